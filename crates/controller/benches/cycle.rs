@@ -1,0 +1,2 @@
+//! Benchmark of one servo cycle.
+fn main() {}

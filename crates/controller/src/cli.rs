@@ -1,0 +1,167 @@
+//! The command line shared by `qmarc-starter` and `qmarc-controller`: the starter parses it,
+//! checks it, and hands the controller the same options with [`MoveOptions::to_args`] and
+//! [`Mode::to_args`].
+
+use crate::config::{ConfigLoadError, Settings};
+use clap::{Args, Subcommand};
+use std::path::PathBuf;
+
+/// Options of every move; flags override the settings file for this run.
+#[derive(Debug, Clone, PartialEq, Args)]
+pub struct MoveOptions {
+    /// Settings file.
+    #[arg(long, default_value = "config/qmarc.toml")]
+    pub config: PathBuf,
+    /// Directory for gather.csv, gather.m and summary.json (default: `gather.out_dir`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Gather every N-th servo cycle (default: `gather.every`).
+    #[arg(long)]
+    pub gather_every: Option<u32>,
+    /// Servo period in µs (default: `general.period_us`).
+    #[arg(long)]
+    pub period_us: Option<u32>,
+    /// Lock-step simulated clock: two runs produce byte-identical data files.
+    #[arg(long)]
+    pub deterministic: bool,
+}
+
+impl MoveOptions {
+    /// Loads the settings file and applies the overrides.
+    pub fn load(&self) -> Result<Settings, ConfigLoadError> {
+        let mut s = Settings::load(&self.config)?;
+        if let Some(p) = self.period_us {
+            s.set_period_us(p)?;
+        }
+        if let Some(n) = self.gather_every {
+            s.set_gather_every(n)?;
+        }
+        if let Some(out) = &self.out {
+            s.gather.out_dir = out.clone();
+        }
+        Ok(s)
+    }
+
+    /// The same options as arguments.
+    pub fn to_args(&self) -> Vec<String> {
+        let mut a = vec![format!("--config={}", self.config.display())];
+        if let Some(out) = &self.out {
+            a.push(format!("--out={}", out.display()));
+        }
+        if let Some(n) = self.gather_every {
+            a.push(format!("--gather-every={n}"));
+        }
+        if let Some(p) = self.period_us {
+            a.push(format!("--period-us={p}"));
+        }
+        if self.deterministic {
+            a.push("--deterministic".into());
+        }
+        a
+    }
+}
+
+/// What to do.
+#[derive(Debug, Clone, PartialEq, Subcommand)]
+pub enum Mode {
+    /// Step every motor by `--size` counts and hold for `--duration` s (tuning, thesis 3.4).
+    Step(StepArgs),
+}
+
+/// Options of `step`.
+#[derive(Debug, Clone, PartialEq, Args, Default)]
+pub struct StepArgs {
+    /// Step size in counts (default: `step.size`).
+    #[arg(long, allow_negative_numbers = true)]
+    pub size: Option<i64>,
+    /// Duration in s (default: `step.duration_s`).
+    #[arg(long)]
+    pub duration: Option<f64>,
+}
+
+impl Mode {
+    /// The mode's name (`step`), also the registered generator it uses.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Mode::Step(_) => "step",
+        }
+    }
+
+    /// Applies the mode's overrides to `s`.
+    pub fn apply(&self, s: &mut Settings) -> Result<(), ConfigLoadError> {
+        match self {
+            Mode::Step(a) => {
+                if let Some(size) = a.size {
+                    s.set_step_size(size)?;
+                }
+                if let Some(d) = a.duration {
+                    s.set_step_duration(d)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The mode as arguments (subcommand first).
+    pub fn to_args(&self) -> Vec<String> {
+        match self {
+            Mode::Step(a) => {
+                let mut v = vec!["step".to_string()];
+                if let Some(size) = a.size {
+                    v.push(format!("--size={size}"));
+                }
+                if let Some(d) = a.duration {
+                    v.push(format!("--duration={d}"));
+                }
+                v
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser, Debug)]
+    struct T {
+        #[command(flatten)]
+        opts: MoveOptions,
+        #[command(subcommand)]
+        mode: Mode,
+    }
+
+    #[test]
+    fn arguments_round_trip() {
+        let t = T::parse_from([
+            "x",
+            "--out",
+            "/tmp/o",
+            "--gather-every",
+            "4",
+            "--period-us",
+            "500",
+            "--deterministic",
+            "step",
+            "--size",
+            "-250",
+            "--duration",
+            "0.75",
+        ]);
+        let args: Vec<String> = std::iter::once("x".to_string())
+            .chain(t.opts.to_args())
+            .chain(t.mode.to_args())
+            .collect();
+        let back = T::parse_from(args);
+        assert_eq!(back.opts, t.opts);
+        assert_eq!(back.mode, t.mode);
+        assert_eq!(
+            back.mode,
+            Mode::Step(StepArgs {
+                size: Some(-250),
+                duration: Some(0.75)
+            })
+        );
+    }
+}

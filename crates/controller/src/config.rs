@@ -1,0 +1,898 @@
+//! The settings file (`config/qmarc.toml`): its model, defaults and validation.
+//!
+//! The file is parsed into raw structs that keep every value's position, then checked once
+//! into [`Settings`]. Every error names the file, line, column and field
+//! (`config/qmarc.toml:31:6: motor[2].kp: ...`); unknown keys are errors. Nothing here runs
+//! after a motor is enabled. Missing sections and keys take the thesis defaults, except the
+//! gains: every motor in use needs its `[[motor]]` table with all five gains.
+
+use crate::registry;
+use qmarc_proto::MAX_MOTORS;
+use qmarc_timer::TickerKind;
+use serde::Deserialize;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// The settings file could not be loaded.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConfigLoadError {
+    /// The file could not be read.
+    #[error("{file}: cannot read the settings file: {source}")]
+    Read {
+        /// The file.
+        file: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A value is missing, unknown, of the wrong type or out of range.
+    #[error("{file}:{line}:{column}: {field}: {message}")]
+    Invalid {
+        /// The file.
+        file: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// Dotted path of the field, e.g. `motor[2].kp` (motors 1-based).
+        field: String,
+        /// What is wrong and what is expected.
+        message: String,
+    },
+    /// A command-line override is out of range.
+    #[error("{flag}: {message}")]
+    Override {
+        /// The flag, e.g. `--period-us`.
+        flag: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// Gains of one motor for the PID feed-forward law (thesis eq. 3-1, PMAC Ix30–Ix35) and its
+/// notch (eq. 3-2, PMAC Ix36–Ix39).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MotorGains {
+    /// Proportional gain Kp.
+    pub kp: f64,
+    /// Integral gain Ki.
+    pub ki: f64,
+    /// Derivative gain Kd (on the actual velocity).
+    pub kd: f64,
+    /// Velocity feed-forward gain Kvff.
+    pub kvff: f64,
+    /// Acceleration feed-forward gain Kaff.
+    pub kaff: f64,
+    /// Notch coefficients `[n1, n2, d1, d2]`; all zero = no notch.
+    pub notch: [f64; 4],
+}
+
+/// Timer and real-time priorities.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimerSettings {
+    /// How the servo thread waits.
+    pub method: TickerKind,
+    /// SCHED_FIFO priority of the servo thread; 0 = SCHED_OTHER.
+    pub servo_priority: i32,
+    /// SCHED_FIFO priority of the hwserver; 0 = SCHED_OTHER.
+    pub hwserver_priority: i32,
+    /// Lock all memory of both processes.
+    pub lock_memory: bool,
+}
+
+/// Data gathering (thesis 3.4, 4.2).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GatherSettings {
+    /// Gather every N-th servo cycle.
+    pub every: u32,
+    /// Directory the data files go to.
+    pub out_dir: PathBuf,
+}
+
+/// The step move (thesis 3.4 "Step Motor").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepSettings {
+    /// Step size in counts, applied to every motor.
+    pub size: i64,
+    /// Duration of the move in s.
+    pub duration_s: f64,
+}
+
+/// The link to the hardware server.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HwServerSettings {
+    /// Backend name (`sim`).
+    pub backend: String,
+    /// Controller silence, in periods, after which the hwserver disables everything.
+    pub watchdog_periods: u32,
+    /// A response later than this many periods makes the controller check whether the
+    /// hwserver process is still alive.
+    pub deadline_periods: u32,
+    /// No response within this many periods means the hwserver is lost.
+    pub response_timeout_periods: u32,
+}
+
+/// The simulated Deltabot (`../shared/notes/deltabot.md`; the geometry is an assumption).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimSettings {
+    /// Amplifier gain, counts/s per volt.
+    pub kv: f64,
+    /// Velocity lag of an enabled amplifier, s.
+    pub tau_s: f64,
+    /// Coasting time constant of a disabled motor, s.
+    pub coast_tau_s: f64,
+    /// Start position per motor, counts.
+    pub start_counts: Vec<f64>,
+    /// Top limit switch position, counts.
+    pub top_switch_counts: f64,
+    /// Bottom limit switch position, counts.
+    pub bottom_switch_counts: f64,
+}
+
+/// The checked settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    /// The file they came from.
+    pub source: PathBuf,
+    /// Motors driven (1‥[`MAX_MOTORS`]).
+    pub n_motors: usize,
+    /// Servo period in µs.
+    pub period_us: u32,
+    /// Registered name of the servo law.
+    pub law: String,
+    /// Encoder counts per motor revolution (post-quadrature).
+    pub counts_per_rev: f64,
+    /// Motor revolutions per arm revolution.
+    pub gear_ratio: f64,
+    /// Timer settings.
+    pub timer: TimerSettings,
+    /// Data gathering.
+    pub gather: GatherSettings,
+    /// The step move.
+    pub step: StepSettings,
+    /// The hwserver link.
+    pub hwserver: HwServerSettings,
+    /// The simulator.
+    pub sim: SimSettings,
+    /// Gains of every `[[motor]]` table (at least `n_motors`, at most [`MAX_MOTORS`]).
+    pub motors: Vec<MotorGains>,
+}
+
+impl Settings {
+    /// The servo period in ns.
+    pub fn period_ns(&self) -> u64 {
+        u64::from(self.period_us) * 1_000
+    }
+
+    /// The servo period in s.
+    pub fn period_s(&self) -> f64 {
+        f64::from(self.period_us) * 1e-6
+    }
+
+    /// Encoder counts per radian of arm rotation: counts_per_rev · gear_ratio / 2π.
+    pub fn counts_per_rad(&self) -> f64 {
+        self.counts_per_rev * self.gear_ratio / std::f64::consts::TAU
+    }
+
+    /// Reads and checks `path`.
+    pub fn load(path: &Path) -> Result<Settings, ConfigLoadError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigLoadError::Read {
+            file: path.to_path_buf(),
+            source,
+        })?;
+        Settings::parse(path, &text)
+    }
+
+    /// Checks `text`, which came from `path`.
+    pub fn parse(path: &Path, text: &str) -> Result<Settings, ConfigLoadError> {
+        let src = Source { path, text };
+        let raw: RawFile = toml::from_str(text).map_err(|e| src.toml_error(&e))?;
+        raw.check(&src)
+    }
+
+    /// Overrides the servo period (`--period-us`).
+    pub fn set_period_us(&mut self, period_us: u32) -> Result<(), ConfigLoadError> {
+        check_period(period_us).map_err(|message| ConfigLoadError::Override {
+            flag: "--period-us",
+            message,
+        })?;
+        self.period_us = period_us;
+        Ok(())
+    }
+
+    /// Overrides the gathering interval (`--gather-every`).
+    pub fn set_gather_every(&mut self, every: u32) -> Result<(), ConfigLoadError> {
+        if every == 0 {
+            return Err(ConfigLoadError::Override {
+                flag: "--gather-every",
+                message: "must be at least 1".into(),
+            });
+        }
+        self.gather.every = every;
+        Ok(())
+    }
+
+    /// Overrides the step size (`--size`).
+    pub fn set_step_size(&mut self, size: i64) -> Result<(), ConfigLoadError> {
+        check_step_size(size).map_err(|message| ConfigLoadError::Override {
+            flag: "--size",
+            message,
+        })?;
+        self.step.size = size;
+        Ok(())
+    }
+
+    /// Overrides the step duration (`--duration`).
+    pub fn set_step_duration(&mut self, duration_s: f64) -> Result<(), ConfigLoadError> {
+        check_duration(duration_s).map_err(|message| ConfigLoadError::Override {
+            flag: "--duration",
+            message,
+        })?;
+        self.step.duration_s = duration_s;
+        Ok(())
+    }
+}
+
+/// Longest move, s: bounds the memory of the command queue and the gather buffer.
+pub const MAX_MOVE_S: f64 = 3600.0;
+/// Largest step, counts.
+pub const MAX_STEP_COUNTS: i64 = 1 << 23;
+
+fn check_period(us: u32) -> Result<(), String> {
+    if (100..=100_000).contains(&us) {
+        Ok(())
+    } else {
+        Err(format!("servo period must be 100‥100000 µs, found {us}"))
+    }
+}
+
+fn check_step_size(size: i64) -> Result<(), String> {
+    if size.abs() <= MAX_STEP_COUNTS {
+        Ok(())
+    } else {
+        Err(format!(
+            "step size must be within ±{MAX_STEP_COUNTS} counts, found {size}"
+        ))
+    }
+}
+
+fn check_duration(s: f64) -> Result<(), String> {
+    if s.is_finite() && s > 0.0 && s <= MAX_MOVE_S {
+        Ok(())
+    } else {
+        Err(format!(
+            "duration must be > 0 and ≤ {MAX_MOVE_S} s, found {s}"
+        ))
+    }
+}
+
+/// The text of the file, for turning byte offsets into lines and fields.
+struct Source<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Source<'_> {
+    fn line_col(&self, offset: usize) -> (usize, usize) {
+        let before = &self.text[..offset.min(self.text.len())];
+        let line = before.matches('\n').count() + 1;
+        let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+        (line, column)
+    }
+
+    fn invalid(
+        &self,
+        span: Range<usize>,
+        field: &str,
+        message: impl Into<String>,
+    ) -> ConfigLoadError {
+        let (line, column) = self.line_col(span.start);
+        ConfigLoadError::Invalid {
+            file: self.path.to_path_buf(),
+            line,
+            column,
+            field: field.to_string(),
+            message: message.into(),
+        }
+    }
+
+    /// The dotted field path at `offset`: the enclosing table header (with the 1-based
+    /// index of an array of tables) and the key on that line.
+    fn field_at(&self, offset: usize) -> String {
+        let mut table = String::new();
+        let mut counts: Vec<(String, usize)> = Vec::new();
+        let mut line_start = 0;
+        for line in self.text.split_inclusive('\n') {
+            if line_start > offset {
+                break;
+            }
+            let t = line.trim();
+            let is_array = t.starts_with("[[");
+            if let Some(name) = t
+                .strip_prefix("[[")
+                .and_then(|r| r.split("]]").next())
+                .or_else(|| t.strip_prefix('[').and_then(|r| r.split(']').next()))
+            {
+                let name = name.trim().to_string();
+                table = if is_array {
+                    let n = match counts.iter_mut().find(|(k, _)| *k == name) {
+                        Some((_, n)) => {
+                            *n += 1;
+                            *n
+                        }
+                        None => {
+                            counts.push((name.clone(), 1));
+                            1
+                        }
+                    };
+                    format!("{name}[{n}]")
+                } else {
+                    name
+                };
+            }
+            line_start += line.len();
+        }
+        let (line_no, _) = self.line_col(offset);
+        let key = self
+            .text
+            .lines()
+            .nth(line_no - 1)
+            .and_then(|l| l.split_once('='))
+            .map(|(k, _)| k.trim().to_string())
+            .unwrap_or_default();
+        match (table.is_empty(), key.is_empty()) {
+            (true, _) => key,
+            (false, true) => table,
+            (false, false) => format!("{table}.{key}"),
+        }
+    }
+
+    fn toml_error(&self, e: &toml::de::Error) -> ConfigLoadError {
+        let span = e.span().unwrap_or(0..0);
+        let field = self.field_at(span.start);
+        let message = e.message().trim().to_string();
+        self.invalid(
+            span,
+            if field.is_empty() { "(file)" } else { &field },
+            message,
+        )
+    }
+}
+
+type S<T> = Option<Spanned<T>>;
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    #[serde(default)]
+    general: RawGeneral,
+    #[serde(default)]
+    timer: RawTimer,
+    #[serde(default)]
+    gather: RawGather,
+    #[serde(default)]
+    step: RawStep,
+    #[serde(default)]
+    hwserver: RawHwServer,
+    #[serde(default)]
+    sim: RawSim,
+    #[serde(default)]
+    motor: Vec<Spanned<RawMotor>>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawGeneral {
+    n_motors: S<i64>,
+    period_us: S<i64>,
+    law: S<String>,
+    counts_per_rev: S<f64>,
+    gear_ratio: S<f64>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawTimer {
+    method: S<String>,
+    servo_priority: S<i64>,
+    hwserver_priority: S<i64>,
+    lock_memory: S<bool>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawGather {
+    every: S<i64>,
+    out_dir: S<String>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawStep {
+    size: S<i64>,
+    duration_s: S<f64>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawHwServer {
+    backend: S<String>,
+    watchdog_periods: S<i64>,
+    deadline_periods: S<i64>,
+    response_timeout_periods: S<i64>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawSim {
+    kv: S<f64>,
+    tau_s: S<f64>,
+    coast_tau_s: S<f64>,
+    start_counts: S<Vec<f64>>,
+    top_switch_counts: S<f64>,
+    bottom_switch_counts: S<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMotor {
+    kp: S<f64>,
+    ki: S<f64>,
+    kd: S<f64>,
+    kvff: S<f64>,
+    kaff: S<f64>,
+    notch: S<Vec<f64>>,
+}
+
+/// Takes an optional spanned value or its default, checking it with `ok`.
+fn take<T: Clone>(
+    src: &Source<'_>,
+    v: &S<T>,
+    field: &str,
+    default: T,
+    ok: impl FnOnce(&T) -> Result<(), String>,
+) -> Result<T, ConfigLoadError> {
+    match v {
+        None => Ok(default),
+        Some(s) => {
+            ok(s.get_ref()).map_err(|m| src.invalid(s.span(), field, m))?;
+            Ok(s.get_ref().clone())
+        }
+    }
+}
+
+fn in_range(lo: i64, hi: i64) -> impl FnOnce(&i64) -> Result<(), String> {
+    move |v| {
+        if (lo..=hi).contains(v) {
+            Ok(())
+        } else {
+            Err(format!("must be {lo}‥{hi}, found {v}"))
+        }
+    }
+}
+
+fn finite(v: &f64) -> Result<(), String> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(format!("must be a finite number, found {v}"))
+    }
+}
+
+fn positive(v: &f64) -> Result<(), String> {
+    if v.is_finite() && *v > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("must be a finite number > 0, found {v}"))
+    }
+}
+
+/// The notch denominator 1 + d1·z⁻¹ + d2·z⁻² is stable iff |d2| < 1 and |d1| < 1 + d2.
+fn check_notch(n: &[f64]) -> Result<(), String> {
+    if n.len() != 4 {
+        return Err(format!(
+            "must be 4 numbers [n1, n2, d1, d2], found {}",
+            n.len()
+        ));
+    }
+    if let Some(bad) = n.iter().find(|x| !x.is_finite()) {
+        return Err(format!("must be finite numbers, found {bad}"));
+    }
+    let (d1, d2) = (n[2], n[3]);
+    if !(d2.abs() < 1.0 && d1.abs() < 1.0 + d2) {
+        return Err(format!(
+            "the denominator 1 + d1·z⁻¹ + d2·z⁻² with d1 = {d1}, d2 = {d2} is unstable \
+             (needs |d2| < 1 and |d1| < 1 + d2)"
+        ));
+    }
+    Ok(())
+}
+
+impl RawFile {
+    fn check(self, src: &Source<'_>) -> Result<Settings, ConfigLoadError> {
+        let g = &self.general;
+        let n_motors = take(
+            src,
+            &g.n_motors,
+            "general.n_motors",
+            3,
+            in_range(1, MAX_MOTORS as i64),
+        )? as usize;
+        let period_us = take(src, &g.period_us, "general.period_us", 400, |v| {
+            u32::try_from(*v)
+                .map_err(|_| format!("servo period must be 100‥100000 µs, found {v}"))
+                .and_then(check_period)
+        })? as u32;
+        let law = take(src, &g.law, "general.law", "pidff".to_string(), |v| {
+            if registry::law(v).is_some() {
+                Ok(())
+            } else {
+                Err(format!(
+                    "unknown servo law `{v}`; registered: {}",
+                    registry::law_names().join(", ")
+                ))
+            }
+        })?;
+        let counts_per_rev = take(
+            src,
+            &g.counts_per_rev,
+            "general.counts_per_rev",
+            4096.0,
+            positive,
+        )?;
+        let gear_ratio = take(src, &g.gear_ratio, "general.gear_ratio", 12.0, positive)?;
+
+        let t = &self.timer;
+        let method = take(src, &t.method, "timer.method", "timerfd".to_string(), |v| {
+            TickerKind::from_name(v)
+                .map(|_| ())
+                .ok_or_else(|| format!("must be \"timerfd\" or \"nanosleep\", found \"{v}\""))
+        })?;
+        let servo_priority = take(
+            src,
+            &t.servo_priority,
+            "timer.servo_priority",
+            80,
+            in_range(0, 98),
+        )? as i32;
+        let hwserver_priority = take(
+            src,
+            &t.hwserver_priority,
+            "timer.hwserver_priority",
+            85,
+            in_range(0, 98),
+        )? as i32;
+        if servo_priority > 0 && hwserver_priority > 0 && hwserver_priority < servo_priority {
+            let span = t.hwserver_priority.as_ref().map_or(0..0, Spanned::span);
+            return Err(src.invalid(
+                span,
+                "timer.hwserver_priority",
+                format!(
+                    "must be at least timer.servo_priority ({servo_priority}): the servo thread \
+                     waits on the hwserver, so the hwserver must not be preempted by it"
+                ),
+            ));
+        }
+        let lock_memory = take(src, &t.lock_memory, "timer.lock_memory", true, |_| Ok(()))?;
+
+        let every = take(
+            src,
+            &self.gather.every,
+            "gather.every",
+            1,
+            in_range(1, 1_000_000),
+        )? as u32;
+        let out_dir = take(
+            src,
+            &self.gather.out_dir,
+            "gather.out_dir",
+            "out".to_string(),
+            |v| {
+                if v.trim().is_empty() {
+                    Err("must not be empty".into())
+                } else {
+                    Ok(())
+                }
+            },
+        )?;
+
+        let size = take(src, &self.step.size, "step.size", 1000, |v| {
+            check_step_size(*v)
+        })?;
+        let duration_s = take(src, &self.step.duration_s, "step.duration_s", 2.0, |v| {
+            check_duration(*v)
+        })?;
+
+        let h = &self.hwserver;
+        let backend = take(
+            src,
+            &h.backend,
+            "hwserver.backend",
+            "sim".to_string(),
+            |v| {
+                if v == "sim" {
+                    Ok(())
+                } else {
+                    Err(format!("must be \"sim\", found \"{v}\""))
+                }
+            },
+        )?;
+        let watchdog_periods = take(
+            src,
+            &h.watchdog_periods,
+            "hwserver.watchdog_periods",
+            10,
+            in_range(2, 1_000_000),
+        )? as u32;
+        let deadline_periods = take(
+            src,
+            &h.deadline_periods,
+            "hwserver.deadline_periods",
+            5,
+            in_range(1, 1_000_000),
+        )? as u32;
+        let response_timeout_periods = take(
+            src,
+            &h.response_timeout_periods,
+            "hwserver.response_timeout_periods",
+            250,
+            in_range(i64::from(deadline_periods), 1_000_000),
+        )? as u32;
+
+        let s = &self.sim;
+        let sim = SimSettings {
+            kv: take(src, &s.kv, "sim.kv", 25_000.0, positive)?,
+            tau_s: take(src, &s.tau_s, "sim.tau_s", 0.004, positive)?,
+            coast_tau_s: take(src, &s.coast_tau_s, "sim.coast_tau_s", 0.05, positive)?,
+            start_counts: take(src, &s.start_counts, "sim.start_counts", vec![], |v| {
+                if v.len() > MAX_MOTORS {
+                    return Err(format!("at most {MAX_MOTORS} positions, found {}", v.len()));
+                }
+                match v
+                    .iter()
+                    .find(|x| !(x.is_finite() && x.abs() < f64::from(1u32 << 23)))
+                {
+                    Some(bad) => Err(format!(
+                        "positions must be finite and within ±2^23 counts, found {bad}"
+                    )),
+                    None => Ok(()),
+                }
+            })?,
+            top_switch_counts: take(
+                src,
+                &s.top_switch_counts,
+                "sim.top_switch_counts",
+                -9_500.0,
+                finite,
+            )?,
+            bottom_switch_counts: take(
+                src,
+                &s.bottom_switch_counts,
+                "sim.bottom_switch_counts",
+                10_500.0,
+                finite,
+            )?,
+        };
+        if sim.top_switch_counts == sim.bottom_switch_counts {
+            let span = s.bottom_switch_counts.as_ref().map_or(0..0, Spanned::span);
+            return Err(src.invalid(
+                span,
+                "sim.bottom_switch_counts",
+                "must differ from sim.top_switch_counts",
+            ));
+        }
+
+        if self.motor.len() > MAX_MOTORS {
+            return Err(src.invalid(
+                self.motor[MAX_MOTORS].span(),
+                &format!("motor[{}]", MAX_MOTORS + 1),
+                format!("at most {MAX_MOTORS} [[motor]] tables"),
+            ));
+        }
+        if self.motor.len() < n_motors {
+            let span = g.n_motors.as_ref().map_or(0..0, Spanned::span);
+            return Err(src.invalid(
+                span,
+                "general.n_motors",
+                format!(
+                    "{n_motors} motors need {n_motors} [[motor]] tables, found {}",
+                    self.motor.len()
+                ),
+            ));
+        }
+        let mut motors = Vec::with_capacity(self.motor.len());
+        for (i, m) in self.motor.iter().enumerate() {
+            let name = |k: &str| format!("motor[{}].{k}", i + 1);
+            let need = |v: &S<f64>, k: &str| -> Result<f64, ConfigLoadError> {
+                match v {
+                    None => Err(src.invalid(m.span(), &name(k), format!("missing key `{k}`"))),
+                    Some(_) => take(src, v, &name(k), 0.0, finite),
+                }
+            };
+            let r = m.get_ref();
+            let notch = take(src, &r.notch, &name("notch"), vec![0.0; 4], |v| {
+                check_notch(v)
+            })?;
+            motors.push(MotorGains {
+                kp: need(&r.kp, "kp")?,
+                ki: need(&r.ki, "ki")?,
+                kd: need(&r.kd, "kd")?,
+                kvff: need(&r.kvff, "kvff")?,
+                kaff: need(&r.kaff, "kaff")?,
+                notch: [notch[0], notch[1], notch[2], notch[3]],
+            });
+        }
+
+        Ok(Settings {
+            source: src.path.to_path_buf(),
+            n_motors,
+            period_us,
+            law,
+            counts_per_rev,
+            gear_ratio,
+            timer: TimerSettings {
+                method: TickerKind::from_name(&method).unwrap_or_default(),
+                servo_priority,
+                hwserver_priority,
+                lock_memory,
+            },
+            gather: GatherSettings {
+                every,
+                out_dir: PathBuf::from(out_dir),
+            },
+            step: StepSettings { size, duration_s },
+            hwserver: HwServerSettings {
+                backend,
+                watchdog_periods,
+                deadline_periods,
+                response_timeout_periods,
+            },
+            sim,
+            motors,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MOTOR: &str = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
+
+    fn parse(text: &str) -> Result<Settings, ConfigLoadError> {
+        Settings::parse(Path::new("q.toml"), text)
+    }
+
+    fn check(text: &str, expected: &str) {
+        match parse(text) {
+            Ok(_) => panic!("accepted:\n{text}"),
+            Err(e) => assert_eq!(e.to_string(), expected),
+        }
+    }
+
+    #[test]
+    fn shipped_settings_are_the_thesis_defaults() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
+        let s = Settings::load(&path).unwrap();
+        assert_eq!((s.n_motors, s.period_us, s.law.as_str()), (3, 400, "pidff"));
+        let table_5_1 = [
+            (182_000.0, 119_000.0),
+            (182_000.0, 103_500.0),
+            (183_000.0, 104_000.0),
+        ];
+        for (m, (kp, kvff)) in s.motors.iter().zip(table_5_1) {
+            assert_eq!(
+                (m.kp, m.ki, m.kd, m.kvff, m.kaff),
+                (kp, 100.0, 3_000.0, kvff, 100.0)
+            );
+            assert_eq!(m.notch, [0.0; 4]);
+        }
+        assert!(
+            (s.counts_per_rad() - 7_822.78).abs() < 0.01,
+            "{}",
+            s.counts_per_rad()
+        );
+        assert_eq!(s.timer.method, TickerKind::TimerFd);
+    }
+
+    #[test]
+    fn minimal_file_takes_defaults() {
+        let s = parse(&MOTOR.repeat(3)).unwrap();
+        assert_eq!(
+            (s.n_motors, s.period_us, s.gather.every, s.step.size),
+            (3, 400, 1, 1000)
+        );
+        assert_eq!(s.hwserver.watchdog_periods, 10);
+    }
+
+    #[test]
+    fn errors_name_file_line_column_and_field() {
+        check(
+            "[general]\nperiod_us = 50\n",
+            "q.toml:2:13: general.period_us: servo period must be 100‥100000 µs, found 50",
+        );
+        check(
+            "[general]\nn_motors = 5\n",
+            "q.toml:2:12: general.n_motors: must be 1‥4, found 5",
+        );
+        check(
+            "[general]\nn_motors = 2\n[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n",
+            "q.toml:2:12: general.n_motors: 2 motors need 2 [[motor]] tables, found 1",
+        );
+        check(
+            &format!("{MOTOR}{MOTOR}[[motor]]\nkp = 1.0\nkpp = 2\n"),
+            "q.toml:15:1: motor[3].kpp: unknown field `kpp`, expected one of `kp`, `ki`, `kd`, `kvff`, `kaff`, `notch`",
+        );
+        check(
+            &format!("{MOTOR}{MOTOR}[[motor]]\nkp = \"big\"\n"),
+            "q.toml:14:6: motor[3].kp: invalid type: string \"big\", expected f64",
+        );
+        check(
+            &format!("{MOTOR}[[motor]]\nkp = 1.0\n{MOTOR}"),
+            "q.toml:7:1: motor[2].ki: missing key `ki`",
+        );
+        check(
+            &format!(
+                "{}[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\nnotch = [0, 0, -2.5, 0.9]\n",
+                MOTOR.repeat(2)
+            ),
+            "q.toml:19:9: motor[3].notch: the denominator 1 + d1·z⁻¹ + d2·z⁻² with d1 = -2.5, d2 = 0.9 is unstable (needs |d2| < 1 and |d1| < 1 + d2)",
+        );
+        check(
+            "[general]\nlaw = \"lqr\"\n",
+            "q.toml:2:7: general.law: unknown servo law `lqr`; registered: pidff",
+        );
+        check(
+            "[timer]\nmethod = \"posix\"\n",
+            "q.toml:2:10: timer.method: must be \"timerfd\" or \"nanosleep\", found \"posix\"",
+        );
+        check(
+            "[bogus]\nx = 1\n",
+            "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `hwserver`, `sim`, `motor`",
+        );
+        check(
+            "[general]\nperiod_us = \n",
+            "q.toml:2:13: general.period_us: string values must be quoted, expected literal string",
+        );
+        check(
+            "[step]\nduration_s = nan\n",
+            "q.toml:2:14: step.duration_s: duration must be > 0 and ≤ 3600 s, found NaN",
+        );
+        check(
+            "[timer]\nservo_priority = 90\nhwserver_priority = 80\n",
+            "q.toml:3:21: timer.hwserver_priority: must be at least timer.servo_priority (90): the servo thread waits on the hwserver, so the hwserver must not be preempted by it",
+        );
+    }
+
+    #[test]
+    fn overrides_are_checked() {
+        let mut s = parse(&MOTOR.repeat(3)).unwrap();
+        assert_eq!(
+            s.set_period_us(99).unwrap_err().to_string(),
+            "--period-us: servo period must be 100‥100000 µs, found 99"
+        );
+        assert_eq!(
+            s.set_gather_every(0).unwrap_err().to_string(),
+            "--gather-every: must be at least 1"
+        );
+        assert_eq!(
+            s.set_step_duration(-1.0).unwrap_err().to_string(),
+            "--duration: duration must be > 0 and ≤ 3600 s, found -1"
+        );
+        s.set_period_us(1000).unwrap();
+        s.set_step_size(-500).unwrap();
+        assert_eq!((s.period_us, s.step.size), (1000, -500));
+    }
+
+    #[test]
+    fn missing_file_is_named() {
+        let e = Settings::load(Path::new("/nonexistent/q.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("/nonexistent/q.toml: cannot read the settings file: "),
+            "{e}"
+        );
+    }
+}

@@ -1,0 +1,208 @@
+//! Data gathering (thesis 3.4, 4.2): every N-th cycle's time, command, actual position and
+//! DAC per motor, into a buffer sized before the move, written to files after it.
+
+use qmarc_proto::MAX_MOTORS;
+use std::io::{self, Write};
+
+/// One gathered servo cycle.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct GatherRow {
+    /// Servo sample index n.
+    pub cycle: u64,
+    /// Time of the sample, s: n·T on the simulated clock, the wake time since tick 0 in real
+    /// time.
+    pub time_s: f64,
+    /// Command position per motor, counts.
+    pub cmd: [f64; MAX_MOTORS],
+    /// Actual position per motor, counts.
+    pub act: [f64; MAX_MOTORS],
+    /// DAC code sent per motor.
+    pub dac: [i32; MAX_MOTORS],
+}
+
+/// The gather buffer. Its capacity is fixed when it is made; [`Gather::push`] never
+/// allocates and drops (and counts) rows beyond it, so it can never overflow mid-move.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gather {
+    rows: Vec<GatherRow>,
+    every: u32,
+    n_motors: usize,
+    dropped: u64,
+}
+
+impl Gather {
+    /// A buffer for a move of `samples` servo cycles gathered every `every` cycles.
+    pub fn for_move(samples: u64, every: u32, n_motors: usize) -> Gather {
+        let every = every.max(1);
+        let rows = samples.div_ceil(u64::from(every)) as usize;
+        Gather {
+            rows: Vec::with_capacity(rows),
+            every,
+            n_motors: n_motors.min(MAX_MOTORS),
+            dropped: 0,
+        }
+    }
+
+    /// Gather every N-th cycle.
+    pub fn every(&self) -> u32 {
+        self.every
+    }
+
+    /// Motors per row.
+    pub fn n_motors(&self) -> usize {
+        self.n_motors
+    }
+
+    /// True if the `k`-th executed cycle (0-based) is gathered.
+    #[inline]
+    pub fn due(&self, k: u64) -> bool {
+        k % u64::from(self.every) == 0
+    }
+
+    /// Stores a row if there is room (never allocates); counts it as dropped otherwise.
+    #[inline]
+    pub fn push(&mut self, row: GatherRow) {
+        if self.rows.len() < self.rows.capacity() {
+            self.rows.push(row);
+        } else {
+            self.dropped += 1;
+        }
+    }
+
+    /// The gathered rows.
+    pub fn rows(&self) -> &[GatherRow] {
+        &self.rows
+    }
+
+    /// Rows that did not fit (0 unless the move ran longer than planned).
+    pub fn dropped(&self) -> u64 {
+        self.dropped
+    }
+
+    /// Column names: `cycle,time_s,cmd1,act1,dac1,cmd2,…`.
+    pub fn columns(&self) -> Vec<String> {
+        let mut c = vec!["cycle".to_string(), "time_s".to_string()];
+        for m in 1..=self.n_motors {
+            c.extend([format!("cmd{m}"), format!("act{m}"), format!("dac{m}")]);
+        }
+        c
+    }
+
+    fn write_row(&self, w: &mut impl Write, r: &GatherRow, sep: &str) -> io::Result<()> {
+        // `{}` on f64 is the shortest text that parses back to the same value, so figures
+        // recomputed from the file equal the ones computed in the loop.
+        write!(w, "{}{sep}{}", r.cycle, r.time_s)?;
+        for m in 0..self.n_motors {
+            write!(w, "{sep}{}{sep}{}{sep}{}", r.cmd[m], r.act[m], r.dac[m])?;
+        }
+        writeln!(w)
+    }
+
+    /// Writes `gather.csv`: a header line, then one line per row.
+    pub fn write_csv(&self, w: &mut impl Write) -> io::Result<()> {
+        writeln!(w, "{}", self.columns().join(","))?;
+        for r in &self.rows {
+            self.write_row(w, r, ",")?;
+        }
+        Ok(())
+    }
+
+    /// Writes `gather.m`: the same data as an Octave/Matlab script defining `qmarc_data`,
+    /// `qmarc_columns` and one column vector per column name.
+    pub fn write_octave(&self, w: &mut impl Write) -> io::Result<()> {
+        let cols = self.columns();
+        writeln!(
+            w,
+            "% QMARC gathered data, written by qmarc-controller after the move."
+        )?;
+        writeln!(
+            w,
+            "% One row per gathered servo cycle (every {} cycles).",
+            self.every
+        )?;
+        writeln!(
+            w,
+            "% cycle: servo sample n; time_s: s; cmdM/actM: counts; dacM: DAC codes (±8191 = ±10 V)."
+        )?;
+        let quoted: Vec<String> = cols.iter().map(|c| format!("'{c}'")).collect();
+        writeln!(w, "qmarc_columns = {{{}}};", quoted.join(", "))?;
+        writeln!(w, "qmarc_data = [")?;
+        for r in &self.rows {
+            self.write_row(w, r, " ")?;
+        }
+        writeln!(w, "];")?;
+        for (i, c) in cols.iter().enumerate() {
+            writeln!(w, "{c} = qmarc_data(:, {});", i + 1)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(cycle: u64) -> GatherRow {
+        GatherRow {
+            cycle,
+            time_s: cycle as f64 * 0.0004,
+            cmd: [1000.5, -3.0, 0.0, 0.0],
+            act: [998.0, -1.0, 0.0, 0.0],
+            dac: [12, -8191, 0, 0],
+        }
+    }
+
+    #[test]
+    fn capacity_is_the_gathered_share_of_the_move() {
+        let mut g = Gather::for_move(10, 4, 2);
+        assert_eq!((0..10).filter(|&k| g.due(k)).count(), 3);
+        for k in 0..10 {
+            if g.due(k) {
+                g.push(row(k));
+            }
+        }
+        assert_eq!((g.rows().len(), g.dropped()), (3, 0));
+        g.push(row(99));
+        assert_eq!(
+            (g.rows().len(), g.dropped()),
+            (3, 1),
+            "full: dropped, not grown"
+        );
+    }
+
+    #[test]
+    fn csv_and_octave_carry_the_same_rows() {
+        let mut g = Gather::for_move(3, 1, 2);
+        for k in 0..3 {
+            g.push(row(k));
+        }
+        let mut csv = Vec::new();
+        g.write_csv(&mut csv).unwrap();
+        let csv = String::from_utf8(csv).unwrap();
+        assert_eq!(
+            csv,
+            "cycle,time_s,cmd1,act1,dac1,cmd2,act2,dac2\n\
+             0,0,1000.5,998,12,-3,-1,-8191\n\
+             1,0.0004,1000.5,998,12,-3,-1,-8191\n\
+             2,0.0008,1000.5,998,12,-3,-1,-8191\n"
+        );
+        let mut m = Vec::new();
+        g.write_octave(&mut m).unwrap();
+        let m = String::from_utf8(m).unwrap();
+        assert!(m.contains(
+            "qmarc_columns = {'cycle', 'time_s', 'cmd1', 'act1', 'dac1', 'cmd2', 'act2', 'dac2'};\n"
+        ));
+        let data: Vec<&str> = m
+            .split("qmarc_data = [\n")
+            .nth(1)
+            .unwrap()
+            .split("];")
+            .next()
+            .unwrap()
+            .lines()
+            .collect();
+        let csv_rows: Vec<String> = csv.lines().skip(1).map(|l| l.replace(',', " ")).collect();
+        assert_eq!(data, csv_rows);
+        assert!(m.ends_with("dac2 = qmarc_data(:, 8);\n"));
+    }
+}

@@ -1,0 +1,335 @@
+//! [`ServoLaw`]: the control law plug-in, and [`PidFf`], the thesis' law (eq. 3-1 + 3-2).
+
+use crate::config::{MotorGains, Settings};
+use qmarc_proto::{DAC_MAX, MAX_MOTORS};
+
+/// What a law sees each cycle. Positions are in counts in the software-counter frame.
+#[derive(Debug, Clone, Copy)]
+pub struct ServoInput<'a> {
+    /// Servo sample index n (the command is the path at n·T).
+    pub n: u64,
+    /// Command position per motor.
+    pub cmd: &'a [f64; MAX_MOTORS],
+    /// Actual (measured) position per motor.
+    pub act: &'a [f64; MAX_MOTORS],
+}
+
+/// A servo law: commanded and actual positions in, DAC codes out.
+///
+/// Real-time contract: construction (from already-validated settings) may allocate and fail;
+/// [`ServoLaw::reset`] runs before the move; [`ServoLaw::step`] runs every cycle, writes
+/// codes clamped to ±[`DAC_MAX`] into the caller's array and never allocates, locks, does
+/// I/O or panics.
+pub trait ServoLaw: Send {
+    /// Registered name.
+    fn name(&self) -> &'static str;
+
+    /// Clears the state at the start of a move, given sample 0's command and actual
+    /// positions (so the first cycle sees no velocity).
+    fn reset(&mut self, cmd: &[f64; MAX_MOTORS], act: &[f64; MAX_MOTORS]);
+
+    /// Computes the DAC code of every motor for this cycle.
+    fn step(&mut self, input: &ServoInput<'_>, dac: &mut [i32; MAX_MOTORS]);
+}
+
+/// The biquad notch of thesis eq. 3-2 (PMAC Ix36–Ix39):
+/// H(z) = (1 + n1·z⁻¹ + n2·z⁻²) / (1 + d1·z⁻¹ + d2·z⁻²). All-zero coefficients pass the
+/// signal unchanged.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Notch {
+    /// `[n1, n2, d1, d2]`.
+    pub coeffs: [f64; 4],
+    x1: f64,
+    x2: f64,
+    y1: f64,
+    y2: f64,
+}
+
+impl Notch {
+    /// A notch with coefficients `[n1, n2, d1, d2]` and zero state.
+    pub fn new(coeffs: [f64; 4]) -> Notch {
+        Notch {
+            coeffs,
+            ..Notch::default()
+        }
+    }
+
+    /// Filters one sample: y(n) = x(n) + n1·x(n−1) + n2·x(n−2) − d1·y(n−1) − d2·y(n−2).
+    #[inline]
+    pub fn filter(&mut self, x: f64) -> f64 {
+        let [n1, n2, d1, d2] = self.coeffs;
+        let y = x + n1 * self.x1 + n2 * self.x2 - d1 * self.y1 - d2 * self.y2;
+        self.x2 = self.x1;
+        self.x1 = x;
+        self.y2 = self.y1;
+        self.y1 = y;
+        y
+    }
+
+    /// Zeroes the state.
+    pub fn reset(&mut self) {
+        *self = Notch::new(self.coeffs);
+    }
+}
+
+/// Per-motor state of [`PidFf`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct AxisState {
+    prev_cmd: f64,
+    prev_cv: f64,
+    prev_act: f64,
+    /// IE(n) = Σ_{j<n} FE(j).
+    ie: f64,
+    notch: Notch,
+}
+
+/// 2⁻¹⁹, the PMAC output scale.
+const TWO_POW_M19: f64 = 1.0 / 524_288.0;
+/// 2²³, the PMAC integrator scale.
+const TWO_POW_23: f64 = 8_388_608.0;
+
+/// PID with velocity and acceleration feed-forward, PMAC form (thesis eq. 3-1, PMAC
+/// `Ix08 = Ix09 = 1`), divided by 4 for the 626's 14-bit DAC, then the notch of eq. 3-2, then
+/// clamped to ±8191 and rounded to a DAC code:
+///
+/// DAC(n) = 2⁻¹⁹·Kp·(FE + (Kvff·CV + Kaff·CA)/128 + Ki·IE/2²³ − Kd·AV/128) / 4
+///
+/// with FE = CP(n) − AP(n), CV = CP(n) − CP(n−1), CA = CV(n) − CV(n−1),
+/// AV = AP(n) − AP(n−1) and IE(n) = Σ_{j<n} FE(j), all in counts per servo cycle.
+#[derive(Debug, Clone, PartialEq)]
+#[doc(alias = "PIDffCtrl")]
+pub struct PidFf {
+    n_motors: usize,
+    gains: [MotorGains; MAX_MOTORS],
+    state: [AxisState; MAX_MOTORS],
+}
+
+impl PidFf {
+    /// The law for the first `gains.len()` motors (at most [`MAX_MOTORS`]).
+    pub fn new(gains: &[MotorGains]) -> PidFf {
+        let n_motors = gains.len().min(MAX_MOTORS);
+        let mut g = [MotorGains::default(); MAX_MOTORS];
+        g[..n_motors].copy_from_slice(&gains[..n_motors]);
+        let mut state = [AxisState::default(); MAX_MOTORS];
+        for (s, gains) in state.iter_mut().zip(&g) {
+            s.notch = Notch::new(gains.notch);
+        }
+        PidFf {
+            n_motors,
+            gains: g,
+            state,
+        }
+    }
+
+    /// The law with the gains of the motors in use.
+    pub fn from_settings(settings: &Settings) -> PidFf {
+        PidFf::new(&settings.motors[..settings.n_motors])
+    }
+
+    /// The output of eq. 3-1 / 4 for one motor, before the notch (DAC codes, unclamped).
+    #[inline]
+    pub fn pmac_output(g: &MotorGains, fe: f64, cv: f64, ca: f64, ie: f64, av: f64) -> f64 {
+        TWO_POW_M19
+            * g.kp
+            * (fe + (g.kvff * cv + g.kaff * ca) / 128.0 + g.ki * ie / TWO_POW_23
+                - g.kd * av / 128.0)
+            / 4.0
+    }
+}
+
+/// Rounds and clamps a law output to a DAC code; NaN gives 0.
+#[inline]
+pub fn to_dac_code(u: f64) -> i32 {
+    let limit = f64::from(DAC_MAX);
+    if u.is_nan() {
+        0
+    } else {
+        u.clamp(-limit, limit).round() as i32
+    }
+}
+
+impl ServoLaw for PidFf {
+    fn name(&self) -> &'static str {
+        "pidff"
+    }
+
+    fn reset(&mut self, cmd: &[f64; MAX_MOTORS], act: &[f64; MAX_MOTORS]) {
+        for m in 0..MAX_MOTORS {
+            let s = &mut self.state[m];
+            *s = AxisState {
+                prev_cmd: cmd[m],
+                prev_act: act[m],
+                notch: s.notch,
+                ..AxisState::default()
+            };
+            s.notch.reset();
+        }
+    }
+
+    #[inline]
+    fn step(&mut self, input: &ServoInput<'_>, dac: &mut [i32; MAX_MOTORS]) {
+        for m in 0..self.n_motors {
+            let (g, s) = (&self.gains[m], &mut self.state[m]);
+            let (cp, ap) = (input.cmd[m], input.act[m]);
+            let fe = cp - ap;
+            let cv = cp - s.prev_cmd;
+            let ca = cv - s.prev_cv;
+            let av = ap - s.prev_act;
+            let u = PidFf::pmac_output(g, fe, cv, ca, s.ie, av);
+            s.ie += fe;
+            s.prev_cmd = cp;
+            s.prev_cv = cv;
+            s.prev_act = ap;
+            dac[m] = to_dac_code(s.notch.filter(u));
+        }
+        for d in &mut dac[self.n_motors..] {
+            *d = 0;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn thesis_motor_1() -> MotorGains {
+        MotorGains {
+            kp: 182_000.0,
+            ki: 100.0,
+            kd: 3_000.0,
+            kvff: 119_000.0,
+            kaff: 100.0,
+            notch: [0.0; 4],
+        }
+    }
+
+    fn run(law: &mut PidFf, cmd: f64, act: f64) -> i32 {
+        let mut c = [0.0; MAX_MOTORS];
+        let mut a = [0.0; MAX_MOTORS];
+        c[0] = cmd;
+        a[0] = act;
+        let mut dac = [7; MAX_MOTORS];
+        law.step(
+            &ServoInput {
+                n: 0,
+                cmd: &c,
+                act: &a,
+            },
+            &mut dac,
+        );
+        assert_eq!(&dac[1..], &[0; MAX_MOTORS - 1], "unused motors get 0");
+        dac[0]
+    }
+
+    /// Two cycles of eq. 3-1 with Table 5-1's motor-1 gains, worked by hand:
+    ///
+    /// cycle 1: CP 0→10, AP 0→2: FE 8, CV 10, CA 10, AV 2, IE 0.
+    ///   inner = 8 + (119000·10 + 100·10)/128 + 0 − 3000·2/128 = 8 + 9304.6875 − 46.875
+    ///         = 9265.8125; DAC = 182000 · 9265.8125 / 2¹⁹ / 4 = 804.128 → 804.
+    /// cycle 2: CP 10→15, AP 2→5: FE 10, CV 5, CA −5, AV 3, IE 8.
+    ///   inner = 10 + (595000 − 500)/128 + 100·8/2²³ − 9000/128
+    ///         = 10 + 4644.53125 + 0.0000953674 − 70.3125 = 4584.2188454;
+    ///   DAC = 182000 · 4584.2188454 / 2¹⁹ / 4 = 397.838… → 398.
+    #[test]
+    fn eq_3_1_matches_the_hand_computation() {
+        let mut law = PidFf::new(&[thesis_motor_1()]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        let inner1: f64 = 8.0 + 9_304.687_5 - 46.875;
+        assert_eq!(inner1, 9_265.812_5);
+        let u1 = 182_000.0 * inner1 / 524_288.0 / 4.0;
+        assert!((u1 - 804.127_6).abs() < 1e-3, "{u1}");
+        assert_eq!(run(&mut law, 10.0, 2.0), 804);
+        let inner2: f64 = 10.0 + 4_644.531_25 + 800.0 / 8_388_608.0 - 70.312_5;
+        let u2 = 182_000.0 * inner2 / 524_288.0 / 4.0;
+        assert!((u2 - 397.838).abs() < 1e-3, "{u2}");
+        assert_eq!(run(&mut law, 15.0, 5.0), 398);
+        let g = thesis_motor_1();
+        assert_eq!(PidFf::pmac_output(&g, 10.0, 5.0, -5.0, 8.0, 3.0), u2);
+    }
+
+    #[test]
+    fn output_is_clamped_to_the_14_bit_range_and_rounded() {
+        let mut law = PidFf::new(&[thesis_motor_1()]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        assert_eq!(
+            run(&mut law, 1_000.0, 0.0),
+            8191,
+            "the step's velocity kick saturates"
+        );
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        assert_eq!(run(&mut law, -1_000.0, 0.0), -8191);
+        for (u, code) in [
+            (0.49, 0),
+            (0.5, 1),
+            (-0.5, -1),
+            (8190.6, 8191),
+            (1e300, 8191),
+            (f64::NAN, 0),
+        ] {
+            assert_eq!(to_dac_code(u), code, "{u}");
+        }
+    }
+
+    #[test]
+    fn proportional_term_alone_is_kp_fe_over_2_pow_21() {
+        let g = MotorGains {
+            kp: 2_097_152.0,
+            ..MotorGains::default()
+        }; // 2²¹: 1 code per count
+        let mut law = PidFf::new(&[g]);
+        law.reset(&[100.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        assert_eq!(run(&mut law, 100.0, 0.0), 100);
+        assert_eq!(run(&mut law, 100.0, 60.0), 40);
+    }
+
+    #[test]
+    fn integrator_sums_past_errors_only() {
+        // Ki alone: IE(n) = Σ_{j<n} FE(j); Kp·Ki/2^19/2^23/4 = 1 code per count·cycle.
+        let g = MotorGains {
+            kp: 1.0,
+            ki: (1u64 << 44) as f64,
+            ..MotorGains::default()
+        };
+        let mut law = PidFf::new(&[g]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        // FE = 5 every cycle; the P term is 5·2⁻²¹ ≈ 0, invisible after rounding.
+        assert_eq!(run(&mut law, 5.0, 0.0), 0);
+        assert_eq!(run(&mut law, 5.0, 0.0), 5);
+        assert_eq!(run(&mut law, 5.0, 0.0), 10);
+    }
+
+    #[test]
+    fn notch_is_the_biquad_of_eq_3_2() {
+        let c = [-1.6, 0.8, -1.2, 0.5];
+        let mut n = Notch::new(c);
+        let x = [1.0, 2.0, -1.0, 0.5];
+        let y0 = 1.0;
+        let y1 = 2.0 + (-1.6) * 1.0 - (-1.2) * y0;
+        let y2 = -1.0 + (-1.6) * 2.0 + 0.8 * 1.0 - (-1.2) * y1 - 0.5 * y0;
+        let y3 = 0.5 + (-1.6) * -1.0 + 0.8 * 2.0 - (-1.2) * y2 - 0.5 * y1;
+        for (xi, yi) in x.iter().zip([y0, y1, y2, y3]) {
+            assert_eq!(n.filter(*xi), yi);
+        }
+        n.reset();
+        assert_eq!(n.filter(3.0), 3.0);
+        let mut off = Notch::new([0.0; 4]);
+        for v in [1.0, -7.5, 1e6] {
+            assert_eq!(off.filter(v), v, "all-zero coefficients pass the signal");
+        }
+    }
+
+    #[test]
+    fn notch_follows_the_law_before_clamping() {
+        let g = MotorGains {
+            kp: 2_097_152.0,
+            notch: [0.0, 0.0, -0.5, 0.0],
+            ..MotorGains::default()
+        };
+        let mut law = PidFf::new(&[g]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        // u = FE = 100 each cycle; y(n) = u + 0.5·y(n−1): 100, 150, 175.
+        assert_eq!(run(&mut law, 100.0, 0.0), 100);
+        assert_eq!(run(&mut law, 100.0, 0.0), 150);
+        assert_eq!(run(&mut law, 100.0, 0.0), 175);
+    }
+}

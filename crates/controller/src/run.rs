@@ -1,0 +1,197 @@
+//! [`run_move`]: one move from checked settings to files on disk.
+//!
+//! The servo thread is made SCHED_FIFO (or runs degraded), connects to the hwserver, runs
+//! the move, tells the hwserver to exit and hands everything back; this thread then writes
+//! `gather.csv`, `gather.m` and `summary.json`. Formatting and file I/O happen only here,
+//! after the loop.
+
+use crate::cli::Mode;
+use crate::config::Settings;
+use crate::link::{HwLink, IoxLink, LinkConnectError, LinkTimeouts};
+use crate::registry;
+use crate::servo::{MoveError, MovePlan, Servo};
+use crate::summary::{MotorSummary, Summary, TimingSummary};
+use qmarc_proto::service::IpcLocation;
+use qmarc_proto::{HwMsg, MsgType};
+use qmarc_timer::MonotonicClock;
+use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Files of a move's data, in the output directory.
+pub const OUTPUT_FILES: [&str; 3] = ["gather.csv", "gather.m", "summary.json"];
+
+/// A move could not run (nothing was enabled, or the outputs could not be written).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// No generator is registered for the mode.
+    #[error("no trajectory generator is registered for mode `{0}`")]
+    UnknownMode(String),
+    /// The hwserver could not be reached.
+    #[error(transparent)]
+    Connect(#[from] LinkConnectError),
+    /// The move could not start.
+    #[error(transparent)]
+    Move(#[from] MoveError),
+    /// The servo thread could not be started or died.
+    #[error("servo thread: {0}")]
+    Thread(String),
+    /// An output file could not be written.
+    #[error("cannot write {file}: {source}")]
+    Output {
+        /// The file.
+        file: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+/// How to run a move besides its settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunOptions {
+    /// Where the hwserver's services are.
+    pub location: IpcLocation,
+    /// Lock-step simulated time.
+    pub deterministic: bool,
+    /// How long to wait for the hwserver to appear.
+    pub connect_wait: Duration,
+}
+
+/// Runs `mode` with `settings` against the hwserver at `opts.location`, writes the data
+/// files into `settings.gather.out_dir` and returns the summary (also on a fault: a fault is
+/// a result, not an error).
+pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<Summary, RunError> {
+    let entry = registry::generator(mode.name())
+        .ok_or_else(|| RunError::UnknownMode(mode.name().into()))?;
+    let law_entry =
+        registry::law(&settings.law).ok_or_else(|| RunError::UnknownMode(settings.law.clone()))?;
+    let out_dir = settings.gather.out_dir.clone();
+    remove_outputs(&out_dir);
+
+    let plan = MovePlan {
+        mode: mode.name().to_string(),
+        n_motors: settings.n_motors,
+        period_ns: settings.period_ns(),
+        gather_every: settings.gather.every,
+        deterministic: opts.deterministic,
+    };
+    let mut servo = Servo::new(
+        plan,
+        (entry.build)(settings),
+        (law_entry.build)(settings),
+        Box::new(MonotonicClock),
+    );
+    let mut ticker = settings.timer.method.build(settings.period_ns());
+    let period = settings.period_ns();
+    let timeouts = LinkTimeouts {
+        deadline_ns: u64::from(settings.hwserver.deadline_periods) * period,
+        give_up_ns: u64::from(settings.hwserver.response_timeout_periods) * period,
+    };
+    let req = RtRequest {
+        priority: (settings.timer.servo_priority > 0).then_some(settings.timer.servo_priority),
+        lock_memory: settings.timer.lock_memory,
+        prefault_stack_bytes: 128 * 1024,
+    };
+    let location = opts.location.clone();
+    let wait = opts.connect_wait;
+    let handle = qmarc_timer::rt::spawn("qmarc-servo", req, move |rt: RtStatus| {
+        let _dma = DmaLatencyGuard::request_zero();
+        let result = (|| -> Result<(), RunError> {
+            let mut link = IoxLink::connect(&location, timeouts, wait)?;
+            let stop = qmarc_timer::stop::flag();
+            let moved = servo.run(&mut link, ticker.as_mut(), stop);
+            // The thesis' last message: the hwserver makes the hardware safe and exits.
+            if servo.fault().is_none_or(|f| f.link.is_none()) {
+                let _ = link.exchange(&HwMsg::request(MsgType::Exit));
+            }
+            moved.map_err(RunError::from)
+        })();
+        (servo, rt, result)
+    })
+    .map_err(|e| RunError::Thread(e.to_string()))?;
+    let (servo, rt, result) = handle
+        .join()
+        .map_err(|_| RunError::Thread("panicked".into()))?;
+    result?;
+
+    let summary = summarize(settings, &servo, &rt, opts.deterministic);
+    write_outputs(&out_dir, &servo, &summary)?;
+    Ok(summary)
+}
+
+/// The summary of a finished move.
+pub fn summarize(
+    settings: &Settings,
+    servo: &Servo,
+    rt: &RtStatus,
+    deterministic: bool,
+) -> Summary {
+    let cpr = settings.counts_per_rad();
+    let mut warnings = rt.warnings.clone();
+    if servo.gather().dropped() > 0 {
+        warnings.push(format!(
+            "{} gathered rows did not fit the buffer",
+            servo.gather().dropped()
+        ));
+    }
+    Summary {
+        mode: servo.plan().mode.clone(),
+        ok: servo.fault().is_none(),
+        degraded: rt.degraded(),
+        deterministic,
+        fault: servo.fault().map(|f| f.report()),
+        cycles: servo.cycles(),
+        planned_samples: servo.planned_samples(),
+        period_us: settings.period_us,
+        gather_every: settings.gather.every,
+        gathered_rows: servo.gather().rows().len() as u64,
+        counts_per_rad: cpr,
+        motors: servo.errors().axes[..settings.n_motors]
+            .iter()
+            .map(|e| MotorSummary::new(e, cpr))
+            .collect(),
+        timing: TimingSummary::new(servo.timing(), settings.timer.method.name(), &rt.policy()),
+        warnings,
+    }
+}
+
+/// Removes the data files of an earlier move from `dir`, so that a failed move never leaves
+/// stale results looking like its own.
+pub fn remove_outputs(dir: &Path) {
+    for f in OUTPUT_FILES {
+        let _ = std::fs::remove_file(dir.join(f));
+    }
+}
+
+fn write_file(
+    path: PathBuf,
+    body: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
+) -> Result<(), RunError> {
+    let wrap = |source| RunError::Output {
+        file: path.clone(),
+        source,
+    };
+    let mut w = std::io::BufWriter::new(std::fs::File::create(&path).map_err(wrap)?);
+    body(&mut w)
+        .and_then(|()| w.flush())
+        .map_err(|source| RunError::Output {
+            file: path.clone(),
+            source,
+        })
+}
+
+/// Writes `gather.csv`, `gather.m` and `summary.json` into `dir` (created if missing).
+pub fn write_outputs(dir: &Path, servo: &Servo, summary: &Summary) -> Result<(), RunError> {
+    std::fs::create_dir_all(dir).map_err(|source| RunError::Output {
+        file: dir.to_path_buf(),
+        source,
+    })?;
+    write_file(dir.join("gather.csv"), |w| servo.gather().write_csv(w))?;
+    write_file(dir.join("gather.m"), |w| servo.gather().write_octave(w))?;
+    write_file(dir.join("summary.json"), |w| {
+        serde_json::to_writer_pretty(&mut *w, summary).map_err(std::io::Error::other)?;
+        writeln!(w)
+    })
+}

@@ -1,0 +1,325 @@
+//! The servo loop (thesis 3.8.1.2.1, 4.1): one cycle is wait for the tick → read all encoders
+//! (one exchange) → command position → law → write all DACs (one exchange) → gather.
+//!
+//! [`Servo`] owns everything a move needs, allocated in [`Servo::prepare`] before any motor
+//! is enabled. [`Servo::cycle`] then allocates nothing, locks nothing, formats nothing and
+//! does no I/O besides the two exchanges of the link; a fault is recorded as a `Copy` value
+//! and handled by disabling every motor.
+
+use crate::gather::{Gather, GatherRow};
+use crate::law::{ServoInput, ServoLaw};
+use crate::link::{HwLink, LinkError};
+use crate::summary::{ErrorStats, Fault, FaultKind, TimingStats};
+use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType, Status};
+use qmarc_timer::{Clock, Tick, Ticker, TickerError};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Samples gathered when a generator cannot say how long its path is.
+pub const STREAM_GATHER_SAMPLES: u64 = 150_000;
+
+/// What a move is, apart from its path and law.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MovePlan {
+    /// `step`, `run` or `home`.
+    pub mode: String,
+    /// Motors driven.
+    pub n_motors: usize,
+    /// Servo period, ns.
+    pub period_ns: u64,
+    /// Gather every N cycles.
+    pub gather_every: u32,
+    /// Simulated time: the sample index is the cycle count and gathered time is n·T.
+    pub deterministic: bool,
+}
+
+/// The move could not start (nothing was enabled), or its timer failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum MoveError {
+    /// The hwserver did not answer during set-up.
+    #[error("hwserver link failed before the move: {0}")]
+    Link(#[from] LinkError),
+    /// The hwserver reported a problem before any motor was enabled.
+    #[error("the hwserver reports {0} before the move: refused to enable the motors")]
+    Refused(Status),
+    /// The trajectory cannot start from where the robot is.
+    #[error(transparent)]
+    Trajectory(#[from] TrajStartError),
+    /// The timer could not be armed or waited on.
+    #[error(transparent)]
+    Timer(#[from] TickerError),
+}
+
+/// How a cycle ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CycleEnd {
+    /// The cycle ran; the move goes on.
+    Continue,
+    /// The path has ended; nothing was written this cycle.
+    Done,
+    /// Something went wrong; the caller must run the fault handler.
+    Fault(Fault),
+}
+
+/// A move: its plan, generator, law, clock and everything it records.
+pub struct Servo {
+    plan: MovePlan,
+    generator: Box<dyn TrajectoryGenerator>,
+    law: Box<dyn ServoLaw>,
+    clock: Box<dyn Clock>,
+    cmd: [f64; MAX_MOTORS],
+    act: [f64; MAX_MOTORS],
+    dac: [i32; MAX_MOTORS],
+    t0_ns: u64,
+    executed: u64,
+    last_sample: u64,
+    gather: Gather,
+    errors: ErrorStats,
+    timing: TimingStats,
+    fault: Option<Fault>,
+    planned_samples: Option<u64>,
+}
+
+impl Servo {
+    /// A move with `generator` and `law`; `clock` times the phases of each cycle.
+    pub fn new(
+        plan: MovePlan,
+        generator: Box<dyn TrajectoryGenerator>,
+        law: Box<dyn ServoLaw>,
+        clock: Box<dyn Clock>,
+    ) -> Servo {
+        let timing = TimingStats::new(plan.period_ns);
+        let gather = Gather::for_move(0, plan.gather_every, plan.n_motors);
+        Servo {
+            plan,
+            generator,
+            law,
+            clock,
+            cmd: [0.0; MAX_MOTORS],
+            act: [0.0; MAX_MOTORS],
+            dac: [0; MAX_MOTORS],
+            t0_ns: 0,
+            executed: 0,
+            last_sample: 0,
+            gather,
+            errors: ErrorStats::default(),
+            timing,
+            fault: None,
+            planned_samples: None,
+        }
+    }
+
+    /// The plan.
+    pub fn plan(&self) -> &MovePlan {
+        &self.plan
+    }
+
+    /// Gathered data.
+    pub fn gather(&self) -> &Gather {
+        &self.gather
+    }
+
+    /// Error figures.
+    pub fn errors(&self) -> &ErrorStats {
+        &self.errors
+    }
+
+    /// Timing figures.
+    pub fn timing(&self) -> &TimingStats {
+        &self.timing
+    }
+
+    /// The fault that ended the move, if any.
+    pub fn fault(&self) -> Option<Fault> {
+        self.fault
+    }
+
+    /// Cycles executed.
+    pub fn cycles(&self) -> u64 {
+        self.executed
+    }
+
+    /// Samples of the path, if known.
+    pub fn planned_samples(&self) -> Option<u64> {
+        self.planned_samples
+    }
+
+    fn request(link: &mut dyn HwLink, req: HwMsg) -> Result<HwMsg, MoveError> {
+        let resp = link.exchange(&req)?;
+        let status = resp.status();
+        if status.is_ok() {
+            Ok(resp)
+        } else {
+            Err(MoveError::Refused(status))
+        }
+    }
+
+    /// Everything before the first tick, in order: clear and arm the safety monitoring, read
+    /// where the robot is, start the path from there, reset the law, size the gather buffer
+    /// from the path's length, and only then enable the motors.
+    pub fn prepare(&mut self, link: &mut dyn HwLink) -> Result<(), MoveError> {
+        Servo::request(link, HwMsg::request(MsgType::ClearSafetyStatus))?;
+        Servo::request(link, HwMsg::request(MsgType::EnableSafety))?;
+        let start = Servo::request(link, HwMsg::read_all_encoders())?;
+        self.act = start.data;
+        self.generator.start(&self.act)?;
+        self.planned_samples = self.generator.samples();
+        self.generator.sample(0, &mut self.cmd);
+        self.law.reset(&self.cmd, &self.act);
+        let samples = self.planned_samples.unwrap_or(STREAM_GATHER_SAMPLES);
+        self.gather = Gather::for_move(samples, self.plan.gather_every, self.plan.n_motors);
+        self.timing = TimingStats::new(self.plan.period_ns);
+        self.errors = ErrorStats::default();
+        self.fault = None;
+        self.executed = 0;
+        for m in 0..self.plan.n_motors {
+            if let Err(e) = Servo::request(link, HwMsg::for_motor(MsgType::EnableMotor, m as u32)) {
+                self.disable_all(link);
+                return Err(e);
+            }
+        }
+        Ok(())
+    }
+
+    /// Marks when tick 0 is due (the origin of gathered time in real-time runs).
+    pub fn set_t0(&mut self, t0_ns: u64) {
+        self.t0_ns = t0_ns;
+    }
+
+    /// One servo cycle for `tick`. Allocates nothing, locks nothing, formats nothing.
+    #[inline]
+    pub fn cycle(&mut self, link: &mut dyn HwLink, tick: &Tick) -> CycleEnd {
+        let n = if self.plan.deterministic {
+            self.executed
+        } else {
+            tick.index
+        };
+        self.last_sample = n;
+
+        // 1. Read all encoders.
+        let read_start = self.clock.now_ns();
+        let resp = match link.exchange(&HwMsg::read_all_encoders()) {
+            Ok(r) => r,
+            Err(e) => return CycleEnd::Fault(Fault::from_link(e, n)),
+        };
+        if let Some(f) = Fault::from_status(resp.status(), n) {
+            return CycleEnd::Fault(f);
+        }
+        self.act = resp.data;
+        let read_done = self.clock.now_ns();
+
+        // 2. Command position.
+        match self.generator.sample(n, &mut self.cmd) {
+            Sample::Ready => {}
+            Sample::Done => return CycleEnd::Done,
+            Sample::Starved => return CycleEnd::Fault(Fault::new(FaultKind::TrajectoryStarved, n)),
+        }
+
+        // 3. Law.
+        self.law.step(
+            &ServoInput {
+                n,
+                cmd: &self.cmd,
+                act: &self.act,
+            },
+            &mut self.dac,
+        );
+        let computed = self.clock.now_ns();
+
+        // 4. Write all DACs.
+        let resp = match link.exchange(&HwMsg::write_all_dacs(&self.dac)) {
+            Ok(r) => r,
+            Err(e) => return CycleEnd::Fault(Fault::from_link(e, n)),
+        };
+        let written = self.clock.now_ns();
+
+        // 5. Gather.
+        self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
+        self.timing
+            .record(tick, read_start, read_done, computed, written);
+        if self.gather.due(self.executed) {
+            // Integer ns divided once: the correctly rounded decimal, no accumulated noise.
+            let time_ns = if self.plan.deterministic {
+                n * self.plan.period_ns
+            } else {
+                tick.woke_ns.saturating_sub(self.t0_ns)
+            };
+            let time_s = time_ns as f64 / 1e9;
+            self.gather.push(GatherRow {
+                cycle: n,
+                time_s,
+                cmd: self.cmd,
+                act: self.act,
+                dac: self.dac,
+            });
+        }
+        self.executed += 1;
+        match Fault::from_status(resp.status(), n) {
+            Some(f) => CycleEnd::Fault(f),
+            None => CycleEnd::Continue,
+        }
+    }
+
+    /// The fault handler: records `fault` and disables every motor (DACs to 0 V first).
+    pub fn handle_fault(&mut self, link: &mut dyn HwLink, fault: Fault) {
+        self.fault = Some(fault);
+        if fault.kind != FaultKind::HwserverLost {
+            self.disable_all(link);
+        }
+    }
+
+    fn disable_all(&mut self, link: &mut dyn HwLink) {
+        // Best effort: a fault path must not fail. A lost link is reported by the caller.
+        let _ = link.exchange(&HwMsg::request(MsgType::DisableAll));
+    }
+
+    /// Runs the whole move: prepare, tick until the path ends, a fault or `stop`, then
+    /// disable every motor and stop the safety monitoring.
+    pub fn run(
+        &mut self,
+        link: &mut dyn HwLink,
+        ticker: &mut dyn Ticker,
+        stop: &AtomicBool,
+    ) -> Result<(), MoveError> {
+        self.prepare(link)?;
+        let t0 = match ticker.start() {
+            Ok(t0) => t0,
+            Err(e) => {
+                self.disable_all(link);
+                return Err(e.into());
+            }
+        };
+        self.set_t0(t0);
+        loop {
+            let tick = match ticker.wait() {
+                Ok(t) => t,
+                Err(e) => {
+                    self.disable_all(link);
+                    return Err(e.into());
+                }
+            };
+            if stop.load(Ordering::Relaxed) {
+                let fault = Fault {
+                    signal: qmarc_timer::stop::signal().unwrap_or(0),
+                    ..Fault::new(FaultKind::Aborted, self.last_sample)
+                };
+                self.handle_fault(link, fault);
+                break;
+            }
+            match self.cycle(link, &tick) {
+                CycleEnd::Continue => {}
+                CycleEnd::Done => break,
+                CycleEnd::Fault(f) => {
+                    self.handle_fault(link, f);
+                    break;
+                }
+            }
+        }
+        if self.fault.is_none_or(|f| f.kind != FaultKind::HwserverLost) {
+            self.disable_all(link);
+            let _ = link.exchange(&HwMsg::request(MsgType::DisableSafety));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,526 @@
+//! What a move leaves behind besides its data: the error figures per motor, the timing
+//! figures, the fault if any, and `summary.json` that carries them to the starter, the
+//! console and the tests.
+
+use crate::link::LinkError;
+use qmarc_proto::{MAX_MOTORS, Status};
+use qmarc_timer::{Histogram, Percentiles, Tick};
+use serde::{Deserialize, Serialize};
+
+/// Following-error figures of one motor, accumulated every servo cycle (error = command −
+/// actual, counts).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct AxisErrors {
+    /// Smallest error.
+    pub min: f64,
+    /// Largest error.
+    pub max: f64,
+    /// Σ |error|.
+    pub sum_abs: f64,
+    /// Σ error².
+    pub sum_sq: f64,
+    /// Cycles counted.
+    pub count: u64,
+}
+
+impl AxisErrors {
+    /// Adds one cycle's error.
+    #[inline]
+    pub fn add(&mut self, e: f64) {
+        if self.count == 0 {
+            self.min = e;
+            self.max = e;
+        } else {
+            self.min = self.min.min(e);
+            self.max = self.max.max(e);
+        }
+        self.sum_abs += e.abs();
+        self.sum_sq += e * e;
+        self.count += 1;
+    }
+}
+
+/// Error figures of every motor.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ErrorStats {
+    /// Per motor.
+    pub axes: [AxisErrors; MAX_MOTORS],
+}
+
+impl ErrorStats {
+    /// Adds one cycle: error = cmd − act for the first `n_motors`.
+    #[inline]
+    pub fn add(&mut self, n_motors: usize, cmd: &[f64; MAX_MOTORS], act: &[f64; MAX_MOTORS]) {
+        for m in 0..n_motors {
+            self.axes[m].add(cmd[m] - act[m]);
+        }
+    }
+}
+
+/// Timing figures of every cycle, in fixed memory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimingStats {
+    period_ns: u64,
+    /// Wake latency against the intended expiry.
+    pub wake_latency: Histogram,
+    /// |interval between wakes − period|.
+    pub period_error: Histogram,
+    /// Read-all-encoders round trip.
+    pub read: Histogram,
+    /// Trajectory + law.
+    pub compute: Histogram,
+    /// From the intended tick to the DAC write being acknowledged.
+    pub output_latency: Histogram,
+    /// Periods that expired without a cycle.
+    pub missed: u64,
+    /// Wakes more than 40 µs off the period (the thesis' criterion, 5.3.2).
+    pub outside_40us: u64,
+    prev_woke_ns: Option<u64>,
+}
+
+/// Nanoseconds the thesis tolerated off the period.
+const OFF_PERIOD_NS: u64 = 40_000;
+
+impl TimingStats {
+    /// Histograms with 1 µs bins up to two periods.
+    pub fn new(period_ns: u64) -> TimingStats {
+        let bound = (2 * period_ns / 1_000) as usize;
+        TimingStats {
+            period_ns,
+            wake_latency: Histogram::new(bound),
+            period_error: Histogram::new(bound),
+            read: Histogram::new(bound),
+            compute: Histogram::new(bound),
+            output_latency: Histogram::new(bound),
+            missed: 0,
+            outside_40us: 0,
+            prev_woke_ns: None,
+        }
+    }
+
+    /// Records one cycle: its tick and when the read, the computation and the write ended.
+    #[inline]
+    pub fn record(
+        &mut self,
+        tick: &Tick,
+        read_start_ns: u64,
+        read_done_ns: u64,
+        computed_ns: u64,
+        written_ns: u64,
+    ) {
+        self.wake_latency.record_ns(tick.latency_ns());
+        if let Some(prev) = self.prev_woke_ns {
+            let err = tick.woke_ns.saturating_sub(prev).abs_diff(self.period_ns);
+            self.period_error.record_ns(err);
+            if err > OFF_PERIOD_NS {
+                self.outside_40us += 1;
+            }
+        }
+        self.prev_woke_ns = Some(tick.woke_ns);
+        self.missed += tick.missed;
+        self.read
+            .record_ns(read_done_ns.saturating_sub(read_start_ns));
+        self.compute
+            .record_ns(computed_ns.saturating_sub(read_done_ns));
+        self.output_latency
+            .record_ns(written_ns.saturating_sub(tick.intended_ns));
+    }
+}
+
+/// What ended a move early.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FaultKind {
+    /// A limit switch tripped.
+    LimitSwitch,
+    /// The hwserver stopped answering or died.
+    HwserverLost,
+    /// The hwserver was stopped by a signal and refuses to drive.
+    HwserverShutdown,
+    /// The hwserver's watchdog fired.
+    Watchdog,
+    /// The hardware reported an error.
+    HardwareFault,
+    /// A counter step could not be unwrapped.
+    EncoderOverflow,
+    /// The hwserver did not understand a request (a bug on one side).
+    ProtocolError,
+    /// A stop signal (Ctrl-C, SIGTERM) aborted the move.
+    Aborted,
+    /// The trajectory generator had no command for a sample.
+    TrajectoryStarved,
+}
+
+impl FaultKind {
+    /// The `kind` string of `summary.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            FaultKind::LimitSwitch => "limit_switch",
+            FaultKind::HwserverLost => "hwserver_lost",
+            FaultKind::HwserverShutdown => "hwserver_shutdown",
+            FaultKind::Watchdog => "watchdog",
+            FaultKind::HardwareFault => "hardware_fault",
+            FaultKind::EncoderOverflow => "encoder_overflow",
+            FaultKind::ProtocolError => "protocol_error",
+            FaultKind::Aborted => "aborted",
+            FaultKind::TrajectoryStarved => "trajectory_starved",
+        }
+    }
+}
+
+/// A fault, as the loop records it: numbers only, `Copy`, formatted after the move.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fault {
+    /// What happened.
+    pub kind: FaultKind,
+    /// 0-based motor, if it concerns one.
+    pub motor: Option<usize>,
+    /// Servo sample index at which it was seen.
+    pub cycle: u64,
+    /// The hwserver status word of the response that reported it.
+    pub status: Status,
+    /// The link failure, for [`FaultKind::HwserverLost`] and IPC errors.
+    pub link: Option<LinkError>,
+    /// The signal, for [`FaultKind::Aborted`].
+    pub signal: i32,
+}
+
+impl Fault {
+    /// A fault of `kind` at sample `cycle` with nothing else known.
+    #[inline]
+    pub fn new(kind: FaultKind, cycle: u64) -> Fault {
+        Fault {
+            kind,
+            motor: None,
+            cycle,
+            status: Status::OK,
+            link: None,
+            signal: 0,
+        }
+    }
+
+    /// The fault a non-zero status word means, most severe first; `None` for a clean status.
+    #[inline]
+    pub fn from_status(status: Status, cycle: u64) -> Option<Fault> {
+        if status.is_ok() {
+            return None;
+        }
+        let (kind, motor) = if status.contains(Status::WATCHDOG) {
+            (FaultKind::Watchdog, None)
+        } else if status.contains(Status::SHUTDOWN) {
+            (FaultKind::HwserverShutdown, None)
+        } else if status.contains(Status::HARDWARE_FAULT) {
+            (FaultKind::HardwareFault, None)
+        } else if let Some((m, _)) = status.first_limit() {
+            (FaultKind::LimitSwitch, Some(m))
+        } else if let Some(m) = status.first_encoder_overflow() {
+            (FaultKind::EncoderOverflow, Some(m))
+        } else {
+            (FaultKind::ProtocolError, None)
+        };
+        Some(Fault {
+            motor,
+            status,
+            ..Fault::new(kind, cycle)
+        })
+    }
+
+    /// A lost or failed link at sample `cycle`.
+    #[inline]
+    pub fn from_link(e: LinkError, cycle: u64) -> Fault {
+        Fault {
+            link: Some(e),
+            ..Fault::new(FaultKind::HwserverLost, cycle)
+        }
+    }
+
+    /// The message for the terminal and `summary.json`, motors 1-based.
+    pub fn message(&self) -> String {
+        let what = match self.kind {
+            FaultKind::LimitSwitch => {
+                let m = self.motor.unwrap_or(0);
+                let side = if self.status.contains(Status::limit_top(m)) {
+                    "top"
+                } else {
+                    "bottom"
+                };
+                format!("motor {} hit its {side} limit switch", m + 1)
+            }
+            FaultKind::HwserverLost => match self.link {
+                Some(e) => format!("lost the hwserver: {e}"),
+                None => "lost the hwserver".to_string(),
+            },
+            FaultKind::HwserverShutdown => {
+                "the hwserver was stopped and disabled the motors".to_string()
+            }
+            FaultKind::Watchdog => {
+                "the hwserver's watchdog fired (controller too late)".to_string()
+            }
+            FaultKind::HardwareFault => "the hardware reported an error".to_string(),
+            FaultKind::EncoderOverflow => {
+                format!("motor {} encoder overflow", self.motor.map_or(0, |m| m + 1))
+            }
+            FaultKind::ProtocolError => format!("the hwserver refused a request: {}", self.status),
+            FaultKind::Aborted => format!("aborted by signal {}", self.signal),
+            FaultKind::TrajectoryStarved => "the trajectory ran out of knots".to_string(),
+        };
+        format!("{what} at cycle {}; all motors disabled", self.cycle)
+    }
+
+    /// The JSON form.
+    pub fn report(&self) -> FaultReport {
+        FaultReport {
+            kind: self.kind.name().to_string(),
+            motor: self.motor.map(|m| m + 1),
+            cycle: self.cycle,
+            message: self.message(),
+        }
+    }
+}
+
+/// A fault in `summary.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FaultReport {
+    /// [`FaultKind::name`].
+    pub kind: String,
+    /// 1-based motor, or null.
+    pub motor: Option<usize>,
+    /// Servo sample index.
+    pub cycle: u64,
+    /// What happened, in words.
+    pub message: String,
+}
+
+/// Error figures of one motor in `summary.json`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MotorSummary {
+    /// Smallest error, counts.
+    pub min_error_counts: f64,
+    /// Largest error, counts.
+    pub max_error_counts: f64,
+    /// Σ |error|, counts.
+    pub accumulated_abs_error_counts: f64,
+    /// Σ error², counts².
+    pub sum_squares_error_counts2: f64,
+    /// Smallest error, rad at the arm.
+    pub min_error_rad: f64,
+    /// Largest error, rad.
+    pub max_error_rad: f64,
+    /// Σ |error|, rad.
+    pub accumulated_abs_error_rad: f64,
+    /// Σ error², rad².
+    pub sum_squares_error_rad2: f64,
+}
+
+impl MotorSummary {
+    /// The figures of `e`, with `counts_per_rad` to convert (rad = counts / counts_per_rad).
+    pub fn new(e: &AxisErrors, counts_per_rad: f64) -> MotorSummary {
+        MotorSummary {
+            min_error_counts: e.min,
+            max_error_counts: e.max,
+            accumulated_abs_error_counts: e.sum_abs,
+            sum_squares_error_counts2: e.sum_sq,
+            min_error_rad: e.min / counts_per_rad,
+            max_error_rad: e.max / counts_per_rad,
+            accumulated_abs_error_rad: e.sum_abs / counts_per_rad,
+            sum_squares_error_rad2: e.sum_sq / (counts_per_rad * counts_per_rad),
+        }
+    }
+}
+
+/// Percentiles in `summary.json`, µs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Pct {
+    /// Median.
+    pub p50: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// 99.9th percentile.
+    pub p999: f64,
+    /// Maximum.
+    pub max: f64,
+}
+
+impl From<Percentiles> for Pct {
+    fn from(p: Percentiles) -> Pct {
+        Pct {
+            p50: p.p50_us,
+            p99: p.p99_us,
+            p999: p.p999_us,
+            max: p.max_us,
+        }
+    }
+}
+
+/// Timing figures in `summary.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TimingSummary {
+    /// `timerfd` or `nanosleep`.
+    pub method: String,
+    /// Scheduling policy of the servo thread, e.g. `SCHED_FIFO 80`.
+    pub policy: String,
+    /// Wake latency against the intended expiry, µs.
+    pub wake_latency_us: Pct,
+    /// |interval between wakes − period|, µs.
+    pub period_error_us: Pct,
+    /// Wakes more than 40 µs off the period.
+    pub outside_40us: u64,
+    /// Periods that expired without a cycle.
+    pub missed_periods: u64,
+    /// Read round trip, µs.
+    pub read_us: Pct,
+    /// Trajectory + law, µs.
+    pub compute_us: Pct,
+    /// Intended tick → DAC write acknowledged, µs.
+    pub output_latency_us: Pct,
+}
+
+impl TimingSummary {
+    /// The figures of `t`.
+    pub fn new(t: &TimingStats, method: &str, policy: &str) -> TimingSummary {
+        TimingSummary {
+            method: method.to_string(),
+            policy: policy.to_string(),
+            wake_latency_us: t.wake_latency.percentiles().into(),
+            period_error_us: t.period_error.percentiles().into(),
+            outside_40us: t.outside_40us,
+            missed_periods: t.missed,
+            read_us: t.read.percentiles().into(),
+            compute_us: t.compute.percentiles().into(),
+            output_latency_us: t.output_latency.percentiles().into(),
+        }
+    }
+}
+
+/// `summary.json`: everything about one move.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `step`, `run` or `home`.
+    pub mode: String,
+    /// True when the move ran to its end without a fault.
+    pub ok: bool,
+    /// True when SCHED_FIFO was refused and the loop ran SCHED_OTHER.
+    pub degraded: bool,
+    /// True for a lock-step simulated run.
+    pub deterministic: bool,
+    /// The fault that ended the move, or null.
+    pub fault: Option<FaultReport>,
+    /// Servo cycles executed.
+    pub cycles: u64,
+    /// Samples the path has (duration / period + 1), if known.
+    pub planned_samples: Option<u64>,
+    /// Servo period, µs.
+    pub period_us: u32,
+    /// Gathered every N cycles.
+    pub gather_every: u32,
+    /// Rows in gather.csv.
+    pub gathered_rows: u64,
+    /// Counts per radian used for the rad figures.
+    pub counts_per_rad: f64,
+    /// Error figures per motor.
+    pub motors: Vec<MotorSummary>,
+    /// Timing figures.
+    pub timing: TimingSummary,
+    /// Warnings of the run (degraded real time, dropped rows).
+    pub warnings: Vec<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_errors_track_extremes_and_sums() {
+        let mut e = AxisErrors::default();
+        for v in [2.0, -3.0, 1.0] {
+            e.add(v);
+        }
+        assert_eq!(
+            e,
+            AxisErrors {
+                min: -3.0,
+                max: 2.0,
+                sum_abs: 6.0,
+                sum_sq: 14.0,
+                count: 3
+            }
+        );
+        let s = MotorSummary::new(&e, 2.0);
+        assert_eq!(
+            (
+                s.min_error_rad,
+                s.accumulated_abs_error_rad,
+                s.sum_squares_error_rad2
+            ),
+            (-1.5, 3.0, 3.5)
+        );
+    }
+
+    #[test]
+    fn status_words_map_to_fault_kinds() {
+        let check = |s: Status, kind: FaultKind, motor: Option<usize>| {
+            let f = Fault::from_status(s, 7).unwrap();
+            assert_eq!((f.kind, f.motor, f.cycle), (kind, motor, 7), "{s}");
+        };
+        assert_eq!(Fault::from_status(Status::OK, 1), None);
+        check(Status::limit_bottom(2), FaultKind::LimitSwitch, Some(2));
+        check(
+            Status::limit_top(0) | Status::WATCHDOG,
+            FaultKind::Watchdog,
+            None,
+        );
+        check(Status::SHUTDOWN, FaultKind::HwserverShutdown, None);
+        check(
+            Status::encoder_overflow(1),
+            FaultKind::EncoderOverflow,
+            Some(1),
+        );
+        check(Status::UNKNOWN_MESSAGE, FaultKind::ProtocolError, None);
+        let f = Fault::from_status(Status::limit_top(0), 1234).unwrap();
+        assert_eq!(
+            f.message(),
+            "motor 1 hit its top limit switch at cycle 1234; all motors disabled"
+        );
+        let r = f.report();
+        assert_eq!(
+            (r.kind.as_str(), r.motor, r.cycle),
+            ("limit_switch", Some(1), 1234)
+        );
+    }
+
+    #[test]
+    fn timing_measures_against_the_intended_tick() {
+        let mut t = TimingStats::new(400_000);
+        let tick = |i: u64, late: u64, missed: u64| Tick {
+            index: i,
+            intended_ns: 1_000_000 + i * 400_000,
+            woke_ns: 1_000_000 + i * 400_000 + late,
+            missed,
+        };
+        t.record(
+            &tick(0, 10_000, 0),
+            1_010_000,
+            1_030_000,
+            1_035_000,
+            1_060_000,
+        );
+        t.record(
+            &tick(1, 60_000, 0),
+            1_460_000,
+            1_480_000,
+            1_481_000,
+            1_500_000,
+        );
+        t.record(
+            &tick(3, 5_000, 1),
+            2_205_000,
+            2_215_000,
+            2_216_000,
+            2_230_000,
+        );
+        assert_eq!(t.missed, 1);
+        assert_eq!(t.wake_latency.max_ns(), 60_000);
+        assert_eq!(t.outside_40us, 2, "+50 µs, then a skipped period");
+        assert_eq!(t.read.percentiles().max_us, 20.0);
+        assert_eq!(t.output_latency.max_ns(), 100_000);
+    }
+}

@@ -1,0 +1,65 @@
+//! [`Backend`]: the hardware behind the server. Swapping hardware means writing one of these.
+
+use qmarc_proto::{MAX_MOTORS, Status};
+
+/// What one input read latches: every counter and every limit switch.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Inputs {
+    /// Raw 24-bit quadrature counter per motor ([`qmarc_proto::COUNTER_MASK`] wide, wraps).
+    pub counters: [u32; MAX_MOTORS],
+    /// Limit switches that are active now, as [`Status::limit_top`]/[`Status::limit_bottom`]
+    /// bits (not latched: the server latches).
+    pub limits: Status,
+}
+
+/// A hardware operation failed (a short ioctl, a device error). Carries numbers only.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("hardware operation {op} failed with code {code}")]
+pub struct HwFault {
+    /// Which operation: 1 read inputs, 2 write DACs, 3 enable, 4 load counter.
+    pub op: u8,
+    /// Backend-specific code (an errno for ioctl backends).
+    pub code: i32,
+}
+
+/// The hardware: counters, DACs, amplifier enables, limit switches, an external watchdog.
+///
+/// Real-time contract: construction may allocate and fail and takes validated parameters;
+/// every method called per exchange ([`Backend::read_inputs`], [`Backend::write_dacs`]) takes
+/// `&mut self`, writes into the caller's buffer and never allocates, locks, does I/O other
+/// than the hardware access itself, or panics. The server clamps DAC codes to
+/// ±[`qmarc_proto::DAC_MAX`] before they arrive here.
+pub trait Backend: Send {
+    /// Short name for messages (`sim`, `s626`).
+    fn name(&self) -> &'static str;
+
+    /// Number of motors driven (≤ [`MAX_MOTORS`]).
+    fn n_motors(&self) -> usize;
+
+    /// Latches every counter and limit switch into `inputs`.
+    fn read_inputs(&mut self, inputs: &mut Inputs) -> Result<(), HwFault>;
+
+    /// Writes the DAC code of every driven motor (`codes[n_motors..]` are ignored).
+    fn write_dacs(&mut self, codes: &[i32; MAX_MOTORS]) -> Result<(), HwFault>;
+
+    /// Switches the amplifier of `motor` on or off.
+    fn set_amp_enable(&mut self, motor: usize, on: bool) -> Result<(), HwFault>;
+
+    /// Loads the hardware counter of `motor` with `raw`.
+    fn load_counter(&mut self, motor: usize, raw: u32) -> Result<(), HwFault>;
+
+    /// All DACs to 0 V and all amplifiers off, as far as the hardware still obeys. Never fails:
+    /// it is what every fault path calls.
+    fn safe_state(&mut self);
+
+    /// The backend's clock in ns: the response timestamp. Hardware uses `CLOCK_MONOTONIC`;
+    /// the simulator its own (simulated in lock-step mode).
+    fn now_ns(&self) -> u64;
+
+    /// Called on every exchange: toggle the output of an external charge pump or safety relay
+    /// that drops amplifier enable when the toggling stops. Default: no such output.
+    fn kick_charge_pump(&mut self) {}
+
+    /// Stop toggling the charge pump for good (its relay drops). Default: no such output.
+    fn stop_charge_pump(&mut self) {}
+}

@@ -1,0 +1,63 @@
+//! `qmarc-hwserver`: the hardware server process, started by `qmarc-starter`.
+//!
+//! Exit codes: 0 after an exit message or a stop signal (motors disabled), 3 when the
+//! watchdog fired (controller silent with motors enabled), 1 on any other error.
+
+use anyhow::Context;
+use clap::Parser;
+use qmarc_hwserver::args::{BackendKind, HwServerArgs};
+use qmarc_hwserver::server::{ServeEnd, ServeOptions, serve};
+use qmarc_hwserver::{Backend, HwCore, SimDeltabot};
+use qmarc_timer::rt::{RtRequest, apply_to_current_thread};
+use std::process::ExitCode;
+
+fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
+    let backend: Box<dyn Backend> = match args.backend {
+        BackendKind::Sim => Box::new(SimDeltabot::new(args.sim_params()?)?),
+    };
+    let stop = qmarc_timer::stop::install().context("cannot install signal handlers")?;
+    let rt = apply_to_current_thread(&RtRequest {
+        priority: (args.priority > 0).then_some(args.priority),
+        lock_memory: !args.no_mlock,
+        prefault_stack_bytes: 64 * 1024,
+    });
+    for w in &rt.warnings {
+        eprintln!("qmarc-hwserver: warning: {w}");
+    }
+    let mut core = HwCore::new(backend);
+    let opts = ServeOptions {
+        watchdog_ns: u64::from(args.watchdog_periods) * args.period_ns(),
+        spin: args.spin,
+        shutdown_grace_ns: 1_000_000_000,
+    };
+    let end = serve(&mut core, &args.location(), &opts, stop)?;
+    Ok(match end {
+        ServeEnd::Exit => ExitCode::SUCCESS,
+        ServeEnd::Stopped => {
+            let sig = qmarc_timer::stop::signal().unwrap_or(0);
+            eprintln!("qmarc-hwserver: stopped by signal {sig}: all motors disabled");
+            ExitCode::SUCCESS
+        }
+        ServeEnd::Watchdog { silent_ns } => {
+            eprintln!(
+                "qmarc-hwserver: watchdog: controller silent for {:.3} ms (limit {} periods of {} µs) \
+                 with motors enabled: all DACs zeroed, all motors disabled",
+                silent_ns as f64 / 1e6,
+                args.watchdog_periods,
+                args.period_us
+            );
+            ExitCode::from(3)
+        }
+    })
+}
+
+fn main() -> ExitCode {
+    let args = HwServerArgs::parse();
+    match run(&args) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("qmarc-hwserver: error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

@@ -1,0 +1,405 @@
+//! [`HwCore`]: what the server does with each request, independent of IPC and hardware.
+
+use crate::backend::{Backend, Inputs};
+use qmarc_proto::{COUNTER_ZERO, DAC_MAX, HwMsg, MAX_MOTORS, MsgType, Status, counter_delta};
+
+/// The server's state machine around a [`Backend`]: software positions, enables, latched
+/// status, watchdog bookkeeping. `handle` is called once per request and never allocates,
+/// locks, formats or panics.
+pub struct HwCore {
+    backend: Box<dyn Backend>,
+    n_motors: usize,
+    inputs: Inputs,
+    /// 64-bit software position per motor (thesis 3.10.2's software counter, widened).
+    position: [i64; MAX_MOTORS],
+    enabled: [bool; MAX_MOTORS],
+    dacs: [i32; MAX_MOTORS],
+    monitoring: bool,
+    latched: Status,
+    exit_requested: bool,
+}
+
+impl HwCore {
+    /// Wraps `backend`. The software positions start at the counters' distance from
+    /// [`COUNTER_ZERO`], so a frame set by an earlier homing survives a server restart as long
+    /// as the counters kept counting. The hardware is put in the safe state first.
+    pub fn new(mut backend: Box<dyn Backend>) -> HwCore {
+        backend.safe_state();
+        let n_motors = backend.n_motors().min(MAX_MOTORS);
+        let mut core = HwCore {
+            backend,
+            n_motors,
+            inputs: Inputs::default(),
+            position: [0; MAX_MOTORS],
+            enabled: [false; MAX_MOTORS],
+            dacs: [0; MAX_MOTORS],
+            monitoring: false,
+            latched: Status::OK,
+            exit_requested: false,
+        };
+        let status = core.read();
+        if status.is_ok() {
+            for m in 0..n_motors {
+                core.position[m] = i64::from(counter_delta(COUNTER_ZERO, core.inputs.counters[m]));
+            }
+        }
+        core
+    }
+
+    /// Number of motors served.
+    pub fn n_motors(&self) -> usize {
+        self.n_motors
+    }
+
+    /// The backend's name.
+    pub fn backend_name(&self) -> &'static str {
+        self.backend.name()
+    }
+
+    /// True once an [`MsgType::Exit`] was handled.
+    pub fn exit_requested(&self) -> bool {
+        self.exit_requested
+    }
+
+    /// True if any amplifier is enabled.
+    pub fn any_enabled(&self) -> bool {
+        self.enabled[..self.n_motors].iter().any(|&e| e)
+    }
+
+    /// The latched status bits.
+    pub fn latched(&self) -> Status {
+        self.latched
+    }
+
+    /// Software position of `motor` in counts.
+    pub fn position(&self, motor: usize) -> i64 {
+        self.position[motor]
+    }
+
+    /// Puts the hardware in the safe state: DACs 0, amplifiers off.
+    pub fn safe_state(&mut self) {
+        self.backend.safe_state();
+        self.enabled = [false; MAX_MOTORS];
+        self.dacs = [0; MAX_MOTORS];
+    }
+
+    /// The watchdog fired: safe state, the charge pump stops and every later response
+    /// carries [`Status::WATCHDOG`].
+    pub fn trip_watchdog(&mut self) {
+        self.safe_state();
+        self.backend.stop_charge_pump();
+        self.latched |= Status::WATCHDOG;
+    }
+
+    /// A stop was requested (signal): safe state, and every later response carries
+    /// [`Status::SHUTDOWN`]; enabling is refused from now on.
+    pub fn shut_down(&mut self) {
+        self.safe_state();
+        self.latched |= Status::SHUTDOWN;
+    }
+
+    /// Reads the inputs and extends the counters; latches limit bits while monitoring.
+    fn read(&mut self) -> Status {
+        if self.backend.read_inputs(&mut self.inputs).is_err() {
+            return Status::HARDWARE_FAULT;
+        }
+        if self.monitoring {
+            let tripped = self.inputs.limits & Status::LIMIT_MASK;
+            if !tripped.is_ok() {
+                // Thesis 3.10.1: latch which switch it was and stop watching until cleared.
+                self.latched |= tripped;
+                self.monitoring = false;
+            }
+        }
+        Status::OK
+    }
+
+    fn update_positions(&mut self, last: &[u32; MAX_MOTORS]) {
+        for m in 0..self.n_motors {
+            self.position[m] += i64::from(counter_delta(last[m], self.inputs.counters[m]));
+        }
+    }
+
+    /// Answers one request. Unknown types and bad motor indices are answered with a status
+    /// bit, never a crash.
+    pub fn handle(&mut self, req: &HwMsg) -> HwMsg {
+        self.backend.kick_charge_pump();
+        let mut resp = req.response();
+        let motor = req.motor as usize;
+        let single = motor < self.n_motors;
+        let mut status = Status::OK;
+        match req.msg_type() {
+            Err(_) => status |= Status::UNKNOWN_MESSAGE,
+            Ok(MsgType::ReadAllEncoders | MsgType::ReadEncoder) => {
+                let last = self.inputs.counters;
+                status |= self.read();
+                if status.is_ok() {
+                    self.update_positions(&last);
+                }
+                if req.msg_type == MsgType::ReadEncoder as u32 && !single {
+                    status |= Status::BAD_MOTOR;
+                }
+                for m in 0..self.n_motors {
+                    resp.data[m] = self.position[m] as f64;
+                }
+            }
+            Ok(MsgType::WriteAllDacs) => {
+                for m in 0..self.n_motors {
+                    self.dacs[m] = req.aux[m].clamp(-DAC_MAX, DAC_MAX);
+                }
+                if self.backend.write_dacs(&self.dacs).is_err() {
+                    status |= Status::HARDWARE_FAULT;
+                }
+            }
+            Ok(MsgType::WriteDac) if single => {
+                self.dacs[motor] = req.aux[motor].clamp(-DAC_MAX, DAC_MAX);
+                if self.backend.write_dacs(&self.dacs).is_err() {
+                    status |= Status::HARDWARE_FAULT;
+                }
+            }
+            Ok(MsgType::EnableMotor) if single => {
+                if self.latched.intersects(Status::SHUTDOWN | Status::WATCHDOG) {
+                    status |= Status::SHUTDOWN;
+                } else if self.backend.set_amp_enable(motor, true).is_ok() {
+                    self.enabled[motor] = true;
+                } else {
+                    status |= Status::HARDWARE_FAULT;
+                }
+            }
+            Ok(MsgType::DisableMotor) if single => {
+                self.dacs[motor] = 0;
+                let dac_ok = self.backend.write_dacs(&self.dacs).is_ok();
+                let amp_ok = self.backend.set_amp_enable(motor, false).is_ok();
+                self.enabled[motor] = false;
+                if !(dac_ok && amp_ok) {
+                    status |= Status::HARDWARE_FAULT;
+                }
+            }
+            Ok(MsgType::DisableAll) => self.safe_state(),
+            Ok(MsgType::ResetEncoderZero) if single || req.motor == HwMsg::ALL_MOTORS => {
+                let range = if single {
+                    motor..motor + 1
+                } else {
+                    0..self.n_motors
+                };
+                for m in range {
+                    if self.backend.load_counter(m, COUNTER_ZERO).is_err() {
+                        status |= Status::HARDWARE_FAULT;
+                    }
+                    self.inputs.counters[m] = COUNTER_ZERO;
+                    self.position[m] = 0;
+                }
+            }
+            Ok(MsgType::EnableSafety) => self.monitoring = true,
+            Ok(MsgType::DisableSafety) => self.monitoring = false,
+            Ok(MsgType::ClearSafetyStatus) => {
+                self.latched = self.latched & !(Status::LIMIT_MASK | Status::ENCODER_MASK);
+            }
+            Ok(MsgType::Exit) => {
+                self.safe_state();
+                self.exit_requested = true;
+            }
+            Ok(_) => status |= Status::BAD_MOTOR,
+        }
+        resp.status = (status | self.latched).0;
+        resp.time_ns = self.backend.now_ns();
+        resp
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::{SimDeltabot, SimParams};
+
+    fn core_with(p: SimParams) -> HwCore {
+        HwCore::new(Box::new(SimDeltabot::new(p).unwrap()))
+    }
+
+    fn core(n_motors: usize) -> HwCore {
+        core_with(SimParams {
+            n_motors,
+            lockstep: true,
+            ..SimParams::default()
+        })
+    }
+
+    fn send(core: &mut HwCore, req: HwMsg) -> HwMsg {
+        let resp = core.handle(&req);
+        assert_eq!(
+            (resp.msg_type, resp.seq, resp.motor),
+            (req.msg_type, req.seq, req.motor)
+        );
+        resp
+    }
+
+    #[test]
+    fn unknown_message_types_get_a_status_bit() {
+        let mut c = core(3);
+        for raw in [0, 13, 1000, u32::MAX] {
+            let resp = send(
+                &mut c,
+                HwMsg {
+                    msg_type: raw,
+                    seq: 9,
+                    ..HwMsg::default()
+                },
+            );
+            assert_eq!(resp.status(), Status::UNKNOWN_MESSAGE);
+        }
+        // The bit is per response, not latched.
+        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
+    }
+
+    #[test]
+    fn bad_motor_indices_get_a_status_bit() {
+        let mut c = core(3);
+        for t in [
+            MsgType::ReadEncoder,
+            MsgType::WriteDac,
+            MsgType::EnableMotor,
+            MsgType::DisableMotor,
+        ] {
+            let resp = send(&mut c, HwMsg::for_motor(t, 3));
+            assert_eq!(resp.status(), Status::BAD_MOTOR, "{t:?}");
+        }
+        assert!(!c.any_enabled());
+    }
+
+    #[test]
+    fn step_response_moves_the_software_position() {
+        let mut c = core(2);
+        send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 1));
+        let mut codes = [0; MAX_MOTORS];
+        codes[1] = 1000;
+        send(&mut c, HwMsg::write_all_dacs(&codes));
+        let mut last = 0.0;
+        for _ in 0..50 {
+            let resp = send(&mut c, HwMsg::read_all_encoders());
+            assert!(resp.data[1] >= last);
+            last = resp.data[1];
+            assert_eq!(resp.data[0], 0.0, "motor 1 is disabled");
+        }
+        assert!(last > 100.0, "{last}");
+        let resp = send(&mut c, HwMsg::for_motor(MsgType::ReadEncoder, 1));
+        assert!(resp.data[1] >= last);
+        // 50 + 1 reads here and the one of HwCore::new, one period each.
+        assert_eq!(resp.time_ns, 52 * 400_000);
+    }
+
+    #[test]
+    fn software_position_survives_counter_wrap() {
+        let mut p = SimParams {
+            n_motors: 1,
+            lockstep: true,
+            ..SimParams::default()
+        };
+        p.start_counts[0] = 8_388_000.0;
+        p.top_switch_counts = -1e9;
+        p.bottom_switch_counts = 1e9;
+        let mut c = core_with(p);
+        assert_eq!(
+            send(&mut c, HwMsg::read_all_encoders()).data[0],
+            8_388_000.0
+        );
+        send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 0));
+        let mut codes = [0; MAX_MOTORS];
+        codes[0] = 8191;
+        send(&mut c, HwMsg::write_all_dacs(&codes));
+        let mut pos = 0.0;
+        for _ in 0..100 {
+            pos = send(&mut c, HwMsg::read_all_encoders()).data[0];
+        }
+        assert!(pos > 8_388_608.0, "crossed the 24-bit wrap: {pos}");
+        assert_eq!(pos, c.position(0) as f64);
+    }
+
+    #[test]
+    fn reset_zero_sets_software_position_to_zero() {
+        let mut p = SimParams {
+            n_motors: 2,
+            lockstep: true,
+            ..SimParams::default()
+        };
+        p.start_counts = [123.0, -77.0, 0.0, 0.0];
+        let mut c = core_with(p);
+        let r = send(&mut c, HwMsg::read_all_encoders());
+        assert_eq!(&r.data[..2], &[123.0, -77.0]);
+        send(&mut c, HwMsg::for_motor(MsgType::ResetEncoderZero, 1));
+        let r = send(&mut c, HwMsg::read_all_encoders());
+        assert_eq!(&r.data[..2], &[123.0, 0.0]);
+        send(
+            &mut c,
+            HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS),
+        );
+        let r = send(&mut c, HwMsg::read_all_encoders());
+        assert_eq!(&r.data[..2], &[0.0, 0.0]);
+    }
+
+    #[test]
+    fn limit_trip_latches_until_cleared_and_only_while_monitoring() {
+        let mut p = SimParams {
+            n_motors: 2,
+            lockstep: true,
+            ..SimParams::default()
+        };
+        p.start_counts[1] = p.top_switch_counts - 1.0;
+        let mut c = core_with(p);
+        assert!(
+            send(&mut c, HwMsg::read_all_encoders()).status().is_ok(),
+            "not monitoring"
+        );
+        send(&mut c, HwMsg::request(MsgType::EnableSafety));
+        let r = send(&mut c, HwMsg::read_all_encoders());
+        assert_eq!(r.status(), Status::limit_top(1));
+        // Latched in every response, including writes.
+        assert_eq!(
+            send(&mut c, HwMsg::write_all_dacs(&[0; 4])).status(),
+            Status::limit_top(1)
+        );
+        send(&mut c, HwMsg::request(MsgType::ClearSafetyStatus));
+        // Monitoring stopped at the trip (thesis 3.10.1): still on the switch, but no new bit.
+        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
+        send(&mut c, HwMsg::request(MsgType::EnableSafety));
+        assert_eq!(
+            send(&mut c, HwMsg::read_all_encoders()).status(),
+            Status::limit_top(1)
+        );
+        send(&mut c, HwMsg::request(MsgType::DisableSafety));
+        send(&mut c, HwMsg::request(MsgType::ClearSafetyStatus));
+        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
+    }
+
+    #[test]
+    fn watchdog_and_shutdown_disable_and_refuse_enable() {
+        let mut c = core(3);
+        for m in 0..3 {
+            send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, m));
+        }
+        assert!(c.any_enabled());
+        c.trip_watchdog();
+        assert!(!c.any_enabled());
+        let r = send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 0));
+        assert!(r.status().contains(Status::WATCHDOG | Status::SHUTDOWN));
+        assert!(!c.any_enabled());
+        let mut c = core(1);
+        c.shut_down();
+        assert_eq!(
+            send(&mut c, HwMsg::read_all_encoders()).status(),
+            Status::SHUTDOWN
+        );
+    }
+
+    #[test]
+    fn exit_and_disable_all_leave_the_safe_state() {
+        let mut c = core(3);
+        send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 2));
+        send(&mut c, HwMsg::request(MsgType::DisableAll));
+        assert!(!c.any_enabled());
+        send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 0));
+        assert!(!c.exit_requested());
+        assert!(send(&mut c, HwMsg::request(MsgType::Exit)).status().is_ok());
+        assert!(c.exit_requested());
+        assert!(!c.any_enabled());
+    }
+}

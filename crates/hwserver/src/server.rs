@@ -1,0 +1,165 @@
+//! [`serve`]: the iceoryx2 loop of the hardware server.
+//!
+//! The server blocks on the request event (no busy spin unless asked), answers every pending
+//! request through [`HwCore::handle`] and notifies the response event after each answer.
+//! Around that it keeps the watchdog: if the controller is silent for longer than the
+//! watchdog while any motor is enabled, the hardware goes to the safe state and the server
+//! ends (the PC-crash protection the thesis lacked, 6.2.3).
+
+use crate::core::HwCore;
+use qmarc_proto::service::{
+    HWSERVER_NODE, IpcLocation, ServiceError, create_node, open_hw_services,
+};
+use qmarc_timer::clock::monotonic_now_ns;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// How the loop waits and when the watchdog fires.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ServeOptions {
+    /// Controller silence (ns) tolerated while any motor is enabled.
+    pub watchdog_ns: u64,
+    /// Busy-poll instead of blocking.
+    pub spin: bool,
+    /// After a stop request, how long to keep answering (so the controller can still send
+    /// its disable and exit messages) before ending.
+    pub shutdown_grace_ns: u64,
+}
+
+/// Why [`serve`] ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServeEnd {
+    /// The controller sent [`qmarc_proto::MsgType::Exit`].
+    Exit,
+    /// The controller was silent for `silent_ns` with motors enabled: the safe state was
+    /// commanded.
+    Watchdog {
+        /// How long it had been silent.
+        silent_ns: u64,
+    },
+    /// A stop was requested (a signal) and no exit message followed within the grace time.
+    Stopped,
+}
+
+/// The loop failed in iceoryx2.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ServeError {
+    /// Node or services could not be opened.
+    #[error(transparent)]
+    Open(#[from] ServiceError),
+    /// A port could not be created or used.
+    #[error("iceoryx2 {op} failed: {reason}")]
+    Port {
+        /// The operation.
+        op: &'static str,
+        /// iceoryx2's error.
+        reason: String,
+    },
+}
+
+fn port_err(op: &'static str) -> impl FnOnce(&dyn std::fmt::Debug) -> ServeError {
+    move |e| ServeError::Port {
+        op,
+        reason: format!("{e:?}"),
+    }
+}
+
+/// Longest single wait, so that stop requests are noticed while idle.
+const IDLE_WAIT_NS: u64 = 50_000_000;
+
+/// Serves requests at `location` until exit, watchdog or stop. `stop` is polled between
+/// waits; once it is set the hardware is made safe at once and [`crate::HwCore::shut_down`]
+/// refuses further enables. On every return the hardware is in the safe state.
+pub fn serve(
+    core: &mut HwCore,
+    location: &IpcLocation,
+    opts: &ServeOptions,
+    stop: &AtomicBool,
+) -> Result<ServeEnd, ServeError> {
+    let result = serve_inner(core, location, opts, stop);
+    core.safe_state();
+    result
+}
+
+fn serve_inner(
+    core: &mut HwCore,
+    location: &IpcLocation,
+    opts: &ServeOptions,
+    stop: &AtomicBool,
+) -> Result<ServeEnd, ServeError> {
+    let node = create_node(HWSERVER_NODE, location)?;
+    let services = open_hw_services(&node)?;
+    let server = services
+        .hw
+        .server_builder()
+        .create()
+        .map_err(|e| port_err("server creation")(&e))?;
+    let listener = services
+        .request_event
+        .listener_builder()
+        .create()
+        .map_err(|e| port_err("listener creation")(&e))?;
+    let notifier = services
+        .response_event
+        .notifier_builder()
+        .create()
+        .map_err(|e| port_err("notifier creation")(&e))?;
+
+    let mut last_request_ns = monotonic_now_ns();
+    let mut stop_since_ns: Option<u64> = None;
+    loop {
+        let now = monotonic_now_ns();
+        if stop_since_ns.is_none() && stop.load(Ordering::Relaxed) {
+            core.shut_down();
+            stop_since_ns = Some(now);
+        }
+        if let Some(since) = stop_since_ns {
+            if now.saturating_sub(since.max(last_request_ns)) > opts.shutdown_grace_ns {
+                return Ok(ServeEnd::Stopped);
+            }
+        }
+        let silent_ns = now.saturating_sub(last_request_ns);
+        if core.any_enabled() && silent_ns > opts.watchdog_ns {
+            core.trip_watchdog();
+            return Ok(ServeEnd::Watchdog { silent_ns });
+        }
+
+        if !opts.spin {
+            let budget = if core.any_enabled() {
+                opts.watchdog_ns.saturating_sub(silent_ns).max(1_000)
+            } else {
+                IDLE_WAIT_NS
+            };
+            match listener.timed_wait(|_| {}, Duration::from_nanos(budget.min(IDLE_WAIT_NS))) {
+                Ok(_) => {}
+                Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => continue,
+                Err(e) => return Err(port_err("listener wait")(&e)),
+            }
+        } else {
+            // Consume the wake-ups without blocking so the event counter stays small.
+            listener
+                .try_wait(|_| {})
+                .map_err(|e| port_err("listener try_wait")(&e))?;
+            std::hint::spin_loop();
+        }
+
+        while let Some(active) = server
+            .receive()
+            .map_err(|e| port_err("server receive")(&e))?
+        {
+            last_request_ns = monotonic_now_ns();
+            let response = core.handle(active.payload());
+            active
+                .send_copy(response)
+                .map_err(|e| port_err("response send")(&e))?;
+            drop(active);
+            notifier
+                .notify()
+                .map_err(|e| port_err("response notify")(&e))?;
+            if core.exit_requested() {
+                return Ok(ServeEnd::Exit);
+            }
+        }
+    }
+}

@@ -1,0 +1,456 @@
+//! [`SimDeltabot`]: a simulated Deltabot, the default backend and what tests and CI run on.
+//!
+//! Per motor (`../shared/notes/deltabot.md`): a velocity-mode servo amplifier turns the DAC
+//! code into a velocity command `Kv · code · 10 V / 8191` that the motor follows with a
+//! first-order lag τ; a disabled amplifier drives nothing and the motor coasts to rest with
+//! its own time constant. The position, in counts, is quantised by a 24-bit quadrature counter
+//! that wraps and whose "zero" is [`COUNTER_ZERO`], as on the 626. Top and bottom limit
+//! switches are active beyond their positions.
+//!
+//! Two clocks: real time (the plant advances by the measured time since the last access) and
+//! lock-step (every read of the inputs advances it by exactly one servo period, so two runs
+//! with the same requests give identical data).
+
+use crate::backend::{Backend, HwFault, Inputs};
+use qmarc_proto::{COUNTER_MASK, COUNTER_ZERO, DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, Status};
+use qmarc_timer::clock::monotonic_now_ns;
+
+/// Parameters of the simulated robot. Every constant of the model is here; the defaults are
+/// the values of `../shared/notes/deltabot.md` (an assumption, not measured data).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimParams {
+    /// Motors simulated (1‥[`MAX_MOTORS`]).
+    pub n_motors: usize,
+    /// Servo period in ns: the step of lock-step mode.
+    pub period_ns: u64,
+    /// Lock-step clock (deterministic) instead of real time.
+    pub lockstep: bool,
+    /// Amplifier gain: motor velocity in counts/s per volt of command.
+    pub kv_counts_per_s_per_v: f64,
+    /// Velocity-loop lag of the enabled amplifier, s.
+    pub tau_s: f64,
+    /// Time constant of a disabled motor coasting to rest, s.
+    pub coast_tau_s: f64,
+    /// Position of each motor at start, counts in the homed frame.
+    pub start_counts: [f64; MAX_MOTORS],
+    /// Top limit switch position, counts in the homed frame (reached moving away from the
+    /// bottom switch).
+    pub top_switch_counts: f64,
+    /// Bottom limit switch position, counts in the homed frame.
+    pub bottom_switch_counts: f64,
+}
+
+impl Default for SimParams {
+    fn default() -> SimParams {
+        SimParams {
+            n_motors: 3,
+            period_ns: 400_000,
+            lockstep: false,
+            kv_counts_per_s_per_v: 25_000.0,
+            tau_s: 0.004,
+            coast_tau_s: 0.05,
+            start_counts: [0.0; MAX_MOTORS],
+            top_switch_counts: -9_500.0,
+            bottom_switch_counts: 10_500.0,
+        }
+    }
+}
+
+/// A [`SimParams`] value is out of range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SimParamsError {
+    /// A parameter is outside its range.
+    #[error("simulator parameter `{name}` = {value} is invalid: {expected}")]
+    OutOfRange {
+        /// Parameter name.
+        name: &'static str,
+        /// Value given.
+        value: f64,
+        /// What is allowed.
+        expected: &'static str,
+    },
+}
+
+impl SimParams {
+    /// Checks every parameter.
+    pub fn validate(&self) -> Result<(), SimParamsError> {
+        let bad = |name, value, expected| {
+            Err(SimParamsError::OutOfRange {
+                name,
+                value,
+                expected,
+            })
+        };
+        if !(1..=MAX_MOTORS).contains(&self.n_motors) {
+            return bad("motors", self.n_motors as f64, "1 to 4");
+        }
+        if self.period_ns == 0 {
+            return bad("period", 0.0, "a positive period");
+        }
+        let positive = [
+            ("kv", self.kv_counts_per_s_per_v),
+            ("tau_s", self.tau_s),
+            ("coast_tau_s", self.coast_tau_s),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(name, v, "finite and > 0");
+            }
+        }
+        for v in [self.top_switch_counts, self.bottom_switch_counts] {
+            if !v.is_finite() {
+                return bad("switch position", v, "finite");
+            }
+        }
+        if self.top_switch_counts == self.bottom_switch_counts {
+            return bad(
+                "top_switch",
+                self.top_switch_counts,
+                "different from bottom_switch",
+            );
+        }
+        for &s in &self.start_counts[..self.n_motors] {
+            if !s.is_finite() || s.abs() >= f64::from(1u32 << 23) {
+                return bad("start position", s, "finite and within ±2^23 counts");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One simulated axis.
+#[derive(Debug, Clone, Copy, Default)]
+struct Axis {
+    /// True position, counts (homed frame).
+    x: f64,
+    /// Velocity, counts/s.
+    v: f64,
+    /// DAC code in effect.
+    dac: i32,
+    /// Amplifier enabled.
+    enabled: bool,
+    /// Raw counter value minus floor(x), mod 2^24: what a counter load changes.
+    counter_offset: u32,
+}
+
+/// The simulated Deltabot backend.
+#[derive(Debug, Clone)]
+pub struct SimDeltabot {
+    p: SimParams,
+    axes: [Axis; MAX_MOTORS],
+    /// Simulated time of the plant state, ns.
+    t_ns: u64,
+    /// In real time: the monotonic time `t_ns` corresponds to.
+    origin_ns: u64,
+    /// Sign of the direction toward the top switch (−1 when top < bottom).
+    top_dir: f64,
+}
+
+impl SimDeltabot {
+    /// A robot at rest at its start positions, amplifiers off, DACs at 0 V.
+    pub fn new(p: SimParams) -> Result<SimDeltabot, SimParamsError> {
+        p.validate()?;
+        let mut axes = [Axis::default(); MAX_MOTORS];
+        for (axis, &start) in axes.iter_mut().zip(&p.start_counts) {
+            axis.x = start;
+            axis.counter_offset = COUNTER_ZERO;
+        }
+        let top_dir = if p.top_switch_counts < p.bottom_switch_counts {
+            -1.0
+        } else {
+            1.0
+        };
+        Ok(SimDeltabot {
+            p,
+            axes,
+            t_ns: 0,
+            origin_ns: monotonic_now_ns(),
+            top_dir,
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &SimParams {
+        &self.p
+    }
+
+    /// True position of `motor` in counts (not quantised).
+    pub fn position(&self, motor: usize) -> f64 {
+        self.axes[motor].x
+    }
+
+    /// Velocity of `motor` in counts/s.
+    pub fn velocity(&self, motor: usize) -> f64 {
+        self.axes[motor].v
+    }
+
+    /// Whether the amplifier of `motor` is on.
+    pub fn enabled(&self, motor: usize) -> bool {
+        self.axes[motor].enabled
+    }
+
+    /// The DAC code in effect on `motor`.
+    pub fn dac(&self, motor: usize) -> i32 {
+        self.axes[motor].dac
+    }
+
+    /// Advances the plant by `dt_ns` with the DACs and enables as they are (zero-order hold).
+    ///
+    /// Exact for the first-order lag: with ω* the commanded velocity and a = e^(−dt/τ),
+    /// ω ← ω* + (ω − ω*)·a and x ← x + ω*·dt + (ω − ω*)·τ·(1 − a).
+    pub fn advance(&mut self, dt_ns: u64) {
+        if dt_ns == 0 {
+            return;
+        }
+        let dt = dt_ns as f64 * 1e-9;
+        let n = self.p.n_motors;
+        let volts_per_code = DAC_FULL_SCALE_V / f64::from(DAC_MAX);
+        for axis in &mut self.axes[..n] {
+            let (target, tau) = if axis.enabled {
+                (
+                    self.p.kv_counts_per_s_per_v * volts_per_code * f64::from(axis.dac),
+                    self.p.tau_s,
+                )
+            } else {
+                (0.0, self.p.coast_tau_s)
+            };
+            let a = (-dt / tau).exp();
+            let dv = axis.v - target;
+            axis.x += target * dt + dv * tau * (1.0 - a);
+            axis.v = target + dv * a;
+        }
+        self.t_ns += dt_ns;
+    }
+
+    /// In real time, brings the plant up to now.
+    fn catch_up(&mut self) {
+        if !self.p.lockstep {
+            let now = monotonic_now_ns().saturating_sub(self.origin_ns);
+            self.advance(now.saturating_sub(self.t_ns));
+        }
+    }
+
+    fn counter(&self, motor: usize) -> u32 {
+        let axis = &self.axes[motor];
+        ((axis.x.floor() as i64 as u32).wrapping_add(axis.counter_offset)) & COUNTER_MASK
+    }
+
+    fn limits(&self) -> Status {
+        let mut s = Status::OK;
+        for (m, axis) in self.axes[..self.p.n_motors].iter().enumerate() {
+            if (axis.x - self.p.top_switch_counts) * self.top_dir >= 0.0 {
+                s |= Status::limit_top(m);
+            }
+            if (axis.x - self.p.bottom_switch_counts) * self.top_dir <= 0.0 {
+                s |= Status::limit_bottom(m);
+            }
+        }
+        s
+    }
+}
+
+impl Backend for SimDeltabot {
+    fn name(&self) -> &'static str {
+        "sim"
+    }
+
+    fn n_motors(&self) -> usize {
+        self.p.n_motors
+    }
+
+    fn read_inputs(&mut self, inputs: &mut Inputs) -> Result<(), HwFault> {
+        if self.p.lockstep {
+            self.advance(self.p.period_ns);
+        } else {
+            self.catch_up();
+        }
+        for m in 0..self.p.n_motors {
+            inputs.counters[m] = self.counter(m);
+        }
+        inputs.limits = self.limits();
+        Ok(())
+    }
+
+    fn write_dacs(&mut self, codes: &[i32; MAX_MOTORS]) -> Result<(), HwFault> {
+        self.catch_up();
+        let n = self.p.n_motors;
+        for (axis, &code) in self.axes[..n].iter_mut().zip(codes) {
+            axis.dac = code.clamp(-DAC_MAX, DAC_MAX);
+        }
+        Ok(())
+    }
+
+    fn set_amp_enable(&mut self, motor: usize, on: bool) -> Result<(), HwFault> {
+        self.catch_up();
+        self.axes[motor].enabled = on;
+        Ok(())
+    }
+
+    fn load_counter(&mut self, motor: usize, raw: u32) -> Result<(), HwFault> {
+        self.catch_up();
+        let axis = &mut self.axes[motor];
+        axis.counter_offset = raw.wrapping_sub(axis.x.floor() as i64 as u32);
+        Ok(())
+    }
+
+    fn safe_state(&mut self) {
+        self.catch_up();
+        for axis in &mut self.axes {
+            axis.dac = 0;
+            axis.enabled = false;
+        }
+    }
+
+    fn now_ns(&self) -> u64 {
+        if self.p.lockstep {
+            self.t_ns
+        } else {
+            monotonic_now_ns().saturating_sub(self.origin_ns)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lockstep(n_motors: usize) -> SimDeltabot {
+        SimDeltabot::new(SimParams {
+            n_motors,
+            lockstep: true,
+            ..SimParams::default()
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn enabled_axis_approaches_kv_times_volts_with_lag_tau() {
+        let mut sim = lockstep(1);
+        sim.set_amp_enable(0, true).unwrap();
+        sim.write_dacs(&[8191, 0, 0, 0]).unwrap();
+        // One τ (4 ms = 10 periods): 1 − 1/e of the commanded 250 000 counts/s.
+        let mut inputs = Inputs::default();
+        for _ in 0..10 {
+            sim.read_inputs(&mut inputs).unwrap();
+        }
+        let target = 25_000.0 * 10.0;
+        let expected_v = target * (1.0 - (-1.0f64).exp());
+        assert!(
+            (sim.velocity(0) - expected_v).abs() < 1e-6 * target,
+            "{}",
+            sim.velocity(0)
+        );
+        // x(t) = target·(t − τ(1 − e^(−t/τ))) for t = τ.
+        let expected_x = target * (0.004 - 0.004 * (1.0 - (-1.0f64).exp()));
+        assert!(
+            (sim.position(0) - expected_x).abs() < 1e-6,
+            "{}",
+            sim.position(0)
+        );
+        assert_eq!(inputs.counters[0], COUNTER_ZERO + expected_x.floor() as u32);
+    }
+
+    #[test]
+    fn disabled_axis_is_not_driven() {
+        let mut sim = lockstep(2);
+        sim.write_dacs(&[8191, -8191, 0, 0]).unwrap();
+        sim.advance(100_000_000);
+        assert_eq!(sim.position(0), 0.0);
+        assert_eq!(sim.position(1), 0.0);
+    }
+
+    #[test]
+    fn counter_wraps_at_24_bits_and_loads() {
+        let mut sim = SimDeltabot::new(SimParams {
+            n_motors: 1,
+            lockstep: true,
+            start_counts: [8_388_608.0, 0.0, 0.0, 0.0],
+            top_switch_counts: -1e9,
+            bottom_switch_counts: 1e9,
+            ..SimParams::default()
+        });
+        assert!(sim.is_err(), "start beyond ±2^23 is refused");
+        sim = SimDeltabot::new(SimParams {
+            n_motors: 1,
+            lockstep: true,
+            start_counts: [8_388_000.0, 0.0, 0.0, 0.0],
+            top_switch_counts: -1e9,
+            bottom_switch_counts: 1e9,
+            ..SimParams::default()
+        });
+        let mut sim = sim.unwrap();
+        let mut inputs = Inputs::default();
+        sim.read_inputs(&mut inputs).unwrap();
+        assert_eq!(
+            inputs.counters[0],
+            (COUNTER_ZERO + 8_388_000) & COUNTER_MASK
+        );
+        sim.load_counter(0, 0xff_fff0).unwrap();
+        sim.read_inputs(&mut inputs).unwrap();
+        assert_eq!(inputs.counters[0], 0xff_fff0);
+        sim.set_amp_enable(0, true).unwrap();
+        sim.write_dacs(&[100, 0, 0, 0]).unwrap();
+        for _ in 0..200 {
+            sim.read_inputs(&mut inputs).unwrap();
+        }
+        let moved = sim.position(0).floor() - 8_388_000.0;
+        assert!(moved > 16.0);
+        assert_eq!(
+            inputs.counters[0],
+            (0xff_fff0 + moved as u32) & COUNTER_MASK
+        );
+        assert!(inputs.counters[0] < 0xff_fff0, "wrapped");
+    }
+
+    #[test]
+    fn switches_trip_beyond_their_positions() {
+        let mut p = SimParams {
+            n_motors: 2,
+            lockstep: true,
+            ..SimParams::default()
+        };
+        p.start_counts[0] = -9_500.0;
+        p.start_counts[1] = 10_600.0;
+        let mut sim = SimDeltabot::new(p).unwrap();
+        let mut inputs = Inputs::default();
+        sim.read_inputs(&mut inputs).unwrap();
+        assert_eq!(
+            inputs.limits,
+            Status::limit_top(0) | Status::limit_bottom(1)
+        );
+        // Reversed orientation: top above bottom.
+        p.top_switch_counts = 100.0;
+        p.bottom_switch_counts = -100.0;
+        p.start_counts = [150.0, -150.0, 0.0, 0.0];
+        let mut sim = SimDeltabot::new(p).unwrap();
+        sim.read_inputs(&mut inputs).unwrap();
+        assert_eq!(
+            inputs.limits,
+            Status::limit_top(0) | Status::limit_bottom(1)
+        );
+    }
+
+    #[test]
+    fn lockstep_advances_one_period_per_read() {
+        let mut sim = lockstep(1);
+        let mut inputs = Inputs::default();
+        for _ in 0..5 {
+            sim.read_inputs(&mut inputs).unwrap();
+            sim.write_dacs(&[1, 0, 0, 0]).unwrap();
+        }
+        assert_eq!(sim.now_ns(), 5 * 400_000);
+    }
+
+    #[test]
+    fn invalid_parameters_are_named() {
+        let p = SimParams {
+            tau_s: -1.0,
+            ..SimParams::default()
+        };
+        assert_eq!(
+            SimDeltabot::new(p).unwrap_err().to_string(),
+            "simulator parameter `tau_s` = -1 is invalid: finite and > 0"
+        );
+    }
+}

@@ -1,0 +1,237 @@
+//! [`HwMsg`], the one message type of the controller ⇄ hwserver protocol, and [`MsgType`].
+
+use crate::{MAX_MOTORS, Status};
+use iceoryx2::prelude::ZeroCopySend;
+
+/// The twelve requests of thesis section 3.6, with their wire values.
+///
+/// Single-motor requests name their motor in [`HwMsg::motor`]; all-motor requests use the
+/// arrays. The numbering follows the thesis' list (1 = read all encoders … 12 = exit).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum MsgType {
+    /// 1. Read every motor's encoder; the response carries the 64-bit software positions in
+    /// `data` (counts) and the latched status.
+    ReadAllEncoders = 1,
+    /// 2. Write every motor's DAC from `aux` (codes, ±[`crate::DAC_MAX`]).
+    WriteAllDacs = 2,
+    /// 3. Read the encoder of motor `motor` into `data[motor]`.
+    ReadEncoder = 3,
+    /// 4. Write `aux[motor]` to the DAC of motor `motor`.
+    WriteDac = 4,
+    /// 5. Enable the amplifier of motor `motor`.
+    EnableMotor = 5,
+    /// 6. Disable the amplifier of motor `motor` (its DAC goes to 0 V first).
+    DisableMotor = 6,
+    /// 7. Zero every DAC and disable every amplifier.
+    DisableAll = 7,
+    /// 8. Load the hardware counter of motor `motor` (or [`HwMsg::ALL_MOTORS`]) with
+    /// [`crate::COUNTER_ZERO`] and set its software position to 0.
+    ResetEncoderZero = 8,
+    /// 9. Start watching the limit switches (a trip latches a status bit and stops watching).
+    EnableSafety = 9,
+    /// 10. Stop watching the limit switches.
+    DisableSafety = 10,
+    /// 11. Clear the latched safety status bits.
+    ClearSafetyStatus = 11,
+    /// 12. Put the hardware in the safe state, answer, and exit the server.
+    Exit = 12,
+}
+
+impl MsgType {
+    /// Every message type, in wire order.
+    pub const ALL: [MsgType; 12] = [
+        MsgType::ReadAllEncoders,
+        MsgType::WriteAllDacs,
+        MsgType::ReadEncoder,
+        MsgType::WriteDac,
+        MsgType::EnableMotor,
+        MsgType::DisableMotor,
+        MsgType::DisableAll,
+        MsgType::ResetEncoderZero,
+        MsgType::EnableSafety,
+        MsgType::DisableSafety,
+        MsgType::ClearSafetyStatus,
+        MsgType::Exit,
+    ];
+
+    /// Decodes a wire value; `None` for anything that is not one of the twelve.
+    #[inline]
+    pub fn from_raw(raw: u32) -> Option<MsgType> {
+        match raw {
+            1..=12 => Some(Self::ALL[raw as usize - 1]),
+            _ => None,
+        }
+    }
+}
+
+/// A wire value that is not a [`MsgType`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct UnknownMsgType(pub u32);
+
+impl std::fmt::Display for UnknownMsgType {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "unknown message type {}", self.0)
+    }
+}
+
+impl std::error::Error for UnknownMsgType {}
+
+/// The request and the response between controller and hwserver (thesis `ClientMessageT`).
+///
+/// Plain old data: fixed arrays, no pointers, the same layout in both processes. A response
+/// echoes `msg_type`, `seq` and `motor` of its request.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("qmarc.HwMsg.v1")]
+#[repr(C)]
+#[doc(alias = "ClientMessageT")]
+pub struct HwMsg {
+    /// A [`MsgType`] wire value (`iMsgType`). Kept raw so that an unknown value reaches the
+    /// server and is answered with [`Status::UNKNOWN_MESSAGE`] instead of failing to decode.
+    pub msg_type: u32,
+    /// Sequence number set by the client; the response carries the same one.
+    pub seq: u32,
+    /// Status word of the server ([`Status`] bits, `iStatus`); 0 in requests.
+    pub status: u32,
+    /// Motor index (0-based) of single-motor requests, or [`HwMsg::ALL_MOTORS`].
+    pub motor: u32,
+    /// Server timestamp of the response in ns on the server's clock (the simulated clock in
+    /// deterministic mode); 0 in requests.
+    pub time_ns: u64,
+    /// Per-motor floating-point data (`fMsgData`): software positions in counts.
+    pub data: [f64; MAX_MOTORS],
+    /// Per-motor integer data (`iInitData`): DAC codes.
+    pub aux: [i32; MAX_MOTORS],
+}
+
+const _: () = assert!(core::mem::size_of::<HwMsg>() == 72);
+const _: () = assert!(core::mem::align_of::<HwMsg>() == 8);
+
+impl HwMsg {
+    /// The `motor` value that means every motor.
+    pub const ALL_MOTORS: u32 = u32::MAX;
+
+    /// A request of type `t` with every other field zero.
+    #[inline]
+    pub fn request(t: MsgType) -> HwMsg {
+        HwMsg {
+            msg_type: t as u32,
+            ..HwMsg::default()
+        }
+    }
+
+    /// A single-motor request of type `t` for motor index `motor`.
+    #[inline]
+    pub fn for_motor(t: MsgType, motor: u32) -> HwMsg {
+        HwMsg {
+            motor,
+            ..HwMsg::request(t)
+        }
+    }
+
+    /// The read-all-encoders request of every servo cycle.
+    #[inline]
+    pub fn read_all_encoders() -> HwMsg {
+        HwMsg::request(MsgType::ReadAllEncoders)
+    }
+
+    /// The write-all-DACs request of every servo cycle.
+    #[inline]
+    pub fn write_all_dacs(codes: &[i32; MAX_MOTORS]) -> HwMsg {
+        HwMsg {
+            aux: *codes,
+            ..HwMsg::request(MsgType::WriteAllDacs)
+        }
+    }
+
+    /// Decodes [`HwMsg::msg_type`].
+    #[inline]
+    pub fn msg_type(&self) -> Result<MsgType, UnknownMsgType> {
+        MsgType::from_raw(self.msg_type).ok_or(UnknownMsgType(self.msg_type))
+    }
+
+    /// The status word as [`Status`].
+    #[inline]
+    pub fn status(&self) -> Status {
+        Status(self.status)
+    }
+
+    /// The answer to `self`: same type, sequence number and motor, everything else zero.
+    #[inline]
+    pub fn response(&self) -> HwMsg {
+        HwMsg {
+            msg_type: self.msg_type,
+            seq: self.seq,
+            motor: self.motor,
+            ..HwMsg::default()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn every_type_round_trips_through_its_wire_value() {
+        for (i, t) in MsgType::ALL.iter().enumerate() {
+            assert_eq!(*t as u32, i as u32 + 1);
+            assert_eq!(MsgType::from_raw(*t as u32), Some(*t));
+        }
+        for raw in [0, 13, 99, u32::MAX] {
+            assert_eq!(MsgType::from_raw(raw), None);
+            let m = HwMsg {
+                msg_type: raw,
+                ..HwMsg::default()
+            };
+            assert_eq!(m.msg_type(), Err(UnknownMsgType(raw)));
+        }
+    }
+
+    #[test]
+    fn response_echoes_type_sequence_and_motor() {
+        let mut req = HwMsg::for_motor(MsgType::EnableMotor, 2);
+        req.seq = 77;
+        req.data = [1.0; MAX_MOTORS];
+        let resp = req.response();
+        assert_eq!((resp.msg_type, resp.seq, resp.motor), (5, 77, 2));
+        assert_eq!(resp.data, [0.0; MAX_MOTORS]);
+    }
+
+    fn to_bytes(m: &HwMsg) -> [u8; 72] {
+        // SAFETY: HwMsg is repr(C) plain old data of exactly 72 bytes without padding
+        // (4 × u32, u64, 4 × f64, 4 × i32), so every byte is initialised.
+        unsafe { core::mem::transmute_copy(m) }
+    }
+
+    fn from_bytes(b: &[u8; 72]) -> HwMsg {
+        // SAFETY: every bit pattern is a valid HwMsg (integers and floats only).
+        unsafe { core::mem::transmute_copy(b) }
+    }
+
+    proptest! {
+        #[test]
+        fn message_round_trips_through_its_bytes(
+            msg_type in any::<u32>(), seq in any::<u32>(), status in any::<u32>(),
+            motor in any::<u32>(), time_ns in any::<u64>(),
+            data in proptest::array::uniform4(any::<f64>()),
+            aux in proptest::array::uniform4(any::<i32>()),
+        ) {
+            let m = HwMsg { msg_type, seq, status, motor, time_ns, data, aux };
+            let back = from_bytes(&to_bytes(&m));
+            prop_assert_eq!(to_bytes(&back), to_bytes(&m));
+            prop_assert_eq!(back.msg_type, msg_type);
+            prop_assert_eq!(back.aux, aux);
+            for i in 0..MAX_MOTORS {
+                prop_assert_eq!(back.data[i].to_bits(), data[i].to_bits());
+            }
+        }
+
+        #[test]
+        fn counter_delta_inverts_wrapping_add(old in 0u32..(1 << 24), d in -(1i32 << 23)..(1i32 << 23)) {
+            let new = (old as i64 + d as i64).rem_euclid(1 << 24) as u32;
+            prop_assert_eq!(crate::counter_delta(old, new), d);
+        }
+    }
+}

@@ -1,0 +1,206 @@
+//! The iceoryx2 services between controller and hwserver, opened identically by both sides.
+//!
+//! One request/response service carries [`HwMsg`] both ways. iceoryx2 0.10 request/response
+//! ports only poll, so two event services make the exchange blocking: the client notifies
+//! [`REQUEST_EVENT`] after sending, the server waits on it; the server notifies
+//! [`RESPONSE_EVENT`] after answering, the client waits on it (see `../shared/notes/iceoryx2.md`).
+//!
+//! Every file iceoryx2 creates is named with the run's prefix and lives under its root, so
+//! parallel runs never meet and a run's leftovers can be removed by prefix.
+
+use crate::HwMsg;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{event, request_response};
+
+/// Name of the request/response service.
+pub const HW_SERVICE: &str = "qmarc/hw";
+/// Name of the event service the client notifies after each request.
+pub const REQUEST_EVENT: &str = "qmarc/hw/request";
+/// Name of the event service the server notifies after each response.
+pub const RESPONSE_EVENT: &str = "qmarc/hw/response";
+/// Node name of the hardware server.
+pub const HWSERVER_NODE: &str = "qmarc-hwserver";
+/// Node name of the controller.
+pub const CONTROLLER_NODE: &str = "qmarc-controller";
+/// Default iceoryx2 root directory (iceoryx2's own default).
+pub const DEFAULT_ROOT: &str = "/tmp/iceoryx2/";
+
+/// The request/response service.
+pub type HwService = request_response::PortFactory<ipc::Service, HwMsg, (), HwMsg, ()>;
+/// An event service.
+pub type EventService = event::PortFactory<ipc::Service>;
+
+/// The three services of one controller ⇄ hwserver link.
+pub struct HwServices {
+    /// Requests and responses.
+    pub hw: HwService,
+    /// Client → server wake-ups.
+    pub request_event: EventService,
+    /// Server → client wake-ups.
+    pub response_event: EventService,
+}
+
+/// Where a link's files live: the name prefix and the root directory.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct IpcLocation {
+    /// Prefix of every file iceoryx2 creates, e.g. `qmarc_1234_`.
+    pub prefix: String,
+    /// Root directory with a trailing slash, e.g. `/tmp/iceoryx2/`.
+    pub root: String,
+}
+
+impl IpcLocation {
+    /// A location; a missing trailing slash is added to `root`.
+    pub fn new(prefix: &str, root: &str) -> IpcLocation {
+        let mut root = root.to_string();
+        if !root.ends_with('/') {
+            root.push('/');
+        }
+        IpcLocation {
+            prefix: prefix.to_string(),
+            root,
+        }
+    }
+
+    /// The iceoryx2 configuration for this location.
+    pub fn config(&self) -> Result<Config, ServiceError> {
+        let mut cfg = Config::default();
+        cfg.global.prefix = FileName::new(self.prefix.as_bytes())
+            .map_err(|e| ServiceError::new("the iceoryx2 prefix", &self.prefix, e))?;
+        let root = Path::new(self.root.as_bytes())
+            .map_err(|e| ServiceError::new("the iceoryx2 root path", &self.root, e))?;
+        cfg.global.set_root_path(&root);
+        Ok(cfg)
+    }
+}
+
+/// Opening a node or a service failed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ServiceError {
+    /// What could not be opened.
+    pub what: String,
+    /// iceoryx2's reason.
+    pub reason: String,
+}
+
+impl ServiceError {
+    fn new(what: &str, name: &str, reason: impl std::fmt::Debug) -> ServiceError {
+        ServiceError {
+            what: format!("{what} `{name}`"),
+            reason: format!("{reason:?}"),
+        }
+    }
+}
+
+impl std::fmt::Display for ServiceError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "cannot open {}: {}", self.what, self.reason)
+    }
+}
+
+impl std::error::Error for ServiceError {}
+
+/// Creates a node named `name` at `location`. iceoryx2's own signal handling is off: each
+/// process installs its own handlers.
+pub fn create_node(name: &str, location: &IpcLocation) -> Result<Node<ipc::Service>, ServiceError> {
+    let cfg = location.config()?;
+    let node_name = NodeName::new(name).map_err(|e| ServiceError::new("node name", name, e))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .config(&cfg)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| ServiceError::new("node", name, e))
+}
+
+/// Opens (or creates) the three services with the QoS both sides require: one client, one
+/// server, at most two requests in flight.
+pub fn open_hw_services(node: &Node<ipc::Service>) -> Result<HwServices, ServiceError> {
+    let name = |s: &str| ServiceName::new(s).map_err(|e| ServiceError::new("service name", s, e));
+    let hw = node
+        .service_builder(&name(HW_SERVICE)?)
+        .request_response::<HwMsg, HwMsg>()
+        .max_clients(1)
+        .max_servers(1)
+        .max_active_requests_per_client(2)
+        .max_response_buffer_size(2)
+        .open_or_create()
+        .map_err(|e| ServiceError::new("service", HW_SERVICE, e))?;
+    let event = |s: &str| -> Result<EventService, ServiceError> {
+        node.service_builder(&name(s)?)
+            .event()
+            .open_or_create()
+            .map_err(|e| ServiceError::new("service", s, e))
+    };
+    Ok(HwServices {
+        hw,
+        request_event: event(REQUEST_EVENT)?,
+        response_event: event(RESPONSE_EVENT)?,
+    })
+}
+
+/// Directory of POSIX shared memory, where iceoryx2 puts its segments.
+pub const SHM_DIR: &str = "/dev/shm";
+
+impl IpcLocation {
+    /// Every file of this prefix that exists now: shared-memory segments in [`SHM_DIR`] and
+    /// files under the root (services, node records, event sockets).
+    pub fn files(&self) -> Vec<std::path::PathBuf> {
+        let mut found = Vec::new();
+        collect_prefixed(
+            std::path::Path::new(SHM_DIR),
+            &self.prefix,
+            false,
+            &mut found,
+        );
+        collect_prefixed(
+            std::path::Path::new(&self.root),
+            &self.prefix,
+            true,
+            &mut found,
+        );
+        found
+    }
+
+    /// Removes every file of this prefix and the per-node directories (`<root>/nodes/<id>`)
+    /// that it leaves empty; the shared `services` and `nodes` directories stay, since other
+    /// runs may be creating files in them. Only call it when no process of this prefix runs
+    /// (iceoryx2 #601: clear both locations together). Returns how many files were removed.
+    pub fn remove_files(&self) -> usize {
+        let files = self.files();
+        let removed = files
+            .iter()
+            .filter(|f| std::fs::remove_file(f).is_ok())
+            .count();
+        let nodes = std::path::Path::new(&self.root).join("nodes");
+        for f in &files {
+            if let Some(dir) = f.parent().filter(|d| d.parent() == Some(nodes.as_path())) {
+                // Fails (as it should) while the directory holds another node's files.
+                let _ = std::fs::remove_dir(dir);
+            }
+        }
+        removed
+    }
+}
+
+fn collect_prefixed(
+    dir: &std::path::Path,
+    prefix: &str,
+    recurse: bool,
+    out: &mut Vec<std::path::PathBuf>,
+) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let path = e.path();
+        let is_dir = e.file_type().is_ok_and(|t| t.is_dir());
+        if is_dir {
+            if recurse {
+                collect_prefixed(&path, prefix, true, out);
+            }
+        } else if e.file_name().to_string_lossy().starts_with(prefix) {
+            out.push(path);
+        }
+    }
+}

@@ -1,0 +1,111 @@
+//! The QMARC starter (thesis 3.5): checks the settings, spawns `qmarc-hwserver` and
+//! `qmarc-controller` for one move, supervises them, relays how they ended and prints the
+//! summary.
+//!
+//! The children inherit the terminal, so their own messages (prefixed with their names)
+//! reach the user directly; [`supervise`] adds how each one ended. Both children get
+//! `PR_SET_PDEATHSIG = SIGTERM`, so they stop (motors disabled) if the starter dies.
+//!
+//! ```
+//! use qmarc_starter::{Exit, describe_exit};
+//! assert_eq!(describe_exit("qmarc-hwserver", Exit::Signal(9)), "qmarc-hwserver was killed by signal 9 (SIGKILL)");
+//! ```
+#![deny(missing_docs)]
+
+pub mod supervise;
+pub mod table;
+
+pub use supervise::{Exit, describe_exit};
+
+use qmarc_controller::config::Settings;
+use qmarc_hwserver::args::HwServerArgs;
+use qmarc_proto::service::IpcLocation;
+
+/// Prefix of the starter's default iceoryx2 prefixes (`qmarc_<pid>_`).
+pub const PREFIX_STEM: &str = "qmarc_";
+
+/// The default iceoryx2 prefix of this starter: unique per run, so runs never meet and
+/// leftovers can be traced to a dead starter.
+pub fn default_prefix() -> String {
+    format!("{PREFIX_STEM}{}_", std::process::id())
+}
+
+/// The hwserver's command line for `settings`.
+pub fn hwserver_args(
+    settings: &Settings,
+    deterministic: bool,
+    location: &IpcLocation,
+) -> HwServerArgs {
+    let sim = &settings.sim;
+    HwServerArgs {
+        iox_prefix: location.prefix.clone(),
+        iox_root: location.root.clone(),
+        motors: settings.n_motors,
+        period_us: u64::from(settings.period_us),
+        deterministic,
+        watchdog_periods: settings.hwserver.watchdog_periods,
+        priority: settings.timer.hwserver_priority,
+        no_mlock: !settings.timer.lock_memory,
+        sim_kv: sim.kv,
+        sim_tau_s: sim.tau_s,
+        sim_coast_tau_s: sim.coast_tau_s,
+        sim_start: sim
+            .start_counts
+            .iter()
+            .copied()
+            .take(settings.n_motors)
+            .collect(),
+        sim_top_switch: sim.top_switch_counts,
+        sim_bottom_switch: sim.bottom_switch_counts,
+        ..HwServerArgs::default()
+    }
+}
+
+/// Removes the iceoryx2 files of earlier starters under `root` that died without cleaning
+/// up (their prefix `qmarc_<pid>_` names a process that no longer exists). Returns how many
+/// files were removed.
+pub fn remove_stale_files(root: &str) -> usize {
+    let Ok(entries) = std::fs::read_dir(qmarc_proto::service::SHM_DIR) else {
+        return 0;
+    };
+    let mut dead: Vec<String> = entries
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let pid: u32 = name
+                .strip_prefix(PREFIX_STEM)?
+                .split('_')
+                .next()?
+                .parse()
+                .ok()?;
+            let alive = std::path::Path::new(&format!("/proc/{pid}")).exists();
+            (!alive).then(|| format!("{PREFIX_STEM}{pid}_"))
+        })
+        .collect();
+    dead.sort();
+    dead.dedup();
+    dead.iter()
+        .map(|p| IpcLocation::new(p, root).remove_files())
+        .sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hwserver_gets_the_settings_plant_and_priorities() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
+        let s = Settings::load(&path).unwrap();
+        let a = hwserver_args(&s, true, &IpcLocation::new("p_", "/tmp/r"));
+        assert_eq!(
+            (a.motors, a.period_us, a.priority, a.watchdog_periods),
+            (3, 400, 85, 10)
+        );
+        assert_eq!(a.iox_root, "/tmp/r/");
+        assert!(a.deterministic);
+        assert_eq!(a.sim_start, vec![0.0, 0.0, 0.0]);
+        let p = a.sim_params().unwrap();
+        assert_eq!((p.kv_counts_per_s_per_v, p.tau_s), (25_000.0, 0.004));
+    }
+}

@@ -1,0 +1,133 @@
+//! `qmarc-starter`: runs one move (`step`) on the robot through the real process split.
+//!
+//! Exit codes: 0 when the move ran to its end and both children exited cleanly, 2 when a
+//! fault ended it, 1 when it could not run (bad settings, a child that failed or died).
+
+use anyhow::{Context, bail};
+use clap::Parser;
+use qmarc_controller::cli::{Mode, MoveOptions};
+use qmarc_controller::run::remove_outputs;
+use qmarc_controller::summary::Summary;
+use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
+use qmarc_starter::supervise::{self, Grace, Supervised};
+use qmarc_starter::{default_prefix, describe_exit, hwserver_args, remove_stale_files, table};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+/// Command line of `qmarc-starter`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "qmarc-starter",
+    version,
+    about = "Run the QMARC controller: spawns qmarc-hwserver and qmarc-controller for one move"
+)]
+struct StarterArgs {
+    #[command(flatten)]
+    opts: MoveOptions,
+    /// Prefix of this run's iceoryx2 files (default: qmarc_<pid>_, unique per run).
+    #[arg(long)]
+    iox_prefix: Option<String>,
+    /// iceoryx2 root directory.
+    #[arg(long, default_value = DEFAULT_ROOT)]
+    iox_root: String,
+    /// Directory holding qmarc-hwserver and qmarc-controller (default: next to this program).
+    #[arg(long)]
+    bin_dir: Option<PathBuf>,
+    #[command(subcommand)]
+    mode: Mode,
+}
+
+fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
+    // Everything is checked before anything starts.
+    let mut settings = args.opts.load()?;
+    args.mode.apply(&mut settings)?;
+    let bin_dir = match &args.bin_dir {
+        Some(d) => d.clone(),
+        None => std::env::current_exe()?
+            .parent()
+            .context("no directory for this program")?
+            .to_path_buf(),
+    };
+    let hwserver_bin = bin_dir.join("qmarc-hwserver");
+    let controller_bin = bin_dir.join("qmarc-controller");
+    for b in [&hwserver_bin, &controller_bin] {
+        if !b.is_file() {
+            bail!(
+                "{} not found: build the workspace first (`cargo build --release`)",
+                b.display()
+            );
+        }
+    }
+    let location = IpcLocation::new(
+        &args.iox_prefix.clone().unwrap_or_else(default_prefix),
+        &args.iox_root,
+    );
+    let hw_args = hwserver_args(&settings, args.opts.deterministic, &location);
+    hw_args.sim_params().context("simulator settings")?;
+    let mut ctl_args = args.opts.to_args();
+    ctl_args.push(format!("--iox-prefix={}", location.prefix));
+    ctl_args.push(format!("--iox-root={}", location.root));
+    ctl_args.extend(args.mode.to_args());
+
+    let out_dir = settings.gather.out_dir.clone();
+    remove_outputs(&out_dir);
+    remove_stale_files(&location.root);
+    let stop = qmarc_timer::stop::install()?;
+
+    let hwserver = supervise::spawn(&hwserver_bin, &hw_args.to_args())
+        .with_context(|| format!("cannot start {}", hwserver_bin.display()))?;
+    let mut children = vec![Supervised {
+        name: "qmarc-hwserver",
+        child: hwserver,
+        exit: None,
+    }];
+    match supervise::spawn(&controller_bin, &ctl_args) {
+        Ok(c) => children.push(Supervised {
+            name: "qmarc-controller",
+            child: c,
+            exit: None,
+        }),
+        Err(e) => eprintln!(
+            "qmarc-starter: cannot start {}: {e}",
+            controller_bin.display()
+        ),
+    }
+    let grace = Grace {
+        term_after: Duration::from_secs(3),
+        kill_after: Duration::from_secs(2),
+    };
+    supervise::wait_all(&mut children, stop, grace, |s| {
+        if let Some(exit) = s.exit.filter(|e| !e.success()) {
+            eprintln!("qmarc-starter: {}", describe_exit(s.name, exit));
+        }
+    });
+    location.remove_files();
+
+    let all_clean =
+        children.len() == 2 && children.iter().all(|s| s.exit.is_some_and(|e| e.success()));
+    let summary_path = out_dir.join("summary.json");
+    let summary: Option<Summary> = std::fs::read(&summary_path)
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok());
+    match &summary {
+        Some(s) => print!("{}", table::render(s, &out_dir)),
+        None => eprintln!("qmarc-starter: no summary was written: the move did not complete"),
+    }
+    Ok(match summary {
+        Some(s) if s.ok && all_clean => ExitCode::SUCCESS,
+        Some(s) if s.fault.is_some() => ExitCode::from(2),
+        _ => ExitCode::from(1),
+    })
+}
+
+fn main() -> ExitCode {
+    let args = StarterArgs::parse();
+    match run(&args) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("qmarc-starter: error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

@@ -1,0 +1,228 @@
+//! Real-time set-up of a thread: SCHED_FIFO priority, locked memory, pre-faulted stack.
+//!
+//! Every step is explicit because each can be refused. SCHED_FIFO needs `CAP_SYS_NICE` or an
+//! `RLIMIT_RTPRIO` at least the priority; without it the thread runs SCHED_OTHER with a 1 ns
+//! timer slack and [`RtStatus::degraded`] says so, so every result can be stamped "degraded"
+//! (the LinuxCNC and ros2_control practice, `../shared/notes/realtime-linux.md`).
+
+use std::fs::File;
+use std::io::Write;
+
+/// What a real-time thread asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RtRequest {
+    /// SCHED_FIFO priority (1‥99); `None` runs SCHED_OTHER on purpose (not degraded).
+    pub priority: Option<i32>,
+    /// `mlockall(MCL_CURRENT | MCL_FUTURE)` for the whole process.
+    pub lock_memory: bool,
+    /// Bytes of stack to touch before the loop so that it never page-faults.
+    pub prefault_stack_bytes: usize,
+}
+
+impl Default for RtRequest {
+    fn default() -> RtRequest {
+        RtRequest {
+            priority: Some(80),
+            lock_memory: true,
+            prefault_stack_bytes: 64 * 1024,
+        }
+    }
+}
+
+/// What a thread got.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RtStatus {
+    /// The priority asked for, if SCHED_FIFO was asked for.
+    pub requested_priority: Option<i32>,
+    /// The SCHED_FIFO priority granted; `None` means SCHED_OTHER.
+    pub fifo_priority: Option<i32>,
+    /// Whether `mlockall` succeeded.
+    pub memory_locked: bool,
+    /// Why something was refused, with the fix; empty when all was granted.
+    pub warnings: Vec<String>,
+}
+
+impl RtStatus {
+    /// True when SCHED_FIFO was asked for and refused.
+    pub fn degraded(&self) -> bool {
+        self.requested_priority.is_some() && self.fifo_priority.is_none()
+    }
+
+    /// `SCHED_FIFO 80` or `SCHED_OTHER (degraded)`.
+    pub fn policy(&self) -> String {
+        match (self.fifo_priority, self.degraded()) {
+            (Some(p), _) => format!("SCHED_FIFO {p}"),
+            (None, true) => "SCHED_OTHER (degraded)".to_string(),
+            (None, false) => "SCHED_OTHER".to_string(),
+        }
+    }
+}
+
+fn last_errno() -> i32 {
+    std::io::Error::last_os_error().raw_os_error().unwrap_or(0)
+}
+
+/// Locks all current and future pages of the process in RAM.
+pub fn lock_memory() -> Result<(), i32> {
+    // SAFETY: plain syscall with constant flags.
+    let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
+    if rc == 0 { Ok(()) } else { Err(last_errno()) }
+}
+
+/// Raises the soft `RLIMIT_RTPRIO` to the hard limit, as cyclictest does, so that an
+/// unprivileged user with an `rtprio` entry in limits.conf gets SCHED_FIFO.
+pub fn raise_rtprio_limit() {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is a valid rlimit to read into and write from.
+    unsafe {
+        if libc::getrlimit(libc::RLIMIT_RTPRIO, &mut lim) == 0 && lim.rlim_cur < lim.rlim_max {
+            lim.rlim_cur = lim.rlim_max;
+            libc::setrlimit(libc::RLIMIT_RTPRIO, &lim);
+        }
+    }
+}
+
+/// Makes the calling thread SCHED_FIFO at `priority`.
+pub fn set_current_thread_fifo(priority: i32) -> Result<(), i32> {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: pthread_self() is the calling thread; `param` is valid.
+    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+    if rc == 0 { Ok(()) } else { Err(rc) }
+}
+
+/// Sets the calling thread's timer slack (`PR_SET_TIMERSLACK`): 1 ns makes a SCHED_OTHER
+/// sleeper wake on time instead of up to 50 µs late.
+pub fn set_timer_slack_ns(ns: u64) {
+    // SAFETY: prctl with an integer argument.
+    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, ns as libc::c_ulong, 0, 0, 0) };
+}
+
+/// Touches `bytes` of stack (in 16 KiB frames) so that the loop never faults a stack page.
+pub fn prefault_stack(bytes: usize) {
+    const FRAME: usize = 16 * 1024;
+    #[inline(never)]
+    fn touch(remaining: usize) {
+        let mut frame = [0u8; FRAME];
+        std::hint::black_box(&mut frame);
+        if remaining > FRAME {
+            touch(remaining - FRAME);
+        }
+    }
+    if bytes > 0 {
+        touch(bytes);
+    }
+}
+
+/// Applies `req` to the calling thread (and `mlockall` to the process) and reports what was
+/// granted. Never fails: refusals become warnings and a degraded status.
+pub fn apply_to_current_thread(req: &RtRequest) -> RtStatus {
+    let mut status = RtStatus {
+        requested_priority: req.priority,
+        fifo_priority: None,
+        memory_locked: false,
+        warnings: Vec::new(),
+    };
+    if req.lock_memory {
+        match lock_memory() {
+            Ok(()) => status.memory_locked = true,
+            Err(e) => status.warnings.push(format!(
+                "mlockall failed (errno {e}): pages may fault in the loop; raise RLIMIT_MEMLOCK \
+                 (`memlock` in /etc/security/limits.conf)"
+            )),
+        }
+    }
+    if let Some(prio) = req.priority {
+        raise_rtprio_limit();
+        match set_current_thread_fifo(prio) {
+            Ok(()) => status.fifo_priority = Some(prio),
+            Err(e) => {
+                set_timer_slack_ns(1);
+                status.warnings.push(format!(
+                    "SCHED_FIFO {prio} refused (errno {e}): running SCHED_OTHER, results are \
+                     degraded; fix: run as root, `setcap cap_sys_nice+ep` on the binary, an \
+                     `rtprio` entry in /etc/security/limits.conf, or systemd `LimitRTPRIO=`"
+                ));
+            }
+        }
+    } else {
+        set_timer_slack_ns(1);
+    }
+    prefault_stack(req.prefault_stack_bytes);
+    status
+}
+
+/// Spawns a thread named `name` with a stack large enough for `req`, applies `req` in it and
+/// runs `f` with the granted status.
+pub fn spawn<F, T>(name: &str, req: RtRequest, f: F) -> std::io::Result<std::thread::JoinHandle<T>>
+where
+    F: FnOnce(RtStatus) -> T + Send + 'static,
+    T: Send + 'static,
+{
+    std::thread::Builder::new()
+        .name(name.to_string())
+        .stack_size((req.prefault_stack_bytes + 1024 * 1024).next_power_of_two())
+        .spawn(move || {
+            let status = apply_to_current_thread(&req);
+            f(status)
+        })
+}
+
+/// Holds `/dev/cpu_dma_latency` at 0 µs while alive (keeps the CPU out of deep C-states).
+/// Root only; closing the file restores the default.
+#[derive(Debug)]
+pub struct DmaLatencyGuard {
+    _file: File,
+}
+
+impl DmaLatencyGuard {
+    /// Requests 0 µs wake-up latency; `None` where the file cannot be opened.
+    pub fn request_zero() -> Option<DmaLatencyGuard> {
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/cpu_dma_latency")
+            .ok()?;
+        file.write_all(&0i32.to_ne_bytes()).ok()?;
+        Some(DmaLatencyGuard { _file: file })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn status_names_the_policy() {
+        let mut s = RtStatus {
+            requested_priority: Some(80),
+            fifo_priority: Some(80),
+            memory_locked: true,
+            warnings: vec![],
+        };
+        assert_eq!(s.policy(), "SCHED_FIFO 80");
+        assert!(!s.degraded());
+        s.fifo_priority = None;
+        assert_eq!(s.policy(), "SCHED_OTHER (degraded)");
+        assert!(s.degraded());
+        s.requested_priority = None;
+        assert_eq!(s.policy(), "SCHED_OTHER");
+        assert!(!s.degraded());
+    }
+
+    #[test]
+    fn spawned_thread_reports_what_it_got() {
+        // SCHED_OTHER on purpose: a unit test must not take the CPU from the other tests.
+        let req = RtRequest {
+            priority: None,
+            lock_memory: false,
+            prefault_stack_bytes: 128 * 1024,
+        };
+        let status = spawn("rt-test", req, |s| s).unwrap().join().unwrap();
+        assert_eq!(status.fifo_priority, None);
+        assert!(!status.degraded());
+    }
+}

@@ -1,0 +1,51 @@
+//! A process-wide stop request set by SIGTERM/SIGINT and polled by real-time loops.
+//!
+//! The handler only stores to an atomic, so a loop can poll it every cycle without locking or
+//! allocating. Handlers are installed with `SA_RESTART`; waits that still return `EINTR` retry.
+
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+
+static STOP: AtomicBool = AtomicBool::new(false);
+static SIGNAL: AtomicI32 = AtomicI32::new(0);
+
+extern "C" fn on_signal(sig: libc::c_int) {
+    SIGNAL.store(sig, Ordering::Relaxed);
+    STOP.store(true, Ordering::Relaxed);
+}
+
+/// Installs the stop handler for SIGTERM and SIGINT. Returns the flag it sets.
+pub fn install() -> std::io::Result<&'static AtomicBool> {
+    for sig in [libc::SIGTERM, libc::SIGINT] {
+        // SAFETY: `act` is fully initialised; the handler is async-signal-safe (atomic stores).
+        let rc = unsafe {
+            let mut act: libc::sigaction = std::mem::zeroed();
+            act.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+            act.sa_flags = libc::SA_RESTART;
+            libc::sigemptyset(&mut act.sa_mask);
+            libc::sigaction(sig, &act, std::ptr::null_mut())
+        };
+        if rc != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+    }
+    Ok(&STOP)
+}
+
+/// The flag the handler sets.
+pub fn flag() -> &'static AtomicBool {
+    &STOP
+}
+
+/// True once a stop signal arrived.
+#[inline]
+pub fn requested() -> bool {
+    STOP.load(Ordering::Relaxed)
+}
+
+/// The signal that asked to stop, if any.
+pub fn signal() -> Option<i32> {
+    match SIGNAL.load(Ordering::Relaxed) {
+        0 => None,
+        s => Some(s),
+    }
+}

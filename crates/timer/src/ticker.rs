@@ -1,0 +1,413 @@
+//! [`Ticker`]: blocks the servo thread until the next absolute expiry and says how late it woke.
+//!
+//! Tick `i` is due at `t0 + i·P`. A wake services the first tick not yet serviced; its
+//! lateness is measured against *that* tick's expiry, never the latest one, so a stall shows
+//! as the stall (`../shared/notes/realtime-linux.md`, "Measuring lateness correctly"). Ticks
+//! that expired during the stall are counted in [`Tick::missed`] and skipped: [`Tick::index`]
+//! is the newest expired tick, so time-based paths stay on time.
+
+use crate::clock::{MockClock, monotonic_now_ns};
+use crate::{Clock, NS_PER_S};
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+
+/// One wake of a [`Ticker`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Tick {
+    /// Index of the newest expired tick (0 for the first).
+    pub index: u64,
+    /// Expiry of the first tick this wake services (ns, `CLOCK_MONOTONIC` or mock time).
+    pub intended_ns: u64,
+    /// When the thread woke (ns, same clock).
+    pub woke_ns: u64,
+    /// Ticks that expired before this wake and were not serviced (overruns).
+    pub missed: u64,
+}
+
+impl Tick {
+    /// Wake latency in ns: how late the thread woke for the tick it services.
+    #[inline]
+    pub fn latency_ns(&self) -> u64 {
+        self.woke_ns.saturating_sub(self.intended_ns)
+    }
+}
+
+/// A ticker failed: the kernel refused the timer or the wait.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum TickerError {
+    /// `timerfd_create` or `timerfd_settime` failed with this errno.
+    #[error("cannot arm the timerfd: errno {0}")]
+    Arm(i32),
+    /// The wait failed with this errno.
+    #[error("waiting for the next tick failed: errno {0}")]
+    Wait(i32),
+    /// `wait` was called before `start`.
+    #[error("the ticker was not started")]
+    NotStarted,
+}
+
+/// Paces a periodic loop. `start` may allocate and fail; `wait` is called once per cycle
+/// and never allocates or locks.
+pub trait Ticker: Send {
+    /// The period in ns.
+    fn period_ns(&self) -> u64;
+    /// Arms the ticker: tick 0 is due one period from now. Returns its expiry.
+    fn start(&mut self) -> Result<u64, TickerError>;
+    /// Blocks until the next tick is due and reports the wake.
+    fn wait(&mut self) -> Result<Tick, TickerError>;
+}
+
+/// How the real-time ticker waits (config `[timer] method`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TickerKind {
+    /// A periodic absolute timerfd: the design's choice.
+    #[default]
+    TimerFd,
+    /// `clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME)`.
+    Nanosleep,
+}
+
+impl TickerKind {
+    /// The config spelling: `timerfd` or `nanosleep`.
+    pub fn name(self) -> &'static str {
+        match self {
+            TickerKind::TimerFd => "timerfd",
+            TickerKind::Nanosleep => "nanosleep",
+        }
+    }
+
+    /// Parses the config spelling.
+    pub fn from_name(name: &str) -> Option<TickerKind> {
+        match name {
+            "timerfd" => Some(TickerKind::TimerFd),
+            "nanosleep" => Some(TickerKind::Nanosleep),
+            _ => None,
+        }
+    }
+
+    /// A ticker of this kind with period `period_ns`.
+    pub fn build(self, period_ns: u64) -> Box<dyn Ticker> {
+        match self {
+            TickerKind::TimerFd => Box::new(TimerFdTicker::new(period_ns)),
+            TickerKind::Nanosleep => Box::new(NanosleepTicker::new(period_ns)),
+        }
+    }
+}
+
+fn timespec(ns: u64) -> libc::timespec {
+    libc::timespec {
+        tv_sec: (ns / NS_PER_S) as libc::time_t,
+        tv_nsec: (ns % NS_PER_S) as libc::c_long,
+    }
+}
+
+fn errno() -> i32 {
+    std::io::Error::last_os_error().raw_os_error().unwrap_or(0)
+}
+
+/// Bookkeeping shared by the tickers: which tick is next and when it is due.
+#[derive(Debug, Clone, Copy)]
+struct Schedule {
+    period_ns: u64,
+    t0_ns: u64,
+    next_index: u64,
+}
+
+impl Schedule {
+    fn due_ns(&self, index: u64) -> u64 {
+        self.t0_ns + index * self.period_ns
+    }
+
+    /// Services a wake at `woke_ns` during which `expired ≥ 1` ticks had expired.
+    fn service(&mut self, woke_ns: u64, expired: u64) -> Tick {
+        let expired = expired.max(1);
+        let tick = Tick {
+            index: self.next_index + expired - 1,
+            intended_ns: self.due_ns(self.next_index),
+            woke_ns,
+            missed: expired - 1,
+        };
+        self.next_index += expired;
+        tick
+    }
+}
+
+/// A periodic absolute timerfd on `CLOCK_MONOTONIC` (the design's choice).
+///
+/// `read` returns how many expirations happened since the last read; more than one means
+/// missed periods.
+#[derive(Debug)]
+pub struct TimerFdTicker {
+    period_ns: u64,
+    fd: Option<OwnedFd>,
+    schedule: Option<Schedule>,
+}
+
+impl TimerFdTicker {
+    /// A ticker with period `period_ns`; nothing is armed until [`Ticker::start`].
+    pub fn new(period_ns: u64) -> TimerFdTicker {
+        TimerFdTicker {
+            period_ns,
+            fd: None,
+            schedule: None,
+        }
+    }
+}
+
+impl Ticker for TimerFdTicker {
+    fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    fn start(&mut self) -> Result<u64, TickerError> {
+        // SAFETY: plain syscall; the returned fd is owned below.
+        let raw = unsafe { libc::timerfd_create(libc::CLOCK_MONOTONIC, libc::TFD_CLOEXEC) };
+        if raw < 0 {
+            return Err(TickerError::Arm(errno()));
+        }
+        // SAFETY: `raw` is a fresh fd nobody else owns.
+        let fd = unsafe { OwnedFd::from_raw_fd(raw) };
+        let t0_ns = monotonic_now_ns() + self.period_ns;
+        let spec = libc::itimerspec {
+            it_interval: timespec(self.period_ns),
+            it_value: timespec(t0_ns),
+        };
+        // SAFETY: `fd` is a timerfd and `spec` a valid itimerspec.
+        let rc = unsafe {
+            libc::timerfd_settime(
+                fd.as_raw_fd(),
+                libc::TFD_TIMER_ABSTIME,
+                &spec,
+                std::ptr::null_mut(),
+            )
+        };
+        if rc < 0 {
+            return Err(TickerError::Arm(errno()));
+        }
+        self.fd = Some(fd);
+        self.schedule = Some(Schedule {
+            period_ns: self.period_ns,
+            t0_ns,
+            next_index: 0,
+        });
+        Ok(t0_ns)
+    }
+
+    fn wait(&mut self) -> Result<Tick, TickerError> {
+        let (Some(fd), Some(schedule)) = (&self.fd, &mut self.schedule) else {
+            return Err(TickerError::NotStarted);
+        };
+        let mut expirations: u64 = 0;
+        loop {
+            // SAFETY: reading 8 bytes into a u64 from a timerfd.
+            let n = unsafe {
+                libc::read(
+                    fd.as_raw_fd(),
+                    (&mut expirations as *mut u64).cast(),
+                    std::mem::size_of::<u64>(),
+                )
+            };
+            if n == 8 {
+                break;
+            }
+            let e = errno();
+            if n < 0 && e == libc::EINTR {
+                continue;
+            }
+            return Err(TickerError::Wait(e));
+        }
+        Ok(schedule.service(monotonic_now_ns(), expirations))
+    }
+}
+
+/// `clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME)` to each expiry; overruns counted by
+/// comparing the wake time with the schedule.
+#[derive(Debug)]
+pub struct NanosleepTicker {
+    period_ns: u64,
+    schedule: Option<Schedule>,
+}
+
+impl NanosleepTicker {
+    /// A ticker with period `period_ns`.
+    pub fn new(period_ns: u64) -> NanosleepTicker {
+        NanosleepTicker {
+            period_ns,
+            schedule: None,
+        }
+    }
+}
+
+impl Ticker for NanosleepTicker {
+    fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    fn start(&mut self) -> Result<u64, TickerError> {
+        let t0_ns = monotonic_now_ns() + self.period_ns;
+        self.schedule = Some(Schedule {
+            period_ns: self.period_ns,
+            t0_ns,
+            next_index: 0,
+        });
+        Ok(t0_ns)
+    }
+
+    fn wait(&mut self) -> Result<Tick, TickerError> {
+        let Some(schedule) = &mut self.schedule else {
+            return Err(TickerError::NotStarted);
+        };
+        let due = timespec(schedule.due_ns(schedule.next_index));
+        loop {
+            // SAFETY: `due` is a valid timespec; no remaining-time output with TIMER_ABSTIME.
+            let rc = unsafe {
+                libc::clock_nanosleep(
+                    libc::CLOCK_MONOTONIC,
+                    libc::TIMER_ABSTIME,
+                    &due,
+                    std::ptr::null_mut(),
+                )
+            };
+            match rc {
+                0 => break,
+                libc::EINTR => continue,
+                e => return Err(TickerError::Wait(e)),
+            }
+        }
+        let woke_ns = monotonic_now_ns();
+        let late = woke_ns.saturating_sub(schedule.due_ns(schedule.next_index));
+        Ok(schedule.service(woke_ns, 1 + late / schedule.period_ns))
+    }
+}
+
+/// Simulated time: every `wait` returns at once, exactly on time, and moves a [`MockClock`]
+/// forward by one period. For tests and benchmarks of the loop without sleeping.
+#[derive(Debug)]
+pub struct ManualTicker {
+    period_ns: u64,
+    clock: MockClock,
+    schedule: Option<Schedule>,
+    late_ns: u64,
+    skip: u64,
+}
+
+impl ManualTicker {
+    /// A manual ticker with its own clock starting at 0.
+    pub fn new(period_ns: u64) -> ManualTicker {
+        ManualTicker::with_clock(period_ns, MockClock::new(0))
+    }
+
+    /// A manual ticker driving `clock`.
+    pub fn with_clock(period_ns: u64, clock: MockClock) -> ManualTicker {
+        ManualTicker {
+            period_ns,
+            clock,
+            schedule: None,
+            late_ns: 0,
+            skip: 0,
+        }
+    }
+
+    /// The next wake happens `late_ns` after its tick and after `skip` further ticks expired.
+    pub fn inject_delay(&mut self, late_ns: u64, skip: u64) {
+        self.late_ns = late_ns;
+        self.skip = skip;
+    }
+
+    /// The clock this ticker moves.
+    pub fn clock(&self) -> &MockClock {
+        &self.clock
+    }
+}
+
+impl Ticker for ManualTicker {
+    fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    fn start(&mut self) -> Result<u64, TickerError> {
+        let t0_ns = self.clock.now_ns() + self.period_ns;
+        self.schedule = Some(Schedule {
+            period_ns: self.period_ns,
+            t0_ns,
+            next_index: 0,
+        });
+        Ok(t0_ns)
+    }
+
+    fn wait(&mut self) -> Result<Tick, TickerError> {
+        let Some(schedule) = &mut self.schedule else {
+            return Err(TickerError::NotStarted);
+        };
+        let due = schedule.due_ns(schedule.next_index);
+        let woke = due + self.skip * self.period_ns + self.late_ns;
+        self.clock.set(woke.max(self.clock.now_ns()));
+        let tick = schedule.service(self.clock.now_ns(), 1 + self.skip);
+        self.late_ns = 0;
+        self.skip = 0;
+        Ok(tick)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn schedule_counts_skipped_ticks_and_measures_against_the_first() {
+        let mut s = Schedule {
+            period_ns: 100,
+            t0_ns: 1_000,
+            next_index: 0,
+        };
+        let a = s.service(1_010, 1);
+        assert_eq!(
+            a,
+            Tick {
+                index: 0,
+                intended_ns: 1_000,
+                woke_ns: 1_010,
+                missed: 0
+            }
+        );
+        // Woke 350 ns after tick 1 was due: ticks 1, 2, 3 expired; 3 is current.
+        let b = s.service(1_450, 3);
+        assert_eq!(
+            b,
+            Tick {
+                index: 3,
+                intended_ns: 1_100,
+                woke_ns: 1_450,
+                missed: 2
+            }
+        );
+        assert_eq!(b.latency_ns(), 350);
+        let c = s.service(1_400 + 5, 1);
+        assert_eq!(c.index, 4);
+        assert_eq!(c.intended_ns, 1_400);
+    }
+
+    #[test]
+    fn manual_ticker_runs_on_time_and_injects_stalls() {
+        let mut t = ManualTicker::new(400);
+        assert_eq!(t.wait(), Err(TickerError::NotStarted));
+        let t0 = t.start().unwrap();
+        assert_eq!(t0, 400);
+        let a = t.wait().unwrap();
+        assert_eq!((a.index, a.latency_ns(), a.missed), (0, 0, 0));
+        t.inject_delay(30, 2);
+        let b = t.wait().unwrap();
+        assert_eq!((b.index, b.latency_ns(), b.missed), (3, 830, 2));
+        let c = t.wait().unwrap();
+        assert_eq!((c.index, c.latency_ns(), c.missed), (4, 0, 0));
+        assert_eq!(t.clock().now_ns(), 400 + 4 * 400);
+    }
+
+    #[test]
+    fn kinds_parse_their_names() {
+        for k in [TickerKind::TimerFd, TickerKind::Nanosleep] {
+            assert_eq!(TickerKind::from_name(k.name()), Some(k));
+        }
+        assert_eq!(TickerKind::from_name("posix"), None);
+    }
+}

@@ -1,0 +1,215 @@
+//! The step move through the real process split: qmarc-starter → qmarc-hwserver ⇄
+//! qmarc-controller over iceoryx2.
+
+use qmarc_tests::{TestRun, default_config, read_gather, read_summary};
+use std::time::Duration;
+
+const TIMEOUT: Duration = Duration::from_secs(60);
+
+fn config_arg() -> String {
+    format!("--config={}", default_config().display())
+}
+
+#[test]
+fn step_of_1000_counts_settles() {
+    let run = TestRun::new("settles");
+    let out = run.out("out");
+    let r = run.starter(
+        &[
+            &config_arg(),
+            &format!("--out={}", out.display()),
+            "--deterministic",
+            "step",
+            "--size=1000",
+            "--duration=3",
+        ],
+        TIMEOUT,
+    );
+    assert_eq!(
+        r.code,
+        Some(0),
+        "stdout:\n{}\nstderr:\n{}",
+        r.stdout,
+        r.stderr
+    );
+    assert!(r.stdout.contains("QMARC step: ok"), "{}", r.stdout);
+    let s = read_summary(&out);
+    assert!(s.ok && s.fault.is_none());
+    assert_eq!(
+        s.cycles, 7501,
+        "3 s at 400 µs: duration / period + 1 samples"
+    );
+    let (header, rows) = read_gather(&out);
+    assert_eq!(header[..5], ["cycle", "time_s", "cmd1", "act1", "dac1"]);
+    assert_eq!(rows.len(), 7501);
+    let last = rows.last().unwrap();
+    // With Table 5-1's gains one DAC code is Kp/2²¹ ≈ 0.087 codes per count of error, so the
+    // loop rests anywhere within half a code of zero output: ±5.8 counts (+1 for the counter).
+    let band = 0.5 / (183_000.0 / 2f64.powi(21)) + 1.0;
+    let last_half_second = &rows[rows.len() - 1250..];
+    for m in 0..3 {
+        let (cmd, act, dac) = (last[2 + 3 * m], last[3 + 3 * m], last[4 + 3 * m]);
+        assert_eq!(cmd, 1000.0);
+        assert!(
+            (cmd - act).abs() <= band,
+            "motor {} rests at {act}, outside ±{band}",
+            m + 1
+        );
+        assert!(dac.abs() <= 1.0, "motor {} still driven: {dac}", m + 1);
+        assert!(
+            last_half_second.iter().all(|r| r[3 + 3 * m] == act),
+            "motor {} still moving",
+            m + 1
+        );
+        let overshoot = rows
+            .iter()
+            .map(|r| r[3 + 3 * m] - 1000.0)
+            .fold(f64::MIN, f64::max);
+        assert!(overshoot <= band, "motor {} overshot by {overshoot}", m + 1);
+    }
+    run.assert_clean();
+}
+
+#[test]
+fn two_deterministic_runs_write_identical_data() {
+    let run = TestRun::new("determinism");
+    let (a, b) = (run.out("a"), run.out("b"));
+    for out in [&a, &b] {
+        let r = run.starter(
+            &[
+                &config_arg(),
+                &format!("--out={}", out.display()),
+                "--deterministic",
+                "step",
+                "--duration=0.4",
+            ],
+            TIMEOUT,
+        );
+        assert_eq!(r.code, Some(0), "stderr:\n{}", r.stderr);
+        run.assert_clean();
+    }
+    for f in ["gather.csv", "gather.m"] {
+        let (x, y) = (
+            std::fs::read(a.join(f)).unwrap(),
+            std::fs::read(b.join(f)).unwrap(),
+        );
+        assert!(x.len() > 1000, "{f} has data");
+        assert!(x == y, "{f} differs between two deterministic runs");
+    }
+}
+
+#[test]
+fn summary_figures_equal_the_ones_recomputed_from_gather_csv() {
+    let run = TestRun::new("recompute");
+    let out = run.out("out");
+    // Real time, not deterministic: the figures come from the live loop.
+    let r = run.starter(
+        &[
+            &config_arg(),
+            &format!("--out={}", out.display()),
+            "--gather-every=1",
+            "step",
+            "--size=-700",
+            "--duration=0.6",
+        ],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(0), "stderr:\n{}", r.stderr);
+    let s = read_summary(&out);
+    let (_, rows) = read_gather(&out);
+    assert_eq!(rows.len() as u64, s.cycles);
+    assert_eq!(s.gathered_rows, s.cycles);
+    assert_eq!(s.motors.len(), 3);
+    for (m, fig) in s.motors.iter().enumerate() {
+        let (mut min, mut max, mut sum_abs, mut sum_sq) = (f64::MAX, f64::MIN, 0.0, 0.0);
+        for r in &rows {
+            let e = r[2 + 3 * m] - r[3 + 3 * m];
+            min = min.min(e);
+            max = max.max(e);
+            sum_abs += e.abs();
+            sum_sq += e * e;
+        }
+        assert_eq!(fig.min_error_counts, min, "motor {}", m + 1);
+        assert_eq!(fig.max_error_counts, max);
+        assert_eq!(fig.accumulated_abs_error_counts, sum_abs);
+        assert_eq!(fig.sum_squares_error_counts2, sum_sq);
+        assert_eq!(
+            fig.max_error_counts, 0.0,
+            "a negative step: command below actual"
+        );
+        assert_eq!(fig.min_error_counts, -700.0);
+        let cpr = s.counts_per_rad;
+        assert_eq!(fig.accumulated_abs_error_rad, sum_abs / cpr);
+        assert_eq!(fig.sum_squares_error_rad2, sum_sq / (cpr * cpr));
+    }
+    // Real time: the timing figures are real measurements.
+    assert!(s.timing.read_us.max > 0.0 && s.timing.output_latency_us.p50 > 0.0);
+    run.assert_clean();
+}
+
+#[test]
+fn gathering_every_fourth_cycle_keeps_a_quarter_of_the_rows() {
+    let run = TestRun::new("every4");
+    let out = run.out("out");
+    let r = run.starter(
+        &[
+            &config_arg(),
+            &format!("--out={}", out.display()),
+            "--gather-every=4",
+            "--deterministic",
+            "step",
+            "--duration=0.2",
+        ],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(0), "stderr:\n{}", r.stderr);
+    let s = read_summary(&out);
+    let (_, rows) = read_gather(&out);
+    assert_eq!(s.cycles, 501);
+    assert_eq!(rows.len(), 126);
+    let cycles: Vec<f64> = rows.iter().map(|r| r[0]).collect();
+    assert_eq!(cycles[..3], [0.0, 4.0, 8.0]);
+    assert_eq!(rows[1][1], 0.0016, "deterministic time is n·T");
+    let m = std::fs::read_to_string(out.join("gather.m")).unwrap();
+    assert_eq!(
+        m.lines()
+            .filter(|l| l.starts_with(|c: char| c.is_ascii_digit()))
+            .count(),
+        126
+    );
+    run.assert_clean();
+}
+
+#[test]
+fn bad_settings_are_refused_before_anything_starts() {
+    let run = TestRun::new("badconfig");
+    let cfg = run.dir.join("bad.toml");
+    let good = std::fs::read_to_string(default_config()).unwrap();
+    std::fs::write(&cfg, good.replacen("kvff = 103500.0", "kvff = \"fast\"", 1)).unwrap();
+    let r = run.starter(&[&format!("--config={}", cfg.display()), "step"], TIMEOUT);
+    assert_eq!(r.code, Some(1));
+    let line = good.lines().position(|l| l == "kvff = 103500.0").unwrap() + 1;
+    let expected = format!(
+        "{}:{line}:8: motor[2].kvff: invalid type: string \"fast\", expected f64",
+        cfg.display()
+    );
+    assert!(
+        r.stderr.contains(&expected),
+        "stderr: {}\nexpected: {expected}",
+        r.stderr
+    );
+    assert!(
+        run.location().files().is_empty(),
+        "no iceoryx2 file was ever created"
+    );
+    // A bad flag is refused the same way.
+    let r = run.starter(&[&config_arg(), "--period-us=20", "step"], TIMEOUT);
+    assert_eq!(r.code, Some(1));
+    assert!(
+        r.stderr
+            .contains("--period-us: servo period must be 100‥100000 µs, found 20"),
+        "{}",
+        r.stderr
+    );
+    run.assert_clean();
+}

@@ -1,0 +1,5 @@
+//! End-to-end tests: the real three processes on the simulated Deltabot, plus the
+//! repository's tidiness rules.
+
+mod e2e;
+mod tidy;

@@ -1,0 +1,230 @@
+//! Helpers for the end-to-end tests: a [`TestRun`] gives each test its own iceoryx2 prefix,
+//! root and output directory, runs the real binaries with a timeout, and checks on drop that
+//! no process and no shared-memory file of the test is left.
+//!
+//! The binaries come from the same target directory as the test executable; `cargo test
+//! --workspace` builds them (every binary crate has an integration test target).
+#![deny(missing_docs)]
+
+use qmarc_controller::summary::Summary;
+use qmarc_proto::service::IpcLocation;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+static COUNTER: AtomicU32 = AtomicU32::new(0);
+
+/// The directory holding the workspace's binaries (`target/<profile>`).
+pub fn bin_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("target/<profile>/deps/..")
+        .to_path_buf();
+    for b in ["qmarc-starter", "qmarc-controller", "qmarc-hwserver"] {
+        assert!(
+            dir.join(b).is_file(),
+            "{} is missing: run the tests with `cargo test --workspace`, which builds it",
+            dir.join(b).display()
+        );
+    }
+    dir
+}
+
+/// The workspace root.
+pub fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("workspace root")
+        .to_path_buf()
+}
+
+/// The shipped settings file.
+pub fn default_config() -> PathBuf {
+    workspace().join("config/qmarc.toml")
+}
+
+/// What a process printed and how it ended.
+#[derive(Debug)]
+pub struct Finished {
+    /// Exit code, `None` if a signal killed it.
+    pub code: Option<i32>,
+    /// Standard output.
+    pub stdout: String,
+    /// Standard error.
+    pub stderr: String,
+}
+
+/// One test's isolated run: prefix, root and output directory of its own.
+#[derive(Debug)]
+pub struct TestRun {
+    /// Unique iceoryx2 prefix.
+    pub prefix: String,
+    /// Private scratch directory (iceoryx2 root and outputs live under it).
+    pub dir: PathBuf,
+}
+
+impl TestRun {
+    /// A fresh run named after the test.
+    pub fn new(test: &str) -> TestRun {
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        let pid = std::process::id();
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.subsec_nanos());
+        let short: String = test
+            .chars()
+            .filter(char::is_ascii_alphanumeric)
+            .take(12)
+            .collect();
+        let prefix = format!("qt{pid}_{n}_{nanos:x}_{short}_");
+        let dir = std::env::temp_dir().join(format!("qmarc-test-{pid}-{n}-{short}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("scratch dir");
+        TestRun { prefix, dir }
+    }
+
+    /// The iceoryx2 root of this run.
+    pub fn root(&self) -> String {
+        format!("{}/iox/", self.dir.display())
+    }
+
+    /// Where this run's iceoryx2 files are.
+    pub fn location(&self) -> IpcLocation {
+        IpcLocation::new(&self.prefix, &self.root())
+    }
+
+    /// The output directory `name` inside the scratch directory.
+    pub fn out(&self, name: &str) -> PathBuf {
+        self.dir.join(name)
+    }
+
+    /// Arguments that isolate a starter run: prefix, root.
+    pub fn isolation_args(&self) -> Vec<String> {
+        vec![
+            format!("--iox-prefix={}", self.prefix),
+            format!("--iox-root={}", self.root()),
+        ]
+    }
+
+    /// Runs `qmarc-starter` with the isolation arguments and `args`, from the workspace
+    /// root, killing it after `timeout`.
+    pub fn starter(&self, args: &[&str], timeout: Duration) -> Finished {
+        let mut all = self.isolation_args();
+        all.extend(args.iter().map(|s| s.to_string()));
+        run_with_timeout(
+            Command::new(bin_dir().join("qmarc-starter"))
+                .args(&all)
+                .current_dir(workspace()),
+            timeout,
+        )
+    }
+
+    /// Processes whose command line mentions this run's prefix.
+    pub fn processes(&self) -> Vec<(u32, String)> {
+        processes_matching(&self.prefix)
+    }
+
+    /// Asserts nothing of this run is left: no process, no iceoryx2 file.
+    pub fn assert_clean(&self) {
+        let procs = self.processes();
+        assert!(procs.is_empty(), "processes left behind: {procs:?}");
+        let files = self.location().files();
+        assert!(files.is_empty(), "iceoryx2 files left behind: {files:?}");
+    }
+}
+
+impl Drop for TestRun {
+    fn drop(&mut self) {
+        for (pid, _) in self.processes() {
+            // SAFETY: kill(2) on a pid found a moment ago; at worst it is already gone.
+            unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
+        }
+        self.location().remove_files();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// Processes (pid, command line) whose command line contains `needle`, except this one.
+pub fn processes_matching(needle: &str) -> Vec<(u32, String)> {
+    let me = std::process::id();
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return vec![];
+    };
+    entries
+        .flatten()
+        .filter_map(|e| {
+            let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+            let raw = std::fs::read(e.path().join("cmdline")).ok()?;
+            let cmd = String::from_utf8_lossy(&raw).replace('\0', " ");
+            (pid != me && cmd.contains(needle)).then_some((pid, cmd))
+        })
+        .collect()
+}
+
+/// Runs `cmd` to completion, capturing its output; kills it and panics after `timeout`.
+pub fn run_with_timeout(cmd: &mut Command, timeout: Duration) -> Finished {
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    let mut out = child.stdout.take().expect("stdout");
+    let mut err = child.stderr.take().expect("stderr");
+    let out_reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = out.read_to_string(&mut s);
+        s
+    });
+    let err_reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = err.read_to_string(&mut s);
+        s
+    });
+    let started = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().expect("wait") {
+            break s;
+        }
+        if started.elapsed() > timeout {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("timed out after {timeout:?}: {cmd:?}");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    Finished {
+        code: status.code(),
+        stdout: out_reader.join().unwrap_or_default(),
+        stderr: err_reader.join().unwrap_or_default(),
+    }
+}
+
+/// `summary.json` of an output directory.
+pub fn read_summary(out: &Path) -> Summary {
+    let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json");
+    serde_json::from_str(&text).expect("summary.json parses")
+}
+
+/// `gather.csv` of an output directory: the header and the rows as numbers.
+pub fn read_gather(out: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(out.join("gather.csv")).expect("gather.csv");
+    let mut lines = text.lines();
+    let header: Vec<String> = lines
+        .next()
+        .expect("header")
+        .split(',')
+        .map(str::to_string)
+        .collect();
+    let rows = lines
+        .map(|l| {
+            l.split(',')
+                .map(|v| v.parse::<f64>().unwrap_or_else(|_| panic!("number: {v}")))
+                .collect()
+        })
+        .collect();
+    (header, rows)
+}
