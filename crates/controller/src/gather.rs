@@ -56,7 +56,7 @@ impl Gather {
     /// True if the `k`-th executed cycle (0-based) is gathered.
     #[inline]
     pub fn due(&self, k: u64) -> bool {
-        k % u64::from(self.every) == 0
+        k.is_multiple_of(u64::from(self.every))
     }
 
     /// Stores a row if there is room (never allocates); counts it as dropped otherwise.

@@ -168,8 +168,12 @@ impl ServoLaw for PidFf {
 
     #[inline]
     fn step(&mut self, input: &ServoInput<'_>, dac: &mut [i32; MAX_MOTORS]) {
-        for m in 0..self.n_motors {
-            let (g, s) = (&self.gains[m], &mut self.state[m]);
+        let axes = self
+            .gains
+            .iter()
+            .zip(self.state.iter_mut())
+            .zip(dac.iter_mut());
+        for (m, ((g, s), out)) in axes.enumerate().take(self.n_motors) {
             let (cp, ap) = (input.cmd[m], input.act[m]);
             let fe = cp - ap;
             let cv = cp - s.prev_cmd;
@@ -180,7 +184,7 @@ impl ServoLaw for PidFf {
             s.prev_cmd = cp;
             s.prev_cv = cv;
             s.prev_act = ap;
-            dac[m] = to_dac_code(s.notch.filter(u));
+            *out = to_dac_code(s.notch.filter(u));
         }
         for d in &mut dac[self.n_motors..] {
             *d = 0;

@@ -311,6 +311,18 @@ impl Servo {
                 CycleEnd::Continue => {}
                 CycleEnd::Done => break,
                 CycleEnd::Fault(f) => {
+                    // Ctrl-C reaches both processes: a hwserver that shut down because of the
+                    // same stop request is our abort, not a hwserver fault.
+                    let f = if f.kind == FaultKind::HwserverShutdown && stop.load(Ordering::Relaxed)
+                    {
+                        Fault {
+                            kind: FaultKind::Aborted,
+                            signal: qmarc_timer::stop::signal().unwrap_or(0),
+                            ..f
+                        }
+                    } else {
+                        f
+                    };
                     self.handle_fault(link, f);
                     break;
                 }

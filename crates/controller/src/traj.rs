@@ -113,9 +113,9 @@ impl TrajectoryGenerator for Step {
             return Sample::Done;
         }
         let offset = if n == 0 { 0.0 } else { self.size };
-        for m in 0..MAX_MOTORS {
-            cmd[m] = if m < self.n_motors {
-                self.start[m] + offset
+        for (m, (c, start)) in cmd.iter_mut().zip(&self.start).enumerate() {
+            *c = if m < self.n_motors {
+                start + offset
             } else {
                 0.0
             };

@@ -115,8 +115,13 @@ impl HwCore {
     }
 
     fn update_positions(&mut self, last: &[u32; MAX_MOTORS]) {
-        for m in 0..self.n_motors {
-            self.position[m] += i64::from(counter_delta(last[m], self.inputs.counters[m]));
+        let counters = self
+            .position
+            .iter_mut()
+            .zip(last)
+            .zip(&self.inputs.counters);
+        for ((position, &old), &new) in counters.take(self.n_motors) {
+            *position += i64::from(counter_delta(old, new));
         }
     }
 

@@ -114,10 +114,10 @@ fn serve_inner(
             core.shut_down();
             stop_since_ns = Some(now);
         }
-        if let Some(since) = stop_since_ns {
-            if now.saturating_sub(since.max(last_request_ns)) > opts.shutdown_grace_ns {
-                return Ok(ServeEnd::Stopped);
-            }
+        if let Some(since) = stop_since_ns
+            && now.saturating_sub(since.max(last_request_ns)) > opts.shutdown_grace_ns
+        {
+            return Ok(ServeEnd::Stopped);
         }
         let silent_ns = now.saturating_sub(last_request_ns);
         if core.any_enabled() && silent_ns > opts.watchdog_ns {

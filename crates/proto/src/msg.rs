@@ -10,31 +10,31 @@ use iceoryx2::prelude::ZeroCopySend;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum MsgType {
-    /// 1. Read every motor's encoder; the response carries the 64-bit software positions in
+    /// Thesis message 1: Read every motor's encoder; the response carries the 64-bit software positions in
     /// `data` (counts) and the latched status.
     ReadAllEncoders = 1,
-    /// 2. Write every motor's DAC from `aux` (codes, ±[`crate::DAC_MAX`]).
+    /// Thesis message 2: Write every motor's DAC from `aux` (codes, ±[`crate::DAC_MAX`]).
     WriteAllDacs = 2,
-    /// 3. Read the encoder of motor `motor` into `data[motor]`.
+    /// Thesis message 3: Read the encoder of motor `motor` into `data[motor]`.
     ReadEncoder = 3,
-    /// 4. Write `aux[motor]` to the DAC of motor `motor`.
+    /// Thesis message 4: Write `aux[motor]` to the DAC of motor `motor`.
     WriteDac = 4,
-    /// 5. Enable the amplifier of motor `motor`.
+    /// Thesis message 5: Enable the amplifier of motor `motor`.
     EnableMotor = 5,
-    /// 6. Disable the amplifier of motor `motor` (its DAC goes to 0 V first).
+    /// Thesis message 6: Disable the amplifier of motor `motor` (its DAC goes to 0 V first).
     DisableMotor = 6,
-    /// 7. Zero every DAC and disable every amplifier.
+    /// Thesis message 7: Zero every DAC and disable every amplifier.
     DisableAll = 7,
-    /// 8. Load the hardware counter of motor `motor` (or [`HwMsg::ALL_MOTORS`]) with
+    /// Thesis message 8: Load the hardware counter of motor `motor` (or [`HwMsg::ALL_MOTORS`]) with
     /// [`crate::COUNTER_ZERO`] and set its software position to 0.
     ResetEncoderZero = 8,
-    /// 9. Start watching the limit switches (a trip latches a status bit and stops watching).
+    /// Thesis message 9: Start watching the limit switches (a trip latches a status bit and stops watching).
     EnableSafety = 9,
-    /// 10. Stop watching the limit switches.
+    /// Thesis message 10: Stop watching the limit switches.
     DisableSafety = 10,
-    /// 11. Clear the latched safety status bits.
+    /// Thesis message 11: Clear the latched safety status bits.
     ClearSafetyStatus = 11,
-    /// 12. Put the hardware in the safe state, answer, and exit the server.
+    /// Thesis message 12: Put the hardware in the safe state, answer, and exit the server.
     Exit = 12,
 }
 
@@ -223,9 +223,7 @@ mod tests {
             prop_assert_eq!(to_bytes(&back), to_bytes(&m));
             prop_assert_eq!(back.msg_type, msg_type);
             prop_assert_eq!(back.aux, aux);
-            for i in 0..MAX_MOTORS {
-                prop_assert_eq!(back.data[i].to_bits(), data[i].to_bits());
-            }
+            prop_assert_eq!(back.data.map(f64::to_bits), data.map(f64::to_bits));
         }
 
         #[test]

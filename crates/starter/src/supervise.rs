@@ -133,16 +133,17 @@ pub fn wait_all(
             running.iter().for_each(|s| send(&s.child, libc::SIGTERM));
             termed.get_or_insert_with(Instant::now);
         }
-        if let Some(t) = first_exit {
-            if termed.is_none() && t.elapsed() >= grace.term_after {
-                running.iter().for_each(|s| send(&s.child, libc::SIGTERM));
-                termed = Some(Instant::now());
-            }
+        if let Some(t) = first_exit
+            && termed.is_none()
+            && t.elapsed() >= grace.term_after
+        {
+            running.iter().for_each(|s| send(&s.child, libc::SIGTERM));
+            termed = Some(Instant::now());
         }
-        if let Some(t) = termed {
-            if t.elapsed() >= grace.kill_after {
-                running.iter().for_each(|s| send(&s.child, libc::SIGKILL));
-            }
+        if let Some(t) = termed
+            && t.elapsed() >= grace.kill_after
+        {
+            running.iter().for_each(|s| send(&s.child, libc::SIGKILL));
         }
         std::thread::sleep(Duration::from_millis(5));
     }

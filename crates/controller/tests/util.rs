@@ -1,0 +1,112 @@
+//! Helpers for the controller's integration tests: a counting allocator (per thread), an
+//! in-process hardware link, and settings.
+
+use qmarc_controller::config::Settings;
+use qmarc_controller::link::{HwLink, LinkError};
+use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
+use qmarc_proto::HwMsg;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::path::Path;
+
+/// Counts every allocation (alloc, alloc_zeroed, realloc) of the calling thread.
+pub struct CountingAllocator;
+
+thread_local! {
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+fn count() {
+    // try_with: the thread-local may already be gone while the thread shuts down.
+    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+}
+
+// SAFETY: every method forwards to the system allocator unchanged; counting touches only a
+// const-initialised thread-local Cell, which never allocates.
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: forwarded with the caller's guarantees.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: forwarded with the caller's guarantees.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        // SAFETY: forwarded with the caller's guarantees.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded with the caller's guarantees.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+/// Allocations made by the calling thread so far.
+pub fn allocations() -> u64 {
+    ALLOCATIONS.with(Cell::get)
+}
+
+/// The shipped settings.
+pub fn settings() -> Settings {
+    Settings::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml")).unwrap()
+}
+
+/// The hwserver's core with a lock-step simulated Deltabot, called in-process.
+pub struct CoreLink(pub HwCore);
+
+impl CoreLink {
+    /// A link to a simulated robot with `params`.
+    pub fn new(params: SimParams) -> CoreLink {
+        CoreLink(HwCore::new(Box::new(SimDeltabot::new(params).unwrap())))
+    }
+}
+
+impl HwLink for CoreLink {
+    fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, LinkError> {
+        Ok(self.0.handle(req))
+    }
+}
+
+/// What the calling thread has done in the kernel: read/write syscalls and blocking waits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ThreadCounters {
+    /// Read-type syscalls (`syscr` of /proc/thread-self/io).
+    pub syscr: u64,
+    /// Write-type syscalls (`syscw`).
+    pub syscw: u64,
+    /// Times the thread blocked (waiting on a lock, I/O or sleep).
+    pub voluntary_switches: u64,
+}
+
+fn field(text: &str, name: &str) -> u64 {
+    text.lines()
+        .find_map(|l| l.strip_prefix(name))
+        .and_then(|v| v.trim_start_matches(':').trim().parse().ok())
+        .unwrap_or_else(|| panic!("{name} missing"))
+}
+
+impl ThreadCounters {
+    /// The counters now (reading them costs a few syscalls of its own).
+    pub fn now() -> ThreadCounters {
+        let io = std::fs::read_to_string("/proc/thread-self/io").unwrap();
+        let status = std::fs::read_to_string("/proc/thread-self/status").unwrap();
+        ThreadCounters {
+            syscr: field(&io, "syscr"),
+            syscw: field(&io, "syscw"),
+            voluntary_switches: field(&status, "voluntary_ctxt_switches"),
+        }
+    }
+
+    /// `later − self`.
+    pub fn delta(self, later: ThreadCounters) -> ThreadCounters {
+        ThreadCounters {
+            syscr: later.syscr - self.syscr,
+            syscw: later.syscw - self.syscw,
+            voluntary_switches: later.voluntary_switches - self.voluntary_switches,
+        }
+    }
+}
