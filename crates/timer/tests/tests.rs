@@ -2,7 +2,7 @@
 //! check what each wake reports, never how fast the machine is.
 
 use qmarc_timer::rt::{RtRequest, spawn};
-use qmarc_timer::{Ticker, TickerKind};
+use qmarc_timer::TickerKind;
 
 fn check_ticks(kind: TickerKind) {
     let period = 1_000_000;
