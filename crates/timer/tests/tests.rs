@@ -1,8 +1,8 @@
 //! Integration tests of the real tickers and the real-time set-up on this machine. They
 //! check what each wake reports, never how fast the machine is.
 
-use qmarc_timer::rt::{RtRequest, spawn};
 use qmarc_timer::TickerKind;
+use qmarc_timer::rt::{RtRequest, spawn};
 
 fn check_ticks(kind: TickerKind) {
     let period = 1_000_000;
