@@ -213,3 +213,133 @@ fn bad_settings_are_refused_before_anything_starts() {
     );
     run.assert_clean();
 }
+
+#[test]
+fn without_realtime_privileges_the_run_is_degraded_and_says_so() {
+    use std::os::unix::fs::PermissionsExt;
+    use std::os::unix::process::CommandExt;
+    let run = TestRun::new("degraded");
+    let out = run.out("out");
+    for d in [&run.dir, &out] {
+        std::fs::create_dir_all(d).unwrap();
+        std::fs::set_permissions(d, std::fs::Permissions::from_mode(0o777)).unwrap();
+    }
+    let mut cmd = std::process::Command::new(qmarc_tests::bin_dir().join("qmarc-starter"));
+    cmd.args(run.isolation_args())
+        .args([config_arg(), format!("--out={}", out.display())])
+        .args(["--deterministic", "step", "--duration=0.2"])
+        .current_dir(qmarc_tests::workspace());
+    // SAFETY: geteuid has no preconditions.
+    let root = unsafe { libc::geteuid() } == 0;
+    if root {
+        cmd.uid(65534).gid(65534); // nobody: no CAP_SYS_NICE, RLIMIT_RTPRIO 0
+    }
+    let r = qmarc_tests::run_with_timeout(&mut cmd, TIMEOUT);
+    assert_eq!(
+        r.code,
+        Some(0),
+        "stdout:\n{}\nstderr:\n{}",
+        r.stdout,
+        r.stderr
+    );
+    let s = read_summary(&out);
+    assert!(s.ok);
+    assert_eq!(s.degraded, s.timing.policy == "SCHED_OTHER (degraded)");
+    if root {
+        assert!(s.degraded, "nobody cannot get SCHED_FIFO");
+        assert!(r.stdout.contains("DEGRADED: not real time"), "{}", r.stdout);
+        assert!(
+            s.warnings
+                .iter()
+                .any(|w| w.starts_with("SCHED_FIFO 80 refused")),
+            "{:?}",
+            s.warnings
+        );
+        assert!(
+            r.stderr
+                .contains("qmarc-hwserver: warning: SCHED_FIFO 85 refused"),
+            "{}",
+            r.stderr
+        );
+        assert_eq!(
+            r.stderr.matches("SCHED_FIFO 80 refused").count(),
+            1,
+            "warned once: {}",
+            r.stderr
+        );
+    }
+    run.assert_clean();
+}
+
+#[test]
+fn killing_the_starter_stops_both_children_with_the_motors_disabled() {
+    let run = TestRun::new("killstarter");
+    let out = run.out("out");
+    // The default prefix (qmarc_<starter pid>_), so that the next starter can tell it is stale.
+    let mut starter = std::process::Command::new(qmarc_tests::bin_dir().join("qmarc-starter"))
+        .args([
+            format!("--iox-root={}", run.root()),
+            config_arg(),
+            format!("--out={}", out.display()),
+        ])
+        .args(["step", "--duration=30"])
+        .current_dir(qmarc_tests::workspace())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let prefix = format!("qmarc_{}_", starter.id());
+    let deadline = std::time::Instant::now() + TIMEOUT;
+    // Wait until the move runs: both children up, and the hwserver has answered for a while.
+    while qmarc_tests::processes_matching(&prefix).len() < 2 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "children did not start"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    std::thread::sleep(Duration::from_millis(700));
+    starter.kill().unwrap();
+    starter.wait().unwrap();
+    while !qmarc_tests::processes_matching(&prefix).is_empty() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "children outlived the starter"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let s = read_summary(&out);
+    let fault = s.fault.expect("the move was aborted");
+    // Both children get SIGTERM: the controller aborts, or first hears from the hwserver
+    // that it stopped; either way the motors end disabled.
+    assert!(
+        ["aborted", "hwserver_shutdown"].contains(&fault.kind.as_str()),
+        "{fault:?}"
+    );
+    assert!(
+        fault.message.ends_with("all motors disabled"),
+        "{}",
+        fault.message
+    );
+    assert!(s.cycles > 100, "it was moving: {} cycles", s.cycles);
+    // The dead starter could not remove its shared memory; the next starter does (or any
+    // other starter running meanwhile: the cleanup is by dead prefix).
+    let stale = qmarc_proto::service::IpcLocation::new(&prefix, &run.root());
+    let r = run.starter(
+        &[
+            &config_arg(),
+            &format!("--out={}", out.display()),
+            "--deterministic",
+            "step",
+            "--duration=0.05",
+        ],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(
+        stale.files().is_empty(),
+        "stale files removed: {:?}",
+        stale.files()
+    );
+    run.assert_clean();
+}

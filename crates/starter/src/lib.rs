@@ -61,14 +61,29 @@ pub fn hwserver_args(
     }
 }
 
+/// True if a process whose command line mentions `needle` is running (the children of a
+/// starter carry its prefix in their arguments).
+fn any_process_mentions(needle: &str) -> bool {
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return false;
+    };
+    entries.flatten().any(|e| {
+        e.file_name()
+            .to_str()
+            .is_some_and(|n| n.bytes().all(|b| b.is_ascii_digit()))
+            && std::fs::read(e.path().join("cmdline"))
+                .is_ok_and(|c| c.windows(needle.len()).any(|w| w == needle.as_bytes()))
+    })
+}
+
 /// Removes the iceoryx2 files of earlier starters under `root` that died without cleaning
-/// up (their prefix `qmarc_<pid>_` names a process that no longer exists). Returns how many
-/// files were removed.
+/// up: their prefix `qmarc_<pid>_` names a starter that no longer exists *and* no process
+/// (an orphaned child still shutting down) uses it. Returns how many files were removed.
 pub fn remove_stale_files(root: &str) -> usize {
     let Ok(entries) = std::fs::read_dir(qmarc_proto::service::SHM_DIR) else {
         return 0;
     };
-    let mut dead: Vec<String> = entries
+    let mut stale: Vec<String> = entries
         .flatten()
         .filter_map(|e| {
             let name = e.file_name().to_string_lossy().into_owned();
@@ -78,13 +93,17 @@ pub fn remove_stale_files(root: &str) -> usize {
                 .next()?
                 .parse()
                 .ok()?;
-            let alive = std::path::Path::new(&format!("/proc/{pid}")).exists();
-            (!alive).then(|| format!("{PREFIX_STEM}{pid}_"))
+            Some((pid, format!("{PREFIX_STEM}{pid}_")))
         })
+        .filter(|(pid, prefix)| {
+            !std::path::Path::new(&format!("/proc/{pid}")).exists() && !any_process_mentions(prefix)
+        })
+        .map(|(_, prefix)| prefix)
         .collect();
-    dead.sort();
-    dead.dedup();
-    dead.iter()
+    stale.sort();
+    stale.dedup();
+    stale
+        .iter()
         .map(|p| IpcLocation::new(p, root).remove_files())
         .sum()
 }
