@@ -14,23 +14,9 @@ fn config_arg() -> String {
 fn step_of_1000_counts_settles() {
     let run = TestRun::new("settles");
     let out = run.out("out");
-    let r = run.starter(
-        &[
-            &config_arg(),
-            &format!("--out={}", out.display()),
-            "--deterministic",
-            "step",
-            "--size=1000",
-            "--duration=3",
-        ],
-        TIMEOUT,
-    );
-    assert_eq!(
-        r.code,
-        Some(0),
-        "stdout:\n{}\nstderr:\n{}",
-        r.stdout,
-        r.stderr
+    let r = run.step_ok(
+        &out,
+        &["--deterministic", "step", "--size=1000", "--duration=3"],
     );
     assert!(r.stdout.contains("QMARC step: ok"), "{}", r.stdout);
     let s = read_summary(&out);
@@ -75,17 +61,7 @@ fn two_deterministic_runs_write_identical_data() {
     let run = TestRun::new("determinism");
     let (a, b) = (run.out("a"), run.out("b"));
     for out in [&a, &b] {
-        let r = run.starter(
-            &[
-                &config_arg(),
-                &format!("--out={}", out.display()),
-                "--deterministic",
-                "step",
-                "--duration=0.4",
-            ],
-            TIMEOUT,
-        );
-        assert_eq!(r.code, Some(0), "stderr:\n{}", r.stderr);
+        run.step_ok(out, &["--deterministic", "step", "--duration=0.4"]);
         run.assert_clean();
     }
     for f in ["gather.csv", "gather.m"] {
@@ -103,18 +79,10 @@ fn summary_figures_equal_the_ones_recomputed_from_gather_csv() {
     let run = TestRun::new("recompute");
     let out = run.out("out");
     // Real time, not deterministic: the figures come from the live loop.
-    let r = run.starter(
-        &[
-            &config_arg(),
-            &format!("--out={}", out.display()),
-            "--gather-every=1",
-            "step",
-            "--size=-700",
-            "--duration=0.6",
-        ],
-        TIMEOUT,
+    run.step_ok(
+        &out,
+        &["--gather-every=1", "step", "--size=-700", "--duration=0.6"],
     );
-    assert_eq!(r.code, Some(0), "stderr:\n{}", r.stderr);
     let s = read_summary(&out);
     let (_, rows) = read_gather(&out);
     assert_eq!(rows.len() as u64, s.cycles);
@@ -151,18 +119,15 @@ fn summary_figures_equal_the_ones_recomputed_from_gather_csv() {
 fn gathering_every_fourth_cycle_keeps_a_quarter_of_the_rows() {
     let run = TestRun::new("every4");
     let out = run.out("out");
-    let r = run.starter(
+    run.step_ok(
+        &out,
         &[
-            &config_arg(),
-            &format!("--out={}", out.display()),
             "--gather-every=4",
             "--deterministic",
             "step",
             "--duration=0.2",
         ],
-        TIMEOUT,
     );
-    assert_eq!(r.code, Some(0), "stderr:\n{}", r.stderr);
     let s = read_summary(&out);
     let (_, rows) = read_gather(&out);
     assert_eq!(s.cycles, 501);
@@ -325,17 +290,7 @@ fn killing_the_starter_stops_both_children_with_the_motors_disabled() {
     // The dead starter could not remove its shared memory; the next starter does (or any
     // other starter running meanwhile: the cleanup is by dead prefix).
     let stale = qmarc_proto::service::IpcLocation::new(&prefix, &run.root());
-    let r = run.starter(
-        &[
-            &config_arg(),
-            &format!("--out={}", out.display()),
-            "--deterministic",
-            "step",
-            "--duration=0.05",
-        ],
-        TIMEOUT,
-    );
-    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    run.step_ok(&out, &["--deterministic", "step", "--duration=0.05"]);
     assert!(
         stale.files().is_empty(),
         "stale files removed: {:?}",

@@ -123,6 +123,24 @@ impl TestRun {
         )
     }
 
+    /// Runs `qmarc-starter` with the shipped settings, output to `out` and `args` (global
+    /// flags, then the mode and its flags), and asserts that it succeeded.
+    pub fn step_ok(&self, out: &Path, args: &[&str]) -> Finished {
+        let config = format!("--config={}", default_config().display());
+        let out_arg = format!("--out={}", out.display());
+        let mut all = vec![config.as_str(), out_arg.as_str()];
+        all.extend_from_slice(args);
+        let r = self.starter(&all, Duration::from_secs(60));
+        assert_eq!(
+            r.code,
+            Some(0),
+            "qmarc-starter {all:?}\nstdout:\n{}\nstderr:\n{}",
+            r.stdout,
+            r.stderr
+        );
+        r
+    }
+
     /// Processes whose command line mentions this run's prefix.
     pub fn processes(&self) -> Vec<(u32, String)> {
         processes_matching(&self.prefix)

@@ -114,6 +114,15 @@ struct Schedule {
 }
 
 impl Schedule {
+    /// Tick 0 due one period after `now_ns`.
+    fn starting(period_ns: u64, now_ns: u64) -> Schedule {
+        Schedule {
+            period_ns,
+            t0_ns: now_ns + period_ns,
+            next_index: 0,
+        }
+    }
+
     fn due_ns(&self, index: u64) -> u64 {
         self.t0_ns + index * self.period_ns
     }
@@ -167,7 +176,8 @@ impl Ticker for TimerFdTicker {
         }
         // SAFETY: `raw` is a fresh fd nobody else owns.
         let fd = unsafe { OwnedFd::from_raw_fd(raw) };
-        let t0_ns = monotonic_now_ns() + self.period_ns;
+        let schedule = Schedule::starting(self.period_ns, monotonic_now_ns());
+        let t0_ns = schedule.t0_ns;
         let spec = libc::itimerspec {
             it_interval: timespec(self.period_ns),
             it_value: timespec(t0_ns),
@@ -185,11 +195,7 @@ impl Ticker for TimerFdTicker {
             return Err(TickerError::Arm(errno()));
         }
         self.fd = Some(fd);
-        self.schedule = Some(Schedule {
-            period_ns: self.period_ns,
-            t0_ns,
-            next_index: 0,
-        });
+        self.schedule = Some(schedule);
         Ok(t0_ns)
     }
 
@@ -244,13 +250,9 @@ impl Ticker for NanosleepTicker {
     }
 
     fn start(&mut self) -> Result<u64, TickerError> {
-        let t0_ns = monotonic_now_ns() + self.period_ns;
-        self.schedule = Some(Schedule {
-            period_ns: self.period_ns,
-            t0_ns,
-            next_index: 0,
-        });
-        Ok(t0_ns)
+        let schedule = Schedule::starting(self.period_ns, monotonic_now_ns());
+        self.schedule = Some(schedule);
+        Ok(schedule.t0_ns)
     }
 
     fn wait(&mut self) -> Result<Tick, TickerError> {
@@ -326,13 +328,9 @@ impl Ticker for ManualTicker {
     }
 
     fn start(&mut self) -> Result<u64, TickerError> {
-        let t0_ns = self.clock.now_ns() + self.period_ns;
-        self.schedule = Some(Schedule {
-            period_ns: self.period_ns,
-            t0_ns,
-            next_index: 0,
-        });
-        Ok(t0_ns)
+        let schedule = Schedule::starting(self.period_ns, self.clock.now_ns());
+        self.schedule = Some(schedule);
+        Ok(schedule.t0_ns)
     }
 
     fn wait(&mut self) -> Result<Tick, TickerError> {
