@@ -14,17 +14,11 @@ fn config_arg() -> String {
 fn step_of_1000_counts_settles() {
     let run = TestRun::new("settles");
     let out = run.out("out");
-    let r = run.step_ok(
-        &out,
-        &["--deterministic", "step", "--size=1000", "--duration=3"],
-    );
+    let r = run.step_ok(&out, &["--deterministic", "step", "--size=1000", "--duration=3"]);
     assert!(r.stdout.contains("QMARC step: ok"), "{}", r.stdout);
     let s = read_summary(&out);
     assert!(s.ok && s.fault.is_none());
-    assert_eq!(
-        s.cycles, 7501,
-        "3 s at 400 µs: duration / period + 1 samples"
-    );
+    assert_eq!(s.cycles, 7501, "3 s at 400 µs: duration / period + 1 samples");
     let (header, rows) = read_gather(&out);
     assert_eq!(header[..5], ["cycle", "time_s", "cmd1", "act1", "dac1"]);
     assert_eq!(rows.len(), 7501);
@@ -36,21 +30,14 @@ fn step_of_1000_counts_settles() {
     for m in 0..3 {
         let (cmd, act, dac) = (last[2 + 3 * m], last[3 + 3 * m], last[4 + 3 * m]);
         assert_eq!(cmd, 1000.0);
-        assert!(
-            (cmd - act).abs() <= band,
-            "motor {} rests at {act}, outside ±{band}",
-            m + 1
-        );
+        assert!((cmd - act).abs() <= band, "motor {} rests at {act}, outside ±{band}", m + 1);
         assert!(dac.abs() <= 1.0, "motor {} still driven: {dac}", m + 1);
         assert!(
             last_half_second.iter().all(|r| r[3 + 3 * m] == act),
             "motor {} still moving",
             m + 1
         );
-        let overshoot = rows
-            .iter()
-            .map(|r| r[3 + 3 * m] - 1000.0)
-            .fold(f64::MIN, f64::max);
+        let overshoot = rows.iter().map(|r| r[3 + 3 * m] - 1000.0).fold(f64::MIN, f64::max);
         assert!(overshoot <= band, "motor {} overshot by {overshoot}", m + 1);
     }
     run.assert_clean();
@@ -65,10 +52,7 @@ fn two_deterministic_runs_write_identical_data() {
         run.assert_clean();
     }
     for f in ["gather.csv", "gather.m"] {
-        let (x, y) = (
-            std::fs::read(a.join(f)).unwrap(),
-            std::fs::read(b.join(f)).unwrap(),
-        );
+        let (x, y) = (std::fs::read(a.join(f)).unwrap(), std::fs::read(b.join(f)).unwrap());
         assert!(x.len() > 1000, "{f} has data");
         assert!(x == y, "{f} differs between two deterministic runs");
     }
@@ -79,10 +63,7 @@ fn summary_figures_equal_the_ones_recomputed_from_gather_csv() {
     let run = TestRun::new("recompute");
     let out = run.out("out");
     // Real time, not deterministic: the figures come from the live loop.
-    run.step_ok(
-        &out,
-        &["--gather-every=1", "step", "--size=-700", "--duration=0.6"],
-    );
+    run.step_ok(&out, &["--gather-every=1", "step", "--size=-700", "--duration=0.6"]);
     let s = read_summary(&out);
     let (_, rows) = read_gather(&out);
     assert_eq!(rows.len() as u64, s.cycles);
@@ -101,10 +82,7 @@ fn summary_figures_equal_the_ones_recomputed_from_gather_csv() {
         assert_eq!(fig.max_error_counts, max);
         assert_eq!(fig.accumulated_abs_error_counts, sum_abs);
         assert_eq!(fig.sum_squares_error_counts2, sum_sq);
-        assert_eq!(
-            fig.max_error_counts, 0.0,
-            "a negative step: command below actual"
-        );
+        assert_eq!(fig.max_error_counts, 0.0, "a negative step: command below actual");
         assert_eq!(fig.min_error_counts, -700.0);
         let cpr = s.counts_per_rad;
         assert_eq!(fig.accumulated_abs_error_rad, sum_abs / cpr);
@@ -119,15 +97,7 @@ fn summary_figures_equal_the_ones_recomputed_from_gather_csv() {
 fn gathering_every_fourth_cycle_keeps_a_quarter_of_the_rows() {
     let run = TestRun::new("every4");
     let out = run.out("out");
-    run.step_ok(
-        &out,
-        &[
-            "--gather-every=4",
-            "--deterministic",
-            "step",
-            "--duration=0.2",
-        ],
-    );
+    run.step_ok(&out, &["--gather-every=4", "--deterministic", "step", "--duration=0.2"]);
     let s = read_summary(&out);
     let (_, rows) = read_gather(&out);
     assert_eq!(s.cycles, 501);
@@ -136,12 +106,7 @@ fn gathering_every_fourth_cycle_keeps_a_quarter_of_the_rows() {
     assert_eq!(cycles[..3], [0.0, 4.0, 8.0]);
     assert_eq!(rows[1][1], 0.0016, "deterministic time is n·T");
     let m = std::fs::read_to_string(out.join("gather.m")).unwrap();
-    assert_eq!(
-        m.lines()
-            .filter(|l| l.starts_with(|c: char| c.is_ascii_digit()))
-            .count(),
-        126
-    );
+    assert_eq!(m.lines().filter(|l| l.starts_with(|c: char| c.is_ascii_digit())).count(), 126);
     run.assert_clean();
 }
 
@@ -158,21 +123,13 @@ fn bad_settings_are_refused_before_anything_starts() {
         "{}:{line}:8: motor[2].kvff: invalid type: string \"fast\", expected f64",
         cfg.display()
     );
-    assert!(
-        r.stderr.contains(&expected),
-        "stderr: {}\nexpected: {expected}",
-        r.stderr
-    );
-    assert!(
-        run.location().files().is_empty(),
-        "no iceoryx2 file was ever created"
-    );
+    assert!(r.stderr.contains(&expected), "stderr: {}\nexpected: {expected}", r.stderr);
+    assert!(run.location().files().is_empty(), "no iceoryx2 file was ever created");
     // A bad flag is refused the same way.
     let r = run.starter(&[&config_arg(), "--period-us=20", "step"], TIMEOUT);
     assert_eq!(r.code, Some(1));
     assert!(
-        r.stderr
-            .contains("--period-us: servo period must be 100‥100000 µs, found 20"),
+        r.stderr.contains("--period-us: servo period must be 100‥100000 µs, found 20"),
         "{}",
         r.stderr
     );
@@ -200,13 +157,7 @@ fn without_realtime_privileges_the_run_is_degraded_and_says_so() {
         cmd.uid(65534).gid(65534); // nobody: no CAP_SYS_NICE, RLIMIT_RTPRIO 0
     }
     let r = qmarc_tests::run_with_timeout(&mut cmd, TIMEOUT);
-    assert_eq!(
-        r.code,
-        Some(0),
-        "stdout:\n{}\nstderr:\n{}",
-        r.stdout,
-        r.stderr
-    );
+    assert_eq!(r.code, Some(0), "stdout:\n{}\nstderr:\n{}", r.stdout, r.stderr);
     let s = read_summary(&out);
     assert!(s.ok);
     assert_eq!(s.degraded, s.timing.policy == "SCHED_OTHER (degraded)");
@@ -214,15 +165,12 @@ fn without_realtime_privileges_the_run_is_degraded_and_says_so() {
         assert!(s.degraded, "nobody cannot get SCHED_FIFO");
         assert!(r.stdout.contains("DEGRADED: not real time"), "{}", r.stdout);
         assert!(
-            s.warnings
-                .iter()
-                .any(|w| w.starts_with("SCHED_FIFO 80 refused")),
+            s.warnings.iter().any(|w| w.starts_with("SCHED_FIFO 80 refused")),
             "{:?}",
             s.warnings
         );
         assert!(
-            r.stderr
-                .contains("qmarc-hwserver: warning: SCHED_FIFO 85 refused"),
+            r.stderr.contains("qmarc-hwserver: warning: SCHED_FIFO 85 refused"),
             "{}",
             r.stderr
         );
@@ -257,44 +205,27 @@ fn killing_the_starter_stops_both_children_with_the_motors_disabled() {
     let deadline = std::time::Instant::now() + TIMEOUT;
     // Wait until the move runs: both children up, and the hwserver has answered for a while.
     while qmarc_tests::processes_matching(&prefix).len() < 2 {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "children did not start"
-        );
+        assert!(std::time::Instant::now() < deadline, "children did not start");
         std::thread::sleep(Duration::from_millis(10));
     }
     std::thread::sleep(Duration::from_millis(700));
     starter.kill().unwrap();
     starter.wait().unwrap();
     while !qmarc_tests::processes_matching(&prefix).is_empty() {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "children outlived the starter"
-        );
+        assert!(std::time::Instant::now() < deadline, "children outlived the starter");
         std::thread::sleep(Duration::from_millis(10));
     }
     let s = read_summary(&out);
     let fault = s.fault.expect("the move was aborted");
     // Both children get SIGTERM: the controller aborts, or first hears from the hwserver
     // that it stopped; either way the motors end disabled.
-    assert!(
-        ["aborted", "hwserver_shutdown"].contains(&fault.kind.as_str()),
-        "{fault:?}"
-    );
-    assert!(
-        fault.message.ends_with("all motors disabled"),
-        "{}",
-        fault.message
-    );
+    assert!(["aborted", "hwserver_shutdown"].contains(&fault.kind.as_str()), "{fault:?}");
+    assert!(fault.message.ends_with("all motors disabled"), "{}", fault.message);
     assert!(s.cycles > 100, "it was moving: {} cycles", s.cycles);
     // The dead starter could not remove its shared memory; the next starter does (or any
     // other starter running meanwhile: the cleanup is by dead prefix).
     let stale = qmarc_proto::service::IpcLocation::new(&prefix, &run.root());
     run.step_ok(&out, &["--deterministic", "step", "--duration=0.05"]);
-    assert!(
-        stale.files().is_empty(),
-        "stale files removed: {:?}",
-        stale.files()
-    );
+    assert!(stale.files().is_empty(), "stale files removed: {:?}", stale.files());
     run.assert_clean();
 }

@@ -26,15 +26,7 @@ fn every_rust_file_starts_with_a_module_doc_comment() {
     assert!(files.len() > 20, "found the sources");
     let missing: Vec<_> = files
         .iter()
-        .filter(|f| {
-            !std::fs::read_to_string(f)
-                .unwrap()
-                .trim_start()
-                .starts_with("//!")
-        })
+        .filter(|f| !std::fs::read_to_string(f).unwrap().trim_start().starts_with("//!"))
         .collect();
-    assert!(
-        missing.is_empty(),
-        "files without a leading //! comment: {missing:?}"
-    );
+    assert!(missing.is_empty(), "files without a leading //! comment: {missing:?}");
 }

@@ -19,11 +19,7 @@ static COUNTER: AtomicU32 = AtomicU32::new(0);
 /// The directory holding the workspace's binaries (`target/<profile>`).
 pub fn bin_dir() -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("target/<profile>/deps/..")
-        .to_path_buf();
+    let dir = exe.parent().and_then(Path::parent).expect("target/<profile>/deps/..").to_path_buf();
     for b in ["qmarc-starter", "qmarc-controller", "qmarc-hwserver"] {
         assert!(
             dir.join(b).is_file(),
@@ -36,10 +32,7 @@ pub fn bin_dir() -> PathBuf {
 
 /// The workspace root.
 pub fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("workspace root")
-        .to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root").to_path_buf()
 }
 
 /// The shipped settings file.
@@ -75,11 +68,7 @@ impl TestRun {
         let nanos = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.subsec_nanos());
-        let short: String = test
-            .chars()
-            .filter(char::is_ascii_alphanumeric)
-            .take(12)
-            .collect();
+        let short: String = test.chars().filter(char::is_ascii_alphanumeric).take(12).collect();
         let prefix = format!("qt{pid}_{n}_{nanos:x}_{short}_");
         let dir = std::env::temp_dir().join(format!("qmarc-test-{pid}-{n}-{short}"));
         let _ = std::fs::remove_dir_all(&dir);
@@ -104,10 +93,7 @@ impl TestRun {
 
     /// Arguments that isolate a starter run: prefix, root.
     pub fn isolation_args(&self) -> Vec<String> {
-        vec![
-            format!("--iox-prefix={}", self.prefix),
-            format!("--iox-root={}", self.root()),
-        ]
+        vec![format!("--iox-prefix={}", self.prefix), format!("--iox-root={}", self.root())]
     }
 
     /// Runs `qmarc-starter` with the isolation arguments and `args`, from the workspace
@@ -116,9 +102,7 @@ impl TestRun {
         let mut all = self.isolation_args();
         all.extend(args.iter().map(|s| s.to_string()));
         run_with_timeout(
-            Command::new(bin_dir().join("qmarc-starter"))
-                .args(&all)
-                .current_dir(workspace()),
+            Command::new(bin_dir().join("qmarc-starter")).args(&all).current_dir(workspace()),
             timeout,
         )
     }
@@ -185,11 +169,7 @@ pub fn processes_matching(needle: &str) -> Vec<(u32, String)> {
 
 /// Runs `cmd` to completion, capturing its output; kills it and panics after `timeout`.
 pub fn run_with_timeout(cmd: &mut Command, timeout: Duration) -> Finished {
-    let mut child = cmd
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn");
+    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("spawn");
     let mut out = child.stdout.take().expect("stdout");
     let mut err = child.stderr.take().expect("stderr");
     let out_reader = std::thread::spawn(move || {
@@ -231,12 +211,8 @@ pub fn read_summary(out: &Path) -> Summary {
 pub fn read_gather(out: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
     let text = std::fs::read_to_string(out.join("gather.csv")).expect("gather.csv");
     let mut lines = text.lines();
-    let header: Vec<String> = lines
-        .next()
-        .expect("header")
-        .split(',')
-        .map(str::to_string)
-        .collect();
+    let header: Vec<String> =
+        lines.next().expect("header").split(',').map(str::to_string).collect();
     let rows = lines
         .map(|l| {
             l.split(',')

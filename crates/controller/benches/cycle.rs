@@ -43,12 +43,8 @@ fn bench_cycle(c: &mut Criterion) {
     let generator = (GENERATORS[0].build)(&s_long);
     let law = Box::new(PidFf::from_settings(&s));
     let mut servo = Servo::new(plan, generator, law, Box::new(MockClock::new(0)));
-    let sim = SimDeltabot::new(SimParams {
-        n_motors: 3,
-        lockstep: true,
-        ..SimParams::default()
-    })
-    .unwrap();
+    let sim = SimDeltabot::new(SimParams { n_motors: 3, lockstep: true, ..SimParams::default() })
+        .unwrap();
     let mut link = CoreLink(HwCore::new(Box::new(sim)));
     let mut ticker = ManualTicker::new(400_000);
     servo.prepare(&mut link).unwrap();
@@ -77,14 +73,7 @@ fn bench_law(c: &mut Criterion) {
             n += 1;
             let cmd = [n as f64, -(n as f64), 0.5 * n as f64, 0.0];
             let act = [n as f64 - 3.0, 2.0 - n as f64, 0.5 * n as f64 + 1.0, 0.0];
-            law.step(
-                black_box(&ServoInput {
-                    n,
-                    cmd: &cmd,
-                    act: &act,
-                }),
-                &mut dac,
-            );
+            law.step(black_box(&ServoInput { n, cmd: &cmd, act: &act }), &mut dac);
             black_box(dac)
         })
     });

@@ -156,12 +156,6 @@ mod tests {
         let back = T::parse_from(args);
         assert_eq!(back.opts, t.opts);
         assert_eq!(back.mode, t.mode);
-        assert_eq!(
-            back.mode,
-            Mode::Step(StepArgs {
-                size: Some(-250),
-                duration: Some(0.75)
-            })
-        );
+        assert_eq!(back.mode, Mode::Step(StepArgs { size: Some(-250), duration: Some(0.75) }));
     }
 }

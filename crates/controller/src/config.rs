@@ -177,10 +177,8 @@ impl Settings {
 
     /// Reads and checks `path`.
     pub fn load(path: &Path) -> Result<Settings, ConfigLoadError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigLoadError::Read {
-            file: path.to_path_buf(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ConfigLoadError::Read { file: path.to_path_buf(), source })?;
         Settings::parse(path, &text)
     }
 
@@ -193,10 +191,8 @@ impl Settings {
 
     /// Overrides the servo period (`--period-us`).
     pub fn set_period_us(&mut self, period_us: u32) -> Result<(), ConfigLoadError> {
-        check_period(period_us).map_err(|message| ConfigLoadError::Override {
-            flag: "--period-us",
-            message,
-        })?;
+        check_period(period_us)
+            .map_err(|message| ConfigLoadError::Override { flag: "--period-us", message })?;
         self.period_us = period_us;
         Ok(())
     }
@@ -215,20 +211,16 @@ impl Settings {
 
     /// Overrides the step size (`--size`).
     pub fn set_step_size(&mut self, size: i64) -> Result<(), ConfigLoadError> {
-        check_step_size(size).map_err(|message| ConfigLoadError::Override {
-            flag: "--size",
-            message,
-        })?;
+        check_step_size(size)
+            .map_err(|message| ConfigLoadError::Override { flag: "--size", message })?;
         self.step.size = size;
         Ok(())
     }
 
     /// Overrides the step duration (`--duration`).
     pub fn set_step_duration(&mut self, duration_s: f64) -> Result<(), ConfigLoadError> {
-        check_duration(duration_s).map_err(|message| ConfigLoadError::Override {
-            flag: "--duration",
-            message,
-        })?;
+        check_duration(duration_s)
+            .map_err(|message| ConfigLoadError::Override { flag: "--duration", message })?;
         self.step.duration_s = duration_s;
         Ok(())
     }
@@ -251,9 +243,7 @@ fn check_step_size(size: i64) -> Result<(), String> {
     if size.abs() <= MAX_STEP_COUNTS {
         Ok(())
     } else {
-        Err(format!(
-            "step size must be within ±{MAX_STEP_COUNTS} counts, found {size}"
-        ))
+        Err(format!("step size must be within ±{MAX_STEP_COUNTS} counts, found {size}"))
     }
 }
 
@@ -261,9 +251,7 @@ fn check_duration(s: f64) -> Result<(), String> {
     if s.is_finite() && s > 0.0 && s <= MAX_MOVE_S {
         Ok(())
     } else {
-        Err(format!(
-            "duration must be > 0 and ≤ {MAX_MOVE_S} s, found {s}"
-        ))
+        Err(format!("duration must be > 0 and ≤ {MAX_MOVE_S} s, found {s}"))
     }
 }
 
@@ -352,11 +340,7 @@ impl Source<'_> {
         let span = e.span().unwrap_or(0..0);
         let field = self.field_at(span.start);
         let message = e.message().trim().to_string();
-        self.invalid(
-            span,
-            if field.is_empty() { "(file)" } else { &field },
-            message,
-        )
+        self.invalid(span, if field.is_empty() { "(file)" } else { &field }, message)
     }
 }
 
@@ -464,20 +448,12 @@ fn take<T: Clone>(
 
 fn in_range(lo: i64, hi: i64) -> impl FnOnce(&i64) -> Result<(), String> {
     move |v| {
-        if (lo..=hi).contains(v) {
-            Ok(())
-        } else {
-            Err(format!("must be {lo}‥{hi}, found {v}"))
-        }
+        if (lo..=hi).contains(v) { Ok(()) } else { Err(format!("must be {lo}‥{hi}, found {v}")) }
     }
 }
 
 fn finite(v: &f64) -> Result<(), String> {
-    if v.is_finite() {
-        Ok(())
-    } else {
-        Err(format!("must be a finite number, found {v}"))
-    }
+    if v.is_finite() { Ok(()) } else { Err(format!("must be a finite number, found {v}")) }
 }
 
 fn positive(v: &f64) -> Result<(), String> {
@@ -491,10 +467,7 @@ fn positive(v: &f64) -> Result<(), String> {
 /// The notch denominator 1 + d1·z⁻¹ + d2·z⁻² is stable iff |d2| < 1 and |d1| < 1 + d2.
 fn check_notch(n: &[f64]) -> Result<(), String> {
     if n.len() != 4 {
-        return Err(format!(
-            "must be 4 numbers [n1, n2, d1, d2], found {}",
-            n.len()
-        ));
+        return Err(format!("must be 4 numbers [n1, n2, d1, d2], found {}", n.len()));
     }
     if let Some(bad) = n.iter().find(|x| !x.is_finite()) {
         return Err(format!("must be finite numbers, found {bad}"));
@@ -512,13 +485,8 @@ fn check_notch(n: &[f64]) -> Result<(), String> {
 impl RawFile {
     fn check(self, src: &Source<'_>) -> Result<Settings, ConfigLoadError> {
         let g = &self.general;
-        let n_motors = take(
-            src,
-            &g.n_motors,
-            "general.n_motors",
-            3,
-            in_range(1, MAX_MOTORS as i64),
-        )? as usize;
+        let n_motors =
+            take(src, &g.n_motors, "general.n_motors", 3, in_range(1, MAX_MOTORS as i64))? as usize;
         let period_us = take(src, &g.period_us, "general.period_us", 400, |v| {
             u32::try_from(*v)
                 .map_err(|_| format!("servo period must be 100‥100000 µs, found {v}"))
@@ -534,13 +502,8 @@ impl RawFile {
                 ))
             }
         })?;
-        let counts_per_rev = take(
-            src,
-            &g.counts_per_rev,
-            "general.counts_per_rev",
-            4096.0,
-            positive,
-        )?;
+        let counts_per_rev =
+            take(src, &g.counts_per_rev, "general.counts_per_rev", 4096.0, positive)?;
         let gear_ratio = take(src, &g.gear_ratio, "general.gear_ratio", 12.0, positive)?;
 
         let t = &self.timer;
@@ -549,20 +512,10 @@ impl RawFile {
                 .map(|_| ())
                 .ok_or_else(|| format!("must be \"timerfd\" or \"nanosleep\", found \"{v}\""))
         })?;
-        let servo_priority = take(
-            src,
-            &t.servo_priority,
-            "timer.servo_priority",
-            80,
-            in_range(0, 98),
-        )? as i32;
-        let hwserver_priority = take(
-            src,
-            &t.hwserver_priority,
-            "timer.hwserver_priority",
-            85,
-            in_range(0, 98),
-        )? as i32;
+        let servo_priority =
+            take(src, &t.servo_priority, "timer.servo_priority", 80, in_range(0, 98))? as i32;
+        let hwserver_priority =
+            take(src, &t.hwserver_priority, "timer.hwserver_priority", 85, in_range(0, 98))? as i32;
         if servo_priority > 0 && hwserver_priority > 0 && hwserver_priority < servo_priority {
             let span = t.hwserver_priority.as_ref().map_or(0..0, Spanned::span);
             return Err(src.invalid(
@@ -576,48 +529,20 @@ impl RawFile {
         }
         let lock_memory = take(src, &t.lock_memory, "timer.lock_memory", true, |_| Ok(()))?;
 
-        let every = take(
-            src,
-            &self.gather.every,
-            "gather.every",
-            1,
-            in_range(1, 1_000_000),
-        )? as u32;
-        let out_dir = take(
-            src,
-            &self.gather.out_dir,
-            "gather.out_dir",
-            "out".to_string(),
-            |v| {
-                if v.trim().is_empty() {
-                    Err("must not be empty".into())
-                } else {
-                    Ok(())
-                }
-            },
-        )?;
+        let every =
+            take(src, &self.gather.every, "gather.every", 1, in_range(1, 1_000_000))? as u32;
+        let out_dir = take(src, &self.gather.out_dir, "gather.out_dir", "out".to_string(), |v| {
+            if v.trim().is_empty() { Err("must not be empty".into()) } else { Ok(()) }
+        })?;
 
-        let size = take(src, &self.step.size, "step.size", 1000, |v| {
-            check_step_size(*v)
-        })?;
-        let duration_s = take(src, &self.step.duration_s, "step.duration_s", 2.0, |v| {
-            check_duration(*v)
-        })?;
+        let size = take(src, &self.step.size, "step.size", 1000, |v| check_step_size(*v))?;
+        let duration_s =
+            take(src, &self.step.duration_s, "step.duration_s", 2.0, |v| check_duration(*v))?;
 
         let h = &self.hwserver;
-        let backend = take(
-            src,
-            &h.backend,
-            "hwserver.backend",
-            "sim".to_string(),
-            |v| {
-                if v == "sim" {
-                    Ok(())
-                } else {
-                    Err(format!("must be \"sim\", found \"{v}\""))
-                }
-            },
-        )?;
+        let backend = take(src, &h.backend, "hwserver.backend", "sim".to_string(), |v| {
+            if v == "sim" { Ok(()) } else { Err(format!("must be \"sim\", found \"{v}\"")) }
+        })?;
         let watchdog_periods = take(
             src,
             &h.watchdog_periods,
@@ -625,13 +550,9 @@ impl RawFile {
             10,
             in_range(2, 1_000_000),
         )? as u32;
-        let deadline_periods = take(
-            src,
-            &h.deadline_periods,
-            "hwserver.deadline_periods",
-            5,
-            in_range(1, 1_000_000),
-        )? as u32;
+        let deadline_periods =
+            take(src, &h.deadline_periods, "hwserver.deadline_periods", 5, in_range(1, 1_000_000))?
+                as u32;
         let response_timeout_periods = take(
             src,
             &h.response_timeout_periods,
@@ -649,10 +570,7 @@ impl RawFile {
                 if v.len() > MAX_MOTORS {
                     return Err(format!("at most {MAX_MOTORS} positions, found {}", v.len()));
                 }
-                match v
-                    .iter()
-                    .find(|x| !(x.is_finite() && x.abs() < f64::from(1u32 << 23)))
-                {
+                match v.iter().find(|x| !(x.is_finite() && x.abs() < f64::from(1u32 << 23))) {
                     Some(bad) => Err(format!(
                         "positions must be finite and within ±2^23 counts, found {bad}"
                     )),
@@ -711,9 +629,7 @@ impl RawFile {
                 }
             };
             let r = m.get_ref();
-            let notch = take(src, &r.notch, &name("notch"), vec![0.0; 4], |v| {
-                check_notch(v)
-            })?;
+            let notch = take(src, &r.notch, &name("notch"), vec![0.0; 4], |v| check_notch(v))?;
             motors.push(MotorGains {
                 kp: need(&r.kp, "kp")?,
                 ki: need(&r.ki, "ki")?,
@@ -737,10 +653,7 @@ impl RawFile {
                 hwserver_priority,
                 lock_memory,
             },
-            gather: GatherSettings {
-                every,
-                out_dir: PathBuf::from(out_dir),
-            },
+            gather: GatherSettings { every, out_dir: PathBuf::from(out_dir) },
             step: StepSettings { size, duration_s },
             hwserver: HwServerSettings {
                 backend,
@@ -776,33 +689,19 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
         let s = Settings::load(&path).unwrap();
         assert_eq!((s.n_motors, s.period_us, s.law.as_str()), (3, 400, "pidff"));
-        let table_5_1 = [
-            (182_000.0, 119_000.0),
-            (182_000.0, 103_500.0),
-            (183_000.0, 104_000.0),
-        ];
+        let table_5_1 = [(182_000.0, 119_000.0), (182_000.0, 103_500.0), (183_000.0, 104_000.0)];
         for (m, (kp, kvff)) in s.motors.iter().zip(table_5_1) {
-            assert_eq!(
-                (m.kp, m.ki, m.kd, m.kvff, m.kaff),
-                (kp, 100.0, 3_000.0, kvff, 100.0)
-            );
+            assert_eq!((m.kp, m.ki, m.kd, m.kvff, m.kaff), (kp, 100.0, 3_000.0, kvff, 100.0));
             assert_eq!(m.notch, [0.0; 4]);
         }
-        assert!(
-            (s.counts_per_rad() - 7_822.78).abs() < 0.01,
-            "{}",
-            s.counts_per_rad()
-        );
+        assert!((s.counts_per_rad() - 7_822.78).abs() < 0.01, "{}", s.counts_per_rad());
         assert_eq!(s.timer.method, TickerKind::TimerFd);
     }
 
     #[test]
     fn minimal_file_takes_defaults() {
         let s = parse(&MOTOR.repeat(3)).unwrap();
-        assert_eq!(
-            (s.n_motors, s.period_us, s.gather.every, s.step.size),
-            (3, 400, 1, 1000)
-        );
+        assert_eq!((s.n_motors, s.period_us, s.gather.every, s.step.size), (3, 400, 1, 1000));
         assert_eq!(s.hwserver.watchdog_periods, 10);
     }
 
@@ -812,10 +711,7 @@ mod tests {
             "[general]\nperiod_us = 50\n",
             "q.toml:2:13: general.period_us: servo period must be 100‥100000 µs, found 50",
         );
-        check(
-            "[general]\nn_motors = 5\n",
-            "q.toml:2:12: general.n_motors: must be 1‥4, found 5",
-        );
+        check("[general]\nn_motors = 5\n", "q.toml:2:12: general.n_motors: must be 1‥4, found 5");
         check(
             "[general]\nn_motors = 2\n[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n",
             "q.toml:2:12: general.n_motors: 2 motors need 2 [[motor]] tables, found 1",
@@ -887,12 +783,7 @@ mod tests {
 
     #[test]
     fn missing_file_is_named() {
-        let e = Settings::load(Path::new("/nonexistent/q.toml"))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.starts_with("/nonexistent/q.toml: cannot read the settings file: "),
-            "{e}"
-        );
+        let e = Settings::load(Path::new("/nonexistent/q.toml")).unwrap_err().to_string();
+        assert!(e.starts_with("/nonexistent/q.toml: cannot read the settings file: "), "{e}");
     }
 }

@@ -111,15 +111,8 @@ impl Gather {
     /// `qmarc_columns` and one column vector per column name.
     pub fn write_octave(&self, w: &mut impl Write) -> io::Result<()> {
         let cols = self.columns();
-        writeln!(
-            w,
-            "% QMARC gathered data, written by qmarc-controller after the move."
-        )?;
-        writeln!(
-            w,
-            "% One row per gathered servo cycle (every {} cycles).",
-            self.every
-        )?;
+        writeln!(w, "% QMARC gathered data, written by qmarc-controller after the move.")?;
+        writeln!(w, "% One row per gathered servo cycle (every {} cycles).", self.every)?;
         writeln!(
             w,
             "% cycle: servo sample n; time_s: s; cmdM/actM: counts; dacM: DAC codes (±8191 = ±10 V)."
@@ -163,11 +156,7 @@ mod tests {
         }
         assert_eq!((g.rows().len(), g.dropped()), (3, 0));
         g.push(row(99));
-        assert_eq!(
-            (g.rows().len(), g.dropped()),
-            (3, 1),
-            "full: dropped, not grown"
-        );
+        assert_eq!((g.rows().len(), g.dropped()), (3, 1), "full: dropped, not grown");
     }
 
     #[test]

@@ -48,10 +48,7 @@ pub struct Notch {
 impl Notch {
     /// A notch with coefficients `[n1, n2, d1, d2]` and zero state.
     pub fn new(coeffs: [f64; 4]) -> Notch {
-        Notch {
-            coeffs,
-            ..Notch::default()
-        }
+        Notch { coeffs, ..Notch::default() }
     }
 
     /// Filters one sample: y(n) = x(n) + n1·x(n−1) + n2·x(n−2) − d1·y(n−1) − d2·y(n−2).
@@ -114,11 +111,7 @@ impl PidFf {
         for (s, gains) in state.iter_mut().zip(&g) {
             s.notch = Notch::new(gains.notch);
         }
-        PidFf {
-            n_motors,
-            gains: g,
-            state,
-        }
+        PidFf { n_motors, gains: g, state }
     }
 
     /// The law with the gains of the motors in use.
@@ -141,11 +134,7 @@ impl PidFf {
 #[inline]
 pub fn to_dac_code(u: f64) -> i32 {
     let limit = f64::from(DAC_MAX);
-    if u.is_nan() {
-        0
-    } else {
-        u.clamp(-limit, limit).round() as i32
-    }
+    if u.is_nan() { 0 } else { u.clamp(-limit, limit).round() as i32 }
 }
 
 impl ServoLaw for PidFf {
@@ -168,11 +157,7 @@ impl ServoLaw for PidFf {
 
     #[inline]
     fn step(&mut self, input: &ServoInput<'_>, dac: &mut [i32; MAX_MOTORS]) {
-        let axes = self
-            .gains
-            .iter()
-            .zip(self.state.iter_mut())
-            .zip(dac.iter_mut());
+        let axes = self.gains.iter().zip(self.state.iter_mut()).zip(dac.iter_mut());
         for (m, ((g, s), out)) in axes.enumerate().take(self.n_motors) {
             let (cp, ap) = (input.cmd[m], input.act[m]);
             let fe = cp - ap;
@@ -213,14 +198,7 @@ mod tests {
         c[0] = cmd;
         a[0] = act;
         let mut dac = [7; MAX_MOTORS];
-        law.step(
-            &ServoInput {
-                n: 0,
-                cmd: &c,
-                act: &a,
-            },
-            &mut dac,
-        );
+        law.step(&ServoInput { n: 0, cmd: &c, act: &a }, &mut dac);
         assert_eq!(&dac[1..], &[0; MAX_MOTORS - 1], "unused motors get 0");
         dac[0]
     }
@@ -255,31 +233,19 @@ mod tests {
     fn output_is_clamped_to_the_14_bit_range_and_rounded() {
         let mut law = PidFf::new(&[thesis_motor_1()]);
         law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
-        assert_eq!(
-            run(&mut law, 1_000.0, 0.0),
-            8191,
-            "the step's velocity kick saturates"
-        );
+        assert_eq!(run(&mut law, 1_000.0, 0.0), 8191, "the step's velocity kick saturates");
         law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
         assert_eq!(run(&mut law, -1_000.0, 0.0), -8191);
-        for (u, code) in [
-            (0.49, 0),
-            (0.5, 1),
-            (-0.5, -1),
-            (8190.6, 8191),
-            (1e300, 8191),
-            (f64::NAN, 0),
-        ] {
+        for (u, code) in
+            [(0.49, 0), (0.5, 1), (-0.5, -1), (8190.6, 8191), (1e300, 8191), (f64::NAN, 0)]
+        {
             assert_eq!(to_dac_code(u), code, "{u}");
         }
     }
 
     #[test]
     fn proportional_term_alone_is_kp_fe_over_2_pow_21() {
-        let g = MotorGains {
-            kp: 2_097_152.0,
-            ..MotorGains::default()
-        }; // 2²¹: 1 code per count
+        let g = MotorGains { kp: 2_097_152.0, ..MotorGains::default() }; // 2²¹: 1 code per count
         let mut law = PidFf::new(&[g]);
         law.reset(&[100.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
         assert_eq!(run(&mut law, 100.0, 0.0), 100);
@@ -289,11 +255,7 @@ mod tests {
     #[test]
     fn integrator_sums_past_errors_only() {
         // Ki alone: IE(n) = Σ_{j<n} FE(j); Kp·Ki/2^19/2^23/4 = 1 code per count·cycle.
-        let g = MotorGains {
-            kp: 1.0,
-            ki: (1u64 << 44) as f64,
-            ..MotorGains::default()
-        };
+        let g = MotorGains { kp: 1.0, ki: (1u64 << 44) as f64, ..MotorGains::default() };
         let mut law = PidFf::new(&[g]);
         law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
         // FE = 5 every cycle; the P term is 5·2⁻²¹ ≈ 0, invisible after rounding.
@@ -324,11 +286,8 @@ mod tests {
 
     #[test]
     fn notch_follows_the_law_before_clamping() {
-        let g = MotorGains {
-            kp: 2_097_152.0,
-            notch: [0.0, 0.0, -0.5, 0.0],
-            ..MotorGains::default()
-        };
+        let g =
+            MotorGains { kp: 2_097_152.0, notch: [0.0, 0.0, -0.5, 0.0], ..MotorGains::default() };
         let mut law = PidFf::new(&[g]);
         law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
         // u = FE = 100 each cycle; y(n) = u + 0.5·y(n−1): 100, 150, 175.

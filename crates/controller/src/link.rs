@@ -98,10 +98,7 @@ pub struct IoxLink {
 }
 
 fn port_err(port: &'static str, e: impl std::fmt::Debug) -> LinkConnectError {
-    LinkConnectError::Port {
-        port,
-        reason: format!("{e:?}"),
-    }
+    LinkConnectError::Port { port, reason: format!("{e:?}") }
 }
 
 impl IoxLink {
@@ -135,11 +132,7 @@ impl IoxLink {
                 Err(e) => return Err(e.into()),
             }
         };
-        let client = services
-            .hw
-            .client_builder()
-            .create()
-            .map_err(|e| port_err("client", e))?;
+        let client = services.hw.client_builder().create().map_err(|e| port_err("client", e))?;
         let notifier = services
             .request_event
             .notifier_builder()
@@ -150,15 +143,7 @@ impl IoxLink {
             .listener_builder()
             .create()
             .map_err(|e| port_err("listener", e))?;
-        Ok(IoxLink {
-            node,
-            services,
-            client,
-            notifier,
-            listener,
-            timeouts,
-            seq: 0,
-        })
+        Ok(IoxLink { node, services, client, notifier, listener, timeouts, seq: 0 })
     }
 
     /// True while the hwserver's node is alive: dead nodes are cleaned up first (liveness is
@@ -175,24 +160,17 @@ impl HwLink for IoxLink {
         let mut msg = *req;
         msg.seq = self.seq;
         let started = monotonic_now_ns();
-        let pending = self
-            .client
-            .send_copy(msg)
-            .map_err(|_| LinkError::Ipc { op: "request send" })?;
-        self.notifier.notify().map_err(|_| LinkError::Ipc {
-            op: "request notify",
-        })?;
+        let pending =
+            self.client.send_copy(msg).map_err(|_| LinkError::Ipc { op: "request send" })?;
+        self.notifier.notify().map_err(|_| LinkError::Ipc { op: "request notify" })?;
         let mut checked = false;
         loop {
-            if let Some(resp) = pending.receive().map_err(|_| LinkError::Ipc {
-                op: "response receive",
-            })? {
+            if let Some(resp) =
+                pending.receive().map_err(|_| LinkError::Ipc { op: "response receive" })?
+            {
                 let r = *resp.payload();
                 if r.seq != msg.seq {
-                    return Err(LinkError::Sequence {
-                        expected: msg.seq,
-                        got: r.seq,
-                    });
+                    return Err(LinkError::Sequence { expected: msg.seq, got: r.seq });
                 }
                 return Ok(r);
             }
@@ -206,24 +184,15 @@ impl HwLink for IoxLink {
             if waited >= self.timeouts.deadline_ns && !checked {
                 checked = true;
                 if !self.server_alive() {
-                    return Err(LinkError::Lost {
-                        waited_ns: waited,
-                        server_alive: false,
-                    });
+                    return Err(LinkError::Lost { waited_ns: waited, server_alive: false });
                 }
             }
-            let next = if checked {
-                self.timeouts.give_up_ns
-            } else {
-                self.timeouts.deadline_ns
-            };
+            let next = if checked { self.timeouts.give_up_ns } else { self.timeouts.deadline_ns };
             let budget = Duration::from_nanos(next.saturating_sub(waited).max(1_000));
             match self.listener.timed_wait(|_| {}, budget) {
                 Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
                 Err(_) => {
-                    return Err(LinkError::Ipc {
-                        op: "response wait",
-                    });
+                    return Err(LinkError::Ipc { op: "response wait" });
                 }
             }
         }

@@ -111,9 +111,7 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
         (servo, rt, result)
     })
     .map_err(|e| RunError::Thread(e.to_string()))?;
-    let (servo, rt, result) = handle
-        .join()
-        .map_err(|_| RunError::Thread("panicked".into()))?;
+    let (servo, rt, result) = handle.join().map_err(|_| RunError::Thread("panicked".into()))?;
     result?;
 
     let summary = summarize(settings, &servo, &rt, opts.deterministic);
@@ -131,10 +129,7 @@ pub fn summarize(
     let cpr = settings.counts_per_rad();
     let mut warnings = rt.warnings.clone();
     if servo.gather().dropped() > 0 {
-        warnings.push(format!(
-            "{} gathered rows did not fit the buffer",
-            servo.gather().dropped()
-        ));
+        warnings.push(format!("{} gathered rows did not fit the buffer", servo.gather().dropped()));
     }
     Summary {
         mode: servo.plan().mode.clone(),
@@ -169,25 +164,17 @@ fn write_file(
     path: PathBuf,
     body: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
 ) -> Result<(), RunError> {
-    let wrap = |source| RunError::Output {
-        file: path.clone(),
-        source,
-    };
+    let wrap = |source| RunError::Output { file: path.clone(), source };
     let mut w = std::io::BufWriter::new(std::fs::File::create(&path).map_err(wrap)?);
     body(&mut w)
         .and_then(|()| w.flush())
-        .map_err(|source| RunError::Output {
-            file: path.clone(),
-            source,
-        })
+        .map_err(|source| RunError::Output { file: path.clone(), source })
 }
 
 /// Writes `gather.csv`, `gather.m` and `summary.json` into `dir` (created if missing).
 pub fn write_outputs(dir: &Path, servo: &Servo, summary: &Summary) -> Result<(), RunError> {
-    std::fs::create_dir_all(dir).map_err(|source| RunError::Output {
-        file: dir.to_path_buf(),
-        source,
-    })?;
+    std::fs::create_dir_all(dir)
+        .map_err(|source| RunError::Output { file: dir.to_path_buf(), source })?;
     write_file(dir.join("gather.csv"), |w| servo.gather().write_csv(w))?;
     write_file(dir.join("gather.m"), |w| servo.gather().write_octave(w))?;
     write_file(dir.join("summary.json"), |w| {

@@ -148,11 +148,7 @@ impl Servo {
     fn request(link: &mut dyn HwLink, req: HwMsg) -> Result<HwMsg, MoveError> {
         let resp = link.exchange(&req)?;
         let status = resp.status();
-        if status.is_ok() {
-            Ok(resp)
-        } else {
-            Err(MoveError::Refused(status))
-        }
+        if status.is_ok() { Ok(resp) } else { Err(MoveError::Refused(status)) }
     }
 
     /// Everything before the first tick, in order: clear and arm the safety monitoring, read
@@ -190,11 +186,7 @@ impl Servo {
     /// One servo cycle for `tick`. Allocates nothing, locks nothing, formats nothing.
     #[inline]
     pub fn cycle(&mut self, link: &mut dyn HwLink, tick: &Tick) -> CycleEnd {
-        let n = if self.plan.deterministic {
-            self.executed
-        } else {
-            tick.index
-        };
+        let n = if self.plan.deterministic { self.executed } else { tick.index };
         self.last_sample = n;
 
         // 1. Read all encoders.
@@ -217,14 +209,7 @@ impl Servo {
         }
 
         // 3. Law.
-        self.law.step(
-            &ServoInput {
-                n,
-                cmd: &self.cmd,
-                act: &self.act,
-            },
-            &mut self.dac,
-        );
+        self.law.step(&ServoInput { n, cmd: &self.cmd, act: &self.act }, &mut self.dac);
         let computed = self.clock.now_ns();
 
         // 4. Write all DACs.
@@ -236,8 +221,7 @@ impl Servo {
 
         // 5. Gather.
         self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
-        self.timing
-            .record(tick, read_start, read_done, computed, written);
+        self.timing.record(tick, read_start, read_done, computed, written);
         if self.gather.due(self.executed) {
             // Integer ns divided once: the correctly rounded decimal, no accumulated noise.
             let time_ns = if self.plan.deterministic {

@@ -118,12 +118,9 @@ impl TimingStats {
         }
         self.prev_woke_ns = Some(tick.woke_ns);
         self.missed += tick.missed;
-        self.read
-            .record_ns(read_done_ns.saturating_sub(read_start_ns));
-        self.compute
-            .record_ns(computed_ns.saturating_sub(read_done_ns));
-        self.output_latency
-            .record_ns(written_ns.saturating_sub(tick.intended_ns));
+        self.read.record_ns(read_done_ns.saturating_sub(read_start_ns));
+        self.compute.record_ns(computed_ns.saturating_sub(read_done_ns));
+        self.output_latency.record_ns(written_ns.saturating_sub(tick.intended_ns));
     }
 }
 
@@ -188,14 +185,7 @@ impl Fault {
     /// A fault of `kind` at sample `cycle` with nothing else known.
     #[inline]
     pub fn new(kind: FaultKind, cycle: u64) -> Fault {
-        Fault {
-            kind,
-            motor: None,
-            cycle,
-            status: Status::OK,
-            link: None,
-            signal: 0,
-        }
+        Fault { kind, motor: None, cycle, status: Status::OK, link: None, signal: 0 }
     }
 
     /// The fault a non-zero status word means, most severe first; `None` for a clean status.
@@ -217,20 +207,13 @@ impl Fault {
         } else {
             (FaultKind::ProtocolError, None)
         };
-        Some(Fault {
-            motor,
-            status,
-            ..Fault::new(kind, cycle)
-        })
+        Some(Fault { motor, status, ..Fault::new(kind, cycle) })
     }
 
     /// A lost or failed link at sample `cycle`.
     #[inline]
     pub fn from_link(e: LinkError, cycle: u64) -> Fault {
-        Fault {
-            link: Some(e),
-            ..Fault::new(FaultKind::HwserverLost, cycle)
-        }
+        Fault { link: Some(e), ..Fault::new(FaultKind::HwserverLost, cycle) }
     }
 
     /// The message for the terminal and `summary.json`, motors 1-based.
@@ -238,11 +221,8 @@ impl Fault {
         let what = match self.kind {
             FaultKind::LimitSwitch => {
                 let m = self.motor.unwrap_or(0);
-                let side = if self.status.contains(Status::limit_top(m)) {
-                    "top"
-                } else {
-                    "bottom"
-                };
+                let side =
+                    if self.status.contains(Status::limit_top(m)) { "top" } else { "bottom" };
                 format!("motor {} hit its {side} limit switch", m + 1)
             }
             FaultKind::HwserverLost => match self.link {
@@ -342,12 +322,7 @@ pub struct Pct {
 
 impl From<Percentiles> for Pct {
     fn from(p: Percentiles) -> Pct {
-        Pct {
-            p50: p.p50_us,
-            p99: p.p99_us,
-            p999: p.p999_us,
-            max: p.max_us,
-        }
+        Pct { p50: p.p50_us, p99: p.p99_us, p999: p.p999_us, max: p.max_us }
     }
 }
 
@@ -434,23 +409,10 @@ mod tests {
         for v in [2.0, -3.0, 1.0] {
             e.add(v);
         }
-        assert_eq!(
-            e,
-            AxisErrors {
-                min: -3.0,
-                max: 2.0,
-                sum_abs: 6.0,
-                sum_sq: 14.0,
-                count: 3
-            }
-        );
+        assert_eq!(e, AxisErrors { min: -3.0, max: 2.0, sum_abs: 6.0, sum_sq: 14.0, count: 3 });
         let s = MotorSummary::new(&e, 2.0);
         assert_eq!(
-            (
-                s.min_error_rad,
-                s.accumulated_abs_error_rad,
-                s.sum_squares_error_rad2
-            ),
+            (s.min_error_rad, s.accumulated_abs_error_rad, s.sum_squares_error_rad2),
             (-1.5, 3.0, 3.5)
         );
     }
@@ -463,17 +425,9 @@ mod tests {
         };
         assert_eq!(Fault::from_status(Status::OK, 1), None);
         check(Status::limit_bottom(2), FaultKind::LimitSwitch, Some(2));
-        check(
-            Status::limit_top(0) | Status::WATCHDOG,
-            FaultKind::Watchdog,
-            None,
-        );
+        check(Status::limit_top(0) | Status::WATCHDOG, FaultKind::Watchdog, None);
         check(Status::SHUTDOWN, FaultKind::HwserverShutdown, None);
-        check(
-            Status::encoder_overflow(1),
-            FaultKind::EncoderOverflow,
-            Some(1),
-        );
+        check(Status::encoder_overflow(1), FaultKind::EncoderOverflow, Some(1));
         check(Status::UNKNOWN_MESSAGE, FaultKind::ProtocolError, None);
         let f = Fault::from_status(Status::limit_top(0), 1234).unwrap();
         assert_eq!(
@@ -481,10 +435,7 @@ mod tests {
             "motor 1 hit its top limit switch at cycle 1234; all motors disabled"
         );
         let r = f.report();
-        assert_eq!(
-            (r.kind.as_str(), r.motor, r.cycle),
-            ("limit_switch", Some(1), 1234)
-        );
+        assert_eq!((r.kind.as_str(), r.motor, r.cycle), ("limit_switch", Some(1), 1234));
     }
 
     #[test]
@@ -496,27 +447,9 @@ mod tests {
             woke_ns: 1_000_000 + i * 400_000 + late,
             missed,
         };
-        t.record(
-            &tick(0, 10_000, 0),
-            1_010_000,
-            1_030_000,
-            1_035_000,
-            1_060_000,
-        );
-        t.record(
-            &tick(1, 60_000, 0),
-            1_460_000,
-            1_480_000,
-            1_481_000,
-            1_500_000,
-        );
-        t.record(
-            &tick(3, 5_000, 1),
-            2_205_000,
-            2_215_000,
-            2_216_000,
-            2_230_000,
-        );
+        t.record(&tick(0, 10_000, 0), 1_010_000, 1_030_000, 1_035_000, 1_060_000);
+        t.record(&tick(1, 60_000, 0), 1_460_000, 1_480_000, 1_481_000, 1_500_000);
+        t.record(&tick(3, 5_000, 1), 2_205_000, 2_215_000, 2_216_000, 2_230_000);
         assert_eq!(t.missed, 1);
         assert_eq!(t.wake_latency.max_ns(), 60_000);
         assert_eq!(t.outside_40us, 2, "+50 µs, then a skipped period");

@@ -114,11 +114,7 @@ impl TrajectoryGenerator for Step {
         }
         let offset = if n == 0 { 0.0 } else { self.size };
         for (m, (c, start)) in cmd.iter_mut().zip(&self.start).enumerate() {
-            *c = if m < self.n_motors {
-                start + offset
-            } else {
-                0.0
-            };
+            *c = if m < self.n_motors { start + offset } else { 0.0 };
         }
         Sample::Ready
     }
@@ -147,9 +143,6 @@ mod tests {
     fn step_refuses_targets_beyond_the_counter() {
         let mut s = Step::new(1 << 23, 1.0, 0.0004, 1);
         let e = s.start(&[9.0e15, 0.0, 0.0, 0.0]).unwrap_err();
-        assert!(
-            e.to_string().starts_with("motor 1: the path reaches"),
-            "{e}"
-        );
+        assert!(e.to_string().starts_with("motor 1: the path reaches"), "{e}");
     }
 }

@@ -30,12 +30,13 @@ fn plan(n_motors: usize) -> MovePlan {
     }
 }
 
+/// The step move with the PID feed-forward law, timed on a mock clock.
+fn step_servo(s: &qmarc_controller::config::Settings) -> Servo {
+    Servo::new(plan(3), (GENERATORS[0].build)(s), (LAWS[0].build)(s), Box::new(MockClock::new(0)))
+}
+
 fn lockstep() -> SimParams {
-    SimParams {
-        n_motors: 3,
-        lockstep: true,
-        ..SimParams::default()
-    }
+    SimParams { n_motors: 3, lockstep: true, ..SimParams::default() }
 }
 
 #[test]
@@ -43,21 +44,14 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
     let s = settings();
     for g in GENERATORS {
         for l in LAWS {
-            let mut servo = Servo::new(
-                plan(3),
-                (g.build)(&s),
-                (l.build)(&s),
-                Box::new(MockClock::new(0)),
-            );
+            let mut servo =
+                Servo::new(plan(3), (g.build)(&s), (l.build)(&s), Box::new(MockClock::new(0)));
             let mut link = CoreLink::new(lockstep());
             let mut ticker = ManualTicker::new(400_000);
             servo.prepare(&mut link).unwrap();
             servo.set_t0(ticker.start().unwrap());
             for _ in 0..10 {
-                assert_eq!(
-                    servo.cycle(&mut link, &ticker.wait().unwrap()),
-                    CycleEnd::Continue
-                );
+                assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
             }
             // What reading the counters costs by itself.
             let (a, b) = (ThreadCounters::now(), ThreadCounters::now());
@@ -73,11 +67,7 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
             }
             let during = allocations() - before;
             let kernel = kernel_before.delta(ThreadCounters::now());
-            assert_eq!(
-                during, 0,
-                "{} + {}: {during} allocations in 3000 cycles",
-                g.name, l.name
-            );
+            assert_eq!(during, 0, "{} + {}: {during} allocations in 3000 cycles", g.name, l.name);
             // No I/O and no blocking (no lock waited on, no sleep) in the cycle itself.
             assert_eq!(
                 kernel, reading,
@@ -97,22 +87,13 @@ fn limit_switch_trip_disables_every_motor_in_the_same_cycle() {
     // Motor 2 starts 300 counts below its bottom switch; the step drives it through.
     params.start_counts[1] = params.bottom_switch_counts - 300.0;
     let mut link = CoreLink::new(params);
-    let mut servo = Servo::new(
-        plan(3),
-        (GENERATORS[0].build)(&s),
-        (LAWS[0].build)(&s),
-        Box::new(MockClock::new(0)),
-    );
+    let mut servo = step_servo(&s);
     let stop = AtomicBool::new(false);
-    servo
-        .run(&mut link, &mut ManualTicker::new(400_000), &stop)
-        .unwrap();
+    servo.run(&mut link, &mut ManualTicker::new(400_000), &stop).unwrap();
     let fault = servo.fault().expect("a fault");
     assert_eq!((fault.kind, fault.motor), (FaultKind::LimitSwitch, Some(1)));
     assert!(
-        fault
-            .message()
-            .starts_with("motor 2 hit its bottom limit switch at cycle"),
+        fault.message().starts_with("motor 2 hit its bottom limit switch at cycle"),
         "{}",
         fault.message()
     );
@@ -126,16 +107,9 @@ fn limit_switch_trip_disables_every_motor_in_the_same_cycle() {
 fn a_stop_request_aborts_the_move_and_disables_the_motors() {
     let s = settings();
     let mut link = CoreLink::new(lockstep());
-    let mut servo = Servo::new(
-        plan(3),
-        (GENERATORS[0].build)(&s),
-        (LAWS[0].build)(&s),
-        Box::new(MockClock::new(0)),
-    );
+    let mut servo = step_servo(&s);
     let stop = AtomicBool::new(true);
-    servo
-        .run(&mut link, &mut ManualTicker::new(400_000), &stop)
-        .unwrap();
+    servo.run(&mut link, &mut ManualTicker::new(400_000), &stop).unwrap();
     assert_eq!(servo.fault().map(|f| f.kind), Some(FaultKind::Aborted));
     assert!(!link.0.any_enabled());
 }
@@ -160,34 +134,20 @@ fn over_iceoryx2_each_cycle_allocates_only_the_two_request_loans() {
         };
         serve(&mut core, &server_location, &opts, &AtomicBool::new(false))
     });
-    let timeouts = LinkTimeouts {
-        deadline_ns: 50_000_000,
-        give_up_ns: 2_000_000_000,
-    };
+    let timeouts = LinkTimeouts { deadline_ns: 50_000_000, give_up_ns: 2_000_000_000 };
     let mut link = IoxLink::connect(&location, timeouts, Duration::from_secs(5)).unwrap();
     let s = settings();
-    let mut servo = Servo::new(
-        plan(3),
-        (GENERATORS[0].build)(&s),
-        (LAWS[0].build)(&s),
-        Box::new(MockClock::new(0)),
-    );
+    let mut servo = step_servo(&s);
     let mut ticker = ManualTicker::new(400_000);
     servo.prepare(&mut link).unwrap();
     servo.set_t0(ticker.start().unwrap());
     for _ in 0..50 {
-        assert_eq!(
-            servo.cycle(&mut link, &ticker.wait().unwrap()),
-            CycleEnd::Continue
-        );
+        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
     }
     let before = allocations();
     let cycles = 1_000;
     for _ in 0..cycles {
-        assert_eq!(
-            servo.cycle(&mut link, &ticker.wait().unwrap()),
-            CycleEnd::Continue
-        );
+        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
     }
     let during = allocations() - before;
     assert_eq!(during, 2 * cycles, "iceoryx2's loans only");

@@ -18,12 +18,7 @@ use std::time::Duration;
 const PERIOD_NS: u64 = 400_000;
 
 fn row(name: &str, h: &Histogram) {
-    let Percentiles {
-        p50_us,
-        p99_us,
-        p999_us,
-        max_us,
-    } = h.percentiles();
+    let Percentiles { p50_us, p99_us, p999_us, max_us } = h.percentiles();
     println!(
         "{name:<34} {:>8} {p50_us:>7.0} {p99_us:>7.0} {p999_us:>7.0} {max_us:>9.1} {:>9}",
         h.count(),
@@ -32,10 +27,8 @@ fn row(name: &str, h: &Histogram) {
 }
 
 fn main() {
-    let cycles: u64 = std::env::var("QMARC_BENCH_CYCLES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(10_000);
+    let cycles: u64 =
+        std::env::var("QMARC_BENCH_CYCLES").ok().and_then(|v| v.parse().ok()).unwrap_or(10_000);
     let pid = std::process::id();
     let dir = std::env::temp_dir().join(format!("qmarc-bench-rt-{pid}"));
     let location = IpcLocation::new(&format!("qb{pid}_"), &format!("{}/", dir.display()));
@@ -49,15 +42,9 @@ fn main() {
     let loc = location.clone();
     let result = spawn(
         "bench-client",
-        RtRequest {
-            priority: Some(80),
-            ..RtRequest::default()
-        },
+        RtRequest { priority: Some(80), ..RtRequest::default() },
         move |rt| {
-            let timeouts = LinkTimeouts {
-                deadline_ns: 5 * PERIOD_NS,
-                give_up_ns: 1_000_000_000,
-            };
+            let timeouts = LinkTimeouts { deadline_ns: 5 * PERIOD_NS, give_up_ns: 1_000_000_000 };
             let mut link =
                 IoxLink::connect(&loc, timeouts, Duration::from_secs(10)).expect("connect");
             let read = HwMsg::read_all_encoders();
@@ -96,15 +83,7 @@ fn main() {
                 output.record_ns(t2 - tick.intended_ns);
             }
             link.exchange(&HwMsg::request(MsgType::Exit)).expect("exit");
-            (
-                rt.policy(),
-                back_to_back,
-                read_rtt,
-                write_rtt,
-                output,
-                wake,
-                missed,
-            )
+            (rt.policy(), back_to_back, read_rtt, write_rtt, output, wake, missed)
         },
     )
     .expect("client thread")

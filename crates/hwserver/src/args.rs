@@ -88,9 +88,7 @@ impl HwServerArgs {
             format!("--iox-root={}", self.iox_root),
             format!(
                 "--backend={}",
-                self.backend
-                    .to_possible_value()
-                    .map_or("sim".into(), |v| v.get_name().to_string())
+                self.backend.to_possible_value().map_or("sim".into(), |v| v.get_name().to_string())
             ),
             format!("--motors={}", self.motors),
             format!("--period-us={}", self.period_us),

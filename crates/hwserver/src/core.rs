@@ -115,11 +115,7 @@ impl HwCore {
     }
 
     fn update_positions(&mut self, last: &[u32; MAX_MOTORS]) {
-        let counters = self
-            .position
-            .iter_mut()
-            .zip(last)
-            .zip(&self.inputs.counters);
+        let counters = self.position.iter_mut().zip(last).zip(&self.inputs.counters);
         for ((position, &old), &new) in counters.take(self.n_motors) {
             *position += i64::from(counter_delta(old, new));
         }
@@ -182,11 +178,7 @@ impl HwCore {
             }
             Ok(MsgType::DisableAll) => self.safe_state(),
             Ok(MsgType::ResetEncoderZero) if single || req.motor == HwMsg::ALL_MOTORS => {
-                let range = if single {
-                    motor..motor + 1
-                } else {
-                    0..self.n_motors
-                };
+                let range = if single { motor..motor + 1 } else { 0..self.n_motors };
                 for m in range {
                     if self.backend.load_counter(m, COUNTER_ZERO).is_err() {
                         status |= Status::HARDWARE_FAULT;
@@ -222,19 +214,12 @@ mod tests {
     }
 
     fn core(n_motors: usize) -> HwCore {
-        core_with(SimParams {
-            n_motors,
-            lockstep: true,
-            ..SimParams::default()
-        })
+        core_with(SimParams { n_motors, lockstep: true, ..SimParams::default() })
     }
 
     fn send(core: &mut HwCore, req: HwMsg) -> HwMsg {
         let resp = core.handle(&req);
-        assert_eq!(
-            (resp.msg_type, resp.seq, resp.motor),
-            (req.msg_type, req.seq, req.motor)
-        );
+        assert_eq!((resp.msg_type, resp.seq, resp.motor), (req.msg_type, req.seq, req.motor));
         resp
     }
 
@@ -242,14 +227,7 @@ mod tests {
     fn unknown_message_types_get_a_status_bit() {
         let mut c = core(3);
         for raw in [0, 13, 1000, u32::MAX] {
-            let resp = send(
-                &mut c,
-                HwMsg {
-                    msg_type: raw,
-                    seq: 9,
-                    ..HwMsg::default()
-                },
-            );
+            let resp = send(&mut c, HwMsg { msg_type: raw, seq: 9, ..HwMsg::default() });
             assert_eq!(resp.status(), Status::UNKNOWN_MESSAGE);
         }
         // The bit is per response, not latched.
@@ -259,12 +237,9 @@ mod tests {
     #[test]
     fn bad_motor_indices_get_a_status_bit() {
         let mut c = core(3);
-        for t in [
-            MsgType::ReadEncoder,
-            MsgType::WriteDac,
-            MsgType::EnableMotor,
-            MsgType::DisableMotor,
-        ] {
+        for t in
+            [MsgType::ReadEncoder, MsgType::WriteDac, MsgType::EnableMotor, MsgType::DisableMotor]
+        {
             let resp = send(&mut c, HwMsg::for_motor(t, 3));
             assert_eq!(resp.status(), Status::BAD_MOTOR, "{t:?}");
         }
@@ -294,19 +269,12 @@ mod tests {
 
     #[test]
     fn software_position_survives_counter_wrap() {
-        let mut p = SimParams {
-            n_motors: 1,
-            lockstep: true,
-            ..SimParams::default()
-        };
+        let mut p = SimParams { n_motors: 1, lockstep: true, ..SimParams::default() };
         p.start_counts[0] = 8_388_000.0;
         p.top_switch_counts = -1e9;
         p.bottom_switch_counts = 1e9;
         let mut c = core_with(p);
-        assert_eq!(
-            send(&mut c, HwMsg::read_all_encoders()).data[0],
-            8_388_000.0
-        );
+        assert_eq!(send(&mut c, HwMsg::read_all_encoders()).data[0], 8_388_000.0);
         send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 0));
         let mut codes = [0; MAX_MOTORS];
         codes[0] = 8191;
@@ -321,11 +289,7 @@ mod tests {
 
     #[test]
     fn reset_zero_sets_software_position_to_zero() {
-        let mut p = SimParams {
-            n_motors: 2,
-            lockstep: true,
-            ..SimParams::default()
-        };
+        let mut p = SimParams { n_motors: 2, lockstep: true, ..SimParams::default() };
         p.start_counts = [123.0, -77.0, 0.0, 0.0];
         let mut c = core_with(p);
         let r = send(&mut c, HwMsg::read_all_encoders());
@@ -333,43 +297,27 @@ mod tests {
         send(&mut c, HwMsg::for_motor(MsgType::ResetEncoderZero, 1));
         let r = send(&mut c, HwMsg::read_all_encoders());
         assert_eq!(&r.data[..2], &[123.0, 0.0]);
-        send(
-            &mut c,
-            HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS),
-        );
+        send(&mut c, HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS));
         let r = send(&mut c, HwMsg::read_all_encoders());
         assert_eq!(&r.data[..2], &[0.0, 0.0]);
     }
 
     #[test]
     fn limit_trip_latches_until_cleared_and_only_while_monitoring() {
-        let mut p = SimParams {
-            n_motors: 2,
-            lockstep: true,
-            ..SimParams::default()
-        };
+        let mut p = SimParams { n_motors: 2, lockstep: true, ..SimParams::default() };
         p.start_counts[1] = p.top_switch_counts - 1.0;
         let mut c = core_with(p);
-        assert!(
-            send(&mut c, HwMsg::read_all_encoders()).status().is_ok(),
-            "not monitoring"
-        );
+        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok(), "not monitoring");
         send(&mut c, HwMsg::request(MsgType::EnableSafety));
         let r = send(&mut c, HwMsg::read_all_encoders());
         assert_eq!(r.status(), Status::limit_top(1));
         // Latched in every response, including writes.
-        assert_eq!(
-            send(&mut c, HwMsg::write_all_dacs(&[0; 4])).status(),
-            Status::limit_top(1)
-        );
+        assert_eq!(send(&mut c, HwMsg::write_all_dacs(&[0; 4])).status(), Status::limit_top(1));
         send(&mut c, HwMsg::request(MsgType::ClearSafetyStatus));
         // Monitoring stopped at the trip (thesis 3.10.1): still on the switch, but no new bit.
         assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
         send(&mut c, HwMsg::request(MsgType::EnableSafety));
-        assert_eq!(
-            send(&mut c, HwMsg::read_all_encoders()).status(),
-            Status::limit_top(1)
-        );
+        assert_eq!(send(&mut c, HwMsg::read_all_encoders()).status(), Status::limit_top(1));
         send(&mut c, HwMsg::request(MsgType::DisableSafety));
         send(&mut c, HwMsg::request(MsgType::ClearSafetyStatus));
         assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
@@ -389,10 +337,7 @@ mod tests {
         assert!(!c.any_enabled());
         let mut c = core(1);
         c.shut_down();
-        assert_eq!(
-            send(&mut c, HwMsg::read_all_encoders()).status(),
-            Status::SHUTDOWN
-        );
+        assert_eq!(send(&mut c, HwMsg::read_all_encoders()).status(), Status::SHUTDOWN);
     }
 
     #[test]

@@ -59,10 +59,7 @@ pub enum ServeError {
 }
 
 fn port_err(op: &'static str) -> impl FnOnce(&dyn std::fmt::Debug) -> ServeError {
-    move |e| ServeError::Port {
-        op,
-        reason: format!("{e:?}"),
-    }
+    move |e| ServeError::Port { op, reason: format!("{e:?}") }
 }
 
 /// Longest single wait, so that stop requests are noticed while idle.
@@ -90,11 +87,8 @@ fn serve_inner(
 ) -> Result<ServeEnd, ServeError> {
     let node = create_node(HWSERVER_NODE, location)?;
     let services = open_hw_services(&node)?;
-    let server = services
-        .hw
-        .server_builder()
-        .create()
-        .map_err(|e| port_err("server creation")(&e))?;
+    let server =
+        services.hw.server_builder().create().map_err(|e| port_err("server creation")(&e))?;
     let listener = services
         .request_event
         .listener_builder()
@@ -138,25 +132,16 @@ fn serve_inner(
             }
         } else {
             // Consume the wake-ups without blocking so the event counter stays small.
-            listener
-                .try_wait(|_| {})
-                .map_err(|e| port_err("listener try_wait")(&e))?;
+            listener.try_wait(|_| {}).map_err(|e| port_err("listener try_wait")(&e))?;
             std::hint::spin_loop();
         }
 
-        while let Some(active) = server
-            .receive()
-            .map_err(|e| port_err("server receive")(&e))?
-        {
+        while let Some(active) = server.receive().map_err(|e| port_err("server receive")(&e))? {
             last_request_ns = monotonic_now_ns();
             let response = core.handle(active.payload());
-            active
-                .send_copy(response)
-                .map_err(|e| port_err("response send")(&e))?;
+            active.send_copy(response).map_err(|e| port_err("response send")(&e))?;
             drop(active);
-            notifier
-                .notify()
-                .map_err(|e| port_err("response notify")(&e))?;
+            notifier.notify().map_err(|e| port_err("response notify")(&e))?;
             if core.exit_requested() {
                 return Ok(ServeEnd::Exit);
             }

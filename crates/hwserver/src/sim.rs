@@ -75,13 +75,7 @@ pub enum SimParamsError {
 impl SimParams {
     /// Checks every parameter.
     pub fn validate(&self) -> Result<(), SimParamsError> {
-        let bad = |name, value, expected| {
-            Err(SimParamsError::OutOfRange {
-                name,
-                value,
-                expected,
-            })
-        };
+        let bad = |name, value, expected| Err(SimParamsError::OutOfRange { name, value, expected });
         if !(1..=MAX_MOTORS).contains(&self.n_motors) {
             return bad("motors", self.n_motors as f64, "1 to 4");
         }
@@ -104,11 +98,7 @@ impl SimParams {
             }
         }
         if self.top_switch_counts == self.bottom_switch_counts {
-            return bad(
-                "top_switch",
-                self.top_switch_counts,
-                "different from bottom_switch",
-            );
+            return bad("top_switch", self.top_switch_counts, "different from bottom_switch");
         }
         for &s in &self.start_counts[..self.n_motors] {
             if !s.is_finite() || s.abs() >= f64::from(1u32 << 23) {
@@ -156,18 +146,8 @@ impl SimDeltabot {
             axis.x = start;
             axis.counter_offset = COUNTER_ZERO;
         }
-        let top_dir = if p.top_switch_counts < p.bottom_switch_counts {
-            -1.0
-        } else {
-            1.0
-        };
-        Ok(SimDeltabot {
-            p,
-            axes,
-            t_ns: 0,
-            origin_ns: monotonic_now_ns(),
-            top_dir,
-        })
+        let top_dir = if p.top_switch_counts < p.bottom_switch_counts { -1.0 } else { 1.0 };
+        Ok(SimDeltabot { p, axes, t_ns: 0, origin_ns: monotonic_now_ns(), top_dir })
     }
 
     /// The parameters.
@@ -208,10 +188,7 @@ impl SimDeltabot {
         let volts_per_code = DAC_FULL_SCALE_V / f64::from(DAC_MAX);
         for axis in &mut self.axes[..n] {
             let (target, tau) = if axis.enabled {
-                (
-                    self.p.kv_counts_per_s_per_v * volts_per_code * f64::from(axis.dac),
-                    self.p.tau_s,
-                )
+                (self.p.kv_counts_per_s_per_v * volts_per_code * f64::from(axis.dac), self.p.tau_s)
             } else {
                 (0.0, self.p.coast_tau_s)
             };
@@ -303,11 +280,7 @@ impl Backend for SimDeltabot {
     }
 
     fn now_ns(&self) -> u64 {
-        if self.p.lockstep {
-            self.t_ns
-        } else {
-            monotonic_now_ns().saturating_sub(self.origin_ns)
-        }
+        if self.p.lockstep { self.t_ns } else { monotonic_now_ns().saturating_sub(self.origin_ns) }
     }
 }
 
@@ -316,12 +289,7 @@ mod tests {
     use super::*;
 
     fn lockstep(n_motors: usize) -> SimDeltabot {
-        SimDeltabot::new(SimParams {
-            n_motors,
-            lockstep: true,
-            ..SimParams::default()
-        })
-        .unwrap()
+        SimDeltabot::new(SimParams { n_motors, lockstep: true, ..SimParams::default() }).unwrap()
     }
 
     #[test]
@@ -336,18 +304,10 @@ mod tests {
         }
         let target = 25_000.0 * 10.0;
         let expected_v = target * (1.0 - (-1.0f64).exp());
-        assert!(
-            (sim.velocity(0) - expected_v).abs() < 1e-6 * target,
-            "{}",
-            sim.velocity(0)
-        );
+        assert!((sim.velocity(0) - expected_v).abs() < 1e-6 * target, "{}", sim.velocity(0));
         // x(t) = target·(t − τ(1 − e^(−t/τ))) for t = τ.
         let expected_x = target * (0.004 - 0.004 * (1.0 - (-1.0f64).exp()));
-        assert!(
-            (sim.position(0) - expected_x).abs() < 1e-6,
-            "{}",
-            sim.position(0)
-        );
+        assert!((sim.position(0) - expected_x).abs() < 1e-6, "{}", sim.position(0));
         assert_eq!(inputs.counters[0], COUNTER_ZERO + expected_x.floor() as u32);
     }
 
@@ -382,10 +342,7 @@ mod tests {
         let mut sim = sim.unwrap();
         let mut inputs = Inputs::default();
         sim.read_inputs(&mut inputs).unwrap();
-        assert_eq!(
-            inputs.counters[0],
-            (COUNTER_ZERO + 8_388_000) & COUNTER_MASK
-        );
+        assert_eq!(inputs.counters[0], (COUNTER_ZERO + 8_388_000) & COUNTER_MASK);
         sim.load_counter(0, 0xff_fff0).unwrap();
         sim.read_inputs(&mut inputs).unwrap();
         assert_eq!(inputs.counters[0], 0xff_fff0);
@@ -396,39 +353,26 @@ mod tests {
         }
         let moved = sim.position(0).floor() - 8_388_000.0;
         assert!(moved > 16.0);
-        assert_eq!(
-            inputs.counters[0],
-            (0xff_fff0 + moved as u32) & COUNTER_MASK
-        );
+        assert_eq!(inputs.counters[0], (0xff_fff0 + moved as u32) & COUNTER_MASK);
         assert!(inputs.counters[0] < 0xff_fff0, "wrapped");
     }
 
     #[test]
     fn switches_trip_beyond_their_positions() {
-        let mut p = SimParams {
-            n_motors: 2,
-            lockstep: true,
-            ..SimParams::default()
-        };
+        let mut p = SimParams { n_motors: 2, lockstep: true, ..SimParams::default() };
         p.start_counts[0] = -9_500.0;
         p.start_counts[1] = 10_600.0;
         let mut sim = SimDeltabot::new(p).unwrap();
         let mut inputs = Inputs::default();
         sim.read_inputs(&mut inputs).unwrap();
-        assert_eq!(
-            inputs.limits,
-            Status::limit_top(0) | Status::limit_bottom(1)
-        );
+        assert_eq!(inputs.limits, Status::limit_top(0) | Status::limit_bottom(1));
         // Reversed orientation: top above bottom.
         p.top_switch_counts = 100.0;
         p.bottom_switch_counts = -100.0;
         p.start_counts = [150.0, -150.0, 0.0, 0.0];
         let mut sim = SimDeltabot::new(p).unwrap();
         sim.read_inputs(&mut inputs).unwrap();
-        assert_eq!(
-            inputs.limits,
-            Status::limit_top(0) | Status::limit_bottom(1)
-        );
+        assert_eq!(inputs.limits, Status::limit_top(0) | Status::limit_bottom(1));
     }
 
     #[test]
@@ -444,10 +388,7 @@ mod tests {
 
     #[test]
     fn invalid_parameters_are_named() {
-        let p = SimParams {
-            tau_s: -1.0,
-            ..SimParams::default()
-        };
+        let p = SimParams { tau_s: -1.0, ..SimParams::default() };
         assert_eq!(
             SimDeltabot::new(p).unwrap_err().to_string(),
             "simulator parameter `tau_s` = -1 is invalid: finite and > 0"

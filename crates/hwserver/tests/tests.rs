@@ -12,18 +12,11 @@ fn unknown_message_types_get_a_status_bit_and_the_server_carries_on() {
     let mut server = Server::start("unknown", &[]);
     let mut link = server.connect();
     for raw in [0, 13, 4242] {
-        let resp = link
-            .exchange(&HwMsg {
-                msg_type: raw,
-                ..HwMsg::default()
-            })
-            .unwrap();
+        let resp = link.exchange(&HwMsg { msg_type: raw, ..HwMsg::default() }).unwrap();
         assert_eq!(resp.status(), Status::UNKNOWN_MESSAGE, "type {raw}");
         assert_eq!(resp.msg_type, raw, "echoed");
     }
-    let resp = link
-        .exchange(&HwMsg::for_motor(MsgType::EnableMotor, 7))
-        .unwrap();
+    let resp = link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 7)).unwrap();
     assert_eq!(resp.status(), Status::BAD_MOTOR);
     let resp = link.exchange(&HwMsg::read_all_encoders()).unwrap();
     assert!(resp.status().is_ok());
@@ -40,15 +33,8 @@ fn all_twelve_messages_are_served() {
     let mut link = server.connect();
     let mut ask = |m: HwMsg| link.exchange(&m).unwrap();
     assert_eq!(&ask(HwMsg::read_all_encoders()).data[..2], &[100.0, -40.0]);
-    assert_eq!(
-        ask(HwMsg::for_motor(MsgType::ReadEncoder, 1)).data[1],
-        -40.0
-    );
-    assert!(
-        ask(HwMsg::for_motor(MsgType::EnableMotor, 0))
-            .status()
-            .is_ok()
-    );
+    assert_eq!(ask(HwMsg::for_motor(MsgType::ReadEncoder, 1)).data[1], -40.0);
+    assert!(ask(HwMsg::for_motor(MsgType::EnableMotor, 0)).status().is_ok());
     let mut codes = [0; 4];
     codes[0] = 2000;
     assert!(ask(HwMsg::write_all_dacs(&codes)).status().is_ok());
@@ -58,32 +44,14 @@ fn all_twelve_messages_are_served() {
     for _ in 0..20 {
         ask(HwMsg::read_all_encoders());
     }
-    assert!(
-        ask(HwMsg::read_all_encoders()).data[0] > 110.0,
-        "motor 1 moved"
-    );
-    assert!(
-        ask(HwMsg::for_motor(MsgType::DisableMotor, 0))
-            .status()
-            .is_ok()
-    );
+    assert!(ask(HwMsg::read_all_encoders()).data[0] > 110.0, "motor 1 moved");
+    assert!(ask(HwMsg::for_motor(MsgType::DisableMotor, 0)).status().is_ok());
     assert!(ask(HwMsg::request(MsgType::DisableAll)).status().is_ok());
-    assert!(
-        ask(HwMsg::for_motor(
-            MsgType::ResetEncoderZero,
-            HwMsg::ALL_MOTORS
-        ))
-        .status()
-        .is_ok()
-    );
+    assert!(ask(HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS)).status().is_ok());
     assert_eq!(ask(HwMsg::for_motor(MsgType::ReadEncoder, 1)).data[1], 0.0);
     assert!(ask(HwMsg::request(MsgType::EnableSafety)).status().is_ok());
     assert!(ask(HwMsg::request(MsgType::DisableSafety)).status().is_ok());
-    assert!(
-        ask(HwMsg::request(MsgType::ClearSafetyStatus))
-            .status()
-            .is_ok()
-    );
+    assert!(ask(HwMsg::request(MsgType::ClearSafetyStatus)).status().is_ok());
     assert!(ask(HwMsg::request(MsgType::Exit)).status().is_ok());
     assert_eq!(server.wait(Duration::from_secs(10)).0, Some(0));
 }
@@ -92,19 +60,11 @@ fn all_twelve_messages_are_served() {
 fn watchdog_disables_the_motors_when_the_controller_falls_silent() {
     let mut server = Server::start("watchdog", &["--watchdog-periods=50"]);
     let mut link = server.connect();
-    assert!(
-        link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0))
-            .unwrap()
-            .status()
-            .is_ok()
-    );
+    assert!(link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0)).unwrap().status().is_ok());
     // Silence: the server must give up on us by itself.
     let (code, stderr) = server.wait(Duration::from_secs(10));
     assert_eq!(code, Some(3), "{stderr}");
-    assert!(
-        stderr.contains("watchdog: controller silent for"),
-        "{stderr}"
-    );
+    assert!(stderr.contains("watchdog: controller silent for"), "{stderr}");
     assert!(stderr.contains("all motors disabled"), "{stderr}");
 }
 
@@ -112,12 +72,7 @@ fn watchdog_disables_the_motors_when_the_controller_falls_silent() {
 fn sigterm_disables_the_motors_and_refuses_to_enable_them() {
     let mut server = Server::start("sigterm", &[]);
     let mut link = server.connect();
-    assert!(
-        link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0))
-            .unwrap()
-            .status()
-            .is_ok()
-    );
+    assert!(link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0)).unwrap().status().is_ok());
     // SAFETY: kill(2) on our own child.
     unsafe { libc::kill(server.child.id() as libc::pid_t, libc::SIGTERM) };
     let mut status = Status::OK;
@@ -129,9 +84,7 @@ fn sigterm_disables_the_motors_and_refuses_to_enable_them() {
         std::thread::sleep(Duration::from_millis(5));
     }
     assert_eq!(status, Status::SHUTDOWN);
-    let resp = link
-        .exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0))
-        .unwrap();
+    let resp = link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0)).unwrap();
     assert!(resp.status().contains(Status::SHUTDOWN));
     link.exchange(&HwMsg::request(MsgType::Exit)).unwrap();
     let (code, stderr) = server.wait(Duration::from_secs(10));

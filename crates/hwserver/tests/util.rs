@@ -33,19 +33,12 @@ impl Server {
             .stderr(Stdio::piped())
             .spawn()
             .expect("spawn qmarc-hwserver");
-        Server {
-            child,
-            location,
-            dir,
-        }
+        Server { child, location, dir }
     }
 
     /// Connects the controller's end of the link.
     pub fn connect(&self) -> IoxLink {
-        let timeouts = LinkTimeouts {
-            deadline_ns: 100_000_000,
-            give_up_ns: 2_000_000_000,
-        };
+        let timeouts = LinkTimeouts { deadline_ns: 100_000_000, give_up_ns: 2_000_000_000 };
         IoxLink::connect(&self.location, timeouts, Duration::from_secs(10)).expect("connect")
     }
 
@@ -61,10 +54,7 @@ impl Server {
                 }
                 return (status.code(), err);
             }
-            assert!(
-                started.elapsed() < timeout,
-                "qmarc-hwserver did not exit within {timeout:?}"
-            );
+            assert!(started.elapsed() < timeout, "qmarc-hwserver did not exit within {timeout:?}");
             std::thread::sleep(Duration::from_millis(5));
         }
     }

@@ -114,19 +114,13 @@ impl HwMsg {
     /// A request of type `t` with every other field zero.
     #[inline]
     pub fn request(t: MsgType) -> HwMsg {
-        HwMsg {
-            msg_type: t as u32,
-            ..HwMsg::default()
-        }
+        HwMsg { msg_type: t as u32, ..HwMsg::default() }
     }
 
     /// A single-motor request of type `t` for motor index `motor`.
     #[inline]
     pub fn for_motor(t: MsgType, motor: u32) -> HwMsg {
-        HwMsg {
-            motor,
-            ..HwMsg::request(t)
-        }
+        HwMsg { motor, ..HwMsg::request(t) }
     }
 
     /// The read-all-encoders request of every servo cycle.
@@ -138,10 +132,7 @@ impl HwMsg {
     /// The write-all-DACs request of every servo cycle.
     #[inline]
     pub fn write_all_dacs(codes: &[i32; MAX_MOTORS]) -> HwMsg {
-        HwMsg {
-            aux: *codes,
-            ..HwMsg::request(MsgType::WriteAllDacs)
-        }
+        HwMsg { aux: *codes, ..HwMsg::request(MsgType::WriteAllDacs) }
     }
 
     /// Decodes [`HwMsg::msg_type`].
@@ -159,12 +150,7 @@ impl HwMsg {
     /// The answer to `self`: same type, sequence number and motor, everything else zero.
     #[inline]
     pub fn response(&self) -> HwMsg {
-        HwMsg {
-            msg_type: self.msg_type,
-            seq: self.seq,
-            motor: self.motor,
-            ..HwMsg::default()
-        }
+        HwMsg { msg_type: self.msg_type, seq: self.seq, motor: self.motor, ..HwMsg::default() }
     }
 }
 
@@ -181,10 +167,7 @@ mod tests {
         }
         for raw in [0, 13, 99, u32::MAX] {
             assert_eq!(MsgType::from_raw(raw), None);
-            let m = HwMsg {
-                msg_type: raw,
-                ..HwMsg::default()
-            };
+            let m = HwMsg { msg_type: raw, ..HwMsg::default() };
             assert_eq!(m.msg_type(), Err(UnknownMsgType(raw)));
         }
     }

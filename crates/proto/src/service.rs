@@ -56,10 +56,7 @@ impl IpcLocation {
         if !root.ends_with('/') {
             root.push('/');
         }
-        IpcLocation {
-            prefix: prefix.to_string(),
-            root,
-        }
+        IpcLocation { prefix: prefix.to_string(), root }
     }
 
     /// The iceoryx2 configuration for this location.
@@ -85,10 +82,7 @@ pub struct ServiceError {
 
 impl ServiceError {
     fn new(what: &str, name: &str, reason: impl std::fmt::Debug) -> ServiceError {
-        ServiceError {
-            what: format!("{what} `{name}`"),
-            reason: format!("{reason:?}"),
-        }
+        ServiceError { what: format!("{what} `{name}`"), reason: format!("{reason:?}") }
     }
 }
 
@@ -147,18 +141,8 @@ impl IpcLocation {
     /// files under the root (services, node records, event sockets).
     pub fn files(&self) -> Vec<std::path::PathBuf> {
         let mut found = Vec::new();
-        collect_prefixed(
-            std::path::Path::new(SHM_DIR),
-            &self.prefix,
-            false,
-            &mut found,
-        );
-        collect_prefixed(
-            std::path::Path::new(&self.root),
-            &self.prefix,
-            true,
-            &mut found,
-        );
+        collect_prefixed(std::path::Path::new(SHM_DIR), &self.prefix, false, &mut found);
+        collect_prefixed(std::path::Path::new(&self.root), &self.prefix, true, &mut found);
         found
     }
 
@@ -168,10 +152,7 @@ impl IpcLocation {
     /// (iceoryx2 #601: clear both locations together). Returns how many files were removed.
     pub fn remove_files(&self) -> usize {
         let files = self.files();
-        let removed = files
-            .iter()
-            .filter(|f| std::fs::remove_file(f).is_ok())
-            .count();
+        let removed = files.iter().filter(|f| std::fs::remove_file(f).is_ok()).count();
         let nodes = std::path::Path::new(&self.root).join("nodes");
         for f in &files {
             if let Some(dir) = f.parent().filter(|d| d.parent() == Some(nodes.as_path())) {

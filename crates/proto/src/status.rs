@@ -159,10 +159,7 @@ impl std::fmt::Display for Status {
             | Status::ENCODER_MASK.0
             | named.iter().fold(0, |acc, (b, _)| acc | b.0);
         if self.0 & !known != 0 {
-            item(
-                f,
-                format_args!("unknown status bits {:#x}", self.0 & !known),
-            )?;
+            item(f, format_args!("unknown status bits {:#x}", self.0 & !known))?;
         }
         Ok(())
     }
@@ -182,10 +179,7 @@ mod tests {
         check(Status::limit_top(0), "motor 1 top limit switch");
         check(Status::limit_bottom(2), "motor 3 bottom limit switch");
         check(Status::encoder_overflow(3), "motor 4 encoder overflow");
-        check(
-            Status::WATCHDOG | Status::limit_bottom(1),
-            "motor 2 bottom limit switch, watchdog",
-        );
+        check(Status::WATCHDOG | Status::limit_bottom(1), "motor 2 bottom limit switch, watchdog");
         check(Status(1 << 30), "unknown status bits 0x40000000");
     }
 
@@ -194,11 +188,7 @@ mod tests {
         let mut seen = 0u32;
         let all = (0..MAX_MOTORS)
             .flat_map(|m| {
-                [
-                    Status::limit_top(m),
-                    Status::limit_bottom(m),
-                    Status::encoder_overflow(m),
-                ]
+                [Status::limit_top(m), Status::limit_bottom(m), Status::encoder_overflow(m)]
             })
             .chain([
                 Status::UNKNOWN_MESSAGE,
@@ -224,9 +214,6 @@ mod tests {
             Some((2, false))
         );
         assert_eq!(Status::limit_top(1).first_limit(), Some((1, true)));
-        assert_eq!(
-            Status::encoder_overflow(2).first_encoder_overflow(),
-            Some(2)
-        );
+        assert_eq!(Status::encoder_overflow(2).first_encoder_overflow(), Some(2));
     }
 }

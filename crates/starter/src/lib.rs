@@ -49,12 +49,7 @@ pub fn hwserver_args(
         sim_kv: sim.kv,
         sim_tau_s: sim.tau_s,
         sim_coast_tau_s: sim.coast_tau_s,
-        sim_start: sim
-            .start_counts
-            .iter()
-            .copied()
-            .take(settings.n_motors)
-            .collect(),
+        sim_start: sim.start_counts.iter().copied().take(settings.n_motors).collect(),
         sim_top_switch: sim.top_switch_counts,
         sim_bottom_switch: sim.bottom_switch_counts,
         ..HwServerArgs::default()
@@ -68,9 +63,7 @@ fn any_process_mentions(needle: &str) -> bool {
         return false;
     };
     entries.flatten().any(|e| {
-        e.file_name()
-            .to_str()
-            .is_some_and(|n| n.bytes().all(|b| b.is_ascii_digit()))
+        e.file_name().to_str().is_some_and(|n| n.bytes().all(|b| b.is_ascii_digit()))
             && std::fs::read(e.path().join("cmdline"))
                 .is_ok_and(|c| c.windows(needle.len()).any(|w| w == needle.as_bytes()))
     })
@@ -87,12 +80,7 @@ pub fn remove_stale_files(root: &str) -> usize {
         .flatten()
         .filter_map(|e| {
             let name = e.file_name().to_string_lossy().into_owned();
-            let pid: u32 = name
-                .strip_prefix(PREFIX_STEM)?
-                .split('_')
-                .next()?
-                .parse()
-                .ok()?;
+            let pid: u32 = name.strip_prefix(PREFIX_STEM)?.split('_').next()?.parse().ok()?;
             Some((pid, format!("{PREFIX_STEM}{pid}_")))
         })
         .filter(|(pid, prefix)| {
@@ -102,10 +90,7 @@ pub fn remove_stale_files(root: &str) -> usize {
         .collect();
     stale.sort();
     stale.dedup();
-    stale
-        .iter()
-        .map(|p| IpcLocation::new(p, root).remove_files())
-        .sum()
+    stale.iter().map(|p| IpcLocation::new(p, root).remove_files()).sum()
 }
 
 #[cfg(test)]
@@ -117,10 +102,7 @@ mod tests {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
         let s = Settings::load(&path).unwrap();
         let a = hwserver_args(&s, true, &IpcLocation::new("p_", "/tmp/r"));
-        assert_eq!(
-            (a.motors, a.period_us, a.priority, a.watchdog_periods),
-            (3, 400, 85, 10)
-        );
+        assert_eq!((a.motors, a.period_us, a.priority, a.watchdog_periods), (3, 400, 85, 10));
         assert_eq!(a.iox_root, "/tmp/r/");
         assert!(a.deterministic);
         assert_eq!(a.sim_start, vec![0.0, 0.0, 0.0]);

@@ -53,16 +53,11 @@ fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
     let controller_bin = bin_dir.join("qmarc-controller");
     for b in [&hwserver_bin, &controller_bin] {
         if !b.is_file() {
-            bail!(
-                "{} not found: build the workspace first (`cargo build --release`)",
-                b.display()
-            );
+            bail!("{} not found: build the workspace first (`cargo build --release`)", b.display());
         }
     }
-    let location = IpcLocation::new(
-        &args.iox_prefix.clone().unwrap_or_else(default_prefix),
-        &args.iox_root,
-    );
+    let location =
+        IpcLocation::new(&args.iox_prefix.clone().unwrap_or_else(default_prefix), &args.iox_root);
     let hw_args = hwserver_args(&settings, args.opts.deterministic, &location);
     hw_args.sim_params().context("simulator settings")?;
     let mut ctl_args = args.opts.to_args();
@@ -77,26 +72,12 @@ fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
 
     let hwserver = supervise::spawn(&hwserver_bin, &hw_args.to_args())
         .with_context(|| format!("cannot start {}", hwserver_bin.display()))?;
-    let mut children = vec![Supervised {
-        name: "qmarc-hwserver",
-        child: hwserver,
-        exit: None,
-    }];
+    let mut children = vec![Supervised { name: "qmarc-hwserver", child: hwserver, exit: None }];
     match supervise::spawn(&controller_bin, &ctl_args) {
-        Ok(c) => children.push(Supervised {
-            name: "qmarc-controller",
-            child: c,
-            exit: None,
-        }),
-        Err(e) => eprintln!(
-            "qmarc-starter: cannot start {}: {e}",
-            controller_bin.display()
-        ),
+        Ok(c) => children.push(Supervised { name: "qmarc-controller", child: c, exit: None }),
+        Err(e) => eprintln!("qmarc-starter: cannot start {}: {e}", controller_bin.display()),
     }
-    let grace = Grace {
-        term_after: Duration::from_secs(3),
-        kill_after: Duration::from_secs(2),
-    };
+    let grace = Grace { term_after: Duration::from_secs(3), kill_after: Duration::from_secs(2) };
     supervise::wait_all(&mut children, stop, grace, |s| {
         if let Some(exit) = s.exit.filter(|e| !e.success()) {
             eprintln!("qmarc-starter: {}", describe_exit(s.name, exit));
@@ -107,9 +88,8 @@ fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
     let all_clean =
         children.len() == 2 && children.iter().all(|s| s.exit.is_some_and(|e| e.success()));
     let summary_path = out_dir.join("summary.json");
-    let summary: Option<Summary> = std::fs::read(&summary_path)
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok());
+    let summary: Option<Summary> =
+        std::fs::read(&summary_path).ok().and_then(|b| serde_json::from_slice(&b).ok());
     match &summary {
         Some(s) => print!("{}", table::render(s, &out_dir)),
         None => eprintln!("qmarc-starter: no summary was written: the move did not complete"),

@@ -62,13 +62,7 @@ pub fn spawn(program: &Path, args: &[String]) -> std::io::Result<Child> {
     // (prctl, getppid, raise).
     unsafe {
         cmd.pre_exec(move || {
-            libc::prctl(
-                libc::PR_SET_PDEATHSIG,
-                libc::SIGTERM as libc::c_ulong,
-                0,
-                0,
-                0,
-            );
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong, 0, 0, 0);
             if libc::getppid() != parent {
                 libc::raise(libc::SIGTERM);
             }
@@ -156,10 +150,7 @@ mod tests {
     #[test]
     fn exits_are_described() {
         assert_eq!(describe_exit("a", Exit::Code(3)), "a exited with code 3");
-        assert_eq!(
-            describe_exit("b", Exit::Signal(15)),
-            "b was killed by signal 15 (SIGTERM)"
-        );
+        assert_eq!(describe_exit("b", Exit::Signal(15)), "b was killed by signal 15 (SIGTERM)");
         assert!(Exit::Code(0).success());
         assert!(!Exit::Signal(9).success());
     }
@@ -170,30 +161,16 @@ mod tests {
         let quick = spawn(sh, &["-c".into(), "exit 4".into()]).unwrap();
         let stubborn = spawn(sh, &["-c".into(), "trap '' TERM; exec sleep 30".into()]).unwrap();
         let mut kids = vec![
-            Supervised {
-                name: "quick",
-                child: quick,
-                exit: None,
-            },
-            Supervised {
-                name: "stubborn",
-                child: stubborn,
-                exit: None,
-            },
+            Supervised { name: "quick", child: quick, exit: None },
+            Supervised { name: "stubborn", child: stubborn, exit: None },
         ];
         let stop = AtomicBool::new(false);
-        let grace = Grace {
-            term_after: Duration::from_millis(50),
-            kill_after: Duration::from_millis(50),
-        };
+        let grace =
+            Grace { term_after: Duration::from_millis(50), kill_after: Duration::from_millis(50) };
         let mut seen = Vec::new();
         wait_all(&mut kids, &stop, grace, |s| seen.push(s.name));
         assert_eq!(seen, ["quick", "stubborn"]);
         assert_eq!(kids[0].exit, Some(Exit::Code(4)));
-        assert_eq!(
-            kids[1].exit,
-            Some(Exit::Signal(libc::SIGKILL)),
-            "TERM ignored, then KILL"
-        );
+        assert_eq!(kids[1].exit, Some(Exit::Signal(libc::SIGKILL)), "TERM ignored, then KILL");
     }
 }

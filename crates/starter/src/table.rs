@@ -21,16 +21,8 @@ pub fn render(s: &Summary, out_dir: &Path) -> String {
         s.cycles,
         s.period_us,
         s.timing.policy,
-        if s.degraded {
-            " — DEGRADED: not real time"
-        } else {
-            ""
-        },
-        if s.deterministic {
-            ", deterministic (simulated time)"
-        } else {
-            ""
-        },
+        if s.degraded { " — DEGRADED: not real time" } else { "" },
+        if s.deterministic { ", deterministic (simulated time)" } else { "" },
     );
     let _ = writeln!(t, "\n  following error (command − actual)");
     let _ = writeln!(
@@ -62,11 +54,7 @@ pub fn render(s: &Summary, out_dir: &Path) -> String {
         );
     }
     let tm = &s.timing;
-    let _ = writeln!(
-        t,
-        "\n  timing, µs ({})      p50      p99    p99.9      max",
-        tm.method
-    );
+    let _ = writeln!(t, "\n  timing, µs ({})      p50      p99    p99.9      max", tm.method);
     let row = |t: &mut String, name: &str, p: &Pct| {
         let _ = writeln!(
             t,

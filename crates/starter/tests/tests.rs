@@ -21,10 +21,8 @@ fn files_of_dead_starters_are_removed_and_files_in_use_are_kept() {
     orphan_pid.wait().unwrap();
     let in_use = format!("qmarc_{orphan_starter}_");
     // `sh -c SCRIPT NAME`: NAME (the prefix) stays in the shell's command line.
-    let mut orphan = Command::new("sh")
-        .args(["-c", "while :; do sleep 0.05; done", &in_use])
-        .spawn()
-        .unwrap();
+    let mut orphan =
+        Command::new("sh").args(["-c", "while :; do sleep 0.05; done", &in_use]).spawn().unwrap();
     std::thread::sleep(std::time::Duration::from_millis(20));
     // A live starter: this test process.
     let live = format!("qmarc_{}_", std::process::id());
@@ -49,10 +47,6 @@ fn files_of_dead_starters_are_removed_and_files_in_use_are_kept() {
         let _ = std::fs::remove_file(f);
     }
     let _ = std::fs::remove_dir_all(&root);
-    assert_eq!(
-        exists,
-        [false, true, true, false],
-        "dead removed, in-use and live kept"
-    );
+    assert_eq!(exists, [false, true, true, false], "dead removed, in-use and live kept");
     assert_eq!(removed, 2);
 }

@@ -17,10 +17,7 @@ pub struct MonotonicClock;
 /// Reads `CLOCK_MONOTONIC` in ns.
 #[inline]
 pub fn monotonic_now_ns() -> u64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC always exists on Linux.
     unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
     ts.tv_sec as u64 * crate::NS_PER_S + ts.tv_nsec as u64
@@ -42,9 +39,7 @@ pub struct MockClock {
 impl MockClock {
     /// A mock clock at `start_ns`.
     pub fn new(start_ns: u64) -> MockClock {
-        MockClock {
-            now: Arc::new(AtomicU64::new(start_ns)),
-        }
+        MockClock { now: Arc::new(AtomicU64::new(start_ns)) }
     }
 
     /// Moves the clock forward by `ns`.

@@ -26,12 +26,7 @@ pub struct Percentiles {
 impl Histogram {
     /// A histogram with bins 0‥`bound_us` µs (one per µs) and an overflow count above.
     pub fn new(bound_us: usize) -> Histogram {
-        Histogram {
-            bins: vec![0; bound_us + 1],
-            overflow: 0,
-            count: 0,
-            max_ns: 0,
-        }
+        Histogram { bins: vec![0; bound_us + 1], overflow: 0, count: 0, max_ns: 0 }
     }
 
     /// Records a duration in ns (truncated to whole µs, as cyclictest does).

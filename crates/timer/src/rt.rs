@@ -21,11 +21,7 @@ pub struct RtRequest {
 
 impl Default for RtRequest {
     fn default() -> RtRequest {
-        RtRequest {
-            priority: Some(80),
-            lock_memory: true,
-            prefault_stack_bytes: 64 * 1024,
-        }
+        RtRequest { priority: Some(80), lock_memory: true, prefault_stack_bytes: 64 * 1024 }
     }
 }
 
@@ -72,10 +68,7 @@ pub fn lock_memory() -> Result<(), i32> {
 /// Raises the soft `RLIMIT_RTPRIO` to the hard limit, as cyclictest does, so that an
 /// unprivileged user with an `rtprio` entry in limits.conf gets SCHED_FIFO.
 pub fn raise_rtprio_limit() {
-    let mut lim = libc::rlimit {
-        rlim_cur: 0,
-        rlim_max: 0,
-    };
+    let mut lim = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
     // SAFETY: `lim` is a valid rlimit to read into and write from.
     unsafe {
         if libc::getrlimit(libc::RLIMIT_RTPRIO, &mut lim) == 0 && lim.rlim_cur < lim.rlim_max {
@@ -87,9 +80,7 @@ pub fn raise_rtprio_limit() {
 
 /// Makes the calling thread SCHED_FIFO at `priority`.
 pub fn set_current_thread_fifo(priority: i32) -> Result<(), i32> {
-    let param = libc::sched_param {
-        sched_priority: priority,
-    };
+    let param = libc::sched_param { sched_priority: priority };
     // SAFETY: pthread_self() is the calling thread; `param` is valid.
     let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
     if rc == 0 { Ok(()) } else { Err(rc) }
@@ -182,10 +173,7 @@ pub struct DmaLatencyGuard {
 impl DmaLatencyGuard {
     /// Requests 0 µs wake-up latency; `None` where the file cannot be opened.
     pub fn request_zero() -> Option<DmaLatencyGuard> {
-        let mut file = std::fs::OpenOptions::new()
-            .write(true)
-            .open("/dev/cpu_dma_latency")
-            .ok()?;
+        let mut file = std::fs::OpenOptions::new().write(true).open("/dev/cpu_dma_latency").ok()?;
         file.write_all(&0i32.to_ne_bytes()).ok()?;
         Some(DmaLatencyGuard { _file: file })
     }
@@ -216,11 +204,8 @@ mod tests {
     #[test]
     fn spawned_thread_reports_what_it_got() {
         // SCHED_OTHER on purpose: a unit test must not take the CPU from the other tests.
-        let req = RtRequest {
-            priority: None,
-            lock_memory: false,
-            prefault_stack_bytes: 128 * 1024,
-        };
+        let req =
+            RtRequest { priority: None, lock_memory: false, prefault_stack_bytes: 128 * 1024 };
         let status = spawn("rt-test", req, |s| s).unwrap().join().unwrap();
         assert_eq!(status.fifo_priority, None);
         assert!(!status.degraded());

@@ -116,11 +116,7 @@ struct Schedule {
 impl Schedule {
     /// Tick 0 due one period after `now_ns`.
     fn starting(period_ns: u64, now_ns: u64) -> Schedule {
-        Schedule {
-            period_ns,
-            t0_ns: now_ns + period_ns,
-            next_index: 0,
-        }
+        Schedule { period_ns, t0_ns: now_ns + period_ns, next_index: 0 }
     }
 
     fn due_ns(&self, index: u64) -> u64 {
@@ -155,11 +151,7 @@ pub struct TimerFdTicker {
 impl TimerFdTicker {
     /// A ticker with period `period_ns`; nothing is armed until [`Ticker::start`].
     pub fn new(period_ns: u64) -> TimerFdTicker {
-        TimerFdTicker {
-            period_ns,
-            fd: None,
-            schedule: None,
-        }
+        TimerFdTicker { period_ns, fd: None, schedule: None }
     }
 }
 
@@ -178,10 +170,8 @@ impl Ticker for TimerFdTicker {
         let fd = unsafe { OwnedFd::from_raw_fd(raw) };
         let schedule = Schedule::starting(self.period_ns, monotonic_now_ns());
         let t0_ns = schedule.t0_ns;
-        let spec = libc::itimerspec {
-            it_interval: timespec(self.period_ns),
-            it_value: timespec(t0_ns),
-        };
+        let spec =
+            libc::itimerspec { it_interval: timespec(self.period_ns), it_value: timespec(t0_ns) };
         // SAFETY: `fd` is a timerfd and `spec` a valid itimerspec.
         let rc = unsafe {
             libc::timerfd_settime(
@@ -237,10 +227,7 @@ pub struct NanosleepTicker {
 impl NanosleepTicker {
     /// A ticker with period `period_ns`.
     pub fn new(period_ns: u64) -> NanosleepTicker {
-        NanosleepTicker {
-            period_ns,
-            schedule: None,
-        }
+        NanosleepTicker { period_ns, schedule: None }
     }
 }
 
@@ -301,13 +288,7 @@ impl ManualTicker {
 
     /// A manual ticker driving `clock`.
     pub fn with_clock(period_ns: u64, clock: MockClock) -> ManualTicker {
-        ManualTicker {
-            period_ns,
-            clock,
-            schedule: None,
-            late_ns: 0,
-            skip: 0,
-        }
+        ManualTicker { period_ns, clock, schedule: None, late_ns: 0, skip: 0 }
     }
 
     /// The next wake happens `late_ns` after its tick and after `skip` further ticks expired.
@@ -353,32 +334,12 @@ mod tests {
 
     #[test]
     fn schedule_counts_skipped_ticks_and_measures_against_the_first() {
-        let mut s = Schedule {
-            period_ns: 100,
-            t0_ns: 1_000,
-            next_index: 0,
-        };
+        let mut s = Schedule { period_ns: 100, t0_ns: 1_000, next_index: 0 };
         let a = s.service(1_010, 1);
-        assert_eq!(
-            a,
-            Tick {
-                index: 0,
-                intended_ns: 1_000,
-                woke_ns: 1_010,
-                missed: 0
-            }
-        );
+        assert_eq!(a, Tick { index: 0, intended_ns: 1_000, woke_ns: 1_010, missed: 0 });
         // Woke 350 ns after tick 1 was due: ticks 1, 2, 3 expired; 3 is current.
         let b = s.service(1_450, 3);
-        assert_eq!(
-            b,
-            Tick {
-                index: 3,
-                intended_ns: 1_100,
-                woke_ns: 1_450,
-                missed: 2
-            }
-        );
+        assert_eq!(b, Tick { index: 3, intended_ns: 1_100, woke_ns: 1_450, missed: 2 });
         assert_eq!(b.latency_ns(), 350);
         let c = s.service(1_400 + 5, 1);
         assert_eq!(c.index, 4);

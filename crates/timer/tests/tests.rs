@@ -13,20 +13,13 @@ fn check_ticks(kind: TickerKind) {
     for _ in 0..30 {
         let tick = ticker.wait().unwrap();
         assert!(tick.index >= expected_index, "{kind:?}: index went back");
-        assert_eq!(
-            tick.index,
-            expected_index + tick.missed,
-            "{kind:?}: skipped ticks are counted"
-        );
+        assert_eq!(tick.index, expected_index + tick.missed, "{kind:?}: skipped ticks are counted");
         assert_eq!(
             tick.intended_ns,
             t0 + expected_index * period,
             "{kind:?}: first unserviced tick"
         );
-        assert!(
-            tick.woke_ns >= tick.intended_ns,
-            "{kind:?}: woke before the expiry"
-        );
+        assert!(tick.woke_ns >= tick.intended_ns, "{kind:?}: woke before the expiry");
         assert!(tick.woke_ns >= last_woke);
         last_woke = tick.woke_ns;
         expected_index = tick.index + 1;
@@ -46,11 +39,7 @@ fn nanosleep_ticks_are_reported_against_their_expiry() {
 #[test]
 fn fifo_is_granted_or_reported_as_degraded() {
     // A short SCHED_FIFO thread that only sleeps: it cannot starve the other tests.
-    let req = RtRequest {
-        priority: Some(10),
-        lock_memory: false,
-        prefault_stack_bytes: 32 * 1024,
-    };
+    let req = RtRequest { priority: Some(10), lock_memory: false, prefault_stack_bytes: 32 * 1024 };
     let status = spawn("fifo-probe", req, |s| {
         let mut t = TickerKind::Nanosleep.build(500_000);
         t.start().unwrap();
@@ -69,11 +58,7 @@ fn fifo_is_granted_or_reported_as_degraded() {
         }
         None => {
             assert!(status.degraded());
-            assert!(
-                status.warnings[0].contains("SCHED_FIFO 10 refused"),
-                "{:?}",
-                status.warnings
-            );
+            assert!(status.warnings[0].contains("SCHED_FIFO 10 refused"), "{:?}", status.warnings);
         }
     }
 }
