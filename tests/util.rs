@@ -68,9 +68,10 @@ impl TestRun {
         let nanos = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.subsec_nanos());
-        let short: String = test.chars().filter(char::is_ascii_alphanumeric).take(12).collect();
-        let prefix = format!("qt{pid}_{n}_{nanos:x}_{short}_");
-        let dir = std::env::temp_dir().join(format!("qmarc-test-{pid}-{n}-{short}"));
+        // Short enough that root + prefix fit iceoryx2's socket names (IpcLocation::checked).
+        let short: String = test.chars().filter(char::is_ascii_alphanumeric).take(8).collect();
+        let prefix = format!("qt{pid}_{n}_{nanos:x}_");
+        let dir = std::env::temp_dir().join(format!("qmt-{pid}-{n}-{short}"));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("scratch dir");
         TestRun { prefix, dir }

@@ -21,6 +21,9 @@ pub struct MoveOptions {
     /// Servo period in µs (default: `general.period_us`).
     #[arg(long)]
     pub period_us: Option<u32>,
+    /// Number of motors (default: `general.n_motors`; each needs its `[[motor]]` table).
+    #[arg(long)]
+    pub motors: Option<usize>,
     /// Lock-step simulated clock: two runs produce byte-identical data files.
     #[arg(long)]
     pub deterministic: bool,
@@ -35,6 +38,9 @@ impl MoveOptions {
         }
         if let Some(n) = self.gather_every {
             s.set_gather_every(n)?;
+        }
+        if let Some(n) = self.motors {
+            s.set_n_motors(n)?;
         }
         if let Some(out) = &self.out {
             s.gather.out_dir = out.clone();
@@ -54,6 +60,9 @@ impl MoveOptions {
         if let Some(p) = self.period_us {
             a.push(format!("--period-us={p}"));
         }
+        if let Some(n) = self.motors {
+            a.push(format!("--motors={n}"));
+        }
         if self.deterministic {
             a.push("--deterministic".into());
         }
@@ -66,6 +75,19 @@ impl MoveOptions {
 pub enum Mode {
     /// Step every motor by `--size` counts and hold for `--duration` s (tuning, thesis 3.4).
     Step(StepArgs),
+    /// Run a path from a knot file or stream (thesis 3.12, A.2.3).
+    Run(RunArgs),
+}
+
+/// Options of `run`.
+#[derive(Debug, Clone, PartialEq, Args, Default)]
+pub struct RunArgs {
+    /// Knot file, or `-` for standard input (default: `trajectory.knots`).
+    #[arg(long)]
+    pub knots: Option<PathBuf>,
+    /// `spline` (offline cubic spline) or `pvt` (online PVT) (default: `trajectory.method`).
+    #[arg(long)]
+    pub method: Option<String>,
 }
 
 /// Options of `step`.
@@ -80,10 +102,19 @@ pub struct StepArgs {
 }
 
 impl Mode {
-    /// The mode's name (`step`), also the registered generator it uses.
+    /// The mode's name (`step`, `run`).
     pub fn name(&self) -> &'static str {
         match self {
             Mode::Step(_) => "step",
+            Mode::Run(_) => "run",
+        }
+    }
+
+    /// The registered generator the mode uses with settings `s` (after [`Mode::apply`]).
+    pub fn generator<'a>(&self, s: &'a Settings) -> &'a str {
+        match self {
+            Mode::Step(_) => "step",
+            Mode::Run(_) => &s.trajectory.method,
         }
     }
 
@@ -96,6 +127,14 @@ impl Mode {
                 }
                 if let Some(d) = a.duration {
                     s.set_step_duration(d)?;
+                }
+            }
+            Mode::Run(a) => {
+                if let Some(k) = &a.knots {
+                    s.set_knots(k);
+                }
+                if let Some(m) = &a.method {
+                    s.set_method(m)?;
                 }
             }
         }
@@ -112,6 +151,16 @@ impl Mode {
                 }
                 if let Some(d) = a.duration {
                     v.push(format!("--duration={d}"));
+                }
+                v
+            }
+            Mode::Run(a) => {
+                let mut v = vec!["run".to_string()];
+                if let Some(k) = &a.knots {
+                    v.push(format!("--knots={}", k.display()));
+                }
+                if let Some(m) = &a.method {
+                    v.push(format!("--method={m}"));
                 }
                 v
             }
@@ -157,5 +206,12 @@ mod tests {
         assert_eq!(back.opts, t.opts);
         assert_eq!(back.mode, t.mode);
         assert_eq!(back.mode, Mode::Step(StepArgs { size: Some(-250), duration: Some(0.75) }));
+        let t = T::parse_from(["x", "--motors", "2", "run", "--knots", "-", "--method", "pvt"]);
+        let args: Vec<String> = std::iter::once("x".to_string())
+            .chain(t.opts.to_args())
+            .chain(t.mode.to_args())
+            .collect();
+        let back = T::parse_from(args);
+        assert_eq!((back.opts.motors, &back.mode), (Some(2), &t.mode));
     }
 }

@@ -99,6 +99,21 @@ pub struct StepSettings {
     pub duration_s: f64,
 }
 
+/// The `run` move (thesis 3.12, A.2.3).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrajectorySettings {
+    /// Registered generator that reads knots (`spline`, `pvt`).
+    pub method: String,
+    /// Knot file; `-` is standard input. `None` until given.
+    pub knots: Option<PathBuf>,
+    /// The path must start within this many counts of where each motor is.
+    pub start_tolerance_counts: f64,
+    /// A stream's first knots must arrive within this many seconds.
+    pub stream_wait_s: f64,
+    /// When a stream runs dry: hold the last command this long, then disable, ms.
+    pub starve_hold_ms: f64,
+}
+
 /// The link to the hardware server.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HwServerSettings {
@@ -111,6 +126,8 @@ pub struct HwServerSettings {
     pub deadline_periods: u32,
     /// No response within this many periods means the hwserver is lost.
     pub response_timeout_periods: u32,
+    /// Fastest an encoder can physically count, counts/s; a larger jump is an encoder fault.
+    pub max_counts_per_s: f64,
 }
 
 /// The simulated Deltabot (`../shared/notes/deltabot.md`; the geometry is an assumption).
@@ -151,6 +168,8 @@ pub struct Settings {
     pub gather: GatherSettings,
     /// The step move.
     pub step: StepSettings,
+    /// The `run` move.
+    pub trajectory: TrajectorySettings,
     /// The hwserver link.
     pub hwserver: HwServerSettings,
     /// The simulator.
@@ -209,6 +228,42 @@ impl Settings {
         Ok(())
     }
 
+    /// Overrides the number of motors (`--motors`).
+    pub fn set_n_motors(&mut self, n: usize) -> Result<(), ConfigLoadError> {
+        let flag = "--motors";
+        if !(1..=MAX_MOTORS).contains(&n) {
+            return Err(ConfigLoadError::Override {
+                flag,
+                message: format!("must be 1‥{MAX_MOTORS}, found {n}"),
+            });
+        }
+        if n > self.motors.len() {
+            return Err(ConfigLoadError::Override {
+                flag,
+                message: format!(
+                    "{n} motors need {n} [[motor]] tables in {}, found {}",
+                    self.source.display(),
+                    self.motors.len()
+                ),
+            });
+        }
+        self.n_motors = n;
+        Ok(())
+    }
+
+    /// Overrides the knot file (`--knots`).
+    pub fn set_knots(&mut self, path: &Path) {
+        self.trajectory.knots = Some(path.to_path_buf());
+    }
+
+    /// Overrides the trajectory method (`--method`).
+    pub fn set_method(&mut self, method: &str) -> Result<(), ConfigLoadError> {
+        check_method(method)
+            .map_err(|message| ConfigLoadError::Override { flag: "--method", message })?;
+        self.trajectory.method = method.to_string();
+        Ok(())
+    }
+
     /// Overrides the step size (`--size`).
     pub fn set_step_size(&mut self, size: i64) -> Result<(), ConfigLoadError> {
         check_step_size(size)
@@ -236,6 +291,16 @@ fn check_period(us: u32) -> Result<(), String> {
         Ok(())
     } else {
         Err(format!("servo period must be 100‥100000 µs, found {us}"))
+    }
+}
+
+fn check_method(method: &str) -> Result<(), String> {
+    match registry::generator(method) {
+        Some(g) if g.needs_knots => Ok(()),
+        _ => Err(format!(
+            "unknown trajectory method `{method}`; methods that read knots: {}",
+            registry::knot_generator_names().join(", ")
+        )),
     }
 }
 
@@ -358,6 +423,8 @@ struct RawFile {
     #[serde(default)]
     step: RawStep,
     #[serde(default)]
+    trajectory: RawTrajectory,
+    #[serde(default)]
     hwserver: RawHwServer,
     #[serde(default)]
     sim: RawSim,
@@ -400,11 +467,22 @@ struct RawStep {
 
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
+struct RawTrajectory {
+    method: S<String>,
+    knots: S<String>,
+    start_tolerance_counts: S<f64>,
+    stream_wait_s: S<f64>,
+    starve_hold_ms: S<f64>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
 struct RawHwServer {
     backend: S<String>,
     watchdog_periods: S<i64>,
     deadline_periods: S<i64>,
     response_timeout_periods: S<i64>,
+    max_counts_per_s: S<f64>,
 }
 
 #[derive(Deserialize, Default)]
@@ -539,6 +617,50 @@ impl RawFile {
         let duration_s =
             take(src, &self.step.duration_s, "step.duration_s", 2.0, |v| check_duration(*v))?;
 
+        let tr = &self.trajectory;
+        let trajectory = TrajectorySettings {
+            method: take(src, &tr.method, "trajectory.method", "spline".to_string(), |v| {
+                check_method(v)
+            })?,
+            knots: take(src, &tr.knots, "trajectory.knots", String::new(), |v| {
+                if v.trim().is_empty() { Err("must not be empty".into()) } else { Ok(()) }
+            })
+            .map(|k| (!k.is_empty()).then(|| PathBuf::from(k)))?,
+            start_tolerance_counts: take(
+                src,
+                &tr.start_tolerance_counts,
+                "trajectory.start_tolerance_counts",
+                100.0,
+                |v| {
+                    if v.is_finite() && *v >= 0.0 {
+                        Ok(())
+                    } else {
+                        Err(format!("must be a finite number ≥ 0, found {v}"))
+                    }
+                },
+            )?,
+            stream_wait_s: take(
+                src,
+                &tr.stream_wait_s,
+                "trajectory.stream_wait_s",
+                10.0,
+                positive,
+            )?,
+            starve_hold_ms: take(
+                src,
+                &tr.starve_hold_ms,
+                "trajectory.starve_hold_ms",
+                50.0,
+                |v| {
+                    if v.is_finite() && (0.0..=10_000.0).contains(v) {
+                        Ok(())
+                    } else {
+                        Err(format!("must be 0‥10000 ms, found {v}"))
+                    }
+                },
+            )?,
+        };
+
         let h = &self.hwserver;
         let backend = take(src, &h.backend, "hwserver.backend", "sim".to_string(), |v| {
             if v == "sim" { Ok(()) } else { Err(format!("must be \"sim\", found \"{v}\"")) }
@@ -560,6 +682,9 @@ impl RawFile {
             250,
             in_range(i64::from(deadline_periods), 1_000_000),
         )? as u32;
+
+        let max_counts_per_s =
+            take(src, &h.max_counts_per_s, "hwserver.max_counts_per_s", 500_000.0, positive)?;
 
         let s = &self.sim;
         let sim = SimSettings {
@@ -655,7 +780,9 @@ impl RawFile {
             },
             gather: GatherSettings { every, out_dir: PathBuf::from(out_dir) },
             step: StepSettings { size, duration_s },
+            trajectory,
             hwserver: HwServerSettings {
+                max_counts_per_s,
                 backend,
                 watchdog_periods,
                 deadline_periods,
@@ -745,7 +872,11 @@ mod tests {
         );
         check(
             "[bogus]\nx = 1\n",
-            "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `hwserver`, `sim`, `motor`",
+            "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `hwserver`, `sim`, `motor`",
+        );
+        check(
+            "[trajectory]\nmethod = \"step\"\n",
+            "q.toml:2:10: trajectory.method: unknown trajectory method `step`; methods that read knots: spline, pvt",
         );
         check(
             "[general]\nperiod_us = \n",

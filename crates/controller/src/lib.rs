@@ -22,7 +22,8 @@
 //! impl HwLink for Still {
 //!     fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, LinkError> { Ok(req.response()) }
 //! }
-//! let plan = MovePlan { mode: "step".into(), n_motors: 1, period_ns: 400_000, gather_every: 1, deterministic: true };
+//! let plan = MovePlan { mode: "step".into(), n_motors: 1, period_ns: 400_000, gather_every: 1,
+//!                       deterministic: true, starve_hold_cycles: 0 };
 //! let gains = MotorGains { kp: 182_000.0, ..MotorGains::default() };
 //! let mut servo = Servo::new(plan, Box::new(Step::new(100, 0.004, 0.0004, 1)),
 //!                            Box::new(PidFf::new(&[gains])), Box::new(MockClock::new(0)));
@@ -37,10 +38,13 @@
 pub mod cli;
 pub mod config;
 pub mod gather;
+pub mod knots;
 pub mod law;
 pub mod link;
+pub mod pvt;
 pub mod registry;
 pub mod run;
 pub mod servo;
+pub mod spline;
 pub mod summary;
 pub mod traj;

@@ -1,10 +1,12 @@
 //! The registry: every trajectory generator and servo law by name. Adding one is one new
 //! type plus one line here; the settings file, the command line and the console list and
-//! choose from these tables.
+//! choose from these tables (see `docs/extending.md`).
 
 use crate::config::Settings;
 use crate::law::{PidFf, ServoLaw};
-use crate::traj::{Step, TrajectoryGenerator};
+use crate::pvt::Pvt;
+use crate::spline::CubicSpline;
+use crate::traj::{Step, TrajBuildError, TrajectoryGenerator};
 
 /// A registered servo law.
 #[derive(Clone, Copy)]
@@ -20,12 +22,15 @@ pub struct LawEntry {
 /// A registered trajectory generator.
 #[derive(Clone, Copy)]
 pub struct GeneratorEntry {
-    /// Name (the command-line mode or `trajectory.method`).
+    /// Name (`step`, or `trajectory.method` / `--method` for `run`).
     pub name: &'static str,
     /// One line for lists.
     pub description: &'static str,
-    /// Builds the generator from validated settings.
-    pub build: fn(&Settings) -> Box<dyn TrajectoryGenerator>,
+    /// True if it reads a knot file (`run`); false for the built-in `step`.
+    pub needs_knots: bool,
+    /// Builds the generator from validated settings; reads and checks a knot file if one is
+    /// named (streams are read when the move starts).
+    pub build: fn(&Settings) -> Result<Box<dyn TrajectoryGenerator>, TrajBuildError>,
 }
 
 /// Every servo law.
@@ -36,11 +41,26 @@ pub const LAWS: &[LawEntry] = &[LawEntry {
 }];
 
 /// Every trajectory generator.
-pub const GENERATORS: &[GeneratorEntry] = &[GeneratorEntry {
-    name: "step",
-    description: "ideal step of [step] size on every motor, held for [step] duration",
-    build: |s| Box::new(Step::from_settings(s)),
-}];
+pub const GENERATORS: &[GeneratorEntry] = &[
+    GeneratorEntry {
+        name: "step",
+        description: "ideal step of [step] size on every motor, held for [step] duration",
+        needs_knots: false,
+        build: |s| Ok(Box::new(Step::from_settings(s)?)),
+    },
+    GeneratorEntry {
+        name: "spline",
+        description: "offline natural cubic spline through time/position knots (thesis 3.12.1)",
+        needs_knots: true,
+        build: |s| Ok(Box::new(CubicSpline::from_settings(s)?)),
+    },
+    GeneratorEntry {
+        name: "pvt",
+        description: "online position-velocity-time cubics, from a file or a stream (thesis 3.12.2)",
+        needs_knots: true,
+        build: |s| Ok(Box::new(Pvt::from_settings(s)?)),
+    },
+];
 
 /// The law named `name`.
 pub fn law(name: &str) -> Option<&'static LawEntry> {
@@ -60,4 +80,9 @@ pub fn law_names() -> Vec<&'static str> {
 /// Names of every generator.
 pub fn generator_names() -> Vec<&'static str> {
     GENERATORS.iter().map(|e| e.name).collect()
+}
+
+/// Names of the generators `run` accepts (those that read knots).
+pub fn knot_generator_names() -> Vec<&'static str> {
+    GENERATORS.iter().filter(|e| e.needs_knots).map(|e| e.name).collect()
 }

@@ -29,6 +29,9 @@ pub enum RunError {
     /// No generator is registered for the mode.
     #[error("no trajectory generator is registered for mode `{0}`")]
     UnknownMode(String),
+    /// The trajectory could not be built (a bad knot file).
+    #[error(transparent)]
+    Trajectory(#[from] crate::traj::TrajBuildError),
     /// The hwserver could not be reached.
     #[error(transparent)]
     Connect(#[from] LinkConnectError),
@@ -63,8 +66,9 @@ pub struct RunOptions {
 /// files into `settings.gather.out_dir` and returns the summary (also on a fault: a fault is
 /// a result, not an error).
 pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<Summary, RunError> {
-    let entry = registry::generator(mode.name())
-        .ok_or_else(|| RunError::UnknownMode(mode.name().into()))?;
+    let generator = mode.generator(settings);
+    let entry =
+        registry::generator(generator).ok_or_else(|| RunError::UnknownMode(generator.into()))?;
     let law_entry =
         registry::law(&settings.law).ok_or_else(|| RunError::UnknownMode(settings.law.clone()))?;
     let out_dir = settings.gather.out_dir.clone();
@@ -76,10 +80,12 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
         period_ns: settings.period_ns(),
         gather_every: settings.gather.every,
         deterministic: opts.deterministic,
+        starve_hold_cycles: (settings.trajectory.starve_hold_ms * 1e6 / settings.period_ns() as f64)
+            .ceil() as u64,
     };
     let mut servo = Servo::new(
         plan,
-        (entry.build)(settings),
+        (entry.build)(settings)?,
         (law_entry.build)(settings),
         Box::new(MonotonicClock),
     );
@@ -103,7 +109,7 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
             let stop = qmarc_timer::stop::flag();
             let moved = servo.run(&mut link, ticker.as_mut(), stop);
             // The thesis' last message: the hwserver makes the hardware safe and exits.
-            if servo.fault().is_none_or(|f| f.link.is_none()) {
+            if !crate::servo::server_gone(servo.fault()) {
                 let _ = link.exchange(&HwMsg::request(MsgType::Exit));
             }
             moved.map_err(RunError::from)
@@ -133,10 +139,11 @@ pub fn summarize(
     }
     Summary {
         mode: servo.plan().mode.clone(),
+        trajectory: servo.generator_name().to_string(),
         ok: servo.fault().is_none(),
         degraded: rt.degraded(),
         deterministic,
-        fault: servo.fault().map(|f| f.report()),
+        fault: servo.fault_report(),
         cycles: servo.cycles(),
         planned_samples: servo.planned_samples(),
         period_us: settings.period_us,
@@ -160,25 +167,36 @@ pub fn remove_outputs(dir: &Path) {
     }
 }
 
+/// Writes `path` through a temporary file renamed into place, so that a reader (or a kill)
+/// never sees half a file.
 fn write_file(
     path: PathBuf,
     body: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
 ) -> Result<(), RunError> {
-    let wrap = |source| RunError::Output { file: path.clone(), source };
-    let mut w = std::io::BufWriter::new(std::fs::File::create(&path).map_err(wrap)?);
-    body(&mut w)
-        .and_then(|()| w.flush())
-        .map_err(|source| RunError::Output { file: path.clone(), source })
+    let mut tmp = path.clone().into_os_string();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    let result = std::fs::File::create(&tmp).and_then(|f| {
+        let mut w = std::io::BufWriter::new(f);
+        body(&mut w)?;
+        w.flush()?;
+        std::fs::rename(&tmp, &path)
+    });
+    result.map_err(|source| {
+        let _ = std::fs::remove_file(&tmp);
+        RunError::Output { file: path.clone(), source }
+    })
 }
 
-/// Writes `gather.csv`, `gather.m` and `summary.json` into `dir` (created if missing).
+/// Writes `summary.json` (first: it is small and says what happened), then `gather.csv` and
+/// `gather.m`, into `dir` (created if missing).
 pub fn write_outputs(dir: &Path, servo: &Servo, summary: &Summary) -> Result<(), RunError> {
     std::fs::create_dir_all(dir)
         .map_err(|source| RunError::Output { file: dir.to_path_buf(), source })?;
-    write_file(dir.join("gather.csv"), |w| servo.gather().write_csv(w))?;
-    write_file(dir.join("gather.m"), |w| servo.gather().write_octave(w))?;
     write_file(dir.join("summary.json"), |w| {
         serde_json::to_writer_pretty(&mut *w, summary).map_err(std::io::Error::other)?;
         writeln!(w)
-    })
+    })?;
+    write_file(dir.join("gather.csv"), |w| servo.gather().write_csv(w))?;
+    write_file(dir.join("gather.m"), |w| servo.gather().write_octave(w))
 }

@@ -9,7 +9,7 @@
 use crate::gather::{Gather, GatherRow};
 use crate::law::{ServoInput, ServoLaw};
 use crate::link::{HwLink, LinkError};
-use crate::summary::{ErrorStats, Fault, FaultKind, TimingStats};
+use crate::summary::{ErrorStats, Fault, FaultKind, FaultReport, TimingStats};
 use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType, Status};
 use qmarc_timer::{Clock, Tick, Ticker, TickerError};
@@ -31,6 +31,8 @@ pub struct MovePlan {
     pub gather_every: u32,
     /// Simulated time: the sample index is the cycle count and gathered time is n·T.
     pub deterministic: bool,
+    /// When the trajectory starves: cycles to hold the last command before disabling.
+    pub starve_hold_cycles: u64,
 }
 
 /// The move could not start (nothing was enabled), or its timer failed.
@@ -79,6 +81,8 @@ pub struct Servo {
     timing: TimingStats,
     fault: Option<Fault>,
     planned_samples: Option<u64>,
+    /// Holding the last command after the trajectory starved.
+    holding: bool,
 }
 
 impl Servo {
@@ -107,6 +111,7 @@ impl Servo {
             timing,
             fault: None,
             planned_samples: None,
+            holding: false,
         }
     }
 
@@ -133,6 +138,21 @@ impl Servo {
     /// The fault that ended the move, if any.
     pub fn fault(&self) -> Option<Fault> {
         self.fault
+    }
+
+    /// The fault for the summary, with the generator's own explanation where it has one.
+    pub fn fault_report(&self) -> Option<FaultReport> {
+        let f = self.fault?;
+        let mut report = f.report();
+        if let (FaultKind::TrajectoryError, Some(why)) = (f.kind, self.generator.failure()) {
+            report.message = format!("{why}; {}", report.message);
+        }
+        Some(report)
+    }
+
+    /// Name of the trajectory generator.
+    pub fn generator_name(&self) -> &'static str {
+        self.generator.name()
     }
 
     /// Cycles executed.
@@ -189,6 +209,8 @@ impl Servo {
         let n = if self.plan.deterministic { self.executed } else { tick.index };
         self.last_sample = n;
 
+        self.timing.record_tick(tick);
+
         // 1. Read all encoders.
         let read_start = self.clock.now_ns();
         let resp = match link.exchange(&HwMsg::read_all_encoders()) {
@@ -201,11 +223,18 @@ impl Servo {
         self.act = resp.data;
         let read_done = self.clock.now_ns();
 
-        // 2. Command position.
-        match self.generator.sample(n, &mut self.cmd) {
-            Sample::Ready => {}
-            Sample::Done => return CycleEnd::Done,
-            Sample::Starved => return CycleEnd::Fault(Fault::new(FaultKind::TrajectoryStarved, n)),
+        // 2. Command position (frozen while holding after a starved trajectory).
+        if !self.holding {
+            match self.generator.sample(n, &mut self.cmd) {
+                Sample::Ready => {}
+                Sample::Done => return CycleEnd::Done,
+                Sample::Starved => {
+                    return CycleEnd::Fault(Fault::new(FaultKind::TrajectoryStarved, n));
+                }
+                Sample::Failed => {
+                    return CycleEnd::Fault(Fault::new(FaultKind::TrajectoryError, n));
+                }
+            }
         }
 
         // 3. Law.
@@ -221,7 +250,7 @@ impl Servo {
 
         // 5. Gather.
         self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
-        self.timing.record(tick, read_start, read_done, computed, written);
+        self.timing.record_cycle(tick, read_start, read_done, computed, written);
         if self.gather.due(self.executed) {
             // Integer ns divided once: the correctly rounded decimal, no accumulated noise.
             let time_ns = if self.plan.deterministic {
@@ -245,17 +274,43 @@ impl Servo {
         }
     }
 
-    /// The fault handler: records `fault` and disables every motor (DACs to 0 V first).
+    /// The fault handler: disables every motor (DACs to 0 V first) unless the hwserver is
+    /// known to be gone, and records `fault` with whether the disable was acknowledged.
     pub fn handle_fault(&mut self, link: &mut dyn HwLink, fault: Fault) {
-        self.fault = Some(fault);
-        if fault.kind != FaultKind::HwserverLost {
-            self.disable_all(link);
-        }
+        let disabled = !server_gone(Some(fault)) && self.disable_all(link);
+        self.fault = Some(Fault { disabled, ..fault });
     }
 
-    fn disable_all(&mut self, link: &mut dyn HwLink) {
-        // Best effort: a fault path must not fail. A lost link is reported by the caller.
-        let _ = link.exchange(&HwMsg::request(MsgType::DisableAll));
+    /// Commands `DisableAll`; true if the hwserver acknowledged it. Never fails: a fault path
+    /// must go on.
+    fn disable_all(&mut self, link: &mut dyn HwLink) -> bool {
+        link.exchange(&HwMsg::request(MsgType::DisableAll)).is_ok()
+    }
+
+    /// The trajectory starved: keep servoing on the last command for the plan's hold time
+    /// (the robot decelerates under control instead of coasting), then disable. Any other
+    /// fault during the hold ends it at once.
+    fn hold(
+        &mut self,
+        link: &mut dyn HwLink,
+        ticker: &mut dyn Ticker,
+        stop: &AtomicBool,
+        starved: Fault,
+    ) {
+        self.holding = true;
+        let mut fault = starved;
+        for _ in 0..self.plan.starve_hold_cycles {
+            if stop.load(Ordering::Relaxed) {
+                break;
+            }
+            let Ok(tick) = ticker.wait() else { break };
+            if let CycleEnd::Fault(f) = self.cycle(link, &tick) {
+                fault = f;
+                break;
+            }
+        }
+        self.holding = false;
+        self.handle_fault(link, fault);
     }
 
     /// Runs the whole move: prepare, tick until the path ends, a fault or `stop`, then
@@ -294,11 +349,15 @@ impl Servo {
             match self.cycle(link, &tick) {
                 CycleEnd::Continue => {}
                 CycleEnd::Done => break,
+                CycleEnd::Fault(f) if f.kind == FaultKind::TrajectoryStarved => {
+                    self.hold(link, ticker, stop, f);
+                    break;
+                }
                 CycleEnd::Fault(f) => {
-                    // Ctrl-C reaches both processes: a hwserver that shut down because of the
-                    // same stop request is our abort, not a hwserver fault.
-                    let f = if f.kind == FaultKind::HwserverShutdown && stop.load(Ordering::Relaxed)
-                    {
+                    // A stop signal (Ctrl-C, the starter dying) reaches both processes: a
+                    // hwserver that shut down because of it is our abort, not a hwserver
+                    // fault. Our own signal may land a moment after its response.
+                    let f = if f.kind == FaultKind::HwserverShutdown && stop_arrives(stop) {
                         Fault {
                             kind: FaultKind::Aborted,
                             signal: qmarc_timer::stop::signal().unwrap_or(0),
@@ -312,10 +371,27 @@ impl Servo {
                 }
             }
         }
-        if self.fault.is_none_or(|f| f.kind != FaultKind::HwserverLost) {
+        if !server_gone(self.fault) {
             self.disable_all(link);
             let _ = link.exchange(&HwMsg::request(MsgType::DisableSafety));
         }
         Ok(())
     }
+}
+
+/// True when `fault` says the hwserver process is gone: nothing can reach the hardware. A
+/// link that failed with the server still alive still gets the disable commands.
+pub fn server_gone(fault: Option<Fault>) -> bool {
+    matches!(fault.and_then(|f| f.link), Some(LinkError::Lost { server_alive: false, .. }))
+}
+
+/// Waits up to 5 ms for the stop flag (off the loop's fast path: only after a fault).
+fn stop_arrives(stop: &AtomicBool) -> bool {
+    for _ in 0..50 {
+        if stop.load(Ordering::Relaxed) {
+            return true;
+        }
+        std::thread::sleep(std::time::Duration::from_micros(100));
+    }
+    stop.load(Ordering::Relaxed)
 }

@@ -98,16 +98,10 @@ impl TimingStats {
         }
     }
 
-    /// Records one cycle: its tick and when the read, the computation and the write ended.
+    /// Records a wake: latency, period error, missed periods. Called for every tick, also
+    /// the one on which a move ends or faults, so a stall is never lost.
     #[inline]
-    pub fn record(
-        &mut self,
-        tick: &Tick,
-        read_start_ns: u64,
-        read_done_ns: u64,
-        computed_ns: u64,
-        written_ns: u64,
-    ) {
+    pub fn record_tick(&mut self, tick: &Tick) {
         self.wake_latency.record_ns(tick.latency_ns());
         if let Some(prev) = self.prev_woke_ns {
             let err = tick.woke_ns.saturating_sub(prev).abs_diff(self.period_ns);
@@ -118,6 +112,18 @@ impl TimingStats {
         }
         self.prev_woke_ns = Some(tick.woke_ns);
         self.missed += tick.missed;
+    }
+
+    /// Records a completed cycle: when the read, the computation and the write ended.
+    #[inline]
+    pub fn record_cycle(
+        &mut self,
+        tick: &Tick,
+        read_start_ns: u64,
+        read_done_ns: u64,
+        computed_ns: u64,
+        written_ns: u64,
+    ) {
         self.read.record_ns(read_done_ns.saturating_sub(read_start_ns));
         self.compute.record_ns(computed_ns.saturating_sub(read_done_ns));
         self.output_latency.record_ns(written_ns.saturating_sub(tick.intended_ns));
@@ -137,14 +143,16 @@ pub enum FaultKind {
     Watchdog,
     /// The hardware reported an error.
     HardwareFault,
-    /// A counter step could not be unwrapped.
-    EncoderOverflow,
+    /// An encoder count jumped further than the motor can move (a counter or cable fault).
+    EncoderFault,
     /// The hwserver did not understand a request (a bug on one side).
     ProtocolError,
     /// A stop signal (Ctrl-C, SIGTERM) aborted the move.
     Aborted,
     /// The trajectory generator had no command for a sample.
     TrajectoryStarved,
+    /// The trajectory generator could not go on (a bad knot in a stream).
+    TrajectoryError,
 }
 
 impl FaultKind {
@@ -156,10 +164,11 @@ impl FaultKind {
             FaultKind::HwserverShutdown => "hwserver_shutdown",
             FaultKind::Watchdog => "watchdog",
             FaultKind::HardwareFault => "hardware_fault",
-            FaultKind::EncoderOverflow => "encoder_overflow",
+            FaultKind::EncoderFault => "encoder_fault",
             FaultKind::ProtocolError => "protocol_error",
             FaultKind::Aborted => "aborted",
             FaultKind::TrajectoryStarved => "trajectory_starved",
+            FaultKind::TrajectoryError => "trajectory_error",
         }
     }
 }
@@ -179,13 +188,23 @@ pub struct Fault {
     pub link: Option<LinkError>,
     /// The signal, for [`FaultKind::Aborted`].
     pub signal: i32,
+    /// Whether the hwserver acknowledged disabling every motor afterwards.
+    pub disabled: bool,
 }
 
 impl Fault {
     /// A fault of `kind` at sample `cycle` with nothing else known.
     #[inline]
     pub fn new(kind: FaultKind, cycle: u64) -> Fault {
-        Fault { kind, motor: None, cycle, status: Status::OK, link: None, signal: 0 }
+        Fault {
+            kind,
+            motor: None,
+            cycle,
+            status: Status::OK,
+            link: None,
+            signal: 0,
+            disabled: false,
+        }
     }
 
     /// The fault a non-zero status word means, most severe first; `None` for a clean status.
@@ -203,7 +222,7 @@ impl Fault {
         } else if let Some((m, _)) = status.first_limit() {
             (FaultKind::LimitSwitch, Some(m))
         } else if let Some(m) = status.first_encoder_overflow() {
-            (FaultKind::EncoderOverflow, Some(m))
+            (FaultKind::EncoderFault, Some(m))
         } else {
             (FaultKind::ProtocolError, None)
         };
@@ -236,14 +255,24 @@ impl Fault {
                 "the hwserver's watchdog fired (controller too late)".to_string()
             }
             FaultKind::HardwareFault => "the hardware reported an error".to_string(),
-            FaultKind::EncoderOverflow => {
-                format!("motor {} encoder overflow", self.motor.map_or(0, |m| m + 1))
-            }
+            FaultKind::EncoderFault => format!(
+                "motor {} encoder fault: its count jumped further than the motor can move",
+                self.motor.map_or(0, |m| m + 1)
+            ),
             FaultKind::ProtocolError => format!("the hwserver refused a request: {}", self.status),
             FaultKind::Aborted => format!("aborted by signal {}", self.signal),
-            FaultKind::TrajectoryStarved => "the trajectory ran out of knots".to_string(),
+            FaultKind::TrajectoryStarved => {
+                "the knot stream ran dry before it ended (motors held, then disabled)".to_string()
+            }
+            FaultKind::TrajectoryError => "the trajectory failed".to_string(),
         };
-        format!("{what} at cycle {}; all motors disabled", self.cycle)
+        let after = if self.disabled {
+            "all motors disabled"
+        } else {
+            "the hwserver did not acknowledge disabling the motors (on hardware the charge-pump \
+             relay drops them when the hwserver stops)"
+        };
+        format!("{what} at cycle {}; {after}", self.cycle)
     }
 
     /// The JSON form.
@@ -371,6 +400,8 @@ impl TimingSummary {
 pub struct Summary {
     /// `step`, `run` or `home`.
     pub mode: String,
+    /// The trajectory generator (`step`, `spline`, `pvt`).
+    pub trajectory: String,
     /// True when the move ran to its end without a fault.
     pub ok: bool,
     /// True when SCHED_FIFO was refused and the loop ran SCHED_OTHER.
@@ -427,9 +458,14 @@ mod tests {
         check(Status::limit_bottom(2), FaultKind::LimitSwitch, Some(2));
         check(Status::limit_top(0) | Status::WATCHDOG, FaultKind::Watchdog, None);
         check(Status::SHUTDOWN, FaultKind::HwserverShutdown, None);
-        check(Status::encoder_overflow(1), FaultKind::EncoderOverflow, Some(1));
+        check(Status::encoder_overflow(1), FaultKind::EncoderFault, Some(1));
         check(Status::UNKNOWN_MESSAGE, FaultKind::ProtocolError, None);
-        let f = Fault::from_status(Status::limit_top(0), 1234).unwrap();
+        let mut f = Fault::from_status(Status::limit_top(0), 1234).unwrap();
+        assert!(f.message().ends_with(
+            "the hwserver did not acknowledge disabling the motors (on hardware the charge-pump \
+             relay drops them when the hwserver stops)"
+        ));
+        f.disabled = true;
         assert_eq!(
             f.message(),
             "motor 1 hit its top limit switch at cycle 1234; all motors disabled"
@@ -447,9 +483,13 @@ mod tests {
             woke_ns: 1_000_000 + i * 400_000 + late,
             missed,
         };
-        t.record(&tick(0, 10_000, 0), 1_010_000, 1_030_000, 1_035_000, 1_060_000);
-        t.record(&tick(1, 60_000, 0), 1_460_000, 1_480_000, 1_481_000, 1_500_000);
-        t.record(&tick(3, 5_000, 1), 2_205_000, 2_215_000, 2_216_000, 2_230_000);
+        let cycle = |t: &mut TimingStats, k: Tick, a, b, c, d| {
+            t.record_tick(&k);
+            t.record_cycle(&k, a, b, c, d);
+        };
+        cycle(&mut t, tick(0, 10_000, 0), 1_010_000, 1_030_000, 1_035_000, 1_060_000);
+        cycle(&mut t, tick(1, 60_000, 0), 1_460_000, 1_480_000, 1_481_000, 1_500_000);
+        cycle(&mut t, tick(3, 5_000, 1), 2_205_000, 2_215_000, 2_216_000, 2_230_000);
         assert_eq!(t.missed, 1);
         assert_eq!(t.wake_latency.max_ns(), 60_000);
         assert_eq!(t.outside_40us, 2, "+50 µs, then a skipped period");

@@ -1,7 +1,10 @@
 //! [`TrajectoryGenerator`]: the trajectory plug-in, and [`Step`], the thesis' default.
 
 use crate::config::Settings;
+use crate::knots::KnotFileError;
 use qmarc_proto::MAX_MOTORS;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
 
 /// What a generator says about a sample.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -12,6 +15,113 @@ pub enum Sample {
     Done,
     /// An online generator has no knot for this sample yet (a fault: the robot cannot wait).
     Starved,
+    /// The generator cannot go on (a bad knot in a stream); [`TrajectoryGenerator::failure`]
+    /// says why, after the move.
+    Failed,
+}
+
+/// Most memory a generator's command queue may take, bytes (`mlockall` keeps it resident).
+pub const QUEUE_BUDGET_BYTES: u64 = 256 << 20;
+
+/// Where knots come from (`--knots` / `trajectory.knots`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum KnotSource {
+    /// A regular file: read and checked completely before anything starts.
+    File(PathBuf),
+    /// Standard input (`-`): read as the move starts (inherited from the starter).
+    Stdin,
+    /// A FIFO or other non-regular file: opened and read as the move starts.
+    Stream(PathBuf),
+}
+
+impl KnotSource {
+    /// The source named by `path`: `-` is standard input, a regular file a file, anything
+    /// else (a FIFO) a stream. Streams are not opened here.
+    pub fn from_path(path: &Path) -> Result<KnotSource, KnotFileError> {
+        if path == Path::new("-") {
+            return Ok(KnotSource::Stdin);
+        }
+        let meta = std::fs::metadata(path).map_err(|e| KnotFileError::Read {
+            file: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        Ok(if meta.is_file() {
+            KnotSource::File(path.to_path_buf())
+        } else {
+            KnotSource::Stream(path.to_path_buf())
+        })
+    }
+
+    /// The source of the settings' `trajectory.knots`.
+    pub fn from_settings(s: &Settings) -> Result<KnotSource, TrajBuildError> {
+        let path = s.trajectory.knots.as_deref().ok_or(TrajBuildError::NoKnots)?;
+        Ok(KnotSource::from_path(path)?)
+    }
+
+    /// True for sources read only as the move starts.
+    pub fn is_stream(&self) -> bool {
+        !matches!(self, KnotSource::File(_))
+    }
+
+    /// The name errors use: the path, or `-`.
+    pub fn name(&self) -> String {
+        match self {
+            KnotSource::File(p) | KnotSource::Stream(p) => p.display().to_string(),
+            KnotSource::Stdin => "-".to_string(),
+        }
+    }
+
+    /// Opens the source for reading.
+    pub fn open(&self) -> Result<(String, Box<dyn BufRead + Send>), KnotFileError> {
+        let name = self.name();
+        let reader: Box<dyn BufRead + Send> = match self {
+            KnotSource::Stdin => Box::new(BufReader::new(std::io::stdin())),
+            KnotSource::File(p) | KnotSource::Stream(p) => {
+                Box::new(BufReader::new(std::fs::File::open(p).map_err(|e| {
+                    KnotFileError::Read { file: name.clone(), reason: e.to_string() }
+                })?))
+            }
+        };
+        Ok((name, reader))
+    }
+}
+
+/// A generator could not be built from the settings.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum TrajBuildError {
+    /// The method needs knots and none were named.
+    #[error("this trajectory needs a knot file: give --knots FILE or set trajectory.knots")]
+    NoKnots,
+    /// The knot file is bad.
+    #[error(transparent)]
+    Knots(#[from] KnotFileError),
+    /// The knots cannot carry a spline.
+    #[error("{0}")]
+    Spline(crate::spline::SplineError),
+    /// The move is shorter than one servo period.
+    #[error("the move lasts {seconds} s, less than one servo period ({period_us} µs)")]
+    TooShort {
+        /// Duration, s.
+        seconds: f64,
+        /// The period, µs.
+        period_us: u32,
+    },
+    /// The command queue would not fit its memory budget.
+    #[error(
+        "the path lasts {seconds} s: its {samples} samples need {bytes} bytes of command queue, \
+         more than the {budget}-byte budget (shorten the path or lengthen the period)"
+    )]
+    Budget {
+        /// Duration of the path, s.
+        seconds: f64,
+        /// Samples.
+        samples: u64,
+        /// Bytes needed.
+        bytes: u64,
+        /// [`QUEUE_BUDGET_BYTES`].
+        budget: u64,
+    },
 }
 
 /// A generator could not start a path.
@@ -30,6 +140,57 @@ pub enum TrajStartError {
         /// What the limit is.
         reason: &'static str,
     },
+    /// The path starts away from where the robot is.
+    #[error(
+        "motor {motor} is at {actual} counts but the path starts at {path} counts, more than the \
+         {tolerance}-count start tolerance away: move it there first"
+    )]
+    FarFromStart {
+        /// 1-based motor.
+        motor: usize,
+        /// Where it is, counts.
+        actual: f64,
+        /// Where the path starts, counts.
+        path: f64,
+        /// `trajectory.start_tolerance_counts`.
+        tolerance: f64,
+    },
+    /// The knots read at the start are bad.
+    #[error(transparent)]
+    Knots(#[from] KnotFileError),
+    /// The path read at the start cannot be built.
+    #[error(transparent)]
+    Build(#[from] TrajBuildError),
+    /// A stream delivered too few knots in time.
+    #[error("{stream}: {got} of the first {needed} knots arrived within {waited_s} s")]
+    NoKnots {
+        /// The stream.
+        stream: String,
+        /// Knots received.
+        got: usize,
+        /// Knots needed before the move.
+        needed: usize,
+        /// How long we waited.
+        waited_s: f64,
+    },
+}
+
+/// Checks that the path's first command is within `tolerance` counts of the robot's position.
+pub fn check_start(
+    actual: &[f64; MAX_MOTORS],
+    first: &[f64; MAX_MOTORS],
+    n_motors: usize,
+    tolerance: f64,
+) -> Result<(), TrajStartError> {
+    match (0..n_motors).find(|&m| (actual[m] - first[m]).abs() > tolerance) {
+        None => Ok(()),
+        Some(m) => Err(TrajStartError::FarFromStart {
+            motor: m + 1,
+            actual: actual[m],
+            path: first[m],
+            tolerance,
+        }),
+    }
 }
 
 /// A trajectory generator: the command position of every motor at each servo sample.
@@ -52,6 +213,11 @@ pub trait TrajectoryGenerator: Send {
 
     /// The command of sample `n` (time n·T from the start) for every motor.
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample;
+
+    /// After [`Sample::Failed`]: why, for the summary. Not called in the loop.
+    fn failure(&self) -> Option<String> {
+        None
+    }
 }
 
 /// An ideal step of `size` counts on every motor, held for `duration` (thesis 3.8.1.1.4, the
@@ -76,9 +242,15 @@ impl Step {
         }
     }
 
-    /// The step of the settings' `[step]` section.
-    pub fn from_settings(s: &Settings) -> Step {
-        Step::new(s.step.size, s.step.duration_s, s.period_s(), s.n_motors)
+    /// The step of the settings' `[step]` section; it must last at least one servo period.
+    pub fn from_settings(s: &Settings) -> Result<Step, TrajBuildError> {
+        if s.step.duration_s < s.period_s() {
+            return Err(TrajBuildError::TooShort {
+                seconds: s.step.duration_s,
+                period_us: s.period_us,
+            });
+        }
+        Ok(Step::new(s.step.size, s.step.duration_s, s.period_s(), s.n_motors))
     }
 }
 

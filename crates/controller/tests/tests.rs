@@ -10,12 +10,12 @@ use qmarc_controller::servo::{CycleEnd, MovePlan, Servo};
 use qmarc_controller::summary::FaultKind;
 use qmarc_hwserver::server::{ServeEnd, ServeOptions, serve};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
-use qmarc_proto::service::IpcLocation;
+
 use qmarc_proto::{HwMsg, MsgType};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
-use util::{CoreLink, CountingAllocator, ThreadCounters, allocations, settings};
+use util::{CoreLink, CountingAllocator, ThreadCounters, allocations, knots, settings};
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
@@ -27,12 +27,18 @@ fn plan(n_motors: usize) -> MovePlan {
         period_ns: 400_000,
         gather_every: 1,
         deterministic: false,
+        starve_hold_cycles: 25,
     }
 }
 
 /// The step move with the PID feed-forward law, timed on a mock clock.
 fn step_servo(s: &qmarc_controller::config::Settings) -> Servo {
-    Servo::new(plan(3), (GENERATORS[0].build)(s), (LAWS[0].build)(s), Box::new(MockClock::new(0)))
+    Servo::new(
+        plan(3),
+        (GENERATORS[0].build)(s).unwrap(),
+        (LAWS[0].build)(s),
+        Box::new(MockClock::new(0)),
+    )
 }
 
 fn lockstep() -> SimParams {
@@ -41,11 +47,15 @@ fn lockstep() -> SimParams {
 
 #[test]
 fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
-    let s = settings();
     for g in GENERATORS {
+        // Every generator on an example path (the knot readers' threads are not the loop's).
+        let mut s = settings();
+        let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
+        s.trajectory.knots = Some(knots(example));
         for l in LAWS {
+            let generator = (g.build)(&s).unwrap();
             let mut servo =
-                Servo::new(plan(3), (g.build)(&s), (l.build)(&s), Box::new(MockClock::new(0)));
+                Servo::new(plan(3), generator, (l.build)(&s), Box::new(MockClock::new(0)));
             let mut link = CoreLink::new(lockstep());
             let mut ticker = ManualTicker::new(400_000);
             servo.prepare(&mut link).unwrap();
@@ -119,11 +129,8 @@ fn a_stop_request_aborts_the_move_and_disables_the_motors() {
 /// eclipse-iceoryx/iceoryx2#101), so exactly one allocation per exchange, two per cycle.
 #[test]
 fn over_iceoryx2_each_cycle_allocates_only_the_two_request_loans() {
-    let dir = std::env::temp_dir().join(format!("qmarc-ctl-alloc-{}", std::process::id()));
-    let location = IpcLocation::new(
-        &format!("qc{}_alloc_", std::process::id()),
-        &format!("{}/", dir.display()),
-    );
+    let ipc = util::IpcDir::new("alloc");
+    let location = ipc.location.clone();
     let server_location = location.clone();
     let server = std::thread::spawn(move || {
         let mut core = HwCore::new(Box::new(SimDeltabot::new(lockstep()).unwrap()));
@@ -134,7 +141,8 @@ fn over_iceoryx2_each_cycle_allocates_only_the_two_request_loans() {
         };
         serve(&mut core, &server_location, &opts, &AtomicBool::new(false))
     });
-    let timeouts = LinkTimeouts { deadline_ns: 50_000_000, give_up_ns: 2_000_000_000 };
+    // Deadlines far beyond any stall: a missed one would allocate (the liveness check).
+    let timeouts = LinkTimeouts { deadline_ns: 1_000_000_000, give_up_ns: 5_000_000_000 };
     let mut link = IoxLink::connect(&location, timeouts, Duration::from_secs(5)).unwrap();
     let s = settings();
     let mut servo = step_servo(&s);
@@ -154,7 +162,134 @@ fn over_iceoryx2_each_cycle_allocates_only_the_two_request_loans() {
     link.exchange(&HwMsg::request(MsgType::Exit)).unwrap();
     assert_eq!(server.join().unwrap().unwrap(), ServeEnd::Exit);
     drop(link);
-    location.remove_files();
-    assert!(location.files().is_empty());
-    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Name of this test, for running it again in a child process.
+const STRICT_TEST: &str = "servo_cycle_makes_no_system_call_under_seccomp_strict_mode";
+
+/// Phases of the strict-mode thread, set by it and by the watching thread.
+static STRICT_PHASE: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+static STRICT_FAILED: AtomicBool = AtomicBool::new(false);
+
+fn wait_phase(phase: u32) {
+    use std::sync::atomic::Ordering::SeqCst;
+    while STRICT_PHASE.load(SeqCst) < phase {
+        std::hint::spin_loop();
+    }
+}
+
+/// The cycle (read, sample, law, write, gather) with the in-process link makes no system
+/// call at all. Proof: the cycles run in a thread in seccomp strict mode, where any system
+/// call other than read, write, exit and sigreturn kills the process; the thread's read and
+/// write counts are compared before and after. It runs in a child process (this test binary
+/// again) so that a violation is reported instead of killing the test run.
+#[test]
+fn servo_cycle_makes_no_system_call_under_seccomp_strict_mode() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::sync::atomic::Ordering::SeqCst;
+    if std::env::var_os("QMARC_STRICT_CHILD").is_none() {
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([STRICT_TEST, "--exact", "--nocapture", "--test-threads=1"])
+            .env("QMARC_STRICT_CHILD", "1")
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.signal() != Some(libc::SIGKILL),
+            "the servo cycle made a system call: seccomp strict mode killed it\n{stdout}"
+        );
+        assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+        assert_eq!(
+            stdout.matches("strict mode: 3000 cycles, 0 reads, 0 writes").count(),
+            GENERATORS.len() * LAWS.len(),
+            "{stdout}"
+        );
+        return;
+    }
+    for g in GENERATORS {
+        for l in LAWS {
+            let mut s = settings();
+            let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
+            s.trajectory.knots = Some(knots(example));
+            let mut servo = Servo::new(
+                plan(3),
+                (g.build)(&s).unwrap(),
+                (l.build)(&s),
+                Box::new(MockClock::new(0)),
+            );
+            let mut link = CoreLink::new(lockstep());
+            let mut ticker = ManualTicker::new(400_000);
+            servo.prepare(&mut link).unwrap();
+            servo.set_t0(ticker.start().unwrap());
+            for _ in 0..10 {
+                servo.cycle(&mut link, &ticker.wait().unwrap());
+            }
+            STRICT_PHASE.store(0, SeqCst);
+            let (tid_tx, tid_rx) = std::sync::mpsc::channel();
+            let thread = std::thread::spawn(move || {
+                // SAFETY: gettid and prctl have no memory preconditions.
+                let tid = unsafe { libc::syscall(libc::SYS_gettid) };
+                tid_tx.send(tid).unwrap();
+                // SAFETY: as above; from here on only read, write, exit and sigreturn.
+                let rc = unsafe {
+                    libc::prctl(
+                        libc::PR_SET_SECCOMP,
+                        libc::SECCOMP_MODE_STRICT as libc::c_ulong,
+                        0,
+                        0,
+                        0,
+                    )
+                };
+                assert_eq!(rc, 0, "seccomp strict mode");
+                STRICT_PHASE.store(1, SeqCst);
+                wait_phase(2);
+                for _ in 0..3_000 {
+                    let tick = ticker.wait().unwrap_or_default();
+                    if servo.cycle(&mut link, &tick) != CycleEnd::Continue {
+                        STRICT_FAILED.store(true, SeqCst);
+                    }
+                }
+                STRICT_PHASE.store(3, SeqCst);
+                wait_phase(4);
+                // SAFETY: the thread's only way out in strict mode; it leaks its stack and
+                // never returns to Rust.
+                unsafe { libc::syscall(libc::SYS_exit, 0) };
+                unreachable!()
+            });
+            let tid = tid_rx.recv().unwrap();
+            let io = || {
+                let text = std::fs::read_to_string(format!("/proc/self/task/{tid}/io")).unwrap();
+                let get = |k: &str| -> u64 {
+                    text.lines()
+                        .find_map(|l| l.strip_prefix(k))
+                        .unwrap()
+                        .trim_start_matches(':')
+                        .trim()
+                        .parse()
+                        .unwrap()
+                };
+                (get("syscr"), get("syscw"))
+            };
+            wait_phase(1);
+            let before = io();
+            STRICT_PHASE.store(2, SeqCst);
+            wait_phase(3);
+            let after = io();
+            STRICT_PHASE.store(4, SeqCst);
+            std::mem::forget(thread); // it exited by itself; there is nothing to join
+            assert!(
+                !STRICT_FAILED.load(SeqCst),
+                "{} + {}: a cycle did not continue",
+                g.name,
+                l.name
+            );
+            println!(
+                "{} + {}: strict mode: 3000 cycles, {} reads, {} writes",
+                g.name,
+                l.name,
+                after.0 - before.0,
+                after.1 - before.1
+            );
+        }
+    }
 }

@@ -55,6 +55,11 @@ pub fn settings() -> Settings {
     Settings::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml")).unwrap()
 }
 
+/// A file of the repository's `knots/`.
+pub fn knots(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../knots").join(name)
+}
+
 /// The hwserver's core with a lock-step simulated Deltabot, called in-process.
 pub struct CoreLink(pub HwCore);
 
@@ -108,5 +113,33 @@ impl ThreadCounters {
             syscw: later.syscw - self.syscw,
             voluntary_switches: later.voluntary_switches - self.voluntary_switches,
         }
+    }
+}
+
+/// A private iceoryx2 prefix and root for one test, removed on drop even when the test fails.
+pub struct IpcDir {
+    /// The location.
+    pub location: qmarc_proto::service::IpcLocation,
+    dir: std::path::PathBuf,
+}
+
+impl IpcDir {
+    /// A fresh location named after `test`.
+    pub fn new(test: &str) -> IpcDir {
+        let pid = std::process::id();
+        let dir = std::env::temp_dir().join(format!("qmarc-ctl-{test}-{pid}"));
+        let location = qmarc_proto::service::IpcLocation::checked(
+            &format!("qc{pid}_{test}_"),
+            &format!("{}/", dir.display()),
+        )
+        .unwrap();
+        IpcDir { location, dir }
+    }
+}
+
+impl Drop for IpcDir {
+    fn drop(&mut self) {
+        self.location.remove_files();
+        let _ = std::fs::remove_dir_all(&self.dir);
     }
 }

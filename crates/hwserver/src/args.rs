@@ -45,6 +45,10 @@ pub struct HwServerArgs {
     /// the server exits.
     #[arg(long, default_value_t = 10)]
     pub watchdog_periods: u32,
+    /// Fastest a counter can physically change, counts/s: a larger jump between two reads is
+    /// an encoder fault.
+    #[arg(long, default_value_t = 500_000.0)]
+    pub max_counts_per_s: f64,
     /// SCHED_FIFO priority of the server (above the controller's); 0 runs SCHED_OTHER.
     #[arg(long, default_value_t = 85)]
     pub priority: i32,
@@ -93,6 +97,7 @@ impl HwServerArgs {
             format!("--motors={}", self.motors),
             format!("--period-us={}", self.period_us),
             format!("--watchdog-periods={}", self.watchdog_periods),
+            format!("--max-counts-per-s={}", self.max_counts_per_s),
             format!("--priority={}", self.priority),
             format!("--sim-kv={}", self.sim_kv),
             format!("--sim-tau-s={}", self.sim_tau_s),
@@ -116,9 +121,9 @@ impl HwServerArgs {
         a
     }
 
-    /// Where the iceoryx2 files live.
-    pub fn location(&self) -> IpcLocation {
-        IpcLocation::new(&self.iox_prefix, &self.iox_root)
+    /// Where the iceoryx2 files live (checked: see [`IpcLocation::checked`]).
+    pub fn location(&self) -> Result<IpcLocation, String> {
+        IpcLocation::checked(&self.iox_prefix, &self.iox_root)
     }
 
     /// The servo period in ns.

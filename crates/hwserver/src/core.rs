@@ -17,7 +17,14 @@ pub struct HwCore {
     monitoring: bool,
     latched: Status,
     exit_requested: bool,
+    /// Fastest a counter can physically change, counts/s (∞: unchecked).
+    max_counts_per_s: f64,
+    last_read_ns: u64,
 }
+
+/// Counts a counter may move beyond the physical bound between two reads (quantisation and
+/// timestamp jitter).
+pub const ENCODER_SLACK_COUNTS: i64 = 16;
 
 impl HwCore {
     /// Wraps `backend`. The software positions start at the counters' distance from
@@ -36,14 +43,24 @@ impl HwCore {
             monitoring: false,
             latched: Status::OK,
             exit_requested: false,
+            max_counts_per_s: f64::INFINITY,
+            last_read_ns: 0,
         };
-        let status = core.read();
-        if status.is_ok() {
+        if core.backend.read_inputs(&mut core.inputs).is_ok() {
             for m in 0..n_motors {
                 core.position[m] = i64::from(counter_delta(COUNTER_ZERO, core.inputs.counters[m]));
             }
         }
+        core.last_read_ns = core.backend.now_ns();
         core
+    }
+
+    /// Flags a counter change faster than `counts_per_s` between two reads (plus
+    /// [`ENCODER_SLACK_COUNTS`]) as an encoder fault: [`Status::encoder_overflow`] latches and
+    /// the jump is not added to the position. A 24-bit wrap is a normal step, not a jump.
+    pub fn with_encoder_limit(mut self, counts_per_s: f64) -> HwCore {
+        self.max_counts_per_s = counts_per_s;
+        self
     }
 
     /// Number of motors served.
@@ -98,11 +115,29 @@ impl HwCore {
         self.latched |= Status::SHUTDOWN;
     }
 
-    /// Reads the inputs and extends the counters; latches limit bits while monitoring.
+    /// Reads the inputs, extends the counters into the positions (a physically impossible
+    /// jump latches an encoder fault instead) and latches limit bits while monitoring. A
+    /// failed read changes nothing.
     fn read(&mut self) -> Status {
-        if self.backend.read_inputs(&mut self.inputs).is_err() {
+        let mut fresh = Inputs::default();
+        if self.backend.read_inputs(&mut fresh).is_err() {
             return Status::HARDWARE_FAULT;
         }
+        let now = self.backend.now_ns();
+        let dt_s = now.saturating_sub(self.last_read_ns) as f64 * 1e-9;
+        // `as` saturates: an unchecked (infinite) limit gives i64::MAX.
+        let bound =
+            ((self.max_counts_per_s * dt_s).ceil() as i64).saturating_add(ENCODER_SLACK_COUNTS);
+        for m in 0..self.n_motors {
+            let step = i64::from(counter_delta(self.inputs.counters[m], fresh.counters[m]));
+            if step.abs() > bound {
+                self.latched |= Status::encoder_overflow(m);
+            } else {
+                self.position[m] += step;
+            }
+        }
+        self.inputs = fresh;
+        self.last_read_ns = now;
         if self.monitoring {
             let tripped = self.inputs.limits & Status::LIMIT_MASK;
             if !tripped.is_ok() {
@@ -112,13 +147,6 @@ impl HwCore {
             }
         }
         Status::OK
-    }
-
-    fn update_positions(&mut self, last: &[u32; MAX_MOTORS]) {
-        let counters = self.position.iter_mut().zip(last).zip(&self.inputs.counters);
-        for ((position, &old), &new) in counters.take(self.n_motors) {
-            *position += i64::from(counter_delta(old, new));
-        }
     }
 
     /// Answers one request. Unknown types and bad motor indices are answered with a status
@@ -132,11 +160,7 @@ impl HwCore {
         match req.msg_type() {
             Err(_) => status |= Status::UNKNOWN_MESSAGE,
             Ok(MsgType::ReadAllEncoders | MsgType::ReadEncoder) => {
-                let last = self.inputs.counters;
                 status |= self.read();
-                if status.is_ok() {
-                    self.update_positions(&last);
-                }
                 if req.msg_type == MsgType::ReadEncoder as u32 && !single {
                     status |= Status::BAD_MOTOR;
                 }
@@ -190,6 +214,7 @@ impl HwCore {
             Ok(MsgType::EnableSafety) => self.monitoring = true,
             Ok(MsgType::DisableSafety) => self.monitoring = false,
             Ok(MsgType::ClearSafetyStatus) => {
+                // Limit and encoder bits; a watchdog or shutdown stays for good.
                 self.latched = self.latched & !(Status::LIMIT_MASK | Status::ENCODER_MASK);
             }
             Ok(MsgType::Exit) => {
@@ -285,6 +310,35 @@ mod tests {
         }
         assert!(pos > 8_388_608.0, "crossed the 24-bit wrap: {pos}");
         assert_eq!(pos, c.position(0) as f64);
+    }
+
+    #[test]
+    fn a_counter_jump_faster_than_physically_possible_is_an_encoder_fault() {
+        let mut p = SimParams { n_motors: 2, lockstep: true, ..SimParams::default() };
+        p.top_switch_counts = -1e9;
+        p.bottom_switch_counts = 1e9;
+        // 400 µs at 250 000 counts/s is 100 counts per read: the bound is 100 + 16.
+        let sim = SimDeltabot::new(p).unwrap();
+        let mut c = HwCore::new(Box::new(sim)).with_encoder_limit(250_000.0);
+        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
+        // Full speed crosses nothing: the sim cannot exceed Kv·10 V = 250 000 counts/s.
+        send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 0));
+        let mut codes = [0; MAX_MOTORS];
+        codes[0] = 8191;
+        send(&mut c, HwMsg::write_all_dacs(&codes));
+        for _ in 0..200 {
+            assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
+        }
+        let before = c.position(1);
+        // A glitch: motor 2's counter is reloaded behind the core's back (a cable fault).
+        c.backend.load_counter(1, COUNTER_ZERO + 5_000).unwrap();
+        let r = send(&mut c, HwMsg::read_all_encoders());
+        assert_eq!(r.status(), Status::encoder_overflow(1));
+        assert_eq!(c.position(1), before, "the jump is not believed");
+        // Latched until cleared.
+        assert_eq!(send(&mut c, HwMsg::read_all_encoders()).status(), Status::encoder_overflow(1));
+        send(&mut c, HwMsg::request(MsgType::ClearSafetyStatus));
+        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
     }
 
     #[test]

@@ -21,8 +21,8 @@ pub struct ServeOptions {
     pub watchdog_ns: u64,
     /// Busy-poll instead of blocking.
     pub spin: bool,
-    /// After a stop request, how long to keep answering (so the controller can still send
-    /// its disable and exit messages) before ending.
+    /// After a stop request or a watchdog trip, how long to keep answering (so the
+    /// controller learns why, and can still send its disable and exit messages) before ending.
     pub shutdown_grace_ns: u64,
 }
 
@@ -101,22 +101,24 @@ fn serve_inner(
         .map_err(|e| port_err("notifier creation")(&e))?;
 
     let mut last_request_ns = monotonic_now_ns();
-    let mut stop_since_ns: Option<u64> = None;
+    // Once stopping: since when, and how it will be reported. The server goes on answering
+    // (every response says why) until the controller exits or falls silent for the grace time.
+    let mut ending: Option<(u64, ServeEnd)> = None;
     loop {
         let now = monotonic_now_ns();
-        if stop_since_ns.is_none() && stop.load(Ordering::Relaxed) {
+        if ending.is_none() && stop.load(Ordering::Relaxed) {
             core.shut_down();
-            stop_since_ns = Some(now);
-        }
-        if let Some(since) = stop_since_ns
-            && now.saturating_sub(since.max(last_request_ns)) > opts.shutdown_grace_ns
-        {
-            return Ok(ServeEnd::Stopped);
+            ending = Some((now, ServeEnd::Stopped));
         }
         let silent_ns = now.saturating_sub(last_request_ns);
-        if core.any_enabled() && silent_ns > opts.watchdog_ns {
+        if ending.is_none() && core.any_enabled() && silent_ns > opts.watchdog_ns {
             core.trip_watchdog();
-            return Ok(ServeEnd::Watchdog { silent_ns });
+            ending = Some((now, ServeEnd::Watchdog { silent_ns }));
+        }
+        if let Some((since, end)) = ending
+            && now.saturating_sub(since.max(last_request_ns)) > opts.shutdown_grace_ns
+        {
+            return Ok(end);
         }
 
         if !opts.spin {
@@ -143,7 +145,7 @@ fn serve_inner(
             drop(active);
             notifier.notify().map_err(|e| port_err("response notify")(&e))?;
             if core.exit_requested() {
-                return Ok(ServeEnd::Exit);
+                return Ok(ending.map_or(ServeEnd::Exit, |(_, end)| end));
             }
         }
     }

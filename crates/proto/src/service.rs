@@ -59,6 +59,35 @@ impl IpcLocation {
         IpcLocation { prefix: prefix.to_string(), root }
     }
 
+    /// A location after checking that its files can be told apart from everybody else's: the
+    /// prefix is 1‥40 characters of `A-Z a-z 0-9 _ -` ending in `_` (so that `qmarc_1_` never
+    /// matches `qmarc_12_…`), the root an absolute path other than `/`, and both together short
+    /// enough for iceoryx2's event socket, `root + prefix + 30-digit id + ".event"`, to fit
+    /// the 108-byte `sun_path` (`iceoryx2.md`): at most 72 characters.
+    pub fn checked(prefix: &str, root: &str) -> Result<IpcLocation, String> {
+        let loc = IpcLocation::new(prefix, root);
+        let ok_chars = prefix.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+        if prefix.is_empty() || prefix.len() > 40 || !ok_chars || !prefix.ends_with('_') {
+            return Err(format!(
+                "iceoryx2 prefix `{prefix}`: must be 1 to 40 characters of A-Z a-z 0-9 _ - ending in `_`"
+            ));
+        }
+        if !loc.root.starts_with('/') || loc.root == "/" {
+            return Err(format!(
+                "iceoryx2 root `{root}`: must be an absolute directory other than /"
+            ));
+        }
+        if loc.root.len() + loc.prefix.len() > 72 {
+            return Err(format!(
+                "iceoryx2 root `{}` and prefix `{prefix}` are {} characters together: at most 72 fit \
+                 iceoryx2's socket names",
+                loc.root,
+                loc.root.len() + loc.prefix.len()
+            ));
+        }
+        Ok(loc)
+    }
+
     /// The iceoryx2 configuration for this location.
     pub fn config(&self) -> Result<Config, ServiceError> {
         let mut cfg = Config::default();
@@ -151,6 +180,9 @@ impl IpcLocation {
     /// runs may be creating files in them. Only call it when no process of this prefix runs
     /// (iceoryx2 #601: clear both locations together). Returns how many files were removed.
     pub fn remove_files(&self) -> usize {
+        if self.prefix.is_empty() {
+            return 0; // would match every file
+        }
         let files = self.files();
         let removed = files.iter().filter(|f| std::fs::remove_file(f).is_ok()).count();
         let nodes = std::path::Path::new(&self.root).join("nodes");
@@ -183,5 +215,39 @@ fn collect_prefixed(
         } else if e.file_name().to_string_lossy().starts_with(prefix) {
             out.push(path);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn locations_that_could_touch_other_files_are_refused() {
+        assert!(IpcLocation::checked("qmarc_12_", "/tmp/iceoryx2/").is_ok());
+        for (prefix, root, expected) in [
+            (
+                "",
+                "/tmp/x",
+                "iceoryx2 prefix ``: must be 1 to 40 characters of A-Z a-z 0-9 _ - ending in `_`",
+            ),
+            (
+                "abc",
+                "/tmp/x",
+                "iceoryx2 prefix `abc`: must be 1 to 40 characters of A-Z a-z 0-9 _ - ending in `_`",
+            ),
+            (
+                "a/b_",
+                "/tmp/x",
+                "iceoryx2 prefix `a/b_`: must be 1 to 40 characters of A-Z a-z 0-9 _ - ending in `_`",
+            ),
+            ("p_", "/", "iceoryx2 root `/`: must be an absolute directory other than /"),
+            ("p_", "tmp/x", "iceoryx2 root `tmp/x`: must be an absolute directory other than /"),
+        ] {
+            assert_eq!(IpcLocation::checked(prefix, root).unwrap_err(), expected);
+        }
+        let long_root = format!("/tmp/{}", "r".repeat(60));
+        assert!(IpcLocation::checked("p_", &long_root).unwrap_err().contains("at most 72"));
+        assert_eq!(IpcLocation::new("", "/tmp").remove_files(), 0);
     }
 }

@@ -44,6 +44,7 @@ pub fn hwserver_args(
         period_us: u64::from(settings.period_us),
         deterministic,
         watchdog_periods: settings.hwserver.watchdog_periods,
+        max_counts_per_s: settings.hwserver.max_counts_per_s,
         priority: settings.timer.hwserver_priority,
         no_mlock: !settings.timer.lock_memory,
         sim_kv: sim.kv,

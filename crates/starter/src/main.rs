@@ -9,7 +9,7 @@ use qmarc_controller::cli::{Mode, MoveOptions};
 use qmarc_controller::run::remove_outputs;
 use qmarc_controller::summary::Summary;
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
-use qmarc_starter::supervise::{self, Grace, Supervised};
+use qmarc_starter::supervise::{self, Supervised};
 use qmarc_starter::{default_prefix, describe_exit, hwserver_args, remove_stale_files, table};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -56,8 +56,9 @@ fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
             bail!("{} not found: build the workspace first (`cargo build --release`)", b.display());
         }
     }
-    let location =
-        IpcLocation::new(&args.iox_prefix.clone().unwrap_or_else(default_prefix), &args.iox_root);
+    let prefix = args.iox_prefix.clone().unwrap_or_else(default_prefix);
+    let location = IpcLocation::checked(&prefix, &args.iox_root).map_err(anyhow::Error::msg)?;
+    location.config()?;
     let hw_args = hwserver_args(&settings, args.opts.deterministic, &location);
     hw_args.sim_params().context("simulator settings")?;
     let mut ctl_args = args.opts.to_args();
@@ -72,13 +73,18 @@ fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
 
     let hwserver = supervise::spawn(&hwserver_bin, &hw_args.to_args())
         .with_context(|| format!("cannot start {}", hwserver_bin.display()))?;
-    let mut children = vec![Supervised { name: "qmarc-hwserver", child: hwserver, exit: None }];
+    // The hwserver has nothing to save: 3 s to end by itself, 2 s after SIGTERM. The
+    // controller may be writing a long move's data: two minutes for each.
+    let secs = Duration::from_secs;
+    let mut children = vec![Supervised::new("qmarc-hwserver", hwserver, secs(3), secs(2))];
     match supervise::spawn(&controller_bin, &ctl_args) {
-        Ok(c) => children.push(Supervised { name: "qmarc-controller", child: c, exit: None }),
-        Err(e) => eprintln!("qmarc-starter: cannot start {}: {e}", controller_bin.display()),
+        Ok(c) => children.push(Supervised::new("qmarc-controller", c, secs(120), secs(120))),
+        Err(e) => {
+            eprintln!("qmarc-starter: cannot start {}: {e}", controller_bin.display());
+            supervise::send(&children[0].child, libc::SIGTERM);
+        }
     }
-    let grace = Grace { term_after: Duration::from_secs(3), kill_after: Duration::from_secs(2) };
-    supervise::wait_all(&mut children, stop, grace, |s| {
+    supervise::wait_all(&mut children, stop, |s| {
         if let Some(exit) = s.exit.filter(|e| !e.success()) {
             eprintln!("qmarc-starter: {}", describe_exit(s.name, exit));
         }

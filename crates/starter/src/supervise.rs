@@ -81,34 +81,43 @@ pub struct Supervised {
     pub child: Child,
     /// How it ended, once it has.
     pub exit: Option<Exit>,
-}
-
-/// How long the survivors get once one child has ended, before SIGTERM and then SIGKILL.
-#[derive(Debug, Clone, Copy)]
-pub struct Grace {
-    /// From the first exit to SIGTERM.
+    /// Once the other child has ended, how long this one may take to finish on its own
+    /// before SIGTERM.
     pub term_after: Duration,
-    /// From SIGTERM to SIGKILL.
+    /// After SIGTERM, how long before SIGKILL.
     pub kill_after: Duration,
 }
 
-fn send(child: &Child, sig: i32) {
+impl Supervised {
+    /// `child`, named `name`, with its grace times.
+    pub fn new(
+        name: &'static str,
+        child: Child,
+        term_after: Duration,
+        kill_after: Duration,
+    ) -> Supervised {
+        Supervised { name, child, exit: None, term_after, kill_after }
+    }
+}
+
+/// Sends `sig` to `child` (not yet reaped, so its pid cannot have been reused).
+pub fn send(child: &Child, sig: i32) {
     // SAFETY: plain kill(2) on our own child's pid (not yet reaped, so not reused).
     unsafe { libc::kill(child.id() as libc::pid_t, sig) };
 }
 
-/// Waits until every child has ended. When one ends, the others get `grace.term_after` to
-/// finish on their own (the controller notices a dead hwserver, the hwserver's watchdog a
-/// dead controller), then SIGTERM, then SIGKILL. A stop request (`stop`) forwards SIGTERM to
-/// all at once. Each child's end is reported through `report` as it happens.
+/// Waits until every child has ended. When one ends, each other gets its `term_after` to
+/// finish on its own (the controller notices a dead hwserver and writes its data, the
+/// hwserver's watchdog notices a dead controller), then SIGTERM, then after its `kill_after`
+/// SIGKILL. A stop request (`stop`) forwards SIGTERM to all at once. Each child's end is
+/// reported through `report` as it happens.
 pub fn wait_all(
     children: &mut [Supervised],
     stop: &AtomicBool,
-    grace: Grace,
     mut report: impl FnMut(&Supervised),
 ) {
     let mut first_exit: Option<Instant> = None;
-    let mut termed: Option<Instant> = None;
+    let mut termed: Vec<Option<Instant>> = vec![None; children.len()];
     let mut forwarded = false;
     loop {
         for s in children.iter_mut().filter(|s| s.exit.is_none()) {
@@ -118,26 +127,21 @@ pub fn wait_all(
                 report(s);
             }
         }
-        let running: Vec<&Supervised> = children.iter().filter(|s| s.exit.is_none()).collect();
-        if running.is_empty() {
+        if children.iter().all(|s| s.exit.is_some()) {
             return;
         }
-        if stop.load(Ordering::Relaxed) && !forwarded {
-            forwarded = true;
-            running.iter().for_each(|s| send(&s.child, libc::SIGTERM));
-            termed.get_or_insert_with(Instant::now);
-        }
-        if let Some(t) = first_exit
-            && termed.is_none()
-            && t.elapsed() >= grace.term_after
+        let forward = stop.load(Ordering::Relaxed) && !forwarded;
+        forwarded |= forward;
+        for (s, termed) in children.iter().zip(termed.iter_mut()).filter(|(s, _)| s.exit.is_none())
         {
-            running.iter().for_each(|s| send(&s.child, libc::SIGTERM));
-            termed = Some(Instant::now());
-        }
-        if let Some(t) = termed
-            && t.elapsed() >= grace.kill_after
-        {
-            running.iter().for_each(|s| send(&s.child, libc::SIGKILL));
+            let due = forward || first_exit.is_some_and(|t| t.elapsed() >= s.term_after);
+            if termed.is_none() && due {
+                send(&s.child, libc::SIGTERM);
+                *termed = Some(Instant::now());
+            }
+            if termed.is_some_and(|t| t.elapsed() >= s.kill_after) {
+                send(&s.child, libc::SIGKILL);
+            }
         }
         std::thread::sleep(Duration::from_millis(5));
     }
@@ -160,15 +164,14 @@ mod tests {
         let sh = Path::new("/bin/sh");
         let quick = spawn(sh, &["-c".into(), "exit 4".into()]).unwrap();
         let stubborn = spawn(sh, &["-c".into(), "trap '' TERM; exec sleep 30".into()]).unwrap();
+        let ms = Duration::from_millis;
         let mut kids = vec![
-            Supervised { name: "quick", child: quick, exit: None },
-            Supervised { name: "stubborn", child: stubborn, exit: None },
+            Supervised::new("quick", quick, ms(50), ms(50)),
+            Supervised::new("stubborn", stubborn, ms(50), ms(50)),
         ];
         let stop = AtomicBool::new(false);
-        let grace =
-            Grace { term_after: Duration::from_millis(50), kill_after: Duration::from_millis(50) };
         let mut seen = Vec::new();
-        wait_all(&mut kids, &stop, grace, |s| seen.push(s.name));
+        wait_all(&mut kids, &stop, |s| seen.push(s.name));
         assert_eq!(seen, ["quick", "stubborn"]);
         assert_eq!(kids[0].exit, Some(Exit::Code(4)));
         assert_eq!(kids[1].exit, Some(Exit::Signal(libc::SIGKILL)), "TERM ignored, then KILL");

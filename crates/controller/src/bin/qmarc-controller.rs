@@ -38,7 +38,8 @@ fn run(args: &ControllerArgs) -> anyhow::Result<ExitCode> {
     args.mode.apply(&mut settings)?;
     qmarc_timer::stop::install()?;
     let opts = RunOptions {
-        location: IpcLocation::new(&args.iox_prefix, &args.iox_root),
+        location: IpcLocation::checked(&args.iox_prefix, &args.iox_root)
+            .map_err(anyhow::Error::msg)?,
         deterministic: args.opts.deterministic,
         connect_wait: Duration::from_millis(args.connect_wait_ms),
     };

@@ -24,13 +24,17 @@ fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
     for w in &rt.warnings {
         eprintln!("qmarc-hwserver: warning: {w}");
     }
-    let mut core = HwCore::new(backend);
+    if !(args.max_counts_per_s > 0.0) {
+        anyhow::bail!("--max-counts-per-s must be > 0, found {}", args.max_counts_per_s);
+    }
+    let mut core = HwCore::new(backend).with_encoder_limit(args.max_counts_per_s);
     let opts = ServeOptions {
         watchdog_ns: u64::from(args.watchdog_periods) * args.period_ns(),
         spin: args.spin,
         shutdown_grace_ns: 1_000_000_000,
     };
-    let end = serve(&mut core, &args.location(), &opts, stop)?;
+    let location = args.location().map_err(anyhow::Error::msg)?;
+    let end = serve(&mut core, &location, &opts, stop)?;
     Ok(match end {
         ServeEnd::Exit => ExitCode::SUCCESS,
         ServeEnd::Stopped => {

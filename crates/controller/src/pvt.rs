@@ -1,0 +1,476 @@
+//! The online trajectory (thesis 3.12.2): position-velocity-time knots joined by cubics.
+//!
+//! Each segment is the cubic that meets position and velocity at both of its knots over the
+//! segment time ([`Hermite`]; thesis eqs. 3-10/3-11 as printed have sign errors, see
+//! `../shared/notes/deltabot.md`). Knots reach the servo loop through a bounded wait-free
+//! queue filled by a reader thread, so they can come from a file, a pipe or a FIFO while the
+//! robot moves (`--knots -` reads standard input). A file is checked completely before the
+//! move; a stream knot by knot as it arrives. If the queue runs dry before the stream ends,
+//! the generator reports [`Sample::Starved`].
+
+use crate::config::Settings;
+use crate::knots::{
+    KnotFileError, MIN_PVT_KNOTS, PvtKnot, PvtLineParser, parse_pvt, read_knot_file,
+};
+use crate::spline::samples_between;
+use crate::traj::{
+    KnotSource, Sample, TrajBuildError, TrajStartError, TrajectoryGenerator, check_start,
+};
+use qmarc_proto::MAX_MOTORS;
+use rtrb::{Consumer, Producer, PushError, RingBuffer};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// Knots the queue between the reader thread and the servo loop holds.
+pub const PVT_QUEUE_CAPACITY: usize = 1024;
+
+/// p(τ) = Aτ³ + Bτ² + Cτ + D on τ ∈ [0, T]: the cubic with p(0) = X₀, p′(0) = V₀,
+/// p(T) = X₁, p′(T) = V₁ (a cubic Hermite segment; PMAC PVT moves are the same curve).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Hermite {
+    /// τ³ coefficient.
+    pub a: f64,
+    /// τ² coefficient.
+    pub b: f64,
+    /// τ coefficient.
+    pub c: f64,
+    /// Constant.
+    pub d: f64,
+}
+
+impl Hermite {
+    /// The segment from (x0, v0) to (x1, v1) over `t` seconds. From the four end conditions:
+    /// D = X₀, C = V₀, and p(T) = X₁, p′(T) = V₁ solved for A and B:
+    /// B = 3(X₁ − X₀)/T² − (2V₀ + V₁)/T, A = 2(X₀ − X₁)/T³ + (V₀ + V₁)/T².
+    #[inline]
+    pub fn new(x0: f64, v0: f64, x1: f64, v1: f64, t: f64) -> Hermite {
+        let (t2, t3) = (t * t, t * t * t);
+        Hermite {
+            a: 2.0 * (x0 - x1) / t3 + (v0 + v1) / t2,
+            b: 3.0 * (x1 - x0) / t2 - (2.0 * v0 + v1) / t,
+            c: v0,
+            d: x0,
+        }
+    }
+
+    /// Position at τ.
+    #[inline]
+    pub fn position(&self, tau: f64) -> f64 {
+        ((self.a * tau + self.b) * tau + self.c) * tau + self.d
+    }
+
+    /// Velocity at τ.
+    #[inline]
+    pub fn velocity(&self, tau: f64) -> f64 {
+        (3.0 * self.a * tau + 2.0 * self.b) * tau + self.c
+    }
+
+    /// Acceleration at τ.
+    #[inline]
+    pub fn acceleration(&self, tau: f64) -> f64 {
+        6.0 * self.a * tau + 2.0 * self.b
+    }
+}
+
+/// What travels through the queue.
+#[derive(Debug, Clone, Copy)]
+enum Feed {
+    Knot(PvtKnot),
+    /// The path has no more knots.
+    End,
+    /// The reader failed; the error is in the shared slot.
+    Error,
+}
+
+/// Where the knots come from.
+#[derive(Debug, Clone)]
+enum PvtSource {
+    /// A file, checked completely.
+    Knots(Arc<Vec<PvtKnot>>),
+    /// A stream, checked knot by knot.
+    Stream(KnotSource),
+}
+
+/// The online PVT generator.
+#[derive(Debug)]
+#[doc(alias = "PVTOnlineTrajGen")]
+pub struct Pvt {
+    source: PvtSource,
+    n_motors: usize,
+    period_s: f64,
+    start_tolerance: f64,
+    stream_wait: Duration,
+    consumer: Option<Consumer<Feed>>,
+    failure: Arc<Mutex<Option<KnotFileError>>>,
+    seg: [Hermite; MAX_MOTORS],
+    seg_start: f64,
+    seg_len: f64,
+    end_knot: PvtKnot,
+    pending: Option<PvtKnot>,
+    ended: bool,
+    failed: bool,
+}
+
+/// Pushes `v`, waiting while the queue is full; false if the consumer is gone.
+fn push_blocking(producer: &mut Producer<Feed>, mut v: Feed) -> bool {
+    loop {
+        match producer.push(v) {
+            Ok(()) => return true,
+            Err(PushError::Full(back)) => {
+                if producer.is_abandoned() {
+                    return false;
+                }
+                v = back;
+                std::thread::sleep(Duration::from_micros(200));
+            }
+        }
+    }
+}
+
+/// Reads a stream knot by knot into the queue (the reader thread's body).
+fn read_stream(
+    source: &KnotSource,
+    n_motors: usize,
+    producer: &mut Producer<Feed>,
+    failure: &Mutex<Option<KnotFileError>>,
+) {
+    let fail = |e: KnotFileError, producer: &mut Producer<Feed>| {
+        if let Ok(mut slot) = failure.lock() {
+            *slot = Some(e);
+        }
+        push_blocking(producer, Feed::Error);
+    };
+    let (name, reader) = match source.open() {
+        Ok(r) => r,
+        Err(e) => return fail(e, producer),
+    };
+    let mut parser = PvtLineParser::new(&name, n_motors);
+    for line in std::io::BufRead::lines(reader) {
+        let line = match line {
+            Ok(l) => l,
+            Err(e) => {
+                return fail(
+                    KnotFileError::Read { file: name.clone(), reason: e.to_string() },
+                    producer,
+                );
+            }
+        };
+        match parser.parse_line(&line) {
+            Ok(Some(k)) => {
+                if !push_blocking(producer, Feed::Knot(k)) {
+                    return;
+                }
+            }
+            Ok(None) => {}
+            Err(e) => return fail(e, producer),
+        }
+    }
+    if parser.knots() < MIN_PVT_KNOTS {
+        return fail(parser.too_few(), producer);
+    }
+    push_blocking(producer, Feed::End);
+}
+
+impl Pvt {
+    fn new(
+        source: PvtSource,
+        n_motors: usize,
+        period_s: f64,
+        start_tolerance: f64,
+        stream_wait: Duration,
+    ) -> Pvt {
+        Pvt {
+            source,
+            n_motors,
+            period_s,
+            start_tolerance,
+            stream_wait,
+            consumer: None,
+            failure: Arc::new(Mutex::new(None)),
+            seg: [Hermite::default(); MAX_MOTORS],
+            seg_start: 0.0,
+            seg_len: 0.0,
+            end_knot: PvtKnot::default(),
+            pending: None,
+            ended: false,
+            failed: false,
+        }
+    }
+
+    /// The generator for knots already checked (at least [`MIN_PVT_KNOTS`]).
+    pub fn from_knots(
+        knots: Vec<PvtKnot>,
+        n_motors: usize,
+        period_s: f64,
+        start_tolerance: f64,
+    ) -> Pvt {
+        Pvt::new(
+            PvtSource::Knots(Arc::new(knots)),
+            n_motors,
+            period_s,
+            start_tolerance,
+            Duration::from_secs(10),
+        )
+    }
+
+    /// The generator for a stream of knots (standard input, a FIFO), read as the move
+    /// starts; the first [`MIN_PVT_KNOTS`] must arrive within `stream_wait`.
+    pub fn from_stream(
+        source: KnotSource,
+        n_motors: usize,
+        period_s: f64,
+        start_tolerance: f64,
+        stream_wait: Duration,
+    ) -> Pvt {
+        Pvt::new(PvtSource::Stream(source), n_motors, period_s, start_tolerance, stream_wait)
+    }
+
+    /// The generator of the settings: `trajectory.knots`, a file checked now or a stream.
+    pub fn from_settings(s: &Settings) -> Result<Pvt, TrajBuildError> {
+        let tol = s.trajectory.start_tolerance_counts;
+        let wait = Duration::from_secs_f64(s.trajectory.stream_wait_s);
+        Ok(match KnotSource::from_settings(s)? {
+            KnotSource::File(path) => {
+                let text = read_knot_file(&path)?;
+                let knots = parse_pvt(&path.display().to_string(), &text, s.n_motors)?;
+                Pvt::new(PvtSource::Knots(Arc::new(knots)), s.n_motors, s.period_s(), tol, wait)
+            }
+            stream => Pvt::from_stream(stream, s.n_motors, s.period_s(), tol, wait),
+        })
+    }
+
+    /// Starts the reader thread and waits for the first knots.
+    fn first_knots(&mut self) -> Result<Vec<PvtKnot>, TrajStartError> {
+        let (mut producer, mut consumer) = RingBuffer::new(PVT_QUEUE_CAPACITY);
+        let source = self.source.clone();
+        let n_motors = self.n_motors;
+        let failure = Arc::clone(&self.failure);
+        std::thread::Builder::new()
+            .name("qmarc-knots".into())
+            .spawn(move || match source {
+                PvtSource::Knots(knots) => {
+                    for k in knots.iter() {
+                        if !push_blocking(&mut producer, Feed::Knot(*k)) {
+                            return;
+                        }
+                    }
+                    push_blocking(&mut producer, Feed::End);
+                }
+                PvtSource::Stream(src) => read_stream(&src, n_motors, &mut producer, &failure),
+            })
+            .map_err(|e| KnotFileError::Read {
+                file: self.source_name(),
+                reason: format!("reader thread: {e}"),
+            })?;
+        let started = Instant::now();
+        let mut first = Vec::with_capacity(MIN_PVT_KNOTS);
+        while first.len() < MIN_PVT_KNOTS {
+            match consumer.pop() {
+                Ok(Feed::Knot(k)) => first.push(k),
+                Ok(Feed::End) => break,
+                Ok(Feed::Error) => return Err(self.stored_failure().into()),
+                Err(_) if started.elapsed() < self.stream_wait => {
+                    std::thread::sleep(Duration::from_millis(1))
+                }
+                Err(_) => {
+                    return Err(TrajStartError::NoKnots {
+                        stream: self.source_name(),
+                        got: first.len(),
+                        needed: MIN_PVT_KNOTS,
+                        waited_s: self.stream_wait.as_secs_f64(),
+                    });
+                }
+            }
+        }
+        self.consumer = Some(consumer);
+        Ok(first)
+    }
+
+    fn source_name(&self) -> String {
+        match &self.source {
+            PvtSource::Knots(_) => "knots".into(),
+            PvtSource::Stream(s) => s.name(),
+        }
+    }
+
+    fn stored_failure(&self) -> KnotFileError {
+        self.failure.lock().ok().and_then(|f| f.clone()).unwrap_or(KnotFileError::Read {
+            file: self.source_name(),
+            reason: "the knot reader failed".into(),
+        })
+    }
+
+    fn enter_segment(&mut self, next: PvtKnot) {
+        let from = self.end_knot;
+        self.seg_start += self.seg_len;
+        self.seg_len = from.dt_s;
+        for (m, seg) in self.seg.iter_mut().enumerate().take(self.n_motors) {
+            *seg = Hermite::new(from.pos[m], from.vel[m], next.pos[m], next.vel[m], from.dt_s);
+        }
+        self.end_knot = next;
+    }
+}
+
+impl TrajectoryGenerator for Pvt {
+    fn name(&self) -> &'static str {
+        "pvt"
+    }
+
+    fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+        let first = self.first_knots()?;
+        check_start(start, &first[0].pos, self.n_motors, self.start_tolerance)?;
+        self.seg_start = 0.0;
+        self.seg_len = 0.0;
+        self.end_knot = first[0];
+        self.enter_segment(first[1]);
+        self.seg_start = 0.0;
+        self.pending = first.get(2).copied();
+        self.ended = false;
+        self.failed = false;
+        Ok(())
+    }
+
+    fn samples(&self) -> Option<u64> {
+        match &self.source {
+            PvtSource::Knots(k) => {
+                let total: f64 = k[..k.len() - 1].iter().map(|k| k.dt_s).sum();
+                Some(samples_between(0.0, total, self.period_s))
+            }
+            PvtSource::Stream(_) => None,
+        }
+    }
+
+    #[inline]
+    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+        let t = n as f64 * self.period_s;
+        while t > self.seg_start + self.seg_len + 1e-9 {
+            let next = match self.pending.take() {
+                Some(k) => k,
+                None => match self.consumer.as_mut().map(Consumer::pop) {
+                    Some(Ok(Feed::Knot(k))) => k,
+                    Some(Ok(Feed::End)) => {
+                        self.ended = true;
+                        return Sample::Done;
+                    }
+                    Some(Ok(Feed::Error)) => {
+                        self.failed = true;
+                        return Sample::Failed;
+                    }
+                    Some(Err(_)) | None if self.ended => return Sample::Done,
+                    Some(Err(_)) | None if self.failed => return Sample::Failed,
+                    Some(Err(_)) | None => return Sample::Starved,
+                },
+            };
+            self.enter_segment(next);
+        }
+        let tau = t - self.seg_start;
+        for (c, seg) in cmd.iter_mut().zip(&self.seg).take(self.n_motors) {
+            *c = seg.position(tau);
+        }
+        Sample::Ready
+    }
+
+    fn failure(&self) -> Option<String> {
+        self.failed.then(|| self.stored_failure().to_string())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn knot(pos: f64, vel: f64, dt_ms: f64) -> PvtKnot {
+        let mut k = PvtKnot { dt_s: dt_ms / 1000.0, ..PvtKnot::default() };
+        k.pos[0] = pos;
+        k.vel[0] = vel;
+        k
+    }
+
+    #[test]
+    fn hermite_meets_both_ends() {
+        // The thesis' example segment: 0 → 309 counts, 0 → 16 000 counts/s in 25 ms.
+        let h = Hermite::new(0.0, 0.0, 309.0, 16_000.0, 0.025);
+        assert_eq!((h.position(0.0), h.velocity(0.0)), (0.0, 0.0));
+        assert!((h.position(0.025) - 309.0).abs() < 1e-9);
+        assert!((h.velocity(0.025) - 16_000.0).abs() < 1e-7);
+        // By hand: B = 3·309/0.025² − 16000/0.025 = 1 483 200 − 640 000 = 843 200;
+        // A = −2·309/0.025³ + 16000/0.025² = −39 552 000 + 25 600 000 = −13 952 000.
+        assert!((h.b - 843_200.0).abs() < 1e-6 && (h.a + 13_952_000.0).abs() < 1e-5, "{h:?}");
+        assert!((h.acceleration(0.0) - 2.0 * h.b).abs() < 1e-9);
+    }
+
+    #[test]
+    fn file_path_is_sampled_segment_by_segment_and_ends() {
+        let knots = vec![knot(0.0, 0.0, 10.0), knot(100.0, 5_000.0, 20.0), knot(200.0, 0.0, 10.0)];
+        let mut g = Pvt::from_knots(knots, 1, 0.001, 5.0);
+        assert_eq!(g.samples(), Some(31));
+        g.start(&[0.0; MAX_MOTORS]).unwrap();
+        let mut cmd = [0.0; MAX_MOTORS];
+        let mut seen = Vec::new();
+        let mut n = 0;
+        while g.sample(n, &mut cmd) == Sample::Ready {
+            seen.push(cmd[0]);
+            n += 1;
+        }
+        assert_eq!(n, 31);
+        assert_eq!(seen[0], 0.0);
+        assert!((seen[10] - 100.0).abs() < 1e-9, "{}", seen[10]);
+        assert!((seen[30] - 200.0).abs() < 1e-9, "{}", seen[30]);
+        assert_eq!(g.sample(31, &mut cmd), Sample::Done);
+    }
+
+    #[test]
+    fn path_far_from_the_robot_is_refused() {
+        let knots = vec![knot(500.0, 0.0, 10.0), knot(600.0, 0.0, 10.0), knot(700.0, 0.0, 10.0)];
+        let mut g = Pvt::from_knots(knots, 1, 0.001, 5.0);
+        let e = g.start(&[0.0; MAX_MOTORS]).unwrap_err().to_string();
+        assert!(e.starts_with("motor 1 is at 0 counts but the path starts at 500 counts"), "{e}");
+    }
+
+    proptest! {
+        /// Each segment meets its knots' positions and velocities, and its coefficients are
+        /// those of an independent 4×4 solve of the end conditions (nalgebra LU).
+        #[test]
+        fn hermite_agrees_with_the_end_conditions_solved_directly(
+            x0 in -1e5f64..1e5, x1 in -1e5f64..1e5, v0 in -5e4f64..5e4, v1 in -5e4f64..5e4, t in 0.001f64..0.2,
+        ) {
+            let h = Hermite::new(x0, v0, x1, v1, t);
+            let scale = 1.0 + x0.abs() + x1.abs() + (v0.abs() + v1.abs()) * t;
+            prop_assert!((h.position(0.0) - x0).abs() <= 1e-9 * scale);
+            prop_assert!((h.position(t) - x1).abs() <= 1e-9 * scale);
+            prop_assert!((h.velocity(0.0) - v0).abs() <= 1e-9 * scale / t);
+            prop_assert!((h.velocity(t) - v1).abs() <= 1e-9 * scale / t);
+            let m = nalgebra::Matrix4::new(
+                1.0, 0.0, 0.0, 0.0,
+                0.0, 1.0, 0.0, 0.0,
+                1.0, t, t * t, t * t * t,
+                0.0, 1.0, 2.0 * t, 3.0 * t * t,
+            );
+            let dcba = m.lu().solve(&nalgebra::Vector4::new(x0, v0, x1, v1)).unwrap();
+            prop_assert!((dcba[0] - h.d).abs() <= 1e-9 * scale);
+            prop_assert!((dcba[1] - h.c).abs() <= 1e-6 * scale / t);
+            prop_assert!((dcba[2] - h.b).abs() <= 1e-6 * scale / (t * t));
+            prop_assert!((dcba[3] - h.a).abs() <= 1e-6 * scale / (t * t * t));
+        }
+
+        /// A whole random path passes through every knot at its time.
+        #[test]
+        fn path_meets_every_knot(
+            raw in proptest::collection::vec((-1e4f64..1e4, -2e4f64..2e4, 1u32..40), 3..30),
+        ) {
+            let knots: Vec<PvtKnot> = raw.iter().enumerate()
+                .map(|(i, &(p, v, ms))| knot(if i == 0 { 0.0 } else { p.round() }, v, f64::from(ms)))
+                .collect();
+            let mut g = Pvt::from_knots(knots.clone(), 1, 0.001, 1.0);
+            g.start(&[0.0; MAX_MOTORS]).unwrap();
+            let mut cmd = [0.0; MAX_MOTORS];
+            let mut t_ms = 0u64;
+            for k in &knots {
+                prop_assert_eq!(g.sample(t_ms, &mut cmd), Sample::Ready);
+                prop_assert!((cmd[0] - k.pos[0]).abs() <= 1e-6 * (1.0 + k.pos[0].abs()), "{} vs {}", cmd[0], k.pos[0]);
+                t_ms += (k.dt_s * 1000.0).round() as u64;
+            }
+        }
+    }
+}
