@@ -35,6 +35,11 @@ pub fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root").to_path_buf()
 }
 
+/// A file of the repository's `knots/`.
+pub fn knots(name: &str) -> PathBuf {
+    workspace().join("knots").join(name)
+}
+
 /// The shipped settings file.
 pub fn default_config() -> PathBuf {
     workspace().join("config/qmarc.toml")
@@ -126,6 +131,20 @@ impl TestRun {
         r
     }
 
+    /// Starts `qmarc-starter` with the isolation arguments and `args`, standard input piped (to
+    /// feed a knot stream) and the output captured; finish it with [`wait_with_timeout`].
+    pub fn spawn_starter(&self, args: &[&str]) -> std::process::Child {
+        Command::new(bin_dir().join("qmarc-starter"))
+            .args(self.isolation_args())
+            .args(args)
+            .current_dir(workspace())
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn qmarc-starter")
+    }
+
     /// Processes whose command line mentions this run's prefix.
     pub fn processes(&self) -> Vec<(u32, String)> {
         processes_matching(&self.prefix)
@@ -170,7 +189,13 @@ pub fn processes_matching(needle: &str) -> Vec<(u32, String)> {
 
 /// Runs `cmd` to completion, capturing its output; kills it and panics after `timeout`.
 pub fn run_with_timeout(cmd: &mut Command, timeout: Duration) -> Finished {
-    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("spawn");
+    let child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("spawn");
+    wait_with_timeout(child, timeout)
+}
+
+/// Waits for `child` (spawned with piped stdout and stderr), capturing its output; kills it
+/// and panics after `timeout`.
+pub fn wait_with_timeout(mut child: std::process::Child, timeout: Duration) -> Finished {
     let mut out = child.stdout.take().expect("stdout");
     let mut err = child.stderr.take().expect("stderr");
     let out_reader = std::thread::spawn(move || {
@@ -191,7 +216,7 @@ pub fn run_with_timeout(cmd: &mut Command, timeout: Duration) -> Finished {
         if started.elapsed() > timeout {
             let _ = child.kill();
             let _ = child.wait();
-            panic!("timed out after {timeout:?}: {cmd:?}");
+            panic!("timed out after {timeout:?}");
         }
         std::thread::sleep(Duration::from_millis(10));
     };

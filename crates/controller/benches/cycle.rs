@@ -1,20 +1,26 @@
 //! Criterion benchmarks of the servo loop's pieces for 3 motors: one whole cycle against the
-//! in-process hardware core (simulated Deltabot, so the figure includes the plant model and
-//! excludes IPC), the law alone and the generator alone. Run with
-//! `cargo bench -p qmarc-controller --bench cycle`.
+//! in-process hardware core (simulated Deltabot: the figure includes the plant model and
+//! excludes IPC), the law alone, one sample of each trajectory generator, and the natural
+//! spline's O(N) solve for 10³…10⁶ knots. Run with `cargo bench -p qmarc-controller --bench
+//! cycle`.
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use qmarc_controller::config::Settings;
+use qmarc_controller::knots::{OfflineKnots, PvtKnot};
 use qmarc_controller::law::{PidFf, ServoInput, ServoLaw};
 use qmarc_controller::link::{HwLink, LinkError};
+use qmarc_controller::pvt::Pvt;
 use qmarc_controller::registry::GENERATORS;
 use qmarc_controller::servo::{CycleEnd, MovePlan, Servo};
-use qmarc_controller::traj::{Step, TrajectoryGenerator};
+use qmarc_controller::spline::{CubicSpline, NaturalSpline};
+use qmarc_controller::traj::{Sample, Step, TrajectoryGenerator};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
 use qmarc_proto::{HwMsg, MAX_MOTORS};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
 use std::hint::black_box;
 use std::path::Path;
+
+const PERIOD_S: f64 = 0.0004;
 
 struct CoreLink(HwCore);
 
@@ -39,8 +45,9 @@ fn bench_cycle(c: &mut Criterion) {
         period_ns: 400_000,
         gather_every: 4,
         deterministic: false,
+        starve_hold_cycles: 0,
     };
-    let generator = (GENERATORS[0].build)(&s_long);
+    let generator = (GENERATORS[0].build)(&s_long).unwrap();
     let law = Box::new(PidFf::from_settings(&s));
     let mut servo = Servo::new(plan, generator, law, Box::new(MockClock::new(0)));
     let sim = SimDeltabot::new(SimParams { n_motors: 3, lockstep: true, ..SimParams::default() })
@@ -79,18 +86,77 @@ fn bench_law(c: &mut Criterion) {
     });
 }
 
-fn bench_step_generator(c: &mut Criterion) {
-    let mut g = Step::new(1000, 3_600.0, 0.0004, 3);
-    g.start(&[0.0; MAX_MOTORS]).unwrap();
+/// A 3-motor sine path sampled every `dt` s for `seconds`.
+fn sine(t: f64, m: usize) -> f64 {
+    (1000.0 * (1.0 - (std::f64::consts::TAU * (1.0 + m as f64 * 0.5) * t).cos())).round()
+}
+
+fn offline_knots(seconds: f64, dt: f64) -> OfflineKnots {
+    let n = (seconds / dt).round() as usize + 1;
+    let times: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+    let positions = times.iter().map(|&t| [sine(t, 0), sine(t, 1), sine(t, 2), 0.0]).collect();
+    OfflineKnots { times, positions, n_motors: 3 }
+}
+
+fn pvt_knots(seconds: f64, dt: f64) -> Vec<PvtKnot> {
+    let n = (seconds / dt).round() as usize + 1;
+    (0..n)
+        .map(|i| {
+            let t = i as f64 * dt;
+            let mut k = PvtKnot { dt_s: dt, ..PvtKnot::default() };
+            for m in 0..3 {
+                k.pos[m] = sine(t, m);
+                let w = std::f64::consts::TAU * (1.0 + m as f64 * 0.5);
+                k.vel[m] = 1000.0 * w * (w * t).sin();
+            }
+            k
+        })
+        .collect()
+}
+
+/// One sample of `g`, restarting the path when it ends (the restart is amortised over
+/// hundreds of thousands of samples).
+fn bench_generator(c: &mut Criterion, name: &str, mut g: Box<dyn TrajectoryGenerator>) {
+    let start = [0.0; MAX_MOTORS];
+    g.start(&start).unwrap();
     let mut cmd = [0.0; MAX_MOTORS];
     let mut n = 0u64;
-    c.bench_function("step generator sample, 3 motors", |b| {
+    c.bench_function(&format!("{name} generator sample, 3 motors"), |b| {
         b.iter(|| {
-            n = (n + 1) % 1_000_000;
-            black_box(g.sample(black_box(n), &mut cmd));
+            if g.sample(black_box(n), &mut cmd) != Sample::Ready {
+                g.start(&start).unwrap();
+                n = 0;
+                g.sample(n, &mut cmd);
+            }
+            n += 1;
+            black_box(cmd)
         })
     });
 }
 
-criterion_group!(benches, bench_cycle, bench_law, bench_step_generator);
+fn bench_generators(c: &mut Criterion) {
+    bench_generator(c, "step", Box::new(Step::new(1000, 3_600.0, PERIOD_S, 3)));
+    // 60 s of spline from 10 ms knots: 150 001 queued samples.
+    let spline = CubicSpline::from_knots(&offline_knots(60.0, 0.01), PERIOD_S, 1.0).unwrap();
+    bench_generator(c, "spline", Box::new(spline));
+    // 1000 s of PVT from 10 ms knots, through the queue from the reader thread.
+    let pvt = Pvt::from_knots(pvt_knots(1000.0, 0.01), 3, PERIOD_S, 1.0);
+    bench_generator(c, "pvt", Box::new(pvt));
+}
+
+fn bench_spline_solve(c: &mut Criterion) {
+    let mut group = c.benchmark_group("natural spline solve");
+    group.sample_size(10);
+    for n in [1_000usize, 10_000, 100_000, 1_000_000] {
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.001 + (i % 7) as f64 * 1e-4).collect();
+        let y: Vec<f64> = t.iter().map(|&t| sine(t, 0)).collect();
+        group.throughput(Throughput::Elements(n as u64));
+        group.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+            b.iter(|| black_box(NaturalSpline::new(t.clone(), y.clone()).unwrap()))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_cycle, bench_law, bench_generators, bench_spline_solve);
 criterion_main!(benches);

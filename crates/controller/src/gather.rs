@@ -20,6 +20,36 @@ pub struct GatherRow {
     pub dac: [i32; MAX_MOTORS],
 }
 
+/// Most memory the gather buffer may take, bytes (`mlockall` keeps it resident).
+pub const GATHER_BUDGET_BYTES: u64 = 256 << 20;
+
+/// The gathered rows of a move would not fit [`GATHER_BUDGET_BYTES`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "gathering every {every} of {samples} cycles needs {bytes} bytes, more than the {budget}-byte \
+     budget: gather less often (--gather-every) or shorten the move"
+)]
+pub struct GatherBudgetError {
+    /// Samples of the move.
+    pub samples: u64,
+    /// Gather every N cycles.
+    pub every: u32,
+    /// Bytes needed.
+    pub bytes: u64,
+    /// [`GATHER_BUDGET_BYTES`].
+    pub budget: u64,
+}
+
+/// Checks that gathering every `every` of `samples` cycles fits the memory budget.
+pub fn check_budget(samples: u64, every: u32) -> Result<(), GatherBudgetError> {
+    let rows = samples.div_ceil(u64::from(every.max(1)));
+    let bytes = rows.saturating_mul(std::mem::size_of::<GatherRow>() as u64);
+    if bytes > GATHER_BUDGET_BYTES {
+        return Err(GatherBudgetError { samples, every, bytes, budget: GATHER_BUDGET_BYTES });
+    }
+    Ok(())
+}
+
 /// The gather buffer. Its capacity is fixed when it is made; [`Gather::push`] never
 /// allocates and drops (and counts) rows beyond it, so it can never overflow mid-move.
 #[derive(Debug, Clone, PartialEq)]

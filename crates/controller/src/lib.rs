@@ -37,6 +37,8 @@
 
 pub mod cli;
 pub mod config;
+#[doc = include_str!("../../../docs/extending.md")]
+pub mod extending {}
 pub mod gather;
 pub mod knots;
 pub mod law;

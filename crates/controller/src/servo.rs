@@ -51,6 +51,9 @@ pub enum MoveError {
     /// The timer could not be armed or waited on.
     #[error(transparent)]
     Timer(#[from] TickerError),
+    /// The gathered data would not fit its memory budget.
+    #[error(transparent)]
+    Gather(#[from] crate::gather::GatherBudgetError),
 }
 
 /// How a cycle ended.
@@ -184,6 +187,7 @@ impl Servo {
         self.generator.sample(0, &mut self.cmd);
         self.law.reset(&self.cmd, &self.act);
         let samples = self.planned_samples.unwrap_or(STREAM_GATHER_SAMPLES);
+        crate::gather::check_budget(samples, self.plan.gather_every)?;
         self.gather = Gather::for_move(samples, self.plan.gather_every, self.plan.n_motors);
         self.timing = TimingStats::new(self.plan.period_ns);
         self.errors = ErrorStats::default();

@@ -246,7 +246,7 @@ mod tests {
         ] {
             assert_eq!(IpcLocation::checked(prefix, root).unwrap_err(), expected);
         }
-        let long_root = format!("/tmp/{}", "r".repeat(60));
+        let long_root = format!("/tmp/{}", "r".repeat(70));
         assert!(IpcLocation::checked("p_", &long_root).unwrap_err().contains("at most 72"));
         assert_eq!(IpcLocation::new("", "/tmp").remove_files(), 0);
     }

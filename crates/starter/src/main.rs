@@ -6,6 +6,8 @@
 use anyhow::{Context, bail};
 use clap::Parser;
 use qmarc_controller::cli::{Mode, MoveOptions};
+use qmarc_controller::gather::check_budget;
+use qmarc_controller::registry;
 use qmarc_controller::run::remove_outputs;
 use qmarc_controller::summary::Summary;
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
@@ -65,6 +67,17 @@ fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
     ctl_args.push(format!("--iox-prefix={}", location.prefix));
     ctl_args.push(format!("--iox-root={}", location.root));
     ctl_args.extend(args.mode.to_args());
+
+    // The path: knot files are read and checked now (streams are the controller's to read:
+    // it inherits standard input), and its data must fit the gather budget.
+    let generator = args.mode.generator(&settings);
+    let entry = registry::generator(generator)
+        .with_context(|| format!("no trajectory generator `{generator}`"))?;
+    let path = (entry.build)(&settings)?;
+    if let Some(samples) = path.samples() {
+        check_budget(samples, settings.gather.every)?;
+    }
+    drop(path);
 
     let out_dir = settings.gather.out_dir.clone();
     remove_outputs(&out_dir);

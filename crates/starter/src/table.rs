@@ -15,8 +15,9 @@ pub fn render(s: &Summary, out_dir: &Path) -> String {
     };
     let _ = writeln!(
         t,
-        "QMARC {}: {verdict}\n  {} motors, {} cycles of {} µs, {}{}{}",
+        "QMARC {}{}: {verdict}\n  {} motors, {} cycles of {} µs, {}{}{}",
         s.mode,
+        if s.trajectory == s.mode { String::new() } else { format!(" ({})", s.trajectory) },
         s.motors.len(),
         s.cycles,
         s.period_us,

@@ -24,7 +24,7 @@ fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
     for w in &rt.warnings {
         eprintln!("qmarc-hwserver: warning: {w}");
     }
-    if !(args.max_counts_per_s > 0.0) {
+    if args.max_counts_per_s.is_nan() || args.max_counts_per_s <= 0.0 {
         anyhow::bail!("--max-counts-per-s must be > 0, found {}", args.max_counts_per_s);
     }
     let mut core = HwCore::new(backend).with_encoder_limit(args.max_counts_per_s);

@@ -1,0 +1,273 @@
+//! The `run` move through the real processes: the offline spline and the online PVT
+//! generator, from files and from a pipe, the examples of `knots/`, and bad knots.
+
+use qmarc_tests::{TestRun, default_config, knots, read_gather, read_summary, wait_with_timeout};
+use std::io::Write;
+use std::time::Duration;
+
+const TIMEOUT: Duration = Duration::from_secs(60);
+
+fn config_arg() -> String {
+    format!("--config={}", default_config().display())
+}
+
+/// The knots of an offline file: (time, positions).
+fn offline_knots(name: &str) -> Vec<(f64, Vec<f64>)> {
+    let text = std::fs::read_to_string(knots(name)).unwrap();
+    text.lines()
+        .skip(1)
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            (v[0], v[1..].to_vec())
+        })
+        .collect()
+}
+
+/// The knots of a PVT file: (time from the start, positions).
+fn pvt_knots(name: &str) -> Vec<(f64, Vec<f64>)> {
+    let text = std::fs::read_to_string(knots(name)).unwrap();
+    let mut t = 0.0;
+    text.lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let cols: Vec<&str> = l.split_whitespace().collect();
+            let pos = cols.chunks(4).map(|c| c[1].parse().unwrap()).collect();
+            let here = t;
+            t += cols[3].parse::<f64>().unwrap() / 1000.0;
+            (here, pos)
+        })
+        .collect()
+}
+
+/// Asserts that gathered row n (sample n at n·T) commands the positions of each knot that
+/// falls on a sample.
+fn assert_passes_through(rows: &[Vec<f64>], knots: &[(f64, Vec<f64>)], t0: f64) {
+    let mut checked = 0;
+    for (t, pos) in knots {
+        let exact = (t - t0) / 0.0004;
+        if (exact - exact.round()).abs() > 1e-6 {
+            continue;
+        }
+        checked += 1;
+        let n = exact.round() as usize;
+        let row = &rows[n];
+        assert_eq!(row[0] as usize, n);
+        for (m, p) in pos.iter().enumerate() {
+            let cmd = row[2 + 3 * m];
+            assert!((cmd - p).abs() < 1e-6, "motor {} at {t} s: command {cmd}, knot {p}", m + 1);
+        }
+    }
+    assert!(checked >= 2, "knots on samples: {checked}");
+}
+
+#[test]
+fn spline_run_passes_through_every_knot() {
+    let run = TestRun::new("spline");
+    let out = run.out("out");
+    let k = knots("sine-3motors.txt");
+    run.step_ok(
+        &out,
+        &["--deterministic", "run", "--method=spline", &format!("--knots={}", k.display())],
+    );
+    let s = read_summary(&out);
+    assert_eq!((s.mode.as_str(), s.trajectory.as_str(), s.cycles), ("run", "spline", 5001));
+    let (_, rows) = read_gather(&out);
+    assert_passes_through(&rows, &offline_knots("sine-3motors.txt"), 0.0);
+    // It tracks: the errors are the law's, not a runaway (thesis gains, sim plant).
+    for m in &s.motors {
+        assert!(m.max_error_counts < 400.0 && m.min_error_counts > -400.0, "{m:?}");
+    }
+    run.assert_clean();
+}
+
+#[test]
+fn pvt_run_from_a_file_meets_every_knot() {
+    let run = TestRun::new("pvtfile");
+    let out = run.out("out");
+    let k = knots("pvt-3motors.txt");
+    run.step_ok(
+        &out,
+        &["--deterministic", "run", "--method=pvt", &format!("--knots={}", k.display())],
+    );
+    let s = read_summary(&out);
+    assert_eq!((s.trajectory.as_str(), s.cycles, s.planned_samples), ("pvt", 4001, Some(4001)));
+    let (_, rows) = read_gather(&out);
+    assert_passes_through(&rows, &pvt_knots("pvt-3motors.txt"), 0.0);
+    run.assert_clean();
+}
+
+#[test]
+fn thesis_examples_run_on_two_motors() {
+    let run = TestRun::new("thesis");
+    for (method, file) in
+        [("spline", "thesis-a231-offline-2motors.txt"), ("pvt", "thesis-a232-pvt-2motors.txt")]
+    {
+        let out = run.out(method);
+        let k = knots(file);
+        run.step_ok(
+            &out,
+            &[
+                "--motors=2",
+                "--deterministic",
+                "run",
+                &format!("--method={method}"),
+                &format!("--knots={}", k.display()),
+            ],
+        );
+        let s = read_summary(&out);
+        assert!(s.ok && s.motors.len() == 2, "{file}");
+        let (header, rows) = read_gather(&out);
+        assert_eq!(header.len(), 2 + 3 * 2);
+        let knots = if method == "spline" { offline_knots(file) } else { pvt_knots(file) };
+        assert_passes_through(&rows, &knots, 0.0);
+    }
+    run.assert_clean();
+}
+
+/// Feeds PVT knots into a running starter's standard input: the first three at once, the
+/// rest paced while the robot moves. With `close` false the pipe is held open after them,
+/// so the stream runs dry.
+fn feed(
+    stdin: std::process::ChildStdin,
+    lines: Vec<String>,
+    close: bool,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let mut stdin = stdin;
+        for (i, l) in lines.iter().enumerate() {
+            if stdin.write_all(l.as_bytes()).and_then(|()| stdin.write_all(b"\n")).is_err() {
+                return;
+            }
+            let _ = stdin.flush();
+            if i >= 2 {
+                std::thread::sleep(Duration::from_millis(5)); // a 20 ms knot every 5 ms
+            }
+        }
+        if !close {
+            std::thread::sleep(Duration::from_secs(3));
+        }
+    })
+}
+
+fn pvt_lines(n: usize) -> Vec<String> {
+    std::fs::read_to_string(knots("pvt-3motors.txt"))
+        .unwrap()
+        .lines()
+        .take(n)
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn pvt_stream_through_a_pipe_runs_while_the_robot_moves() {
+    let run = TestRun::new("pvtpipe");
+    let out = run.out("out");
+    let mut child = run.spawn_starter(&[
+        &config_arg(),
+        &format!("--out={}", out.display()),
+        "run",
+        "--method=pvt",
+        "--knots=-",
+    ]);
+    let writer = feed(child.stdin.take().unwrap(), pvt_lines(usize::MAX), true);
+    let r = wait_with_timeout(child, TIMEOUT);
+    writer.join().unwrap();
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    let s = read_summary(&out);
+    assert_eq!(s.planned_samples, None, "a stream's length is unknown before it ends");
+    let (_, rows) = read_gather(&out);
+    // Real time: a late wake skips samples, but the path ends at its last knot, 1.6 s.
+    assert_eq!(rows.last().unwrap()[0], 4000.0);
+    assert_eq!(rows.len() as u64, s.cycles);
+    run.assert_clean();
+}
+
+#[test]
+fn a_stream_that_runs_dry_faults_with_the_motors_held_then_disabled() {
+    let run = TestRun::new("starved");
+    let out = run.out("out");
+    let mut child = run.spawn_starter(&[
+        &config_arg(),
+        &format!("--out={}", out.display()),
+        "run",
+        "--method=pvt",
+        "--knots=-",
+    ]);
+    // 10 knots of 20 ms: the path is known up to 180 ms, then nothing comes.
+    let writer = feed(child.stdin.take().unwrap(), pvt_lines(10), false);
+    let r = wait_with_timeout(child, TIMEOUT);
+    writer.join().unwrap();
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    let s = read_summary(&out);
+    let fault = s.fault.expect("a fault");
+    assert_eq!(fault.kind, "trajectory_starved");
+    assert_eq!(fault.cycle, 451, "the first sample after the last knot (180 ms / 400 µs = 450)");
+    assert!(fault.message.ends_with("all motors disabled"), "{}", fault.message);
+    assert!(r.stdout.contains("FAULT trajectory_starved"), "{}", r.stdout);
+    // Held: the command stays at the last knot for the hold time (50 ms), then the end.
+    let (_, rows) = read_gather(&out);
+    let held: Vec<&Vec<f64>> = rows.iter().filter(|r| r[0] >= 451.0).collect();
+    assert!(!held.is_empty());
+    let last_knot = &rows.iter().find(|r| r[0] == 450.0).unwrap();
+    for r in &held {
+        for m in 0..3 {
+            assert_eq!(r[2 + 3 * m], last_knot[2 + 3 * m], "command held at cycle {}", r[0]);
+        }
+    }
+    assert!(held.len() <= 125, "held for 50 ms (125 cycles) at most: {}", held.len());
+    run.assert_clean();
+}
+
+#[test]
+fn a_bad_knot_in_a_stream_ends_the_move_naming_line_and_column() {
+    let run = TestRun::new("badstream");
+    let out = run.out("out");
+    let mut child = run.spawn_starter(&[
+        &config_arg(),
+        &format!("--out={}", out.display()),
+        "run",
+        "--method=pvt",
+        "--knots=-",
+    ]);
+    let mut lines = pvt_lines(8);
+    lines[6] = lines[6].replacen("20.000", "25.000", 1);
+    let writer = feed(child.stdin.take().unwrap(), lines, true);
+    let r = wait_with_timeout(child, TIMEOUT);
+    writer.join().unwrap();
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    let fault = read_summary(&out).fault.expect("a fault");
+    assert_eq!(fault.kind, "trajectory_error");
+    assert!(
+        fault.message.starts_with("-:7:")
+            && fault
+                .message
+                .contains("motor 2 time to the next knot 20 ms differs from motor 1's 25 ms"),
+        "{}",
+        fault.message
+    );
+    run.assert_clean();
+}
+
+#[test]
+fn a_bad_knot_file_is_refused_before_anything_starts() {
+    let run = TestRun::new("badknots");
+    let bad = run.dir.join("bad.txt");
+    std::fs::write(&bad, "3\n0.0 0 0 0\n0.25 100 100\n0.5 0 0 0\n").unwrap();
+    let r = run.starter(&[&config_arg(), "run", &format!("--knots={}", bad.display())], TIMEOUT);
+    assert_eq!(r.code, Some(1));
+    let expected =
+        format!("{}:3:13: expected 4 columns (time and 3 motor positions), found 3", bad.display());
+    assert!(r.stderr.contains(&expected), "{}\nexpected: {expected}", r.stderr);
+    assert!(run.location().files().is_empty(), "nothing was started");
+    // A path that does not start where the robot is, likewise.
+    std::fs::write(&bad, "2\n0.0 500 0 0\n0.5 0 0 0\n").unwrap();
+    let r = run.starter(&[&config_arg(), "run", &format!("--knots={}", bad.display())], TIMEOUT);
+    assert_eq!(r.code, Some(1));
+    assert!(
+        r.stderr.contains("motor 1 is at 0 counts but the path starts at 500 counts, more than the 100-count start tolerance away"),
+        "{}",
+        r.stderr
+    );
+    run.assert_clean();
+}
