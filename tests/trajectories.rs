@@ -271,3 +271,37 @@ fn a_bad_knot_file_is_refused_before_anything_starts() {
     );
     run.assert_clean();
 }
+
+#[test]
+fn pvt_stream_through_a_fifo_runs() {
+    let run = TestRun::new("pvtfifo");
+    let out = run.out("out");
+    let fifo = run.dir.join("knots.fifo");
+    let c_path = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c_path.as_ptr(), 0o600) }, 0, "mkfifo");
+    let child = run.spawn_starter(&[
+        &config_arg(),
+        &format!("--out={}", out.display()),
+        "--deterministic",
+        "run",
+        "--method=pvt",
+        &format!("--knots={}", fifo.display()),
+    ]);
+    // Opening the FIFO for writing waits for the controller to open it for reading.
+    let writer = std::thread::spawn(move || {
+        let f = std::fs::OpenOptions::new().write(true).open(&fifo).unwrap();
+        let mut w = std::io::BufWriter::new(f);
+        for l in pvt_lines(usize::MAX) {
+            writeln!(w, "{l}").unwrap();
+        }
+    });
+    let r = wait_with_timeout(child, TIMEOUT);
+    writer.join().unwrap();
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    let s = read_summary(&out);
+    assert_eq!((s.trajectory.as_str(), s.cycles), ("pvt", 4001));
+    let (_, rows) = read_gather(&out);
+    assert_passes_through(&rows, &pvt_knots("pvt-3motors.txt"), 0.0);
+    run.assert_clean();
+}
