@@ -229,3 +229,28 @@ fn killing_the_starter_stops_both_children_with_the_motors_disabled() {
     assert!(stale.files().is_empty(), "stale files removed: {:?}", stale.files());
     run.assert_clean();
 }
+
+#[test]
+fn a_controller_that_cannot_start_stops_the_hwserver() {
+    use std::os::unix::fs::PermissionsExt;
+    let run = TestRun::new("nocontrol");
+    let bins = run.dir.join("bin");
+    std::fs::create_dir_all(&bins).unwrap();
+    std::os::unix::fs::symlink(
+        qmarc_tests::bin_dir().join("qmarc-hwserver"),
+        bins.join("qmarc-hwserver"),
+    )
+    .unwrap();
+    let broken = bins.join("qmarc-controller");
+    std::fs::write(&broken, b"not a program").unwrap();
+    std::fs::set_permissions(&broken, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let r =
+        run.starter(&[&config_arg(), &format!("--bin-dir={}", bins.display()), "step"], TIMEOUT);
+    assert_eq!(r.code, Some(1), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("cannot start") && r.stderr.contains("qmarc-controller"),
+        "{}",
+        r.stderr
+    );
+    run.assert_clean();
+}
