@@ -251,9 +251,10 @@ impl Fault {
             FaultKind::HwserverShutdown => {
                 "the hwserver was stopped and disabled the motors".to_string()
             }
-            FaultKind::Watchdog => {
-                "the hwserver's watchdog fired (controller too late)".to_string()
-            }
+            FaultKind::Watchdog => "the hwserver's watchdog fired: the controller was silent for \
+                longer than hwserver.watchdog_periods with motors enabled (without PREEMPT_RT, \
+                host stalls of a few ms can do that: raise the limit)"
+                .to_string(),
             FaultKind::HardwareFault => "the hardware reported an error".to_string(),
             FaultKind::EncoderFault => format!(
                 "motor {} encoder fault: its count jumped further than the motor can move",
