@@ -39,14 +39,7 @@ fn bench_cycle(c: &mut Criterion) {
     // A long step so the path never ends while criterion iterates.
     let mut s_long = s.clone();
     s_long.step.duration_s = 3_600.0;
-    let plan = MovePlan {
-        mode: "step".into(),
-        n_motors: 3,
-        period_ns: 400_000,
-        gather_every: 4,
-        deterministic: false,
-        starve_hold_cycles: 0,
-    };
+    let plan = MovePlan { gather_every: 4, ..MovePlan::new("step", 3, 400_000) };
     let generator = (GENERATORS[0].build)(&s_long).unwrap();
     let law = Box::new(PidFf::from_settings(&s));
     let mut servo = Servo::new(plan, generator, law, Box::new(MockClock::new(0)));

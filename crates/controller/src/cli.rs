@@ -27,6 +27,9 @@ pub struct MoveOptions {
     /// Lock-step simulated clock: two runs produce byte-identical data files.
     #[arg(long)]
     pub deterministic: bool,
+    /// Move although the frame is not homed; software position limits are then off.
+    #[arg(long)]
+    pub unhomed: bool,
 }
 
 impl MoveOptions {
@@ -66,6 +69,9 @@ impl MoveOptions {
         if self.deterministic {
             a.push("--deterministic".into());
         }
+        if self.unhomed {
+            a.push("--unhomed".into());
+        }
         a
     }
 }
@@ -77,6 +83,8 @@ pub enum Mode {
     Step(StepArgs),
     /// Run a path from a knot file or stream (thesis 3.12, A.2.3).
     Run(RunArgs),
+    /// Home the robot on its top limit switches, one motor at a time (thesis 3.10.1.1).
+    Home,
 }
 
 /// Options of `run`.
@@ -107,6 +115,7 @@ impl Mode {
         match self {
             Mode::Step(_) => "step",
             Mode::Run(_) => "run",
+            Mode::Home => "home",
         }
     }
 
@@ -115,6 +124,7 @@ impl Mode {
         match self {
             Mode::Step(_) => "step",
             Mode::Run(_) => &s.trajectory.method,
+            Mode::Home => "home",
         }
     }
 
@@ -137,6 +147,7 @@ impl Mode {
                     s.set_method(m)?;
                 }
             }
+            Mode::Home => {}
         }
         Ok(())
     }
@@ -164,6 +175,7 @@ impl Mode {
                 }
                 v
             }
+            Mode::Home => vec!["home".to_string()],
         }
     }
 }

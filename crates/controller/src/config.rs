@@ -68,6 +68,48 @@ pub struct MotorGains {
     pub notch: [f64; 4],
 }
 
+/// Limits and homing of one motor (thesis 3.10; PMAC Ixx11 for the instantaneous limit).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotorSafety {
+    /// Software position limits `[min, max]`, counts in the homed frame (active once homed).
+    pub soft_limits: [f64; 2],
+    /// Largest |command − actual|, counts, before the move is stopped.
+    pub max_following_error_counts: f64,
+    /// Largest |Σ (command − actual)| over the move (eq. 3-1's IE), counts.
+    pub max_integrated_error_counts: f64,
+    /// Homing: where home is, counts from the top switch (away from it).
+    pub home_offset_counts: f64,
+    /// Homing: the direction of the top switch, −1 or +1 counts.
+    pub top_direction: f64,
+}
+
+impl Default for MotorSafety {
+    fn default() -> MotorSafety {
+        MotorSafety {
+            soft_limits: [-9_000.0, 10_000.0],
+            max_following_error_counts: 2_000.0,
+            max_integrated_error_counts: 200_000.0,
+            home_offset_counts: 9_500.0,
+            top_direction: -1.0,
+        }
+    }
+}
+
+/// How homing moves (thesis 3.10.1.1).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HomingSettings {
+    /// Speed toward the top switch and to the home offset, counts/s.
+    pub velocity_counts_per_s: f64,
+    /// Speed backing off the switch, counts/s.
+    pub creep_counts_per_s: f64,
+    /// The switch must clear within this many counts of backing off (thesis: 10).
+    pub clear_within_counts: f64,
+    /// The switch must be found within this travel, counts.
+    pub max_travel_counts: f64,
+    /// Time each motor rests at home before the next one starts, s.
+    pub settle_s: f64,
+}
+
 /// Timer and real-time priorities.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TimerSettings {
@@ -145,6 +187,16 @@ pub struct SimSettings {
     pub top_switch_counts: f64,
     /// Bottom limit switch position, counts.
     pub bottom_switch_counts: f64,
+    /// The robot starts homed (see `hwserver::SimParams::homed`).
+    pub homed: bool,
+    /// Offset of an unhomed counter frame, counts.
+    pub counter_offset: i64,
+    /// Fault injection: this motor (1-based) does not move.
+    pub stall_motor: Option<usize>,
+    /// Fault injection: this motor's (1-based) top switch sticks once tripped.
+    pub stuck_top_motor: Option<usize>,
+    /// Where the simulator writes its event log when it ends.
+    pub events_file: Option<PathBuf>,
 }
 
 /// The checked settings.
@@ -170,12 +222,18 @@ pub struct Settings {
     pub step: StepSettings,
     /// The `run` move.
     pub trajectory: TrajectorySettings,
+    /// Homing.
+    pub homing: HomingSettings,
+    /// Missed periods in a row that end a move (`overrun`).
+    pub max_missed_in_row: u64,
     /// The hwserver link.
     pub hwserver: HwServerSettings,
     /// The simulator.
     pub sim: SimSettings,
     /// Gains of every `[[motor]]` table (at least `n_motors`, at most [`MAX_MOTORS`]).
     pub motors: Vec<MotorGains>,
+    /// Limits and homing of every `[[motor]]` table.
+    pub safety: Vec<MotorSafety>,
 }
 
 impl Settings {
@@ -425,6 +483,10 @@ struct RawFile {
     #[serde(default)]
     trajectory: RawTrajectory,
     #[serde(default)]
+    homing: RawHoming,
+    #[serde(default)]
+    safety: RawSafety,
+    #[serde(default)]
     hwserver: RawHwServer,
     #[serde(default)]
     sim: RawSim,
@@ -477,6 +539,22 @@ struct RawTrajectory {
 
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
+struct RawHoming {
+    velocity_counts_per_s: S<f64>,
+    creep_counts_per_s: S<f64>,
+    clear_within_counts: S<f64>,
+    max_travel_counts: S<f64>,
+    settle_s: S<f64>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawSafety {
+    max_missed_in_row: S<i64>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
 struct RawHwServer {
     backend: S<String>,
     watchdog_periods: S<i64>,
@@ -494,6 +572,11 @@ struct RawSim {
     start_counts: S<Vec<f64>>,
     top_switch_counts: S<f64>,
     bottom_switch_counts: S<f64>,
+    homed: S<bool>,
+    counter_offset: S<i64>,
+    stall_motor: S<i64>,
+    stuck_top_motor: S<i64>,
+    events_file: S<String>,
 }
 
 #[derive(Deserialize)]
@@ -505,6 +588,11 @@ struct RawMotor {
     kvff: S<f64>,
     kaff: S<f64>,
     notch: S<Vec<f64>>,
+    soft_limits: S<Vec<f64>>,
+    max_following_error_counts: S<f64>,
+    max_integrated_error_counts: S<f64>,
+    home_offset_counts: S<f64>,
+    top_direction: S<i64>,
 }
 
 /// Takes an optional spanned value or its default, checking it with `ok`.
@@ -528,6 +616,11 @@ fn in_range(lo: i64, hi: i64) -> impl FnOnce(&i64) -> Result<(), String> {
     move |v| {
         if (lo..=hi).contains(v) { Ok(()) } else { Err(format!("must be {lo}‥{hi}, found {v}")) }
     }
+}
+
+/// 1-based motor number, 0 meaning none.
+fn motor_or_none(v: i64) -> Option<usize> {
+    (v > 0).then_some(v as usize)
 }
 
 fn finite(v: &f64) -> Result<(), String> {
@@ -716,6 +809,30 @@ impl RawFile {
                 10_500.0,
                 finite,
             )?,
+            homed: take(src, &s.homed, "sim.homed", true, |_| Ok(()))?,
+            counter_offset: take(
+                src,
+                &s.counter_offset,
+                "sim.counter_offset",
+                0,
+                in_range(-(1 << 23), 1 << 23),
+            )?,
+            stall_motor: motor_or_none(take(
+                src,
+                &s.stall_motor,
+                "sim.stall_motor",
+                0,
+                in_range(0, n_motors as i64),
+            )?),
+            stuck_top_motor: motor_or_none(take(
+                src,
+                &s.stuck_top_motor,
+                "sim.stuck_top_motor",
+                0,
+                in_range(0, n_motors as i64),
+            )?),
+            events_file: take(src, &s.events_file, "sim.events_file", String::new(), |_| Ok(()))
+                .map(|f| (!f.is_empty()).then(|| PathBuf::from(f)))?,
         };
         if sim.top_switch_counts == sim.bottom_switch_counts {
             let span = s.bottom_switch_counts.as_ref().map_or(0..0, Spanned::span);
@@ -745,6 +862,7 @@ impl RawFile {
             ));
         }
         let mut motors = Vec::with_capacity(self.motor.len());
+        let mut safety = Vec::with_capacity(self.motor.len());
         for (i, m) in self.motor.iter().enumerate() {
             let name = |k: &str| format!("motor[{}].{k}", i + 1);
             let need = |v: &S<f64>, k: &str| -> Result<f64, ConfigLoadError> {
@@ -763,7 +881,108 @@ impl RawFile {
                 kaff: need(&r.kaff, "kaff")?,
                 notch: [notch[0], notch[1], notch[2], notch[3]],
             });
+            let d = MotorSafety::default();
+            let soft = take(
+                src,
+                &r.soft_limits,
+                &name("soft_limits"),
+                d.soft_limits.to_vec(),
+                |v| match v.as_slice() {
+                    [lo, hi] if lo.is_finite() && hi.is_finite() && lo < hi => Ok(()),
+                    _ => Err(format!("must be [min, max] with min < max, found {v:?}")),
+                },
+            )?;
+            let positive = |v: &f64| {
+                if v.is_finite() && *v > 0.0 {
+                    Ok(())
+                } else {
+                    Err(format!("must be a finite number > 0, found {v}"))
+                }
+            };
+            safety.push(MotorSafety {
+                soft_limits: [soft[0], soft[1]],
+                max_following_error_counts: take(
+                    src,
+                    &r.max_following_error_counts,
+                    &name("max_following_error_counts"),
+                    d.max_following_error_counts,
+                    positive,
+                )?,
+                max_integrated_error_counts: take(
+                    src,
+                    &r.max_integrated_error_counts,
+                    &name("max_integrated_error_counts"),
+                    d.max_integrated_error_counts,
+                    positive,
+                )?,
+                home_offset_counts: take(
+                    src,
+                    &r.home_offset_counts,
+                    &name("home_offset_counts"),
+                    d.home_offset_counts,
+                    |v| {
+                        if v.is_finite() && *v >= 0.0 {
+                            Ok(())
+                        } else {
+                            Err(format!("must be a finite number ≥ 0, found {v}"))
+                        }
+                    },
+                )?,
+                top_direction: take(src, &r.top_direction, &name("top_direction"), -1, |v| {
+                    if *v == 1 || *v == -1 {
+                        Ok(())
+                    } else {
+                        Err(format!("must be -1 or 1, found {v}"))
+                    }
+                })? as f64,
+            });
         }
+
+        let hm = &self.homing;
+        let homing = HomingSettings {
+            velocity_counts_per_s: take(
+                src,
+                &hm.velocity_counts_per_s,
+                "homing.velocity_counts_per_s",
+                1_000.0,
+                positive,
+            )?,
+            creep_counts_per_s: take(
+                src,
+                &hm.creep_counts_per_s,
+                "homing.creep_counts_per_s",
+                100.0,
+                positive,
+            )?,
+            clear_within_counts: take(
+                src,
+                &hm.clear_within_counts,
+                "homing.clear_within_counts",
+                10.0,
+                positive,
+            )?,
+            max_travel_counts: take(
+                src,
+                &hm.max_travel_counts,
+                "homing.max_travel_counts",
+                30_000.0,
+                positive,
+            )?,
+            settle_s: take(src, &hm.settle_s, "homing.settle_s", 0.2, |v| {
+                if v.is_finite() && (0.0..=10.0).contains(v) {
+                    Ok(())
+                } else {
+                    Err(format!("must be 0‥10 s, found {v}"))
+                }
+            })?,
+        };
+        let max_missed_in_row = take(
+            src,
+            &self.safety.max_missed_in_row,
+            "safety.max_missed_in_row",
+            25,
+            in_range(1, 1_000_000),
+        )? as u64;
 
         Ok(Settings {
             source: src.path.to_path_buf(),
@@ -781,6 +1000,8 @@ impl RawFile {
             gather: GatherSettings { every, out_dir: PathBuf::from(out_dir) },
             step: StepSettings { size, duration_s },
             trajectory,
+            homing,
+            max_missed_in_row,
             hwserver: HwServerSettings {
                 max_counts_per_s,
                 backend,
@@ -790,6 +1011,7 @@ impl RawFile {
             },
             sim,
             motors,
+            safety,
         })
     }
 }
@@ -845,7 +1067,7 @@ mod tests {
         );
         check(
             &format!("{MOTOR}{MOTOR}[[motor]]\nkp = 1.0\nkpp = 2\n"),
-            "q.toml:15:1: motor[3].kpp: unknown field `kpp`, expected one of `kp`, `ki`, `kd`, `kvff`, `kaff`, `notch`",
+            "q.toml:15:1: motor[3].kpp: unknown field `kpp`, expected one of `kp`, `ki`, `kd`, `kvff`, `kaff`, `notch`, `soft_limits`, `max_following_error_counts`, `max_integrated_error_counts`, `home_offset_counts`, `top_direction`",
         );
         check(
             &format!("{MOTOR}{MOTOR}[[motor]]\nkp = \"big\"\n"),
@@ -872,7 +1094,7 @@ mod tests {
         );
         check(
             "[bogus]\nx = 1\n",
-            "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `hwserver`, `sim`, `motor`",
+            "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `motor`",
         );
         check(
             "[trajectory]\nmethod = \"step\"\n",

@@ -22,8 +22,7 @@
 //! impl HwLink for Still {
 //!     fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, LinkError> { Ok(req.response()) }
 //! }
-//! let plan = MovePlan { mode: "step".into(), n_motors: 1, period_ns: 400_000, gather_every: 1,
-//!                       deterministic: true, starve_hold_cycles: 0 };
+//! let plan = MovePlan { deterministic: true, ..MovePlan::new("step", 1, 400_000) };
 //! let gains = MotorGains { kp: 182_000.0, ..MotorGains::default() };
 //! let mut servo = Servo::new(plan, Box::new(Step::new(100, 0.004, 0.0004, 1)),
 //!                            Box::new(PidFf::new(&[gains])), Box::new(MockClock::new(0)));
@@ -40,6 +39,7 @@ pub mod config;
 #[doc = include_str!("../../../docs/extending.md")]
 pub mod extending {}
 pub mod gather;
+pub mod homing;
 pub mod knots;
 pub mod law;
 pub mod link;

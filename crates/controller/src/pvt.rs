@@ -373,6 +373,34 @@ impl TrajectoryGenerator for Pvt {
     fn failure(&self) -> Option<String> {
         self.failed.then(|| self.stored_failure().to_string())
     }
+
+    /// From a file: every sample of every segment (the cubics can overshoot their knots).
+    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
+        let PvtSource::Knots(knots) = &self.source else { return None };
+        let mut b = crate::traj::bounds_of(knots.iter().map(|k| &k.pos));
+        let mut seg_start = 0.0;
+        let mut n = 0u64;
+        for w in knots.windows(2) {
+            let segs: Vec<Hermite> = (0..self.n_motors)
+                .map(|m| {
+                    Hermite::new(w[0].pos[m], w[0].vel[m], w[1].pos[m], w[1].vel[m], w[0].dt_s)
+                })
+                .collect();
+            loop {
+                let tau = n as f64 * self.period_s - seg_start;
+                if tau > w[0].dt_s + 1e-9 {
+                    break;
+                }
+                for (m, s) in segs.iter().enumerate() {
+                    let p = s.position(tau);
+                    b[m] = (b[m].0.min(p), b[m].1.max(p));
+                }
+                n += 1;
+            }
+            seg_start += w[0].dt_s;
+        }
+        Some(b)
+    }
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 //! choose from these tables (see `docs/extending.md`).
 
 use crate::config::Settings;
+use crate::homing::Homing;
 use crate::law::{PidFf, ServoLaw};
 use crate::pvt::Pvt;
 use crate::spline::CubicSpline;
@@ -53,6 +54,12 @@ pub const GENERATORS: &[GeneratorEntry] = &[
         description: "offline natural cubic spline through time/position knots (thesis 3.12.1)",
         needs_knots: true,
         build: |s| Ok(Box::new(CubicSpline::from_settings(s)?)),
+    },
+    GeneratorEntry {
+        name: "home",
+        description: "homing on the top limit switches, one motor at a time (thesis 3.10.1.1)",
+        needs_knots: false,
+        build: |s| Ok(Box::new(Homing::from_settings(s))),
     },
     GeneratorEntry {
         name: "pvt",

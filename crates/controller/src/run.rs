@@ -9,10 +9,10 @@ use crate::cli::Mode;
 use crate::config::Settings;
 use crate::link::{HwLink, IoxLink, LinkConnectError, LinkTimeouts};
 use crate::registry;
-use crate::servo::{MoveError, MovePlan, Servo};
+use crate::servo::{MoveError, MoveLimits, MovePlan, Servo};
 use crate::summary::{MotorSummary, Summary, TimingSummary};
 use qmarc_proto::service::IpcLocation;
-use qmarc_proto::{HwMsg, MsgType};
+use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType};
 use qmarc_timer::MonotonicClock;
 use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
 use std::io::Write;
@@ -60,6 +60,8 @@ pub struct RunOptions {
     pub deterministic: bool,
     /// How long to wait for the hwserver to appear.
     pub connect_wait: Duration,
+    /// Move in a frame that may not be homed (software limits off).
+    pub unhomed: bool,
 }
 
 /// Runs `mode` with `settings` against the hwserver at `opts.location`, writes the data
@@ -74,15 +76,8 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
     let out_dir = settings.gather.out_dir.clone();
     remove_outputs(&out_dir);
 
-    let plan = MovePlan {
-        mode: mode.name().to_string(),
-        n_motors: settings.n_motors,
-        period_ns: settings.period_ns(),
-        gather_every: settings.gather.every,
-        deterministic: opts.deterministic,
-        starve_hold_cycles: (settings.trajectory.starve_hold_ms * 1e6 / settings.period_ns() as f64)
-            .ceil() as u64,
-    };
+    let plan = plan_for(settings, mode, opts.deterministic, opts.unhomed);
+    let homing = matches!(mode, Mode::Home);
     let mut servo = Servo::new(
         plan,
         (entry.build)(settings)?,
@@ -108,6 +103,12 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
             let mut link = IoxLink::connect(&location, timeouts, wait)?;
             let stop = qmarc_timer::stop::flag();
             let moved = servo.run(&mut link, ticker.as_mut(), stop);
+            // Homing ends with every motor at its home offset: that is position 0 from now
+            // on, and the frame is homed (thesis 3.10.1.1).
+            if homing && moved.is_ok() && servo.fault().is_none() {
+                let zero = HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS);
+                link.exchange(&zero).map_err(MoveError::from)?;
+            }
             // The thesis' last message: the hwserver makes the hardware safe and exits.
             if !crate::servo::server_gone(servo.fault()) {
                 let _ = link.exchange(&HwMsg::request(MsgType::Exit));
@@ -120,9 +121,43 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
     let (servo, rt, result) = handle.join().map_err(|_| RunError::Thread("panicked".into()))?;
     result?;
 
-    let summary = summarize(settings, &servo, &rt, opts.deterministic);
+    let mut summary = summarize(settings, &servo, &rt, opts.deterministic);
+    if homing {
+        summary.homing = servo.generator_summary();
+    }
+    if opts.unhomed && !homing {
+        summary.warnings.push(
+            "--unhomed: the frame may not be homed; software position limits were off".into(),
+        );
+    }
     write_outputs(&out_dir, &servo, &summary)?;
     Ok(summary)
+}
+
+/// The plan of `mode` with `settings`: the limits of the settings, software limits only in a
+/// homed frame (off when homing or with `--unhomed`), homing required unless homing or
+/// `--unhomed`, the hwserver's switch latch off while homing.
+pub fn plan_for(settings: &Settings, mode: &Mode, deterministic: bool, unhomed: bool) -> MovePlan {
+    let homing = matches!(mode, Mode::Home);
+    let mut limits = MoveLimits::none();
+    let mut soft = [(f64::NEG_INFINITY, f64::INFINITY); MAX_MOTORS];
+    for (m, s) in settings.safety.iter().enumerate().take(settings.n_motors) {
+        soft[m] = (s.soft_limits[0], s.soft_limits[1]);
+        limits.max_following_error[m] = s.max_following_error_counts;
+        limits.max_integrated_error[m] = s.max_integrated_error_counts;
+    }
+    limits.soft = (!homing && !unhomed).then_some(soft);
+    limits.max_missed_in_row = settings.max_missed_in_row;
+    MovePlan {
+        gather_every: settings.gather.every,
+        deterministic,
+        starve_hold_cycles: (settings.trajectory.starve_hold_ms * 1e6 / settings.period_ns() as f64)
+            .ceil() as u64,
+        limits,
+        require_homed: !homing && !unhomed,
+        monitor_switches: !homing,
+        ..MovePlan::new(mode.name(), settings.n_motors, settings.period_ns())
+    }
 }
 
 /// The summary of a finished move.
@@ -156,6 +191,7 @@ pub fn summarize(
             .collect(),
         timing: TimingSummary::new(servo.timing(), settings.timer.method.name(), &rt.policy()),
         warnings,
+        homing: None,
     }
 }
 

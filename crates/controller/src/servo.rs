@@ -11,12 +11,38 @@ use crate::law::{ServoInput, ServoLaw};
 use crate::link::{HwLink, LinkError};
 use crate::summary::{ErrorStats, Fault, FaultKind, FaultReport, TimingStats};
 use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
-use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType, Status};
+use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_timer::{Clock, Tick, Ticker, TickerError};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Samples gathered when a generator cannot say how long its path is.
 pub const STREAM_GATHER_SAMPLES: u64 = 150_000;
+
+/// The limits a move is held to (thesis 3.10; PMAC Ixx11).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MoveLimits {
+    /// Software position limits `(min, max)` per motor, counts; `None`: off (not homed, or
+    /// `--unhomed`).
+    pub soft: Option<[(f64, f64); MAX_MOTORS]>,
+    /// Largest |command − actual| per motor, counts.
+    pub max_following_error: [f64; MAX_MOTORS],
+    /// Largest |Σ (command − actual)| per motor, counts.
+    pub max_integrated_error: [f64; MAX_MOTORS],
+    /// Missed periods in a row that end the move.
+    pub max_missed_in_row: u64,
+}
+
+impl MoveLimits {
+    /// No limits at all.
+    pub fn none() -> MoveLimits {
+        MoveLimits {
+            soft: None,
+            max_following_error: [f64::INFINITY; MAX_MOTORS],
+            max_integrated_error: [f64::INFINITY; MAX_MOTORS],
+            max_missed_in_row: u64::MAX,
+        }
+    }
+}
 
 /// What a move is, apart from its path and law.
 #[derive(Debug, Clone, PartialEq)]
@@ -33,6 +59,50 @@ pub struct MovePlan {
     pub deterministic: bool,
     /// When the trajectory starves: cycles to hold the last command before disabling.
     pub starve_hold_cycles: u64,
+    /// Limits checked before and during the move.
+    pub limits: MoveLimits,
+    /// Refuse to move unless every motor's frame is homed.
+    pub require_homed: bool,
+    /// Latch limit switches in the hwserver (off while homing: homing watches its switch).
+    pub monitor_switches: bool,
+}
+
+impl MovePlan {
+    /// A plan for `n_motors` at `period_ns`: gather every cycle, real time, no limits, no
+    /// homing required, switches monitored.
+    pub fn new(mode: &str, n_motors: usize, period_ns: u64) -> MovePlan {
+        MovePlan {
+            mode: mode.to_string(),
+            n_motors,
+            period_ns,
+            gather_every: 1,
+            deterministic: false,
+            starve_hold_cycles: 0,
+            limits: MoveLimits::none(),
+            require_homed: false,
+            monitor_switches: true,
+        }
+    }
+}
+
+/// Where a move is. `run` goes Idle → Preparing → Moving (or Homing) → Done, or to Fault from
+/// Preparing onwards; Holding lies between Moving and Fault when a knot stream runs dry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// Nothing happened yet.
+    Idle,
+    /// Reading the robot, starting the path, enabling the motors.
+    Preparing,
+    /// Homing, one motor at a time.
+    Homing,
+    /// Following the path.
+    Moving,
+    /// Holding the last command after the trajectory starved.
+    Holding,
+    /// The path ended; motors disabled.
+    Done,
+    /// A fault ended the move; motors disabled where the hwserver could be reached.
+    Fault,
 }
 
 /// The move could not start (nothing was enabled), or its timer failed.
@@ -54,6 +124,30 @@ pub enum MoveError {
     /// The gathered data would not fit its memory budget.
     #[error(transparent)]
     Gather(#[from] crate::gather::GatherBudgetError),
+    /// A motor's frame is not homed.
+    #[error(
+        "motor {motor} is not homed: run `qmarc-starter home` first, or give --unhomed (software \
+         limits off)"
+    )]
+    NotHomed {
+        /// 1-based motor.
+        motor: usize,
+    },
+    /// The path leaves the software limits.
+    #[error(
+        "motor {motor}: the path reaches {value:.1} counts, outside its software limits \
+         [{min}, {max}]: refused before the move"
+    )]
+    OutsideSoftLimits {
+        /// 1-based motor.
+        motor: usize,
+        /// The extreme command, counts.
+        value: f64,
+        /// Lower limit.
+        min: f64,
+        /// Upper limit.
+        max: f64,
+    },
 }
 
 /// How a cycle ended.
@@ -86,6 +180,9 @@ pub struct Servo {
     planned_samples: Option<u64>,
     /// Holding the last command after the trajectory starved.
     holding: bool,
+    phase: Phase,
+    /// Σ (command − actual) per motor over the move.
+    integrated_error: [f64; MAX_MOTORS],
 }
 
 impl Servo {
@@ -115,7 +212,19 @@ impl Servo {
             fault: None,
             planned_samples: None,
             holding: false,
+            phase: Phase::Idle,
+            integrated_error: [0.0; MAX_MOTORS],
         }
+    }
+
+    /// Where the move is.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// What the generator reports for `summary.json` (homing: where it found the switches).
+    pub fn generator_summary(&self) -> Option<serde_json::Value> {
+        self.generator.summary()
     }
 
     /// The plan.
@@ -147,7 +256,9 @@ impl Servo {
     pub fn fault_report(&self) -> Option<FaultReport> {
         let f = self.fault?;
         let mut report = f.report();
-        if let (FaultKind::TrajectoryError, Some(why)) = (f.kind, self.generator.failure()) {
+        if let (FaultKind::TrajectoryError | FaultKind::HomingFailed, Some(why)) =
+            (f.kind, self.generator.failure())
+        {
             report.message = format!("{why}; {}", report.message);
         }
         Some(report)
@@ -178,11 +289,28 @@ impl Servo {
     /// where the robot is, start the path from there, reset the law, size the gather buffer
     /// from the path's length, and only then enable the motors.
     pub fn prepare(&mut self, link: &mut dyn HwLink) -> Result<(), MoveError> {
+        self.phase = Phase::Preparing;
         Servo::request(link, HwMsg::request(MsgType::ClearSafetyStatus))?;
-        Servo::request(link, HwMsg::request(MsgType::EnableSafety))?;
+        let monitor =
+            if self.plan.monitor_switches { MsgType::EnableSafety } else { MsgType::DisableSafety };
+        Servo::request(link, HwMsg::request(monitor))?;
         let start = Servo::request(link, HwMsg::read_all_encoders())?;
         self.act = start.data;
+        if self.plan.require_homed
+            && let Some(m) = (0..self.plan.n_motors).find(|&m| !MotorFlags(start.aux[m]).homed())
+        {
+            return Err(MoveError::NotHomed { motor: m + 1 });
+        }
         self.generator.start(&self.act)?;
+        if let (Some(soft), Some(bounds)) = (self.plan.limits.soft, self.generator.path_bounds()) {
+            for m in 0..self.plan.n_motors {
+                let ((min, max), (lo, hi)) = (soft[m], bounds[m]);
+                if lo < min || hi > max {
+                    let value = if lo < min { lo } else { hi };
+                    return Err(MoveError::OutsideSoftLimits { motor: m + 1, value, min, max });
+                }
+            }
+        }
         self.planned_samples = self.generator.samples();
         self.generator.sample(0, &mut self.cmd);
         self.law.reset(&self.cmd, &self.act);
@@ -193,6 +321,7 @@ impl Servo {
         self.errors = ErrorStats::default();
         self.fault = None;
         self.executed = 0;
+        self.integrated_error = [0.0; MAX_MOTORS];
         for m in 0..self.plan.n_motors {
             if let Err(e) = Servo::request(link, HwMsg::for_motor(MsgType::EnableMotor, m as u32)) {
                 self.disable_all(link);
@@ -214,6 +343,12 @@ impl Servo {
         self.last_sample = n;
 
         self.timing.record_tick(tick);
+        if tick.missed >= self.plan.limits.max_missed_in_row {
+            return CycleEnd::Fault(Fault {
+                value: tick.missed as f64,
+                ..Fault::new(FaultKind::Overrun, n)
+            });
+        }
 
         // 1. Read all encoders.
         let read_start = self.clock.now_ns();
@@ -221,11 +356,13 @@ impl Servo {
             Ok(r) => r,
             Err(e) => return CycleEnd::Fault(Fault::from_link(e, n)),
         };
+        let hw_time_ns = resp.time_ns;
         if let Some(f) = Fault::from_status(resp.status(), n) {
-            return CycleEnd::Fault(f);
+            return CycleEnd::Fault(Fault { hw_time_ns, ..f });
         }
         self.act = resp.data;
         let read_done = self.clock.now_ns();
+        self.generator.observe(&self.act, &resp.aux.map(MotorFlags));
 
         // 2. Command position (frozen while holding after a starved trajectory).
         if !self.holding {
@@ -236,9 +373,12 @@ impl Servo {
                     return CycleEnd::Fault(Fault::new(FaultKind::TrajectoryStarved, n));
                 }
                 Sample::Failed => {
-                    return CycleEnd::Fault(Fault::new(FaultKind::TrajectoryError, n));
+                    return CycleEnd::Fault(Fault::new(self.generator.failure_kind(), n));
                 }
             }
+        }
+        if let Some(f) = self.check_limits(n) {
+            return CycleEnd::Fault(Fault { hw_time_ns, ..f });
         }
 
         // 3. Law.
@@ -278,11 +418,57 @@ impl Servo {
         }
     }
 
+    /// The software position limits (on the command) and the following-error limits, this
+    /// cycle; `None` when all hold.
+    #[inline]
+    fn check_limits(&mut self, n: u64) -> Option<Fault> {
+        let lim = &self.plan.limits;
+        for m in 0..self.plan.n_motors {
+            let c = self.cmd[m];
+            if let Some(soft) = lim.soft {
+                let (min, max) = soft[m];
+                if c < min || c > max {
+                    let limit = if c < min { min } else { max };
+                    return Some(Fault {
+                        motor: Some(m),
+                        value: c,
+                        limit,
+                        ..Fault::new(FaultKind::SoftwareLimit, n)
+                    });
+                }
+            }
+            let fe = c - self.act[m];
+            if fe.abs() > lim.max_following_error[m] {
+                let limit = lim.max_following_error[m];
+                return Some(Fault {
+                    motor: Some(m),
+                    value: fe,
+                    limit,
+                    ..Fault::new(FaultKind::FollowingError, n)
+                });
+            }
+            self.integrated_error[m] += fe;
+            let ie = self.integrated_error[m];
+            if ie.abs() > lim.max_integrated_error[m] {
+                let limit = lim.max_integrated_error[m];
+                return Some(Fault {
+                    motor: Some(m),
+                    value: ie,
+                    limit,
+                    integrated: true,
+                    ..Fault::new(FaultKind::FollowingError, n)
+                });
+            }
+        }
+        None
+    }
+
     /// The fault handler: disables every motor (DACs to 0 V first) unless the hwserver is
     /// known to be gone, and records `fault` with whether the disable was acknowledged.
     pub fn handle_fault(&mut self, link: &mut dyn HwLink, fault: Fault) {
         let disabled = !server_gone(Some(fault)) && self.disable_all(link);
         self.fault = Some(Fault { disabled, ..fault });
+        self.phase = Phase::Fault;
     }
 
     /// Commands `DisableAll`; true if the hwserver acknowledged it. Never fails: a fault path
@@ -302,6 +488,7 @@ impl Servo {
         starved: Fault,
     ) {
         self.holding = true;
+        self.phase = Phase::Holding;
         let mut fault = starved;
         for _ in 0..self.plan.starve_hold_cycles {
             if stop.load(Ordering::Relaxed) {
@@ -334,6 +521,7 @@ impl Servo {
             }
         };
         self.set_t0(t0);
+        self.phase = if self.plan.mode == "home" { Phase::Homing } else { Phase::Moving };
         loop {
             let tick = match ticker.wait() {
                 Ok(t) => t,
@@ -378,6 +566,9 @@ impl Servo {
         if !server_gone(self.fault) {
             self.disable_all(link);
             let _ = link.exchange(&HwMsg::request(MsgType::DisableSafety));
+        }
+        if self.fault.is_none() {
+            self.phase = Phase::Done;
         }
         Ok(())
     }

@@ -278,6 +278,10 @@ impl TrajectoryGenerator for CubicSpline {
         (!self.queue.is_empty()).then_some(self.queue.len() as u64)
     }
 
+    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
+        (!self.queue.is_empty()).then(|| crate::traj::bounds_of(&self.queue))
+    }
+
     #[inline]
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
         match self.queue.get(n as usize) {

@@ -153,6 +153,16 @@ pub enum FaultKind {
     TrajectoryStarved,
     /// The trajectory generator could not go on (a bad knot in a stream).
     TrajectoryError,
+    /// |command − actual| or |Σ (command − actual)| went past its limit.
+    FollowingError,
+    /// A command went outside the software position limits.
+    SoftwareLimit,
+    /// Too many servo periods in a row went by without a cycle.
+    Overrun,
+    /// Homing could not find, clear or leave a switch as it should.
+    HomingFailed,
+    /// The controller process died (reported by the starter).
+    ControllerLost,
 }
 
 impl FaultKind {
@@ -169,6 +179,11 @@ impl FaultKind {
             FaultKind::Aborted => "aborted",
             FaultKind::TrajectoryStarved => "trajectory_starved",
             FaultKind::TrajectoryError => "trajectory_error",
+            FaultKind::FollowingError => "following_error",
+            FaultKind::SoftwareLimit => "software_limit",
+            FaultKind::Overrun => "overrun",
+            FaultKind::HomingFailed => "homing_failed",
+            FaultKind::ControllerLost => "controller_lost",
         }
     }
 }
@@ -190,6 +205,15 @@ pub struct Fault {
     pub signal: i32,
     /// Whether the hwserver acknowledged disabling every motor afterwards.
     pub disabled: bool,
+    /// The offending value (following error, command, missed periods), counts.
+    pub value: f64,
+    /// The limit it broke.
+    pub limit: f64,
+    /// A following error that is the integrated one (Σ), not the instantaneous one.
+    pub integrated: bool,
+    /// The hwserver's timestamp of the read that showed the fault (its own clock: simulated
+    /// time in lock-step), 0 if none.
+    pub hw_time_ns: u64,
 }
 
 impl Fault {
@@ -204,6 +228,10 @@ impl Fault {
             link: None,
             signal: 0,
             disabled: false,
+            value: 0.0,
+            limit: 0.0,
+            integrated: false,
+            hw_time_ns: 0,
         }
     }
 
@@ -266,6 +294,25 @@ impl Fault {
                 "the knot stream ran dry before it ended (motors held, then disabled)".to_string()
             }
             FaultKind::TrajectoryError => "the trajectory failed".to_string(),
+            FaultKind::FollowingError => format!(
+                "motor {} {} following error {:.1} counts passed its limit {}",
+                self.motor.map_or(0, |m| m + 1),
+                if self.integrated { "integrated" } else { "instantaneous" },
+                self.value,
+                self.limit
+            ),
+            FaultKind::SoftwareLimit => format!(
+                "motor {} was commanded to {:.1} counts, past its software limit {}",
+                self.motor.map_or(0, |m| m + 1),
+                self.value,
+                self.limit
+            ),
+            FaultKind::Overrun => format!(
+                "{} servo periods in a row went by without a cycle (limit safety.max_missed_in_row)",
+                self.value
+            ),
+            FaultKind::HomingFailed => "homing failed".to_string(),
+            FaultKind::ControllerLost => "the controller died".to_string(),
         };
         let after = if self.disabled {
             "all motors disabled"
@@ -283,6 +330,7 @@ impl Fault {
             motor: self.motor.map(|m| m + 1),
             cycle: self.cycle,
             message: self.message(),
+            hw_time_ns: (self.hw_time_ns > 0).then_some(self.hw_time_ns),
         }
     }
 }
@@ -298,6 +346,9 @@ pub struct FaultReport {
     pub cycle: u64,
     /// What happened, in words.
     pub message: String,
+    /// The hwserver's clock when the fault was read (simulated time in lock-step), ns.
+    #[serde(default)]
+    pub hw_time_ns: Option<u64>,
 }
 
 /// Error figures of one motor in `summary.json`.
@@ -357,7 +408,7 @@ impl From<Percentiles> for Pct {
 }
 
 /// Timing figures in `summary.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct TimingSummary {
     /// `timerfd` or `nanosleep`.
     pub method: String,
@@ -429,6 +480,40 @@ pub struct Summary {
     pub timing: TimingSummary,
     /// Warnings of the run (degraded real time, dropped rows).
     pub warnings: Vec<String>,
+    /// `home` only: per motor where the top switch was found and cleared and where the motor
+    /// ended (counts in the frame before homing; each counter reads 0 there afterwards).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub homing: Option<serde_json::Value>,
+}
+
+impl Summary {
+    /// The summary the starter writes when the controller died before writing its own.
+    pub fn controller_lost(mode: &str, period_us: u32, message: String) -> Summary {
+        Summary {
+            mode: mode.to_string(),
+            trajectory: String::new(),
+            ok: false,
+            degraded: false,
+            deterministic: false,
+            fault: Some(FaultReport {
+                kind: FaultKind::ControllerLost.name().to_string(),
+                motor: None,
+                cycle: 0,
+                message,
+                hw_time_ns: None,
+            }),
+            cycles: 0,
+            planned_samples: None,
+            period_us,
+            gather_every: 0,
+            gathered_rows: 0,
+            counts_per_rad: 0.0,
+            motors: Vec::new(),
+            timing: TimingSummary::default(),
+            warnings: Vec::new(),
+            homing: None,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -2,7 +2,8 @@
 
 use crate::config::Settings;
 use crate::knots::KnotFileError;
-use qmarc_proto::MAX_MOTORS;
+use crate::summary::FaultKind;
+use qmarc_proto::{MAX_MOTORS, MotorFlags};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 
@@ -218,6 +219,44 @@ pub trait TrajectoryGenerator: Send {
     fn failure(&self) -> Option<String> {
         None
     }
+
+    /// The fault kind a [`Sample::Failed`] stands for.
+    fn failure_kind(&self) -> FaultKind {
+        FaultKind::TrajectoryError
+    }
+
+    /// Feedback of this cycle, before [`TrajectoryGenerator::sample`]: the actual positions
+    /// and each motor's switches, enable and homed flags. Generators that react to the robot
+    /// (homing) use it; the default ignores it. Same contract as `sample`.
+    #[inline]
+    fn observe(&mut self, act: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
+        let _ = (act, flags);
+    }
+
+    /// After `start`: the smallest and largest command of each motor over the whole path,
+    /// if known before the move (checked against the software limits); `None` for streams.
+    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
+        None
+    }
+
+    /// After the move: what this generator has to say in `summary.json` (homing reports where
+    /// it found the switches). Not called in the loop.
+    fn summary(&self) -> Option<serde_json::Value> {
+        None
+    }
+}
+
+/// The per-motor bounds of a sequence of commands.
+pub fn bounds_of<'a>(
+    cmds: impl IntoIterator<Item = &'a [f64; MAX_MOTORS]>,
+) -> [(f64, f64); MAX_MOTORS] {
+    let mut b = [(f64::INFINITY, f64::NEG_INFINITY); MAX_MOTORS];
+    for c in cmds {
+        for (bm, &v) in b.iter_mut().zip(c) {
+            *bm = (bm.0.min(v), bm.1.max(v));
+        }
+    }
+    b
 }
 
 /// An ideal step of `size` counts on every motor, held for `duration` (thesis 3.8.1.1.4, the
@@ -277,6 +316,11 @@ impl TrajectoryGenerator for Step {
 
     fn samples(&self) -> Option<u64> {
         Some(self.last_sample + 1)
+    }
+
+    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
+        let target = self.start.map(|s| s + self.size);
+        Some(bounds_of([&self.start, &target]))
     }
 
     #[inline]

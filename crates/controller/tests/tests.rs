@@ -21,14 +21,7 @@ use util::{CoreLink, CountingAllocator, ThreadCounters, allocations, knots, sett
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
 fn plan(n_motors: usize) -> MovePlan {
-    MovePlan {
-        mode: "step".into(),
-        n_motors,
-        period_ns: 400_000,
-        gather_every: 1,
-        deterministic: false,
-        starve_hold_cycles: 25,
-    }
+    MovePlan { starve_hold_cycles: 25, ..MovePlan::new("step", n_motors, 400_000) }
 }
 
 /// The step move with the PID feed-forward law, timed on a mock clock.

@@ -76,6 +76,22 @@ pub struct HwServerArgs {
     /// Simulator: bottom limit switch position, counts.
     #[arg(long, default_value_t = 10_500.0, allow_negative_numbers = true)]
     pub sim_bottom_switch: f64,
+    /// Simulator: start unhomed, the counters `--sim-counter-offset` counts off the homed frame.
+    #[arg(long)]
+    pub sim_unhomed: bool,
+    /// Simulator: offset of an unhomed counter frame, counts.
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+    pub sim_counter_offset: i64,
+    /// Simulator fault injection: this motor (1-based) does not move.
+    #[arg(long)]
+    pub sim_stall: Option<usize>,
+    /// Simulator fault injection: this motor's (1-based) top switch sticks once tripped.
+    #[arg(long)]
+    pub sim_stuck_top: Option<usize>,
+    /// Simulator: write its event log (switch edges, amplifier changes, last access; simulated
+    /// clock) to this file when the server ends.
+    #[arg(long)]
+    pub sim_events: Option<std::path::PathBuf>,
 }
 
 impl Default for HwServerArgs {
@@ -105,6 +121,21 @@ impl HwServerArgs {
             format!("--sim-top-switch={}", self.sim_top_switch),
             format!("--sim-bottom-switch={}", self.sim_bottom_switch),
         ];
+        if self.sim_unhomed {
+            a.push("--sim-unhomed".into());
+        }
+        if self.sim_counter_offset != 0 {
+            a.push(format!("--sim-counter-offset={}", self.sim_counter_offset));
+        }
+        if let Some(m) = self.sim_stall {
+            a.push(format!("--sim-stall={m}"));
+        }
+        if let Some(m) = self.sim_stuck_top {
+            a.push(format!("--sim-stuck-top={m}"));
+        }
+        if let Some(p) = &self.sim_events {
+            a.push(format!("--sim-events={}", p.display()));
+        }
         if !self.sim_start.is_empty() {
             let list: Vec<String> = self.sim_start.iter().map(f64::to_string).collect();
             a.push(format!("--sim-start={}", list.join(",")));
@@ -152,6 +183,10 @@ impl HwServerArgs {
             start_counts,
             top_switch_counts: self.sim_top_switch,
             bottom_switch_counts: self.sim_bottom_switch,
+            homed: !self.sim_unhomed,
+            counter_offset: self.sim_counter_offset,
+            stall_motor: self.sim_stall.map(|m| m.wrapping_sub(1)),
+            stuck_top_motor: self.sim_stuck_top.map(|m| m.wrapping_sub(1)),
         };
         p.validate()?;
         Ok(p)
@@ -176,11 +211,20 @@ mod tests {
         a.sim_start = vec![-12.5, 3e6];
         a.sim_top_switch = 200.0;
         a.sim_bottom_switch = -0.25;
+        a.sim_unhomed = true;
+        a.sim_counter_offset = -123;
+        a.sim_stall = Some(2);
+        a.sim_stuck_top = Some(1);
+        a.sim_events = Some("/tmp/e.csv".into());
         let back = HwServerArgs::parse_from(std::iter::once("x".to_string()).chain(a.to_args()));
         assert_eq!(back, a);
         let p = back.sim_params().unwrap();
         assert_eq!(p.start_counts, [-12.5, 3e6, 0.0, 0.0]);
         assert!(p.lockstep);
+        assert_eq!(
+            (p.homed, p.counter_offset, p.stall_motor, p.stuck_top_motor),
+            (false, -123, Some(1), Some(0))
+        );
     }
 
     #[test]

@@ -62,4 +62,23 @@ pub trait Backend: Send {
 
     /// Stop toggling the charge pump for good (its relay drops). Default: no such output.
     fn stop_charge_pump(&mut self) {}
+
+    /// Whether `motor`'s counter frame is homed when the server starts. A card whose counters
+    /// keep counting while it is powered keeps the frame a homing set (the 626); the
+    /// simulator says what its settings say. Default: not homed.
+    fn homed(&self, motor: usize) -> bool {
+        let _ = motor;
+        false
+    }
+
+    /// Homing has just set `motor`'s counter frame (persist it where the hardware does).
+    fn set_homed(&mut self, motor: usize) {
+        let _ = motor;
+    }
+
+    /// Writes what the backend recorded (the simulator's event log), after the server ends.
+    fn write_log(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
+        let _ = w;
+        Ok(())
+    }
 }

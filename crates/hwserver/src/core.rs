@@ -1,7 +1,9 @@
 //! [`HwCore`]: what the server does with each request, independent of IPC and hardware.
 
 use crate::backend::{Backend, Inputs};
-use qmarc_proto::{COUNTER_ZERO, DAC_MAX, HwMsg, MAX_MOTORS, MsgType, Status, counter_delta};
+use qmarc_proto::{
+    COUNTER_ZERO, DAC_MAX, HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status, counter_delta,
+};
 
 /// The server's state machine around a [`Backend`]: software positions, enables, latched
 /// status, watchdog bookkeeping. `handle` is called once per request and never allocates,
@@ -17,6 +19,8 @@ pub struct HwCore {
     monitoring: bool,
     latched: Status,
     exit_requested: bool,
+    /// Per motor: is the counter frame homed?
+    homed: [bool; MAX_MOTORS],
     /// Fastest a counter can physically change, counts/s (∞: unchecked).
     max_counts_per_s: f64,
     last_read_ns: u64,
@@ -43,9 +47,13 @@ impl HwCore {
             monitoring: false,
             latched: Status::OK,
             exit_requested: false,
+            homed: [false; MAX_MOTORS],
             max_counts_per_s: f64::INFINITY,
             last_read_ns: 0,
         };
+        for m in 0..n_motors {
+            core.homed[m] = core.backend.homed(m);
+        }
         if core.backend.read_inputs(&mut core.inputs).is_ok() {
             for m in 0..n_motors {
                 core.position[m] = i64::from(counter_delta(COUNTER_ZERO, core.inputs.counters[m]));
@@ -71,6 +79,29 @@ impl HwCore {
     /// The backend's name.
     pub fn backend_name(&self) -> &'static str {
         self.backend.name()
+    }
+
+    /// The backend (to write its log after the server ends).
+    pub fn backend(&self) -> &dyn Backend {
+        self.backend.as_ref()
+    }
+
+    /// The flags a read response carries for `motor`.
+    fn flags(&self, motor: usize) -> i32 {
+        let mut f = 0;
+        if self.inputs.limits.contains(Status::limit_top(motor)) {
+            f |= MotorFlags::TOP;
+        }
+        if self.inputs.limits.contains(Status::limit_bottom(motor)) {
+            f |= MotorFlags::BOTTOM;
+        }
+        if self.enabled[motor] {
+            f |= MotorFlags::ENABLED;
+        }
+        if self.homed[motor] {
+            f |= MotorFlags::HOMED;
+        }
+        f
     }
 
     /// True once an [`MsgType::Exit`] was handled.
@@ -166,6 +197,7 @@ impl HwCore {
                 }
                 for m in 0..self.n_motors {
                     resp.data[m] = self.position[m] as f64;
+                    resp.aux[m] = self.flags(m);
                 }
             }
             Ok(MsgType::WriteAllDacs) => {
@@ -209,6 +241,8 @@ impl HwCore {
                     }
                     self.inputs.counters[m] = COUNTER_ZERO;
                     self.position[m] = 0;
+                    self.homed[m] = true;
+                    self.backend.set_homed(m);
                 }
             }
             Ok(MsgType::EnableSafety) => self.monitoring = true,

@@ -38,6 +38,16 @@ pub struct SimParams {
     pub top_switch_counts: f64,
     /// Bottom limit switch position, counts in the homed frame.
     pub bottom_switch_counts: f64,
+    /// The robot starts in the homed frame (its counters "kept counting since the last
+    /// homing"); false: the counters start `counter_offset` counts away from it.
+    pub homed: bool,
+    /// When not homed: how far the counter frame is from the homed one, counts.
+    pub counter_offset: i64,
+    /// Fault injection: this motor (0-based) does not move, whatever it is told (a seized
+    /// joint, a broken coupling).
+    pub stall_motor: Option<usize>,
+    /// Fault injection: this motor's (0-based) top switch sticks once it has tripped.
+    pub stuck_top_motor: Option<usize>,
 }
 
 impl Default for SimParams {
@@ -52,6 +62,10 @@ impl Default for SimParams {
             start_counts: [0.0; MAX_MOTORS],
             top_switch_counts: -9_500.0,
             bottom_switch_counts: 10_500.0,
+            homed: true,
+            counter_offset: 0,
+            stall_motor: None,
+            stuck_top_motor: None,
         }
     }
 }
@@ -100,6 +114,11 @@ impl SimParams {
         if self.top_switch_counts == self.bottom_switch_counts {
             return bad("top_switch", self.top_switch_counts, "different from bottom_switch");
         }
+        for m in [self.stall_motor, self.stuck_top_motor].into_iter().flatten() {
+            if m >= self.n_motors {
+                return bad("fault-injection motor", m as f64 + 1.0, "one of the simulated motors");
+            }
+        }
         for &s in &self.start_counts[..self.n_motors] {
             if !s.is_finite() || s.abs() >= f64::from(1u32 << 23) {
                 return bad("start position", s, "finite and within ±2^23 counts");
@@ -124,11 +143,43 @@ struct Axis {
     counter_offset: u32,
 }
 
+/// What the simulator records for tests and post-mortems, on its own clock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SimEvent {
+    /// A limit switch became active (`top`) or inactive.
+    Switch {
+        /// Motor, 0-based.
+        motor: u8,
+        /// The top switch (else the bottom one).
+        top: bool,
+        /// Active now.
+        on: bool,
+    },
+    /// An amplifier was enabled or disabled.
+    Amp {
+        /// Motor, 0-based.
+        motor: u8,
+        /// Enabled now.
+        on: bool,
+    },
+}
+
+/// Events the log keeps; later ones are dropped (and counted).
+pub const SIM_EVENT_CAPACITY: usize = 4096;
+
 /// The simulated Deltabot backend.
 #[derive(Debug, Clone)]
 pub struct SimDeltabot {
     p: SimParams,
     axes: [Axis; MAX_MOTORS],
+    /// Switch states at the last read, to log their edges.
+    switches: Status,
+    /// Stuck switch has tripped.
+    stuck: bool,
+    events: Vec<(u64, SimEvent)>,
+    dropped_events: u64,
+    /// Simulated time of the last access by the server (reads, writes, enables, loads).
+    last_access_ns: u64,
     /// Simulated time of the plant state, ns.
     t_ns: u64,
     /// In real time: the monotonic time `t_ns` corresponds to.
@@ -142,12 +193,44 @@ impl SimDeltabot {
     pub fn new(p: SimParams) -> Result<SimDeltabot, SimParamsError> {
         p.validate()?;
         let mut axes = [Axis::default(); MAX_MOTORS];
+        let offset = if p.homed { 0 } else { p.counter_offset };
         for (axis, &start) in axes.iter_mut().zip(&p.start_counts) {
             axis.x = start;
-            axis.counter_offset = COUNTER_ZERO;
+            axis.counter_offset = COUNTER_ZERO.wrapping_add(offset as u32);
         }
         let top_dir = if p.top_switch_counts < p.bottom_switch_counts { -1.0 } else { 1.0 };
-        Ok(SimDeltabot { p, axes, t_ns: 0, origin_ns: monotonic_now_ns(), top_dir })
+        Ok(SimDeltabot {
+            p,
+            axes,
+            switches: Status::OK,
+            stuck: false,
+            events: Vec::with_capacity(SIM_EVENT_CAPACITY),
+            dropped_events: 0,
+            last_access_ns: 0,
+            t_ns: 0,
+            origin_ns: monotonic_now_ns(),
+            top_dir,
+        })
+    }
+
+    /// The recorded events (time on the simulator's clock, ns).
+    pub fn events(&self) -> &[(u64, SimEvent)] {
+        &self.events
+    }
+
+    fn log(&mut self, event: SimEvent) {
+        if self.events.len() < self.events.capacity() {
+            self.events.push((self.t_ns, event));
+        } else {
+            self.dropped_events += 1;
+        }
+    }
+
+    fn set_enabled(&mut self, motor: usize, on: bool) {
+        if self.axes[motor].enabled != on {
+            self.axes[motor].enabled = on;
+            self.log(SimEvent::Amp { motor: motor as u8, on });
+        }
     }
 
     /// The parameters.
@@ -186,7 +269,11 @@ impl SimDeltabot {
         let dt = dt_ns as f64 * 1e-9;
         let n = self.p.n_motors;
         let volts_per_code = DAC_FULL_SCALE_V / f64::from(DAC_MAX);
-        for axis in &mut self.axes[..n] {
+        for (m, axis) in self.axes[..n].iter_mut().enumerate() {
+            if self.p.stall_motor == Some(m) {
+                axis.v = 0.0;
+                continue;
+            }
             let (target, tau) = if axis.enabled {
                 (self.p.kv_counts_per_s_per_v * volts_per_code * f64::from(axis.dac), self.p.tau_s)
             } else {
@@ -213,7 +300,7 @@ impl SimDeltabot {
         ((axis.x.floor() as i64 as u32).wrapping_add(axis.counter_offset)) & COUNTER_MASK
     }
 
-    fn limits(&self) -> Status {
+    fn limits(&mut self) -> Status {
         let mut s = Status::OK;
         for (m, axis) in self.axes[..self.p.n_motors].iter().enumerate() {
             if (axis.x - self.p.top_switch_counts) * self.top_dir >= 0.0 {
@@ -221,6 +308,12 @@ impl SimDeltabot {
             }
             if (axis.x - self.p.bottom_switch_counts) * self.top_dir <= 0.0 {
                 s |= Status::limit_bottom(m);
+            }
+        }
+        if let Some(m) = self.p.stuck_top_motor {
+            self.stuck |= s.contains(Status::limit_top(m));
+            if self.stuck {
+                s |= Status::limit_top(m);
             }
         }
         s
@@ -246,6 +339,20 @@ impl Backend for SimDeltabot {
             inputs.counters[m] = self.counter(m);
         }
         inputs.limits = self.limits();
+        let changed = inputs.limits.0 ^ self.switches.0;
+        for m in 0..self.p.n_motors {
+            for (top, bit) in [(true, Status::limit_top(m)), (false, Status::limit_bottom(m))] {
+                if changed & bit.0 != 0 {
+                    self.log(SimEvent::Switch {
+                        motor: m as u8,
+                        top,
+                        on: inputs.limits.contains(bit),
+                    });
+                }
+            }
+        }
+        self.switches = inputs.limits;
+        self.last_access_ns = self.t_ns;
         Ok(())
     }
 
@@ -255,12 +362,14 @@ impl Backend for SimDeltabot {
         for (axis, &code) in self.axes[..n].iter_mut().zip(codes) {
             axis.dac = code.clamp(-DAC_MAX, DAC_MAX);
         }
+        self.last_access_ns = self.t_ns;
         Ok(())
     }
 
     fn set_amp_enable(&mut self, motor: usize, on: bool) -> Result<(), HwFault> {
         self.catch_up();
-        self.axes[motor].enabled = on;
+        self.set_enabled(motor, on);
+        self.last_access_ns = self.t_ns;
         Ok(())
     }
 
@@ -273,10 +382,43 @@ impl Backend for SimDeltabot {
 
     fn safe_state(&mut self) {
         self.catch_up();
-        for axis in &mut self.axes {
-            axis.dac = 0;
-            axis.enabled = false;
+        for m in 0..MAX_MOTORS {
+            self.axes[m].dac = 0;
+            if m < self.p.n_motors {
+                self.set_enabled(m, false);
+            }
         }
+    }
+
+    fn homed(&self, _motor: usize) -> bool {
+        self.p.homed
+    }
+
+    /// CSV: `t_ns,event,motor` (motor 1-based; events `top_on`, `top_off`, `bottom_on`,
+    /// `bottom_off`, `amp_on`, `amp_off`), then `t_ns,last_access,0`: the last time the server
+    /// touched the robot before it ended.
+    fn write_log(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
+        writeln!(w, "t_ns,event,motor")?;
+        for (t, e) in &self.events {
+            let (name, motor) = match *e {
+                SimEvent::Switch { motor, top, on } => {
+                    let name = match (top, on) {
+                        (true, true) => "top_on",
+                        (true, false) => "top_off",
+                        (false, true) => "bottom_on",
+                        (false, false) => "bottom_off",
+                    };
+                    (name, motor)
+                }
+                SimEvent::Amp { motor, on } => (if on { "amp_on" } else { "amp_off" }, motor),
+            };
+            writeln!(w, "{t},{name},{}", motor + 1)?;
+        }
+        writeln!(w, "{},last_access,0", self.last_access_ns)?;
+        if self.dropped_events > 0 {
+            writeln!(w, "{},dropped_events,{}", self.t_ns, self.dropped_events)?;
+        }
+        Ok(())
     }
 
     fn now_ns(&self) -> u64 {

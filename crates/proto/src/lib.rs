@@ -23,7 +23,7 @@ pub mod msg;
 pub mod service;
 pub mod status;
 
-pub use msg::{HwMsg, MsgType, UnknownMsgType};
+pub use msg::{HwMsg, MotorFlags, MsgType, UnknownMsgType};
 pub use status::Status;
 
 /// Most motors one hardware server drives. One Sensoray 626 has four DACs (and six counters),

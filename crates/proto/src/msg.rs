@@ -10,8 +10,9 @@ use iceoryx2::prelude::ZeroCopySend;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum MsgType {
-    /// Thesis message 1: Read every motor's encoder; the response carries the 64-bit software positions in
-    /// `data` (counts) and the latched status.
+    /// Thesis message 1: Read every motor's encoder; the response carries the 64-bit software
+    /// positions in `data` (counts), the latched status, and per motor in `aux` the
+    /// [`MotorFlags`] (switches as they are now, enabled, homed).
     ReadAllEncoders = 1,
     /// Thesis message 2: Write every motor's DAC from `aux` (codes, ±[`crate::DAC_MAX`]).
     WriteAllDacs = 2,
@@ -62,6 +63,47 @@ impl MsgType {
             1..=12 => Some(Self::ALL[raw as usize - 1]),
             _ => None,
         }
+    }
+}
+
+/// What a read response says about one motor, in `aux[motor]`: the limit switches as they
+/// are *now* (not latched: homing needs to see a switch clear), whether its amplifier is
+/// enabled and whether its counter frame is homed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MotorFlags(pub i32);
+
+impl MotorFlags {
+    /// The top limit switch is active.
+    pub const TOP: i32 = 1;
+    /// The bottom limit switch is active.
+    pub const BOTTOM: i32 = 2;
+    /// The amplifier is enabled.
+    pub const ENABLED: i32 = 4;
+    /// The counter frame was set by homing (or survives from it).
+    pub const HOMED: i32 = 8;
+
+    /// The top switch is active.
+    #[inline]
+    pub fn top(self) -> bool {
+        self.0 & Self::TOP != 0
+    }
+
+    /// The bottom switch is active.
+    #[inline]
+    pub fn bottom(self) -> bool {
+        self.0 & Self::BOTTOM != 0
+    }
+
+    /// The amplifier is enabled.
+    #[inline]
+    pub fn enabled(self) -> bool {
+        self.0 & Self::ENABLED != 0
+    }
+
+    /// The frame is homed.
+    #[inline]
+    pub fn homed(self) -> bool {
+        self.0 & Self::HOMED != 0
     }
 }
 

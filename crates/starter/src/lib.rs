@@ -53,6 +53,11 @@ pub fn hwserver_args(
         sim_start: sim.start_counts.iter().copied().take(settings.n_motors).collect(),
         sim_top_switch: sim.top_switch_counts,
         sim_bottom_switch: sim.bottom_switch_counts,
+        sim_unhomed: !sim.homed,
+        sim_counter_offset: sim.counter_offset,
+        sim_stall: sim.stall_motor,
+        sim_stuck_top: sim.stuck_top_motor,
+        sim_events: sim.events_file.clone(),
         ..HwServerArgs::default()
     }
 }

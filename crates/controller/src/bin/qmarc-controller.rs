@@ -42,6 +42,7 @@ fn run(args: &ControllerArgs) -> anyhow::Result<ExitCode> {
             .map_err(anyhow::Error::msg)?,
         deterministic: args.opts.deterministic,
         connect_wait: Duration::from_millis(args.connect_wait_ms),
+        unhomed: args.opts.unhomed,
     };
     let summary = run_move(&settings, &args.mode, &opts)?;
     for w in &summary.warnings {

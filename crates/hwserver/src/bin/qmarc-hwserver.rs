@@ -34,7 +34,13 @@ fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
         shutdown_grace_ns: 1_000_000_000,
     };
     let location = args.location().map_err(anyhow::Error::msg)?;
-    let end = serve(&mut core, &location, &opts, stop)?;
+    let end = serve(&mut core, &location, &opts, stop);
+    if let Some(path) = &args.sim_events {
+        let mut out = Vec::new();
+        core.backend().write_log(&mut out)?;
+        std::fs::write(path, out).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    let end = end?;
     Ok(match end {
         ServeEnd::Exit => ExitCode::SUCCESS,
         ServeEnd::Stopped => {

@@ -1,0 +1,390 @@
+//! Homing (thesis 3.10.1.1), as a trajectory generator that watches the switches.
+//!
+//! One motor at a time, the others held where they are: move at a constant velocity toward
+//! the top limit switch; when it trips, creep back until it clears — if it has not cleared
+//! after backing off `clear_within_counts` (thesis: 10), something is wrong (a stuck switch,
+//! a broken wire) and homing fails; then move to the home offset (counts from the switch,
+//! away from it) and let it settle. When every motor is home, the move ends and the caller
+//! zeroes every counter there ([`crate::run`]), which makes the frame homed.
+//!
+//! It reads the switches' *current* state from each read's [`MotorFlags`] (the hwserver's
+//! latching monitor is off while homing: a homing expects its switch to trip). A switch other
+//! than the one being sought fails the homing.
+
+use crate::config::{HomingSettings, MotorSafety, Settings};
+use crate::summary::FaultKind;
+use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_proto::{MAX_MOTORS, MotorFlags};
+use serde::Serialize;
+
+/// Where homing found and left one motor, counts in the frame before homing.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct MotorHomeReport {
+    /// 1-based motor.
+    pub motor: usize,
+    /// Where the top switch was first seen active.
+    pub switch_found_counts: f64,
+    /// Where it cleared while backing off.
+    pub switch_cleared_counts: f64,
+    /// Where the motor ended, at its home offset (its counter reads 0 there afterwards).
+    pub ended_counts: f64,
+    /// The motor was already on its top switch when its homing began.
+    pub started_on_switch: bool,
+}
+
+/// Why homing failed (numbers only: it is decided in the loop).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum HomingFailure {
+    /// The top switch was not found within `max_travel_counts`.
+    NoSwitch {
+        /// 0-based motor.
+        motor: usize,
+        /// Travel so far, counts.
+        travel: f64,
+    },
+    /// The switch did not clear within `clear_within_counts` of backing off.
+    NotCleared {
+        /// 0-based motor.
+        motor: usize,
+        /// Counts backed off.
+        backed_off: f64,
+    },
+    /// Another switch tripped.
+    UnexpectedSwitch {
+        /// 0-based motor whose switch it is.
+        motor: usize,
+        /// Its top switch (else bottom).
+        top: bool,
+        /// 0-based motor being homed.
+        homing: usize,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    Approach,
+    Backoff,
+    ToOffset,
+    Settle,
+    Done,
+}
+
+/// The homing generator.
+#[derive(Debug, Clone)]
+#[doc(alias = "setHomePos")]
+#[doc(alias = "homeCtrlLoop")]
+pub struct Homing {
+    n_motors: usize,
+    period_s: f64,
+    settings: HomingSettings,
+    motors: [MotorSafety; MAX_MOTORS],
+    motor: usize,
+    phase: Phase,
+    /// Samples spent on the current motor.
+    samples_on_motor: u64,
+    cmd: [f64; MAX_MOTORS],
+    act: [f64; MAX_MOTORS],
+    flags: [MotorFlags; MAX_MOTORS],
+    origin: f64,
+    /// Furthest the motor got toward the switch while backing off (× direction).
+    peak: f64,
+    target: f64,
+    settle_left: u64,
+    reports: [MotorHomeReport; MAX_MOTORS],
+    failure: Option<HomingFailure>,
+}
+
+impl Homing {
+    /// Homing with the settings' `[homing]` and per-motor offsets and directions.
+    pub fn from_settings(s: &Settings) -> Homing {
+        let mut motors = [MotorSafety::default(); MAX_MOTORS];
+        motors[..s.safety.len()].copy_from_slice(&s.safety);
+        Homing::new(s.n_motors, s.period_s(), s.homing, motors)
+    }
+
+    /// Homing for `n_motors` at `period_s`.
+    pub fn new(
+        n_motors: usize,
+        period_s: f64,
+        settings: HomingSettings,
+        motors: [MotorSafety; MAX_MOTORS],
+    ) -> Homing {
+        Homing {
+            n_motors: n_motors.min(MAX_MOTORS),
+            period_s,
+            settings,
+            motors,
+            motor: 0,
+            phase: Phase::Approach,
+            samples_on_motor: 0,
+            cmd: [0.0; MAX_MOTORS],
+            act: [0.0; MAX_MOTORS],
+            flags: [MotorFlags::default(); MAX_MOTORS],
+            origin: 0.0,
+            peak: f64::NEG_INFINITY,
+            target: 0.0,
+            settle_left: 0,
+            reports: [MotorHomeReport::default(); MAX_MOTORS],
+            failure: None,
+        }
+    }
+
+    /// The reports of the motors homed so far.
+    pub fn reports(&self) -> &[MotorHomeReport] {
+        &self.reports[..self.motor.min(self.n_motors)]
+    }
+
+    fn begin(&mut self, motor: usize) {
+        self.motor = motor;
+        self.phase = Phase::Approach;
+        self.samples_on_motor = 0;
+        self.origin = self.cmd[motor];
+        self.peak = f64::NEG_INFINITY;
+        self.reports[motor] = MotorHomeReport { motor: motor + 1, ..MotorHomeReport::default() };
+    }
+
+    /// A switch that must not be active now: of a motor already homed, of the one being homed
+    /// other than its top switch (its bottom switch is allowed while it moves away from it),
+    /// or its top switch after it cleared.
+    fn unexpected_switch(&self) -> Option<HomingFailure> {
+        let m = self.motor;
+        for k in 0..self.n_motors.min(m + 1) {
+            let f = self.flags[k];
+            let top_ok = k == m && matches!(self.phase, Phase::Approach | Phase::Backoff);
+            let bottom_ok = k == m && self.phase == Phase::Approach;
+            if f.top() && !top_ok {
+                return Some(HomingFailure::UnexpectedSwitch { motor: k, top: true, homing: m });
+            }
+            if f.bottom() && !bottom_ok {
+                return Some(HomingFailure::UnexpectedSwitch { motor: k, top: false, homing: m });
+            }
+        }
+        None
+    }
+
+    fn fail(&mut self, why: HomingFailure) -> Sample {
+        self.failure = Some(why);
+        Sample::Failed
+    }
+}
+
+impl TrajectoryGenerator for Homing {
+    fn name(&self) -> &'static str {
+        "home"
+    }
+
+    fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+        self.cmd = *start;
+        self.act = *start;
+        self.failure = None;
+        self.begin(0);
+        Ok(())
+    }
+
+    fn samples(&self) -> Option<u64> {
+        None
+    }
+
+    #[inline]
+    fn observe(&mut self, act: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
+        self.act = *act;
+        self.flags = *flags;
+    }
+
+    fn sample(&mut self, _n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+        if self.failure.is_some() {
+            return Sample::Failed;
+        }
+        if self.phase == Phase::Done {
+            return Sample::Done;
+        }
+        if let Some(why) = self.unexpected_switch() {
+            return self.fail(why);
+        }
+        let m = self.motor;
+        let dir = self.motors[m].top_direction;
+        let step = self.settings.velocity_counts_per_s * self.period_s;
+        match self.phase {
+            Phase::Approach => {
+                if self.flags[m].top() {
+                    // Stop where it is and back off from there.
+                    let r = &mut self.reports[m];
+                    r.switch_found_counts = self.act[m];
+                    r.started_on_switch = self.samples_on_motor == 0;
+                    self.cmd[m] = self.act[m];
+                    self.phase = Phase::Backoff;
+                } else {
+                    self.cmd[m] += dir * step;
+                    let travel = (self.cmd[m] - self.origin).abs();
+                    if travel > self.settings.max_travel_counts {
+                        return self.fail(HomingFailure::NoSwitch { motor: m, travel });
+                    }
+                }
+            }
+            Phase::Backoff => {
+                self.peak = self.peak.max(self.act[m] * dir);
+                if !self.flags[m].top() {
+                    self.reports[m].switch_cleared_counts = self.act[m];
+                    self.target = self.act[m] - dir * self.motors[m].home_offset_counts;
+                    self.phase = Phase::ToOffset;
+                } else {
+                    let backed_off = self.peak - self.act[m] * dir;
+                    if backed_off >= self.settings.clear_within_counts {
+                        return self.fail(HomingFailure::NotCleared { motor: m, backed_off });
+                    }
+                    self.cmd[m] -= dir * self.settings.creep_counts_per_s * self.period_s;
+                }
+            }
+            Phase::ToOffset => {
+                let left = self.target - self.cmd[m];
+                if left.abs() <= step {
+                    self.cmd[m] = self.target;
+                    self.phase = Phase::Settle;
+                    self.settle_left = (self.settings.settle_s / self.period_s).round() as u64;
+                } else {
+                    self.cmd[m] += step.copysign(left);
+                }
+            }
+            Phase::Settle => {
+                if self.settle_left == 0 {
+                    self.reports[m].ended_counts = self.act[m];
+                    if m + 1 < self.n_motors {
+                        self.begin(m + 1);
+                    } else {
+                        self.motor = self.n_motors;
+                        self.phase = Phase::Done;
+                    }
+                } else {
+                    self.settle_left -= 1;
+                }
+            }
+            Phase::Done => {}
+        }
+        self.samples_on_motor += 1;
+        *cmd = self.cmd;
+        Sample::Ready
+    }
+
+    fn failure(&self) -> Option<String> {
+        let s = &self.settings;
+        self.failure.map(|f| match f {
+            HomingFailure::NoSwitch { motor, travel } => format!(
+                "homing motor {}: no top switch within {travel:.0} counts (homing.max_travel_counts {})",
+                motor + 1,
+                s.max_travel_counts
+            ),
+            HomingFailure::NotCleared { motor, backed_off } => format!(
+                "homing motor {}: its top switch did not clear after backing off {backed_off:.1} counts \
+                 (it must within {} counts): a stuck switch or a wiring fault",
+                motor + 1,
+                s.clear_within_counts
+            ),
+            HomingFailure::UnexpectedSwitch { motor, top, homing } => format!(
+                "homing motor {}: motor {}'s {} limit switch tripped",
+                homing + 1,
+                motor + 1,
+                if top { "top" } else { "bottom" }
+            ),
+        })
+    }
+
+    fn failure_kind(&self) -> FaultKind {
+        FaultKind::HomingFailed
+    }
+
+    fn summary(&self) -> Option<serde_json::Value> {
+        serde_json::to_value(self.reports()).ok()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn settings() -> HomingSettings {
+        HomingSettings {
+            velocity_counts_per_s: 2_500.0,
+            creep_counts_per_s: 250.0,
+            clear_within_counts: 10.0,
+            max_travel_counts: 1_000.0,
+            settle_s: 0.004,
+        }
+    }
+
+    fn safety(offset: f64) -> [MotorSafety; MAX_MOTORS] {
+        [MotorSafety { home_offset_counts: offset, top_direction: -1.0, ..MotorSafety::default() };
+            MAX_MOTORS]
+    }
+
+    /// Drives the homing against an ideal robot (actual = command) whose top switch is active
+    /// at or below `switch`, until it ends; the commands of motor 1.
+    fn drive(h: &mut Homing, switch: f64, stuck: bool) -> (Sample, Vec<f64>) {
+        let mut act = [0.0; MAX_MOTORS];
+        let mut cmd = [0.0; MAX_MOTORS];
+        h.start(&act).unwrap();
+        let mut seen = Vec::new();
+        let mut tripped = false;
+        for n in 0..100_000 {
+            let mut flags = [MotorFlags::default(); MAX_MOTORS];
+            tripped |= act[0] <= switch;
+            if act[0] <= switch || (stuck && tripped) {
+                flags[0] = MotorFlags(MotorFlags::TOP);
+            }
+            h.observe(&act, &flags);
+            match h.sample(n, &mut cmd) {
+                Sample::Ready => seen.push(cmd[0]),
+                other => return (other, seen),
+            }
+            act = cmd;
+        }
+        panic!("homing did not end");
+    }
+
+    #[test]
+    fn finds_the_switch_backs_off_and_goes_to_the_offset() {
+        let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
+        let (end, cmds) = drive(&mut h, -200.0, false);
+        assert_eq!(end, Sample::Done);
+        let r = h.reports()[0];
+        assert_eq!(r.switch_found_counts, -200.0, "1 count per sample at 2500 counts/s");
+        assert!(r.switch_cleared_counts > -200.0 && r.switch_cleared_counts < -199.0, "{r:?}");
+        assert!((r.ended_counts - (r.switch_cleared_counts + 300.0)).abs() < 1e-9, "{r:?}");
+        assert!(!r.started_on_switch);
+        assert!(cmds.iter().all(|&c| c >= -200.0), "never past the switch");
+    }
+
+    #[test]
+    fn starting_on_the_switch_backs_off_at_once() {
+        let mut h = Homing::new(1, 0.0004, settings(), safety(50.0));
+        let (end, _) = drive(&mut h, 5.0, false);
+        assert_eq!(end, Sample::Done);
+        assert!(h.reports()[0].started_on_switch);
+        assert_eq!(h.reports()[0].switch_found_counts, 0.0);
+    }
+
+    #[test]
+    fn a_stuck_switch_fails_within_ten_counts() {
+        let mut h = Homing::new(1, 0.0004, settings(), safety(50.0));
+        let (end, cmds) = drive(&mut h, -100.0, true);
+        assert_eq!(end, Sample::Failed);
+        assert_eq!(h.failure_kind(), FaultKind::HomingFailed);
+        let msg = h.failure().unwrap();
+        assert!(
+            msg.starts_with("homing motor 1: its top switch did not clear after backing off 10."),
+            "{msg}"
+        );
+        assert!(cmds.last().unwrap() - -100.0 <= 10.0 + 0.1);
+    }
+
+    #[test]
+    fn no_switch_within_the_travel_fails() {
+        let mut h = Homing::new(1, 0.0004, settings(), safety(50.0));
+        let (end, _) = drive(&mut h, -5_000.0, false);
+        assert_eq!(end, Sample::Failed);
+        assert!(
+            h.failure().unwrap().starts_with("homing motor 1: no top switch within 1001 counts"),
+            "{:?}",
+            h.failure()
+        );
+    }
+}
