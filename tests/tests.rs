@@ -2,5 +2,6 @@
 //! repository's tidiness rules.
 
 mod e2e;
+mod safety;
 mod tidy;
 mod trajectories;

@@ -62,7 +62,8 @@ pub fn default_config() -> PathBuf {
             .find(|l| l.starts_with("watchdog_periods = 10 "))
             .expect("watchdog line");
         let test = shipped.replacen(line, &line.replacen("= 10 ", "= 250", 1), 1);
-        let missed = test.lines().find(|l| l.starts_with("max_missed_in_row = 25 ")).expect("overrun line");
+        let missed =
+            test.lines().find(|l| l.starts_with("max_missed_in_row = 25 ")).expect("overrun line");
         let test = test.replacen(missed, &missed.replacen("= 25 ", "= 250", 1), 1);
         let path = bin_dir().join("qmarc-test.toml");
         let tmp = bin_dir().join(format!("qmarc-test.toml.{}", std::process::id()));
@@ -139,6 +140,47 @@ impl TestRun {
             Command::new(bin_dir().join("qmarc-starter")).args(&all).current_dir(workspace()),
             timeout,
         )
+    }
+
+    /// A copy of the test settings in this run's directory with `edits` applied: each
+    /// `(key, value)` replaces the value of every line `key = …` (every `[[motor]]` table's,
+    /// for per-motor keys). Panics if a key is not in the file.
+    pub fn config_with(&self, edits: &[(&str, &str)]) -> PathBuf {
+        let mut text = std::fs::read_to_string(default_config()).expect("test settings");
+        for (key, value) in edits {
+            let prefix = format!("{key} = ");
+            let mut found = false;
+            text = text
+                .lines()
+                .map(|l| {
+                    if l.starts_with(&prefix) {
+                        found = true;
+                        format!("{key} = {value}")
+                    } else {
+                        l.to_string()
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join("\n");
+            assert!(found, "no `{key}` in the settings");
+        }
+        let path = self.dir.join("qmarc.toml");
+        std::fs::write(&path, text + "\n").expect("write settings");
+        path
+    }
+
+    /// Runs `qmarc-starter` with the isolation arguments and `args` and asserts that it
+    /// succeeded.
+    pub fn starter_ok(&self, args: &[&str]) -> Finished {
+        let r = self.starter(args, Duration::from_secs(120));
+        assert_eq!(
+            r.code,
+            Some(0),
+            "qmarc-starter {args:?}\nstdout:\n{}\nstderr:\n{}",
+            r.stdout,
+            r.stderr
+        );
+        r
     }
 
     /// Runs `qmarc-starter` with the shipped settings, output to `out` and `args` (global
@@ -259,6 +301,18 @@ pub fn wait_with_timeout(mut child: std::process::Child, timeout: Duration) -> F
 pub fn read_summary(out: &Path) -> Summary {
     let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json");
     serde_json::from_str(&text).expect("summary.json parses")
+}
+
+/// The simulator's event log: `(t_ns, event, motor)` rows.
+pub fn read_sim_events(path: &Path) -> Vec<(u64, String, usize)> {
+    let text = std::fs::read_to_string(path).expect("simulator event log");
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[0].parse().expect("t_ns"), f[1].to_string(), f[2].parse().expect("motor"))
+        })
+        .collect()
 }
 
 /// `gather.csv` of an output directory: the header and the rows as numbers.

@@ -1,11 +1,14 @@
 //! Homing (thesis 3.10.1.1), as a trajectory generator that watches the switches.
 //!
 //! One motor at a time, the others held where they are: move at a constant velocity toward
-//! the top limit switch; when it trips, creep back until it clears — if it has not cleared
-//! after backing off `clear_within_counts` (thesis: 10), something is wrong (a stuck switch,
-//! a broken wire) and homing fails; then move to the home offset (counts from the switch,
-//! away from it) and let it settle. When every motor is home, the move ends and the caller
-//! zeroes every counter there ([`crate::run`]), which makes the frame homed.
+//! the top limit switch (starting on it, first move off it, so that the trip is at its edge);
+//! when it trips, creep back until it clears — if it is still active `clear_within_counts`
+//! (thesis: 10) back from where it tripped, something is wrong (a stuck switch, a broken wire)
+//! and homing fails; then move to the home offset (counts from where the switch cleared, away
+//! from it) and let it settle. When every motor is home, the move ends and the caller resets
+//! every counter so that home reads 0 ([`crate::run`]), which makes the frame homed. The frame
+//! comes from where each switch cleared, not from where the motor came to rest, so a sluggish
+//! position loop does not shift it.
 //!
 //! It reads the switches' *current* state from each read's [`MotorFlags`] (the hwserver's
 //! latching monitor is off while homing: a homing expects its switch to trip). A switch other
@@ -26,10 +29,14 @@ pub struct MotorHomeReport {
     pub switch_found_counts: f64,
     /// Where it cleared while backing off.
     pub switch_cleared_counts: f64,
-    /// Where the motor ended, at its home offset (its counter reads 0 there afterwards).
+    /// Home: the home offset from where the switch cleared. It reads 0 afterwards.
+    pub home_counts: f64,
+    /// Where the motor stood when the next one started (it reads `ended − home` afterwards).
     pub ended_counts: f64,
     /// The motor was already on its top switch when its homing began.
     pub started_on_switch: bool,
+    /// It got home (false: homing failed on this motor).
+    pub home: bool,
 }
 
 /// Why homing failed (numbers only: it is decided in the loop).
@@ -42,13 +49,14 @@ pub enum HomingFailure {
         /// Travel so far, counts.
         travel: f64,
     },
-    /// The switch did not clear within `clear_within_counts` of backing off.
+    /// The switch did not clear within `clear_within_counts` back from where it tripped.
     NotCleared {
         /// 0-based motor.
         motor: usize,
         /// Counts backed off.
         backed_off: f64,
     },
+
     /// Another switch tripped.
     UnexpectedSwitch {
         /// 0-based motor whose switch it is.
@@ -62,6 +70,9 @@ pub enum HomingFailure {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
+    /// Started on the top switch: move away until it clears, then approach it again, so that
+    /// the trip is at the switch's edge.
+    LeaveSwitch,
     Approach,
     Backoff,
     ToOffset,
@@ -86,12 +97,14 @@ pub struct Homing {
     act: [f64; MAX_MOTORS],
     flags: [MotorFlags; MAX_MOTORS],
     origin: f64,
-    /// Furthest the motor got toward the switch while backing off (× direction).
-    peak: f64,
+    /// Where the switch tripped.
+    trip: f64,
     target: f64,
     settle_left: u64,
     reports: [MotorHomeReport; MAX_MOTORS],
     failure: Option<HomingFailure>,
+    /// Feedback has arrived (the servo seeds the law with one `sample` before the loop).
+    observed: bool,
 }
 
 impl Homing {
@@ -121,17 +134,18 @@ impl Homing {
             act: [0.0; MAX_MOTORS],
             flags: [MotorFlags::default(); MAX_MOTORS],
             origin: 0.0,
-            peak: f64::NEG_INFINITY,
+            trip: 0.0,
             target: 0.0,
             settle_left: 0,
             reports: [MotorHomeReport::default(); MAX_MOTORS],
             failure: None,
+            observed: false,
         }
     }
 
-    /// The reports of the motors homed so far.
+    /// The reports of the motors homed so far and of the one being homed.
     pub fn reports(&self) -> &[MotorHomeReport] {
-        &self.reports[..self.motor.min(self.n_motors)]
+        &self.reports[..(self.motor + 1).min(self.n_motors)]
     }
 
     fn begin(&mut self, motor: usize) {
@@ -139,7 +153,6 @@ impl Homing {
         self.phase = Phase::Approach;
         self.samples_on_motor = 0;
         self.origin = self.cmd[motor];
-        self.peak = f64::NEG_INFINITY;
         self.reports[motor] = MotorHomeReport { motor: motor + 1, ..MotorHomeReport::default() };
     }
 
@@ -150,7 +163,8 @@ impl Homing {
         let m = self.motor;
         for k in 0..self.n_motors.min(m + 1) {
             let f = self.flags[k];
-            let top_ok = k == m && matches!(self.phase, Phase::Approach | Phase::Backoff);
+            let top_ok = k == m
+                && matches!(self.phase, Phase::LeaveSwitch | Phase::Approach | Phase::Backoff);
             let bottom_ok = k == m && self.phase == Phase::Approach;
             if f.top() && !top_ok {
                 return Some(HomingFailure::UnexpectedSwitch { motor: k, top: true, homing: m });
@@ -177,6 +191,7 @@ impl TrajectoryGenerator for Homing {
         self.cmd = *start;
         self.act = *start;
         self.failure = None;
+        self.observed = false;
         self.begin(0);
         Ok(())
     }
@@ -189,6 +204,7 @@ impl TrajectoryGenerator for Homing {
     fn observe(&mut self, act: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
         self.act = *act;
         self.flags = *flags;
+        self.observed = true;
     }
 
     fn sample(&mut self, _n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
@@ -198,6 +214,10 @@ impl TrajectoryGenerator for Homing {
         if self.phase == Phase::Done {
             return Sample::Done;
         }
+        if !self.observed {
+            *cmd = self.cmd; // before the loop: hold, nothing seen yet
+            return Sample::Ready;
+        }
         if let Some(why) = self.unexpected_switch() {
             return self.fail(why);
         }
@@ -205,12 +225,28 @@ impl TrajectoryGenerator for Homing {
         let dir = self.motors[m].top_direction;
         let step = self.settings.velocity_counts_per_s * self.period_s;
         match self.phase {
+            Phase::LeaveSwitch => {
+                if self.flags[m].top() {
+                    self.cmd[m] -= dir * step;
+                    let travel = (self.cmd[m] - self.origin).abs();
+                    if travel > self.settings.max_travel_counts {
+                        return self
+                            .fail(HomingFailure::NotCleared { motor: m, backed_off: travel });
+                    }
+                } else {
+                    self.origin = self.cmd[m];
+                    self.phase = Phase::Approach;
+                }
+            }
+            Phase::Approach if self.flags[m].top() && self.samples_on_motor == 0 => {
+                self.reports[m].started_on_switch = true;
+                self.phase = Phase::LeaveSwitch;
+            }
             Phase::Approach => {
                 if self.flags[m].top() {
                     // Stop where it is and back off from there.
-                    let r = &mut self.reports[m];
-                    r.switch_found_counts = self.act[m];
-                    r.started_on_switch = self.samples_on_motor == 0;
+                    self.reports[m].switch_found_counts = self.act[m];
+                    self.trip = self.act[m];
                     self.cmd[m] = self.act[m];
                     self.phase = Phase::Backoff;
                 } else {
@@ -222,13 +258,13 @@ impl TrajectoryGenerator for Homing {
                 }
             }
             Phase::Backoff => {
-                self.peak = self.peak.max(self.act[m] * dir);
                 if !self.flags[m].top() {
                     self.reports[m].switch_cleared_counts = self.act[m];
                     self.target = self.act[m] - dir * self.motors[m].home_offset_counts;
+                    self.reports[m].home_counts = self.target;
                     self.phase = Phase::ToOffset;
                 } else {
-                    let backed_off = self.peak - self.act[m] * dir;
+                    let backed_off = (self.trip - self.act[m]) * dir;
                     if backed_off >= self.settings.clear_within_counts {
                         return self.fail(HomingFailure::NotCleared { motor: m, backed_off });
                     }
@@ -248,6 +284,7 @@ impl TrajectoryGenerator for Homing {
             Phase::Settle => {
                 if self.settle_left == 0 {
                     self.reports[m].ended_counts = self.act[m];
+                    self.reports[m].home = true;
                     if m + 1 < self.n_motors {
                         self.begin(m + 1);
                     } else {
@@ -274,11 +311,12 @@ impl TrajectoryGenerator for Homing {
                 s.max_travel_counts
             ),
             HomingFailure::NotCleared { motor, backed_off } => format!(
-                "homing motor {}: its top switch did not clear after backing off {backed_off:.1} counts \
-                 (it must within {} counts): a stuck switch or a wiring fault",
+                "homing motor {}: its top switch was still active {backed_off:.1} counts back from \
+                 where it tripped (it must clear within {} counts): a stuck switch or a wiring fault",
                 motor + 1,
                 s.clear_within_counts
             ),
+
             HomingFailure::UnexpectedSwitch { motor, top, homing } => format!(
                 "homing motor {}: motor {}'s {} limit switch tripped",
                 homing + 1,
@@ -290,6 +328,14 @@ impl TrajectoryGenerator for Homing {
 
     fn failure_kind(&self) -> FaultKind {
         FaultKind::HomingFailed
+    }
+
+    fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
+        let mut home = [0.0; MAX_MOTORS];
+        for (h, r) in home.iter_mut().zip(&self.reports).take(self.n_motors) {
+            *h = r.home_counts;
+        }
+        (self.phase == Phase::Done).then_some(home)
     }
 
     fn summary(&self) -> Option<serde_json::Value> {
@@ -348,18 +394,22 @@ mod tests {
         let r = h.reports()[0];
         assert_eq!(r.switch_found_counts, -200.0, "1 count per sample at 2500 counts/s");
         assert!(r.switch_cleared_counts > -200.0 && r.switch_cleared_counts < -199.0, "{r:?}");
-        assert!((r.ended_counts - (r.switch_cleared_counts + 300.0)).abs() < 1e-9, "{r:?}");
+        assert_eq!(r.home_counts, r.switch_cleared_counts + 300.0);
+        assert!((r.ended_counts - r.home_counts).abs() < 1e-9, "{r:?}");
+        assert_eq!(h.homed_frame().unwrap()[0], r.home_counts);
         assert!(!r.started_on_switch);
         assert!(cmds.iter().all(|&c| c >= -200.0), "never past the switch");
     }
 
     #[test]
-    fn starting_on_the_switch_backs_off_at_once() {
+    fn starting_deep_on_the_switch_leaves_it_and_comes_back_to_its_edge() {
         let mut h = Homing::new(1, 0.0004, settings(), safety(50.0));
-        let (end, _) = drive(&mut h, 5.0, false);
+        // The switch is active at and below +40: the robot starts 40 counts into it.
+        let (end, _) = drive(&mut h, 40.0, false);
         assert_eq!(end, Sample::Done);
-        assert!(h.reports()[0].started_on_switch);
-        assert_eq!(h.reports()[0].switch_found_counts, 0.0);
+        let r = h.reports()[0];
+        assert!(r.started_on_switch);
+        assert_eq!(r.switch_found_counts, 40.0, "found again at its edge");
     }
 
     #[test]
@@ -369,10 +419,7 @@ mod tests {
         assert_eq!(end, Sample::Failed);
         assert_eq!(h.failure_kind(), FaultKind::HomingFailed);
         let msg = h.failure().unwrap();
-        assert!(
-            msg.starts_with("homing motor 1: its top switch did not clear after backing off 10."),
-            "{msg}"
-        );
+        assert!(msg.starts_with("homing motor 1: its top switch was still active 10."), "{msg}");
         assert!(cmds.last().unwrap() - -100.0 <= 10.0 + 0.1);
     }
 

@@ -12,7 +12,7 @@ use crate::registry;
 use crate::servo::{MoveError, MoveLimits, MovePlan, Servo};
 use crate::summary::{MotorSummary, Summary, TimingSummary};
 use qmarc_proto::service::IpcLocation;
-use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType};
+use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType};
 use qmarc_timer::MonotonicClock;
 use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
 use std::io::Write;
@@ -77,6 +77,7 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
     remove_outputs(&out_dir);
 
     let plan = plan_for(settings, mode, opts.deterministic, opts.unhomed);
+    let n_motors = settings.n_motors;
     let homing = matches!(mode, Mode::Home);
     let mut servo = Servo::new(
         plan,
@@ -99,15 +100,25 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
     let wait = opts.connect_wait;
     let handle = qmarc_timer::rt::spawn("qmarc-servo", req, move |rt: RtStatus| {
         let _dma = DmaLatencyGuard::request_zero();
+        let mut homed_read = None;
         let result = (|| -> Result<(), RunError> {
             let mut link = IoxLink::connect(&location, timeouts, wait)?;
             let stop = qmarc_timer::stop::flag();
             let moved = servo.run(&mut link, ticker.as_mut(), stop);
-            // Homing ends with every motor at its home offset: that is position 0 from now
-            // on, and the frame is homed (thesis 3.10.1.1).
-            if homing && moved.is_ok() && servo.fault().is_none() {
-                let zero = HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS);
-                link.exchange(&zero).map_err(MoveError::from)?;
+            // Homing ends with every motor at its home offset: home reads 0 from now on and the
+            // frame is homed (thesis 3.10.1.1). Each motor's position is preset to where it
+            // stands relative to home, so the frame does not depend on how well it settled.
+            if let (Ok(()), None, Some(home)) = (&moved, servo.fault(), servo.homed_frame()) {
+                let now = link.exchange(&HwMsg::read_all_encoders()).map_err(MoveError::from)?;
+                let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS);
+                for ((p, now), home) in
+                    preset.data.iter_mut().zip(now.data).zip(home).take(n_motors)
+                {
+                    *p = now - home;
+                }
+                link.exchange(&preset).map_err(MoveError::from)?;
+                homed_read =
+                    Some(link.exchange(&HwMsg::read_all_encoders()).map_err(MoveError::from)?);
             }
             // The thesis' last message: the hwserver makes the hardware safe and exits.
             if !crate::servo::server_gone(servo.fault()) {
@@ -115,15 +126,26 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
             }
             moved.map_err(RunError::from)
         })();
-        (servo, rt, result)
+        (servo, rt, result, homed_read)
     })
     .map_err(|e| RunError::Thread(e.to_string()))?;
-    let (servo, rt, result) = handle.join().map_err(|_| RunError::Thread("panicked".into()))?;
+    let (servo, rt, result, homed_read) =
+        handle.join().map_err(|_| RunError::Thread("panicked".into()))?;
     result?;
 
     let mut summary = summarize(settings, &servo, &rt, opts.deterministic);
     if homing {
-        summary.homing = servo.generator_summary();
+        // Where each motor's switch was found and where it ended, and what the hwserver says
+        // right after the counters were zeroed there.
+        let n = settings.n_motors;
+        let after = homed_read.map(|r| {
+            serde_json::json!({
+                "positions_counts": r.data[..n],
+                "homed": r.aux[..n].iter().map(|&f| MotorFlags(f).homed()).collect::<Vec<_>>(),
+            })
+        });
+        summary.homing =
+            Some(serde_json::json!({ "motors": servo.generator_summary(), "after": after }));
     }
     if opts.unhomed && !homing {
         summary.warnings.push(

@@ -222,6 +222,11 @@ impl Servo {
         self.phase
     }
 
+    /// The positions that read 0 after this move, if it defines a homed frame (homing).
+    pub fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
+        self.generator.homed_frame()
+    }
+
     /// What the generator reports for `summary.json` (homing: where it found the switches).
     pub fn generator_summary(&self) -> Option<serde_json::Value> {
         self.generator.summary()

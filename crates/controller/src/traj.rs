@@ -212,7 +212,9 @@ pub trait TrajectoryGenerator: Send {
     /// sizes the gather buffer. `None` for a stream of unknown length.
     fn samples(&self) -> Option<u64>;
 
-    /// The command of sample `n` (time n·T from the start) for every motor.
+    /// The command of sample `n` (time n·T from the start) for every motor. The servo calls
+    /// it once for sample 0 before the loop, with no feedback observed yet, to seed the law;
+    /// generators that act on feedback hold their command until they have observed.
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample;
 
     /// After [`Sample::Failed`]: why, for the summary. Not called in the loop.
@@ -236,6 +238,12 @@ pub trait TrajectoryGenerator: Send {
     /// After `start`: the smallest and largest command of each motor over the whole path,
     /// if known before the move (checked against the software limits); `None` for streams.
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
+        None
+    }
+
+    /// After a move without a fault: the positions (in the frame of the move) that are to read
+    /// 0 from now on, making the frame homed — homing's home positions. Default: none.
+    fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
         None
     }
 

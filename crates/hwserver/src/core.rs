@@ -236,11 +236,14 @@ impl HwCore {
             Ok(MsgType::ResetEncoderZero) if single || req.motor == HwMsg::ALL_MOTORS => {
                 let range = if single { motor..motor + 1 } else { 0..self.n_motors };
                 for m in range {
-                    if self.backend.load_counter(m, COUNTER_ZERO).is_err() {
+                    let preset =
+                        req.data[m].round().clamp(-f64::from(1 << 22), f64::from(1 << 22)) as i64;
+                    let raw = COUNTER_ZERO.wrapping_add(preset as u32) & qmarc_proto::COUNTER_MASK;
+                    if self.backend.load_counter(m, raw).is_err() {
                         status |= Status::HARDWARE_FAULT;
                     }
-                    self.inputs.counters[m] = COUNTER_ZERO;
-                    self.position[m] = 0;
+                    self.inputs.counters[m] = raw;
+                    self.position[m] = preset;
                     self.homed[m] = true;
                     self.backend.set_homed(m);
                 }
@@ -388,6 +391,14 @@ mod tests {
         send(&mut c, HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS));
         let r = send(&mut c, HwMsg::read_all_encoders());
         assert_eq!(&r.data[..2], &[0.0, 0.0]);
+        // A preset: the position reads data[m] there (homing sets home to 0 this way).
+        let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS);
+        preset.data[0] = -37.0;
+        preset.data[1] = 5.4;
+        send(&mut c, preset);
+        let r = send(&mut c, HwMsg::read_all_encoders());
+        assert_eq!(&r.data[..2], &[-37.0, 5.0]);
+        assert!(MotorFlags(r.aux[0]).homed() && MotorFlags(r.aux[1]).homed());
     }
 
     #[test]

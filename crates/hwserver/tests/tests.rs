@@ -45,7 +45,8 @@ fn all_twelve_messages_are_served() {
         ask(HwMsg::read_all_encoders());
     }
     assert!(ask(HwMsg::read_all_encoders()).data[0] > 110.0, "motor 1 moved");
-    assert!(ask(HwMsg::for_motor(MsgType::DisableMotor, 0)).status().is_ok());
+    let st = ask(HwMsg::for_motor(MsgType::DisableMotor, 0)).status();
+    assert!(st.is_ok(), "{st}");
     assert!(ask(HwMsg::request(MsgType::DisableAll)).status().is_ok());
     assert!(ask(HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS)).status().is_ok());
     assert_eq!(ask(HwMsg::for_motor(MsgType::ReadEncoder, 1)).data[1], 0.0);

@@ -29,6 +29,12 @@ impl Server {
             .arg(format!("--iox-prefix={}", location.prefix))
             .arg(format!("--iox-root={}", location.root))
             .args(["--priority=0", "--no-mlock", "--deterministic"])
+            // The test thread is no real-time loop: a 4 ms watchdog would fire whenever it
+            // is descheduled between two requests. The watchdog test sets its own.
+            .args(
+                (!extra.iter().any(|a| a.starts_with("--watchdog-periods")))
+                    .then_some("--watchdog-periods=2500"),
+            )
             .args(extra)
             .stderr(Stdio::piped())
             .spawn()

@@ -26,8 +26,9 @@ pub enum MsgType {
     DisableMotor = 6,
     /// Thesis message 7: Zero every DAC and disable every amplifier.
     DisableAll = 7,
-    /// Thesis message 8: Load the hardware counter of motor `motor` (or [`HwMsg::ALL_MOTORS`]) with
-    /// [`crate::COUNTER_ZERO`] and set its software position to 0.
+    /// Thesis message 8: Reset the encoder "zero" of motor `motor` (or [`HwMsg::ALL_MOTORS`]):
+    /// its software position becomes `data[m]` (whole counts; 0 is the thesis' reset) and
+    /// its hardware counter [`crate::COUNTER_ZERO`] plus that. The frame is then homed.
     ResetEncoderZero = 8,
     /// Thesis message 9: Start watching the limit switches (a trip latches a status bit and stops watching).
     EnableSafety = 9,

@@ -6,13 +6,16 @@
 use anyhow::{Context, bail};
 use clap::Parser;
 use qmarc_controller::cli::{Mode, MoveOptions};
+use qmarc_controller::config::Settings;
 use qmarc_controller::gather::check_budget;
 use qmarc_controller::registry;
 use qmarc_controller::run::remove_outputs;
 use qmarc_controller::summary::Summary;
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
 use qmarc_starter::supervise::{self, Supervised};
-use qmarc_starter::{default_prefix, describe_exit, hwserver_args, remove_stale_files, table};
+use qmarc_starter::{
+    Exit, default_prefix, describe_exit, hwserver_args, remove_stale_files, table,
+};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -107,8 +110,24 @@ fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
     let all_clean =
         children.len() == 2 && children.iter().all(|s| s.exit.is_some_and(|e| e.success()));
     let summary_path = out_dir.join("summary.json");
-    let summary: Option<Summary> =
+    let mut summary: Option<Summary> =
         std::fs::read(&summary_path).ok().and_then(|b| serde_json::from_slice(&b).ok());
+    // A controller that died wrote nothing: say what happened, and what the hwserver did.
+    let controller = children.iter().find(|s| s.name == "qmarc-controller").and_then(|s| s.exit);
+    let hwserver = children[0].exit;
+    if summary.is_none()
+        && let Some(exit @ Exit::Signal(_)) = controller
+    {
+        let lost = Summary::controller_lost(
+            args.mode.name(),
+            settings.period_us,
+            controller_lost_message(exit, hwserver, &settings),
+        );
+        if let Err(e) = write_summary(&summary_path, &lost) {
+            eprintln!("qmarc-starter: cannot write {}: {e}", summary_path.display());
+        }
+        summary = Some(lost);
+    }
     match &summary {
         Some(s) => print!("{}", table::render(s, &out_dir)),
         None => eprintln!("qmarc-starter: no summary was written: the move did not complete"),
@@ -118,6 +137,29 @@ fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
         Some(s) if s.fault.is_some() => ExitCode::from(2),
         _ => ExitCode::from(1),
     })
+}
+
+/// What the starter knows when the controller died: how, and how the hwserver ended.
+fn controller_lost_message(controller: Exit, hwserver: Option<Exit>, s: &Settings) -> String {
+    let how = describe_exit("qmarc-controller", controller);
+    let motors = match hwserver {
+        Some(Exit::Code(3)) => format!(
+            "the hwserver's watchdog disabled the motors after {} periods without a request",
+            s.hwserver.watchdog_periods
+        ),
+        Some(Exit::Code(0)) => "the hwserver disabled the motors as it stopped".to_string(),
+        Some(e) => format!("{}: the motors' state is unknown", describe_exit("qmarc-hwserver", e)),
+        None => "the hwserver did not end".to_string(),
+    };
+    format!("{how}; {motors}")
+}
+
+fn write_summary(path: &std::path::Path, s: &Summary) -> std::io::Result<()> {
+    let text = serde_json::to_string_pretty(s).map_err(std::io::Error::other)?;
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    std::fs::write(path, text + "\n")
 }
 
 fn main() -> ExitCode {

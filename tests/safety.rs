@@ -1,0 +1,480 @@
+//! Safety and homing through the real processes on the simulated robot: limit switches,
+//! following error, software limits, the 24-bit counter wrap, each process killed with
+//! SIGKILL at several points of a move, and homing from several start positions.
+//!
+//! Bounds are measured on the simulator's own clock, from its event log (`sim.events_file`):
+//! in lock-step runs a disable "within one period" means before the next read.
+
+use qmarc_tests::{
+    TestRun, processes_matching, read_gather, read_sim_events, read_summary, wait_with_timeout,
+};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+const TIMEOUT: Duration = Duration::from_secs(120);
+const PERIOD_NS: u64 = 400_000;
+
+fn arg(key: &str, value: impl std::fmt::Display) -> String {
+    format!("--{key}={value}")
+}
+
+fn write(run: &TestRun, name: &str, text: &str) -> PathBuf {
+    let p = run.dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// An offline path that takes motor 1 from 0 to `end` counts in 1 s; the others stay.
+fn motor1_path(end: i64) -> String {
+    format!("3\n0.0 0 0 0\n0.5 {} 0 0\n1.0 {end} 0 0\n", end / 2)
+}
+
+/// Settings with the simulator's event log in the run's directory, plus `edits`.
+fn with_events(run: &TestRun, edits: &[(&str, &str)]) -> (PathBuf, PathBuf) {
+    let events = run.dir.join("sim-events.csv");
+    let quoted = format!("\"{}\"", events.display());
+    let mut all = vec![("events_file", quoted.as_str())];
+    all.extend_from_slice(edits);
+    (run.config_with(&all), events)
+}
+
+/// When each motor's amplifier was first switched off at or after `t`.
+fn amps_off_after(events: &[(u64, String, usize)], t: u64, n_motors: usize) -> Vec<u64> {
+    (1..=n_motors)
+        .map(|m| {
+            events
+                .iter()
+                .find(|e| e.1 == "amp_off" && e.2 == m && e.0 >= t)
+                .unwrap_or_else(|| panic!("motor {m} was never disabled after {t}: {events:?}"))
+                .0
+        })
+        .collect()
+}
+
+#[test]
+fn a_path_into_the_top_switch_disables_every_motor_within_a_period() {
+    let run = TestRun::new("topswitch");
+    let (cfg, events) = with_events(&run, &[]);
+    let knots = write(&run, "into-top.txt", &motor1_path(-12_000));
+    let out = run.out("out");
+    // --unhomed: the software limits would refuse this path before the move (tested below).
+    let r = run.starter(
+        &[
+            &arg("config", cfg.display()),
+            &arg("out", out.display()),
+            "--deterministic",
+            "--unhomed",
+            "run",
+            "--method=spline",
+            &arg("knots", knots.display()),
+        ],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    assert!(
+        r.stdout.contains("FAULT limit_switch: motor 1 hit its top limit switch"),
+        "{}",
+        r.stdout
+    );
+    let fault = read_summary(&out).fault.expect("a fault");
+    assert_eq!((fault.kind.as_str(), fault.motor), ("limit_switch", Some(1)));
+    assert!(fault.message.ends_with("all motors disabled"), "{}", fault.message);
+    let ev = read_sim_events(&events);
+    let on = ev.iter().find(|e| e.1 == "top_on" && e.2 == 1).expect("the switch tripped").0;
+    assert_eq!(fault.hw_time_ns, Some(on), "the fault is the read that saw the switch");
+    for t in amps_off_after(&ev, on, 3) {
+        assert!(t - on <= PERIOD_NS, "disabled {} ns after the trip", t - on);
+    }
+    run.assert_clean();
+}
+
+#[test]
+fn the_software_limits_refuse_a_path_that_leaves_them_before_any_motor_is_enabled() {
+    let run = TestRun::new("softpath");
+    let (cfg, events) = with_events(&run, &[]);
+    let knots = write(&run, "into-top.txt", &motor1_path(-12_000));
+    let r = run.starter(
+        &[&arg("config", cfg.display()), "run", "--method=spline", &arg("knots", knots.display())],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(1), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("motor 1: the path reaches -12000.0 counts, outside its software limits [-9000, 10000]: refused before the move"),
+        "{}",
+        r.stderr
+    );
+    let ev = read_sim_events(&events);
+    assert!(!ev.iter().any(|e| e.1 == "amp_on"), "no motor was enabled: {ev:?}");
+    run.assert_clean();
+}
+
+#[test]
+fn a_stream_that_leaves_the_software_limits_is_stopped_in_the_loop() {
+    let run = TestRun::new("softloop");
+    let (cfg, events) = with_events(&run, &[]);
+    // PVT: motor 1 to −9600 counts in 1 s at rest at both ends, streamed from a FIFO-like pipe.
+    let mut text = String::new();
+    for i in 0..=20 {
+        let s = f64::from(i) / 20.0;
+        let p = (-9_600.0 * (3.0 * s * s - 2.0 * s * s * s)).round();
+        let v = -9_600.0 * (6.0 * s - 6.0 * s * s);
+        text += &format!("X {p} {v:.3} 50 Y 0 0 50 Z 0 0 50\n");
+    }
+    let knots = write(&run, "to-9600.txt", &text);
+    let out = run.out("out");
+    let mut child = run.spawn_starter(&[
+        &arg("config", cfg.display()),
+        &arg("out", out.display()),
+        "--deterministic",
+        "run",
+        "--method=pvt",
+        "--knots=-",
+    ]);
+    let mut stdin = child.stdin.take().unwrap();
+    std::io::Write::write_all(&mut stdin, text.as_bytes()).unwrap();
+    drop(stdin);
+    let r = wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    let fault = read_summary(&out).fault.expect("a fault");
+    assert_eq!((fault.kind.as_str(), fault.motor), ("software_limit", Some(1)));
+    assert!(
+        fault.message.starts_with("motor 1 was commanded to -900")
+            && fault.message.contains("past its software limit -9000"),
+        "{}",
+        fault.message
+    );
+    let t = fault.hw_time_ns.expect("read time");
+    for off in amps_off_after(&read_sim_events(&events), t, 3) {
+        assert!(off - t <= PERIOD_NS);
+    }
+    let _ = knots;
+    run.assert_clean();
+}
+
+#[test]
+fn a_stalled_motor_trips_the_following_error_limit_within_a_period() {
+    let run = TestRun::new("stall");
+    let (cfg, events) = with_events(&run, &[("stall_motor", "1")]);
+    let out = run.out("out");
+    let k = qmarc_tests::knots("sine-3motors.txt");
+    let r = run.starter(
+        &[
+            &arg("config", cfg.display()),
+            &arg("out", out.display()),
+            "--deterministic",
+            "run",
+            "--method=spline",
+            &arg("knots", k.display()),
+        ],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    let fault = read_summary(&out).fault.expect("a fault");
+    assert_eq!((fault.kind.as_str(), fault.motor), ("following_error", Some(1)));
+    assert!(
+        fault.message.starts_with("motor 1 instantaneous following error 200"),
+        "{}",
+        fault.message
+    );
+    assert!(fault.message.contains("passed its limit 2000"), "{}", fault.message);
+    let t = fault.hw_time_ns.expect("read time");
+    for off in amps_off_after(&read_sim_events(&events), t, 3) {
+        assert!(off - t <= PERIOD_NS);
+    }
+    // The motor never moved; the fault came as soon as the command was 2000 counts away.
+    let (_, rows) = read_gather(&out);
+    let last = rows.last().unwrap();
+    assert_eq!(last[3], 0.0);
+    assert!(last[2] <= 2_000.0 && last[2] > 1_900.0, "{}", last[2]);
+    run.assert_clean();
+}
+
+#[test]
+fn the_24_bit_counter_wraps_cleanly_during_a_move() {
+    let run = TestRun::new("wrap");
+    // 256 counts below the 24-bit wrap of the raw counter (0x800000 + 8 388 352 = 0xFFFF00).
+    let cfg = run.config_with(&[
+        ("start_counts", "[8388352, 0, 0]"),
+        ("top_switch_counts", "-100000000"),
+        ("bottom_switch_counts", "100000000"),
+    ]);
+    let out = run.out("out");
+    run.starter_ok(&[
+        &arg("config", cfg.display()),
+        &arg("out", out.display()),
+        "--deterministic",
+        "--unhomed",
+        "step",
+        "--size=1000",
+        "--duration=3",
+    ]);
+    let s = read_summary(&out);
+    assert!(s.ok);
+    let (_, rows) = read_gather(&out);
+    let act: Vec<f64> = rows.iter().map(|r| r[3]).collect();
+    assert_eq!(act[0], 8_388_352.0);
+    assert!(act.iter().any(|&a| a > 8_388_608.0), "crossed the wrap");
+    let biggest_step = act.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
+    assert!(biggest_step < 150.0, "no jump at the wrap: {biggest_step}");
+    assert!((act.last().unwrap() - 8_389_352.0).abs() <= 7.0, "settled at {}", act.last().unwrap());
+    run.assert_clean();
+}
+
+/// Starts a 3 s step in real time, waits `delay` after both children are up, SIGKILLs the
+/// process whose command line contains `victim`, and waits for the starter.
+fn kill_during_step(
+    run: &TestRun,
+    cfg: &std::path::Path,
+    victim: &str,
+    delay: Duration,
+) -> qmarc_tests::Finished {
+    let out = run.out("out");
+    let child = run.spawn_starter(&[
+        &arg("config", cfg.display()),
+        &arg("out", out.display()),
+        "step",
+        "--duration=3",
+    ]);
+    let deadline = Instant::now() + TIMEOUT;
+    let pid = loop {
+        let procs = processes_matching(&run.prefix);
+        let ready = procs.len() >= 2 || (victim == "qmarc-hwserver" && delay.is_zero());
+        if let Some((pid, _)) = procs.iter().find(|(_, cmd)| cmd.contains(victim)).filter(|_| ready)
+        {
+            break *pid;
+        }
+        assert!(Instant::now() < deadline, "{victim} did not start");
+        std::thread::sleep(Duration::from_millis(2));
+    };
+    std::thread::sleep(delay);
+    // SAFETY: kill(2) on a pid found a moment ago.
+    unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
+    wait_with_timeout(child, TIMEOUT)
+}
+
+#[test]
+fn killing_the_hwserver_during_a_move_ends_it_as_hwserver_lost() {
+    for delay_ms in [300, 1_500] {
+        let run = TestRun::new("killhw");
+        let r = kill_during_step(
+            &run,
+            &qmarc_tests::default_config(),
+            "qmarc-hwserver",
+            Duration::from_millis(delay_ms),
+        );
+        assert_eq!(r.code, Some(2), "{delay_ms} ms: {}\n{}", r.stdout, r.stderr);
+        assert!(
+            r.stderr.contains("qmarc-hwserver was killed by signal 9 (SIGKILL)"),
+            "{}",
+            r.stderr
+        );
+        let fault = read_summary(&run.out("out")).fault.expect("a fault");
+        assert_eq!(fault.kind, "hwserver_lost", "{delay_ms} ms");
+        assert!(fault.message.contains("(server process gone)"), "{}", fault.message);
+        assert!(
+            fault.message.contains("did not acknowledge disabling the motors"),
+            "{}",
+            fault.message
+        );
+        run.assert_clean();
+    }
+}
+
+#[test]
+fn killing_the_hwserver_before_the_move_ends_the_run() {
+    let run = TestRun::new("killhw0");
+    let r =
+        kill_during_step(&run, &qmarc_tests::default_config(), "qmarc-hwserver", Duration::ZERO);
+    assert_ne!(r.code, Some(0), "{}", r.stderr);
+    assert!(r.stderr.contains("qmarc-hwserver was killed by signal 9 (SIGKILL)"), "{}", r.stderr);
+    run.assert_clean();
+}
+
+#[test]
+fn killing_the_controller_during_a_move_trips_the_hwserver_watchdog_within_its_bound() {
+    let run = TestRun::new("killctl");
+    let (cfg, events) = with_events(&run, &[]);
+    // Real time: the simulator's clock runs on while the controller is dead.
+    let r = kill_during_step(&run, &cfg, "qmarc-controller", Duration::from_millis(500));
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stderr.contains("qmarc-controller was killed by signal 9 (SIGKILL)"), "{}", r.stderr);
+    assert!(r.stderr.contains("qmarc-hwserver: watchdog: controller silent for"), "{}", r.stderr);
+    let fault = read_summary(&run.out("out")).fault.expect("the starter's summary");
+    assert_eq!(fault.kind, "controller_lost");
+    assert!(
+        fault.message.contains("the hwserver's watchdog disabled the motors after 250 periods"),
+        "{}",
+        fault.message
+    );
+    let ev = read_sim_events(&events);
+    let last = ev.iter().find(|e| e.1 == "last_access").expect("last access").0;
+    // The test settings' watchdog: 250 periods = 100 ms, measured on the simulator's clock,
+    // plus what a VM stall of the server's own wake-up may add.
+    let watchdog = 250 * PERIOD_NS;
+    for off in amps_off_after(&ev, last, 3) {
+        let silent = off - last;
+        assert!(
+            silent >= watchdog && silent <= watchdog + 25_000_000,
+            "disabled {silent} ns after the last request"
+        );
+    }
+    run.assert_clean();
+}
+
+#[test]
+fn killing_the_controller_before_the_move_stops_the_hwserver() {
+    let run = TestRun::new("killctl0");
+    let r =
+        kill_during_step(&run, &qmarc_tests::default_config(), "qmarc-controller", Duration::ZERO);
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    let fault = read_summary(&run.out("out")).fault.expect("the starter's summary");
+    assert_eq!(fault.kind, "controller_lost");
+    assert!(
+        fault.message.starts_with("qmarc-controller was killed by signal 9 (SIGKILL); "),
+        "{}",
+        fault.message
+    );
+    run.assert_clean();
+}
+
+#[test]
+fn killing_the_starter_at_the_start_and_near_the_end_stops_everything() {
+    for (delay_ms, duration) in [(0, "3"), (900, "1")] {
+        let run = TestRun::new("killst");
+        let out = run.out("out");
+        let mut child = run.spawn_starter(&[
+            &arg("config", qmarc_tests::default_config().display()),
+            &arg("out", out.display()),
+            "step",
+            &arg("duration", duration),
+        ]);
+        let deadline = Instant::now() + TIMEOUT;
+        while processes_matching(&run.prefix).len() < 2 {
+            assert!(Instant::now() < deadline, "children did not start");
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        std::thread::sleep(Duration::from_millis(delay_ms));
+        child.kill().unwrap();
+        child.wait().unwrap();
+        while !processes_matching(&run.prefix).is_empty() {
+            assert!(Instant::now() < deadline, "children outlived the starter ({delay_ms} ms)");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        // If the move had begun, its summary says the motors were disabled.
+        if out.join("summary.json").exists() {
+            let fault = read_summary(&out).fault.expect("a killed starter's move has a fault");
+            assert_eq!(fault.kind, "aborted", "{fault:?}");
+            assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
+        }
+        // The dead starter's shared memory goes with the next run.
+        run.location().remove_files();
+        run.assert_clean();
+    }
+}
+
+/// Test settings for homing: an unhomed robot whose counters read 5000 counts off the homed
+/// frame, a fast search (the test is about the sequence, not about patience), home 2000
+/// counts below the top switch, and `edits`.
+fn homing_config(run: &TestRun, edits: &[(&str, &str)]) -> PathBuf {
+    let mut all = vec![
+        ("homed", "false"),
+        ("counter_offset", "5000"),
+        ("velocity_counts_per_s", "20000.0"),
+        ("creep_counts_per_s", "1000.0"),
+        ("settle_s", "0.05"),
+        ("home_offset_counts", "2000.0"),
+    ];
+    all.extend_from_slice(edits);
+    run.config_with(&all)
+}
+
+#[test]
+fn homing_from_several_start_positions_finds_every_switch() {
+    // At rest mid-range; and: motor 1 on its top switch, motor 2 just below it, motor 3 on
+    // its bottom switch (the switches are at −9500 and 10 500 in the homed frame).
+    for start in ["[0, 0, 0]", "[-9600, -8000, 10600]"] {
+        let run = TestRun::new("home");
+        let cfg = homing_config(&run, &[("start_counts", start)]);
+        let out = run.out("out");
+        let r = run.starter_ok(&[
+            &arg("config", cfg.display()),
+            &arg("out", out.display()),
+            "--deterministic",
+            "home",
+        ]);
+        assert!(r.stdout.contains("QMARC home: ok"), "{}", r.stdout);
+        let s = read_summary(&out);
+        let homing = s.homing.expect("a homing report");
+        let motors = homing["motors"].as_array().unwrap();
+        assert_eq!(motors.len(), 3);
+        for (m, rep) in motors.iter().enumerate() {
+            let f = |k: &str| rep[k].as_f64().unwrap();
+            assert!(rep["home"].as_bool().unwrap(), "{start}: motor {} {rep}", m + 1);
+            // The counters read 5000 off the homed frame: the switch at −9500 reads −4500.
+            assert!((f("switch_found_counts") - -4_500.0).abs() <= 10.0, "{start}: {rep}");
+            assert!((f("switch_cleared_counts") - -4_500.0).abs() <= 10.0, "{start}: {rep}");
+            // Home: 2000 counts below where the switch cleared, away from it.
+            assert_eq!(f("home_counts"), f("switch_cleared_counts") + 2_000.0, "{start}: {rep}");
+            // Afterwards home reads 0: the motor reads how far it stands from home.
+            let after = homing["after"]["positions_counts"][m].as_f64().unwrap();
+            assert!(
+                after.abs() < 400.0,
+                "{start}: motor {} stands {after} counts from home",
+                m + 1
+            );
+            assert!(homing["after"]["homed"][m].as_bool().unwrap());
+        }
+        assert_eq!(motors[0]["started_on_switch"].as_bool(), Some(start.starts_with("[-9600")));
+        run.assert_clean();
+    }
+}
+
+#[test]
+fn a_stuck_top_switch_fails_homing_within_ten_counts() {
+    let run = TestRun::new("stuck");
+    let cfg = homing_config(&run, &[("stuck_top_motor", "1")]);
+    let out = run.out("out");
+    let r = run.starter(
+        &[&arg("config", cfg.display()), &arg("out", out.display()), "--deterministic", "home"],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    let fault = read_summary(&out).fault.expect("a fault");
+    assert_eq!(fault.kind, "homing_failed");
+    let backed: f64 = fault
+        .message
+        .strip_prefix("homing motor 1: its top switch was still active ")
+        .and_then(|m| m.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{}", fault.message));
+    // Caught at the first read 10 counts back (the encoder moves a count or two per cycle).
+    assert!((10.0..13.0).contains(&backed), "{}", fault.message);
+    assert!(fault.message.contains("(it must clear within 10 counts)"), "{}", fault.message);
+    assert!(fault.message.ends_with("all motors disabled"), "{}", fault.message);
+    run.assert_clean();
+}
+
+#[test]
+fn moves_refuse_an_unhomed_frame_unless_told() {
+    let run = TestRun::new("unhomed");
+    let cfg = run.config_with(&[("homed", "false"), ("counter_offset", "5000")]);
+    let out = run.out("out");
+    let r =
+        run.starter(&[&arg("config", cfg.display()), &arg("out", out.display()), "step"], TIMEOUT);
+    assert_eq!(r.code, Some(1));
+    assert!(
+        r.stderr.contains("motor 1 is not homed: run `qmarc-starter home` first, or give --unhomed (software limits off)"),
+        "{}",
+        r.stderr
+    );
+    let r = run.starter_ok(&[
+        &arg("config", cfg.display()),
+        &arg("out", out.display()),
+        "--deterministic",
+        "--unhomed",
+        "step",
+        "--duration=0.2",
+    ]);
+    assert!(r.stdout.contains("warning: --unhomed"), "{}", r.stdout);
+    run.assert_clean();
+}
