@@ -6,12 +6,12 @@ mod util;
 
 use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
 use qmarc_controller::registry::{GENERATORS, LAWS};
-use qmarc_controller::servo::{CycleEnd, MovePlan, Servo};
+use qmarc_controller::servo::{CycleEnd, MoveLimits, MovePlan, Phase, Servo};
 use qmarc_controller::summary::FaultKind;
 use qmarc_hwserver::server::{ServeEnd, ServeOptions, serve};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
 
-use qmarc_proto::{HwMsg, MsgType};
+use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
@@ -319,4 +319,196 @@ fn fuzz_corpus_replays_cleanly() {
         }
     }
     assert!(replayed >= 10, "the corpus is there: {replayed} inputs");
+}
+
+/// A generator that ramps every motor at `rate` counts per sample forever and does not say
+/// where it goes (like a stream): only the in-loop checks can stop it.
+struct Ramp(f64, [f64; MAX_MOTORS]);
+
+impl qmarc_controller::traj::TrajectoryGenerator for Ramp {
+    fn name(&self) -> &'static str {
+        "ramp"
+    }
+    fn start(
+        &mut self,
+        start: &[f64; MAX_MOTORS],
+    ) -> Result<(), qmarc_controller::traj::TrajStartError> {
+        self.1 = *start;
+        Ok(())
+    }
+    fn samples(&self) -> Option<u64> {
+        None
+    }
+    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> qmarc_controller::traj::Sample {
+        for (c, s) in cmd.iter_mut().zip(&self.1) {
+            *c = s + self.0 * n as f64;
+        }
+        qmarc_controller::traj::Sample::Ready
+    }
+}
+
+fn run_with(
+    plan: MovePlan,
+    generator: Box<dyn qmarc_controller::traj::TrajectoryGenerator>,
+    params: SimParams,
+) -> (Servo, CoreLink, Result<(), qmarc_controller::servo::MoveError>) {
+    let s = settings();
+    let mut link = CoreLink::new(params);
+    let mut servo = Servo::new(plan, generator, (LAWS[0].build)(&s), Box::new(MockClock::new(0)));
+    let r = servo.run(&mut link, &mut ManualTicker::new(400_000), &AtomicBool::new(false));
+    (servo, link, r)
+}
+
+fn limits() -> MoveLimits {
+    MoveLimits {
+        soft: Some([(-1_000.0, 1_000.0); MAX_MOTORS]),
+        max_following_error: [500.0; MAX_MOTORS],
+        max_integrated_error: [1e9; MAX_MOTORS],
+        max_missed_in_row: 5,
+    }
+}
+
+#[test]
+fn a_following_error_past_its_limit_ends_the_move_in_that_cycle() {
+    let mut p = lockstep();
+    p.stall_motor = Some(1);
+    let stalled = MovePlan { limits: limits(), ..plan(3) };
+    let (servo, link, r) = run_with(stalled, Box::new(Ramp(2.0, [0.0; MAX_MOTORS])), p);
+    r.unwrap();
+    let f = servo.fault().expect("a fault");
+    assert_eq!((f.kind, f.motor, f.integrated), (FaultKind::FollowingError, Some(1), false));
+    assert!(f.value > 500.0 && f.value <= 502.0, "{}", f.value);
+    assert!(f.disabled && !link.0.any_enabled());
+    assert_eq!(servo.phase(), Phase::Fault);
+    // The integrated limit, with the instantaneous one out of the way: Σ FE of a stalled ramp.
+    let mut p = lockstep();
+    p.stall_motor = Some(0);
+    let integrated = MovePlan {
+        limits: MoveLimits {
+            max_following_error: [1e9; MAX_MOTORS],
+            max_integrated_error: [10_000.0; MAX_MOTORS],
+            ..limits()
+        },
+        ..plan(3)
+    };
+    let (servo, _, r) = run_with(integrated, Box::new(Ramp(2.0, [0.0; MAX_MOTORS])), p);
+    r.unwrap();
+    let f = servo.fault().expect("a fault");
+    assert_eq!((f.kind, f.motor, f.integrated), (FaultKind::FollowingError, Some(0), true));
+    assert!(f.message().starts_with("motor 1 integrated following error 10"), "{}", f.message());
+}
+
+#[test]
+fn software_limits_refuse_a_known_path_and_stop_an_unknown_one() {
+    let s = settings();
+    // A known path: the step's bounds are checked before any motor is enabled.
+    let plan = MovePlan { limits: limits(), ..plan(3) };
+    let mut s_big = s.clone();
+    s_big.step.size = 5_000;
+    let (servo, link, r) =
+        run_with(plan.clone(), (GENERATORS[0].build)(&s_big).unwrap(), lockstep());
+    assert_eq!(
+        r.unwrap_err().to_string(),
+        "motor 1: the path reaches 5000.0 counts, outside its software limits [-1000, 1000]: refused before the move"
+    );
+    assert!(servo.fault().is_none() && !link.0.any_enabled());
+    // An unknown path (a stream): caught in the loop before the command is applied.
+    let plan = MovePlan {
+        limits: MoveLimits { max_following_error: [1e9; MAX_MOTORS], ..limits() },
+        ..plan
+    };
+    let (servo, link, r) = run_with(plan, Box::new(Ramp(1.0, [0.0; MAX_MOTORS])), lockstep());
+    r.unwrap();
+    let f = servo.fault().expect("a fault");
+    assert_eq!(
+        (f.kind, f.motor, f.value, f.limit),
+        (FaultKind::SoftwareLimit, Some(0), 1_001.0, 1_000.0)
+    );
+    assert_eq!(
+        servo.gather().rows().last().unwrap().cycle,
+        1_000,
+        "the last command applied was 1000"
+    );
+    assert!(!link.0.any_enabled());
+}
+
+#[test]
+fn too_many_missed_periods_in_a_row_are_an_overrun() {
+    let s = settings();
+    let plan = MovePlan {
+        limits: MoveLimits { max_following_error: [1e9; MAX_MOTORS], ..limits() },
+        ..plan(3)
+    };
+    let mut link = CoreLink::new(lockstep());
+    let mut servo = Servo::new(
+        plan,
+        (GENERATORS[0].build)(&s).unwrap(),
+        (LAWS[0].build)(&s),
+        Box::new(MockClock::new(0)),
+    );
+    let mut ticker = ManualTicker::new(400_000);
+    servo.prepare(&mut link).unwrap();
+    ticker.start().unwrap();
+    for _ in 0..10 {
+        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+    }
+    ticker.inject_delay(0, 4); // 4 in a row: tolerated
+    assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+    ticker.inject_delay(0, 5); // 5: the limit
+    match servo.cycle(&mut link, &ticker.wait().unwrap()) {
+        CycleEnd::Fault(f) => {
+            assert_eq!((f.kind, f.value), (FaultKind::Overrun, 5.0));
+            assert!(
+                f.message().starts_with("5 servo periods in a row went by without a cycle"),
+                "{}",
+                f.message()
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn an_unhomed_frame_is_refused_when_homing_is_required() {
+    let s = settings();
+    let plan = MovePlan { require_homed: true, ..plan(3) };
+    let p = SimParams { homed: false, counter_offset: 777, ..lockstep() };
+    let (_, link, r) = run_with(plan, (GENERATORS[0].build)(&s).unwrap(), p);
+    assert_eq!(
+        r.unwrap_err().to_string(),
+        "motor 1 is not homed: run `qmarc-starter home` first, or give --unhomed (software limits off)"
+    );
+    assert!(!link.0.any_enabled());
+}
+
+#[test]
+fn homing_in_process_finds_the_switches_and_presets_the_frame() {
+    let mut s = settings();
+    s.homing.velocity_counts_per_s = 20_000.0;
+    s.homing.creep_counts_per_s = 1_000.0;
+    s.homing.settle_s = 0.02;
+    let p = SimParams { homed: false, counter_offset: 5_000, ..lockstep() };
+    let plan = MovePlan { monitor_switches: false, ..MovePlan::new("home", 3, 400_000) };
+    let (servo, mut link, r) =
+        run_with(plan, Box::new(qmarc_controller::homing::Homing::from_settings(&s)), p);
+    r.unwrap();
+    assert!(servo.fault().is_none(), "{:?}", servo.fault_report());
+    assert_eq!(servo.phase(), Phase::Done);
+    let home = servo.homed_frame().expect("a homed frame");
+    for (m, h) in home.iter().enumerate().take(3) {
+        // The switch at −9500 reads −4500 (offset 5000); home is 9500 below where it cleared.
+        assert!((h - 5_000.0).abs() <= 10.0, "motor {}: home at {h}", m + 1);
+    }
+    // What run_move does next: preset the frame so that home reads 0.
+    let now = link.exchange(&HwMsg::read_all_encoders()).unwrap();
+    let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS);
+    let wanted: Vec<f64> = (0..3).map(|m| now.data[m] - home[m]).collect();
+    preset.data[..3].copy_from_slice(&wanted);
+    link.exchange(&preset).unwrap();
+    let after = link.exchange(&HwMsg::read_all_encoders()).unwrap();
+    for (m, w) in wanted.iter().enumerate() {
+        assert!(qmarc_proto::MotorFlags(after.aux[m]).homed());
+        // The robot coasts a count or so between the two reads.
+        assert!((after.data[m] - w).abs() <= 2.0, "{} vs {w}", after.data[m]);
+    }
 }
