@@ -25,6 +25,30 @@ pub fn render(s: &Summary, out_dir: &Path) -> String {
         if s.degraded { " — DEGRADED: not real time" } else { "" },
         if s.deterministic { ", deterministic (simulated time)" } else { "" },
     );
+    if let Some(motors) = s.homing.as_ref().and_then(|h| h["motors"].as_array()) {
+        let _ = writeln!(t, "\n  homing (counts in the frame before homing)");
+        for r in motors {
+            let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+            let _ = writeln!(
+                t,
+                "  motor {}: top switch found at {:.0}{}, cleared at {:.0}; home at {:.0}{}",
+                r["motor"],
+                f("switch_found_counts"),
+                if r["started_on_switch"].as_bool() == Some(true) {
+                    " (started on it)"
+                } else {
+                    ""
+                },
+                f("switch_cleared_counts"),
+                f("home_counts"),
+                if r["home"].as_bool() == Some(true) {
+                    ", reads 0 from now on"
+                } else {
+                    " — not reached"
+                },
+            );
+        }
+    }
     let _ = writeln!(t, "\n  following error (command − actual)");
     let _ = writeln!(
         t,
