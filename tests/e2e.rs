@@ -111,6 +111,43 @@ fn gathering_every_fourth_cycle_keeps_a_quarter_of_the_rows() {
 }
 
 #[test]
+fn gathering_only_the_chosen_fields_keeps_the_full_error_figures() {
+    let run = TestRun::new("fields");
+    let out = run.out("out");
+    let cfg = run.config_with(&[("fields", r#"["act", "cmd"]"#)]);
+    run.starter_ok(&[
+        &format!("--config={}", cfg.display()),
+        &format!("--out={}", out.display()),
+        "--deterministic",
+        "step",
+        "--duration=0.1",
+    ]);
+    let (header, rows) = read_gather(&out);
+    assert_eq!(header, ["cycle", "cmd1", "act1", "cmd2", "act2", "cmd3", "act3"]);
+    assert_eq!(rows.len(), 251);
+    let m = std::fs::read_to_string(out.join("gather.m")).unwrap();
+    let columns = "qmarc_columns = {'cycle', 'cmd1', 'act1', 'cmd2', 'act2', 'cmd3', 'act3'};";
+    assert!(m.lines().any(|l| l == columns), "{m:.400}");
+    // The figures are over every cycle, whatever is gathered.
+    let s = read_summary(&out);
+    assert_eq!(s.motors[0].max_error_counts, 1000.0);
+    // An unknown field is refused with file, line and field before anything starts.
+    let bad = run.config_with(&[("fields", r#"["cmd", "torque"]"#)]);
+    let r = run.starter(&[&format!("--config={}", bad.display()), "step"], TIMEOUT);
+    assert_eq!(r.code, Some(1));
+    let line = std::fs::read_to_string(&bad)
+        .unwrap()
+        .lines()
+        .position(|l| l.starts_with("fields = "))
+        .unwrap()
+        + 1;
+    let want = format!("{}:{line}:", bad.display());
+    assert!(r.stderr.contains(&want) && r.stderr.contains("gather.fields"), "{}", r.stderr);
+    assert!(r.stderr.contains("torque"), "{}", r.stderr);
+    run.assert_clean();
+}
+
+#[test]
 fn bad_settings_are_refused_before_anything_starts() {
     let run = TestRun::new("badconfig");
     let cfg = run.dir.join("bad.toml");

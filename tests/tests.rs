@@ -1,6 +1,7 @@
 //! End-to-end tests: the real three processes on the simulated Deltabot, plus the
 //! repository's tidiness rules.
 
+mod console;
 mod e2e;
 mod safety;
 mod tidy;

@@ -93,7 +93,8 @@ pub struct RunArgs {
     /// Knot file, or `-` for standard input (default: `trajectory.knots`).
     #[arg(long)]
     pub knots: Option<PathBuf>,
-    /// `spline` (offline cubic spline) or `pvt` (online PVT) (default: `trajectory.method`).
+    /// `spline` (offline cubic spline), `pvt` (online PVT) or `step` (default:
+    /// `trajectory.method`).
     #[arg(long)]
     pub method: Option<String>,
 }

@@ -130,6 +130,59 @@ pub struct GatherSettings {
     pub every: u32,
     /// Directory the data files go to.
     pub out_dir: PathBuf,
+    /// Which fields go into the files (thesis 3.4: time, DAC, command, actual position).
+    pub fields: GatherFields,
+}
+
+/// Which per-cycle fields the data files carry; `cycle` is always there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GatherFields {
+    /// `time_s`.
+    pub time: bool,
+    /// `cmdM`.
+    pub cmd: bool,
+    /// `actM`.
+    pub act: bool,
+    /// `dacM`.
+    pub dac: bool,
+}
+
+impl Default for GatherFields {
+    fn default() -> GatherFields {
+        GatherFields { time: true, cmd: true, act: true, dac: true }
+    }
+}
+
+impl GatherFields {
+    /// The names used in `gather.fields`.
+    pub const NAMES: [&'static str; 4] = ["time", "cmd", "act", "dac"];
+
+    /// Parses a list of names; the error names the first unknown one.
+    pub fn from_names<'a>(
+        names: impl IntoIterator<Item = &'a str>,
+    ) -> Result<GatherFields, String> {
+        let mut f = GatherFields { time: false, cmd: false, act: false, dac: false };
+        for n in names {
+            match n {
+                "time" => f.time = true,
+                "cmd" => f.cmd = true,
+                "act" => f.act = true,
+                "dac" => f.dac = true,
+                other => {
+                    return Err(format!(
+                        "unknown field `{other}`: the fields are time, cmd, act, dac"
+                    ));
+                }
+            }
+        }
+        Ok(f)
+    }
+
+    /// The names of the selected fields.
+    pub fn names(&self) -> Vec<&'static str> {
+        let on = [self.time, self.cmd, self.act, self.dac];
+        GatherFields::NAMES.iter().zip(on).filter(|(_, on)| *on).map(|(n, _)| *n).collect()
+    }
 }
 
 /// The step move (thesis 3.4 "Step Motor").
@@ -354,10 +407,10 @@ fn check_period(us: u32) -> Result<(), String> {
 
 fn check_method(method: &str) -> Result<(), String> {
     match registry::generator(method) {
-        Some(g) if g.needs_knots => Ok(()),
+        Some(g) if g.name != "home" => Ok(()),
         _ => Err(format!(
-            "unknown trajectory method `{method}`; methods that read knots: {}",
-            registry::knot_generator_names().join(", ")
+            "unknown trajectory method `{method}`; registered: {}",
+            registry::path_generator_names().join(", ")
         )),
     }
 }
@@ -518,6 +571,7 @@ struct RawTimer {
 struct RawGather {
     every: S<i64>,
     out_dir: S<String>,
+    fields: S<Vec<String>>,
 }
 
 #[derive(Deserialize, Default)]
@@ -705,6 +759,12 @@ impl RawFile {
         let out_dir = take(src, &self.gather.out_dir, "gather.out_dir", "out".to_string(), |v| {
             if v.trim().is_empty() { Err("must not be empty".into()) } else { Ok(()) }
         })?;
+        let all_fields = GatherFields::NAMES.map(str::to_string).to_vec();
+        let field_names = take(src, &self.gather.fields, "gather.fields", all_fields, |v| {
+            GatherFields::from_names(v.iter().map(String::as_str)).map(|_| ())
+        })?;
+        let fields =
+            GatherFields::from_names(field_names.iter().map(String::as_str)).unwrap_or_default();
 
         let size = take(src, &self.step.size, "step.size", 1000, |v| check_step_size(*v))?;
         let duration_s =
@@ -997,7 +1057,7 @@ impl RawFile {
                 hwserver_priority,
                 lock_memory,
             },
-            gather: GatherSettings { every, out_dir: PathBuf::from(out_dir) },
+            gather: GatherSettings { every, out_dir: PathBuf::from(out_dir), fields },
             step: StepSettings { size, duration_s },
             trajectory,
             homing,
@@ -1097,8 +1157,8 @@ mod tests {
             "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `motor`",
         );
         check(
-            "[trajectory]\nmethod = \"step\"\n",
-            "q.toml:2:10: trajectory.method: unknown trajectory method `step`; methods that read knots: spline, pvt",
+            "[trajectory]\nmethod = \"home\"\n",
+            "q.toml:2:10: trajectory.method: unknown trajectory method `home`; registered: step, spline, pvt",
         );
         check(
             "[general]\nperiod_us = \n",

@@ -1,6 +1,7 @@
 //! Data gathering (thesis 3.4, 4.2): every N-th cycle's time, command, actual position and
 //! DAC per motor, into a buffer sized before the move, written to files after it.
 
+use crate::config::GatherFields;
 use qmarc_proto::MAX_MOTORS;
 use std::io::{self, Write};
 
@@ -58,6 +59,7 @@ pub struct Gather {
     every: u32,
     n_motors: usize,
     dropped: u64,
+    fields: GatherFields,
 }
 
 impl Gather {
@@ -70,7 +72,14 @@ impl Gather {
             every,
             n_motors: n_motors.min(MAX_MOTORS),
             dropped: 0,
+            fields: GatherFields::default(),
         }
+    }
+
+    /// Writes only `fields` (every row keeps all of them in memory).
+    pub fn with_fields(mut self, fields: GatherFields) -> Gather {
+        self.fields = fields;
+        self
     }
 
     /// Gather every N-th cycle.
@@ -111,9 +120,17 @@ impl Gather {
 
     /// Column names: `cycle,time_s,cmd1,act1,dac1,cmd2,…`.
     pub fn columns(&self) -> Vec<String> {
-        let mut c = vec!["cycle".to_string(), "time_s".to_string()];
+        let f = self.fields;
+        let mut c = vec!["cycle".to_string()];
+        if f.time {
+            c.push("time_s".to_string());
+        }
         for m in 1..=self.n_motors {
-            c.extend([format!("cmd{m}"), format!("act{m}"), format!("dac{m}")]);
+            for (on, name) in [(f.cmd, "cmd"), (f.act, "act"), (f.dac, "dac")] {
+                if on {
+                    c.push(format!("{name}{m}"));
+                }
+            }
         }
         c
     }
@@ -121,9 +138,21 @@ impl Gather {
     fn write_row(&self, w: &mut impl Write, r: &GatherRow, sep: &str) -> io::Result<()> {
         // `{}` on f64 is the shortest text that parses back to the same value, so figures
         // recomputed from the file equal the ones computed in the loop.
-        write!(w, "{}{sep}{}", r.cycle, r.time_s)?;
+        let f = self.fields;
+        write!(w, "{}", r.cycle)?;
+        if f.time {
+            write!(w, "{sep}{}", r.time_s)?;
+        }
         for m in 0..self.n_motors {
-            write!(w, "{sep}{}{sep}{}{sep}{}", r.cmd[m], r.act[m], r.dac[m])?;
+            if f.cmd {
+                write!(w, "{sep}{}", r.cmd[m])?;
+            }
+            if f.act {
+                write!(w, "{sep}{}", r.act[m])?;
+            }
+            if f.dac {
+                write!(w, "{sep}{}", r.dac[m])?;
+            }
         }
         writeln!(w)
     }
@@ -223,5 +252,22 @@ mod tests {
         let csv_rows: Vec<String> = csv.lines().skip(1).map(|l| l.replace(',', " ")).collect();
         assert_eq!(data, csv_rows);
         assert!(m.ends_with("dac2 = qmarc_data(:, 8);\n"));
+    }
+
+    #[test]
+    fn only_the_chosen_fields_are_written() {
+        let mut g = Gather::for_move(1, 1, 2).with_fields(GatherFields {
+            time: false,
+            cmd: true,
+            act: true,
+            dac: false,
+        });
+        g.push(row(7));
+        let mut csv = Vec::new();
+        g.write_csv(&mut csv).unwrap();
+        assert_eq!(
+            String::from_utf8(csv).unwrap(),
+            "cycle,cmd1,act1,cmd2,act2\n7,1000.5,998,-3,-1\n"
+        );
     }
 }

@@ -89,7 +89,7 @@ pub fn generator_names() -> Vec<&'static str> {
     GENERATORS.iter().map(|e| e.name).collect()
 }
 
-/// Names of the generators `run` accepts (those that read knots).
-pub fn knot_generator_names() -> Vec<&'static str> {
-    GENERATORS.iter().filter(|e| e.needs_knots).map(|e| e.name).collect()
+/// Names of the generators `run` accepts: every one that follows a path (not homing).
+pub fn path_generator_names() -> Vec<&'static str> {
+    GENERATORS.iter().filter(|e| e.name != "home").map(|e| e.name).collect()
 }

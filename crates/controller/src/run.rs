@@ -172,6 +172,7 @@ pub fn plan_for(settings: &Settings, mode: &Mode, deterministic: bool, unhomed: 
     limits.max_missed_in_row = settings.max_missed_in_row;
     MovePlan {
         gather_every: settings.gather.every,
+        gather_fields: settings.gather.fields,
         deterministic,
         starve_hold_cycles: (settings.trajectory.starve_hold_ms * 1e6 / settings.period_ns() as f64)
             .ceil() as u64,

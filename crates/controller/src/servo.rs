@@ -55,6 +55,8 @@ pub struct MovePlan {
     pub period_ns: u64,
     /// Gather every N cycles.
     pub gather_every: u32,
+    /// Which fields the data files carry.
+    pub gather_fields: crate::config::GatherFields,
     /// Simulated time: the sample index is the cycle count and gathered time is n·T.
     pub deterministic: bool,
     /// When the trajectory starves: cycles to hold the last command before disabling.
@@ -76,6 +78,7 @@ impl MovePlan {
             n_motors,
             period_ns,
             gather_every: 1,
+            gather_fields: crate::config::GatherFields::default(),
             deterministic: false,
             starve_hold_cycles: 0,
             limits: MoveLimits::none(),
@@ -321,7 +324,8 @@ impl Servo {
         self.law.reset(&self.cmd, &self.act);
         let samples = self.planned_samples.unwrap_or(STREAM_GATHER_SAMPLES);
         crate::gather::check_budget(samples, self.plan.gather_every)?;
-        self.gather = Gather::for_move(samples, self.plan.gather_every, self.plan.n_motors);
+        self.gather = Gather::for_move(samples, self.plan.gather_every, self.plan.n_motors)
+            .with_fields(self.plan.gather_fields);
         self.timing = TimingStats::new(self.plan.period_ns);
         self.errors = ErrorStats::default();
         self.fault = None;

@@ -1,4 +1,5 @@
-//! A process-wide stop request set by SIGTERM/SIGINT and polled by real-time loops.
+//! A process-wide stop request set by SIGTERM, SIGINT or SIGHUP (the terminal went away) and
+//! polled by real-time loops.
 //!
 //! The handler only stores to an atomic, so a loop can poll it every cycle without locking or
 //! allocating. Handlers are installed with `SA_RESTART`; waits that still return `EINTR` retry.
@@ -13,9 +14,9 @@ extern "C" fn on_signal(sig: libc::c_int) {
     STOP.store(true, Ordering::Relaxed);
 }
 
-/// Installs the stop handler for SIGTERM and SIGINT. Returns the flag it sets.
+/// Installs the stop handler for SIGTERM, SIGINT and SIGHUP. Returns the flag it sets.
 pub fn install() -> std::io::Result<&'static AtomicBool> {
-    for sig in [libc::SIGTERM, libc::SIGINT] {
+    for sig in [libc::SIGTERM, libc::SIGINT, libc::SIGHUP] {
         // SAFETY: `act` is fully initialised; the handler is async-signal-safe (atomic stores).
         let rc = unsafe {
             let mut act: libc::sigaction = std::mem::zeroed();

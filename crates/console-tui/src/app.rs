@@ -1,0 +1,438 @@
+//! The console's state and what each key does. Drawing is in [`crate::ui`]; the terminal loop
+//! in `main.rs`. Everything here runs without a terminal, so the tests drive it directly.
+
+use crate::form::{Action, Form, Kind, Section};
+use crate::results::{HistoryEntry, MoveResult};
+use crate::runner::{Mode, Running};
+use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+use std::path::PathBuf;
+
+/// The console's pages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Page {
+    /// The five sections of settings and the actions (F1).
+    Setup,
+    /// The starter's output (F3).
+    Log,
+    /// The last move's summary (F4).
+    Results,
+    /// The last move's charts (F7).
+    Charts,
+    /// The session's moves (F8).
+    History,
+}
+
+/// How the console ends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Quit {
+    /// Exit: the settings were saved.
+    Saved,
+    /// Cancel: the file was left as it was.
+    Cancelled,
+}
+
+/// Lines of starter output kept.
+pub const LOG_LINES: usize = 2_000;
+
+/// The console.
+#[derive(Debug)]
+pub struct App {
+    /// The settings form.
+    pub form: Form,
+    /// The page shown.
+    pub page: Page,
+    /// The focused field.
+    pub focus: usize,
+    /// The focused field's text when editing began (Esc restores it).
+    pub editing: Option<String>,
+    /// The message line and whether it is an error.
+    pub status: (String, bool),
+    /// The starter's output.
+    pub log: Vec<String>,
+    /// A move in progress.
+    pub running: Option<Running>,
+    /// The last move's outcome.
+    pub last: Option<MoveResult>,
+    /// The session's moves.
+    pub history: Vec<HistoryEntry>,
+    /// The motor the charts show (0-based).
+    pub chart_motor: usize,
+    /// Set when the console should end.
+    pub quit: Option<Quit>,
+    /// `qmarc-starter`.
+    pub starter: PathBuf,
+    /// Options given to every starter run before `--config` (iceoryx2 prefix and root).
+    pub starter_args: Vec<String>,
+    /// Where moves run (relative settings paths are relative to it).
+    pub workdir: PathBuf,
+}
+
+impl App {
+    /// A console on `form`, running moves with `starter` in `workdir`.
+    pub fn new(form: Form, starter: PathBuf, workdir: PathBuf) -> App {
+        let mut app = App {
+            form,
+            page: Page::Setup,
+            focus: 0,
+            editing: None,
+            status: (String::new(), false),
+            log: Vec::new(),
+            running: None,
+            last: None,
+            history: Vec::new(),
+            chart_motor: 0,
+            quit: None,
+            starter,
+            starter_args: Vec::new(),
+            workdir,
+        };
+        // The last move's results, if its files are there: shown, and its timing is what a
+        // new servo period is checked against.
+        if let Ok(r) = MoveResult::load(&app.out_dir()) {
+            app.form.last_output_p50_us =
+                Some(r.summary.timing.output_latency_us.p50).filter(|&p| p > 0.0);
+            app.form.validate();
+            app.last = Some(r);
+        }
+        app.hint();
+        app
+    }
+
+    fn say(&mut self, msg: impl Into<String>, error: bool) {
+        self.status = (msg.into(), error);
+    }
+
+    /// The focused field's error or the keys, on the message line.
+    fn hint(&mut self) {
+        match self.form.fields.get(self.focus).and_then(|f| f.error.clone()) {
+            Some(e) => self.say(e, true),
+            None => match &self.form.file_error {
+                Some(e) => self.say(e.clone(), true),
+                None => {
+                    let Some(f) = self.form.fields.get(self.focus) else { return };
+                    let keys = match (f.kind, f.place.motor()) {
+                        (Kind::Choice, _) => "←→ or space chooses · Tab/↑↓ next field".to_string(),
+                        (_, Some(_)) => {
+                            "type a value, Esc undoes · Tab/↑↓ next field · ←→ motor".to_string()
+                        }
+                        (_, None) => "type a value, Esc undoes · Tab/↑↓ next field".to_string(),
+                    };
+                    let name = match f.place.motor() {
+                        Some(m) => format!("{} M{}", f.label, m + 1),
+                        None => f.label.to_string(),
+                    };
+                    self.say(format!("{name}: {keys}"), false)
+                }
+            },
+        }
+    }
+
+    /// The output directory of the settings as they stand.
+    pub fn out_dir(&self) -> PathBuf {
+        let out = self
+            .form
+            .fields
+            .iter()
+            .find(|f| f.label == "Out dir")
+            .map_or_else(|| "out".to_string(), |f| f.text.clone());
+        self.workdir.join(out)
+    }
+
+    fn move_focus(&mut self, forward: bool) {
+        self.commit_edit();
+        let n = self.form.fields.len();
+        let mut i = self.focus;
+        for _ in 0..n {
+            i = if forward { (i + 1) % n } else { (i + n - 1) % n };
+            if self.form.enabled(i) {
+                break;
+            }
+        }
+        self.focus = i;
+        self.hint();
+    }
+
+    /// Left/right in the gains table: the same row of the neighbouring motor.
+    fn move_column(&mut self, right: bool) {
+        self.commit_edit();
+        let f = &self.form.fields[self.focus];
+        let Some(m) = f.place.motor() else { return };
+        let target = if right { m + 1 } else { m.wrapping_sub(1) };
+        let want = match f.place {
+            crate::form::Place::Motor(_, k) => crate::form::Place::Motor(target, k),
+            crate::form::Place::Notch(_, k) => crate::form::Place::Notch(target, k),
+            other => other,
+        };
+        if let Some(i) = self.form.index(want).filter(|&i| self.form.enabled(i)) {
+            self.focus = i;
+        }
+        self.hint();
+    }
+
+    fn commit_edit(&mut self) {
+        if self.editing.take().is_some() {
+            self.form.validate();
+        }
+    }
+
+    fn type_char(&mut self, c: char) {
+        let i = self.focus;
+        if !self.form.enabled(i) {
+            return;
+        }
+        let field = &self.form.fields[i];
+        if field.kind == Kind::Choice {
+            return;
+        }
+        // The first key replaces the value, as in a spreadsheet; later keys append.
+        let mut text = if self.editing.is_none() {
+            self.editing = Some(field.text.clone());
+            String::new()
+        } else {
+            field.text.clone()
+        };
+        text.push(c);
+        self.form.set_text(i, &text);
+        self.hint();
+    }
+
+    fn backspace(&mut self) {
+        let i = self.focus;
+        if !self.form.enabled(i) || self.form.fields[i].kind == Kind::Choice {
+            return;
+        }
+        if self.editing.is_none() {
+            self.editing = Some(self.form.fields[i].text.clone());
+        }
+        let mut text = self.form.fields[i].text.clone();
+        text.pop();
+        self.form.set_text(i, &text);
+        self.hint();
+    }
+
+    fn cycle_choice(&mut self, forward: bool) {
+        let f = &self.form.fields[self.focus];
+        if f.kind != Kind::Choice || f.choices.is_empty() {
+            return;
+        }
+        let n = f.choices.len();
+        let at = f.choices.iter().position(|c| *c == f.text).unwrap_or(0);
+        let next = f.choices[if forward { (at + 1) % n } else { (at + n - 1) % n }].clone();
+        self.form.set_text(self.focus, &next);
+        self.hint();
+    }
+
+    /// Saves the settings and starts `mode` (thesis 3.4: a button saves, then spawns the
+    /// starter), unless a field it needs does not validate.
+    pub fn start(&mut self, mode: Mode) {
+        if self.running.is_some() {
+            return self.say("a move is running: F9 aborts it", true);
+        }
+        self.commit_edit();
+        let action = match mode {
+            Mode::Home => Action::Home,
+            Mode::Run => Action::Run,
+            Mode::Step => Action::Step,
+        };
+        if let Some((field, e)) = self.form.blocking(action) {
+            if let Some(i) = field {
+                self.focus = i;
+            }
+            self.page = Page::Setup;
+            return self.say(format!("cannot {}: {e}", mode.arg()), true);
+        }
+        if let Err(e) = self.form.save() {
+            return self.say(e, true);
+        }
+        match Running::start(
+            &self.starter,
+            &self.starter_args,
+            &self.form.path,
+            mode,
+            &self.workdir,
+        ) {
+            Ok(r) => {
+                self.log.push(format!("── {} ──", mode.arg()));
+                self.running = Some(r);
+                self.page = Page::Log;
+                self.say(format!("{} running · F9 aborts (motors disabled)", mode.arg()), false);
+            }
+            Err(e) => self.say(format!("cannot start {}: {e}", self.starter.display()), true),
+        }
+    }
+
+    /// Stops the running move.
+    pub fn abort(&mut self) {
+        if let Some(r) = self.running.as_mut().filter(|r| !r.aborted) {
+            r.abort();
+            self.say("aborting: the motors are being disabled…", true);
+        }
+    }
+
+    /// Aborts a running move and waits up to `timeout` for it to end (the console is closing).
+    pub fn abort_and_wait(&mut self, timeout: std::time::Duration) {
+        let start = std::time::Instant::now();
+        self.abort();
+        while self.running.is_some() && start.elapsed() < timeout {
+            std::thread::sleep(std::time::Duration::from_millis(20));
+            self.poll();
+        }
+    }
+
+    /// Takes the starter's output; when the move has ended, loads its results.
+    pub fn poll(&mut self) {
+        let Some(r) = &mut self.running else { return };
+        self.log.extend(r.drain());
+        let Some(status) = r.finished() else {
+            self.trim_log();
+            return;
+        };
+        let (mode, since) = (r.mode, r.started_wall);
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        self.log.extend(r.drain());
+        self.trim_log();
+        self.running = None;
+        match MoveResult::load_since(&self.out_dir(), since) {
+            Ok(result) => {
+                self.record(mode, &result);
+                let fault = result
+                    .summary
+                    .fault
+                    .as_ref()
+                    .map(|f| format!("FAULT {}: {}", f.kind, f.message));
+                self.form.last_output_p50_us =
+                    Some(result.summary.timing.output_latency_us.p50).filter(|&p| p > 0.0);
+                self.last = Some(result);
+                self.page = Page::Results;
+                match fault {
+                    Some(f) => self.say(f, true),
+                    None => {
+                        self.say(format!("{} done · F7 charts · F8 history", mode.arg()), false)
+                    }
+                }
+            }
+            Err(e) => {
+                self.page = Page::Log;
+                self.say(format!("{} ended ({status}) without results: {e}", mode.arg()), true);
+            }
+        }
+    }
+
+    fn trim_log(&mut self) {
+        if self.log.len() > LOG_LINES {
+            self.log.drain(..self.log.len() - LOG_LINES);
+        }
+    }
+
+    fn record(&mut self, mode: Mode, r: &MoveResult) {
+        let s = &r.summary;
+        let what = if s.trajectory.is_empty() || s.trajectory == s.mode {
+            mode.arg().to_string()
+        } else {
+            format!("{} ({})", s.mode, s.trajectory)
+        };
+        let gains = self
+            .form
+            .checked
+            .as_ref()
+            .map(|c| c.motors.iter().take(c.n_motors).map(|g| (g.kp, g.kd, g.kvff)).collect())
+            .unwrap_or_default();
+        self.history.push(HistoryEntry {
+            n: self.history.len() + 1,
+            what,
+            fault: s.fault.as_ref().map(|f| f.kind.clone()),
+            accumulated: s.motors.iter().map(|m| m.accumulated_abs_error_counts).collect(),
+            gains,
+        });
+    }
+
+    /// Handles one key.
+    pub fn on_key(&mut self, key: KeyEvent) {
+        let ctrl = key.modifiers.contains(KeyModifiers::CONTROL);
+        match key.code {
+            KeyCode::Char('c') if ctrl => {
+                if self.running.is_some() {
+                    self.abort();
+                } else {
+                    self.quit = Some(Quit::Cancelled);
+                }
+            }
+            KeyCode::F(1) => self.page = Page::Setup,
+            KeyCode::F(3) => self.page = Page::Log,
+            KeyCode::F(4) => self.page = Page::Results,
+            KeyCode::F(7) => self.page = Page::Charts,
+            KeyCode::F(8) => self.page = Page::History,
+            KeyCode::F(2) => self.start(Mode::Home),
+            KeyCode::F(5) => self.start(Mode::Run),
+            KeyCode::F(6) => self.start(Mode::Step),
+            KeyCode::F(9) => self.abort(),
+            KeyCode::F(10) => {
+                if self.running.is_some() {
+                    return self.say("a move is running: F9 aborts it first", true);
+                }
+                self.commit_edit();
+                match self.form.save() {
+                    Ok(()) => self.quit = Some(Quit::Saved),
+                    Err(e) => self.say(format!("not saved: {e} (F12 leaves without saving)"), true),
+                }
+            }
+            KeyCode::F(12) => {
+                if self.running.is_some() {
+                    return self.say("a move is running: F9 aborts it first", true);
+                }
+                self.quit = Some(Quit::Cancelled);
+            }
+            _ if self.page == Page::Charts => self.on_chart_key(key.code),
+            _ if self.page == Page::Setup => self.on_setup_key(key.code),
+            _ => {}
+        }
+    }
+
+    fn on_chart_key(&mut self, code: KeyCode) {
+        let n = self
+            .last
+            .as_ref()
+            .and_then(|r| r.series.as_ref())
+            .map_or(1, |s| s.cmd.len().max(s.act.len()).max(1));
+        match code {
+            KeyCode::Right | KeyCode::Tab => self.chart_motor = (self.chart_motor + 1) % n,
+            KeyCode::Left | KeyCode::BackTab => self.chart_motor = (self.chart_motor + n - 1) % n,
+            KeyCode::Char(c @ '1'..='4') => {
+                self.chart_motor = (c as usize - '1' as usize).min(n - 1)
+            }
+            _ => {}
+        }
+    }
+
+    fn on_setup_key(&mut self, code: KeyCode) {
+        match code {
+            KeyCode::Tab | KeyCode::Down | KeyCode::Enter => self.move_focus(true),
+            KeyCode::BackTab | KeyCode::Up => self.move_focus(false),
+            KeyCode::Left if self.form.fields[self.focus].kind == Kind::Choice => {
+                self.cycle_choice(false)
+            }
+            KeyCode::Right if self.form.fields[self.focus].kind == Kind::Choice => {
+                self.cycle_choice(true)
+            }
+            KeyCode::Char(' ') if self.form.fields[self.focus].kind == Kind::Choice => {
+                self.cycle_choice(true)
+            }
+            KeyCode::Left => self.move_column(false),
+            KeyCode::Right => self.move_column(true),
+            KeyCode::Esc => {
+                if let Some(old) = self.editing.take() {
+                    self.form.set_text(self.focus, &old);
+                }
+                self.hint();
+            }
+            KeyCode::Backspace => self.backspace(),
+            KeyCode::Char(c) => self.type_char(c),
+            _ => {}
+        }
+    }
+
+    /// True for fields of `section`.
+    pub fn in_section(&self, i: usize, section: Section) -> bool {
+        self.form.fields[i].section == section
+    }
+}

@@ -1,0 +1,627 @@
+//! The settings form: the five sections of the thesis console (3.4) as editable fields, read
+//! from and written back to the settings file the starter reads — its comments, order and
+//! formatting kept — and checked with the very code the starter and controller use.
+
+use qmarc_controller::config::{ConfigLoadError, Settings};
+use qmarc_controller::registry;
+use qmarc_controller::traj::KnotSource;
+use std::path::{Path, PathBuf};
+use toml_edit::{Array, DocumentMut, Item, Table, Value};
+
+/// Sections of the console, as in the thesis' Figure 3-5.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Section {
+    /// Number of motors, servo period, home offsets.
+    General,
+    /// Method and knot file.
+    Trajectory,
+    /// Step size and duration.
+    Step,
+    /// Gains and notch per motor.
+    Gains,
+    /// Data gathering.
+    Gathering,
+}
+
+/// What a field holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// A whole number.
+    Int,
+    /// A number.
+    Float,
+    /// Free text (a path).
+    Text,
+    /// One of [`Field::choices`].
+    Choice,
+    /// A comma-separated list of names.
+    List,
+}
+
+/// Where a field lives in the settings file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Place {
+    /// `[table] key`.
+    Key(&'static str, &'static str),
+    /// `key` of the 0-based `[[motor]]` table.
+    Motor(usize, &'static str),
+    /// Element of `notch = [n1, n2, d1, d2]` of the 0-based `[[motor]]` table.
+    Notch(usize, usize),
+}
+
+impl Place {
+    /// The field as the settings checker names it (`general.period_us`, `motor[2].kp`).
+    pub fn config_path(self) -> String {
+        match self {
+            Place::Key(t, k) => format!("{t}.{k}"),
+            Place::Motor(m, k) => format!("motor[{}].{k}", m + 1),
+            Place::Notch(m, _) => format!("motor[{}].notch", m + 1),
+        }
+    }
+
+    /// The motor (0-based) of a per-motor field.
+    pub fn motor(self) -> Option<usize> {
+        match self {
+            Place::Motor(m, _) | Place::Notch(m, _) => Some(m),
+            Place::Key(..) => None,
+        }
+    }
+}
+
+/// One editable value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Field {
+    /// Its section.
+    pub section: Section,
+    /// Its label.
+    pub label: &'static str,
+    /// Where it lives.
+    pub place: Place,
+    /// What it holds.
+    pub kind: Kind,
+    /// The text as edited.
+    pub text: String,
+    /// Why it does not validate, if it does not.
+    pub error: Option<String>,
+    /// Which check the error comes from (meaningless without one).
+    pub check: Check,
+    /// The choices of a [`Kind::Choice`].
+    pub choices: Vec<String>,
+}
+
+/// Where a field's error comes from: that decides which actions it blocks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Check {
+    /// The settings parser refused the value: the file cannot be saved, so every action
+    /// (each saves first) is blocked.
+    Settings,
+    /// The knot file does not exist or parse: only `run` reads it (the starter does the same).
+    KnotFile,
+    /// The value parses but this machine cannot do it (the servo period): no move may start;
+    /// the settings can still be saved.
+    Machine,
+}
+
+/// What an action needs to be valid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Action {
+    /// Home robot.
+    Home,
+    /// Start controller (run the trajectory).
+    Run,
+    /// Step motors now.
+    Step,
+    /// Exit, saving the settings.
+    Save,
+}
+
+/// Labels of the gain rows, in order: Kp Ki Kd Kvff Kaff n1 n2 d1 d2.
+pub const GAIN_ROWS: [&str; 9] = ["Kp", "Ki", "Kd", "Kvff", "Kaff", "n1", "n2", "d1", "d2"];
+
+/// The form.
+#[derive(Debug, Clone)]
+pub struct Form {
+    /// The settings file.
+    pub path: PathBuf,
+    original: String,
+    doc: DocumentMut,
+    /// Every field, in display order.
+    pub fields: Vec<Field>,
+    /// `[[motor]]` tables in the file (gain columns).
+    pub motor_tables: usize,
+    /// The settings as the parser checks them now (`None` while a value does not parse; the
+    /// knot-file and machine checks do not clear it).
+    pub checked: Option<Settings>,
+    /// An error the form cannot show on one field (elsewhere in the file).
+    pub file_error: Option<String>,
+    /// Median "tick → DAC written" of the last move, µs: what a typical cycle needs on this
+    /// machine, which the servo period must exceed.
+    pub last_output_p50_us: Option<f64>,
+    /// Where moves run: relative paths in the settings (the knot file) are relative to it.
+    pub base: PathBuf,
+}
+
+fn item_text(item: Option<&Item>) -> Option<String> {
+    let v = item?.as_value()?;
+    Some(match v {
+        Value::String(s) => s.value().clone(),
+        Value::Integer(i) => i.value().to_string(),
+        Value::Float(f) => f.value().to_string(),
+        Value::Boolean(b) => b.value().to_string(),
+        Value::Array(a) => a.iter().filter_map(|x| x.as_str()).collect::<Vec<_>>().join(","),
+        _ => return None,
+    })
+}
+
+impl Form {
+    /// Reads `path` into a form, relative paths in it taken from the working directory. Fails
+    /// only when the file cannot be read or is not TOML at all (it could not be edited then);
+    /// invalid values load and show their errors in place.
+    pub fn load(path: &Path) -> Result<Form, String> {
+        Form::load_in(path, &std::env::current_dir().unwrap_or_default())
+    }
+
+    /// [`Form::load`] with relative paths taken from `base` (where moves will run).
+    pub fn load_in(path: &Path, base: &Path) -> Result<Form, String> {
+        let original = std::fs::read_to_string(path)
+            .map_err(|e| format!("{}: cannot read the settings file: {e}", path.display()))?;
+        let doc: DocumentMut = original.parse().map_err(|e| format!("{}: {e}", path.display()))?;
+        let motor_tables = doc
+            .get("motor")
+            .and_then(Item::as_array_of_tables)
+            .map_or(0, |a| a.len())
+            .min(qmarc_proto::MAX_MOTORS);
+        let mut form = Form {
+            path: path.to_path_buf(),
+            original,
+            doc,
+            fields: Vec::new(),
+            motor_tables,
+            checked: None,
+            file_error: None,
+            last_output_p50_us: None,
+            base: base.to_path_buf(),
+        };
+        form.fields = form.layout();
+        form.validate();
+        Ok(form)
+    }
+
+    fn layout(&self) -> Vec<Field> {
+        let methods: Vec<String> =
+            registry::path_generator_names().into_iter().map(str::to_string).collect();
+        let mut f = Vec::new();
+        let mut add = |section, label, place, kind| {
+            f.push(Field {
+                section,
+                label,
+                place,
+                kind,
+                text: self.read(place).unwrap_or_default(),
+                error: None,
+                check: Check::Settings,
+                choices: if kind == Kind::Choice { methods.clone() } else { Vec::new() },
+            })
+        };
+        add(Section::General, "Motors", Place::Key("general", "n_motors"), Kind::Int);
+        add(Section::General, "Period µs", Place::Key("general", "period_us"), Kind::Int);
+        add(Section::Trajectory, "Method", Place::Key("trajectory", "method"), Kind::Choice);
+        add(Section::Trajectory, "Knots", Place::Key("trajectory", "knots"), Kind::Text);
+        add(Section::Step, "Size", Place::Key("step", "size"), Kind::Int);
+        add(Section::Step, "Duration s", Place::Key("step", "duration_s"), Kind::Float);
+        add(Section::Gathering, "Every", Place::Key("gather", "every"), Kind::Int);
+        add(Section::Gathering, "Out dir", Place::Key("gather", "out_dir"), Kind::Text);
+        add(Section::Gathering, "Fields", Place::Key("gather", "fields"), Kind::List);
+        for m in 0..self.motor_tables {
+            add(Section::General, "Home", Place::Motor(m, "home_offset_counts"), Kind::Float);
+        }
+        for (row, key) in ["kp", "ki", "kd", "kvff", "kaff"].into_iter().enumerate() {
+            for m in 0..self.motor_tables {
+                add(Section::Gains, GAIN_ROWS[row], Place::Motor(m, key), Kind::Float);
+            }
+        }
+        for k in 0..4 {
+            for m in 0..self.motor_tables {
+                add(Section::Gains, GAIN_ROWS[5 + k], Place::Notch(m, k), Kind::Float);
+            }
+        }
+        f
+    }
+
+    fn motor_table(&self, m: usize) -> Option<&Table> {
+        self.doc.get("motor")?.as_array_of_tables()?.get(m)
+    }
+
+    /// The text of `place` in the file as loaded.
+    fn read(&self, place: Place) -> Option<String> {
+        match place {
+            Place::Key(t, k) => item_text(self.doc.get(t).and_then(|t| t.get(k))),
+            Place::Motor(m, k) => item_text(self.motor_table(m)?.get(k)),
+            Place::Notch(m, k) => {
+                let arr = self.motor_table(m)?.get("notch")?.as_array()?;
+                let v = arr.get(k)?;
+                v.as_float()
+                    .map(|f| f.to_string())
+                    .or_else(|| v.as_integer().map(|i| i.to_string()))
+            }
+        }
+    }
+
+    fn value_of(field: &Field) -> Value {
+        let t = field.text.trim();
+        match field.kind {
+            Kind::Int => t.parse::<i64>().map(Value::from).unwrap_or_else(|_| Value::from(t)),
+            Kind::Float => t.parse::<f64>().map(Value::from).unwrap_or_else(|_| Value::from(t)),
+            Kind::Text | Kind::Choice => Value::from(t),
+            Kind::List => {
+                let mut a = Array::new();
+                for n in t.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+                    a.push(n);
+                }
+                Value::Array(a)
+            }
+        }
+    }
+
+    /// `doc` with `field` written into it (keys and tables created where missing).
+    fn apply(doc: &mut DocumentMut, field: &Field) {
+        let value = Form::value_of(field);
+        match field.place {
+            Place::Key(t, k) => {
+                if !doc.contains_table(t) {
+                    doc.insert(t, Item::Table(Table::new()));
+                }
+                set_keeping_decor(&mut doc[t][k], value);
+            }
+            Place::Motor(m, k) => {
+                if let Some(table) = doc
+                    .get_mut("motor")
+                    .and_then(Item::as_array_of_tables_mut)
+                    .and_then(|a| a.get_mut(m))
+                {
+                    set_keeping_decor(&mut table[k], value);
+                }
+            }
+            Place::Notch(m, k) => {
+                if let Some(table) = doc
+                    .get_mut("motor")
+                    .and_then(Item::as_array_of_tables_mut)
+                    .and_then(|a| a.get_mut(m))
+                {
+                    if table.get("notch").and_then(Item::as_array).is_none_or(|a| a.len() != 4) {
+                        table["notch"] = toml_edit::value(Array::from_iter([0.0, 0.0, 0.0, 0.0]));
+                    }
+                    if let Some(arr) = table["notch"].as_array_mut() {
+                        arr.replace(k, value);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The file with every field written except those in `skip`.
+    fn doc_with(&self, skip: &[usize]) -> DocumentMut {
+        let mut doc = self.doc.clone();
+        for (i, f) in self.fields.iter().enumerate() {
+            if !skip.contains(&i) {
+                Form::apply(&mut doc, f);
+            }
+        }
+        doc
+    }
+
+    /// The settings file as it would be saved now.
+    pub fn text(&self) -> String {
+        self.doc_with(&[]).to_string()
+    }
+
+    /// True when saving would change the file.
+    pub fn dirty(&self) -> bool {
+        self.text() != self.original
+    }
+
+    /// Number of motors the form says (falls back to the tables in the file).
+    pub fn n_motors(&self) -> usize {
+        self.fields[0]
+            .text
+            .trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|n| (1..=self.motor_tables).contains(n))
+            .unwrap_or(self.motor_tables)
+    }
+
+    /// Whether field `i` can be edited: per-motor fields of motors beyond the number of motors
+    /// are not (thesis 3.4: their edit boxes are disabled).
+    pub fn enabled(&self, i: usize) -> bool {
+        self.fields[i].place.motor().is_none_or(|m| m < self.n_motors())
+    }
+
+    /// Sets field `i`'s text and checks everything again.
+    pub fn set_text(&mut self, i: usize, text: &str) {
+        self.fields[i].text = text.to_string();
+        self.validate();
+    }
+
+    /// The index of the field at `place`.
+    pub fn index(&self, place: Place) -> Option<usize> {
+        self.fields.iter().position(|f| f.place == place)
+    }
+
+    /// Checks every field with the starter's own code: the whole file is parsed; an error
+    /// names a field, which is marked, set back to its saved value, and the file parsed again,
+    /// until it checks. Then the knot file is read for the chosen method and the period is
+    /// compared with what the last move needed.
+    pub fn validate(&mut self) {
+        for f in &mut self.fields {
+            f.error = None;
+        }
+        self.file_error = None;
+        self.checked = None;
+        let mut skip: Vec<usize> = Vec::new();
+        for _ in 0..=self.fields.len() {
+            let text = self.doc_with(&skip).to_string();
+            match Settings::parse(&self.path, &text) {
+                Ok(s) => {
+                    if skip.is_empty() {
+                        self.checked = Some(s);
+                    }
+                    break;
+                }
+                Err(ConfigLoadError::Invalid { field, message, line, .. }) => {
+                    let hit: Vec<usize> = (0..self.fields.len())
+                        .filter(|&i| {
+                            self.fields[i].place.config_path() == field && !skip.contains(&i)
+                        })
+                        .collect();
+                    if hit.is_empty() {
+                        self.file_error =
+                            Some(format!("{}:{line}: {field}: {message}", self.path.display()));
+                        break;
+                    }
+                    for i in hit {
+                        self.fields[i].error = Some(message.clone());
+                        self.fields[i].check = Check::Settings;
+                        skip.push(i);
+                    }
+                }
+                Err(e) => {
+                    self.file_error = Some(e.to_string());
+                    break;
+                }
+            }
+        }
+        if let Some(s) = self.checked.clone() {
+            self.check_knots(&s);
+            self.check_period(&s);
+        }
+    }
+
+    /// The knot file must exist and parse for the chosen method and motors.
+    fn check_knots(&mut self, s: &Settings) {
+        let Some(i) = self.index(Place::Key("trajectory", "knots")) else { return };
+        let mut s = s.clone();
+        s.trajectory.knots = s
+            .trajectory
+            .knots
+            .map(|k| if k.is_relative() && k != Path::new("-") { self.base.join(k) } else { k });
+        let s = &s;
+        let Some(entry) = registry::generator(&s.trajectory.method) else { return };
+        if !entry.needs_knots {
+            return;
+        }
+        let error = match &s.trajectory.knots {
+            None => Some("this method needs a knot file".to_string()),
+            Some(path) => match KnotSource::from_path(path) {
+                Ok(KnotSource::File(_)) => (entry.build)(s).err().map(|e| e.to_string()),
+                Ok(_) => None, // a stream: read when the move starts
+                Err(e) => Some(e.to_string()),
+            },
+        };
+        if let Some(e) = error {
+            self.fields[i].error = Some(e);
+            self.fields[i].check = Check::KnotFile;
+        }
+    }
+
+    /// The servo period must leave the loop room: more than a typical cycle of the last move
+    /// took from the tick to the DAC write being acknowledged. (The median, not a tail: on a
+    /// kernel without PREEMPT_RT the tails are host stalls, which no period avoids.)
+    fn check_period(&mut self, s: &Settings) {
+        let (Some(i), Some(p50)) =
+            (self.index(Place::Key("general", "period_us")), self.last_output_p50_us)
+        else {
+            return;
+        };
+        if f64::from(s.period_us) <= p50 {
+            self.fields[i].check = Check::Machine;
+            self.fields[i].error = Some(format!(
+                "a typical cycle of the last move needed {p50:.0} µs from tick to DAC written \
+                 (p50): a {} µs period would overrun every cycle on this machine",
+                s.period_us
+            ));
+        }
+    }
+
+    /// The first error that stops `action`: (field index or none, message).
+    pub fn blocking(&self, action: Action) -> Option<(Option<usize>, String)> {
+        if let Some(e) = &self.file_error {
+            return Some((None, e.clone()));
+        }
+        self.fields.iter().enumerate().find_map(|(i, f)| {
+            let needed = match (f.check, action) {
+                (Check::Settings, _) | (_, Action::Run) => true,
+                (Check::Machine, Action::Step | Action::Home) => true,
+                (Check::KnotFile | Check::Machine, _) => false,
+            };
+            let e = f.error.as_ref().filter(|_| needed)?;
+            Some((Some(i), format!("{} {}: {e}", f.place.config_path(), f.label)))
+        })
+    }
+
+    /// Writes the file (only when every field checks).
+    pub fn save(&mut self) -> Result<(), String> {
+        if let Some((_, e)) = self.blocking(Action::Save) {
+            return Err(e);
+        }
+        let text = self.text();
+        std::fs::write(&self.path, &text).map_err(|e| format!("{}: {e}", self.path.display()))?;
+        self.original = text.clone();
+        self.doc = text.parse().map_err(|e| format!("{e}"))?;
+        Ok(())
+    }
+}
+
+/// Replaces the value of `item`, keeping the comment after it.
+fn set_keeping_decor(item: &mut Item, mut value: Value) {
+    if let Some(old) = item.as_value() {
+        *value.decor_mut() = old.decor().clone();
+    } else {
+        value.decor_mut().set_prefix(" ");
+    }
+    *item = Item::Value(value);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped() -> String {
+        std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml"),
+        )
+        .unwrap()
+    }
+
+    fn form_of(text: &str) -> (tempdir::Dir, Form) {
+        let dir = tempdir::Dir::new();
+        let path = dir.0.join("qmarc.toml");
+        std::fs::write(&path, text).unwrap();
+        let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let form = Form::load_in(&path, &repo).unwrap();
+        (dir, form)
+    }
+
+    mod tempdir {
+        /// A scratch directory removed on drop.
+        pub struct Dir(pub std::path::PathBuf);
+        impl Dir {
+            pub fn new() -> Dir {
+                static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+                let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let d = std::env::temp_dir().join(format!("qmarc-form-{}-{n}", std::process::id()));
+                std::fs::create_dir_all(&d).unwrap();
+                Dir(d)
+            }
+        }
+        impl Drop for Dir {
+            fn drop(&mut self) {
+                let _ = std::fs::remove_dir_all(&self.0);
+            }
+        }
+    }
+
+    #[test]
+    fn the_shipped_file_loads_checks_and_round_trips_unchanged() {
+        let (_d, form) = form_of(&shipped());
+        assert!(form.checked.is_some(), "{:?}", form.fields.iter().find(|f| f.error.is_some()));
+        assert_eq!(form.motor_tables, 4);
+        assert_eq!(form.text(), shipped(), "writing the fields back changes nothing");
+        assert!(!form.dirty());
+        let kp2 = form.index(Place::Motor(1, "kp")).unwrap();
+        assert_eq!(form.fields[kp2].text, "182000");
+    }
+
+    #[test]
+    fn an_invalid_value_is_marked_on_its_field_with_the_checkers_message() {
+        let (_d, mut form) = form_of(&shipped());
+        let period = form.index(Place::Key("general", "period_us")).unwrap();
+        form.set_text(period, "50");
+        assert_eq!(
+            form.fields[period].error.as_deref(),
+            Some("servo period must be 100‥100000 µs, found 50")
+        );
+        let kd3 = form.index(Place::Motor(2, "kd")).unwrap();
+        form.set_text(kd3, "fast");
+        assert_eq!(
+            form.fields[kd3].error.as_deref(),
+            Some("invalid type: string \"fast\", expected f64")
+        );
+        // Both are found, not just the first.
+        assert!(form.fields[period].error.is_some());
+        let (i, msg) = form.blocking(Action::Step).unwrap();
+        assert_eq!(i, Some(period));
+        assert!(msg.starts_with("general.period_us Period µs: servo period"), "{msg}");
+        form.set_text(period, "500");
+        form.set_text(kd3, "2500");
+        assert!(form.blocking(Action::Save).is_none());
+        assert!(form.checked.is_some());
+    }
+
+    #[test]
+    fn a_bad_knot_file_is_shown_on_the_knots_field_and_blocks_only_run() {
+        let (d, mut form) = form_of(&shipped());
+        let bad = d.0.join("bad.txt");
+        std::fs::write(&bad, "2\n0 0 0 0\n1 5 5\n").unwrap();
+        let knots = form.index(Place::Key("trajectory", "knots")).unwrap();
+        form.set_text(knots, bad.to_str().unwrap());
+        let e = form.fields[knots].error.clone().unwrap();
+        assert!(
+            e.ends_with("bad.txt:3:6: expected 4 columns (time and 3 motor positions), found 3"),
+            "{e}"
+        );
+        assert!(form.blocking(Action::Run).is_some());
+        assert!(form.blocking(Action::Step).is_none() && form.blocking(Action::Home).is_none());
+        // The starter accepts such settings for step and home: they can be saved.
+        assert!(form.blocking(Action::Save).is_none() && form.checked.is_some());
+    }
+
+    #[test]
+    fn motor_columns_beyond_the_number_of_motors_are_disabled() {
+        let (_d, mut form) = form_of(&shipped());
+        let kp4 = form.index(Place::Motor(3, "kp")).unwrap();
+        assert!(!form.enabled(kp4));
+        form.set_text(0, "4");
+        assert!(form.enabled(kp4));
+        form.set_text(0, "2");
+        let kp3 = form.index(Place::Motor(2, "kp")).unwrap();
+        assert!(!form.enabled(kp3));
+    }
+
+    #[test]
+    fn saving_writes_the_edit_and_keeps_the_comments() {
+        let (_d, mut form) = form_of(&shipped());
+        let kvff1 = form.index(Place::Motor(0, "kvff")).unwrap();
+        form.set_text(kvff1, "120500");
+        let n2 = form.index(Place::Notch(1, 1)).unwrap();
+        form.set_text(n2, "0.25");
+        assert!(form.dirty());
+        form.save().unwrap();
+        let text = std::fs::read_to_string(&form.path).unwrap();
+        assert!(text.contains("kvff = 120500.0"), "{text}");
+        assert!(text.contains("notch = [0.0, 0.25, 0.0, 0.0]"), "{text}");
+        assert!(text.contains("# Per motor: gains (thesis Table 5-1;"), "comments kept");
+        assert_eq!(text.lines().count(), shipped().lines().count());
+        let again = Form::load_in(&form.path, &form.base).unwrap();
+        assert_eq!(again.fields[kvff1].text, "120500");
+    }
+
+    #[test]
+    fn the_period_must_leave_room_for_what_the_last_move_needed() {
+        let (_d, mut form) = form_of(&shipped());
+        form.last_output_p50_us = Some(450.0);
+        form.validate();
+        let period = form.index(Place::Key("general", "period_us")).unwrap();
+        assert_eq!(
+            form.fields[period].error.as_deref(),
+            Some(
+                "a typical cycle of the last move needed 450 µs from tick to DAC written (p50): a 400 µs period would overrun every cycle on this machine"
+            )
+        );
+        // It stops moves, not saving (the settings may be for another machine).
+        assert!(form.blocking(Action::Step).is_some() && form.blocking(Action::Home).is_some());
+        assert!(form.blocking(Action::Save).is_none());
+        form.set_text(period, "600");
+        assert!(form.fields[period].error.is_none());
+    }
+}

@@ -1,0 +1,133 @@
+//! `qmarc`: the console. `qmarc [--config FILE]` opens it; `qmarc home|step|run …` does the
+//! same as `qmarc-starter home|step|run …` without it, for scripts (same options, same exit
+//! codes).
+
+use anyhow::Context;
+use clap::Parser;
+use qmarc_console::app::{App, Quit};
+use qmarc_console::form::Form;
+use qmarc_console::ui;
+use ratatui::crossterm::event::{self, Event, KeyEventKind};
+use std::io::Write;
+use std::os::unix::process::CommandExt;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+/// Command line of `qmarc`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "qmarc",
+    version,
+    about = "QMARC console: set up, home, step, run and tune the robot",
+    after_help = "Without the console: qmarc [qmarc-starter options] home|step|run [options] \
+                  runs qmarc-starter with the same arguments."
+)]
+struct Args {
+    /// Settings file (the one qmarc-starter reads).
+    #[arg(long, default_value = "config/qmarc.toml")]
+    config: PathBuf,
+    /// qmarc-starter to run moves with (default: next to this program).
+    #[arg(long)]
+    starter: Option<PathBuf>,
+    /// Passed to qmarc-starter: prefix of the runs' iceoryx2 files.
+    #[arg(long)]
+    iox_prefix: Option<String>,
+    /// Passed to qmarc-starter: iceoryx2 root directory.
+    #[arg(long)]
+    iox_root: Option<String>,
+}
+
+fn starter_next_to_me() -> PathBuf {
+    std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(|d| d.join("qmarc-starter")))
+        .unwrap_or_else(|| PathBuf::from("qmarc-starter"))
+}
+
+/// True when the console's terminal has hung up (its other end closed).
+fn terminal_gone() -> bool {
+    let mut fd = libc::pollfd { fd: libc::STDOUT_FILENO, events: 0, revents: 0 };
+    // SAFETY: poll(2) on one valid pollfd, zero timeout.
+    let n = unsafe { libc::poll(&mut fd, 1, 0) };
+    n > 0 && fd.revents & (libc::POLLHUP | libc::POLLERR | libc::POLLNVAL) != 0
+}
+
+fn run_console(args: &Args) -> anyhow::Result<Option<Quit>> {
+    let workdir = std::env::current_dir().context("no working directory")?;
+    let form = Form::load_in(&args.config, &workdir).map_err(anyhow::Error::msg)?;
+    if !std::io::IsTerminal::is_terminal(&std::io::stdout()) {
+        anyhow::bail!("the console needs a terminal; without one, use `qmarc home|step|run …`");
+    }
+    let mut app = App::new(form, args.starter.clone().unwrap_or_else(starter_next_to_me), workdir);
+    app.starter_args.extend(args.iox_prefix.iter().map(|p| format!("--iox-prefix={p}")));
+    app.starter_args.extend(args.iox_root.iter().map(|r| format!("--iox-root={r}")));
+    // SIGTERM, SIGHUP and a SIGINT from outside end the console like Cancel (aborting a move
+    // first); Ctrl-C typed in the console arrives as a key.
+    let stop = qmarc_timer::stop::install().context("signal handlers")?;
+    let mut terminal = ratatui::try_init().context("cannot set up the terminal")?;
+    let result = (|| -> anyhow::Result<()> {
+        loop {
+            // A terminal that went away (window closed, ssh dropped) ends the console like a
+            // stop signal, whether or not SIGHUP reached this process.
+            let gone = terminal_gone();
+            if gone {
+                stop.store(true, Ordering::Relaxed);
+                std::thread::sleep(Duration::from_millis(50));
+            } else {
+                terminal.draw(|f| ui::draw(f, &app))?;
+                if event::poll(Duration::from_millis(100))? {
+                    match event::read()? {
+                        Event::Key(k) if k.kind == KeyEventKind::Press => app.on_key(k),
+                        _ => {} // a resize redraws on the next turn
+                    }
+                }
+            }
+            app.poll();
+            if stop.load(Ordering::Relaxed) {
+                app.abort();
+                app.quit.get_or_insert(Quit::Cancelled);
+            }
+            if app.quit.is_some() && app.running.is_none() {
+                return Ok(());
+            }
+        }
+    })();
+    // Whatever ended the loop (an error of the terminal included), a move still running is
+    // stopped and waited for: motors disabled, data written.
+    app.abort_and_wait(Duration::from_secs(30));
+    // Restoring a terminal that is gone fails; there is nothing left to restore then.
+    let _ = ratatui::try_restore();
+    result?;
+    Ok(app.quit)
+}
+
+fn main() -> ExitCode {
+    // `qmarc home|step|run …`: the starter's command line, run in place of this process.
+    let raw: Vec<String> = std::env::args().skip(1).collect();
+    if raw.iter().any(|a| matches!(a.as_str(), "home" | "step" | "run")) {
+        let mut cmd = std::process::Command::new(starter_next_to_me());
+        cmd.args(&raw);
+        let err = cmd.exec();
+        eprintln!("qmarc: cannot run {}: {err}", starter_next_to_me().display());
+        return ExitCode::from(1);
+    }
+    let args = Args::parse();
+    match run_console(&args) {
+        // Written without panicking: the terminal may be gone.
+        Ok(Some(Quit::Saved)) => {
+            let _ =
+                writeln!(std::io::stdout(), "qmarc: settings saved to {}", args.config.display());
+            ExitCode::SUCCESS
+        }
+        Ok(_) => {
+            let _ = writeln!(std::io::stdout(), "qmarc: left without saving");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            let _ = writeln!(std::io::stderr(), "qmarc: error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

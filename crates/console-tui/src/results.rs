@@ -1,0 +1,172 @@
+//! What the console shows after a move: the summary, the series for the charts from
+//! `gather.csv`, and the history of the session's moves.
+
+use qmarc_controller::summary::Summary;
+use std::path::Path;
+
+/// The series of one move, per motor, from `gather.csv`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Series {
+    /// Time of each gathered row, s (from `time_s`, or cycle × period without it).
+    pub t: Vec<f64>,
+    /// Command per motor, counts (empty if not gathered).
+    pub cmd: Vec<Vec<f64>>,
+    /// Actual position per motor, counts (empty if not gathered).
+    pub act: Vec<Vec<f64>>,
+    /// Interval between consecutive gathered rows divided by the rows' cycle distance, µs:
+    /// the servo period as it was (only with `time_s`).
+    pub period_us: Vec<(f64, f64)>,
+}
+
+impl Series {
+    /// Parses `gather.csv` text; `period_s` turns cycles into time when `time_s` is missing.
+    pub fn parse(csv: &str, period_s: f64) -> Result<Series, String> {
+        let mut lines = csv.lines();
+        let header: Vec<&str> = lines.next().ok_or("gather.csv is empty")?.split(',').collect();
+        let col = |name: &str| header.iter().position(|h| *h == name);
+        let has =
+            |m: usize| ["cmd", "act", "dac"].iter().any(|n| col(&format!("{n}{m}")).is_some());
+        let n_motors = (1..=qmarc_proto::MAX_MOTORS).take_while(|&m| has(m)).count();
+        let mut rows: Vec<Vec<f64>> = Vec::new();
+        for (i, l) in lines.enumerate() {
+            let r: Result<Vec<f64>, _> = l.split(',').map(str::parse::<f64>).collect();
+            rows.push(r.map_err(|e| format!("gather.csv line {}: {e}", i + 2))?);
+        }
+        let cycle = col("cycle").ok_or("gather.csv has no cycle column")?;
+        let time = col("time_s");
+        let t: Vec<f64> = rows.iter().map(|r| time.map_or(r[cycle] * period_s, |c| r[c])).collect();
+        let per_motor = |name: &str| -> Vec<Vec<f64>> {
+            (1..=n_motors)
+                .map_while(|m| col(&format!("{name}{m}")))
+                .map(|c| rows.iter().map(|r| r[c]).collect())
+                .collect()
+        };
+        let mut period_us = Vec::new();
+        if time.is_some() {
+            for w in rows.windows(2) {
+                let cycles = w[1][cycle] - w[0][cycle];
+                if cycles > 0.0 {
+                    let (t0, t1) = (time.map_or(0.0, |c| w[0][c]), time.map_or(0.0, |c| w[1][c]));
+                    period_us.push((t1, (t1 - t0) / cycles * 1e6));
+                }
+            }
+        }
+        Ok(Series { t, cmd: per_motor("cmd"), act: per_motor("act"), period_us })
+    }
+
+    /// Following error (command − actual) of motor `m` over time.
+    pub fn error(&self, m: usize) -> Vec<(f64, f64)> {
+        match (self.cmd.get(m), self.act.get(m)) {
+            (Some(c), Some(a)) => {
+                self.t.iter().zip(c.iter().zip(a)).map(|(&t, (c, a))| (t, c - a)).collect()
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// `values` against time.
+    pub fn points(&self, values: Option<&Vec<f64>>) -> Vec<(f64, f64)> {
+        values.map_or_else(Vec::new, |v| self.t.iter().copied().zip(v.iter().copied()).collect())
+    }
+}
+
+/// Keeps at most about `n` points of `pts` (charts need no more than their width): of each
+/// run of k points, the one furthest from the run's first — so a single late period or an
+/// error peak stays visible.
+pub fn thin(pts: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
+    let step = pts.len().div_ceil(n.max(1)).max(1);
+    pts.chunks(step)
+        .map(|c| {
+            *c.iter()
+                .max_by(|a, b| (a.1 - c[0].1).abs().total_cmp(&(b.1 - c[0].1).abs()))
+                .unwrap_or(&c[0])
+        })
+        .collect()
+}
+
+/// The outcome of one move.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MoveResult {
+    /// `summary.json`.
+    pub summary: Summary,
+    /// The gathered data, if `gather.csv` could be read.
+    pub series: Option<Series>,
+}
+
+impl MoveResult {
+    /// Reads `summary.json` and `gather.csv` from `out`.
+    pub fn load(out: &Path) -> Result<MoveResult, String> {
+        let path = out.join("summary.json");
+        let text =
+            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let summary: Summary =
+            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        let period_s = f64::from(summary.period_us) * 1e-6;
+        let series = std::fs::read_to_string(out.join("gather.csv"))
+            .ok()
+            .and_then(|c| Series::parse(&c, period_s).ok());
+        Ok(MoveResult { summary, series })
+    }
+
+    /// [`MoveResult::load`], refusing a `summary.json` older than `since`: a move that
+    /// ended before writing its own (refused settings, a crash) must not show the one
+    /// before it as its result.
+    pub fn load_since(out: &Path, since: std::time::SystemTime) -> Result<MoveResult, String> {
+        let path = out.join("summary.json");
+        let written = std::fs::metadata(&path)
+            .and_then(|m| m.modified())
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        // File times come from the kernel's coarse clock, up to a tick behind the fine one.
+        let slack = std::time::Duration::from_millis(20);
+        if written + slack < since {
+            return Err(format!("{} is from an earlier move", path.display()));
+        }
+        MoveResult::load(out)
+    }
+}
+
+/// One line of the history: what a move's accumulated errors were with which gains.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HistoryEntry {
+    /// 1-based move number of the session.
+    pub n: usize,
+    /// `step`, `run (spline)`, `home`.
+    pub what: String,
+    /// The fault kind, if one ended it.
+    pub fault: Option<String>,
+    /// Σ|error| per motor, counts.
+    pub accumulated: Vec<f64>,
+    /// (Kp, Kd, Kvff) per motor when it ran.
+    pub gains: Vec<(f64, f64, f64)>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn series_come_from_the_gathered_columns() {
+        let csv = "cycle,time_s,cmd1,act1,dac1,cmd2,act2,dac2\n0,0,0,0,0,0,0,0\n1,0.0004,1000,3,8191,-5,-1,-30\n3,0.0012,1000,40,100,-5,-4,-2\n";
+        let s = Series::parse(csv, 0.0004).unwrap();
+        assert_eq!(s.t, [0.0, 0.0004, 0.0012]);
+        assert_eq!(s.cmd.len(), 2);
+        assert_eq!(s.error(0), [(0.0, 0.0), (0.0004, 997.0), (0.0012, 960.0)]);
+        assert_eq!(s.error(1)[2], (0.0012, -1.0));
+        assert_eq!(s.period_us.len(), 2);
+        assert!((s.period_us[0].1 - 400.0).abs() < 1e-9 && (s.period_us[1].1 - 400.0).abs() < 1e-9);
+        // Without time_s: cycles × period; without cmd: no error series.
+        let s = Series::parse("cycle,act1\n0,5\n2,7\n", 0.0004).unwrap();
+        assert_eq!(s.t, [0.0, 0.0008]);
+        assert!(s.error(0).is_empty() && s.period_us.is_empty());
+    }
+
+    #[test]
+    fn thinning_keeps_every_kth_point() {
+        let pts: Vec<(f64, f64)> = (0..100).map(|i| (f64::from(i), 0.0)).collect();
+        assert_eq!(thin(&pts, 10).len(), 10);
+        assert_eq!(thin(&pts, 1000).len(), 100);
+        let mut spiky: Vec<(f64, f64)> = (0..100).map(|i| (f64::from(i), 400.0)).collect();
+        spiky[57].1 = 3_000.0;
+        assert!(thin(&spiky, 10).iter().any(|p| p.1 == 3_000.0), "a spike survives");
+    }
+}

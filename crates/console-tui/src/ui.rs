@@ -1,0 +1,653 @@
+//! Drawing the console. Every page fits 80×24 and uses more room when there is more; nothing
+//! here can panic on a small or resized terminal (layouts shrink, text is clipped).
+
+use crate::app::{App, Page};
+use crate::form::{Action, Field, GAIN_ROWS, Kind, Section};
+use crate::results::thin;
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::symbols;
+use ratatui::text::{Line, Span};
+use ratatui::widgets::{Axis, Block, Borders, Chart, Dataset, GraphType, Paragraph, Wrap};
+
+const PAGES: [(Page, &str); 5] = [
+    (Page::Setup, "F1 Setup"),
+    (Page::Log, "F3 Log"),
+    (Page::Results, "F4 Results"),
+    (Page::Charts, "F7 Charts"),
+    (Page::History, "F8 History"),
+];
+
+/// Draws the whole console.
+pub fn draw(f: &mut Frame, app: &App) {
+    let [title, tabs, body, status, keys] = Layout::vertical([
+        Constraint::Length(1),
+        Constraint::Length(1),
+        Constraint::Min(0),
+        Constraint::Length(1),
+        Constraint::Length(1),
+    ])
+    .areas(f.area());
+    let modified = if app.form.dirty() { " [modified]" } else { "" };
+    let running = app.running.as_ref().map_or(String::new(), |r| {
+        format!(" — {} running {:.1} s", r.mode.arg(), r.started.elapsed().as_secs_f64())
+    });
+    f.render_widget(
+        Line::from(vec![
+            Span::styled(" QMARC console ", Style::new().bold().reversed()),
+            Span::raw(format!(" {}{modified}{running}", app.form.path.display())),
+        ]),
+        title,
+    );
+    let tab_spans: Vec<Span> = PAGES
+        .iter()
+        .flat_map(|(p, name)| {
+            let style = if *p == app.page { Style::new().reversed().bold() } else { Style::new() };
+            [Span::styled(format!(" {name} "), style), Span::raw(" ")]
+        })
+        .collect();
+    f.render_widget(Line::from(tab_spans), tabs);
+    match app.page {
+        Page::Setup => draw_setup(f, app, body),
+        Page::Log => draw_log(f, app, body),
+        Page::Results => draw_results(f, app, body),
+        Page::Charts => draw_charts(f, app, body),
+        Page::History => draw_history(f, app, body),
+    }
+    let (msg, err) = &app.status;
+    let style = if *err { Style::new().fg(Color::Red).bold() } else { Style::new() };
+    f.render_widget(Line::styled(format!(" {msg}"), style), status);
+    f.render_widget(
+        Line::from(" F2 Home  F5 Run  F6 Step  F9 Abort  F10 Exit (save)  F12 Cancel")
+            .style(Style::new().dim()),
+        keys,
+    );
+}
+
+fn value_style(app: &App, i: usize, f: &Field) -> Style {
+    let mut s = Style::new();
+    if !app.form.enabled(i) {
+        s = s.fg(Color::DarkGray);
+    } else if f.error.is_some() {
+        s = s.fg(Color::Red).bold();
+    }
+    if i == app.focus && app.page == Page::Setup {
+        s = s.add_modifier(Modifier::REVERSED);
+    }
+    s
+}
+
+fn section_title(s: Section) -> &'static str {
+    match s {
+        Section::General => "General",
+        Section::Trajectory => "Trajectory",
+        Section::Step => "Step",
+        Section::Gains => "Gains",
+        Section::Gathering => "Data gathering",
+    }
+}
+
+fn draw_setup(f: &mut Frame, app: &App, area: Rect) {
+    let [left, right] =
+        Layout::horizontal([Constraint::Percentage(47), Constraint::Percentage(53)]).areas(area);
+    // Left: the sections with one value per line; an invalid value's message right under it.
+    let mut lines: Vec<Line> = Vec::new();
+    let width = usize::from(left.width.saturating_sub(2));
+    for section in [Section::General, Section::Trajectory, Section::Step, Section::Gathering] {
+        lines.push(Line::styled(section_title(section), Style::new().bold().underlined()));
+        for (i, fld) in app.form.fields.iter().enumerate() {
+            if fld.section != section || fld.place.motor().is_some() {
+                continue;
+            }
+            let shown = if fld.kind == Kind::Choice {
+                format!("‹ {} ›", fld.text)
+            } else {
+                fld.text.clone()
+            };
+            let mark = if fld.error.is_some() { "!" } else { " " };
+            lines.push(Line::from(vec![
+                Span::raw(format!(" {:<10}{mark}", fld.label)),
+                Span::styled(shown, value_style(app, i, fld)),
+            ]));
+            if let Some(e) = &fld.error {
+                let text: String = format!("   ↳ {e}").chars().take(width.max(8)).collect();
+                lines.push(Line::styled(text, Style::new().fg(Color::Red)));
+            }
+        }
+    }
+    f.render_widget(Paragraph::new(lines).block(Block::new().borders(Borders::RIGHT)), left);
+
+    let [gains, actions] =
+        Layout::vertical([Constraint::Length(13), Constraint::Min(0)]).areas(right);
+    draw_gains(f, app, gains);
+    draw_actions(f, app, actions);
+}
+
+fn draw_gains(f: &mut Frame, app: &App, area: Rect) {
+    let n = app.form.motor_tables;
+    let cell = usize::from(area.width.saturating_sub(7)) / n.max(1);
+    let cell = cell.clamp(4, 11);
+    let mut lines = Vec::new();
+    let mut head = vec![Span::raw(format!("{:<6}", ""))];
+    for m in 0..n {
+        let style = if m < app.form.n_motors() {
+            Style::new().bold()
+        } else {
+            Style::new().fg(Color::DarkGray)
+        };
+        head.push(Span::styled(format!("{:>cell$}", format!("M{}", m + 1)), style));
+    }
+    lines.push(Line::from(head));
+    let rows: Vec<&str> = std::iter::once("Home").chain(GAIN_ROWS).collect();
+    for label in rows {
+        let mut spans = vec![Span::raw(format!("{label:<6}"))];
+        for (i, fld) in app
+            .form
+            .fields
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| f.label == label && f.place.motor().is_some())
+        {
+            let text: String = fld.text.chars().take(cell.saturating_sub(1)).collect();
+            let mark = if fld.error.is_some() { "!" } else { " " };
+            spans.push(Span::styled(
+                format!("{text:>w$}{mark}", w = cell - 1),
+                value_style(app, i, fld),
+            ));
+        }
+        lines.push(Line::from(spans));
+    }
+    f.render_widget(
+        Paragraph::new(lines).block(Block::bordered().title(" Gains (one column per motor) ")),
+        area,
+    );
+}
+
+fn draw_actions(f: &mut Frame, app: &App, area: Rect) {
+    let mut lines = Vec::new();
+    for (key, name, action) in [
+        ("F2", "Home robot", Action::Home),
+        ("F5", "Start controller", Action::Run),
+        ("F6", "Step motors now", Action::Step),
+        ("F10", "Exit (save)", Action::Save),
+    ] {
+        match app.form.blocking(action) {
+            None if app.running.is_none() => lines.push(Line::from(vec![
+                Span::styled(format!(" {key:<4}"), Style::new().bold()),
+                Span::raw(name),
+            ])),
+            None => lines.push(Line::styled(
+                format!(" {key:<4}{name} — a move is running"),
+                Style::new().dim(),
+            )),
+            Some((field, _)) => {
+                // The reason is shown at the field itself; here only which field it is.
+                let by = field.map_or("the settings file".to_string(), |i| {
+                    let f = &app.form.fields[i];
+                    match f.place.motor() {
+                        Some(m) => format!("{} M{}", f.label, m + 1),
+                        None => f.label.to_string(),
+                    }
+                });
+                lines.push(Line::styled(
+                    format!(" {key:<4}{name} — blocked by {by}"),
+                    Style::new().fg(Color::DarkGray),
+                ))
+            }
+        }
+    }
+    lines.push(Line::from(vec![
+        Span::styled(" F12 ", Style::new().bold()),
+        Span::raw("Cancel (leave without saving)"),
+    ]));
+    f.render_widget(
+        Paragraph::new(lines)
+            .wrap(Wrap { trim: false })
+            .block(Block::bordered().title(" Actions ")),
+        area,
+    );
+}
+
+fn draw_log(f: &mut Frame, app: &App, area: Rect) {
+    let h = usize::from(area.height.saturating_sub(2));
+    let start = app.log.len().saturating_sub(h);
+    let lines: Vec<Line> = app.log[start..]
+        .iter()
+        .map(|l| {
+            let red = l.contains("FAULT") || l.contains("error") || l.contains("fault");
+            Line::styled(l.clone(), if red { Style::new().fg(Color::Red) } else { Style::new() })
+        })
+        .collect();
+    f.render_widget(
+        Paragraph::new(lines).block(Block::bordered().title(" qmarc-starter output ")),
+        area,
+    );
+}
+
+fn draw_results(f: &mut Frame, app: &App, area: Rect) {
+    let Some(r) = &app.last else {
+        f.render_widget(
+            Paragraph::new("No move yet: F6 steps, F5 runs the trajectory, F2 homes.")
+                .block(Block::bordered().title(" Results ")),
+            area,
+        );
+        return;
+    };
+    let s = &r.summary;
+    let mut lines = Vec::new();
+    let what = if s.trajectory.is_empty() || s.trajectory == s.mode {
+        s.mode.clone()
+    } else {
+        format!("{} ({})", s.mode, s.trajectory)
+    };
+    match &s.fault {
+        None => lines.push(Line::styled(
+            format!("{what}: ok — {} cycles of {} µs", s.cycles, s.period_us),
+            Style::new().fg(Color::Green).bold(),
+        )),
+        Some(fl) => lines.push(Line::styled(
+            format!("{what}: FAULT {}: {}", fl.kind, fl.message),
+            Style::new().fg(Color::Red).bold(),
+        )),
+    }
+    lines.push(Line::from(format!(
+        "{}{}",
+        s.timing.policy,
+        if s.degraded { " — DEGRADED: not real time" } else { "" }
+    )));
+    lines.push(Line::styled(
+        format!(
+            "{:<3}{:>9}{:>9}{:>12}{:>14}{:>10}{:>10}",
+            "M", "min cnt", "max cnt", "Σ|e| cnt", "Σe² cnt²", "Σ|e| rad", "Σe² rad²"
+        ),
+        Style::new().bold(),
+    ));
+    for (m, e) in s.motors.iter().enumerate() {
+        lines.push(Line::from(format!(
+            "{:<3}{:>9.1}{:>9.1}{:>12.0}{:>14.3e}{:>10.3}{:>10.3e}",
+            m + 1,
+            e.min_error_counts,
+            e.max_error_counts,
+            e.accumulated_abs_error_counts,
+            e.sum_squares_error_counts2,
+            e.accumulated_abs_error_rad,
+            e.sum_squares_error_rad2
+        )));
+        lines.push(Line::styled(
+            format!(
+                "{:<3}{:>9}{:>9}   rad: min {:.3e}  max {:.3e}",
+                "", "", "", e.min_error_rad, e.max_error_rad
+            ),
+            Style::new().dim(),
+        ));
+    }
+    let t = &s.timing;
+    lines.push(Line::styled(
+        format!("{:<20}{:>7}{:>7}{:>8}{:>9}", "timing µs", "p50", "p99", "p99.9", "max"),
+        Style::new().bold(),
+    ));
+    for (name, p) in [
+        ("wake latency", &t.wake_latency_us),
+        ("period error", &t.period_error_us),
+        ("read round trip", &t.read_us),
+        ("tick → DAC written", &t.output_latency_us),
+    ] {
+        lines.push(Line::from(format!(
+            "{name:<20}{:>7.0}{:>7.0}{:>8.0}{:>9.1}",
+            p.p50, p.p99, p.p999, p.max
+        )));
+    }
+    lines.push(Line::from(format!(
+        "periods off by > 40 µs: {}   missed: {}",
+        t.outside_40us, t.missed_periods
+    )));
+    // Wrapped, so a long fault message is read whole at 80 columns.
+    let p = Paragraph::new(lines).wrap(Wrap { trim: false });
+    f.render_widget(p.block(Block::bordered().title(" Results of the last move ")), area);
+}
+
+fn bounds(pts: &[&[(f64, f64)]]) -> ([f64; 2], [f64; 2]) {
+    let mut x = [f64::INFINITY, f64::NEG_INFINITY];
+    let mut y = [f64::INFINITY, f64::NEG_INFINITY];
+    for p in pts.iter().flat_map(|s| s.iter()) {
+        x = [x[0].min(p.0), x[1].max(p.0)];
+        y = [y[0].min(p.1), y[1].max(p.1)];
+    }
+    if !x[0].is_finite() {
+        return ([0.0, 1.0], [0.0, 1.0]);
+    }
+    let pad = ((y[1] - y[0]) * 0.05).max(1e-9);
+    ([x[0], x[1].max(x[0] + 1e-9)], [y[0] - pad, y[1] + pad])
+}
+
+/// One line of a chart: its name, colour and points.
+type Trace<'a> = (&'a str, Color, &'a [(f64, f64)]);
+
+fn chart<'a>(title: impl Into<Line<'a>>, sets: Vec<Trace<'a>>) -> Chart<'a> {
+    let slices: Vec<&[(f64, f64)]> = sets.iter().map(|s| s.2).collect();
+    let (xb, yb) = bounds(&slices);
+    let datasets = sets
+        .into_iter()
+        .map(|(name, color, data)| {
+            Dataset::default()
+                .name(name)
+                .marker(symbols::Marker::Braille)
+                .graph_type(GraphType::Line)
+                .style(Style::new().fg(color))
+                .data(data)
+        })
+        .collect();
+    Chart::new(datasets)
+        .block(Block::bordered().title(title))
+        .x_axis(
+            Axis::default().bounds(xb).labels([format!("{:.2}s", xb[0]), format!("{:.2}s", xb[1])]),
+        )
+        .y_axis(
+            Axis::default().bounds(yb).labels([format!("{:.0}", yb[0]), format!("{:.0}", yb[1])]),
+        )
+}
+
+fn draw_charts(f: &mut Frame, app: &App, area: Rect) {
+    let Some(series) = app.last.as_ref().and_then(|r| r.series.as_ref()) else {
+        f.render_widget(
+            Paragraph::new("No gathered data yet.").block(Block::bordered().title(" Charts ")),
+            area,
+        );
+        return;
+    };
+    let m = app.chart_motor;
+    let width = usize::from(area.width) * 2;
+    let cmd = thin(&series.points(series.cmd.get(m)), width);
+    let act = thin(&series.points(series.act.get(m)), width);
+    let err = thin(&series.error(m), width);
+    let period = thin(&series.period_us, width);
+    let [a, b, c] = Layout::vertical([
+        Constraint::Ratio(2, 5),
+        Constraint::Ratio(3, 10),
+        Constraint::Ratio(3, 10),
+    ])
+    .areas(area);
+    f.render_widget(
+        chart(
+            // The title names the colours: at 80×24 there is no room for a legend.
+            Line::from(vec![
+                Span::raw(format!(" motor {} (←/→): ", m + 1)),
+                Span::styled("command", Style::new().fg(Color::Cyan)),
+                Span::raw(" vs "),
+                Span::styled("actual", Style::new().fg(Color::Yellow)),
+                Span::raw(", counts "),
+            ]),
+            vec![("cmd", Color::Cyan, &cmd), ("act", Color::Yellow, &act)],
+        ),
+        a,
+    );
+    f.render_widget(chart(" following error, counts ", vec![("cmd − act", Color::Red, &err)]), b);
+    f.render_widget(chart(" servo period, µs ", vec![("period", Color::Green, &period)]), c);
+}
+
+fn draw_history(f: &mut Frame, app: &App, area: Rect) {
+    let mut lines = vec![Line::styled(
+        format!("{:<4}{:<16}{:<18}{}", "#", "move", "outcome", "Σ|error| per motor, counts"),
+        Style::new().bold(),
+    )];
+    if app.history.is_empty() {
+        lines.push(Line::from("No move yet this session."));
+    }
+    for (i, h) in app.history.iter().enumerate() {
+        // The trend compares whole moves of the same kind: a move a fault cut short has a
+        // smaller sum without being better.
+        let prev = app.history[..i]
+            .iter()
+            .rev()
+            .find(|p| p.what == h.what && p.fault.is_none())
+            .filter(|_| h.fault.is_none())
+            .map(|p| &p.accumulated);
+        let outcome = h.fault.clone().unwrap_or_else(|| "ok".into());
+        let acc: Vec<String> = h
+            .accumulated
+            .iter()
+            .enumerate()
+            .map(|(m, a)| {
+                let trend = match prev.and_then(|p| p.get(m)) {
+                    Some(p) if a < p => " ↓",
+                    Some(p) if a > p => " ↑",
+                    _ => "",
+                };
+                format!("{a:.0}{trend}")
+            })
+            .collect();
+        let gains: Vec<String> =
+            h.gains.iter().map(|(kp, kd, kvff)| format!("{kp:.0}/{kd:.0}/{kvff:.0}")).collect();
+        let style = if h.fault.is_some() { Style::new().fg(Color::Red) } else { Style::new() };
+        lines.push(Line::styled(
+            format!("{:<4}{:<16}{:<18}{}", h.n, h.what, outcome, acc.join("  ")),
+            style,
+        ));
+        lines
+            .push(Line::styled(format!("    Kp/Kd/Kvff {}", gains.join("  ")), Style::new().dim()));
+    }
+    let p = Paragraph::new(lines).wrap(Wrap { trim: false });
+    f.render_widget(
+        p.block(
+            Block::bordered()
+                .title(" History (↓ ↑: Σ|e| against the last whole move of its kind) "),
+        ),
+        area,
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::form::{Form, Place};
+    use crate::results::{MoveResult, Series};
+    use qmarc_controller::summary::{FaultReport, Summary};
+    use ratatui::Terminal;
+    use ratatui::backend::TestBackend;
+    use ratatui::buffer::Buffer;
+
+    struct Scratch(std::path::PathBuf);
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn app() -> (Scratch, App) {
+        static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir = std::env::temp_dir().join(format!("qmarc-ui-{}-{n}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let shipped =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
+        let cfg = dir.join("qmarc.toml");
+        std::fs::copy(shipped, &cfg).unwrap();
+        // Relative paths (knots) resolve from the repository, as when run from its root.
+        let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let mut form = Form::load_in(&cfg, &repo).unwrap();
+        let out = form.index(Place::Key("gather", "out_dir")).unwrap();
+        form.set_text(out, dir.join("out").to_str().unwrap());
+        let app = App::new(form, "qmarc-starter".into(), repo);
+        (Scratch(dir), app)
+    }
+
+    fn render(app: &App, w: u16, h: u16) -> Buffer {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw(f, app)).unwrap();
+        t.backend().buffer().clone()
+    }
+
+    fn text(b: &Buffer) -> String {
+        let a = b.area;
+        (0..a.height)
+            .map(|y| (0..a.width).map(|x| b[(x, y)].symbol()).collect::<String>())
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    /// The position of the first occurrence of `needle` (in cells).
+    fn find(b: &Buffer, needle: &str) -> Option<(u16, u16)> {
+        let a = b.area;
+        (0..a.height).find_map(|y| {
+            let row: Vec<&str> = (0..a.width).map(|x| b[(x, y)].symbol()).collect();
+            let chars: Vec<char> = needle.chars().collect();
+            (0..row.len().saturating_sub(chars.len() - 1)).find_map(|x| {
+                chars
+                    .iter()
+                    .enumerate()
+                    .all(|(k, c)| row[x + k] == c.to_string())
+                    .then_some((x as u16, y))
+            })
+        })
+    }
+
+    #[test]
+    fn setup_shows_the_five_sections_and_the_actions_at_80x24() {
+        let (_d, app) = app();
+        let b = render(&app, 80, 24);
+        let s = text(&b);
+        for want in [
+            "General",
+            "Motors",
+            "Period µs",
+            "Trajectory",
+            "‹ spline ›",
+            "knots/sine-3motors.txt",
+            "Step",
+            "Size",
+            "Duration s",
+            "Data gathering",
+            "Every",
+            "Out dir",
+            "Fields",
+            "Gains (one column per motor)",
+            "Home",
+            "Kp",
+            "Kvff",
+            "d2",
+            "182000",
+            "119000",
+            "Home robot",
+            "Start controller",
+            "Step motors now",
+            "Exit (save)",
+            "Cancel (leave without saving)",
+        ] {
+            assert!(s.contains(want), "missing {want:?} in\n{s}");
+        }
+    }
+
+    #[test]
+    fn gain_columns_beyond_the_number_of_motors_are_disabled() {
+        let (_d, mut app) = app();
+        let b = render(&app, 80, 24);
+        let (x, y) = find(&b, "M4").unwrap();
+        assert_eq!(b[(x, y)].fg, Color::DarkGray, "motor 4 disabled with 3 motors");
+        let (x3, y3) = find(&b, "M3").unwrap();
+        assert_ne!(b[(x3, y3)].fg, Color::DarkGray);
+        // The Kp of motor 4 is dim too, and not focusable.
+        let kp4 = app.form.index(Place::Motor(3, "kp")).unwrap();
+        assert!(!app.form.enabled(kp4));
+        app.form.set_text(0, "4");
+        let b = render(&app, 80, 24);
+        let (x, y) = find(&b, "M4").unwrap();
+        assert_ne!(b[(x, y)].fg, Color::DarkGray, "enabled with 4 motors");
+    }
+
+    #[test]
+    fn an_invalid_field_shows_its_message_in_place_and_blocks_the_actions() {
+        let (_d, mut app) = app();
+        let period = app.form.index(Place::Key("general", "period_us")).unwrap();
+        app.form.set_text(period, "50");
+        let b = render(&app, 80, 24);
+        let s = text(&b);
+        assert!(s.contains("↳ servo period must be 100‥100000"), "{s}");
+        assert!(s.contains("Step motors now — blocked"), "{s}");
+        let (x, y) = find(&b, "50 ").unwrap();
+        assert_eq!(b[(x, y)].fg, Color::Red);
+        // A bad gain: red in its cell, the reason on the message line when focused.
+        let kd2 = app.form.index(Place::Motor(1, "kd")).unwrap();
+        app.form.set_text(kd2, "x");
+        app.focus = kd2;
+        app.on_key(ratatui::crossterm::event::KeyEvent::from(
+            ratatui::crossterm::event::KeyCode::Char('y'),
+        ));
+        let s = text(&render(&app, 80, 24));
+        assert!(s.contains("invalid type: string \"y\", expected f64"), "{s}");
+    }
+
+    fn result(fault: bool) -> MoveResult {
+        let mut summary = Summary::controller_lost("step", 400, String::new());
+        summary.fault = fault.then(|| FaultReport {
+            kind: "limit_switch".into(),
+            motor: Some(1),
+            cycle: 12,
+            message: "motor 1 hit its top limit switch at cycle 12; all motors disabled".into(),
+            hw_time_ns: None,
+        });
+        summary.trajectory = "step".into();
+        summary.ok = !fault;
+        let csv =
+            "cycle,time_s,cmd1,act1,dac1\n0,0,0,0,0\n1,0.0004,1000,3,8191\n2,0.0008,1000,20,500\n";
+        MoveResult { summary, series: Some(Series::parse(csv, 0.0004).unwrap()) }
+    }
+
+    #[test]
+    fn results_show_a_fault_in_red_and_the_charts_draw() {
+        let (_d, mut app) = app();
+        app.last = Some(result(true));
+        app.page = Page::Results;
+        let b = render(&app, 80, 24);
+        let (x, y) = find(&b, "FAULT limit_switch").unwrap();
+        assert_eq!(b[(x, y)].fg, Color::Red);
+        assert!(text(&b).contains("motor 1 hit its top limit switch"));
+        app.page = Page::Charts;
+        let s = text(&render(&app, 80, 24));
+        for want in ["command vs actual", "following error", "servo period"] {
+            assert!(s.contains(want), "{s}");
+        }
+    }
+
+    #[test]
+    fn no_page_panics_at_any_size() {
+        let (_d, mut app) = app();
+        app.last = Some(result(false));
+        app.log = (0..100).map(|i| format!("line {i}")).collect();
+        for page in [Page::Setup, Page::Log, Page::Results, Page::Charts, Page::History] {
+            app.page = page;
+            for (w, h) in [(1, 1), (10, 3), (40, 10), (80, 24), (79, 23), (200, 60)] {
+                render(&app, w, h);
+            }
+        }
+    }
+
+    #[test]
+    fn history_trends_compare_whole_moves_of_the_same_kind() {
+        let (_d, mut app) = app();
+        let entry = |n, what: &str, fault: Option<&str>, acc: f64| crate::results::HistoryEntry {
+            n,
+            what: what.into(),
+            fault: fault.map(str::to_string),
+            accumulated: vec![acc; 3],
+            gains: vec![(182000.0, 3000.0, 119000.0); 3],
+        };
+        app.history = vec![
+            entry(1, "step", None, 9000.0),
+            entry(2, "step", Some("following_error"), 500.0),
+            entry(3, "run (spline)", None, 100.0),
+            entry(4, "step", None, 8000.0),
+        ];
+        app.page = Page::History;
+        let s = text(&render(&app, 80, 24));
+        let row =
+            |n: &str| s.lines().find(|l| l.starts_with(&format!("│{n}   "))).unwrap().to_string();
+        // The cut-short move and the first run have nothing to compare with; move 4 is
+        // compared with move 1, not with the faulted move 2 or the run.
+        assert!(!row("2").contains('↓') && !row("2").contains('↑'), "{s}");
+        assert!(!row("3").contains('↓') && !row("3").contains('↑'), "{s}");
+        assert!(row("4").contains("8000 ↓"), "{s}");
+        assert!(row("2").contains("following_error"), "{s}");
+        assert!(s.contains("Kp/Kd/Kvff 182000/3000/119000"), "{s}");
+    }
+}

@@ -1,0 +1,360 @@
+//! The console, `qmarc`, driven as a user drives it: the real binary in an 80×24 tmux pane,
+//! keys sent with `send-keys`, the screen read with `capture-pane`. Each test has its own tmux
+//! server (a socket in its scratch directory) and its own iceoryx2 prefix, passed through the
+//! console to every starter run.
+
+use qmarc_tests::{TestRun, bin_dir, knots, processes_matching, read_summary};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// A tmux server of one test, with one 80×24 pane; killed on drop.
+struct Tmux {
+    socket: PathBuf,
+}
+
+impl Tmux {
+    /// Starts `command` (a shell command line) in a detached 80×24 session, in `cwd`. The pane
+    /// stays after the command ends, so its exit status and last output can be read.
+    fn start(dir: &Path, cwd: &Path, command: &str) -> Tmux {
+        let tmux = Tmux { socket: dir.join("tmux.sock") };
+        let ok = Command::new("tmux")
+            .arg("-S")
+            .arg(&tmux.socket)
+            .args(["-f", "/dev/null", "new-session", "-d", "-x", "80", "-y", "24", "-c"])
+            .arg(cwd)
+            .arg(command)
+            .args([";", "set-option", "-g", "remain-on-exit", "on"])
+            .status()
+            .unwrap_or_else(|e| panic!("cannot run tmux (install it: .ci/run does): {e}"));
+        assert!(ok.success(), "tmux new-session failed");
+        tmux
+    }
+
+    fn tmux(&self, args: &[&str]) -> String {
+        let out = Command::new("tmux").arg("-S").arg(&self.socket).args(args).output();
+        let out = out.expect("tmux");
+        assert!(out.status.success(), "tmux {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+
+    /// The pane's text.
+    fn screen(&self) -> String {
+        self.tmux(&["capture-pane", "-p"])
+    }
+
+    /// Sends tmux key names (`Tab`, `F6`, `C-c`).
+    fn keys(&self, keys: &[&str]) {
+        let mut args = vec!["send-keys"];
+        args.extend_from_slice(keys);
+        self.tmux(&args);
+    }
+
+    /// Types `text` literally.
+    fn type_text(&self, text: &str) {
+        self.tmux(&["send-keys", "-l", text]);
+    }
+
+    /// Waits until the screen satisfies `pred`; panics with the screen after `timeout`.
+    fn wait_for(&self, what: &str, timeout: Duration, pred: impl Fn(&str) -> bool) -> String {
+        let start = Instant::now();
+        loop {
+            let s = self.screen();
+            if pred(&s) {
+                return s;
+            }
+            assert!(start.elapsed() < timeout, "waited {timeout:?} for {what}; the screen:\n{s}");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// Waits for the console to end; returns its exit status and the screen it left, with the
+    /// scrollback. The status is the one [`console_command`]'s shell prints: tmux 3.3 at times
+    /// leaves a dead pane's process unreaped, without a status.
+    fn wait_exit(&self, timeout: Duration) -> (i32, String) {
+        let start = Instant::now();
+        loop {
+            let all = self.tmux(&["capture-pane", "-p", "-S", "-"]);
+            if let Some(rest) = all.split("[qmarc exited ").nth(1) {
+                let status = rest.split(']').next().and_then(|s| s.parse().ok());
+                return (status.expect("exit status"), all);
+            }
+            assert!(
+                start.elapsed() < timeout,
+                "the console did not end within {timeout:?}; the screen:\n{}",
+                self.screen()
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// Moves the focus with Tab until the message line names `field`.
+    fn focus(&self, field: &str) {
+        for _ in 0..80 {
+            let s = self.screen();
+            if s.lines().rev().nth(1).is_some_and(|l| l.trim_start().starts_with(field)) {
+                return;
+            }
+            self.keys(&["Tab"]);
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        panic!("no field `{field}` reached with Tab; the screen:\n{}", self.screen());
+    }
+}
+
+impl Drop for Tmux {
+    fn drop(&mut self) {
+        let _ = Command::new("tmux").arg("-S").arg(&self.socket).arg("kill-server").status();
+        // The server's command line holds the console's (and so the test's prefix): wait
+        // until it is gone, so the test's leftover check does not see it.
+        let socket = self.socket.display().to_string();
+        let start = Instant::now();
+        while !processes_matching(&socket).is_empty() && start.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+/// The console's command line for `run`, in its scratch directory; the shell prints the exit
+/// status when it ends.
+fn console_command(run: &TestRun) -> String {
+    format!(
+        "'{}' --config qmarc.toml --iox-prefix={} --iox-root={}; echo \"[qmarc exited $?]\"",
+        bin_dir().join("qmarc").display(),
+        run.prefix,
+        run.root()
+    )
+}
+
+/// The `Kp` row of the gains table.
+fn kp_row(screen: &str) -> String {
+    let row = screen.lines().find(|l| l.contains("│Kp ")).expect("a Kp row");
+    row.split("│Kp").nth(1).unwrap_or_default().to_string()
+}
+
+#[test]
+fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
+    let run = TestRun::new("console");
+    let sine = knots("sine-3motors.txt");
+    let config = run.config_with(&[("knots", &format!("{:?}", sine.display().to_string()))]);
+    {
+        let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
+        let s = tmux.wait_for("the setup screen", Duration::from_secs(30), |s| {
+            s.contains("Gains (one column per motor)")
+        });
+        for section in ["General", "Trajectory", "Step", "Data gathering", "Actions"] {
+            assert!(s.contains(section), "section {section} missing:\n{s}");
+        }
+        assert!(kp_row(&s).trim_start().starts_with("182000"), "shipped Kp M1:\n{s}");
+
+        // Edit Kp of motor 1: typing replaces the value, Tab commits it.
+        tmux.focus("Kp M1:");
+        tmux.type_text("185000");
+        tmux.keys(&["Tab"]);
+        tmux.wait_for("the edited gain", Duration::from_secs(10), |s| {
+            kp_row(s).trim_start().starts_with("185000")
+        });
+
+        // Step: the console saves, runs the starter, then shows the summary.
+        tmux.keys(&["F6"]);
+        let s = tmux.wait_for("the step's results", Duration::from_secs(120), |s| {
+            s.contains("Results of the last move") && !s.contains("step running")
+        });
+        assert!(s.contains("step: ok"), "the step faulted:\n{s}");
+        for want in ["min cnt", "Σ|e| cnt", "Σe² cnt²", "Σ|e| rad", "wake latency", "missed:"]
+        {
+            assert!(s.contains(want), "{want} missing from the results:\n{s}");
+        }
+        // The console's figures are the move's own: motor 1's accumulated error as written.
+        let summary = read_summary(&run.out("out"));
+        let acc = format!("{:.0}", summary.motors[0].accumulated_abs_error_counts);
+        assert!(s.contains(&acc), "Σ|e| of motor 1 ({acc}) not shown:\n{s}");
+
+        // Charts: command vs actual, following error, servo period.
+        tmux.keys(&["F7"]);
+        let s = tmux
+            .wait_for("the charts", Duration::from_secs(10), |s| s.contains("command vs actual"));
+        assert!(s.contains("following error") && s.contains("servo period"), "charts:\n{s}");
+        assert!(
+            s.chars().any(|c| ('\u{2801}'..='\u{28ff}').contains(&c)),
+            "no plotted points:\n{s}"
+        );
+
+        // Resizing, down to a few cells, redraws without a panic.
+        for (w, h) in [("120", "40"), ("30", "8"), ("80", "24")] {
+            tmux.tmux(&["resize-window", "-x", w, "-y", h]);
+            tmux.wait_for("the resized charts", Duration::from_secs(10), |s| {
+                s.lines().count() == h.parse::<usize>().unwrap_or(0) && s.contains("QMARC console")
+            });
+        }
+
+        // History: the move with the gains it ran with.
+        tmux.keys(&["F8"]);
+        tmux.wait_for("the history", Duration::from_secs(10), |s| {
+            s.contains("185000/") && s.lines().any(|l| l.contains("│1   step"))
+        });
+
+        // Exit, saving.
+        tmux.keys(&["F10"]);
+        let (status, s) = tmux.wait_exit(Duration::from_secs(20));
+        assert_eq!(status, 0, "the console's exit:\n{s}");
+        assert!(s.contains("settings saved to qmarc.toml"), "{s}");
+        assert!(!s.contains("Gains (one column"), "the terminal was not restored:\n{s}");
+    }
+    let saved = std::fs::read_to_string(&config).expect("saved settings");
+    let first_kp = saved.lines().find(|l| l.starts_with("kp = ")).expect("kp line");
+    assert_eq!(first_kp, "kp = 185000.0", "motor 1's Kp in the file");
+    assert!(saved.contains("# motors driven, 1‥4"), "comments kept:\n{saved}");
+
+    // Restart: the edited gain is loaded. Edit it again and Cancel: the file stays as it was.
+    {
+        let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
+        let s = tmux.wait_for("the setup screen", Duration::from_secs(30), |s| {
+            s.contains("Gains (one column per motor)")
+        });
+        assert!(kp_row(&s).trim_start().starts_with("185000"), "the saved gain:\n{s}");
+        // The last move's results are loaded at start too.
+        tmux.keys(&["F4"]);
+        tmux.wait_for("the last results", Duration::from_secs(10), |s| s.contains("step: ok"));
+        tmux.keys(&["F1"]);
+        tmux.focus("Kp M1:");
+        tmux.type_text("1");
+        tmux.keys(&["Tab"]);
+        tmux.wait_for("the unsaved edit", Duration::from_secs(10), |s| {
+            kp_row(s).trim_start().starts_with("1 ")
+        });
+        tmux.keys(&["F12"]);
+        let (status, s) = tmux.wait_exit(Duration::from_secs(20));
+        assert_eq!(status, 0, "the console's exit:\n{s}");
+        assert!(s.contains("left without saving"), "{s}");
+    }
+    assert_eq!(std::fs::read_to_string(&config).expect("settings"), saved, "Cancel wrote the file");
+    run.assert_clean();
+}
+
+/// Settings whose `run` is long enough to stop in the middle: 10 s of a slow raised cosine
+/// (offline format, thesis A.2.3.1), in a knot file outside the repository.
+fn long_run_config(run: &TestRun) -> PathBuf {
+    let long = run.dir.join("long.txt");
+    let mut text = String::from("1001\n");
+    for i in 0..=1000 {
+        let t = f64::from(i) * 0.01;
+        let p = (300.0 * (1.0 - (std::f64::consts::PI * t / 5.0).cos())).round();
+        text += &format!("{t:.2} {p} {p} {p}\n");
+    }
+    std::fs::write(&long, text).expect("knot file");
+    run.config_with(&[("knots", &format!("{:?}", long.display().to_string()))])
+}
+
+/// Waits until the move the console started is under way: the controller up, and moving for
+/// a while.
+fn wait_until_moving(run: &TestRun) {
+    let start = Instant::now();
+    while !processes_matching(&run.prefix).iter().any(|(_, c)| c.contains("qmarc-controller")) {
+        assert!(start.elapsed() < Duration::from_secs(30), "the controller did not start");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    std::thread::sleep(Duration::from_millis(700));
+}
+
+#[test]
+fn console_blocks_a_step_on_an_invalid_field_and_aborts_a_run_with_motors_disabled() {
+    let run = TestRun::new("consabrt");
+    let config = long_run_config(&run);
+    let before = std::fs::read_to_string(&config).expect("settings");
+    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
+    tmux.wait_for("the setup screen", Duration::from_secs(30), |s| s.contains("Gains (one"));
+
+    // An invalid servo period is shown in place and blocks the step; nothing is written.
+    tmux.focus("Period µs:");
+    tmux.type_text("abc");
+    tmux.keys(&["F6"]);
+    let s = tmux.wait_for("the refusal", Duration::from_secs(10), |s| s.contains("cannot step"));
+    assert!(s.contains("general.period_us"), "the message names the field:\n{s}");
+    assert_eq!(std::fs::read_to_string(&config).expect("settings"), before, "written anyway");
+    assert!(!run.out("out").join("summary.json").exists(), "a move ran");
+    // Corrected, the field validates again.
+    tmux.type_text("400");
+    tmux.keys(&["Tab"]);
+    tmux.wait_for("the corrected period", Duration::from_secs(10), |s| !s.contains("blocked by"));
+
+    // Run the trajectory and abort it: the summary says it was stopped, motors disabled.
+    tmux.keys(&["F5"]);
+    tmux.wait_for("the run", Duration::from_secs(30), |s| s.contains("run running"));
+    wait_until_moving(&run);
+    tmux.keys(&["F9"]);
+    let s = tmux.wait_for("the aborted run's results", Duration::from_secs(60), |s| {
+        s.contains("Results of the last move")
+    });
+    let fault = read_summary(&run.out("out")).fault.expect("the aborted run has a fault");
+    assert_eq!(fault.kind, "aborted", "{fault:?}");
+    assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
+    assert!(s.contains("FAULT aborted"), "the fault is shown:\n{s}");
+    tmux.keys(&["F12"]);
+    let (status, s) = tmux.wait_exit(Duration::from_secs(20));
+    assert_eq!(status, 0, "{s}");
+    drop(tmux);
+    run.assert_clean();
+}
+
+#[test]
+fn plain_subcommands_run_the_starter_without_the_console() {
+    let run = TestRun::new("conscli");
+    let out = run.out("out");
+    let config = qmarc_tests::default_config();
+    let mut args = run.isolation_args();
+    args.extend([
+        format!("--config={}", config.display()),
+        format!("--out={}", out.display()),
+        "--deterministic".into(),
+        "step".into(),
+        "--duration=0.05".into(),
+    ]);
+    let r = qmarc_tests::run_with_timeout(
+        Command::new(bin_dir().join("qmarc")).args(&args),
+        Duration::from_secs(60),
+    );
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stdout.contains("QMARC step: ok"), "{}", r.stdout);
+    assert!(read_summary(&out).ok);
+    // Bad settings: the starter's error (file, line, field) and exit code, nothing started.
+    let bad = run.dir.join("bad.toml");
+    std::fs::write(&bad, "[general]\nn_motors = \"x\"\n").expect("bad settings");
+    let r = qmarc_tests::run_with_timeout(
+        Command::new(bin_dir().join("qmarc"))
+            .args([&format!("--config={}", bad.display()), "step"]),
+        Duration::from_secs(60),
+    );
+    assert_ne!(r.code, Some(0));
+    assert!(
+        r.stderr.contains(&format!("{}:2:12: general.n_motors", bad.display())),
+        "{}",
+        r.stderr
+    );
+    run.assert_clean();
+}
+
+#[test]
+fn closing_the_terminal_during_a_move_stops_it_with_motors_disabled() {
+    let run = TestRun::new("conshup");
+    long_run_config(&run);
+    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
+    tmux.wait_for("the setup screen", Duration::from_secs(30), |s| s.contains("Gains (one"));
+    tmux.keys(&["F5"]);
+    wait_until_moving(&run);
+    // The terminal goes away under the console (its window closed, its ssh dropped).
+    drop(tmux);
+    let start = Instant::now();
+    while !processes_matching(&run.prefix).is_empty() {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "left running after the terminal closed: {:?}",
+            processes_matching(&run.prefix)
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let fault = read_summary(&run.out("out")).fault.expect("the interrupted run has a fault");
+    assert_eq!(fault.kind, "aborted", "{fault:?}");
+    assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
+    run.assert_clean();
+}
