@@ -88,15 +88,17 @@ impl Tmux {
         }
     }
 
-    /// Moves the focus with Tab until the message line names `field`.
+    /// Moves the focus with Tab until the message line names `field`: one Tab at a time, each
+    /// waited for (the message line changes), so no key is ever queued past the target.
     fn focus(&self, field: &str) {
+        let message = |s: &str| s.lines().rev().nth(1).unwrap_or_default().trim().to_string();
         for _ in 0..80 {
-            let s = self.screen();
-            if s.lines().rev().nth(1).is_some_and(|l| l.trim_start().starts_with(field)) {
+            let before = message(&self.screen());
+            if before.starts_with(field) {
                 return;
             }
             self.keys(&["Tab"]);
-            std::thread::sleep(Duration::from_millis(50));
+            self.wait_for("the focus to move", Duration::from_secs(10), |s| message(s) != before);
         }
         panic!("no field `{field}` reached with Tab; the screen:\n{}", self.screen());
     }
@@ -148,7 +150,7 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
         assert!(kp_row(&s).trim_start().starts_with("182000"), "shipped Kp M1:\n{s}");
 
         // Edit Kp of motor 1: typing replaces the value, Tab commits it.
-        tmux.focus("Kp M1:");
+        tmux.focus("Kp M1 =");
         tmux.type_text("185000");
         tmux.keys(&["Tab"]);
         tmux.wait_for("the edited gain", Duration::from_secs(10), |s| {
@@ -170,6 +172,12 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
         let acc = format!("{:.0}", summary.motors[0].accumulated_abs_error_counts);
         assert!(s.contains(&acc), "Σ|e| of motor 1 ({acc}) not shown:\n{s}");
 
+        // The log page has the starter's output, its table included.
+        tmux.keys(&["F3"]);
+        tmux.wait_for("the starter's output", Duration::from_secs(10), |s| {
+            s.contains("qmarc-starter output") && s.contains("QMARC step: ok")
+        });
+
         // Charts: command vs actual, following error, servo period.
         tmux.keys(&["F7"]);
         let s = tmux
@@ -180,12 +188,21 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
             "no plotted points:\n{s}"
         );
 
-        // Resizing, down to a few cells, redraws without a panic.
-        for (w, h) in [("120", "40"), ("30", "8"), ("80", "24")] {
-            tmux.tmux(&["resize-window", "-x", w, "-y", h]);
-            tmux.wait_for("the resized charts", Duration::from_secs(10), |s| {
-                s.lines().count() == h.parse::<usize>().unwrap_or(0) && s.contains("QMARC console")
-            });
+        // Resizing, down to a few cells, redraws without a panic. Each size is waited for
+        // by what only a redraw at that size shows: the charts' right border at its column
+        // (the old picture, clipped or padded, has it elsewhere), the status bar on row h.
+        for (w, h) in [(120, 40), (30, 8), (80, 24)] {
+            tmux.tmux(&["resize-window", "-x", &w.to_string(), "-y", &h.to_string()]);
+            tmux.wait_for(
+                &format!("the charts redrawn at {w}×{h}"),
+                Duration::from_secs(10),
+                |s| {
+                    let rows: Vec<&str> = s.lines().collect();
+                    rows.len() == h
+                        && rows.iter().any(|r| r.chars().count() == w && r.ends_with('┐'))
+                        && rows[h - 1].contains("F2 Home")
+                },
+            );
         }
 
         // History: the move with the gains it ran with.
@@ -206,7 +223,8 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
     assert_eq!(first_kp, "kp = 185000.0", "motor 1's Kp in the file");
     assert!(saved.contains("# motors driven, 1‥4"), "comments kept:\n{saved}");
 
-    // Restart: the edited gain is loaded. Edit it again and Cancel: the file stays as it was.
+    // Restart: the edited gain is loaded. Edit it again, step with it (which saves it, as the
+    // thesis' buttons do), and Cancel: the file is as it was when the console opened.
     {
         let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
         let s = tmux.wait_for("the setup screen", Duration::from_secs(30), |s| {
@@ -217,12 +235,20 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
         tmux.keys(&["F4"]);
         tmux.wait_for("the last results", Duration::from_secs(10), |s| s.contains("step: ok"));
         tmux.keys(&["F1"]);
-        tmux.focus("Kp M1:");
-        tmux.type_text("1");
+        tmux.focus("Kp M1 =");
+        tmux.type_text("190000");
         tmux.keys(&["Tab"]);
         tmux.wait_for("the unsaved edit", Duration::from_secs(10), |s| {
-            kp_row(s).trim_start().starts_with("1 ")
+            kp_row(s).trim_start().starts_with("190000")
         });
+        tmux.keys(&["F6"]);
+        tmux.wait_for("the second step's results", Duration::from_secs(120), |s| {
+            s.contains("step: ok") && s.contains("s ago)")
+        });
+        assert!(
+            std::fs::read_to_string(&config).expect("settings").contains("kp = 190000.0"),
+            "the step ran with the edited gain, saved first"
+        );
         tmux.keys(&["F12"]);
         let (status, s) = tmux.wait_exit(Duration::from_secs(20));
         assert_eq!(status, 0, "the console's exit:\n{s}");
@@ -254,7 +280,8 @@ fn wait_until_moving(run: &TestRun) {
         assert!(start.elapsed() < Duration::from_secs(30), "the controller did not start");
         std::thread::sleep(Duration::from_millis(10));
     }
-    std::thread::sleep(Duration::from_millis(700));
+    // The controller loads its knots, connects and enables: give it time to be moving.
+    std::thread::sleep(Duration::from_millis(1500));
 }
 
 #[test]
@@ -356,5 +383,45 @@ fn closing_the_terminal_during_a_move_stops_it_with_motors_disabled() {
     let fault = read_summary(&run.out("out")).fault.expect("the interrupted run has a fault");
     assert_eq!(fault.kind, "aborted", "{fault:?}");
     assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
+    run.assert_clean();
+}
+
+#[test]
+fn killing_the_console_during_a_move_stops_it_with_motors_disabled() {
+    let run = TestRun::new("conskill");
+    long_run_config(&run);
+    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
+    tmux.wait_for("the setup screen", Duration::from_secs(30), |s| s.contains("Gains (one"));
+    tmux.keys(&["F5"]);
+    wait_until_moving(&run);
+    let console: Vec<u32> = processes_matching(&run.prefix)
+        .into_iter()
+        .filter(|(_, c)| c.contains("/qmarc --config"))
+        .map(|(pid, _)| pid)
+        .collect();
+    assert_eq!(console.len(), 1, "{:?}", processes_matching(&run.prefix));
+    // SAFETY: kill(2) on the console found a moment ago.
+    unsafe { libc::kill(console[0] as libc::pid_t, libc::SIGKILL) };
+    // The starter gets SIGTERM from the kernel (its parent-death signal) and stops the move.
+    // (The tmux server's command line holds the prefix too: it stays until the end.)
+    let moving = || -> Vec<(u32, String)> {
+        processes_matching(&run.prefix)
+            .into_iter()
+            .filter(|(_, c)| !c.starts_with("tmux"))
+            .collect()
+    };
+    let start = Instant::now();
+    while !moving().is_empty() {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "the move outlived the console: {:?}",
+            moving()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let fault = read_summary(&run.out("out")).fault.expect("the interrupted run has a fault");
+    assert_eq!(fault.kind, "aborted", "{fault:?}");
+    assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
+    drop(tmux);
     run.assert_clean();
 }

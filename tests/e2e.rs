@@ -291,3 +291,31 @@ fn a_controller_that_cannot_start_stops_the_hwserver() {
     );
     run.assert_clean();
 }
+
+#[test]
+fn a_starter_whose_output_is_closed_still_runs_and_cleans_up() {
+    // `qmarc-starter step | head -1`, or a console that died: nobody reads its output.
+    let run = TestRun::new("closedout");
+    let out = run.out("out");
+    let mut child = run.spawn_starter(&[
+        &config_arg(),
+        &format!("--out={}", out.display()),
+        "--deterministic",
+        "step",
+        "--duration=0.05",
+    ]);
+    drop(child.stdout.take());
+    drop(child.stderr.take());
+    let deadline = std::time::Instant::now() + TIMEOUT;
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(std::time::Instant::now() < deadline, "the starter did not end");
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    // It cannot print its table, but the move ran, and nothing is left.
+    assert!(read_summary(&out).ok);
+    assert_eq!(status.code(), Some(0), "{status:?}");
+    run.assert_clean();
+}

@@ -118,7 +118,7 @@ impl App {
                         (_, None) => "type a value, Esc undoes · Tab/↑↓ next field".to_string(),
                     };
                     let name = match f.place.motor() {
-                        Some(m) => format!("{} M{}", f.label, m + 1),
+                        Some(m) => format!("{} M{} = {}", f.label, m + 1, f.text),
                         None => f.label.to_string(),
                     };
                     self.say(format!("{name}: {keys}"), false)
@@ -251,7 +251,10 @@ impl App {
             mode,
             &self.workdir,
         ) {
-            Ok(r) => {
+            Ok(mut r) => {
+                // What the move runs with, taken now: the form stays editable meanwhile.
+                r.out_dir = self.out_dir();
+                r.gains = self.gains();
                 self.log.push(format!("── {} ──", mode.arg()));
                 self.running = Some(r);
                 self.page = Page::Log;
@@ -263,20 +266,47 @@ impl App {
 
     /// Stops the running move.
     pub fn abort(&mut self) {
-        if let Some(r) = self.running.as_mut().filter(|r| !r.aborted) {
+        if let Some(r) = self.running.as_mut().filter(|r| r.aborted.is_none()) {
             r.abort();
-            self.say("aborting: the motors are being disabled…", true);
+            self.say(
+                "aborting: the motors are being disabled… (F9 again after 5 s kills the starter)",
+                true,
+            );
         }
     }
 
-    /// Aborts a running move and waits up to `timeout` for it to end (the console is closing).
-    pub fn abort_and_wait(&mut self, timeout: std::time::Duration) {
+    /// F9: aborts the move; pressed again more than 5 s after an abort that did not end it,
+    /// kills the starter (its children stop on their parent-death signal).
+    fn abort_key(&mut self) {
+        match self.running.as_mut().and_then(|r| r.aborted.map(|at| (r, at))) {
+            Some((r, at)) if at.elapsed() > std::time::Duration::from_secs(5) => {
+                r.kill();
+                self.say("qmarc-starter killed: its children stop on their own", true);
+            }
+            Some(_) => {}
+            None => self.abort(),
+        }
+    }
+
+    /// Aborts a running move and waits up to `timeout` for it to end (the console is
+    /// closing). Err with the starter's pid if it is still running then.
+    pub fn abort_and_wait(&mut self, timeout: std::time::Duration) -> Result<(), u32> {
         let start = std::time::Instant::now();
         self.abort();
         while self.running.is_some() && start.elapsed() < timeout {
             std::thread::sleep(std::time::Duration::from_millis(20));
             self.poll();
         }
+        self.running.as_ref().map_or(Ok(()), |r| Err(r.pid()))
+    }
+
+    /// (Kp, Kd, Kvff) of the motors as the settings check now.
+    fn gains(&self) -> Vec<(f64, f64, f64)> {
+        self.form
+            .checked
+            .as_ref()
+            .map(|c| c.motors.iter().take(c.n_motors).map(|g| (g.kp, g.kd, g.kvff)).collect())
+            .unwrap_or_default()
     }
 
     /// Takes the starter's output; when the move has ended, loads its results.
@@ -287,14 +317,13 @@ impl App {
             self.trim_log();
             return;
         };
-        let (mode, since) = (r.mode, r.started_wall);
-        std::thread::sleep(std::time::Duration::from_millis(20));
-        self.log.extend(r.drain());
+        // Its last lines (why it failed, often) may still be on their way from the children.
+        self.log.extend(r.drain_to_end(std::time::Duration::from_secs(2)));
         self.trim_log();
-        self.running = None;
-        match MoveResult::load_since(&self.out_dir(), since) {
+        let Some(r) = self.running.take() else { return };
+        match MoveResult::load_since(&r.out_dir, r.started_wall) {
             Ok(result) => {
-                self.record(mode, &result);
+                self.record(r.mode, r.gains.clone(), &result);
                 let fault = result
                     .summary
                     .fault
@@ -302,18 +331,22 @@ impl App {
                     .map(|f| format!("FAULT {}: {}", f.kind, f.message));
                 self.form.last_output_p50_us =
                     Some(result.summary.timing.output_latency_us.p50).filter(|&p| p > 0.0);
+                // The period is checked again against what this move measured.
+                self.form.validate();
                 self.last = Some(result);
                 self.page = Page::Results;
                 match fault {
                     Some(f) => self.say(f, true),
                     None => {
-                        self.say(format!("{} done · F7 charts · F8 history", mode.arg()), false)
+                        self.say(format!("{} done · F7 charts · F8 history", r.mode.arg()), false)
                     }
                 }
             }
             Err(e) => {
+                // The results pages must not show the move before as this one's.
+                self.last = None;
                 self.page = Page::Log;
-                self.say(format!("{} ended ({status}) without results: {e}", mode.arg()), true);
+                self.say(format!("{} ended ({status}) without results: {e}", r.mode.arg()), true);
             }
         }
     }
@@ -324,19 +357,13 @@ impl App {
         }
     }
 
-    fn record(&mut self, mode: Mode, r: &MoveResult) {
+    fn record(&mut self, mode: Mode, gains: Vec<(f64, f64, f64)>, r: &MoveResult) {
         let s = &r.summary;
         let what = if s.trajectory.is_empty() || s.trajectory == s.mode {
             mode.arg().to_string()
         } else {
             format!("{} ({})", s.mode, s.trajectory)
         };
-        let gains = self
-            .form
-            .checked
-            .as_ref()
-            .map(|c| c.motors.iter().take(c.n_motors).map(|g| (g.kp, g.kd, g.kvff)).collect())
-            .unwrap_or_default();
         self.history.push(HistoryEntry {
             n: self.history.len() + 1,
             what,
@@ -365,7 +392,7 @@ impl App {
             KeyCode::F(2) => self.start(Mode::Home),
             KeyCode::F(5) => self.start(Mode::Run),
             KeyCode::F(6) => self.start(Mode::Step),
-            KeyCode::F(9) => self.abort(),
+            KeyCode::F(9) => self.abort_key(),
             KeyCode::F(10) => {
                 if self.running.is_some() {
                     return self.say("a move is running: F9 aborts it first", true);

@@ -124,6 +124,9 @@ pub struct Form {
     /// The settings file.
     pub path: PathBuf,
     original: String,
+    /// The file as the console found it (what Cancel puts back).
+    opened: String,
+
     doc: DocumentMut,
     /// Every field, in display order.
     pub fields: Vec<Field>,
@@ -173,7 +176,9 @@ impl Form {
             .min(qmarc_proto::MAX_MOTORS);
         let mut form = Form {
             path: path.to_path_buf(),
+            opened: original.clone(),
             original,
+
             doc,
             fields: Vec::new(),
             motor_tables,
@@ -414,6 +419,12 @@ impl Form {
             None => Some("this method needs a knot file".to_string()),
             Some(path) => match KnotSource::from_path(path) {
                 Ok(KnotSource::File(_)) => (entry.build)(s).err().map(|e| e.to_string()),
+                // The console gives the starter no standard input to read knots from.
+                Ok(KnotSource::Stdin) => Some(
+                    "\"-\" (standard input) works only with qmarc-starter run by hand: \
+                     give a file or a FIFO"
+                        .to_string(),
+                ),
                 Ok(_) => None, // a stream: read when the move starts
                 Err(e) => Some(e.to_string()),
             },
@@ -457,6 +468,17 @@ impl Form {
             let e = f.error.as_ref().filter(|_| needed)?;
             Some((Some(i), format!("{} {}: {e}", f.place.config_path(), f.label)))
         })
+    }
+
+    /// Cancel: puts the file back as it was when the form was loaded, if a move saved other
+    /// settings since (moves save them before they start). Untouched otherwise.
+    pub fn restore_opened(&mut self) -> Result<(), String> {
+        if self.original != self.opened {
+            std::fs::write(&self.path, &self.opened).map_err(|e| {
+                format!("{}: cannot put back the settings: {e}", self.path.display())
+            })?;
+        }
+        Ok(())
     }
 
     /// Writes the file (only when every field checks).
@@ -574,6 +596,12 @@ mod tests {
         assert!(form.blocking(Action::Step).is_none() && form.blocking(Action::Home).is_none());
         // The starter accepts such settings for step and home: they can be saved.
         assert!(form.blocking(Action::Save).is_none() && form.checked.is_some());
+        // Standard input cannot feed a console's run; a directory is no knot file.
+        form.set_text(knots, "-");
+        assert!(form.fields[knots].error.as_deref().unwrap().contains("give a file or a FIFO"));
+        form.set_text(knots, d.0.to_str().unwrap());
+        let e = form.fields[knots].error.clone().unwrap();
+        assert!(e.ends_with("cannot read the knot file: it is a directory"), "{e}");
     }
 
     #[test]

@@ -3,11 +3,13 @@
 //! codes).
 
 use anyhow::Context;
-use clap::Parser;
+use clap::{Args as _, CommandFactory, Parser};
 use qmarc_console::app::{App, Quit};
 use qmarc_console::form::Form;
 use qmarc_console::ui;
+use qmarc_controller::cli::MoveOptions;
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
+use std::ffi::OsString;
 use std::io::Write;
 use std::os::unix::process::CommandExt;
 use std::path::PathBuf;
@@ -66,7 +68,14 @@ fn run_console(args: &Args) -> anyhow::Result<Option<Quit>> {
     // SIGTERM, SIGHUP and a SIGINT from outside end the console like Cancel (aborting a move
     // first); Ctrl-C typed in the console arrives as a key.
     let stop = qmarc_timer::stop::install().context("signal handlers")?;
-    let mut terminal = ratatui::try_init().context("cannot set up the terminal")?;
+    let mut terminal = match ratatui::try_init() {
+        Ok(t) => t,
+        Err(e) => {
+            // Raw mode may already be on.
+            let _ = ratatui::try_restore();
+            return Err(anyhow::Error::new(e).context("cannot set up the terminal"));
+        }
+    };
     let result = (|| -> anyhow::Result<()> {
         loop {
             // A terminal that went away (window closed, ssh dropped) ends the console like a
@@ -96,21 +105,67 @@ fn run_console(args: &Args) -> anyhow::Result<Option<Quit>> {
     })();
     // Whatever ended the loop (an error of the terminal included), a move still running is
     // stopped and waited for: motors disabled, data written.
-    app.abort_and_wait(Duration::from_secs(30));
+    let still_running = app.abort_and_wait(Duration::from_secs(30));
     // Restoring a terminal that is gone fails; there is nothing left to restore then.
     let _ = ratatui::try_restore();
+    if let Err(pid) = still_running {
+        // Dropping the app kills it; its children stop on their parent-death signal.
+        anyhow::bail!("qmarc-starter (pid {pid}) did not stop within 30 s of SIGTERM: killed");
+    }
     result?;
+    // Cancel: the file as it was when the console opened (moves save it before they start).
+    if app.quit == Some(Quit::Cancelled) {
+        app.form.restore_opened().map_err(anyhow::Error::msg)?;
+    }
     Ok(app.quit)
+}
+
+/// `qmarc [options] home|step|run …`: the arguments for `qmarc-starter` (the console's own
+/// `--starter` taken out, and returned), or `None` when no mode is given. The mode is the
+/// first argument that is neither an option nor an option's value; which options take a
+/// value comes from the command-line definitions themselves.
+fn plain_subcommand(raw: &[OsString]) -> Option<(Option<PathBuf>, Vec<OsString>)> {
+    let takes_value: Vec<String> = Args::command()
+        .get_arguments()
+        .chain(MoveOptions::augment_args(clap::Command::new("qmarc-starter")).get_arguments())
+        .filter(|a| a.get_action().takes_values())
+        .filter_map(|a| a.get_long().map(|l| format!("--{l}")))
+        // qmarc-starter's own: where its two programs are.
+        .chain(["--bin-dir".to_string()])
+        .collect();
+    let mut starter = None;
+    let mut pass = Vec::new();
+    let mut it = raw.iter();
+    let mut mode = false;
+    while let Some(a) = it.next() {
+        let s = a.to_string_lossy();
+        if mode {
+            pass.push(a.clone());
+        } else if s == "--starter" {
+            starter = it.next().map(PathBuf::from);
+        } else if let Some(v) = s.strip_prefix("--starter=") {
+            starter = Some(PathBuf::from(v));
+        } else if takes_value.iter().any(|o| *o == s) {
+            pass.push(a.clone());
+            pass.extend(it.next().cloned());
+        } else {
+            mode = matches!(s.as_ref(), "home" | "step" | "run");
+            if !mode && !s.starts_with('-') {
+                return None;
+            }
+            pass.push(a.clone());
+        }
+    }
+    mode.then_some((starter, pass))
 }
 
 fn main() -> ExitCode {
     // `qmarc home|step|run …`: the starter's command line, run in place of this process.
-    let raw: Vec<String> = std::env::args().skip(1).collect();
-    if raw.iter().any(|a| matches!(a.as_str(), "home" | "step" | "run")) {
-        let mut cmd = std::process::Command::new(starter_next_to_me());
-        cmd.args(&raw);
-        let err = cmd.exec();
-        eprintln!("qmarc: cannot run {}: {err}", starter_next_to_me().display());
+    let raw: Vec<OsString> = std::env::args_os().skip(1).collect();
+    if let Some((starter, pass)) = plain_subcommand(&raw) {
+        let starter = starter.unwrap_or_else(starter_next_to_me);
+        let err = std::process::Command::new(&starter).args(&pass).exec();
+        let _ = writeln!(std::io::stderr(), "qmarc: cannot run {}: {err}", starter.display());
         return ExitCode::from(1);
     }
     let args = Args::parse();
@@ -129,5 +184,37 @@ fn main() -> ExitCode {
             let _ = writeln!(std::io::stderr(), "qmarc: error: {e:#}");
             ExitCode::from(1)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn split(args: &[&str]) -> Option<(Option<PathBuf>, Vec<String>)> {
+        let raw: Vec<OsString> = args.iter().map(OsString::from).collect();
+        plain_subcommand(&raw)
+            .map(|(s, p)| (s, p.into_iter().map(|a| a.to_string_lossy().into_owned()).collect()))
+    }
+
+    #[test]
+    fn the_mode_is_the_first_argument_that_is_no_option_value() {
+        assert_eq!(split(&[]), None);
+        assert_eq!(split(&["--config", "run.toml"]), None);
+        // A settings file called `step` is a value, not the mode.
+        assert_eq!(split(&["--config", "step"]), None);
+        assert_eq!(split(&["--config=x.toml", "--iox-root", "/tmp/r/"]), None);
+        let (starter, pass) =
+            split(&["--config", "step", "--deterministic", "run", "--knots", "home"]).unwrap();
+        assert_eq!(starter, None);
+        assert_eq!(pass, ["--config", "step", "--deterministic", "run", "--knots", "home"]);
+        // The console's --starter is taken out and used.
+        let (starter, pass) = split(&["--starter", "/opt/s", "--out=o", "home"]).unwrap();
+        assert_eq!(starter, Some(PathBuf::from("/opt/s")));
+        assert_eq!(pass, ["--out=o", "home"]);
+        let (starter, _) = split(&["--starter=/opt/t", "step", "--size", "-5"]).unwrap();
+        assert_eq!(starter, Some(PathBuf::from("/opt/t")));
+        // A stray word is left to the console's own parser (which reports it).
+        assert_eq!(split(&["stepp"]), None);
     }
 }

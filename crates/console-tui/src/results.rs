@@ -29,8 +29,20 @@ impl Series {
         let n_motors = (1..=qmarc_proto::MAX_MOTORS).take_while(|&m| has(m)).count();
         let mut rows: Vec<Vec<f64>> = Vec::new();
         for (i, l) in lines.enumerate() {
-            let r: Result<Vec<f64>, _> = l.split(',').map(str::parse::<f64>).collect();
-            rows.push(r.map_err(|e| format!("gather.csv line {}: {e}", i + 2))?);
+            let r: Vec<f64> = l
+                .split(',')
+                .map(str::parse::<f64>)
+                .collect::<Result<_, _>>()
+                .map_err(|e| format!("gather.csv line {}: {e}", i + 2))?;
+            if r.len() != header.len() {
+                return Err(format!(
+                    "gather.csv line {}: {} fields, the header has {}",
+                    i + 2,
+                    r.len(),
+                    header.len()
+                ));
+            }
+            rows.push(r);
         }
         let cycle = col("cycle").ok_or("gather.csv has no cycle column")?;
         let time = col("time_s");
@@ -91,6 +103,8 @@ pub struct MoveResult {
     pub summary: Summary,
     /// The gathered data, if `gather.csv` could be read.
     pub series: Option<Series>,
+    /// When `summary.json` was written.
+    pub written: Option<std::time::SystemTime>,
 }
 
 impl MoveResult {
@@ -105,7 +119,19 @@ impl MoveResult {
         let series = std::fs::read_to_string(out.join("gather.csv"))
             .ok()
             .and_then(|c| Series::parse(&c, period_s).ok());
-        Ok(MoveResult { summary, series })
+        let written = std::fs::metadata(&path).and_then(|m| m.modified()).ok();
+        Ok(MoveResult { summary, series, written })
+    }
+
+    /// How long ago the results were written, for the title: `12 s ago`, `5 min ago`.
+    pub fn age(&self, now: std::time::SystemTime) -> Option<String> {
+        let s = now.duration_since(self.written?).ok()?.as_secs();
+        Some(match s {
+            0..120 => format!("{s} s ago"),
+            120..7200 => format!("{} min ago", s / 60),
+            7200..172_800 => format!("{} h ago", s / 3600),
+            _ => format!("{} days ago", s / 86_400),
+        })
     }
 
     /// [`MoveResult::load`], refusing a `summary.json` older than `since`: a move that
@@ -158,6 +184,12 @@ mod tests {
         let s = Series::parse("cycle,act1\n0,5\n2,7\n", 0.0004).unwrap();
         assert_eq!(s.t, [0.0, 0.0008]);
         assert!(s.error(0).is_empty() && s.period_us.is_empty());
+        // A cut-off row, an empty file, a header alone: an error or empty series, no panic.
+        let e = Series::parse("cycle,time_s,cmd1,act1\n0,0,0,0\n1,0.0004\n", 0.0004).unwrap_err();
+        assert_eq!(e, "gather.csv line 3: 2 fields, the header has 4");
+        assert!(Series::parse("", 0.0004).is_err());
+        let s = Series::parse("cycle,time_s,cmd1,act1\n", 0.0004).unwrap();
+        assert!(s.t.is_empty() && s.error(0).is_empty() && s.period_us.is_empty());
     }
 
     #[test]

@@ -1,12 +1,20 @@
 //! Running a move: `qmarc-starter` is spawned with the chosen mode and the settings file, its
-//! output is streamed line by line into the log, and an abort sends it SIGTERM — it forwards
-//! the stop to both children, which disable the motors and write their data.
+//! output (written to an unlinked file, see [`Running::start`]) is streamed line by line into
+//! the log, and an abort sends it SIGTERM — it forwards
+//! the stop to both children, which disable the motors and write their data. A [`Running`]
+//! dropped while its move runs stops it the same way.
 
-use std::io::{BufRead, BufReader};
-use std::path::Path;
+use std::ffi::OsString;
+use std::fs::{File, OpenOptions};
+use std::io::Read;
+use std::os::unix::fs::OpenOptionsExt;
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
-use std::time::{Instant, SystemTime};
+use std::time::{Duration, Instant, SystemTime};
 
 /// What to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -35,21 +43,63 @@ impl Mode {
 pub struct Running {
     child: Child,
     lines: Receiver<String>,
+    /// Set when the starter has ended: the output file is then complete.
+    done: Arc<AtomicBool>,
     /// What runs.
     pub mode: Mode,
     /// Since when.
     pub started: Instant,
     /// Since when, wall clock (results older than this are not this move's).
     pub started_wall: SystemTime,
-    /// An abort was sent.
-    pub aborted: bool,
+    /// When an abort was sent, if one was.
+    pub aborted: Option<Instant>,
+    /// Where its results will be (the settings' output folder when it started).
+    pub out_dir: PathBuf,
+    /// (Kp, Kd, Kvff) per motor it runs with.
+    pub gains: Vec<(f64, f64, f64)>,
 }
 
-fn forward(stream: impl std::io::Read + Send + 'static, tx: Sender<String>) {
+/// The starter's output goes to a file, not a pipe: if the console dies, the starter and its
+/// children must not meet a closed pipe while they stop the move. The file is unlinked as soon
+/// as it is open (a writer for the starter, a reader of our own), so nothing is left behind.
+fn output_file() -> std::io::Result<(File, File)> {
+    static N: AtomicU32 = AtomicU32::new(0);
+    let n = N.fetch_add(1, Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!("qmarc-console-{}-{n}.log", std::process::id()));
+    let writer = OpenOptions::new().append(true).create_new(true).mode(0o600).open(&path)?;
+    let reader = File::open(&path);
+    let _ = std::fs::remove_file(&path);
+    Ok((writer, reader?))
+}
+
+/// Sends the file's lines as they are written, until `done` (the writers have all ended) and
+/// the file is read to its end.
+fn tail(mut file: File, done: Arc<AtomicBool>, tx: Sender<String>) {
     std::thread::spawn(move || {
-        for line in BufReader::new(stream).lines().map_while(Result::ok) {
-            if tx.send(line).is_err() {
-                break;
+        let mut pending: Vec<u8> = Vec::new();
+        let mut buf = [0u8; 4096];
+        loop {
+            // Read after looking at `done`: a read that finds the end then has seen everything.
+            let finished = done.load(Ordering::Acquire);
+            match file.read(&mut buf) {
+                Ok(0) if finished => {
+                    if !pending.is_empty() {
+                        let _ = tx.send(String::from_utf8_lossy(&pending).into_owned());
+                    }
+                    return;
+                }
+                Ok(0) => std::thread::sleep(Duration::from_millis(20)),
+                Ok(n) => {
+                    pending.extend_from_slice(&buf[..n]);
+                    while let Some(i) = pending.iter().position(|&b| b == b'\n') {
+                        let line: Vec<u8> = pending.drain(..=i).collect();
+                        let text = String::from_utf8_lossy(&line[..i]).into_owned();
+                        if tx.send(text).is_err() {
+                            return;
+                        }
+                    }
+                }
+                Err(_) => return,
             }
         }
     });
@@ -57,7 +107,9 @@ fn forward(stream: impl std::io::Read + Send + 'static, tx: Sender<String>) {
 
 impl Running {
     /// Spawns `starter EXTRA… --config=CONFIG MODE` in `cwd` (relative paths of the settings
-    /// are relative to it, as for the starter run by hand).
+    /// are relative to it, as for the starter run by hand). The starter gets a process group
+    /// of its own, so signals of the terminal reach only the console, which decides what
+    /// stops the move; and SIGTERM if the console dies, so no move outlives it.
     pub fn start(
         starter: &Path,
         extra: &[String],
@@ -66,23 +118,44 @@ impl Running {
         cwd: &Path,
     ) -> std::io::Result<Running> {
         let started_wall = SystemTime::now();
-        let mut child = Command::new(starter)
-            .args(extra)
-            .arg(format!("--config={}", config.display()))
+        let mut config_arg = OsString::from("--config=");
+        config_arg.push(config);
+        let (writer, reader) = output_file()?;
+        let mut cmd = Command::new(starter);
+        cmd.args(extra)
+            .arg(config_arg)
             .arg(mode.arg())
             .current_dir(cwd)
             .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()?;
+            .stdout(Stdio::from(writer.try_clone()?))
+            .stderr(Stdio::from(writer))
+            .process_group(0);
+        // SAFETY: prctl(2) is async-signal-safe; the closure touches nothing else.
+        unsafe {
+            cmd.pre_exec(|| {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+        let child = cmd.spawn()?;
+        // `cmd` holds the writer's copies: gone with it, so only the starter's side stays open.
+        drop(cmd);
         let (tx, lines) = channel();
-        if let Some(out) = child.stdout.take() {
-            forward(out, tx.clone());
-        }
-        if let Some(err) = child.stderr.take() {
-            forward(err, tx);
-        }
-        Ok(Running { child, lines, mode, started: Instant::now(), started_wall, aborted: false })
+        let done = Arc::new(AtomicBool::new(false));
+        tail(reader, Arc::clone(&done), tx);
+        Ok(Running {
+            child,
+            lines,
+            done,
+            mode,
+            started: Instant::now(),
+            started_wall,
+            aborted: None,
+            out_dir: cwd.to_path_buf(),
+            gains: Vec::new(),
+        })
     }
 
     /// Lines printed since the last call.
@@ -90,16 +163,69 @@ impl Running {
         self.lines.try_iter().collect()
     }
 
-    /// Asks the move to stop: SIGTERM to the starter, which stops both children (motors
-    /// disabled, data written).
+    /// The rest of the output once the starter has ended: lines until the file is read to its
+    /// end, for at most `timeout`.
+    pub fn drain_to_end(&self, timeout: Duration) -> Vec<String> {
+        let end = Instant::now() + timeout;
+        let mut out = Vec::new();
+        while let Some(left) = end.checked_duration_since(Instant::now()) {
+            match self.lines.recv_timeout(left) {
+                Ok(l) => out.push(l),
+                Err(_) => break, // read to the end, or out of time
+            }
+        }
+        out
+    }
+
+    /// Asks the move to stop (once; later calls do nothing): SIGTERM to the starter, which
+    /// stops both children (motors disabled, data written).
     pub fn abort(&mut self) {
-        // SAFETY: kill(2) on our own child, not yet reaped.
-        unsafe { libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM) };
-        self.aborted = true;
+        if self.aborted.is_none() {
+            // SAFETY: kill(2) on our own child, not yet reaped.
+            unsafe { libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM) };
+            self.aborted = Some(Instant::now());
+        }
+    }
+
+    /// Kills a starter that does not stop: its children then get SIGTERM from the kernel
+    /// (their parent-death signal) and stop as they would have for it.
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        self.aborted.get_or_insert_with(Instant::now);
+    }
+
+    /// The starter's process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
     }
 
     /// The exit status once the starter has ended.
     pub fn finished(&mut self) -> Option<ExitStatus> {
-        self.child.try_wait().ok().flatten()
+        let status = self.child.try_wait().ok().flatten();
+        if status.is_some() {
+            self.done.store(true, Ordering::Release);
+        }
+        status
+    }
+}
+
+impl Drop for Running {
+    /// A move is never left behind: however the console lets go of it (a panic included), the
+    /// starter is stopped and waited for — SIGTERM, then SIGKILL after 30 s.
+    fn drop(&mut self) {
+        if self.finished().is_some() {
+            return;
+        }
+        self.abort();
+        let end = Instant::now() + Duration::from_secs(30);
+        while Instant::now() < end {
+            if self.finished().is_some() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        self.kill();
+        let _ = self.child.wait();
+        self.done.store(true, Ordering::Release);
     }
 }

@@ -111,8 +111,15 @@ fn draw_setup(f: &mut Frame, app: &App, area: Rect) {
                 Span::styled(shown, value_style(app, i, fld)),
             ]));
             if let Some(e) = &fld.error {
-                let text: String = format!("   ↳ {e}").chars().take(width.max(8)).collect();
-                lines.push(Line::styled(text, Style::new().fg(Color::Red)));
+                // Wrapped on up to four lines: a knot-file error's position and reason come
+                // after its path.
+                let chars: Vec<char> = e.chars().collect();
+                let w = width.saturating_sub(5).max(8);
+                for (k, chunk) in chars.chunks(w).take(4).enumerate() {
+                    let lead = if k == 0 { "   ↳ " } else { "     " };
+                    let text = format!("{lead}{}", chunk.iter().collect::<String>());
+                    lines.push(Line::styled(text, Style::new().fg(Color::Red)));
+                }
             }
         }
     }
@@ -149,7 +156,17 @@ fn draw_gains(f: &mut Frame, app: &App, area: Rect) {
             .enumerate()
             .filter(|(_, f)| f.label == label && f.place.motor().is_some())
         {
-            let text: String = fld.text.chars().take(cell.saturating_sub(1)).collect();
+            // A value wider than its cell shows its end while typed, else its start and '…'
+            // (the message line has it whole).
+            let room = cell.saturating_sub(1);
+            let n = fld.text.chars().count();
+            let text: String = if n <= room {
+                fld.text.clone()
+            } else if i == app.focus && app.editing.is_some() {
+                fld.text.chars().skip(n - room).collect()
+            } else {
+                fld.text.chars().take(room.saturating_sub(1)).chain(['…']).collect()
+            };
             let mark = if fld.error.is_some() { "!" } else { " " };
             spans.push(Span::styled(
                 format!("{text:>w$}{mark}", w = cell - 1),
@@ -304,7 +321,11 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
     )));
     // Wrapped, so a long fault message is read whole at 80 columns.
     let p = Paragraph::new(lines).wrap(Wrap { trim: false });
-    f.render_widget(p.block(Block::bordered().title(" Results of the last move ")), area);
+    let title = match r.age(std::time::SystemTime::now()) {
+        Some(age) => format!(" Results of the last move ({age}) "),
+        None => " Results of the last move ".to_string(),
+    };
+    f.render_widget(p.block(Block::bordered().title(title)), area);
 }
 
 fn bounds(pts: &[&[(f64, f64)]]) -> ([f64; 2], [f64; 2]) {
@@ -590,7 +611,7 @@ mod tests {
         summary.ok = !fault;
         let csv =
             "cycle,time_s,cmd1,act1,dac1\n0,0,0,0,0\n1,0.0004,1000,3,8191\n2,0.0008,1000,20,500\n";
-        MoveResult { summary, series: Some(Series::parse(csv, 0.0004).unwrap()) }
+        MoveResult { summary, series: Some(Series::parse(csv, 0.0004).unwrap()), written: None }
     }
 
     #[test]

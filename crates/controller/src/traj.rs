@@ -46,6 +46,12 @@ impl KnotSource {
             file: path.display().to_string(),
             reason: e.to_string(),
         })?;
+        if meta.is_dir() {
+            return Err(KnotFileError::Read {
+                file: path.display().to_string(),
+                reason: "it is a directory".to_string(),
+            });
+        }
         Ok(if meta.is_file() {
             KnotSource::File(path.to_path_buf())
         } else {

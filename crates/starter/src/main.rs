@@ -16,9 +16,18 @@ use qmarc_starter::supervise::{self, Supervised};
 use qmarc_starter::{
     Exit, default_prefix, describe_exit, hwserver_args, remove_stale_files, table,
 };
+use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
+
+/// A line on standard error that cannot fail: if whoever reads it went away (a closed pipe),
+/// the starter still stops its children and removes its files.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
 
 /// Command line of `qmarc-starter`.
 #[derive(Debug, Parser)]
@@ -96,13 +105,13 @@ fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
     match supervise::spawn(&controller_bin, &ctl_args) {
         Ok(c) => children.push(Supervised::new("qmarc-controller", c, secs(120), secs(120))),
         Err(e) => {
-            eprintln!("qmarc-starter: cannot start {}: {e}", controller_bin.display());
+            say!("qmarc-starter: cannot start {}: {e}", controller_bin.display());
             supervise::send(&children[0].child, libc::SIGTERM);
         }
     }
     supervise::wait_all(&mut children, stop, |s| {
         if let Some(exit) = s.exit.filter(|e| !e.success()) {
-            eprintln!("qmarc-starter: {}", describe_exit(s.name, exit));
+            say!("qmarc-starter: {}", describe_exit(s.name, exit));
         }
     });
     location.remove_files();
@@ -124,13 +133,15 @@ fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
             controller_lost_message(exit, hwserver, &settings),
         );
         if let Err(e) = write_summary(&summary_path, &lost) {
-            eprintln!("qmarc-starter: cannot write {}: {e}", summary_path.display());
+            say!("qmarc-starter: cannot write {}: {e}", summary_path.display());
         }
         summary = Some(lost);
     }
     match &summary {
-        Some(s) => print!("{}", table::render(s, &out_dir)),
-        None => eprintln!("qmarc-starter: no summary was written: the move did not complete"),
+        Some(s) => {
+            let _ = write!(std::io::stdout(), "{}", table::render(s, &out_dir));
+        }
+        None => say!("qmarc-starter: no summary was written: the move did not complete"),
     }
     Ok(match summary {
         Some(s) if s.ok && all_clean => ExitCode::SUCCESS,
@@ -167,7 +178,7 @@ fn main() -> ExitCode {
     match run(&args) {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("qmarc-starter: error: {e:#}");
+            say!("qmarc-starter: error: {e:#}");
             ExitCode::from(1)
         }
     }
