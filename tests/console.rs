@@ -272,16 +272,10 @@ fn long_run_config(run: &TestRun) -> PathBuf {
     run.config_with(&[("knots", &format!("{:?}", long.display().to_string()))])
 }
 
-/// Waits until the move the console started is under way: the controller up, and moving for
-/// a while.
+/// Waits until the move the console started is under way, and then a little.
 fn wait_until_moving(run: &TestRun) {
-    let start = Instant::now();
-    while !processes_matching(&run.prefix).iter().any(|(_, c)| c.contains("qmarc-controller")) {
-        assert!(start.elapsed() < Duration::from_secs(30), "the controller did not start");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    // The controller loads its knots, connects and enables: give it time to be moving.
-    std::thread::sleep(Duration::from_millis(1500));
+    qmarc_tests::wait_until_moving(&run.prefix, Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(300));
 }
 
 #[test]

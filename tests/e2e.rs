@@ -240,12 +240,9 @@ fn killing_the_starter_stops_both_children_with_the_motors_disabled() {
         .unwrap();
     let prefix = format!("qmarc_{}_", starter.id());
     let deadline = std::time::Instant::now() + TIMEOUT;
-    // Wait until the move runs: both children up, and the hwserver has answered for a while.
-    while qmarc_tests::processes_matching(&prefix).len() < 2 {
-        assert!(std::time::Instant::now() < deadline, "children did not start");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    std::thread::sleep(Duration::from_millis(700));
+    // Wait until the move runs, and a while longer.
+    qmarc_tests::wait_until_moving(&prefix, TIMEOUT);
+    std::thread::sleep(Duration::from_millis(300));
     starter.kill().unwrap();
     starter.wait().unwrap();
     while !qmarc_tests::processes_matching(&prefix).is_empty() {

@@ -220,8 +220,9 @@ fn the_24_bit_counter_wraps_cleanly_during_a_move() {
     run.assert_clean();
 }
 
-/// Starts a 3 s step in real time, waits `delay` after both children are up, SIGKILLs the
-/// process whose command line contains `victim`, and waits for the starter.
+/// Starts a 3 s step in real time, waits `delay` after the move is under way (zero: right when
+/// the victim is up), SIGKILLs the process whose command line contains `victim`, and waits for
+/// the starter.
 fn kill_during_step(
     run: &TestRun,
     cfg: &std::path::Path,
@@ -246,6 +247,10 @@ fn kill_during_step(
         assert!(Instant::now() < deadline, "{victim} did not start");
         std::thread::sleep(Duration::from_millis(2));
     };
+    if !delay.is_zero() {
+        // `delay` counts from the start of the move, not of the processes.
+        qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    }
     std::thread::sleep(delay);
     // SAFETY: kill(2) on a pid found a moment ago.
     unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
@@ -352,6 +357,10 @@ fn killing_the_starter_at_the_start_and_near_the_end_stops_everything() {
         while processes_matching(&run.prefix).len() < 2 {
             assert!(Instant::now() < deadline, "children did not start");
             std::thread::sleep(Duration::from_millis(2));
+        }
+        if delay_ms > 0 {
+            // Near the end of the move: counted from its start.
+            qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
         }
         std::thread::sleep(Duration::from_millis(delay_ms));
         child.kill().unwrap();

@@ -240,6 +240,38 @@ impl Drop for TestRun {
     }
 }
 
+/// Waits until a move of the run with iceoryx2 prefix `prefix` is under way: its hwserver has
+/// blocked and woken at least 200 times (a couple per servo cycle; before the move it answers a
+/// handful of requests). An observable start, where a fixed delay would guess wrong on a
+/// loaded machine. Panics after `timeout`.
+pub fn wait_until_moving(prefix: &str, timeout: Duration) {
+    let start = Instant::now();
+    loop {
+        let hw = processes_matching(prefix).into_iter().find(|(_, c)| c.contains("qmarc-hwserver"));
+        if let Some((pid, _)) = hw
+            && voluntary_switches(pid) >= 200
+        {
+            return;
+        }
+        assert!(start.elapsed() < timeout, "no move under way within {timeout:?}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// Voluntary context switches of all threads of `pid` (0 if it is gone).
+fn voluntary_switches(pid: u32) -> u64 {
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else { return 0 };
+    tasks
+        .flatten()
+        .filter_map(|t| std::fs::read_to_string(t.path().join("status")).ok())
+        .filter_map(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("voluntary_ctxt_switches:"))
+                .and_then(|v| v.trim().parse::<u64>().ok())
+        })
+        .sum()
+}
+
 /// Processes (pid, command line) whose command line contains `needle`, except this one.
 pub fn processes_matching(needle: &str) -> Vec<(u32, String)> {
     let me = std::process::id();
