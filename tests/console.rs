@@ -117,6 +117,18 @@ impl Drop for Tmux {
     }
 }
 
+/// The setup page is drawn whole: its last panel and the key bar are there (a capture can
+/// catch a screen half-updated).
+fn setup_drawn(s: &str) -> bool {
+    s.contains("Cancel (leave without saving)")
+        && s.lines().last().is_some_and(|l| l.contains("F12"))
+}
+
+/// The results page is drawn whole, down to its last figure.
+fn results_drawn(s: &str) -> bool {
+    s.contains("Results of the last move") && s.contains("missed:")
+}
+
 /// The console's command line for `run`, in its scratch directory; the shell prints the exit
 /// status when it ends.
 fn console_command(run: &TestRun) -> String {
@@ -141,9 +153,7 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
     let config = run.config_with(&[("knots", &format!("{:?}", sine.display().to_string()))]);
     {
         let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
-        let s = tmux.wait_for("the setup screen", Duration::from_secs(30), |s| {
-            s.contains("Gains (one column per motor)")
-        });
+        let s = tmux.wait_for("the setup screen", Duration::from_secs(30), setup_drawn);
         for section in ["General", "Trajectory", "Step", "Data gathering", "Actions"] {
             assert!(s.contains(section), "section {section} missing:\n{s}");
         }
@@ -159,9 +169,7 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
 
         // Step: the console saves, runs the starter, then shows the summary.
         tmux.keys(&["F6"]);
-        let s = tmux.wait_for("the step's results", Duration::from_secs(120), |s| {
-            s.contains("Results of the last move") && !s.contains("step running")
-        });
+        let s = tmux.wait_for("the step's results", Duration::from_secs(120), results_drawn);
         assert!(s.contains("step: ok"), "the step faulted:\n{s}");
         for want in ["min cnt", "Σ|e| cnt", "Σe² cnt²", "Σ|e| rad", "wake latency", "missed:"]
         {
@@ -180,9 +188,10 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
 
         // Charts: command vs actual, following error, servo period.
         tmux.keys(&["F7"]);
-        let s = tmux
-            .wait_for("the charts", Duration::from_secs(10), |s| s.contains("command vs actual"));
-        assert!(s.contains("following error") && s.contains("servo period"), "charts:\n{s}");
+        // All three drawn (a capture can catch the screen half-updated).
+        let s = tmux.wait_for("the charts", Duration::from_secs(10), |s| {
+            ["command vs actual", "following error", "servo period"].iter().all(|t| s.contains(t))
+        });
         assert!(
             s.chars().any(|c| ('\u{2801}'..='\u{28ff}').contains(&c)),
             "no plotted points:\n{s}"
@@ -227,9 +236,7 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
     // thesis' buttons do), and Cancel: the file is as it was when the console opened.
     {
         let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
-        let s = tmux.wait_for("the setup screen", Duration::from_secs(30), |s| {
-            s.contains("Gains (one column per motor)")
-        });
+        let s = tmux.wait_for("the setup screen", Duration::from_secs(30), setup_drawn);
         assert!(kp_row(&s).trim_start().starts_with("185000"), "the saved gain:\n{s}");
         // The last move's results are loaded at start too.
         tmux.keys(&["F4"]);
@@ -278,20 +285,32 @@ fn wait_until_moving(run: &TestRun) {
     std::thread::sleep(Duration::from_millis(300));
 }
 
+/// A console on [`long_run_config`] that has started the run (F5), which is under way.
+fn console_running_a_long_move(run: &TestRun) -> Tmux {
+    long_run_config(run);
+    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(run));
+    tmux.wait_for("the setup screen", Duration::from_secs(30), setup_drawn);
+    tmux.keys(&["F5"]);
+    wait_until_moving(run);
+    tmux
+}
+
 #[test]
 fn console_blocks_a_step_on_an_invalid_field_and_aborts_a_run_with_motors_disabled() {
     let run = TestRun::new("consabrt");
     let config = long_run_config(&run);
     let before = std::fs::read_to_string(&config).expect("settings");
     let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
-    tmux.wait_for("the setup screen", Duration::from_secs(30), |s| s.contains("Gains (one"));
+    tmux.wait_for("the setup screen", Duration::from_secs(30), setup_drawn);
 
     // An invalid servo period is shown in place and blocks the step; nothing is written.
     tmux.focus("Period µs:");
     tmux.type_text("abc");
     tmux.keys(&["F6"]);
-    let s = tmux.wait_for("the refusal", Duration::from_secs(10), |s| s.contains("cannot step"));
-    assert!(s.contains("general.period_us"), "the message names the field:\n{s}");
+    // The message names the field.
+    tmux.wait_for("the refusal", Duration::from_secs(10), |s| {
+        s.contains("cannot step: general.period_us Period µs: invalid type")
+    });
     assert_eq!(std::fs::read_to_string(&config).expect("settings"), before, "written anyway");
     assert!(!run.out("out").join("summary.json").exists(), "a move ran");
     // Corrected, the field validates again.
@@ -304,9 +323,7 @@ fn console_blocks_a_step_on_an_invalid_field_and_aborts_a_run_with_motors_disabl
     tmux.wait_for("the run", Duration::from_secs(30), |s| s.contains("run running"));
     wait_until_moving(&run);
     tmux.keys(&["F9"]);
-    let s = tmux.wait_for("the aborted run's results", Duration::from_secs(60), |s| {
-        s.contains("Results of the last move")
-    });
+    let s = tmux.wait_for("the aborted run's results", Duration::from_secs(60), results_drawn);
     let fault = read_summary(&run.out("out")).fault.expect("the aborted run has a fault");
     assert_eq!(fault.kind, "aborted", "{fault:?}");
     assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
@@ -358,11 +375,7 @@ fn plain_subcommands_run_the_starter_without_the_console() {
 #[test]
 fn closing_the_terminal_during_a_move_stops_it_with_motors_disabled() {
     let run = TestRun::new("conshup");
-    long_run_config(&run);
-    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
-    tmux.wait_for("the setup screen", Duration::from_secs(30), |s| s.contains("Gains (one"));
-    tmux.keys(&["F5"]);
-    wait_until_moving(&run);
+    let tmux = console_running_a_long_move(&run);
     // The terminal goes away under the console (its window closed, its ssh dropped).
     drop(tmux);
     let start = Instant::now();
@@ -383,11 +396,7 @@ fn closing_the_terminal_during_a_move_stops_it_with_motors_disabled() {
 #[test]
 fn killing_the_console_during_a_move_stops_it_with_motors_disabled() {
     let run = TestRun::new("conskill");
-    long_run_config(&run);
-    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
-    tmux.wait_for("the setup screen", Duration::from_secs(30), |s| s.contains("Gains (one"));
-    tmux.keys(&["F5"]);
-    wait_until_moving(&run);
+    let tmux = console_running_a_long_move(&run);
     let console: Vec<u32> = processes_matching(&run.prefix)
         .into_iter()
         .filter(|(_, c)| c.contains("/qmarc --config"))

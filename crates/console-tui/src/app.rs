@@ -89,8 +89,7 @@ impl App {
         // The last move's results, if its files are there: shown, and its timing is what a
         // new servo period is checked against.
         if let Ok(r) = MoveResult::load(&app.out_dir()) {
-            app.form.last_output_p50_us =
-                Some(r.summary.timing.output_latency_us.p50).filter(|&p| p > 0.0);
+            app.form.last_cycle_work_us = r.cycle_work_us();
             app.form.validate();
             app.last = Some(r);
         }
@@ -329,8 +328,7 @@ impl App {
                     .fault
                     .as_ref()
                     .map(|f| format!("FAULT {}: {}", f.kind, f.message));
-                self.form.last_output_p50_us =
-                    Some(result.summary.timing.output_latency_us.p50).filter(|&p| p > 0.0);
+                self.form.last_cycle_work_us = result.cycle_work_us();
                 // The period is checked again against what this move measured.
                 self.form.validate();
                 self.last = Some(result);

@@ -137,9 +137,9 @@ pub struct Form {
     pub checked: Option<Settings>,
     /// An error the form cannot show on one field (elsewhere in the file).
     pub file_error: Option<String>,
-    /// Median "tick → DAC written" of the last move, µs: what a typical cycle needs on this
-    /// machine, which the servo period must exceed.
-    pub last_output_p50_us: Option<f64>,
+    /// The work of one servo cycle of the last move, µs (`MoveResult::cycle_work_us`): what
+    /// a cycle needs on this machine, which the servo period must exceed.
+    pub last_cycle_work_us: Option<f64>,
     /// Where moves run: relative paths in the settings (the knot file) are relative to it.
     pub base: PathBuf,
 }
@@ -184,7 +184,7 @@ impl Form {
             motor_tables,
             checked: None,
             file_error: None,
-            last_output_p50_us: None,
+            last_cycle_work_us: None,
             base: base.to_path_buf(),
         };
         form.fields = form.layout();
@@ -435,20 +435,20 @@ impl Form {
         }
     }
 
-    /// The servo period must leave the loop room: more than a typical cycle of the last move
-    /// took from the tick to the DAC write being acknowledged. (The median, not a tail: on a
-    /// kernel without PREEMPT_RT the tails are host stalls, which no period avoids.)
+    /// The servo period must leave the loop room: more than the work of a typical cycle of the
+    /// last move (medians, not tails: on a kernel without PREEMPT_RT the tails are host
+    /// stalls, which no period avoids).
     fn check_period(&mut self, s: &Settings) {
-        let (Some(i), Some(p50)) =
-            (self.index(Place::Key("general", "period_us")), self.last_output_p50_us)
+        let (Some(i), Some(work)) =
+            (self.index(Place::Key("general", "period_us")), self.last_cycle_work_us)
         else {
             return;
         };
-        if f64::from(s.period_us) <= p50 {
+        if f64::from(s.period_us) <= work {
             self.fields[i].check = Check::Machine;
             self.fields[i].error = Some(format!(
-                "a typical cycle of the last move needed {p50:.0} µs from tick to DAC written \
-                 (p50): a {} µs period would overrun every cycle on this machine",
+                "a cycle of the last move needed {work:.0} µs of work (two hwserver exchanges \
+                 and the law, medians): a {} µs period would overrun every cycle on this machine",
                 s.period_us
             ));
         }
@@ -637,13 +637,13 @@ mod tests {
     #[test]
     fn the_period_must_leave_room_for_what_the_last_move_needed() {
         let (_d, mut form) = form_of(&shipped());
-        form.last_output_p50_us = Some(450.0);
+        form.last_cycle_work_us = Some(450.0);
         form.validate();
         let period = form.index(Place::Key("general", "period_us")).unwrap();
         assert_eq!(
             form.fields[period].error.as_deref(),
             Some(
-                "a typical cycle of the last move needed 450 µs from tick to DAC written (p50): a 400 µs period would overrun every cycle on this machine"
+                "a cycle of the last move needed 450 µs of work (two hwserver exchanges and the law, medians): a 400 µs period would overrun every cycle on this machine"
             )
         );
         // It stops moves, not saving (the settings may be for another machine).

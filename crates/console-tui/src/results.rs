@@ -123,6 +123,16 @@ impl MoveResult {
         Ok(MoveResult { summary, series, written })
     }
 
+    /// The work of one servo cycle of this move, µs: two exchanges with the hwserver (the
+    /// median read round trip, twice: the write is the same exchange) and the median
+    /// trajectory + law time — what the machine needs per period when the loop wakes on time.
+    /// (Not "tick → DAC written": that adds the wake-up delay, which on a busy machine without
+    /// PREEMPT_RT says how loaded it was, not what it can do.) `None` without figures.
+    pub fn cycle_work_us(&self) -> Option<f64> {
+        let t = &self.summary.timing;
+        Some(2.0 * t.read_us.p50 + t.compute_us.p50).filter(|&w| w > 0.0)
+    }
+
     /// How long ago the results were written, for the title: `12 s ago`, `5 min ago`.
     pub fn age(&self, now: std::time::SystemTime) -> Option<String> {
         let s = now.duration_since(self.written?).ok()?.as_secs();
