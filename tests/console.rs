@@ -3,7 +3,9 @@
 //! server (a socket in its scratch directory) and its own iceoryx2 prefix, passed through the
 //! console to every starter run.
 
-use qmarc_tests::{TestRun, bin_dir, knots, processes_matching, read_summary};
+use qmarc_tests::{
+    TestRun, assert_aborted_with_motors_disabled, bin_dir, knots, processes_matching, read_summary,
+};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -72,20 +74,11 @@ impl Tmux {
     /// scrollback. The status is the one [`console_command`]'s shell prints: tmux 3.3 at times
     /// leaves a dead pane's process unreaped, without a status.
     fn wait_exit(&self, timeout: Duration) -> (i32, String) {
-        let start = Instant::now();
-        loop {
-            let all = self.tmux(&["capture-pane", "-p", "-S", "-"]);
-            if let Some(rest) = all.split("[qmarc exited ").nth(1) {
-                let status = rest.split(']').next().and_then(|s| s.parse().ok());
-                return (status.expect("exit status"), all);
-            }
-            assert!(
-                start.elapsed() < timeout,
-                "the console did not end within {timeout:?}; the screen:\n{}",
-                self.screen()
-            );
-            std::thread::sleep(Duration::from_millis(100));
-        }
+        // The shell's line is the last one printed: on the screen, by the cursor.
+        self.wait_for("the console to end", timeout, |s| s.contains("[qmarc exited "));
+        let all = self.tmux(&["capture-pane", "-p", "-S", "-"]);
+        let status = all.split("[qmarc exited ").nth(1).and_then(|r| r.split(']').next());
+        (status.and_then(|s| s.parse().ok()).expect("exit status"), all)
     }
 
     /// Moves the focus with Tab until the message line names `field`: one Tab at a time, each
@@ -285,6 +278,22 @@ fn wait_until_moving(run: &TestRun) {
     std::thread::sleep(Duration::from_millis(300));
 }
 
+/// Waits up to 30 s until no process of the run is left but the tmux server (whose command
+/// line holds the console's, prefix included); panics with `what` and the processes.
+fn wait_until_stopped(run: &TestRun, what: &str) {
+    let left = || -> Vec<(u32, String)> {
+        processes_matching(&run.prefix)
+            .into_iter()
+            .filter(|(_, c)| !c.starts_with("tmux"))
+            .collect()
+    };
+    let start = Instant::now();
+    while !left().is_empty() {
+        assert!(start.elapsed() < Duration::from_secs(30), "{what}: {:?}", left());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// A console on [`long_run_config`] that has started the run (F5), which is under way.
 fn console_running_a_long_move(run: &TestRun) -> Tmux {
     long_run_config(run);
@@ -324,9 +333,7 @@ fn console_blocks_a_step_on_an_invalid_field_and_aborts_a_run_with_motors_disabl
     wait_until_moving(&run);
     tmux.keys(&["F9"]);
     let s = tmux.wait_for("the aborted run's results", Duration::from_secs(60), results_drawn);
-    let fault = read_summary(&run.out("out")).fault.expect("the aborted run has a fault");
-    assert_eq!(fault.kind, "aborted", "{fault:?}");
-    assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
+    assert_aborted_with_motors_disabled(&run.out("out"));
     assert!(s.contains("FAULT aborted"), "the fault is shown:\n{s}");
     tmux.keys(&["F12"]);
     let (status, s) = tmux.wait_exit(Duration::from_secs(20));
@@ -378,18 +385,8 @@ fn closing_the_terminal_during_a_move_stops_it_with_motors_disabled() {
     let tmux = console_running_a_long_move(&run);
     // The terminal goes away under the console (its window closed, its ssh dropped).
     drop(tmux);
-    let start = Instant::now();
-    while !processes_matching(&run.prefix).is_empty() {
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "left running after the terminal closed: {:?}",
-            processes_matching(&run.prefix)
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let fault = read_summary(&run.out("out")).fault.expect("the interrupted run has a fault");
-    assert_eq!(fault.kind, "aborted", "{fault:?}");
-    assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
+    wait_until_stopped(&run, "left running after the terminal closed");
+    assert_aborted_with_motors_disabled(&run.out("out"));
     run.assert_clean();
 }
 
@@ -406,25 +403,8 @@ fn killing_the_console_during_a_move_stops_it_with_motors_disabled() {
     // SAFETY: kill(2) on the console found a moment ago.
     unsafe { libc::kill(console[0] as libc::pid_t, libc::SIGKILL) };
     // The starter gets SIGTERM from the kernel (its parent-death signal) and stops the move.
-    // (The tmux server's command line holds the prefix too: it stays until the end.)
-    let moving = || -> Vec<(u32, String)> {
-        processes_matching(&run.prefix)
-            .into_iter()
-            .filter(|(_, c)| !c.starts_with("tmux"))
-            .collect()
-    };
-    let start = Instant::now();
-    while !moving().is_empty() {
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "the move outlived the console: {:?}",
-            moving()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let fault = read_summary(&run.out("out")).fault.expect("the interrupted run has a fault");
-    assert_eq!(fault.kind, "aborted", "{fault:?}");
-    assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
+    wait_until_stopped(&run, "the move outlived the console");
+    assert_aborted_with_motors_disabled(&run.out("out"));
     drop(tmux);
     run.assert_clean();
 }

@@ -371,9 +371,7 @@ fn killing_the_starter_at_the_start_and_near_the_end_stops_everything() {
         }
         // If the move had begun, its summary says the motors were disabled.
         if out.join("summary.json").exists() {
-            let fault = read_summary(&out).fault.expect("a killed starter's move has a fault");
-            assert_eq!(fault.kind, "aborted", "{fault:?}");
-            assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
+            qmarc_tests::assert_aborted_with_motors_disabled(&out);
         }
         // The dead starter's shared memory goes with the next run.
         run.location().remove_files();

@@ -150,6 +150,26 @@ fn feed(
     })
 }
 
+/// `qmarc-starter [flags] run --method=pvt --knots=-` fed `lines` through its standard input
+/// (see [`feed`]), to its end.
+fn run_stream(
+    run: &TestRun,
+    out: &std::path::Path,
+    flags: &[&str],
+    lines: Vec<String>,
+    close: bool,
+) -> qmarc_tests::Finished {
+    let out_arg = format!("--out={}", out.display());
+    let mut args = vec![config_arg(), out_arg];
+    args.extend(flags.iter().map(|f| f.to_string()));
+    args.extend(["run", "--method=pvt", "--knots=-"].map(str::to_string));
+    let mut child = run.spawn_starter(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let writer = feed(child.stdin.take().unwrap(), lines, close);
+    let r = wait_with_timeout(child, TIMEOUT);
+    writer.join().unwrap();
+    r
+}
+
 fn pvt_lines(n: usize) -> Vec<String> {
     std::fs::read_to_string(knots("pvt-3motors.txt"))
         .unwrap()
@@ -165,17 +185,7 @@ fn pvt_stream_through_a_pipe_runs_while_the_robot_moves() {
     let out = run.out("out");
     // Deterministic: the knots still arrive through the pipe in real time, but a host stall
     // cannot skip the samples checked below.
-    let mut child = run.spawn_starter(&[
-        &config_arg(),
-        &format!("--out={}", out.display()),
-        "--deterministic",
-        "run",
-        "--method=pvt",
-        "--knots=-",
-    ]);
-    let writer = feed(child.stdin.take().unwrap(), pvt_lines(usize::MAX), true);
-    let r = wait_with_timeout(child, TIMEOUT);
-    writer.join().unwrap();
+    let r = run_stream(&run, &out, &["--deterministic"], pvt_lines(usize::MAX), true);
     assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
     let s = read_summary(&out);
     assert_eq!(s.planned_samples, None, "a stream's length is unknown before it ends");
@@ -191,18 +201,8 @@ fn pvt_stream_through_a_pipe_runs_while_the_robot_moves() {
 fn a_stream_that_runs_dry_faults_with_the_motors_held_then_disabled() {
     let run = TestRun::new("starved");
     let out = run.out("out");
-    let mut child = run.spawn_starter(&[
-        &config_arg(),
-        &format!("--out={}", out.display()),
-        "--deterministic",
-        "run",
-        "--method=pvt",
-        "--knots=-",
-    ]);
     // 10 knots of 20 ms: the path is known up to 180 ms, then nothing comes.
-    let writer = feed(child.stdin.take().unwrap(), pvt_lines(10), false);
-    let r = wait_with_timeout(child, TIMEOUT);
-    writer.join().unwrap();
+    let r = run_stream(&run, &out, &["--deterministic"], pvt_lines(10), false);
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     let s = read_summary(&out);
     let fault = s.fault.expect("a fault");
@@ -228,18 +228,9 @@ fn a_stream_that_runs_dry_faults_with_the_motors_held_then_disabled() {
 fn a_bad_knot_in_a_stream_ends_the_move_naming_line_and_column() {
     let run = TestRun::new("badstream");
     let out = run.out("out");
-    let mut child = run.spawn_starter(&[
-        &config_arg(),
-        &format!("--out={}", out.display()),
-        "run",
-        "--method=pvt",
-        "--knots=-",
-    ]);
     let mut lines = pvt_lines(8);
     lines[6] = lines[6].replacen("20.000", "25.000", 1);
-    let writer = feed(child.stdin.take().unwrap(), lines, true);
-    let r = wait_with_timeout(child, TIMEOUT);
-    writer.join().unwrap();
+    let r = run_stream(&run, &out, &[], lines, true);
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     let fault = read_summary(&out).fault.expect("a fault");
     assert_eq!(fault.kind, "trajectory_error");

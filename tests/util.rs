@@ -335,6 +335,17 @@ pub fn read_summary(out: &Path) -> Summary {
     serde_json::from_str(&text).expect("summary.json parses")
 }
 
+/// Asserts that the move whose outputs are in `out` was aborted and that the hwserver
+/// acknowledged disabling the motors (the message says so only when it did). Returns its
+/// summary.
+pub fn assert_aborted_with_motors_disabled(out: &Path) -> Summary {
+    let s = read_summary(out);
+    let fault = s.fault.as_ref().expect("the move was aborted");
+    assert_eq!(fault.kind, "aborted", "{fault:?}");
+    assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
+    s
+}
+
 /// The simulator's event log: `(t_ns, event, motor)` rows.
 pub fn read_sim_events(path: &Path) -> Vec<(u64, String, usize)> {
     let text = std::fs::read_to_string(path).expect("simulator event log");

@@ -1,7 +1,7 @@
 //! The console's state and what each key does. Drawing is in [`crate::ui`]; the terminal loop
 //! in `main.rs`. Everything here runs without a terminal, so the tests drive it directly.
 
-use crate::form::{Action, Form, Kind, Section};
+use crate::form::{Action, Form, Kind};
 use crate::results::{HistoryEntry, MoveResult};
 use crate::runner::{Mode, Running};
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
@@ -116,9 +116,10 @@ impl App {
                         }
                         (_, None) => "type a value, Esc undoes · Tab/↑↓ next field".to_string(),
                     };
+                    // A gain cell may be too narrow for its value: the message line has it whole.
                     let name = match f.place.motor() {
-                        Some(m) => format!("{} M{} = {}", f.label, m + 1, f.text),
-                        None => f.label.to_string(),
+                        Some(_) => format!("{} = {}", f.name(), f.text),
+                        None => f.name(),
                     };
                     self.say(format!("{name}: {keys}"), false)
                 }
@@ -454,10 +455,5 @@ impl App {
             KeyCode::Char(c) => self.type_char(c),
             _ => {}
         }
-    }
-
-    /// True for fields of `section`.
-    pub fn in_section(&self, i: usize, section: Section) -> bool {
-        self.form.fields[i].section == section
     }
 }

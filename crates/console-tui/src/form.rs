@@ -89,6 +89,16 @@ pub struct Field {
     pub choices: Vec<String>,
 }
 
+impl Field {
+    /// Its name on screen: the label, and the motor for a per-motor field (`Kp M1`).
+    pub fn name(&self) -> String {
+        match self.place.motor() {
+            Some(m) => format!("{} M{}", self.label, m + 1),
+            None => self.label.to_string(),
+        }
+    }
+}
+
 /// Where a field's error comes from: that decides which actions it blocks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Check {
@@ -157,14 +167,9 @@ fn item_text(item: Option<&Item>) -> Option<String> {
 }
 
 impl Form {
-    /// Reads `path` into a form, relative paths in it taken from the working directory. Fails
-    /// only when the file cannot be read or is not TOML at all (it could not be edited then);
-    /// invalid values load and show their errors in place.
-    pub fn load(path: &Path) -> Result<Form, String> {
-        Form::load_in(path, &std::env::current_dir().unwrap_or_default())
-    }
-
-    /// [`Form::load`] with relative paths taken from `base` (where moves will run).
+    /// Reads `path` into a form, relative paths in it (the knot file) taken from `base`, where
+    /// moves will run. Fails only when the file cannot be read or is not TOML at all (it could
+    /// not be edited then); invalid values load and show their errors in place.
     pub fn load_in(path: &Path, base: &Path) -> Result<Form, String> {
         let original = std::fs::read_to_string(path)
             .map_err(|e| format!("{}: cannot read the settings file: {e}", path.display()))?;

@@ -200,13 +200,8 @@ fn draw_actions(f: &mut Frame, app: &App, area: Rect) {
             )),
             Some((field, _)) => {
                 // The reason is shown at the field itself; here only which field it is.
-                let by = field.map_or("the settings file".to_string(), |i| {
-                    let f = &app.form.fields[i];
-                    match f.place.motor() {
-                        Some(m) => format!("{} M{}", f.label, m + 1),
-                        None => f.label.to_string(),
-                    }
-                });
+                let by =
+                    field.map_or("the settings file".to_string(), |i| app.form.fields[i].name());
                 lines.push(Line::styled(
                     format!(" {key:<4}{name} — blocked by {by}"),
                     Style::new().fg(Color::DarkGray),

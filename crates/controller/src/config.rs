@@ -689,6 +689,14 @@ fn positive(v: &f64) -> Result<(), String> {
     }
 }
 
+fn non_negative(v: &f64) -> Result<(), String> {
+    if v.is_finite() && *v >= 0.0 {
+        Ok(())
+    } else {
+        Err(format!("must be a finite number ≥ 0, found {v}"))
+    }
+}
+
 /// The notch denominator 1 + d1·z⁻¹ + d2·z⁻² is stable iff |d2| < 1 and |d1| < 1 + d2.
 fn check_notch(n: &[f64]) -> Result<(), String> {
     if n.len() != 4 {
@@ -784,13 +792,7 @@ impl RawFile {
                 &tr.start_tolerance_counts,
                 "trajectory.start_tolerance_counts",
                 100.0,
-                |v| {
-                    if v.is_finite() && *v >= 0.0 {
-                        Ok(())
-                    } else {
-                        Err(format!("must be a finite number ≥ 0, found {v}"))
-                    }
-                },
+                non_negative,
             )?,
             stream_wait_s: take(
                 src,
@@ -980,13 +982,7 @@ impl RawFile {
                     &r.home_offset_counts,
                     &name("home_offset_counts"),
                     d.home_offset_counts,
-                    |v| {
-                        if v.is_finite() && *v >= 0.0 {
-                            Ok(())
-                        } else {
-                            Err(format!("must be a finite number ≥ 0, found {v}"))
-                        }
-                    },
+                    non_negative,
                 )?,
                 top_direction: take(src, &r.top_direction, &name("top_direction"), -1, |v| {
                     if *v == 1 || *v == -1 {
