@@ -176,7 +176,7 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
         // The log page has the starter's output, its table included.
         tmux.keys(&["F3"]);
         tmux.wait_for("the starter's output", Duration::from_secs(10), |s| {
-            s.contains("qmarc-starter output") && s.contains("QMARC step: ok")
+            s.contains("qmarc-starter output") && s.contains("following error (command − actual)")
         });
 
         // Charts: command vs actual, following error, servo period.

@@ -19,9 +19,12 @@ fn step_of_1000_counts_settles() {
     let s = read_summary(&out);
     assert!(s.ok && s.fault.is_none());
     assert_eq!(s.cycles, 7501, "3 s at 400 µs: duration / period + 1 samples");
+    // Then the last command is held for trajectory.settle_s (0.2 s), and gathered too.
+    let settle = s.settle.as_ref().expect("the path ended, then settled");
+    assert_eq!((settle.cycles, settle.seconds), (500, 0.2));
     let (header, rows) = read_gather(&out);
     assert_eq!(header[..5], ["cycle", "time_s", "cmd1", "act1", "dac1"]);
-    assert_eq!(rows.len(), 7501);
+    assert_eq!(rows.len(), 7501 + 500);
     let last = rows.last().unwrap();
     // With Table 5-1's gains one DAC code is Kp/2²¹ ≈ 0.087 codes per count of error, so the
     // loop rests anywhere within half a code of zero output: ±5.8 counts (+1 for the counter).
@@ -66,12 +69,23 @@ fn summary_figures_equal_the_ones_recomputed_from_gather_csv() {
     run.step_ok(&out, &["--gather-every=1", "step", "--size=-700", "--duration=0.6"]);
     let s = read_summary(&out);
     let (_, rows) = read_gather(&out);
-    assert_eq!(rows.len() as u64, s.cycles);
-    assert_eq!(s.gathered_rows, s.cycles);
+    // The path's cycles, then the settle's: the error figures cover the path, the settle
+    // has its own.
+    let settle = s.settle.as_ref().expect("settle figures");
+    assert_eq!(rows.len() as u64, s.cycles + settle.cycles);
+    assert_eq!(s.gathered_rows, rows.len() as u64);
     assert_eq!(s.motors.len(), 3);
+    let (path, held) = rows.split_at(s.cycles as usize);
+    for m in 0..3 {
+        let e = |r: &Vec<f64>| r[2 + 3 * m] - r[3 + 3 * m];
+        assert!(held.iter().all(|r| r[2 + 3 * m] == path.last().unwrap()[2 + 3 * m]), "held");
+        assert_eq!(settle.final_error_counts[m], e(held.last().unwrap()));
+        let largest = held.iter().map(|r| e(r).abs()).fold(0.0, f64::max);
+        assert_eq!(settle.max_abs_error_counts[m], largest);
+    }
     for (m, fig) in s.motors.iter().enumerate() {
         let (mut min, mut max, mut sum_abs, mut sum_sq) = (f64::MAX, f64::MIN, 0.0, 0.0);
-        for r in &rows {
+        for r in path {
             let e = r[2 + 3 * m] - r[3 + 3 * m];
             min = min.min(e);
             max = max.max(e);
@@ -101,12 +115,14 @@ fn gathering_every_fourth_cycle_keeps_a_quarter_of_the_rows() {
     let s = read_summary(&out);
     let (_, rows) = read_gather(&out);
     assert_eq!(s.cycles, 501);
-    assert_eq!(rows.len(), 126);
+    // 501 cycles of the path and 500 of the settle: every fourth of 1001.
+    assert_eq!(s.settle.as_ref().unwrap().cycles, 500);
+    assert_eq!(rows.len(), 251);
     let cycles: Vec<f64> = rows.iter().map(|r| r[0]).collect();
     assert_eq!(cycles[..3], [0.0, 4.0, 8.0]);
     assert_eq!(rows[1][1], 0.0016, "deterministic time is n·T");
     let m = std::fs::read_to_string(out.join("gather.m")).unwrap();
-    assert_eq!(m.lines().filter(|l| l.starts_with(|c: char| c.is_ascii_digit())).count(), 126);
+    assert_eq!(m.lines().filter(|l| l.starts_with(|c: char| c.is_ascii_digit())).count(), 251);
     run.assert_clean();
 }
 
@@ -124,7 +140,7 @@ fn gathering_only_the_chosen_fields_keeps_the_full_error_figures() {
     ]);
     let (header, rows) = read_gather(&out);
     assert_eq!(header, ["cycle", "cmd1", "act1", "cmd2", "act2", "cmd3", "act3"]);
-    assert_eq!(rows.len(), 251);
+    assert_eq!(rows.len(), 251 + 500, "the path, then the settle");
     let m = std::fs::read_to_string(out.join("gather.m")).unwrap();
     let columns = "qmarc_columns = {'cycle', 'cmd1', 'act1', 'cmd2', 'act2', 'cmd3', 'act3'};";
     assert!(m.lines().any(|l| l == columns), "{m:.400}");
@@ -173,21 +189,67 @@ fn bad_settings_are_refused_before_anything_starts() {
     run.assert_clean();
 }
 
+/// Issue 9, item 5: every global option works before or after the subcommand, for the
+/// starter and for the console's plain subcommands.
+#[test]
+fn global_options_work_after_the_subcommand_issue_9() {
+    let run = TestRun::new("globals");
+    let (a, b) = (run.out("a"), run.out("b"));
+    let out_a = format!("--out={}", a.display());
+    run.starter_ok(&[
+        "step",
+        &config_arg(),
+        &out_a,
+        "--deterministic",
+        "--gather-every=2",
+        "--period-us=500",
+        "--motors=2",
+        "--backend=sim",
+        "--duration=0.1",
+    ]);
+    let s = read_summary(&a);
+    assert_eq!((s.period_us, s.gather_every, s.motors.len()), (500, 2, 2));
+    assert!(s.deterministic);
+    // The console's `qmarc step …` passes them on the same way.
+    let mut qmarc = std::process::Command::new(qmarc_tests::bin_dir().join("qmarc"));
+    qmarc
+        .args(["step", "--size=300", &config_arg(), &format!("--out={}", b.display())])
+        .args(["--deterministic", "--duration=0.1"])
+        .args(run.isolation_args())
+        .current_dir(qmarc_tests::workspace());
+    let r = qmarc_tests::run_with_timeout(&mut qmarc, TIMEOUT);
+    assert_eq!(r.code, Some(0), "stdout:\n{}\nstderr:\n{}", r.stdout, r.stderr);
+    assert_eq!(read_summary(&b).motors[0].max_error_counts, 300.0);
+    // An unknown backend is refused naming the ones there are.
+    let r = run.starter(&["step", &config_arg(), "--backend=s7"], TIMEOUT);
+    assert_eq!(r.code, Some(1));
+    assert!(r.stderr.contains("--backend: unknown backend `s7`; available: sim"), "{}", r.stderr);
+    run.assert_clean();
+}
+
 #[test]
 fn without_realtime_privileges_the_run_is_degraded_and_says_so() {
     use std::os::unix::fs::PermissionsExt;
     use std::os::unix::process::CommandExt;
     let run = TestRun::new("degraded");
     let out = run.out("out");
-    for d in [&run.dir, &out] {
+    let bin = run.out("bin");
+    for d in [&run.dir, &out, &bin] {
         std::fs::create_dir_all(d).unwrap();
         std::fs::set_permissions(d, std::fs::Permissions::from_mode(0o777)).unwrap();
     }
-    let mut cmd = std::process::Command::new(qmarc_tests::bin_dir().join("qmarc-starter"));
+    // The checkout may live where `nobody` cannot go (a 0700 home, a `mktemp -d` folder): the
+    // programs and the settings are copied into the run's own folder, and it runs from there.
+    for b in ["qmarc-starter", "qmarc-hwserver", "qmarc-controller"] {
+        std::fs::copy(qmarc_tests::bin_dir().join(b), bin.join(b)).unwrap();
+    }
+    let config = run.out("qmarc.toml");
+    std::fs::copy(default_config(), &config).unwrap();
+    let mut cmd = std::process::Command::new(bin.join("qmarc-starter"));
     cmd.args(run.isolation_args())
-        .args([config_arg(), format!("--out={}", out.display())])
+        .args([format!("--config={}", config.display()), format!("--out={}", out.display())])
         .args(["--deterministic", "step", "--duration=0.2"])
-        .current_dir(qmarc_tests::workspace());
+        .current_dir(&run.dir);
     // SAFETY: geteuid has no preconditions.
     let root = unsafe { libc::geteuid() } == 0;
     if root {
@@ -232,7 +294,7 @@ fn killing_the_starter_stops_both_children_with_the_motors_disabled() {
             config_arg(),
             format!("--out={}", out.display()),
         ])
-        .args(["step", "--duration=30"])
+        .args(["--deterministic", "step", "--duration=30"])
         .current_dir(qmarc_tests::workspace())
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())

@@ -220,22 +220,21 @@ fn the_24_bit_counter_wraps_cleanly_during_a_move() {
     run.assert_clean();
 }
 
-/// Starts a 3 s step in real time, waits `delay` after the move is under way (zero: right when
-/// the victim is up), SIGKILLs the process whose command line contains `victim`, and waits for
-/// the starter.
+/// Starts a 3 s step with `flags`, waits `delay` after the move is under way (zero: right
+/// when the victim is up), SIGKILLs the process whose command line contains `victim`, and
+/// waits for the starter.
 fn kill_during_step(
     run: &TestRun,
     cfg: &std::path::Path,
+    flags: &[&str],
     victim: &str,
     delay: Duration,
 ) -> qmarc_tests::Finished {
     let out = run.out("out");
-    let child = run.spawn_starter(&[
-        &arg("config", cfg.display()),
-        &arg("out", out.display()),
-        "step",
-        "--duration=3",
-    ]);
+    let mut args = vec![arg("config", cfg.display()), arg("out", out.display())];
+    args.extend(flags.iter().map(|f| f.to_string()));
+    args.extend(["step", "--duration=3"].map(String::from));
+    let child = run.spawn_starter(&args.iter().map(String::as_str).collect::<Vec<_>>());
     let deadline = Instant::now() + TIMEOUT;
     let pid = loop {
         let procs = processes_matching(&run.prefix);
@@ -261,9 +260,12 @@ fn kill_during_step(
 fn killing_the_hwserver_during_a_move_ends_it_as_hwserver_lost() {
     for delay_ms in [300, 1_500] {
         let run = TestRun::new("killhw");
+        // Lock-step: the hwserver's death is noticed by its death, and a host stall during
+        // the move (this test is not about timing) cannot end it first.
         let r = kill_during_step(
             &run,
             &qmarc_tests::default_config(),
+            &["--deterministic"],
             "qmarc-hwserver",
             Duration::from_millis(delay_ms),
         );
@@ -288,8 +290,8 @@ fn killing_the_hwserver_during_a_move_ends_it_as_hwserver_lost() {
 #[test]
 fn killing_the_hwserver_before_the_move_ends_the_run() {
     let run = TestRun::new("killhw0");
-    let r =
-        kill_during_step(&run, &qmarc_tests::default_config(), "qmarc-hwserver", Duration::ZERO);
+    let cfg = qmarc_tests::default_config();
+    let r = kill_during_step(&run, &cfg, &["--deterministic"], "qmarc-hwserver", Duration::ZERO);
     assert_ne!(r.code, Some(0), "{}", r.stderr);
     assert!(r.stderr.contains("qmarc-hwserver was killed by signal 9 (SIGKILL)"), "{}", r.stderr);
     run.assert_clean();
@@ -298,9 +300,10 @@ fn killing_the_hwserver_before_the_move_ends_the_run() {
 #[test]
 fn killing_the_controller_during_a_move_trips_the_hwserver_watchdog_within_its_bound() {
     let run = TestRun::new("killctl");
-    let (cfg, events) = with_events(&run, &[]);
-    // Real time: the simulator's clock runs on while the controller is dead.
-    let r = kill_during_step(&run, &cfg, "qmarc-controller", Duration::from_millis(500));
+    // Real time: the simulator's clock runs on while the controller is dead. The overrun
+    // check is not what this test is about: a host stall must not end the move first.
+    let (cfg, events) = with_events(&run, &[("safety.max_missed_in_row", "2500")]);
+    let r = kill_during_step(&run, &cfg, &[], "qmarc-controller", Duration::from_millis(500));
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     assert!(r.stderr.contains("qmarc-controller was killed by signal 9 (SIGKILL)"), "{}", r.stderr);
     assert!(r.stderr.contains("qmarc-hwserver: watchdog: controller silent for"), "{}", r.stderr);
@@ -313,7 +316,7 @@ fn killing_the_controller_during_a_move_trips_the_hwserver_watchdog_within_its_b
     );
     let ev = read_sim_events(&events);
     let last = ev.iter().find(|e| e.1 == "last_access").expect("last access").0;
-    // The test settings' watchdog: 250 periods = 100 ms, measured on the simulator's clock,
+    // The simulated robot's default watchdog: 250 periods = 100 ms, measured on its clock,
     // plus what a VM stall of the server's own wake-up may add.
     let watchdog = 250 * PERIOD_NS;
     for off in amps_off_after(&ev, last, 3) {
@@ -329,8 +332,8 @@ fn killing_the_controller_during_a_move_trips_the_hwserver_watchdog_within_its_b
 #[test]
 fn killing_the_controller_before_the_move_stops_the_hwserver() {
     let run = TestRun::new("killctl0");
-    let r =
-        kill_during_step(&run, &qmarc_tests::default_config(), "qmarc-controller", Duration::ZERO);
+    let cfg = qmarc_tests::default_config();
+    let r = kill_during_step(&run, &cfg, &["--deterministic"], "qmarc-controller", Duration::ZERO);
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     let fault = read_summary(&run.out("out")).fault.expect("the starter's summary");
     assert_eq!(fault.kind, "controller_lost");
@@ -350,6 +353,7 @@ fn killing_the_starter_at_the_start_and_near_the_end_stops_everything() {
         let mut child = run.spawn_starter(&[
             &arg("config", qmarc_tests::default_config().display()),
             &arg("out", out.display()),
+            "--deterministic",
             "step",
             &arg("duration", duration),
         ]);
@@ -483,5 +487,76 @@ fn moves_refuse_an_unhomed_frame_unless_told() {
         "--duration=0.2",
     ]);
     assert!(r.stdout.contains("warning: --unhomed"), "{}", r.stdout);
+    run.assert_clean();
+}
+
+/// Issue 9, item 6: lock-step runs follow simulated time. Host stalls — here the controller,
+/// then the hwserver, stopped with SIGSTOP for 300 ms each during the move — are no overrun
+/// and no watchdog trip even with the hardware's bounds (10 and 25 periods), and the data are
+/// those of an undisturbed run, byte for byte. A dead process is still noticed by its death
+/// (`killing_the_controller_of_a_lock_step_run_trips_the_watchdog_at_once`).
+#[test]
+fn lock_step_runs_ride_out_host_stalls_issue_9() {
+    let run = TestRun::new("stalls");
+    let cfg =
+        run.config_with(&[("hwserver.watchdog_periods", "10"), ("safety.max_missed_in_row", "25")]);
+    let (quiet, stalled) = (run.out("quiet"), run.out("stalled"));
+    let args = |out: &std::path::Path| {
+        [arg("config", cfg.display()), arg("out", out.display())]
+            .into_iter()
+            .chain(["--deterministic", "step", "--duration=1.5"].map(String::from))
+            .collect::<Vec<_>>()
+    };
+    let quiet_args = args(&quiet);
+    run.starter_ok(&quiet_args.iter().map(String::as_str).collect::<Vec<_>>());
+    let stalled_args = args(&stalled);
+    let child = run.spawn_starter(&stalled_args.iter().map(String::as_str).collect::<Vec<_>>());
+    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    for victim in ["qmarc-controller", "qmarc-hwserver"] {
+        let procs = processes_matching(&run.prefix);
+        let (pid, _) = procs.iter().find(|(_, c)| c.contains(victim)).expect(victim);
+        // SAFETY: kill(2) on a child of the run found a moment ago.
+        unsafe { libc::kill(*pid as libc::pid_t, libc::SIGSTOP) };
+        std::thread::sleep(Duration::from_millis(300));
+        // SAFETY: as above.
+        unsafe { libc::kill(*pid as libc::pid_t, libc::SIGCONT) };
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let r = wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    let s = read_summary(&stalled);
+    assert!(s.ok && s.timing.missed_periods >= 700, "the stalls happened: {:?}", s.timing);
+    for f in ["gather.csv", "gather.m"] {
+        let (a, b) =
+            (std::fs::read(quiet.join(f)).unwrap(), std::fs::read(stalled.join(f)).unwrap());
+        assert!(a == b, "{f}: a stalled lock-step run differs from an undisturbed one");
+    }
+    run.assert_clean();
+}
+
+/// In lock-step the watchdog follows the controller's death, not the clock: killed during a
+/// move, it is noticed within the watchdog's wall time and the motors are disabled.
+#[test]
+fn killing_the_controller_of_a_lock_step_run_trips_the_watchdog_at_once() {
+    let run = TestRun::new("killlock");
+    let out = run.out("out");
+    let child = run.spawn_starter(&[
+        &arg("config", qmarc_tests::default_config().display()),
+        &arg("out", out.display()),
+        "--deterministic",
+        "step",
+        "--duration=3",
+    ]);
+    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    let procs = processes_matching(&run.prefix);
+    let (pid, _) = procs.iter().find(|(_, c)| c.contains("qmarc-controller")).expect("controller");
+    // SAFETY: kill(2) on a child of the run found a moment ago.
+    unsafe { libc::kill(*pid as libc::pid_t, libc::SIGKILL) };
+    let r = wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stderr.contains("its process is gone"), "{}", r.stderr);
+    let fault = read_summary(&out).fault.expect("the starter's summary");
+    assert_eq!(fault.kind, "controller_lost");
+    assert!(fault.message.contains("the hwserver's watchdog disabled the motors"), "{fault:?}");
     run.assert_clean();
 }

@@ -190,10 +190,11 @@ fn pvt_stream_through_a_pipe_runs_while_the_robot_moves() {
     let s = read_summary(&out);
     assert_eq!(s.planned_samples, None, "a stream's length is unknown before it ends");
     let (_, rows) = read_gather(&out);
-    // The path ends at its last knot, 1.6 s.
-    assert_eq!(rows.last().unwrap()[0], 4000.0);
+    // The path ends at its last knot, 1.6 s; then the settle holds it for 0.2 s.
+    assert_eq!(rows.len() as u64, s.cycles + 500);
+    assert_eq!(rows[s.cycles as usize - 1][0], 4000.0);
+    assert_eq!(rows.last().unwrap()[0], 4500.0);
     assert_passes_through(&rows, &pvt_knots("pvt-3motors.txt"), 0.0);
-    assert_eq!(rows.len() as u64, s.cycles);
     run.assert_clean();
 }
 
@@ -299,5 +300,94 @@ fn pvt_stream_through_a_fifo_runs() {
     assert_eq!((s.trajectory.as_str(), s.cycles), ("pvt", 4001));
     let (_, rows) = read_gather(&out);
     assert_passes_through(&rows, &pvt_knots("pvt-3motors.txt"), 0.0);
+    run.assert_clean();
+}
+
+/// A spline through three knots on a straight line, 0 → 2000 counts in 0.5 s: it ends at
+/// full speed, 4000 counts/s.
+fn ramp_knots(run: &TestRun) -> std::path::PathBuf {
+    let path = run.dir.join("ramp.txt");
+    std::fs::write(&path, "3\n0.0 0 0 0\n0.25 1000 1000 1000\n0.5 2000 2000 2000\n").unwrap();
+    path
+}
+
+/// Issue 9, item 2: a path that ends moving is not cut off (the motors would coast): its
+/// last command is held with the loop closed for `trajectory.settle_s`, with a warning, and
+/// the summary has the settle's own figures.
+#[test]
+fn a_path_that_ends_moving_is_held_until_the_motors_stop_issue_9() {
+    let run = TestRun::new("endmove");
+    let out = run.out("out");
+    let k = ramp_knots(&run);
+    let r = run.step_ok(
+        &out,
+        &["--deterministic", "run", "--method=spline", &format!("--knots={}", k.display())],
+    );
+    let s = read_summary(&out);
+    let warning = s.warnings.iter().find(|w| w.starts_with("the path ends moving"));
+    let warning = warning.unwrap_or_else(|| panic!("no warning: {:?}", s.warnings));
+    assert!(warning.contains("(motor 1 at 4000.0 counts/s)"), "{warning}");
+    assert!(r.stdout.contains("warning: the path ends moving"), "{}", r.stdout);
+    let settle = s.settle.as_ref().expect("settled");
+    assert_eq!((s.cycles, settle.cycles), (1251, 500));
+    let (_, rows) = read_gather(&out);
+    let held = &rows[s.cycles as usize..];
+    assert_eq!(held.len(), 500);
+    // The motors stop under control, at the last command: they come to rest (under a tenth
+    // of the 4000 counts/s the path ended with over the last 20 ms), closer to the last
+    // command than when the path ended, without coasting past it.
+    let band = 0.5 / (183_000.0 / 2f64.powi(21)) + 1.0;
+    let path_end = &rows[s.cycles as usize - 1];
+    for m in 0..3 {
+        let (cmd, act) = (2 + 3 * m, 3 + 3 * m);
+        let end = path_end[cmd];
+        assert!((end - 2000.0).abs() < 1e-6, "the path ends at its last knot: {end}");
+        assert!(held.iter().all(|r| r[cmd] == end), "motor {} command held", m + 1);
+        let last = held.last().unwrap();
+        let speed = (last[act] - held[held.len() - 51][act]).abs() / 0.02;
+        assert!(speed < 400.0, "motor {} still moves at {speed} counts/s", m + 1);
+        assert!((last[cmd] - last[act]).abs() < (end - path_end[act]).abs(), "{last:?}");
+        assert!(rows.iter().all(|r| r[act] <= end + band), "motor {} coasted past", m + 1);
+        assert_eq!(settle.final_error_counts[m], last[cmd] - last[act]);
+    }
+    run.assert_clean();
+}
+
+/// Issue 9, item 4: the law works per servo period, so gains tuned at one period are
+/// rescaled at another (`general.gains_period_us`). The ramp at 200 µs then follows as it
+/// does at 400 µs; with the gains taken as they are (declared tuned at 200 µs) the velocity
+/// feed-forward halves and the following error grows many times.
+#[test]
+fn gains_keep_their_loop_at_another_period_issue_9() {
+    let run = TestRun::new("gainsT");
+    let k = ramp_knots(&run);
+    let knots_arg = format!("--knots={}", k.display());
+    let max_error = |out: &std::path::Path, config: &std::path::Path, period: &str| {
+        run.starter_ok(&[
+            &format!("--config={}", config.display()),
+            &format!("--out={}", out.display()),
+            "--deterministic",
+            period,
+            "run",
+            "--method=spline",
+            &knots_arg,
+        ]);
+        let s = read_summary(out);
+        (s.motors[0].max_error_counts.max(-s.motors[0].min_error_counts), s)
+    };
+    let tuned_at_400 = default_config();
+    let (at_400, _) = max_error(&run.out("400"), &tuned_at_400, "--period-us=400");
+    let (at_200, s) = max_error(&run.out("200"), &tuned_at_400, "--period-us=200");
+    assert_eq!(s.gains_period_us, 400);
+    assert_eq!((s.gains[0].kp, s.gains[0].kvff, s.gains[0].kd), (182_000.0, 238_000.0, 6_000.0));
+    assert_eq!((s.gains[0].kaff, s.gains[0].ki), (400.0, 50.0));
+    assert!(s.warnings.iter().any(|w| w.contains("gains_period_us = 400")), "{:?}", s.warnings);
+    let not_rescaled = run.config_with(&[("gains_period_us", "200")]);
+    let (unscaled, _) = max_error(&run.out("raw"), &not_rescaled, "--period-us=200");
+    assert!(
+        (at_200 - at_400).abs() <= 0.25 * at_400 + 2.0,
+        "rescaled: {at_200} counts at 200 µs, {at_400} at 400 µs"
+    );
+    assert!(unscaled > 3.0 * at_400, "not rescaled: {unscaled} counts, {at_400} at 400 µs");
     run.assert_clean();
 }

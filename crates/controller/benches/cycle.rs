@@ -73,7 +73,7 @@ fn bench_law(c: &mut Criterion) {
             n += 1;
             let cmd = [n as f64, -(n as f64), 0.5 * n as f64, 0.0];
             let act = [n as f64 - 3.0, 2.0 - n as f64, 0.5 * n as f64 + 1.0, 0.0];
-            law.step(black_box(&ServoInput { n, cmd: &cmd, act: &act }), &mut dac);
+            law.step(black_box(&ServoInput { n, elapsed: 1, cmd: &cmd, act: &act }), &mut dac);
             black_box(dac)
         })
     });

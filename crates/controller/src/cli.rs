@@ -6,30 +6,35 @@ use crate::config::{ConfigLoadError, Settings};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
-/// Options of every move; flags override the settings file for this run.
+/// Options of every move; flags override the settings file for this run. They are global:
+/// they go before or after the subcommand (`qmarc-starter --out x step` or
+/// `qmarc-starter step --out x`).
 #[derive(Debug, Clone, PartialEq, Args)]
 pub struct MoveOptions {
     /// Settings file.
-    #[arg(long, default_value = "config/qmarc.toml")]
+    #[arg(long, global = true, default_value = "config/qmarc.toml")]
     pub config: PathBuf,
     /// Directory for gather.csv, gather.m and summary.json (default: `gather.out_dir`).
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub out: Option<PathBuf>,
     /// Gather every N-th servo cycle (default: `gather.every`).
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub gather_every: Option<u32>,
     /// Servo period in µs (default: `general.period_us`).
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub period_us: Option<u32>,
     /// Number of motors (default: `general.n_motors`; each needs its `[[motor]]` table).
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub motors: Option<usize>,
     /// Lock-step simulated clock: two runs produce byte-identical data files.
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub deterministic: bool,
     /// Move although the frame is not homed; software position limits are then off.
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub unhomed: bool,
+    /// Hardware backend (default: `hwserver.backend`): `sim`, the simulated Deltabot.
+    #[arg(long, global = true)]
+    pub backend: Option<String>,
 }
 
 impl MoveOptions {
@@ -47,6 +52,9 @@ impl MoveOptions {
         }
         if let Some(out) = &self.out {
             s.gather.out_dir = out.clone();
+        }
+        if let Some(b) = &self.backend {
+            s.set_backend(b)?;
         }
         Ok(s)
     }
@@ -71,6 +79,9 @@ impl MoveOptions {
         }
         if self.unhomed {
             a.push("--unhomed".into());
+        }
+        if let Some(b) = &self.backend {
+            a.push(format!("--backend={b}"));
         }
         a
     }

@@ -207,6 +207,9 @@ pub struct TrajectorySettings {
     pub stream_wait_s: f64,
     /// When a stream runs dry: hold the last command this long, then disable, ms.
     pub starve_hold_ms: f64,
+    /// When a path ends (`step` and `run`): hold its last command with the loop closed this
+    /// long before disabling, s.
+    pub settle_s: f64,
 }
 
 /// The link to the hardware server.
@@ -261,6 +264,9 @@ pub struct Settings {
     pub n_motors: usize,
     /// Servo period in µs.
     pub period_us: u32,
+    /// The servo period the gains were tuned at, µs: gains that act per period are rescaled
+    /// to `period_us` ([`Settings::effective_gains`]).
+    pub gains_period_us: u32,
     /// Registered name of the servo law.
     pub law: String,
     /// Encoder counts per motor revolution (post-quadrature).
@@ -287,6 +293,17 @@ pub struct Settings {
     pub motors: Vec<MotorGains>,
     /// Limits and homing of every `[[motor]]` table.
     pub safety: Vec<MotorSafety>,
+    /// Which backend-dependent values the file set ([`TimingDefaults`]).
+    pub explicit: ExplicitTiming,
+}
+
+/// Which of the [`TimingDefaults`] the settings file set itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ExplicitTiming {
+    /// `hwserver.watchdog_periods` is in the file.
+    pub watchdog_periods: bool,
+    /// `safety.max_missed_in_row` is in the file.
+    pub max_missed_in_row: bool,
 }
 
 impl Settings {
@@ -298,6 +315,22 @@ impl Settings {
     /// The servo period in s.
     pub fn period_s(&self) -> f64 {
         f64::from(self.period_us) * 1e-6
+    }
+
+    /// The gains of `motor` at the servo period in use. The law works in counts per period:
+    /// a velocity in counts/period scales with T, an acceleration with T², a sum of errors
+    /// with 1/T. Gains tuned at `gains_period_us` = T₀ keep the loop they were tuned for at
+    /// `period_us` = T when Kd and Kvff are multiplied by T₀/T, Kaff by (T₀/T)² and Ki by
+    /// T/T₀; Kp and the notch (which acts per sample) are kept.
+    pub fn effective_gains(&self, motor: usize) -> MotorGains {
+        let g = self.motors[motor];
+        let r = f64::from(self.gains_period_us) / f64::from(self.period_us);
+        MotorGains { ki: g.ki / r, kd: g.kd * r, kvff: g.kvff * r, kaff: g.kaff * r * r, ..g }
+    }
+
+    /// True when the gains are rescaled ([`Settings::effective_gains`]).
+    pub fn gains_rescaled(&self) -> bool {
+        self.gains_period_us != self.period_us
     }
 
     /// Encoder counts per radian of arm rotation: counts_per_rev · gear_ratio / 2π.
@@ -362,6 +395,21 @@ impl Settings {
         Ok(())
     }
 
+    /// Overrides the hardware backend (`--backend`).
+    pub fn set_backend(&mut self, backend: &str) -> Result<(), ConfigLoadError> {
+        check_backend(backend)
+            .map_err(|message| ConfigLoadError::Override { flag: "--backend", message })?;
+        self.hwserver.backend = backend.to_string();
+        let d = TimingDefaults::of(backend);
+        if !self.explicit.watchdog_periods {
+            self.hwserver.watchdog_periods = d.watchdog_periods;
+        }
+        if !self.explicit.max_missed_in_row {
+            self.max_missed_in_row = d.max_missed_in_row;
+        }
+        Ok(())
+    }
+
     /// Overrides the knot file (`--knots`).
     pub fn set_knots(&mut self, path: &Path) {
         self.trajectory.knots = Some(path.to_path_buf());
@@ -402,6 +450,44 @@ fn check_period(us: u32) -> Result<(), String> {
         Ok(())
     } else {
         Err(format!("servo period must be 100‥100000 µs, found {us}"))
+    }
+}
+
+/// The hardware backends `qmarc-hwserver` has.
+pub const BACKENDS: [&str; 1] = ["sim"];
+
+/// Timing bounds whose defaults depend on the backend. Real hardware keeps the tight bounds a
+/// PREEMPT_RT machine meets (thesis 4.2; PMAC and Mesa watchdogs are a few periods). The
+/// simulated robot runs on ordinary desktops and VMs, whose host stalls reach tens of ms
+/// (`../shared/notes/realtime-linux.md`): nothing physical is at stake there, so its bounds
+/// ride those out. A value set in the file or on the command line holds for every backend.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TimingDefaults {
+    /// `hwserver.watchdog_periods`.
+    pub watchdog_periods: u32,
+    /// `safety.max_missed_in_row`.
+    pub max_missed_in_row: u64,
+}
+
+impl TimingDefaults {
+    /// On real hardware: 10 periods (4 ms at 400 µs) and 25 periods (10 ms).
+    pub const HARDWARE: TimingDefaults =
+        TimingDefaults { watchdog_periods: 10, max_missed_in_row: 25 };
+    /// On the simulated robot: 250 periods (100 ms at 400 µs) for both.
+    pub const SIMULATED: TimingDefaults =
+        TimingDefaults { watchdog_periods: 250, max_missed_in_row: 250 };
+
+    /// The defaults of `backend`.
+    pub fn of(backend: &str) -> TimingDefaults {
+        if backend == "sim" { TimingDefaults::SIMULATED } else { TimingDefaults::HARDWARE }
+    }
+}
+
+fn check_backend(backend: &str) -> Result<(), String> {
+    if BACKENDS.contains(&backend) {
+        Ok(())
+    } else {
+        Err(format!("unknown backend `{backend}`; available: {}", BACKENDS.join(", ")))
     }
 }
 
@@ -552,6 +638,7 @@ struct RawFile {
 struct RawGeneral {
     n_motors: S<i64>,
     period_us: S<i64>,
+    gains_period_us: S<i64>,
     law: S<String>,
     counts_per_rev: S<f64>,
     gear_ratio: S<f64>,
@@ -589,6 +676,7 @@ struct RawTrajectory {
     start_tolerance_counts: S<f64>,
     stream_wait_s: S<f64>,
     starve_hold_ms: S<f64>,
+    settle_s: S<f64>,
 }
 
 #[derive(Deserialize, Default)]
@@ -725,6 +813,11 @@ impl RawFile {
                 .map_err(|_| format!("servo period must be 100‥100000 µs, found {v}"))
                 .and_then(check_period)
         })? as u32;
+        let gains_period_us = take(src, &g.gains_period_us, "general.gains_period_us", 400, |v| {
+            u32::try_from(*v)
+                .map_err(|_| format!("servo period must be 100‥100000 µs, found {v}"))
+                .and_then(check_period)
+        })? as u32;
         let law = take(src, &g.law, "general.law", "pidff".to_string(), |v| {
             if registry::law(v).is_some() {
                 Ok(())
@@ -814,17 +907,24 @@ impl RawFile {
                     }
                 },
             )?,
+            settle_s: take(src, &tr.settle_s, "trajectory.settle_s", 0.2, |v| {
+                if v.is_finite() && (0.0..=10.0).contains(v) {
+                    Ok(())
+                } else {
+                    Err(format!("must be 0‥10 s, found {v}"))
+                }
+            })?,
         };
 
         let h = &self.hwserver;
-        let backend = take(src, &h.backend, "hwserver.backend", "sim".to_string(), |v| {
-            if v == "sim" { Ok(()) } else { Err(format!("must be \"sim\", found \"{v}\"")) }
-        })?;
+        let backend =
+            take(src, &h.backend, "hwserver.backend", "sim".to_string(), |v| check_backend(v))?;
+        let timing_defaults = TimingDefaults::of(&backend);
         let watchdog_periods = take(
             src,
             &h.watchdog_periods,
             "hwserver.watchdog_periods",
-            10,
+            i64::from(timing_defaults.watchdog_periods),
             in_range(2, 1_000_000),
         )? as u32;
         let deadline_periods =
@@ -1036,7 +1136,7 @@ impl RawFile {
             src,
             &self.safety.max_missed_in_row,
             "safety.max_missed_in_row",
-            25,
+            timing_defaults.max_missed_in_row as i64,
             in_range(1, 1_000_000),
         )? as u64;
 
@@ -1044,6 +1144,7 @@ impl RawFile {
             source: src.path.to_path_buf(),
             n_motors,
             period_us,
+            gains_period_us,
             law,
             counts_per_rev,
             gear_ratio,
@@ -1068,6 +1169,10 @@ impl RawFile {
             sim,
             motors,
             safety,
+            explicit: ExplicitTiming {
+                watchdog_periods: h.watchdog_periods.is_some(),
+                max_missed_in_row: self.safety.max_missed_in_row.is_some(),
+            },
         })
     }
 }
@@ -1107,7 +1212,7 @@ mod tests {
     fn minimal_file_takes_defaults() {
         let s = parse(&MOTOR.repeat(3)).unwrap();
         assert_eq!((s.n_motors, s.period_us, s.gather.every, s.step.size), (3, 400, 1, 1000));
-        assert_eq!(s.hwserver.watchdog_periods, 10);
+        assert_eq!(s.hwserver.watchdog_periods, 250, "the simulated robot's default");
     }
 
     #[test]

@@ -105,6 +105,9 @@ pub struct Homing {
     failure: Option<HomingFailure>,
     /// Feedback has arrived (the servo seeds the law with one `sample` before the loop).
     observed: bool,
+    /// Per motor: the switches active since homing began and continuously since (a motor
+    /// not yet homed may rest on one; once it clears it must not come back).
+    resting: [MotorFlags; MAX_MOTORS],
 }
 
 impl Homing {
@@ -140,6 +143,7 @@ impl Homing {
             reports: [MotorHomeReport::default(); MAX_MOTORS],
             failure: None,
             observed: false,
+            resting: [MotorFlags::default(); MAX_MOTORS],
         }
     }
 
@@ -156,16 +160,19 @@ impl Homing {
         self.reports[motor] = MotorHomeReport { motor: motor + 1, ..MotorHomeReport::default() };
     }
 
-    /// A switch that must not be active now: of a motor already homed, of the one being homed
-    /// other than its top switch (its bottom switch is allowed while it moves away from it),
-    /// or its top switch after it cleared.
+    /// A switch that must not be active now, of any motor: of a motor already homed; of the
+    /// one being homed other than its top switch (its bottom switch is allowed while it moves
+    /// away from it), or its top switch after it cleared; of a motor not yet homed, any switch
+    /// but one it has rested on since homing began.
     fn unexpected_switch(&self) -> Option<HomingFailure> {
         let m = self.motor;
-        for k in 0..self.n_motors.min(m + 1) {
+        for k in 0..self.n_motors {
             let f = self.flags[k];
-            let top_ok = k == m
-                && matches!(self.phase, Phase::LeaveSwitch | Phase::Approach | Phase::Backoff);
-            let bottom_ok = k == m && self.phase == Phase::Approach;
+            let resting = if k > m { self.resting[k] } else { MotorFlags::default() };
+            let top_ok = resting.top()
+                || (k == m
+                    && matches!(self.phase, Phase::LeaveSwitch | Phase::Approach | Phase::Backoff));
+            let bottom_ok = resting.bottom() || (k == m && self.phase == Phase::Approach);
             if f.top() && !top_ok {
                 return Some(HomingFailure::UnexpectedSwitch { motor: k, top: true, homing: m });
             }
@@ -204,6 +211,10 @@ impl TrajectoryGenerator for Homing {
     fn observe(&mut self, act: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
         self.act = *act;
         self.flags = *flags;
+        for (r, f) in self.resting.iter_mut().zip(flags) {
+            // The first feedback: what each motor rests on; later, only what stays active.
+            *r = if self.observed { MotorFlags(r.0 & f.0) } else { *f };
+        }
         self.observed = true;
     }
 
@@ -433,5 +444,46 @@ mod tests {
             "{:?}",
             h.failure()
         );
+    }
+
+    /// Issue 9, item 3: while motor 1 homes, a switch of motor 2 (not yet homed) that trips
+    /// ends the homing naming motor and side; one that motor 2 rested on from the start is
+    /// its own homing's business, until it clears.
+    #[test]
+    fn another_motors_switch_ends_homing_issue_9() {
+        let run = |start_on_top: bool, trip_bottom_at: Option<u64>| -> (Sample, Option<String>) {
+            let mut h = Homing::new(2, 0.0004, settings(), safety(300.0));
+            let mut act = [0.0; MAX_MOTORS];
+            let mut cmd = [0.0; MAX_MOTORS];
+            h.start(&act).unwrap();
+            for n in 0..100_000 {
+                let mut flags = [MotorFlags::default(); MAX_MOTORS];
+                if act[0] <= -200.0 {
+                    flags[0] = MotorFlags(MotorFlags::TOP);
+                }
+                if start_on_top && h.motor == 0 {
+                    flags[1] = MotorFlags(MotorFlags::TOP);
+                }
+                if trip_bottom_at.is_some_and(|at| n >= at) {
+                    flags[1] = MotorFlags(flags[1].0 | MotorFlags::BOTTOM);
+                }
+                h.observe(&act, &flags);
+                match h.sample(n, &mut cmd) {
+                    Sample::Ready => act = cmd,
+                    end => return (end, h.failure()),
+                }
+                if h.motor == 1 {
+                    return (Sample::Ready, None); // motor 1 is home
+                }
+            }
+            panic!("homing did not end");
+        };
+        let (end, why) = run(false, Some(50));
+        assert_eq!(end, Sample::Failed);
+        assert_eq!(why.unwrap(), "homing motor 1: motor 2's bottom limit switch tripped");
+        assert_eq!(run(true, None), (Sample::Ready, None), "resting on its top switch");
+        let (end, why) = run(true, Some(100));
+        assert_eq!(end, Sample::Failed);
+        assert_eq!(why.unwrap(), "homing motor 1: motor 2's bottom limit switch tripped");
     }
 }

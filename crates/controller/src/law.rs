@@ -8,6 +8,11 @@ use qmarc_proto::{DAC_MAX, MAX_MOTORS};
 pub struct ServoInput<'a> {
     /// Servo sample index n (the command is the path at n·T).
     pub n: u64,
+    /// Servo periods since the law's previous cycle (its reset counts as sample 0): 1 when
+    /// the loop is punctual, k + 1 after k missed periods. A law that differences or sums
+    /// over cycles divides or multiplies by it, so that a late cycle outputs what a punctual
+    /// one would (a velocity over k + 1 periods is not k + 1 times the velocity).
+    pub elapsed: u64,
     /// Command position per motor.
     pub cmd: &'a [f64; MAX_MOTORS],
     /// Actual (measured) position per motor.
@@ -73,8 +78,13 @@ impl Notch {
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct AxisState {
     prev_cmd: f64,
+    /// CV of the previous cycle, counts per period.
     prev_cv: f64,
+    /// Periods the previous cycle's differences spanned (0 before the first cycle).
+    prev_elapsed: u64,
     prev_act: f64,
+    /// FE of the previous cycle, held over the periods until this one.
+    prev_fe: f64,
     /// IE(n) = Σ_{j<n} FE(j).
     ie: f64,
     notch: Notch,
@@ -92,7 +102,13 @@ const TWO_POW_23: f64 = 8_388_608.0;
 /// DAC(n) = 2⁻¹⁹·Kp·(FE + (Kvff·CV + Kaff·CA)/128 + Ki·IE/2²³ − Kd·AV/128) / 4
 ///
 /// with FE = CP(n) − AP(n), CV = CP(n) − CP(n−1), CA = CV(n) − CV(n−1),
-/// AV = AP(n) − AP(n−1) and IE(n) = Σ_{j<n} FE(j), all in counts per servo cycle.
+/// AV = AP(n) − AP(n−1) and IE(n) = Σ_{j<n} FE(j), all in counts per servo period.
+///
+/// After missed periods (the previous cycle was k = [`ServoInput::elapsed`] periods ago) the
+/// differences span k periods: CV and AV are divided by k, CA by the periods between the
+/// midpoints of the two velocity spans, and the integral counts the previous FE k times (the
+/// DAC held its output meanwhile). A late cycle thus outputs what a punctual one would, not
+/// a feed-forward kick k times too large.
 #[derive(Debug, Clone, PartialEq)]
 #[doc(alias = "PIDffCtrl")]
 pub struct PidFf {
@@ -114,9 +130,12 @@ impl PidFf {
         PidFf { n_motors, gains: g, state }
     }
 
-    /// The law with the gains of the motors in use.
+    /// The law with the gains of the motors in use, rescaled to the servo period
+    /// ([`Settings::effective_gains`]).
     pub fn from_settings(settings: &Settings) -> PidFf {
-        PidFf::new(&settings.motors[..settings.n_motors])
+        let gains: Vec<MotorGains> =
+            (0..settings.n_motors).map(|m| settings.effective_gains(m)).collect();
+        PidFf::new(&gains)
     }
 
     /// The output of eq. 3-1 / 4 for one motor, before the notch (DAC codes, unclamped).
@@ -157,17 +176,24 @@ impl ServoLaw for PidFf {
 
     #[inline]
     fn step(&mut self, input: &ServoInput<'_>, dac: &mut [i32; MAX_MOTORS]) {
+        let k = input.elapsed.max(1);
+        let span = k as f64;
         let axes = self.gains.iter().zip(self.state.iter_mut()).zip(dac.iter_mut());
         for (m, ((g, s), out)) in axes.enumerate().take(self.n_motors) {
             let (cp, ap) = (input.cmd[m], input.act[m]);
+            // IE(n) = Σ_{j<n} FE(j): the previous error held over the periods since.
+            s.ie += s.prev_fe * span;
             let fe = cp - ap;
-            let cv = cp - s.prev_cmd;
-            let ca = cv - s.prev_cv;
-            let av = ap - s.prev_act;
+            let cv = (cp - s.prev_cmd) / span;
+            // Periods between the midpoints of this velocity's span and the previous one's.
+            let ca_span = (k + s.prev_elapsed.max(1)) as f64 / 2.0;
+            let ca = (cv - s.prev_cv) / ca_span;
+            let av = (ap - s.prev_act) / span;
             let u = PidFf::pmac_output(g, fe, cv, ca, s.ie, av);
-            s.ie += fe;
+            s.prev_fe = fe;
             s.prev_cmd = cp;
             s.prev_cv = cv;
+            s.prev_elapsed = k;
             s.prev_act = ap;
             *out = to_dac_code(s.notch.filter(u));
         }
@@ -198,7 +224,7 @@ mod tests {
         c[0] = cmd;
         a[0] = act;
         let mut dac = [7; MAX_MOTORS];
-        law.step(&ServoInput { n: 0, cmd: &c, act: &a }, &mut dac);
+        law.step(&ServoInput { n: 0, elapsed: 1, cmd: &c, act: &a }, &mut dac);
         assert_eq!(&dac[1..], &[0; MAX_MOTORS - 1], "unused motors get 0");
         dac[0]
     }
@@ -294,5 +320,68 @@ mod tests {
         assert_eq!(run(&mut law, 100.0, 0.0), 100);
         assert_eq!(run(&mut law, 100.0, 0.0), 150);
         assert_eq!(run(&mut law, 100.0, 0.0), 175);
+    }
+
+    /// Issue 9, item 1: after missed periods the sample index skips, and one late cycle must
+    /// output what a punctual one would. A 17 counts/sample ramp followed with a constant lag:
+    /// a punctual loop and one that misses 3 periods before sample 8 give the same DAC code
+    /// at sample 8 (before the fix, CV, CA and AV spanned 4 periods: 5353 instead of ≈ 1338).
+    #[test]
+    fn missed_periods_do_not_kick_the_feed_forward_issue_9() {
+        let g = thesis_motor_1();
+        let ramp = |n: u64| 17.0 * n as f64;
+        let lag = 3.0;
+        let at = |law: &mut PidFf, n: u64, elapsed: u64| -> i32 {
+            let mut c = [0.0; MAX_MOTORS];
+            let mut a = [0.0; MAX_MOTORS];
+            c[0] = ramp(n);
+            a[0] = ramp(n) - lag;
+            let mut dac = [0; MAX_MOTORS];
+            law.step(&ServoInput { n, elapsed, cmd: &c, act: &a }, &mut dac);
+            dac[0]
+        };
+        let start = |law: &mut PidFf| {
+            let mut a = [0.0; MAX_MOTORS];
+            a[0] = -lag;
+            law.reset(&[0.0; MAX_MOTORS], &a);
+        };
+        let mut punctual = PidFf::new(&[g]);
+        start(&mut punctual);
+        let mut late = PidFf::new(&[g]);
+        start(&mut late);
+        let mut expected = 0;
+        for n in 1..=8 {
+            expected = at(&mut punctual, n, 1);
+        }
+        for n in 1..=4 {
+            at(&mut late, n, 1);
+        }
+        let got = at(&mut late, 8, 4);
+        // The integrator saw the same (constant) error for the same number of periods.
+        assert_eq!(got, expected, "late cycle {got}, punctual {expected}");
+        assert!((1300..1400).contains(&expected), "{expected}");
+        // And the next punctual cycle is unaffected as well.
+        assert_eq!(at(&mut late, 9, 1), at(&mut punctual, 9, 1));
+    }
+
+    /// On an accelerating path, CA after a skip is the acceleration per period², not k
+    /// times it: c(n) = n², so CA is 2 counts/period² whatever the spacing of the cycles.
+    #[test]
+    fn acceleration_feed_forward_is_per_period_after_a_skip() {
+        let g = MotorGains { kp: 2_097_152.0, kaff: 128.0, ..MotorGains::default() };
+        let mut law = PidFf::new(&[g]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        let step = |law: &mut PidFf, n: u64, elapsed: u64| {
+            let mut c = [0.0; MAX_MOTORS];
+            c[0] = (n * n) as f64;
+            let mut dac = [0; MAX_MOTORS];
+            // act = cmd: FE = 0 and AV does not enter (Kd = 0); the output is Kaff·CA/128 = CA.
+            law.step(&ServoInput { n, elapsed, cmd: &c, act: &c }, &mut dac);
+            dac[0]
+        };
+        step(&mut law, 1, 1);
+        assert_eq!(step(&mut law, 2, 1), 2);
+        assert_eq!(step(&mut law, 6, 4), 2, "skipped 3 periods");
+        assert_eq!(step(&mut law, 7, 1), 2);
     }
 }

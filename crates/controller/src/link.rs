@@ -10,6 +10,7 @@ use qmarc_proto::service::{
     CONTROLLER_NODE, HwServices, IpcLocation, ServiceError, create_node, open_hw_services,
 };
 use qmarc_timer::clock::monotonic_now_ns;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 /// An exchange failed. Carries numbers only: it is created in the servo loop.
@@ -29,6 +30,12 @@ pub enum LinkError {
     Ipc {
         /// The operation.
         op: &'static str,
+    },
+    /// A stop signal (Ctrl-C, SIGTERM) arrived while the response was late.
+    #[error("a stop signal arrived while waiting {waited_ns} ns for the hwserver")]
+    Stopped {
+        /// How long the exchange waited.
+        waited_ns: u64,
     },
     /// The response answered another request.
     #[error("response sequence {got} does not match request {expected}")]
@@ -77,10 +84,11 @@ pub enum LinkConnectError {
 /// Deadlines of one exchange.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LinkTimeouts {
-    /// After this long without a response the exchange checks whether the server is alive;
-    /// a dead server ends the exchange at once.
+    /// Every time this long goes by without a response the exchange checks whether the server
+    /// is alive (and whether a stop signal arrived); a dead server ends the exchange at once.
     pub deadline_ns: u64,
-    /// After this long without a response the server is lost, alive or not.
+    /// After this long without a response the server is lost, alive or not (`u64::MAX`:
+    /// never, only its death ends the wait — lock-step runs, whose time is simulated).
     pub give_up_ns: u64,
 }
 
@@ -95,6 +103,7 @@ pub struct IoxLink {
     listener: Listener<ipc::Service>,
     timeouts: LinkTimeouts,
     seq: u32,
+    stop: Option<&'static AtomicBool>,
 }
 
 fn port_err(port: &'static str, e: impl std::fmt::Debug) -> LinkConnectError {
@@ -143,7 +152,14 @@ impl IoxLink {
             .listener_builder()
             .create()
             .map_err(|e| port_err("listener", e))?;
-        Ok(IoxLink { node, services, client, notifier, listener, timeouts, seq: 0 })
+        Ok(IoxLink { node, services, client, notifier, listener, timeouts, seq: 0, stop: None })
+    }
+
+    /// A late response is given up when `stop` is set (checked at each deadline): a stop
+    /// signal ends any wait for a hwserver that does not answer.
+    pub fn with_stop(mut self, stop: &'static AtomicBool) -> IoxLink {
+        self.stop = Some(stop);
+        self
     }
 
     /// True while the hwserver's node is alive: dead nodes are cleaned up first (liveness is
@@ -163,7 +179,7 @@ impl HwLink for IoxLink {
         let pending =
             self.client.send_copy(msg).map_err(|_| LinkError::Ipc { op: "request send" })?;
         self.notifier.notify().map_err(|_| LinkError::Ipc { op: "request notify" })?;
-        let mut checked = false;
+        let mut next_check = self.timeouts.deadline_ns;
         loop {
             if let Some(resp) =
                 pending.receive().map_err(|_| LinkError::Ipc { op: "response receive" })?
@@ -181,13 +197,16 @@ impl HwLink for IoxLink {
                     server_alive: self.server_alive(),
                 });
             }
-            if waited >= self.timeouts.deadline_ns && !checked {
-                checked = true;
+            if waited >= next_check {
                 if !self.server_alive() {
                     return Err(LinkError::Lost { waited_ns: waited, server_alive: false });
                 }
+                if self.stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
+                    return Err(LinkError::Stopped { waited_ns: waited });
+                }
+                next_check = waited.saturating_add(self.timeouts.deadline_ns);
             }
-            let next = if checked { self.timeouts.give_up_ns } else { self.timeouts.deadline_ns };
+            let next = next_check.min(self.timeouts.give_up_ns);
             let budget = Duration::from_nanos(next.saturating_sub(waited).max(1_000));
             match self.listener.timed_wait(|_| {}, budget) {
                 Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}

@@ -107,6 +107,9 @@ pub struct Pvt {
     seg_len: f64,
     end_knot: PvtKnot,
     pending: Option<PvtKnot>,
+    /// A file's knots: the index of the next one to enter (a known path needs no reader
+    /// thread, so it can never starve).
+    next_knot: usize,
     ended: bool,
     failed: bool,
 }
@@ -192,6 +195,7 @@ impl Pvt {
             seg_len: 0.0,
             end_knot: PvtKnot::default(),
             pending: None,
+            next_knot: 0,
             ended: false,
             failed: false,
         }
@@ -239,25 +243,22 @@ impl Pvt {
         })
     }
 
-    /// Starts the reader thread and waits for the first knots.
+    /// The first knots: a file's at once; a stream's through the reader thread, waited for.
     fn first_knots(&mut self) -> Result<Vec<PvtKnot>, TrajStartError> {
+        let source = match &self.source {
+            PvtSource::Knots(knots) => {
+                let first: Vec<PvtKnot> = knots.iter().take(MIN_PVT_KNOTS).copied().collect();
+                self.next_knot = first.len();
+                return Ok(first);
+            }
+            PvtSource::Stream(source) => source.clone(),
+        };
         let (mut producer, mut consumer) = RingBuffer::new(PVT_QUEUE_CAPACITY);
-        let source = self.source.clone();
         let n_motors = self.n_motors;
         let failure = Arc::clone(&self.failure);
         std::thread::Builder::new()
             .name("qmarc-knots".into())
-            .spawn(move || match source {
-                PvtSource::Knots(knots) => {
-                    for k in knots.iter() {
-                        if !push_blocking(&mut producer, Feed::Knot(*k)) {
-                            return;
-                        }
-                    }
-                    push_blocking(&mut producer, Feed::End);
-                }
-                PvtSource::Stream(src) => read_stream(&src, n_motors, &mut producer, &failure),
-            })
+            .spawn(move || read_stream(&source, n_motors, &mut producer, &failure))
             .map_err(|e| KnotFileError::Read {
                 file: self.source_name(),
                 reason: format!("reader thread: {e}"),
@@ -284,6 +285,19 @@ impl Pvt {
         }
         self.consumer = Some(consumer);
         Ok(first)
+    }
+
+    /// The next knot: a file's from memory, a stream's from the queue (`None`: none yet).
+    #[inline]
+    fn next_feed(&mut self) -> Option<Feed> {
+        match &self.source {
+            PvtSource::Knots(knots) => {
+                let feed = knots.get(self.next_knot).map_or(Feed::End, |k| Feed::Knot(*k));
+                self.next_knot += 1;
+                Some(feed)
+            }
+            PvtSource::Stream(_) => self.consumer.as_mut().and_then(|c| c.pop().ok()),
+        }
     }
 
     fn source_name(&self) -> String {
@@ -344,21 +358,25 @@ impl TrajectoryGenerator for Pvt {
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
         let t = n as f64 * self.period_s;
         while t > self.seg_start + self.seg_len + 1e-9 {
+            if self.ended {
+                return Sample::Done;
+            }
+            if self.failed {
+                return Sample::Failed;
+            }
             let next = match self.pending.take() {
                 Some(k) => k,
-                None => match self.consumer.as_mut().map(Consumer::pop) {
-                    Some(Ok(Feed::Knot(k))) => k,
-                    Some(Ok(Feed::End)) => {
+                None => match self.next_feed() {
+                    Some(Feed::Knot(k)) => k,
+                    Some(Feed::End) => {
                         self.ended = true;
                         return Sample::Done;
                     }
-                    Some(Ok(Feed::Error)) => {
+                    Some(Feed::Error) => {
                         self.failed = true;
                         return Sample::Failed;
                     }
-                    Some(Err(_)) | None if self.ended => return Sample::Done,
-                    Some(Err(_)) | None if self.failed => return Sample::Failed,
-                    Some(Err(_)) | None => return Sample::Starved,
+                    None => return Sample::Starved,
                 },
             };
             self.enter_segment(next);
@@ -372,6 +390,14 @@ impl TrajectoryGenerator for Pvt {
 
     fn failure(&self) -> Option<String> {
         self.failed.then(|| self.stored_failure().to_string())
+    }
+
+    /// A file's last knot; a stream's once it has ended.
+    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        match &self.source {
+            PvtSource::Knots(k) => k.last().map(|k| k.vel),
+            PvtSource::Stream(_) => self.ended.then_some(self.end_knot.vel),
+        }
     }
 
     /// From a file: every sample of every segment (the cubics can overshoot their knots).

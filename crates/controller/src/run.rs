@@ -10,7 +10,7 @@ use crate::config::Settings;
 use crate::link::{HwLink, IoxLink, LinkConnectError, LinkTimeouts};
 use crate::registry;
 use crate::servo::{MoveError, MoveLimits, MovePlan, Servo};
-use crate::summary::{MotorSummary, Summary, TimingSummary};
+use crate::summary::{MotorSummary, SettleSummary, Summary, TimingSummary};
 use qmarc_proto::service::IpcLocation;
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType};
 use qmarc_timer::MonotonicClock;
@@ -18,6 +18,9 @@ use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
+
+/// A path whose last command moves slower than this (counts/s) ends at rest.
+pub const END_AT_REST_COUNTS_PER_S: f64 = 1.0;
 
 /// Files of a move's data, in the output directory.
 pub const OUTPUT_FILES: [&str; 3] = ["gather.csv", "gather.m", "summary.json"];
@@ -87,9 +90,15 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
     );
     let mut ticker = settings.timer.method.build(settings.period_ns());
     let period = settings.period_ns();
+    // In lock-step the hwserver is lost only when its process is gone: a host stall is not
+    // the simulated robot's time. The liveness check still runs every deadline.
     let timeouts = LinkTimeouts {
         deadline_ns: u64::from(settings.hwserver.deadline_periods) * period,
-        give_up_ns: u64::from(settings.hwserver.response_timeout_periods) * period,
+        give_up_ns: if opts.deterministic {
+            u64::MAX
+        } else {
+            u64::from(settings.hwserver.response_timeout_periods) * period
+        },
     };
     let req = RtRequest {
         priority: (settings.timer.servo_priority > 0).then_some(settings.timer.servo_priority),
@@ -102,8 +111,8 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
         let _dma = DmaLatencyGuard::request_zero();
         let mut homed_read = None;
         let result = (|| -> Result<(), RunError> {
-            let mut link = IoxLink::connect(&location, timeouts, wait)?;
             let stop = qmarc_timer::stop::flag();
+            let mut link = IoxLink::connect(&location, timeouts, wait)?.with_stop(stop);
             let moved = servo.run(&mut link, ticker.as_mut(), stop);
             // Homing ends with every motor at its home offset: home reads 0 from now on and the
             // frame is homed (thesis 3.10.1.1). Each motor's position is preset to where it
@@ -169,13 +178,20 @@ pub fn plan_for(settings: &Settings, mode: &Mode, deterministic: bool, unhomed: 
         limits.max_integrated_error[m] = s.max_integrated_error_counts;
     }
     limits.soft = (!homing && !unhomed).then_some(soft);
-    limits.max_missed_in_row = settings.max_missed_in_row;
+    // Lock-step time is simulated: a host stall skips no sample there, so it is no overrun.
+    limits.max_missed_in_row = if deterministic { u64::MAX } else { settings.max_missed_in_row };
     MovePlan {
         gather_every: settings.gather.every,
         gather_fields: settings.gather.fields,
         deterministic,
         starve_hold_cycles: (settings.trajectory.starve_hold_ms * 1e6 / settings.period_ns() as f64)
             .ceil() as u64,
+        // Homing settles every motor at home itself.
+        settle_cycles: if homing {
+            0
+        } else {
+            (settings.trajectory.settle_s / settings.period_s()).round() as u64
+        },
         limits,
         require_homed: !homing && !unhomed,
         monitor_switches: !homing,
@@ -191,10 +207,42 @@ pub fn summarize(
     deterministic: bool,
 ) -> Summary {
     let cpr = settings.counts_per_rad();
+    let n = settings.n_motors;
     let mut warnings = rt.warnings.clone();
     if servo.gather().dropped() > 0 {
         warnings.push(format!("{} gathered rows did not fit the buffer", servo.gather().dropped()));
     }
+    if let Some(v) = servo.end_velocity()
+        && let Some(m) = (0..n).find(|&m| v[m].abs() > END_AT_REST_COUNTS_PER_S)
+    {
+        warnings.push(format!(
+            "the path ends moving (motor {} at {:.1} counts/s): its last command was held for \
+             trajectory.settle_s = {} s so that the motors stop under control; end the path at \
+             rest (a last knot repeated, or a PVT velocity of 0) to avoid the jolt",
+            m + 1,
+            v[m],
+            settings.trajectory.settle_s
+        ));
+    }
+    if settings.gains_rescaled() {
+        warnings.push(format!(
+            "the gains were tuned at general.gains_period_us = {} µs and run at {} µs: Kd and \
+             Kvff × {r}, Kaff × {r2}, Ki ÷ {r} (the effective gains are in summary.json)",
+            settings.gains_period_us,
+            settings.period_us,
+            r = f64::from(settings.gains_period_us) / f64::from(settings.period_us),
+            r2 = (f64::from(settings.gains_period_us) / f64::from(settings.period_us)).powi(2),
+        ));
+    }
+    let settle = servo.settle_figures().map(|(cycles, errors, last)| SettleSummary {
+        cycles,
+        seconds: (cycles * u64::from(settings.period_us)) as f64 / 1e6,
+        final_error_counts: last[..n].to_vec(),
+        max_abs_error_counts: errors.axes[..n]
+            .iter()
+            .map(|e| e.max.abs().max(e.min.abs()))
+            .collect(),
+    });
     Summary {
         mode: servo.plan().mode.clone(),
         trajectory: servo.generator_name().to_string(),
@@ -208,10 +256,10 @@ pub fn summarize(
         gather_every: settings.gather.every,
         gathered_rows: servo.gather().rows().len() as u64,
         counts_per_rad: cpr,
-        motors: servo.errors().axes[..settings.n_motors]
-            .iter()
-            .map(|e| MotorSummary::new(e, cpr))
-            .collect(),
+        motors: servo.errors().axes[..n].iter().map(|e| MotorSummary::new(e, cpr)).collect(),
+        gains_period_us: settings.gains_period_us,
+        gains: (0..n).map(|m| settings.effective_gains(m).into()).collect(),
+        settle,
         timing: TimingSummary::new(servo.timing(), settings.timer.method.name(), &rt.policy()),
         warnings,
         homing: None,

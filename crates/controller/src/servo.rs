@@ -61,6 +61,8 @@ pub struct MovePlan {
     pub deterministic: bool,
     /// When the trajectory starves: cycles to hold the last command before disabling.
     pub starve_hold_cycles: u64,
+    /// When the path ends: cycles to hold its last command, loop closed, before disabling.
+    pub settle_cycles: u64,
     /// Limits checked before and during the move.
     pub limits: MoveLimits,
     /// Refuse to move unless every motor's frame is homed.
@@ -81,6 +83,7 @@ impl MovePlan {
             gather_fields: crate::config::GatherFields::default(),
             deterministic: false,
             starve_hold_cycles: 0,
+            settle_cycles: 0,
             limits: MoveLimits::none(),
             require_homed: false,
             monitor_switches: true,
@@ -88,8 +91,9 @@ impl MovePlan {
     }
 }
 
-/// Where a move is. `run` goes Idle → Preparing → Moving (or Homing) → Done, or to Fault from
-/// Preparing onwards; Holding lies between Moving and Fault when a knot stream runs dry.
+/// Where a move is. `run` goes Idle → Preparing → Moving (or Homing) → Settling → Done, or to
+/// Fault from Preparing onwards; Holding lies between Moving and Fault when a knot stream runs
+/// dry.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Phase {
     /// Nothing happened yet.
@@ -102,7 +106,9 @@ pub enum Phase {
     Moving,
     /// Holding the last command after the trajectory starved.
     Holding,
-    /// The path ended; motors disabled.
+    /// The path ended: holding its last command with the loop closed for the settle time.
+    Settling,
+    /// The path ended and settled; motors disabled.
     Done,
     /// A fault ended the move; motors disabled where the hwserver could be reached.
     Fault,
@@ -176,13 +182,19 @@ pub struct Servo {
     t0_ns: u64,
     executed: u64,
     last_sample: u64,
+    /// The sample of the law's previous cycle (0 = the sample its reset seeded).
+    law_sample: u64,
     gather: Gather,
     errors: ErrorStats,
     timing: TimingStats,
     fault: Option<Fault>,
     planned_samples: Option<u64>,
-    /// Holding the last command after the trajectory starved.
+    /// The command is frozen: the trajectory starved, or the path ended and the robot settles.
     holding: bool,
+    /// Cycles of the settle at the end of the path (their errors go to `settle_errors`).
+    settle_executed: u64,
+    settling: bool,
+    settle_errors: ErrorStats,
     phase: Phase,
     /// Σ (command − actual) per motor over the move.
     integrated_error: [f64; MAX_MOTORS],
@@ -209,12 +221,16 @@ impl Servo {
             t0_ns: 0,
             executed: 0,
             last_sample: 0,
+            law_sample: 0,
             gather,
             errors: ErrorStats::default(),
             timing,
             fault: None,
             planned_samples: None,
             holding: false,
+            settle_executed: 0,
+            settling: false,
+            settle_errors: ErrorStats::default(),
             phase: Phase::Idle,
             integrated_error: [0.0; MAX_MOTORS],
         }
@@ -272,14 +288,29 @@ impl Servo {
         Some(report)
     }
 
+    /// Each motor's velocity at the end of the path, counts/s, if the generator knows it.
+    pub fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        self.generator.end_velocity()
+    }
+
     /// Name of the trajectory generator.
     pub fn generator_name(&self) -> &'static str {
         self.generator.name()
     }
 
-    /// Cycles executed.
+    /// Cycles of the path executed (the error figures' cycles; the settle is apart).
     pub fn cycles(&self) -> u64 {
-        self.executed
+        self.executed - self.settle_executed
+    }
+
+    /// The settle at the end of the path, if it began: its cycles, the error figures over it
+    /// and each motor's command − actual at its end.
+    pub fn settle_figures(&self) -> Option<(u64, &ErrorStats, [f64; MAX_MOTORS])> {
+        let mut last = [0.0; MAX_MOTORS];
+        for (l, (c, a)) in last.iter_mut().zip(self.cmd.iter().zip(&self.act)) {
+            *l = c - a;
+        }
+        (self.settle_executed > 0).then_some((self.settle_executed, &self.settle_errors, last))
     }
 
     /// Samples of the path, if known.
@@ -322,14 +353,18 @@ impl Servo {
         self.planned_samples = self.generator.samples();
         self.generator.sample(0, &mut self.cmd);
         self.law.reset(&self.cmd, &self.act);
-        let samples = self.planned_samples.unwrap_or(STREAM_GATHER_SAMPLES);
+        self.law_sample = 0;
+        let samples =
+            self.planned_samples.unwrap_or(STREAM_GATHER_SAMPLES) + self.plan.settle_cycles;
         crate::gather::check_budget(samples, self.plan.gather_every)?;
         self.gather = Gather::for_move(samples, self.plan.gather_every, self.plan.n_motors)
             .with_fields(self.plan.gather_fields);
         self.timing = TimingStats::new(self.plan.period_ns);
         self.errors = ErrorStats::default();
+        self.settle_errors = ErrorStats::default();
         self.fault = None;
         self.executed = 0;
+        self.settle_executed = 0;
         self.integrated_error = [0.0; MAX_MOTORS];
         for m in 0..self.plan.n_motors {
             if let Err(e) = Servo::request(link, HwMsg::for_motor(MsgType::EnableMotor, m as u32)) {
@@ -355,6 +390,7 @@ impl Servo {
         if tick.missed >= self.plan.limits.max_missed_in_row {
             return CycleEnd::Fault(Fault {
                 value: tick.missed as f64,
+                limit: self.plan.limits.max_missed_in_row as f64,
                 ..Fault::new(FaultKind::Overrun, n)
             });
         }
@@ -391,7 +427,9 @@ impl Servo {
         }
 
         // 3. Law.
-        self.law.step(&ServoInput { n, cmd: &self.cmd, act: &self.act }, &mut self.dac);
+        let elapsed = n.saturating_sub(self.law_sample).max(1);
+        self.law_sample = n;
+        self.law.step(&ServoInput { n, elapsed, cmd: &self.cmd, act: &self.act }, &mut self.dac);
         let computed = self.clock.now_ns();
 
         // 4. Write all DACs.
@@ -402,7 +440,12 @@ impl Servo {
         let written = self.clock.now_ns();
 
         // 5. Gather.
-        self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
+        if self.settling {
+            self.settle_errors.add(self.plan.n_motors, &self.cmd, &self.act);
+            self.settle_executed += 1;
+        } else {
+            self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
+        }
         self.timing.record_cycle(tick, read_start, read_done, computed, written);
         if self.gather.due(self.executed) {
             // Integer ns divided once: the correctly rounded decimal, no accumulated noise.
@@ -486,6 +529,47 @@ impl Servo {
         link.exchange(&HwMsg::request(MsgType::DisableAll)).is_ok()
     }
 
+    /// Waits for the next tick. A timer failure disables every motor and is the move's error;
+    /// a stop request (Ctrl-C, the starter dying) is the `aborted` fault: `None`.
+    fn next_tick(
+        &mut self,
+        link: &mut dyn HwLink,
+        ticker: &mut dyn Ticker,
+        stop: &AtomicBool,
+    ) -> Result<Option<Tick>, MoveError> {
+        let tick = match ticker.wait() {
+            Ok(t) => t,
+            Err(e) => {
+                self.disable_all(link);
+                return Err(e.into());
+            }
+        };
+        if stop.load(Ordering::Relaxed) {
+            let fault = Fault {
+                signal: qmarc_timer::stop::signal().unwrap_or(0),
+                ..Fault::new(FaultKind::Aborted, self.last_sample)
+            };
+            self.handle_fault(link, fault);
+            return Ok(None);
+        }
+        Ok(Some(tick))
+    }
+
+    /// The fault handler for a fault a cycle reported. A stop signal (Ctrl-C, the starter
+    /// dying) reaches both processes: a hwserver that shut down because of it is our abort,
+    /// not a hwserver fault. Our own signal may land a moment after its response.
+    fn cycle_fault(&mut self, link: &mut dyn HwLink, f: Fault, stop: &AtomicBool) {
+        let signal = qmarc_timer::stop::signal().unwrap_or(0);
+        let f = if f.kind == FaultKind::HwserverShutdown && stop_arrives(stop) {
+            Fault { kind: FaultKind::Aborted, signal, ..f }
+        } else if f.kind == FaultKind::Aborted {
+            Fault { signal, ..f }
+        } else {
+            f
+        };
+        self.handle_fault(link, f);
+    }
+
     /// The trajectory starved: keep servoing on the last command for the plan's hold time
     /// (the robot decelerates under control instead of coasting), then disable. Any other
     /// fault during the hold ends it at once.
@@ -513,8 +597,32 @@ impl Servo {
         self.handle_fault(link, fault);
     }
 
-    /// Runs the whole move: prepare, tick until the path ends, a fault or `stop`, then
-    /// disable every motor and stop the safety monitoring.
+    /// The path ended: hold its last command with the loop closed for the plan's settle
+    /// time, so that a path that ends moving stops under control instead of coasting. Every
+    /// check goes on; a fault ends the settle as it would the move.
+    fn settle(
+        &mut self,
+        link: &mut dyn HwLink,
+        ticker: &mut dyn Ticker,
+        stop: &AtomicBool,
+    ) -> Result<(), MoveError> {
+        self.holding = true;
+        self.settling = true;
+        self.phase = Phase::Settling;
+        for _ in 0..self.plan.settle_cycles {
+            let Some(tick) = self.next_tick(link, ticker, stop)? else { break };
+            if let CycleEnd::Fault(f) = self.cycle(link, &tick) {
+                self.cycle_fault(link, f, stop);
+                break;
+            }
+        }
+        self.holding = false;
+        self.settling = false;
+        Ok(())
+    }
+
+    /// Runs the whole move: prepare, tick until the path ends (then settle), a fault or
+    /// `stop`, then disable every motor and stop the safety monitoring.
     pub fn run(
         &mut self,
         link: &mut dyn HwLink,
@@ -531,43 +639,19 @@ impl Servo {
         };
         self.set_t0(t0);
         self.phase = if self.plan.mode == "home" { Phase::Homing } else { Phase::Moving };
-        loop {
-            let tick = match ticker.wait() {
-                Ok(t) => t,
-                Err(e) => {
-                    self.disable_all(link);
-                    return Err(e.into());
-                }
-            };
-            if stop.load(Ordering::Relaxed) {
-                let fault = Fault {
-                    signal: qmarc_timer::stop::signal().unwrap_or(0),
-                    ..Fault::new(FaultKind::Aborted, self.last_sample)
-                };
-                self.handle_fault(link, fault);
-                break;
-            }
+        while let Some(tick) = self.next_tick(link, ticker, stop)? {
             match self.cycle(link, &tick) {
                 CycleEnd::Continue => {}
-                CycleEnd::Done => break,
+                CycleEnd::Done => {
+                    self.settle(link, ticker, stop)?;
+                    break;
+                }
                 CycleEnd::Fault(f) if f.kind == FaultKind::TrajectoryStarved => {
                     self.hold(link, ticker, stop, f);
                     break;
                 }
                 CycleEnd::Fault(f) => {
-                    // A stop signal (Ctrl-C, the starter dying) reaches both processes: a
-                    // hwserver that shut down because of it is our abort, not a hwserver
-                    // fault. Our own signal may land a moment after its response.
-                    let f = if f.kind == FaultKind::HwserverShutdown && stop_arrives(stop) {
-                        Fault {
-                            kind: FaultKind::Aborted,
-                            signal: qmarc_timer::stop::signal().unwrap_or(0),
-                            ..f
-                        }
-                    } else {
-                        f
-                    };
-                    self.handle_fault(link, f);
+                    self.cycle_fault(link, f, stop);
                     break;
                 }
             }
@@ -589,13 +673,17 @@ pub fn server_gone(fault: Option<Fault>) -> bool {
     matches!(fault.and_then(|f| f.link), Some(LinkError::Lost { server_alive: false, .. }))
 }
 
-/// Waits up to 5 ms for the stop flag (off the loop's fast path: only after a fault).
+/// True when a stop signal arrived or is pending for this process, waiting up to 1 s for one
+/// (off the loop's fast path: only after the hwserver shut down, the motors already off).
+/// The starter forwards a stop to the controller before the hwserver, so its signal is
+/// normally pending by then; the wait covers two signals sent at once (the kernel's
+/// parent-death signal), whose handler may run late on a loaded machine.
 fn stop_arrives(stop: &AtomicBool) -> bool {
-    for _ in 0..50 {
-        if stop.load(Ordering::Relaxed) {
+    for _ in 0..1_000 {
+        if stop.load(Ordering::Relaxed) || qmarc_timer::stop::arrived_or_pending() {
             return true;
         }
-        std::thread::sleep(std::time::Duration::from_micros(100));
+        std::thread::sleep(std::time::Duration::from_millis(1));
     }
     stop.load(Ordering::Relaxed)
 }

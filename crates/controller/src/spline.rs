@@ -167,6 +167,8 @@ pub struct CubicSpline {
     period_s: f64,
     start_tolerance: f64,
     queue: Vec<[f64; MAX_MOTORS]>,
+    /// Each motor's velocity at the last knot, counts/s.
+    end_velocity: [f64; MAX_MOTORS],
 }
 
 impl CubicSpline {
@@ -183,6 +185,7 @@ impl CubicSpline {
             period_s,
             start_tolerance,
             queue: Vec::new(),
+            end_velocity: [0.0; MAX_MOTORS],
         };
         g.compute(knots)?;
         Ok(g)
@@ -198,6 +201,7 @@ impl CubicSpline {
             period_s: s.period_s(),
             start_tolerance: s.trajectory.start_tolerance_counts,
             queue: Vec::new(),
+            end_velocity: [0.0; MAX_MOTORS],
         };
         if let KnotSource::File(path) = &source {
             let text = read_knot_file(path)?;
@@ -232,6 +236,9 @@ impl CubicSpline {
                 *c = s.position(t);
             }
             self.queue.push(cmd);
+        }
+        for (v, s) in self.end_velocity.iter_mut().zip(&mut splines) {
+            *v = s.velocity(t_end);
         }
         Ok(())
     }
@@ -280,6 +287,10 @@ impl TrajectoryGenerator for CubicSpline {
 
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
         (!self.queue.is_empty()).then(|| crate::traj::bounds_of(&self.queue))
+    }
+
+    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        (!self.queue.is_empty()).then_some(self.end_velocity)
     }
 
     #[inline]

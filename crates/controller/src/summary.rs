@@ -257,10 +257,14 @@ impl Fault {
         Some(Fault { motor, status, ..Fault::new(kind, cycle) })
     }
 
-    /// A lost or failed link at sample `cycle`.
+    /// A lost or failed link at sample `cycle`; a wait a stop signal ended is an abort.
     #[inline]
     pub fn from_link(e: LinkError, cycle: u64) -> Fault {
-        Fault { link: Some(e), ..Fault::new(FaultKind::HwserverLost, cycle) }
+        let kind = match e {
+            LinkError::Stopped { .. } => FaultKind::Aborted,
+            _ => FaultKind::HwserverLost,
+        };
+        Fault { link: Some(e), ..Fault::new(kind, cycle) }
     }
 
     /// The message for the terminal and `summary.json`, motors 1-based.
@@ -308,8 +312,9 @@ impl Fault {
                 self.limit
             ),
             FaultKind::Overrun => format!(
-                "{} servo periods in a row went by without a cycle (limit safety.max_missed_in_row)",
-                self.value
+                "{} servo periods in a row went by without a cycle (limit {}: without \
+                 PREEMPT_RT, host stalls of a few ms can do that; raise safety.max_missed_in_row)",
+                self.value, self.limit
             ),
             FaultKind::HomingFailed => "homing failed".to_string(),
             FaultKind::ControllerLost => "the controller died".to_string(),
@@ -386,6 +391,42 @@ impl MotorSummary {
             sum_squares_error_rad2: e.sum_sq / (counts_per_rad * counts_per_rad),
         }
     }
+}
+
+/// The gains a motor's law ran with (rescaled to the servo period, see
+/// [`crate::config::Settings::effective_gains`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct GainsReport {
+    /// Kp.
+    pub kp: f64,
+    /// Ki.
+    pub ki: f64,
+    /// Kd.
+    pub kd: f64,
+    /// Kvff.
+    pub kvff: f64,
+    /// Kaff.
+    pub kaff: f64,
+}
+
+impl From<crate::config::MotorGains> for GainsReport {
+    fn from(g: crate::config::MotorGains) -> GainsReport {
+        GainsReport { kp: g.kp, ki: g.ki, kd: g.kd, kvff: g.kvff, kaff: g.kaff }
+    }
+}
+
+/// The hold at the end of a path (`trajectory.settle_s`) in `summary.json`: the error figures
+/// of the move leave it out; these are its own.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SettleSummary {
+    /// Cycles of the settle (fewer than planned if a fault ended it).
+    pub cycles: u64,
+    /// Their duration, s.
+    pub seconds: f64,
+    /// Per motor: command − actual at the end of the settle, counts.
+    pub final_error_counts: Vec<f64>,
+    /// Per motor: the largest |command − actual| during the settle, counts.
+    pub max_abs_error_counts: Vec<f64>,
 }
 
 /// Percentiles in `summary.json`, µs.
@@ -474,8 +515,17 @@ pub struct Summary {
     pub gathered_rows: u64,
     /// Counts per radian used for the rad figures.
     pub counts_per_rad: f64,
-    /// Error figures per motor.
+    /// Error figures per motor, over the path (the settle at its end is in `settle`).
     pub motors: Vec<MotorSummary>,
+    /// The servo period the configured gains were tuned at, µs.
+    #[serde(default)]
+    pub gains_period_us: u32,
+    /// Per motor: the gains the law ran with, rescaled from `gains_period_us` to `period_us`.
+    #[serde(default)]
+    pub gains: Vec<GainsReport>,
+    /// The hold at the end of the path, if it began.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settle: Option<SettleSummary>,
     /// Timing figures.
     pub timing: TimingSummary,
     /// Warnings of the run (degraded real time, dropped rows).
@@ -509,6 +559,9 @@ impl Summary {
             gathered_rows: 0,
             counts_per_rad: 0.0,
             motors: Vec::new(),
+            gains_period_us: 0,
+            gains: Vec::new(),
+            settle: None,
             timing: TimingSummary::default(),
             warnings: Vec::new(),
             homing: None,

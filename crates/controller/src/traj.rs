@@ -247,6 +247,13 @@ pub trait TrajectoryGenerator: Send {
         None
     }
 
+    /// Each motor's velocity at the end of the path, counts/s, once known (after `start` for a
+    /// path known before the move, after the move for a stream); `None` if unknown. A path
+    /// that ends moving is held at its last command for `trajectory.settle_s`, with a warning.
+    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        None
+    }
+
     /// After a move without a fault: the positions (in the frame of the move) that are to read
     /// 0 from now on, making the frame homed — homing's home positions. Default: none.
     fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
@@ -335,6 +342,10 @@ impl TrajectoryGenerator for Step {
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
         let target = self.start.map(|s| s + self.size);
         Some(bounds_of([&self.start, &target]))
+    }
+
+    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        Some([0.0; MAX_MOTORS])
     }
 
     #[inline]

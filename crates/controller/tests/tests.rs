@@ -130,6 +130,7 @@ fn over_iceoryx2_each_cycle_allocates_only_the_two_request_loans() {
         let opts = ServeOptions {
             watchdog_ns: 5_000_000_000,
             spin: false,
+            lockstep: false,
             shutdown_grace_ns: 1_000_000_000,
         };
         serve(&mut core, &server_location, &opts, &AtomicBool::new(false))

@@ -7,6 +7,7 @@
 //! ends (the PC-crash protection the thesis lacked, 6.2.3).
 
 use crate::core::HwCore;
+use iceoryx2::prelude::PortFactory;
 use qmarc_proto::service::{
     HWSERVER_NODE, IpcLocation, ServiceError, create_node, open_hw_services,
 };
@@ -24,6 +25,10 @@ pub struct ServeOptions {
     /// After a stop request or a watchdog trip, how long to keep answering (so the
     /// controller learns why, and can still send its disable and exit messages) before ending.
     pub shutdown_grace_ns: u64,
+    /// Lock-step (simulated time): a controller silent past the watchdog trips it only when
+    /// its process is gone; a living one is waiting out a host stall, which simulated time
+    /// does not see.
+    pub lockstep: bool,
 }
 
 /// Why [`serve`] ended.
@@ -36,6 +41,8 @@ pub enum ServeEnd {
     Watchdog {
         /// How long it had been silent.
         silent_ns: u64,
+        /// Whether its process was still there when the watchdog fired.
+        controller_alive: bool,
     },
     /// A stop was requested (a signal) and no exit message followed within the grace time.
     Stopped,
@@ -101,6 +108,14 @@ fn serve_inner(
         .map_err(|e| port_err("notifier creation")(&e))?;
 
     let mut last_request_ns = monotonic_now_ns();
+    // Lock-step: when a silent controller was last seen alive.
+    let mut seen_alive_ns = 0;
+    // The controller's node alive (dead nodes cleaned up first: liveness is a file lock, so a
+    // killed process is seen at once). Allocates: only called on a silent controller.
+    let controller_alive = || {
+        node.try_cleanup_dead_nodes();
+        services.hw.dynamic_config().number_of_clients() > 0
+    };
     // Once stopping: since when, and how it will be reported. The server goes on answering
     // (every response says why) until the controller exits or falls silent for the grace time.
     let mut ending: Option<(u64, ServeEnd)> = None;
@@ -110,10 +125,16 @@ fn serve_inner(
             core.shut_down();
             ending = Some((now, ServeEnd::Stopped));
         }
-        let silent_ns = now.saturating_sub(last_request_ns);
+        let silent_ns = now.saturating_sub(last_request_ns.max(seen_alive_ns));
         if ending.is_none() && core.any_enabled() && silent_ns > opts.watchdog_ns {
-            core.trip_watchdog();
-            ending = Some((now, ServeEnd::Watchdog { silent_ns }));
+            if opts.lockstep && controller_alive() {
+                seen_alive_ns = now;
+            } else {
+                core.trip_watchdog();
+                let silent_ns = now.saturating_sub(last_request_ns);
+                let end = ServeEnd::Watchdog { silent_ns, controller_alive: controller_alive() };
+                ending = Some((now, end));
+            }
         }
         if let Some((since, end)) = ending
             && now.saturating_sub(since.max(last_request_ns)) > opts.shutdown_grace_ns

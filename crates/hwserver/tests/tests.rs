@@ -59,14 +59,33 @@ fn all_twelve_messages_are_served() {
 
 #[test]
 fn watchdog_disables_the_motors_when_the_controller_falls_silent() {
-    let mut server = Server::start("watchdog", &["--watchdog-periods=50"]);
+    // Real time: silence is measured on the wall clock.
+    let mut server = Server::start_with("watchdog", &["--watchdog-periods=50"], false);
     let mut link = server.connect();
     assert!(link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0)).unwrap().status().is_ok());
     // Silence: the server must give up on us by itself.
     let (code, stderr) = server.wait(Duration::from_secs(10));
     assert_eq!(code, Some(3), "{stderr}");
     assert!(stderr.contains("watchdog: controller silent for"), "{stderr}");
+    assert!(stderr.contains("its process still runs"), "{stderr}");
+    assert!(stderr.contains("raise hwserver.watchdog_periods"), "{stderr}");
     assert!(stderr.contains("all motors disabled"), "{stderr}");
+}
+
+/// Issue 9, item 6: in lock-step time is simulated, so a silent controller whose process
+/// lives (a host stall) does not trip the watchdog; it is still served afterwards.
+#[test]
+fn in_lock_step_a_living_silent_controller_does_not_trip_the_watchdog_issue_9() {
+    let mut server = Server::start("lockwd", &["--watchdog-periods=10"]);
+    let mut link = server.connect();
+    assert!(link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0)).unwrap().status().is_ok());
+    // 300 ms of silence: 750 periods, 75 watchdogs of wall time.
+    std::thread::sleep(Duration::from_millis(300));
+    let resp = link.exchange(&HwMsg::read_all_encoders()).unwrap();
+    assert!(resp.status().is_ok(), "{}", resp.status());
+    assert!(link.exchange(&HwMsg::request(MsgType::Exit)).unwrap().status().is_ok());
+    let (code, stderr) = server.wait(Duration::from_secs(10));
+    assert_eq!(code, Some(0), "{stderr}");
 }
 
 #[test]

@@ -21,6 +21,12 @@ pub struct Server {
 impl Server {
     /// Starts the server with `extra` arguments (SCHED_OTHER, no mlock, lock-step sim).
     pub fn start(test: &str, extra: &[&str]) -> Server {
+        Server::start_with(test, extra, true)
+    }
+
+    /// Starts the server with `extra` arguments (SCHED_OTHER, no mlock), its simulated robot
+    /// in lock-step or in real time.
+    pub fn start_with(test: &str, extra: &[&str], lockstep: bool) -> Server {
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
         let pid = std::process::id();
         let dir = std::env::temp_dir().join(format!("qmarc-hw-{pid}-{n}-{test}"));
@@ -28,7 +34,8 @@ impl Server {
         let child = Command::new(env!("CARGO_BIN_EXE_qmarc-hwserver"))
             .arg(format!("--iox-prefix={}", location.prefix))
             .arg(format!("--iox-root={}", location.root))
-            .args(["--priority=0", "--no-mlock", "--deterministic"])
+            .args(["--priority=0", "--no-mlock"])
+            .args(lockstep.then_some("--deterministic"))
             // The test thread is no real-time loop: a 4 ms watchdog would fire whenever it
             // is descheduled between two requests. The watchdog test sets its own.
             .args(

@@ -108,7 +108,7 @@ mod tests {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
         let s = Settings::load(&path).unwrap();
         let a = hwserver_args(&s, true, &IpcLocation::new("p_", "/tmp/r"));
-        assert_eq!((a.motors, a.period_us, a.priority, a.watchdog_periods), (3, 400, 85, 10));
+        assert_eq!((a.motors, a.period_us, a.priority, a.watchdog_periods), (3, 400, 85, 250));
         assert_eq!(a.iox_root, "/tmp/r/");
         assert!(a.deterministic);
         assert_eq!(a.sim_start, vec![0.0, 0.0, 0.0]);

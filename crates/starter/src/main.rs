@@ -40,13 +40,13 @@ struct StarterArgs {
     #[command(flatten)]
     opts: MoveOptions,
     /// Prefix of this run's iceoryx2 files (default: qmarc_<pid>_, unique per run).
-    #[arg(long)]
+    #[arg(long, global = true)]
     iox_prefix: Option<String>,
     /// iceoryx2 root directory.
-    #[arg(long, default_value = DEFAULT_ROOT)]
+    #[arg(long, global = true, default_value = DEFAULT_ROOT)]
     iox_root: String,
     /// Directory holding qmarc-hwserver and qmarc-controller (default: next to this program).
-    #[arg(long)]
+    #[arg(long, global = true)]
     bin_dir: Option<PathBuf>,
     #[command(subcommand)]
     mode: Mode,

@@ -109,7 +109,9 @@ pub fn send(child: &Child, sig: i32) {
 /// Waits until every child has ended. When one ends, each other gets its `term_after` to
 /// finish on its own (the controller notices a dead hwserver and writes its data, the
 /// hwserver's watchdog notices a dead controller), then SIGTERM, then after its `kill_after`
-/// SIGKILL. A stop request (`stop`) forwards SIGTERM to all at once. Each child's end is
+/// SIGKILL. A stop request (`stop`) forwards SIGTERM to all at once, in reverse order of
+/// `children` (the controller before the hwserver: its signal is pending by the time the
+/// hwserver shuts down, so it reports an abort, not a hwserver fault). Each child's end is
 /// reported through `report` as it happens.
 pub fn wait_all(
     children: &mut [Supervised],
@@ -132,8 +134,8 @@ pub fn wait_all(
         }
         let forward = stop.load(Ordering::Relaxed) && !forwarded;
         forwarded |= forward;
-        for (s, termed) in children.iter().zip(termed.iter_mut()).filter(|(s, _)| s.exit.is_none())
-        {
+        let alive = children.iter().zip(termed.iter_mut()).filter(|(s, _)| s.exit.is_none());
+        for (s, termed) in alive.rev() {
             let due = forward || first_exit.is_some_and(|t| t.elapsed() >= s.term_after);
             if termed.is_none() && due {
                 send(&s.child, libc::SIGTERM);

@@ -78,6 +78,17 @@ pub fn render(s: &Summary, out_dir: &Path) -> String {
             m.sum_squares_error_rad2,
         );
     }
+    if let Some(st) = &s.settle {
+        let list = |v: &[f64]| v.iter().map(|e| format!("{e:.1}")).collect::<Vec<_>>().join(" ");
+        let _ = writeln!(
+            t,
+            "\n  settle, last command held {:.3} s ({} cycles): error at its end {} cnt, largest |e| {} cnt",
+            st.seconds,
+            st.cycles,
+            list(&st.final_error_counts),
+            list(&st.max_abs_error_counts),
+        );
+    }
     let tm = &s.timing;
     let _ = writeln!(t, "\n  timing, µs ({})      p50      p99    p99.9      max", tm.method);
     let row = |t: &mut String, name: &str, p: &Pct| {

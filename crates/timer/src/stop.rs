@@ -43,6 +43,29 @@ pub fn requested() -> bool {
     STOP.load(Ordering::Relaxed)
 }
 
+/// True when a stop signal has arrived or is pending (sent, its handler not run yet). Under
+/// load the handler can run milliseconds after the signal was sent; a loop that learns of a
+/// stop from elsewhere (the hwserver shutting down on the same signal) asks here whether it
+/// is its own. A system call: not for the fast path.
+pub fn arrived_or_pending() -> bool {
+    if requested() {
+        return true;
+    }
+    // SAFETY: sigpending(2) fills the set it is given; nix has no wrapper for it.
+    let pending = unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        if libc::sigpending(&mut set) != 0 {
+            return false;
+        }
+        set
+    };
+    // SAFETY: sigismember on an initialised set.
+    [libc::SIGTERM, libc::SIGINT, libc::SIGHUP]
+        .into_iter()
+        .any(|sig| unsafe { libc::sigismember(&pending, sig) } == 1)
+}
+
 /// The signal that asked to stop, if any.
 pub fn signal() -> Option<i32> {
     match SIGNAL.load(Ordering::Relaxed) {

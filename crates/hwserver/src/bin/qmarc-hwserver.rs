@@ -32,6 +32,7 @@ fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
         watchdog_ns: u64::from(args.watchdog_periods) * args.period_ns(),
         spin: args.spin,
         shutdown_grace_ns: 1_000_000_000,
+        lockstep: args.deterministic,
     };
     let location = args.location().map_err(anyhow::Error::msg)?;
     let end = serve(&mut core, &location, &opts, stop);
@@ -48,13 +49,20 @@ fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
             eprintln!("qmarc-hwserver: stopped by signal {sig}: all motors disabled");
             ExitCode::SUCCESS
         }
-        ServeEnd::Watchdog { silent_ns } => {
+        ServeEnd::Watchdog { silent_ns, controller_alive } => {
             eprintln!(
-                "qmarc-hwserver: watchdog: controller silent for {:.3} ms (limit {} periods of {} µs) \
-                 with motors enabled: all DACs zeroed, all motors disabled",
+                "qmarc-hwserver: watchdog: controller silent for {:.3} ms (limit {} periods of {} µs; \
+                 its process {}) with motors enabled: all DACs zeroed, all motors disabled{}",
                 silent_ns as f64 / 1e6,
                 args.watchdog_periods,
-                args.period_us
+                args.period_us,
+                if controller_alive { "still runs" } else { "is gone" },
+                if controller_alive {
+                    " (without PREEMPT_RT, host stalls of a few ms can do that: raise \
+                     hwserver.watchdog_periods)"
+                } else {
+                    ""
+                },
             );
             ExitCode::from(3)
         }
