@@ -150,7 +150,7 @@ fn gathering_only_the_chosen_fields_keeps_the_full_error_figures() {
     // An unknown field is refused with file, line and field before anything starts.
     let bad = run.config_with(&[("fields", r#"["cmd", "torque"]"#)]);
     let r = run.starter(&[&format!("--config={}", bad.display()), "step"], TIMEOUT);
-    assert_eq!(r.code, Some(1));
+    assert_eq!(r.code, Some(3));
     let line = std::fs::read_to_string(&bad)
         .unwrap()
         .lines()
@@ -170,7 +170,7 @@ fn bad_settings_are_refused_before_anything_starts() {
     let good = std::fs::read_to_string(default_config()).unwrap();
     std::fs::write(&cfg, good.replacen("kvff = 103500.0", "kvff = \"fast\"", 1)).unwrap();
     let r = run.starter(&[&format!("--config={}", cfg.display()), "step"], TIMEOUT);
-    assert_eq!(r.code, Some(1));
+    assert_eq!(r.code, Some(3));
     let line = good.lines().position(|l| l == "kvff = 103500.0").unwrap() + 1;
     let expected = format!(
         "{}:{line}:8: motor[2].kvff: invalid type: string \"fast\", expected f64",
@@ -180,7 +180,7 @@ fn bad_settings_are_refused_before_anything_starts() {
     assert!(run.location().files().is_empty(), "no iceoryx2 file was ever created");
     // A bad flag is refused the same way.
     let r = run.starter(&[&config_arg(), "--period-us=20", "step"], TIMEOUT);
-    assert_eq!(r.code, Some(1));
+    assert_eq!(r.code, Some(3));
     assert!(
         r.stderr.contains("--period-us: servo period must be 100‥100000 µs, found 20"),
         "{}",
@@ -222,7 +222,7 @@ fn global_options_work_after_the_subcommand_issue_9() {
     assert_eq!(read_summary(&b).motors[0].max_error_counts, 300.0);
     // An unknown backend is refused naming the ones there are.
     let r = run.starter(&["step", &config_arg(), "--backend=s7"], TIMEOUT);
-    assert_eq!(r.code, Some(1));
+    assert_eq!(r.code, Some(3));
     assert!(r.stderr.contains("--backend: unknown backend `s7`; available: sim"), "{}", r.stderr);
     run.assert_clean();
 }
@@ -234,7 +234,7 @@ fn without_realtime_privileges_the_run_is_degraded_and_says_so() {
     let run = TestRun::new("degraded");
     let out = run.out("out");
     let bin = run.out("bin");
-    for d in [&run.dir, &out, &bin] {
+    for d in [&run.dir, &out, &bin, &run.out("iox")] {
         std::fs::create_dir_all(d).unwrap();
         std::fs::set_permissions(d, std::fs::Permissions::from_mode(0o777)).unwrap();
     }

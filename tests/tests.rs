@@ -3,6 +3,7 @@
 
 mod console;
 mod e2e;
+mod first_hour;
 mod safety;
 mod tidy;
 mod trajectories;

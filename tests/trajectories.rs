@@ -252,7 +252,7 @@ fn a_bad_knot_file_is_refused_before_anything_starts() {
     let bad = run.dir.join("bad.txt");
     std::fs::write(&bad, "3\n0.0 0 0 0\n0.25 100 100\n0.5 0 0 0\n").unwrap();
     let r = run.starter(&[&config_arg(), "run", &format!("--knots={}", bad.display())], TIMEOUT);
-    assert_eq!(r.code, Some(1));
+    assert_eq!(r.code, Some(3));
     let expected =
         format!("{}:3:13: expected 4 columns (time and 3 motor positions), found 3", bad.display());
     assert!(r.stderr.contains(&expected), "{}\nexpected: {expected}", r.stderr);
@@ -260,7 +260,7 @@ fn a_bad_knot_file_is_refused_before_anything_starts() {
     // A path that does not start where the robot is, likewise.
     std::fs::write(&bad, "2\n0.0 500 0 0\n0.5 0 0 0\n").unwrap();
     let r = run.starter(&[&config_arg(), "run", &format!("--knots={}", bad.display())], TIMEOUT);
-    assert_eq!(r.code, Some(1));
+    assert_eq!(r.code, Some(3));
     assert!(
         r.stderr.contains("motor 1 is at 0 counts but the path starts at 500 counts, more than the 100-count start tolerance away"),
         "{}",

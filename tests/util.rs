@@ -86,7 +86,7 @@ impl TestRun {
         let prefix = format!("qt{pid}_{n}_{nanos:x}_");
         let dir = std::env::temp_dir().join(format!("qmt-{pid}-{n}-{short}"));
         let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("scratch dir");
+        std::fs::create_dir_all(dir.join("iox")).expect("scratch dir");
         TestRun { prefix, dir }
     }
 
@@ -124,10 +124,13 @@ impl TestRun {
     /// A copy of the test settings in this run's directory with `edits` applied: each
     /// `(key, value)` replaces the value of every line `key = …` (every `[[motor]]` table's,
     /// for per-motor keys). A `section.key` that is not in the file is added to its
-    /// `[section]`. Panics if a plain key is not in the file.
+    /// `[section]`. Panics if a plain key is not in the file. The simulated robot keeps its
+    /// homed frame in the run's own folder (`sim.state_file`), so runs never share it.
     pub fn config_with(&self, edits: &[(&str, &str)]) -> PathBuf {
         let mut text = std::fs::read_to_string(default_config()).expect("test settings");
-        for (key, value) in edits {
+        let state = format!("{:?}", self.dir.join("sim.state").display().to_string());
+        let own_state = [("state_file", state.as_str())];
+        for (key, value) in own_state.iter().chain(edits) {
             let (section, key) = match key.split_once('.') {
                 Some((section, key)) => (Some(section), key),
                 None => (None, *key),

@@ -164,11 +164,12 @@ fn main() -> ExitCode {
     let raw: Vec<OsString> = std::env::args_os().skip(1).collect();
     if let Some((starter, pass)) = plain_subcommand(&raw) {
         let starter = starter.unwrap_or_else(starter_next_to_me);
-        let err = std::process::Command::new(&starter).args(&pass).exec();
+        // Named `qmarc` for the starter's usage lines (`qmarc step --help`).
+        let err = std::process::Command::new(&starter).arg0("qmarc").args(&pass).exec();
         let _ = writeln!(std::io::stderr(), "qmarc: cannot run {}: {err}", starter.display());
         return ExitCode::from(1);
     }
-    let args = Args::parse();
+    let args: Args = qmarc_controller::cli::parse_or_exit();
     match run_console(&args) {
         // Written without panicking: the terminal may be gone.
         Ok(Some(Quit::Saved)) => {
@@ -182,7 +183,7 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             let _ = writeln!(std::io::stderr(), "qmarc: error: {e:#}");
-            ExitCode::from(1)
+            ExitCode::from(qmarc_proto::exit::INTERNAL)
         }
     }
 }

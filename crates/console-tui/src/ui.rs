@@ -594,7 +594,7 @@ mod tests {
     }
 
     fn result(fault: bool) -> MoveResult {
-        let mut summary = Summary::controller_lost("step", 400, String::new());
+        let mut summary = Summary::controller_lost("step", 3, 400, 0, String::new());
         summary.fault = fault.then(|| FaultReport {
             kind: "limit_switch".into(),
             motor: Some(1),

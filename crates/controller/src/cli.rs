@@ -6,6 +6,21 @@ use crate::config::{ConfigLoadError, Settings};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
+/// Parses the command line of a QMARC program. A wrong command line prints clap's message and
+/// exits with [`qmarc_proto::exit::USAGE`] (clap's own code, 2, would read as "fault"); `--help`
+/// and `--version` print and exit 0.
+pub fn parse_or_exit<T: clap::Parser>() -> T {
+    match T::try_parse() {
+        Ok(t) => t,
+        Err(e) => {
+            let code =
+                if e.use_stderr() { qmarc_proto::exit::USAGE } else { qmarc_proto::exit::OK };
+            let _ = e.print();
+            std::process::exit(i32::from(code));
+        }
+    }
+}
+
 /// Options of every move; flags override the settings file for this run. They are global:
 /// they go before or after the subcommand (`qmarc-starter --out x step` or
 /// `qmarc-starter step --out x`).

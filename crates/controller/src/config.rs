@@ -18,13 +18,22 @@ use toml::Spanned;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ConfigLoadError {
-    /// The file could not be read.
-    #[error("{file}: cannot read the settings file: {source}")]
+    /// The file could not be read. (The OS error is part of the message, not a source: each
+    /// error is printed on one line, its reason once.)
+    #[error("{file}: cannot read the settings file: {reason}")]
     Read {
         /// The file.
         file: PathBuf,
         /// Why.
-        source: std::io::Error,
+        reason: std::io::Error,
+    },
+    /// The file is larger than a settings file may be.
+    #[error("{file}: the file has more than {limit} bytes, the most a settings file may have")]
+    TooLarge {
+        /// The file.
+        file: PathBuf,
+        /// [`MAX_CONFIG_BYTES`].
+        limit: u64,
     },
     /// A value is missing, unknown, of the wrong type or out of range.
     #[error("{file}:{line}:{column}: {field}: {message}")]
@@ -197,6 +206,9 @@ pub struct StepSettings {
 /// The `run` move (thesis 3.12, A.2.3).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrajectorySettings {
+    /// Longest move, s: a knot file's path, a stream's, a step (it bounds every count and
+    /// allocation that follows from a time).
+    pub max_duration_s: f64,
     /// Registered generator that reads knots (`spline`, `pvt`).
     pub method: String,
     /// Knot file; `-` is standard input. `None` until given.
@@ -253,6 +265,8 @@ pub struct SimSettings {
     pub stuck_top_motor: Option<usize>,
     /// Where the simulator writes its event log when it ends.
     pub events_file: Option<PathBuf>,
+    /// Where the simulator keeps its homed frame between runs; `None`: nowhere.
+    pub state_file: Option<PathBuf>,
 }
 
 /// The checked settings.
@@ -307,6 +321,11 @@ pub struct ExplicitTiming {
 }
 
 impl Settings {
+    /// The rules knot files are checked by: the motors driven, the longest path.
+    pub fn knot_rules(&self) -> crate::knots::KnotRules {
+        crate::knots::KnotRules::new(self.n_motors).max_duration_s(self.trajectory.max_duration_s)
+    }
+
     /// The servo period in ns.
     pub fn period_ns(&self) -> u64 {
         u64::from(self.period_us) * 1_000
@@ -338,15 +357,14 @@ impl Settings {
         self.counts_per_rev * self.gear_ratio / std::f64::consts::TAU
     }
 
-    /// Reads and checks `path`.
+    /// Reads (at most [`MAX_CONFIG_BYTES`]) and checks `path`.
     pub fn load(path: &Path) -> Result<Settings, ConfigLoadError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ConfigLoadError::Read { file: path.to_path_buf(), source })?;
-        Settings::parse(path, &text)
+        Settings::parse(path, &read_config(path)?)
     }
 
-    /// Checks `text`, which came from `path`.
+    /// Checks `text`, which came from `path` (a leading byte-order mark is dropped).
     pub fn parse(path: &Path, text: &str) -> Result<Settings, ConfigLoadError> {
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let src = Source { path, text };
         let raw: RawFile = toml::from_str(text).map_err(|e| src.toml_error(&e))?;
         raw.check(&src)
@@ -433,15 +451,37 @@ impl Settings {
 
     /// Overrides the step duration (`--duration`).
     pub fn set_step_duration(&mut self, duration_s: f64) -> Result<(), ConfigLoadError> {
-        check_duration(duration_s)
+        check_duration(duration_s, self.trajectory.max_duration_s)
             .map_err(|message| ConfigLoadError::Override { flag: "--duration", message })?;
         self.step.duration_s = duration_s;
         Ok(())
     }
 }
 
-/// Longest move, s: bounds the memory of the command queue and the gather buffer.
-pub const MAX_MOVE_S: f64 = 3600.0;
+/// Where the simulated robot keeps its homed frame between runs by default: on the tmpfs
+/// `/dev/shm`, which a reboot clears.
+pub const DEFAULT_SIM_STATE_FILE: &str = "/dev/shm/qmarc-sim.state";
+
+/// Largest settings file, bytes.
+pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
+/// Reads the settings file `path`, refusing more than [`MAX_CONFIG_BYTES`] (`/dev/zero`
+/// included) and text that is not UTF-8.
+pub fn read_config(path: &Path) -> Result<String, ConfigLoadError> {
+    use std::io::Read;
+    let file = || path.to_path_buf();
+    let mut raw = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(MAX_CONFIG_BYTES + 1).read_to_end(&mut raw))
+        .map_err(|reason| ConfigLoadError::Read { file: file(), reason })?;
+    if raw.len() as u64 > MAX_CONFIG_BYTES {
+        return Err(ConfigLoadError::TooLarge { file: file(), limit: MAX_CONFIG_BYTES });
+    }
+    String::from_utf8(raw).map_err(|e| ConfigLoadError::Read {
+        file: file(),
+        reason: std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error()),
+    })
+}
 /// Largest step, counts.
 pub const MAX_STEP_COUNTS: i64 = 1 << 23;
 
@@ -509,11 +549,11 @@ fn check_step_size(size: i64) -> Result<(), String> {
     }
 }
 
-fn check_duration(s: f64) -> Result<(), String> {
-    if s.is_finite() && s > 0.0 && s <= MAX_MOVE_S {
+fn check_duration(s: f64, max: f64) -> Result<(), String> {
+    if s.is_finite() && s > 0.0 && s <= max {
         Ok(())
     } else {
-        Err(format!("duration must be > 0 and ≤ {MAX_MOVE_S} s, found {s}"))
+        Err(format!("duration must be > 0 and ≤ {max} s (trajectory.max_duration_s), found {s}"))
     }
 }
 
@@ -677,6 +717,7 @@ struct RawTrajectory {
     stream_wait_s: S<f64>,
     starve_hold_ms: S<f64>,
     settle_s: S<f64>,
+    max_duration_s: S<f64>,
 }
 
 #[derive(Deserialize, Default)]
@@ -719,6 +760,7 @@ struct RawSim {
     stall_motor: S<i64>,
     stuck_top_motor: S<i64>,
     events_file: S<String>,
+    state_file: S<String>,
 }
 
 #[derive(Deserialize)]
@@ -867,12 +909,27 @@ impl RawFile {
         let fields =
             GatherFields::from_names(field_names.iter().map(String::as_str)).unwrap_or_default();
 
-        let size = take(src, &self.step.size, "step.size", 1000, |v| check_step_size(*v))?;
-        let duration_s =
-            take(src, &self.step.duration_s, "step.duration_s", 2.0, |v| check_duration(*v))?;
-
         let tr = &self.trajectory;
+        let max_duration_s = take(
+            src,
+            &tr.max_duration_s,
+            "trajectory.max_duration_s",
+            crate::knots::DEFAULT_MAX_DURATION_S,
+            |v| {
+                if v.is_finite() && *v > 0.0 && *v <= 1e7 {
+                    Ok(())
+                } else {
+                    Err(format!("must be > 0 and ≤ 10000000 s, found {v}"))
+                }
+            },
+        )?;
+        let size = take(src, &self.step.size, "step.size", 1000, |v| check_step_size(*v))?;
+        let duration_s = take(src, &self.step.duration_s, "step.duration_s", 2.0, |v| {
+            check_duration(*v, max_duration_s)
+        })?;
+
         let trajectory = TrajectorySettings {
+            max_duration_s,
             method: take(src, &tr.method, "trajectory.method", "spline".to_string(), |v| {
                 check_method(v)
             })?,
@@ -995,6 +1052,14 @@ impl RawFile {
             )?),
             events_file: take(src, &s.events_file, "sim.events_file", String::new(), |_| Ok(()))
                 .map(|f| (!f.is_empty()).then(|| PathBuf::from(f)))?,
+            state_file: take(
+                src,
+                &s.state_file,
+                "sim.state_file",
+                DEFAULT_SIM_STATE_FILE.to_string(),
+                |_| Ok(()),
+            )
+            .map(|f| (!f.is_empty()).then(|| PathBuf::from(f)))?,
         };
         if sim.top_switch_counts == sim.bottom_switch_counts {
             let span = s.bottom_switch_counts.as_ref().map_or(0..0, Spanned::span);
@@ -1267,7 +1332,7 @@ mod tests {
         );
         check(
             "[step]\nduration_s = nan\n",
-            "q.toml:2:14: step.duration_s: duration must be > 0 and ≤ 3600 s, found NaN",
+            "q.toml:2:14: step.duration_s: duration must be > 0 and ≤ 86400 s (trajectory.max_duration_s), found NaN",
         );
         check(
             "[timer]\nservo_priority = 90\nhwserver_priority = 80\n",
@@ -1288,7 +1353,7 @@ mod tests {
         );
         assert_eq!(
             s.set_step_duration(-1.0).unwrap_err().to_string(),
-            "--duration: duration must be > 0 and ≤ 3600 s, found -1"
+            "--duration: duration must be > 0 and ≤ 86400 s (trajectory.max_duration_s), found -1"
         );
         s.set_period_us(1000).unwrap();
         s.set_step_size(-500).unwrap();

@@ -5,6 +5,15 @@ use crate::config::GatherFields;
 use qmarc_proto::MAX_MOTORS;
 use std::io::{self, Write};
 
+/// Every 4096 rows: an `Interrupted` error once a stop signal has arrived, so that Ctrl-C
+/// ends the writing of a long move's data within a moment.
+fn stop_check(row: usize) -> io::Result<()> {
+    if row.is_multiple_of(4096) && qmarc_timer::stop::requested() {
+        return Err(io::Error::new(io::ErrorKind::Interrupted, "a stop signal arrived"));
+    }
+    Ok(())
+}
+
 /// One gathered servo cycle.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct GatherRow {
@@ -57,6 +66,8 @@ pub fn check_budget(samples: u64, every: u32) -> Result<(), GatherBudgetError> {
 pub struct Gather {
     rows: Vec<GatherRow>,
     every: u32,
+    /// The sample index the next row is due at: the next multiple of `every`.
+    next_due: u64,
     n_motors: usize,
     dropped: u64,
     fields: GatherFields,
@@ -70,6 +81,7 @@ impl Gather {
         Gather {
             rows: Vec::with_capacity(rows),
             every,
+            next_due: 0,
             n_motors: n_motors.min(MAX_MOTORS),
             dropped: 0,
             fields: GatherFields::default(),
@@ -92,15 +104,21 @@ impl Gather {
         self.n_motors
     }
 
-    /// True if the `k`-th executed cycle (0-based) is gathered.
+    /// True if the cycle of sample `n` is gathered: the first cycle at or after each multiple
+    /// of `every`. Rows stay on the sample grid when periods are missed (a stall that skips
+    /// a multiple gathers the first sample after it, and the row says which sample it is);
+    /// counting executed cycles instead would drift off it.
     #[inline]
-    pub fn due(&self, k: u64) -> bool {
-        k.is_multiple_of(u64::from(self.every))
+    pub fn due(&self, n: u64) -> bool {
+        n >= self.next_due
     }
 
-    /// Stores a row if there is room (never allocates); counts it as dropped otherwise.
+    /// Stores a row if there is room (never allocates); counts it as dropped otherwise. The
+    /// next row is due at the next multiple of `every` after this row's sample.
     #[inline]
     pub fn push(&mut self, row: GatherRow) {
+        let every = u64::from(self.every);
+        self.next_due = (row.cycle / every).saturating_add(1).saturating_mul(every);
         if self.rows.len() < self.rows.capacity() {
             self.rows.push(row);
         } else {
@@ -135,7 +153,7 @@ impl Gather {
         c
     }
 
-    fn write_row(&self, w: &mut impl Write, r: &GatherRow, sep: &str) -> io::Result<()> {
+    fn write_row(&self, w: &mut (impl Write + ?Sized), r: &GatherRow, sep: &str) -> io::Result<()> {
         // `{}` on f64 is the shortest text that parses back to the same value, so figures
         // recomputed from the file equal the ones computed in the loop.
         let f = self.fields;
@@ -158,9 +176,10 @@ impl Gather {
     }
 
     /// Writes `gather.csv`: a header line, then one line per row.
-    pub fn write_csv(&self, w: &mut impl Write) -> io::Result<()> {
+    pub fn write_csv(&self, w: &mut (impl Write + ?Sized)) -> io::Result<()> {
         writeln!(w, "{}", self.columns().join(","))?;
-        for r in &self.rows {
+        for (i, r) in self.rows.iter().enumerate() {
+            stop_check(i)?;
             self.write_row(w, r, ",")?;
         }
         Ok(())
@@ -168,7 +187,7 @@ impl Gather {
 
     /// Writes `gather.m`: the same data as an Octave/Matlab script defining `qmarc_data`,
     /// `qmarc_columns` and one column vector per column name.
-    pub fn write_octave(&self, w: &mut impl Write) -> io::Result<()> {
+    pub fn write_octave(&self, w: &mut (impl Write + ?Sized)) -> io::Result<()> {
         let cols = self.columns();
         writeln!(w, "% QMARC gathered data, written by qmarc-controller after the move.")?;
         writeln!(w, "% One row per gathered servo cycle (every {} cycles).", self.every)?;
@@ -179,7 +198,8 @@ impl Gather {
         let quoted: Vec<String> = cols.iter().map(|c| format!("'{c}'")).collect();
         writeln!(w, "qmarc_columns = {{{}}};", quoted.join(", "))?;
         writeln!(w, "qmarc_data = [")?;
-        for r in &self.rows {
+        for (i, r) in self.rows.iter().enumerate() {
+            stop_check(i)?;
             self.write_row(w, r, " ")?;
         }
         writeln!(w, "];")?;
@@ -207,7 +227,6 @@ mod tests {
     #[test]
     fn capacity_is_the_gathered_share_of_the_move() {
         let mut g = Gather::for_move(10, 4, 2);
-        assert_eq!((0..10).filter(|&k| g.due(k)).count(), 3);
         for k in 0..10 {
             if g.due(k) {
                 g.push(row(k));
@@ -216,6 +235,23 @@ mod tests {
         assert_eq!((g.rows().len(), g.dropped()), (3, 0));
         g.push(row(99));
         assert_eq!((g.rows().len(), g.dropped()), (3, 1), "full: dropped, not grown");
+    }
+
+    /// Issue 10, item 13: with `--gather-every N`, rows follow the sample index, not the
+    /// executed cycles: after missed periods they stay on the multiples of N (or the first
+    /// sample after one the stall skipped), never N executed cycles after the last row.
+    #[test]
+    fn rows_stay_on_the_sample_grid_after_missed_periods_issue_10() {
+        let mut g = Gather::for_move(40, 4, 1);
+        // Executed samples: 0‥5, a stall skips 6‥8, then 9‥13, a stall skips 14‥17, 18‥23.
+        let executed = (0..6).chain(9..14).chain(18..24);
+        for n in executed {
+            if g.due(n) {
+                g.push(row(n));
+            }
+        }
+        let cycles: Vec<u64> = g.rows().iter().map(|r| r.cycle).collect();
+        assert_eq!(cycles, [0, 4, 9, 12, 18, 20]);
     }
 
     #[test]

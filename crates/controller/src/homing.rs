@@ -39,6 +39,21 @@ pub struct MotorHomeReport {
     pub home: bool,
 }
 
+/// The words for a homing progress number ([`TrajectoryGenerator::progress`]):
+/// `homing motor 2: backing off the top switch`; `None` for 0.
+pub fn describe_progress(detail: u32) -> Option<String> {
+    let motor = detail >> 8;
+    let what = match detail & 0xff {
+        1 => "leaving the top switch it started on",
+        2 => "approaching the top switch",
+        3 => "backing off the top switch",
+        4 => "moving to home",
+        5 => "settling at home",
+        _ => return None,
+    };
+    (motor > 0).then(|| format!("homing motor {motor}: {what}"))
+}
+
 /// Why homing failed (numbers only: it is decided in the loop).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum HomingFailure {
@@ -69,6 +84,7 @@ pub enum HomingFailure {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
 enum Phase {
     /// Started on the top switch: move away until it clears, then approach it again, so that
     /// the trip is at the switch's edge.
@@ -339,6 +355,15 @@ impl TrajectoryGenerator for Homing {
 
     fn failure_kind(&self) -> FaultKind {
         FaultKind::HomingFailed
+    }
+
+    /// `(motor + 1) << 8 | phase + 1` while homing, 0 before and after.
+    #[inline]
+    fn progress(&self) -> u32 {
+        if self.phase == Phase::Done || !self.observed {
+            return 0;
+        }
+        ((self.motor as u32 + 1) << 8) | (self.phase as u32 + 1)
     }
 
     fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {

@@ -20,16 +20,25 @@
 //! X   309  16000 35.00000    Y   309  16000 35.00000
 //! ```
 //!
-//! Columns are separated by tabs or spaces; blank lines are skipped; `\r\n` line ends (Excel's
-//! "Text (tab delimited)") are accepted.
+//! Columns are separated by tabs or spaces; blank lines and lines whose first non-blank
+//! character is `#` (comments) are skipped anywhere; `\r\n` line ends (Excel's "Text (tab
+//! delimited)") and a UTF-8 byte-order mark are accepted. Everything else is strict. Every
+//! number that becomes a duration is bounded: a path may last at most
+//! `trajectory.max_duration_s` ([`KnotRules`]), and a line may have at most
+//! [`MAX_LINE_BYTES`] bytes (a stream of bytes without line ends, `/dev/zero`, is refused).
 
 use qmarc_proto::MAX_MOTORS;
+use std::io::BufRead;
 use std::path::Path;
 
 /// Most knots a file may hold: bounds the memory of the knots and the spline's coefficients.
 pub const MAX_KNOTS: usize = 1 << 20;
 /// Largest knot file read into memory, bytes.
 pub const MAX_KNOT_FILE_BYTES: u64 = 64 << 20;
+/// Longest line of a knot file or stream, bytes (a knot of four motors needs about 200).
+pub const MAX_LINE_BYTES: usize = 4096;
+/// Default longest path, s (`trajectory.max_duration_s`): 24 h.
+pub const DEFAULT_MAX_DURATION_S: f64 = 86_400.0;
 /// Largest position magnitude, counts: the range of the thesis' 32-bit software counter
 /// (3.10.2), far beyond any physical path (2³¹ counts ≈ 43 700 motor revolutions).
 pub const MAX_POSITION_COUNTS: i64 = i32::MAX as i64;
@@ -70,6 +79,27 @@ pub enum KnotFileError {
     },
 }
 
+/// What the parsers check a file against besides its format.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KnotRules {
+    /// Motors: position columns per knot.
+    pub n_motors: usize,
+    /// Longest path from the first knot, s (`trajectory.max_duration_s`).
+    pub max_duration_s: f64,
+}
+
+impl KnotRules {
+    /// The rules for `n_motors` with the default longest path.
+    pub fn new(n_motors: usize) -> KnotRules {
+        KnotRules { n_motors, max_duration_s: DEFAULT_MAX_DURATION_S }
+    }
+
+    /// The same rules with the longest path `max_duration_s`.
+    pub fn max_duration_s(self, max_duration_s: f64) -> KnotRules {
+        KnotRules { max_duration_s, ..self }
+    }
+}
+
 /// The knots of an offline path: time (s) and position (counts) per motor.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct OfflineKnots {
@@ -105,8 +135,12 @@ pub fn read_knot_file(path: &Path) -> Result<String, KnotFileError> {
     text_of(&file, raw)
 }
 
-/// The text of `raw`, or an error naming the line of the first byte that is not UTF-8.
-pub fn text_of(file: &str, raw: Vec<u8>) -> Result<String, KnotFileError> {
+/// The text of `raw` (a leading UTF-8 byte-order mark dropped), or an error naming the line
+/// of the first byte that is not UTF-8.
+pub fn text_of(file: &str, mut raw: Vec<u8>) -> Result<String, KnotFileError> {
+    if raw.starts_with(&[0xEF, 0xBB, 0xBF]) {
+        raw.drain(..3);
+    }
     String::from_utf8(raw).map_err(|e| {
         let at = e.utf8_error().valid_up_to();
         let bytes = e.as_bytes();
@@ -217,20 +251,77 @@ impl At<'_> {
     }
 }
 
-/// Numbered non-blank lines of `text`.
-fn content_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
-    text.lines().enumerate().map(|(i, l)| (i + 1, l)).filter(|(_, l)| !l.trim().is_empty())
+/// `x` as a person reads it: plain up to 10⁷, in exponent notation beyond (`1e20`).
+fn num(x: f64) -> String {
+    if x.abs() >= 1e7 { format!("{x:e}") } else { format!("{x}") }
 }
 
-/// Parses an offline knot file for `n_motors` motors.
+/// True for a line without a knot: blank, or a `#` comment.
+fn is_blank_or_comment(line: &str) -> bool {
+    let t = line.trim_start();
+    t.is_empty() || t.starts_with('#')
+}
+
+/// The error for a line longer than [`MAX_LINE_BYTES`].
+fn line_too_long(file: &str, line: usize) -> KnotFileError {
+    KnotFileError::Invalid {
+        file: file.to_string(),
+        line,
+        column: 1,
+        message: format!(
+            "the line has more than {MAX_LINE_BYTES} bytes, the most a knot line may have"
+        ),
+    }
+}
+
+/// Numbered lines of `text` that hold knots (or the offline header); an error for a line
+/// longer than [`MAX_LINE_BYTES`].
+fn content_lines<'a>(
+    file: &'a str,
+    text: &'a str,
+) -> impl Iterator<Item = Result<(usize, &'a str), KnotFileError>> + 'a {
+    text.lines().enumerate().map(|(i, l)| (i + 1, l)).filter(|(_, l)| !is_blank_or_comment(l)).map(
+        move |(n, l)| {
+            if l.len() > MAX_LINE_BYTES { Err(line_too_long(file, n)) } else { Ok((n, l)) }
+        },
+    )
+}
+
+/// Reads one line of a stream into `buf` (its end and a `\r` before it dropped), reading no
+/// more than [`MAX_LINE_BYTES`] + 2 bytes of it: `Ok(false)` at the end of the stream, an
+/// error (`InvalidData`, with the line's length) for a longer line.
+pub fn read_line_bounded(
+    reader: &mut dyn std::io::BufRead,
+    buf: &mut Vec<u8>,
+) -> std::io::Result<bool> {
+    buf.clear();
+    let limit = (MAX_LINE_BYTES + 2) as u64;
+    let n = std::io::Read::take(&mut *reader, limit).read_until(b'\n', buf)?;
+    if n == 0 {
+        return Ok(false);
+    }
+    if buf.last() == Some(&b'\n') {
+        buf.pop();
+    } else if n as u64 == limit {
+        return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, "line too long"));
+    }
+    if buf.last() == Some(&b'\r') {
+        buf.pop();
+    }
+    Ok(true)
+}
+
+/// Parses an offline knot file by `rules`.
 pub fn parse_offline(
     file: &str,
     text: &str,
-    n_motors: usize,
+    rules: &KnotRules,
 ) -> Result<OfflineKnots, KnotFileError> {
+    let n_motors = rules.n_motors;
     let at = At { file };
-    let mut lines = content_lines(text);
-    let Some((hline, header)) = lines.next() else {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut lines = content_lines(file, text);
+    let Some((hline, header)) = lines.next().transpose()? else {
         return Err(at.err(
             1,
             1,
@@ -278,7 +369,8 @@ pub fn parse_offline(
     };
     let mut prev: Option<(f64, usize)> = None;
     let mut last_line = hline;
-    for (lno, line) in lines {
+    for next in lines {
+        let (lno, line) = next?;
         last_line = lno;
         if knots.times.len() == declared {
             return Err(at.err(
@@ -309,6 +401,21 @@ pub fn parse_offline(
                 ));
             }
         }
+        if let Some(&t0) = knots.times.first()
+            && t - t0 > rules.max_duration_s
+        {
+            return Err(at.err(
+                lno,
+                toks[0].column,
+                format!(
+                    "time {} s is {} s after the first knot: longer than the longest path, \
+                     trajectory.max_duration_s = {} s",
+                    num(t),
+                    num(t - t0),
+                    rules.max_duration_s
+                ),
+            ));
+        }
         prev = Some((t, lno));
         let mut p = [0.0; MAX_MOTORS];
         for (m, tok) in toks[1..].iter().enumerate() {
@@ -332,15 +439,24 @@ pub fn parse_offline(
 #[derive(Debug, Clone)]
 pub struct PvtLineParser {
     file: String,
-    n_motors: usize,
+    rules: KnotRules,
     line: usize,
     knots: usize,
+    /// Time of the next knot from the first one, s.
+    elapsed_s: f64,
 }
 
 impl PvtLineParser {
-    /// A parser for `n_motors` motors; errors name `file`.
-    pub fn new(file: &str, n_motors: usize) -> PvtLineParser {
-        PvtLineParser { file: file.to_string(), n_motors, line: 0, knots: 0 }
+    /// A parser by `rules`; errors name `file`.
+    pub fn new(file: &str, rules: &KnotRules) -> PvtLineParser {
+        PvtLineParser { file: file.to_string(), rules: *rules, line: 0, knots: 0, elapsed_s: 0.0 }
+    }
+
+    /// Counts a line that could not be read because it was longer than [`MAX_LINE_BYTES`]
+    /// and returns its error.
+    pub fn too_long(&mut self) -> KnotFileError {
+        self.line += 1;
+        line_too_long(&self.file, self.line)
     }
 
     /// Knots parsed so far.
@@ -353,13 +469,17 @@ impl PvtLineParser {
         self.line
     }
 
-    /// Parses the next line: `None` for a blank line.
+    /// Parses the next line: `None` for a blank line or a comment.
     pub fn parse_line(&mut self, line: &str) -> Result<Option<PvtKnot>, KnotFileError> {
         self.line += 1;
         let lno = self.line;
         let line = line.strip_suffix('\r').unwrap_or(line);
-        if line.trim().is_empty() {
+        let line = if lno == 1 { line.strip_prefix('\u{feff}').unwrap_or(line) } else { line };
+        if is_blank_or_comment(line) {
             return Ok(None);
+        }
+        if line.len() > MAX_LINE_BYTES {
+            return Err(line_too_long(&self.file, lno));
         }
         let at = At { file: &self.file };
         if self.knots >= MAX_KNOTS {
@@ -370,7 +490,7 @@ impl PvtLineParser {
             ));
         }
         let toks = tokens(line);
-        let n = self.n_motors;
+        let n = self.rules.n_motors;
         let what = format!(
             "label, position, velocity and time for each of {n} motor{}",
             if n == 1 { "" } else { "s" }
@@ -415,6 +535,19 @@ impl PvtLineParser {
             }
         }
         k.dt_s = first_dt.map_or(0.0, |(ms, _)| ms) / 1000.0;
+        let max = self.rules.max_duration_s;
+        if self.elapsed_s + k.dt_s > max {
+            return Err(at.err(
+                lno,
+                toks[3].column,
+                format!(
+                    "this knot's segment ends {} s after the first knot: longer than the longest \
+                     path, trajectory.max_duration_s = {max} s",
+                    num(self.elapsed_s + k.dt_s)
+                ),
+            ));
+        }
+        self.elapsed_s += k.dt_s;
         self.knots += 1;
         Ok(Some(k))
     }
@@ -436,9 +569,9 @@ impl PvtLineParser {
 /// Fewest knots of a PVT path (thesis A.2.3.2: three must be known before the move).
 pub const MIN_PVT_KNOTS: usize = 3;
 
-/// Parses a whole PVT file for `n_motors` motors.
-pub fn parse_pvt(file: &str, text: &str, n_motors: usize) -> Result<Vec<PvtKnot>, KnotFileError> {
-    let mut parser = PvtLineParser::new(file, n_motors);
+/// Parses a whole PVT file by `rules`.
+pub fn parse_pvt(file: &str, text: &str, rules: &KnotRules) -> Result<Vec<PvtKnot>, KnotFileError> {
+    let mut parser = PvtLineParser::new(file, rules);
     let mut knots = Vec::new();
     for line in text.lines() {
         if let Some(k) = parser.parse_line(line)? {
@@ -466,7 +599,7 @@ pub mod fuzzing {
     /// increasing finite times and in-range whole positions.
     pub fn offline(data: &[u8]) {
         let Some((n, text)) = motors_and_text(data) else { return };
-        if let Ok(k) = parse_offline("fuzz", &text, n) {
+        if let Ok(k) = parse_offline("fuzz", &text, &KnotRules::new(n)) {
             assert!(k.times.len() >= 2 && k.times.len() == k.positions.len());
             assert!(k.times.windows(2).all(|w| w[0] < w[1] && w[1].is_finite()));
             for p in &k.positions {
@@ -484,7 +617,7 @@ pub mod fuzzing {
     /// finite velocities and in-range whole positions.
     pub fn pvt(data: &[u8]) {
         let Some((n, text)) = motors_and_text(data) else { return };
-        if let Ok(ks) = parse_pvt("fuzz", &text, n) {
+        if let Ok(ks) = parse_pvt("fuzz", &text, &KnotRules::new(n)) {
             assert!(ks.len() >= MIN_PVT_KNOTS);
             for k in &ks {
                 assert!(k.dt_s > 0.0 && k.dt_s.is_finite());
@@ -503,15 +636,19 @@ pub mod fuzzing {
 mod tests {
     use super::*;
 
+    fn two() -> KnotRules {
+        KnotRules::new(2)
+    }
+
     fn offline_err(text: &str, n: usize, expected: &str) {
-        match parse_offline("k.txt", text, n) {
+        match parse_offline("k.txt", text, &KnotRules::new(n)) {
             Ok(k) => panic!("accepted {k:?}"),
             Err(e) => assert_eq!(e.to_string(), expected),
         }
     }
 
     fn pvt_err(text: &str, n: usize, expected: &str) {
-        match parse_pvt("p.txt", text, n) {
+        match parse_pvt("p.txt", text, &KnotRules::new(n)) {
             Ok(k) => panic!("accepted {k:?}"),
             Err(e) => assert_eq!(e.to_string(), expected),
         }
@@ -519,16 +656,19 @@ mod tests {
 
     #[test]
     fn thesis_offline_example_parses() {
-        let k =
-            parse_offline("k.txt", "3\n0.0  0      0\n0.25 2000  -2000\n0.5   3000  -4500\n", 2)
-                .unwrap();
+        let k = parse_offline(
+            "k.txt",
+            "3\n0.0  0      0\n0.25 2000  -2000\n0.5   3000  -4500\n",
+            &two(),
+        )
+        .unwrap();
         assert_eq!(k.times, [0.0, 0.25, 0.5]);
         assert_eq!(k.positions[2][..2], [3000.0, -4500.0]);
         // Tabs, CRLF and trailing blank lines, as Excel writes them.
         let k2 = parse_offline(
             "k.txt",
             "3\r\n0.0\t0\t0\r\n0.25\t2000\t-2000\r\n0.5\t3000\t-4500\r\n\r\n",
-            2,
+            &two(),
         )
         .unwrap();
         assert_eq!(k, k2);
@@ -539,7 +679,7 @@ mod tests {
         let text = "X    0    0    25.00000    Y    0    0    25.00000\n\
                     X   309  16000 35.00000    Y   309  16000 35.00000\n\
                     X   700  0     35.00000    Y   700  0     35.00000\n";
-        let ks = parse_pvt("p.txt", text, 2).unwrap();
+        let ks = parse_pvt("p.txt", text, &two()).unwrap();
         assert_eq!(ks.len(), 3);
         assert_eq!((ks[1].pos[0], ks[1].vel[1], ks[1].dt_s), (309.0, 16000.0, 0.035));
         assert_eq!(ks[0].dt_s, 0.025);
@@ -694,7 +834,7 @@ mod tests {
 
     #[test]
     fn pvt_stream_parser_counts_lines_and_knots() {
-        let mut p = PvtLineParser::new("-", 1);
+        let mut p = PvtLineParser::new("-", &KnotRules::new(1));
         assert_eq!(p.parse_line("").unwrap(), None);
         assert!(p.parse_line("A 5 -10.5 20\r").unwrap().is_some());
         assert_eq!((p.lines(), p.knots()), (2, 1));
@@ -723,5 +863,72 @@ mod tests {
             missing.starts_with("/nonexistent/k.txt: cannot read the knot file: "),
             "{missing}"
         );
+    }
+
+    /// Issue 10, item 1: every number that becomes a duration is bounded; a path longer than
+    /// `trajectory.max_duration_s` is an error naming file, line and column (a time of 1e20
+    /// used to overflow the sample count, one of 1e300 to spin for minutes).
+    #[test]
+    fn paths_longer_than_the_longest_are_refused_issue_10() {
+        offline_err(
+            "2\n0 0\n1e20 5\n",
+            1,
+            "k.txt:3:1: time 1e20 s is 1e20 s after the first knot: longer than the longest path, \
+             trajectory.max_duration_s = 86400 s",
+        );
+        pvt_err(
+            "X 0 0 10\nX 5 0 1e300\nX 9 0 10\n",
+            1,
+            "p.txt:2:7: this knot's segment ends 1e297 s after the first knot: longer than the \
+             longest path, trajectory.max_duration_s = 86400 s",
+        );
+        let short = KnotRules::new(1).max_duration_s(1.0);
+        let e = parse_pvt("p.txt", "X 0 0 600\nX 5 0 600\nX 9 0 10\n", &short).unwrap_err();
+        assert!(e.to_string().starts_with("p.txt:2:7: this knot's segment ends 1.2 s"), "{e}");
+        assert!(parse_offline("k.txt", "2\n0 0\n1 5\n", &short).is_ok(), "1 s is allowed");
+    }
+
+    /// Issue 10, items 2 and 16: comments and blank lines anywhere; a byte-order mark; lines
+    /// and streams are bounded.
+    #[test]
+    fn comments_blank_lines_and_bounded_lines_issue_10() {
+        let k = parse_offline(
+            "k.txt",
+            "\u{feff}# a path\n\n3\n  # times in s\n0 0 0\n\n1 5 5\n# the end\n2 9 9\n",
+            &two(),
+        )
+        .unwrap();
+        assert_eq!(k.times, [0.0, 1.0, 2.0]);
+        let ks = parse_pvt(
+            "p.txt",
+            "\u{feff}X 0 0 10\n# two\nX 5 0 10\n\nX 9 0 10\n",
+            &KnotRules::new(1),
+        )
+        .unwrap();
+        assert_eq!(ks.len(), 3);
+        // Everything else stays strict: a comment after a knot is not a comment.
+        pvt_err(
+            "X 0 0 10 # first\n",
+            1,
+            "p.txt:1:10: expected 4 columns (label, position, velocity and time for each of 1 motor), found 6",
+        );
+        let long = format!("2\n0 0\n1 {}\n", "5".repeat(MAX_LINE_BYTES));
+        offline_err(
+            &long,
+            1,
+            "k.txt:3:1: the line has more than 4096 bytes, the most a knot line may have",
+        );
+        // A stream without line ends stops after the limit instead of filling the memory.
+        let mut zeros = std::io::BufReader::new(std::io::repeat(0));
+        let mut buf = Vec::new();
+        let e = read_line_bounded(&mut zeros, &mut buf).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::InvalidData);
+        assert!(buf.len() <= MAX_LINE_BYTES + 2);
+        let mut two_lines = std::io::Cursor::new(b"ab\r\ncd".to_vec());
+        assert!(read_line_bounded(&mut two_lines, &mut buf).unwrap());
+        assert_eq!(buf, b"ab");
+        assert!(read_line_bounded(&mut two_lines, &mut buf).unwrap());
+        assert_eq!(buf, b"cd");
+        assert!(!read_line_bounded(&mut two_lines, &mut buf).unwrap());
     }
 }

@@ -43,6 +43,8 @@ pub mod homing;
 pub mod knots;
 pub mod law;
 pub mod link;
+pub mod output;
+pub mod progress;
 pub mod pvt;
 pub mod registry;
 pub mod run;

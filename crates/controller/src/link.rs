@@ -18,7 +18,7 @@ use std::time::Duration;
 #[non_exhaustive]
 pub enum LinkError {
     /// No response in time, or the hwserver process is gone.
-    #[error("no response from the hwserver for {waited_ns} ns (server process {})", if *.server_alive { "alive" } else { "gone" })]
+    #[error("no response from the hwserver for {:.1} ms (server process {})", *.waited_ns as f64 / 1e6, if *.server_alive { "alive" } else { "gone" })]
     Lost {
         /// How long the exchange waited.
         waited_ns: u64,
@@ -32,7 +32,7 @@ pub enum LinkError {
         op: &'static str,
     },
     /// A stop signal (Ctrl-C, SIGTERM) arrived while the response was late.
-    #[error("a stop signal arrived while waiting {waited_ns} ns for the hwserver")]
+    #[error("a stop signal arrived while waiting {:.1} ms for the hwserver", *.waited_ns as f64 / 1e6)]
     Stopped {
         /// How long the exchange waited.
         waited_ns: u64,

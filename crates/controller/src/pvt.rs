@@ -10,7 +10,8 @@
 
 use crate::config::Settings;
 use crate::knots::{
-    KnotFileError, MIN_PVT_KNOTS, PvtKnot, PvtLineParser, parse_pvt, read_knot_file,
+    KnotFileError, KnotRules, MAX_LINE_BYTES, MIN_PVT_KNOTS, PvtKnot, PvtLineParser, parse_pvt,
+    read_knot_file, read_line_bounded,
 };
 use crate::spline::samples_between;
 use crate::traj::{
@@ -65,6 +66,30 @@ impl Hermite {
         (3.0 * self.a * tau + 2.0 * self.b) * tau + self.c
     }
 
+    /// The smallest and largest position over τ ∈ [0, t]: the ends and the roots of
+    /// p′(τ) = 3Aτ² + 2Bτ + C inside the span.
+    pub fn extremes(&self, t: f64) -> (f64, f64) {
+        let mut lo = self.position(0.0).min(self.position(t));
+        let mut hi = self.position(0.0).max(self.position(t));
+        let (qa, qb, qc) = (3.0 * self.a, 2.0 * self.b, self.c);
+        let mut roots = [f64::NAN; 2];
+        if qa != 0.0 {
+            let disc = qb * qb - 4.0 * qa * qc;
+            if disc >= 0.0 {
+                let r = disc.sqrt();
+                roots = [(-qb - r) / (2.0 * qa), (-qb + r) / (2.0 * qa)];
+            }
+        } else if qb != 0.0 {
+            roots[0] = -qc / qb;
+        }
+        for r in roots.into_iter().filter(|r| *r > 0.0 && *r < t) {
+            let p = self.position(r);
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        (lo, hi)
+    }
+
     /// Acceleration at τ.
     #[inline]
     pub fn acceleration(&self, tau: f64) -> f64 {
@@ -97,6 +122,7 @@ enum PvtSource {
 pub struct Pvt {
     source: PvtSource,
     n_motors: usize,
+    rules: KnotRules,
     period_s: f64,
     start_tolerance: f64,
     stream_wait: Duration,
@@ -130,10 +156,12 @@ fn push_blocking(producer: &mut Producer<Feed>, mut v: Feed) -> bool {
     }
 }
 
-/// Reads a stream knot by knot into the queue (the reader thread's body).
+/// Reads a stream knot by knot into the queue (the reader thread's body). Lines are read
+/// with a bounded buffer: a stream without line ends (`/dev/zero`) is an error, not a
+/// growing allocation.
 fn read_stream(
     source: &KnotSource,
-    n_motors: usize,
+    rules: &KnotRules,
     producer: &mut Producer<Feed>,
     failure: &Mutex<Option<KnotFileError>>,
 ) {
@@ -143,22 +171,40 @@ fn read_stream(
         }
         push_blocking(producer, Feed::Error);
     };
-    let (name, reader) = match source.open() {
+    let (name, mut reader) = match source.open() {
         Ok(r) => r,
         Err(e) => return fail(e, producer),
     };
-    let mut parser = PvtLineParser::new(&name, n_motors);
-    for line in std::io::BufRead::lines(reader) {
-        let line = match line {
-            Ok(l) => l,
+    let mut parser = PvtLineParser::new(&name, rules);
+    let mut buf = Vec::with_capacity(MAX_LINE_BYTES + 2);
+    loop {
+        match read_line_bounded(reader.as_mut(), &mut buf) {
+            Ok(true) => {}
+            Ok(false) => break,
+            Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
+                return fail(parser.too_long(), producer);
+            }
             Err(e) => {
                 return fail(
                     KnotFileError::Read { file: name.clone(), reason: e.to_string() },
                     producer,
                 );
             }
+        }
+        let line = match std::str::from_utf8(&buf) {
+            Ok(l) => l,
+            Err(_) => {
+                let line = parser.lines() + 1;
+                let e = KnotFileError::Invalid {
+                    file: name.clone(),
+                    line,
+                    column: 1,
+                    message: "expected text (UTF-8), found a byte that is not".into(),
+                };
+                return fail(e, producer);
+            }
         };
-        match parser.parse_line(&line) {
+        match parser.parse_line(line) {
             Ok(Some(k)) => {
                 if !push_blocking(producer, Feed::Knot(k)) {
                     return;
@@ -185,6 +231,7 @@ impl Pvt {
         Pvt {
             source,
             n_motors,
+            rules: KnotRules::new(n_motors),
             period_s,
             start_tolerance,
             stream_wait,
@@ -233,14 +280,16 @@ impl Pvt {
     pub fn from_settings(s: &Settings) -> Result<Pvt, TrajBuildError> {
         let tol = s.trajectory.start_tolerance_counts;
         let wait = Duration::from_secs_f64(s.trajectory.stream_wait_s);
-        Ok(match KnotSource::from_settings(s)? {
+        let rules = s.knot_rules();
+        let pvt = match KnotSource::from_settings(s)? {
             KnotSource::File(path) => {
                 let text = read_knot_file(&path)?;
-                let knots = parse_pvt(&path.display().to_string(), &text, s.n_motors)?;
+                let knots = parse_pvt(&path.display().to_string(), &text, &rules)?;
                 Pvt::new(PvtSource::Knots(Arc::new(knots)), s.n_motors, s.period_s(), tol, wait)
             }
             stream => Pvt::from_stream(stream, s.n_motors, s.period_s(), tol, wait),
-        })
+        };
+        Ok(Pvt { rules, ..pvt })
     }
 
     /// The first knots: a file's at once; a stream's through the reader thread, waited for.
@@ -254,15 +303,15 @@ impl Pvt {
             PvtSource::Stream(source) => source.clone(),
         };
         let (mut producer, mut consumer) = RingBuffer::new(PVT_QUEUE_CAPACITY);
-        let n_motors = self.n_motors;
+        let rules = self.rules;
         let failure = Arc::clone(&self.failure);
-        std::thread::Builder::new()
-            .name("qmarc-knots".into())
-            .spawn(move || read_stream(&source, n_motors, &mut producer, &failure))
-            .map_err(|e| KnotFileError::Read {
-                file: self.source_name(),
-                reason: format!("reader thread: {e}"),
-            })?;
+        qmarc_timer::rt::spawn_normal("qmarc-knots", move || {
+            read_stream(&source, &rules, &mut producer, &failure)
+        })
+        .map_err(|e| KnotFileError::Read {
+            file: self.source_name(),
+            reason: format!("reader thread: {e}"),
+        })?;
         let started = Instant::now();
         let mut first = Vec::with_capacity(MIN_PVT_KNOTS);
         while first.len() < MIN_PVT_KNOTS {
@@ -270,6 +319,9 @@ impl Pvt {
                 Ok(Feed::Knot(k)) => first.push(k),
                 Ok(Feed::End) => break,
                 Ok(Feed::Error) => return Err(self.stored_failure().into()),
+                Err(_) if qmarc_timer::stop::requested() => {
+                    return Err(TrajStartError::Interrupted { stream: self.source_name() });
+                }
                 Err(_) if started.elapsed() < self.stream_wait => {
                     std::thread::sleep(Duration::from_millis(1))
                 }
@@ -400,30 +452,19 @@ impl TrajectoryGenerator for Pvt {
         }
     }
 
-    /// From a file: every sample of every segment (the cubics can overshoot their knots).
+    /// From a file: the extremes of every segment's cubic over its whole span (the cubics
+    /// can overshoot their knots), found from the roots of its derivative: O(knots), however
+    /// long the path. They bound every sample, so a path is never passed that a sample breaks.
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
         let PvtSource::Knots(knots) = &self.source else { return None };
         let mut b = crate::traj::bounds_of(knots.iter().map(|k| &k.pos));
-        let mut seg_start = 0.0;
-        let mut n = 0u64;
         for w in knots.windows(2) {
-            let segs: Vec<Hermite> = (0..self.n_motors)
-                .map(|m| {
-                    Hermite::new(w[0].pos[m], w[0].vel[m], w[1].pos[m], w[1].vel[m], w[0].dt_s)
-                })
-                .collect();
-            loop {
-                let tau = n as f64 * self.period_s - seg_start;
-                if tau > w[0].dt_s + 1e-9 {
-                    break;
-                }
-                for (m, s) in segs.iter().enumerate() {
-                    let p = s.position(tau);
-                    b[m] = (b[m].0.min(p), b[m].1.max(p));
-                }
-                n += 1;
+            for (m, bm) in b.iter_mut().enumerate().take(self.n_motors) {
+                let seg =
+                    Hermite::new(w[0].pos[m], w[0].vel[m], w[1].pos[m], w[1].vel[m], w[0].dt_s);
+                let (lo, hi) = seg.extremes(w[0].dt_s);
+                *bm = (bm.0.min(lo), bm.1.max(hi));
             }
-            seg_start += w[0].dt_s;
         }
         Some(b)
     }
@@ -506,6 +547,25 @@ mod tests {
             prop_assert!((dcba[1] - h.c).abs() <= 1e-6 * scale / t);
             prop_assert!((dcba[2] - h.b).abs() <= 1e-6 * scale / (t * t));
             prop_assert!((dcba[3] - h.a).abs() <= 1e-6 * scale / (t * t * t));
+        }
+
+        /// The extremes of a segment bound every point of it and are reached: a dense
+        /// sweep finds nothing outside them and comes within a hair of both.
+        #[test]
+        fn segment_extremes_bound_and_touch_the_curve(
+            x0 in -1e5f64..1e5, x1 in -1e5f64..1e5, v0 in -5e4f64..5e4, v1 in -5e4f64..5e4, t in 0.001f64..0.2,
+        ) {
+            let h = Hermite::new(x0, v0, x1, v1, t);
+            let (lo, hi) = h.extremes(t);
+            let (mut slo, mut shi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for i in 0..=20_000 {
+                let p = h.position(t * f64::from(i) / 20_000.0);
+                slo = slo.min(p);
+                shi = shi.max(p);
+            }
+            let scale = 1.0 + x0.abs() + x1.abs() + (v0.abs() + v1.abs()) * t;
+            prop_assert!(slo >= lo - 1e-9 * scale && shi <= hi + 1e-9 * scale);
+            prop_assert!(slo - lo <= 1e-6 * scale && hi - shi <= 1e-6 * scale, "{lo} {slo} {hi} {shi}");
         }
 
         /// A whole random path passes through every knot at its time.

@@ -16,14 +16,20 @@ use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType};
 use qmarc_timer::MonotonicClock;
 use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 /// A path whose last command moves slower than this (counts/s) ends at rest.
 pub const END_AT_REST_COUNTS_PER_S: f64 = 1.0;
 
-/// Files of a move's data, in the output directory.
+/// Files of a move's data, in the output directory, in the order they are put in place
+/// (`summary.json` last: once it is there, the set is complete).
 pub const OUTPUT_FILES: [&str; 3] = ["gather.csv", "gather.m", "summary.json"];
+
+/// How long the servo thread may take to end after a stop signal before the controller
+/// exits without it (it is then blocked outside the loop, where nothing is enabled; the
+/// hwserver, which got the same signal, has disabled the motors).
+pub const STOP_GRACE: Duration = Duration::from_secs(2);
 
 /// A move could not run (nothing was enabled, or the outputs could not be written).
 #[derive(Debug, thiserror::Error)]
@@ -44,14 +50,39 @@ pub enum RunError {
     /// The servo thread could not be started or died.
     #[error("servo thread: {0}")]
     Thread(String),
-    /// An output file could not be written.
-    #[error("cannot write {file}: {source}")]
-    Output {
-        /// The file.
-        file: PathBuf,
-        /// Why.
-        source: std::io::Error,
+    /// The data files could not be written, not even to the rescue folder.
+    #[error(transparent)]
+    Output(#[from] crate::output::WriteError),
+    /// A stop signal ended the run before the move began.
+    #[error("interrupted by {signal} before the move began: nothing was enabled")]
+    Interrupted {
+        /// The signal's name.
+        signal: &'static str,
     },
+}
+
+impl RunError {
+    /// The exit code for this error ([`qmarc_proto::exit`]): the user's input refused
+    /// before anything moved, a stop signal, or an internal failure.
+    pub fn exit_code(&self) -> u8 {
+        use qmarc_proto::exit;
+        match self {
+            RunError::Interrupted { .. } => exit::INTERRUPTED,
+            RunError::Move(MoveError::Trajectory(crate::traj::TrajStartError::Interrupted {
+                ..
+            })) => exit::INTERRUPTED,
+            RunError::UnknownMode(_)
+            | RunError::Trajectory(_)
+            | RunError::Move(
+                MoveError::Trajectory(_)
+                | MoveError::NotHomed { .. }
+                | MoveError::OutsideSoftLimits { .. }
+                | MoveError::Refused(_)
+                | MoveError::Gather(_),
+            ) => exit::REFUSED,
+            _ => exit::INTERNAL,
+        }
+    }
 }
 
 /// How to run a move besides its settings.
@@ -77,7 +108,9 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
     let law_entry =
         registry::law(&settings.law).ok_or_else(|| RunError::UnknownMode(settings.law.clone()))?;
     let out_dir = settings.gather.out_dir.clone();
-    remove_outputs(&out_dir);
+    let progress =
+        crate::progress::Progress::open(&crate::progress::Progress::path(&opts.location.prefix))
+            .ok();
 
     let plan = plan_for(settings, mode, opts.deterministic, opts.unhomed);
     let n_motors = settings.n_motors;
@@ -87,7 +120,8 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
         (entry.build)(settings)?,
         (law_entry.build)(settings),
         Box::new(MonotonicClock),
-    );
+    )
+    .with_progress(progress);
     let mut ticker = settings.timer.method.build(settings.period_ns());
     let period = settings.period_ns();
     // In lock-step the hwserver is lost only when its process is gone: a host stall is not
@@ -138,6 +172,18 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
         (servo, rt, result, homed_read)
     })
     .map_err(|e| RunError::Thread(e.to_string()))?;
+    // The servo thread ends by itself on a stop signal, motors disabled first. Should it be
+    // blocked outside the loop (nothing enabled), the controller does not wait for it.
+    let mut stopped_at: Option<std::time::Instant> = None;
+    while !handle.is_finished() {
+        if qmarc_timer::stop::requested()
+            && stopped_at.get_or_insert_with(std::time::Instant::now).elapsed() > STOP_GRACE
+        {
+            let signal = qmarc_timer::stop::signal().map_or("a stop signal", signal_name);
+            return Err(RunError::Interrupted { signal });
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
     let (servo, rt, result, homed_read) =
         handle.join().map_err(|_| RunError::Thread("panicked".into()))?;
     result?;
@@ -161,9 +207,11 @@ pub fn run_move(settings: &Settings, mode: &Mode, opts: &RunOptions) -> Result<S
             "--unhomed: the frame may not be homed; software position limits were off".into(),
         );
     }
-    write_outputs(&out_dir, &servo, &summary)?;
+    write_results(&out_dir, &servo, &mut summary)?;
     Ok(summary)
 }
+
+pub use qmarc_timer::stop::signal_name;
 
 /// The plan of `mode` with `settings`: the limits of the settings, software limits only in a
 /// homed frame (off when homing or with `--unhomed`), homing required unless homing or
@@ -234,6 +282,33 @@ pub fn summarize(
             r2 = (f64::from(settings.gains_period_us) / f64::from(settings.period_us)).powi(2),
         ));
     }
+    // The error at the end: of the settle, or of the path when there was none.
+    let final_error = match servo.settle_figures() {
+        Some((_, _, last)) => last,
+        None => servo.last_error(),
+    };
+    let mut motors: Vec<MotorSummary> =
+        servo.errors().axes[..n].iter().map(|e| MotorSummary::new(e, cpr)).collect();
+    let mut travel = servo.errors().travel;
+    if let Some((_, settled, _)) = servo.settle_figures() {
+        for (t, s) in travel.iter_mut().zip(&settled.travel) {
+            t.add(s.act.0, s.act.0);
+            t.add(s.act.1, s.act.1);
+        }
+    }
+    for (m, summary) in motors.iter_mut().enumerate() {
+        if travel[m].not_followed(final_error[m]) {
+            summary.followed = false;
+            let (commanded, moved) = travel[m].lengths();
+            warnings.push(format!(
+                "motor {} did not follow its command: it moved {moved:.0} of the {commanded:.0} \
+                 counts commanded and ended {:.0} counts from its last command (a seized joint, \
+                 an amplifier that is off or not wired, a gain of the wrong sign?)",
+                m + 1,
+                final_error[m]
+            ));
+        }
+    }
     let settle = servo.settle_figures().map(|(cycles, errors, last)| SettleSummary {
         cycles,
         seconds: (cycles * u64::from(settings.period_us)) as f64 / 1e6,
@@ -250,60 +325,60 @@ pub fn summarize(
         degraded: rt.degraded(),
         deterministic,
         fault: servo.fault_report(),
+        n_motors: n,
         cycles: servo.cycles(),
         planned_samples: servo.planned_samples(),
         period_us: settings.period_us,
         gather_every: settings.gather.every,
         gathered_rows: servo.gather().rows().len() as u64,
         counts_per_rad: cpr,
-        motors: servo.errors().axes[..n].iter().map(|e| MotorSummary::new(e, cpr)).collect(),
+        motors,
         gains_period_us: settings.gains_period_us,
         gains: (0..n).map(|m| settings.effective_gains(m).into()).collect(),
         settle,
         timing: TimingSummary::new(servo.timing(), settings.timer.method.name(), &rt.policy()),
         warnings,
+        starter_pid: nix::unistd::getppid().as_raw() as u32,
+        files: Vec::new(),
         homing: None,
     }
 }
 
-/// Removes the data files of an earlier move from `dir`, so that a failed move never leaves
-/// stale results looking like its own.
-pub fn remove_outputs(dir: &Path) {
-    for f in OUTPUT_FILES {
-        let _ = std::fs::remove_file(dir.join(f));
+/// Writes the move's data files and `summary.json` into `dir` as one set
+/// ([`crate::output::write_set`]): the previous results stay until all of them are written.
+/// A stop signal while the rows are written abandons the data files (the summary is still
+/// written, with a warning); a failure writes everything to the rescue folder instead, with
+/// a warning, and says so on standard error.
+pub fn write_results(dir: &Path, servo: &Servo, summary: &mut Summary) -> Result<(), RunError> {
+    let gather = servo.gather();
+    let csv = |w: &mut dyn Write| gather.write_csv(w);
+    let octave = |w: &mut dyn Write| gather.write_octave(w);
+    let attempt = |dir: &Path, summary: &mut Summary, data: bool| {
+        let names: &[&str] = if data { &OUTPUT_FILES } else { &OUTPUT_FILES[2..] };
+        summary.files = names.iter().map(|f| dir.join(f)).collect();
+        let frozen = summary.clone();
+        let json = move |w: &mut dyn Write| {
+            serde_json::to_writer_pretty(&mut *w, &frozen).map_err(std::io::Error::other)?;
+            writeln!(w)
+        };
+        let all: [crate::output::FileWriter<'_>; 3] =
+            [("gather.csv", &csv), ("gather.m", &octave), ("summary.json", &json)];
+        crate::output::write_set(dir, if data { &all } else { &all[2..] })
+    };
+    let Err(e) = attempt(dir, summary, true) else { return Ok(()) };
+    if qmarc_timer::stop::requested() {
+        summary.warnings.push(format!(
+            "a stop signal arrived while the data were written: gather.csv and gather.m were \
+             not written (in {} the previous ones, if any, are as they were)",
+            dir.display()
+        ));
+        attempt(dir, summary, false)?;
+        return Ok(());
     }
-}
-
-/// Writes `path` through a temporary file renamed into place, so that a reader (or a kill)
-/// never sees half a file.
-fn write_file(
-    path: PathBuf,
-    body: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
-) -> Result<(), RunError> {
-    let mut tmp = path.clone().into_os_string();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    let result = std::fs::File::create(&tmp).and_then(|f| {
-        let mut w = std::io::BufWriter::new(f);
-        body(&mut w)?;
-        w.flush()?;
-        std::fs::rename(&tmp, &path)
-    });
-    result.map_err(|source| {
-        let _ = std::fs::remove_file(&tmp);
-        RunError::Output { file: path.clone(), source }
-    })
-}
-
-/// Writes `summary.json` (first: it is small and says what happened), then `gather.csv` and
-/// `gather.m`, into `dir` (created if missing).
-pub fn write_outputs(dir: &Path, servo: &Servo, summary: &Summary) -> Result<(), RunError> {
-    std::fs::create_dir_all(dir)
-        .map_err(|source| RunError::Output { file: dir.to_path_buf(), source })?;
-    write_file(dir.join("summary.json"), |w| {
-        serde_json::to_writer_pretty(&mut *w, summary).map_err(std::io::Error::other)?;
-        writeln!(w)
-    })?;
-    write_file(dir.join("gather.csv"), |w| servo.gather().write_csv(w))?;
-    write_file(dir.join("gather.m"), |w| servo.gather().write_octave(w))
+    let rescue = crate::output::rescue_dir(nix::unistd::getppid().as_raw() as u32);
+    let warning = format!("{e}; the data of this move are in {} instead", rescue.display());
+    let _ = writeln!(std::io::stderr(), "qmarc-controller: {warning}");
+    summary.warnings.push(warning);
+    attempt(&rescue, summary, true)?;
+    Ok(())
 }

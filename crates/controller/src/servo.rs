@@ -114,6 +114,44 @@ pub enum Phase {
     Fault,
 }
 
+impl Phase {
+    /// Every phase, in the order of their codes.
+    pub const ALL: [Phase; 8] = [
+        Phase::Idle,
+        Phase::Preparing,
+        Phase::Homing,
+        Phase::Moving,
+        Phase::Holding,
+        Phase::Settling,
+        Phase::Done,
+        Phase::Fault,
+    ];
+
+    /// Its number in the progress file ([`crate::progress`]).
+    pub fn code(self) -> u32 {
+        Phase::ALL.iter().position(|&p| p == self).unwrap_or(0) as u32
+    }
+
+    /// The phase of `code`.
+    pub fn from_code(code: u32) -> Option<Phase> {
+        Phase::ALL.get(code as usize).copied()
+    }
+
+    /// What it is called in messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            Phase::Idle => "not started",
+            Phase::Preparing => "preparing",
+            Phase::Homing => "homing",
+            Phase::Moving => "moving",
+            Phase::Holding => "holding (stream ran dry)",
+            Phase::Settling => "settling at the end of the path",
+            Phase::Done => "done",
+            Phase::Fault => "fault",
+        }
+    }
+}
+
 /// The move could not start (nothing was enabled), or its timer failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
@@ -198,6 +236,8 @@ pub struct Servo {
     phase: Phase,
     /// Σ (command − actual) per motor over the move.
     integrated_error: [f64; MAX_MOTORS],
+    /// Where the move's progress is published, if anywhere.
+    progress: Option<crate::progress::Progress>,
 }
 
 impl Servo {
@@ -233,6 +273,20 @@ impl Servo {
             settle_errors: ErrorStats::default(),
             phase: Phase::Idle,
             integrated_error: [0.0; MAX_MOTORS],
+            progress: None,
+        }
+    }
+
+    /// Publishes the move's phase and cycles in `progress` as it goes.
+    pub fn with_progress(mut self, progress: Option<crate::progress::Progress>) -> Servo {
+        self.progress = progress;
+        self
+    }
+
+    fn enter(&mut self, phase: Phase) {
+        self.phase = phase;
+        if let Some(p) = &self.progress {
+            p.set_phase(phase.code());
         }
     }
 
@@ -303,14 +357,23 @@ impl Servo {
         self.executed - self.settle_executed
     }
 
+    /// Command − actual of every motor in the last cycle.
+    pub fn last_error(&self) -> [f64; MAX_MOTORS] {
+        let mut e = [0.0; MAX_MOTORS];
+        for (e, (c, a)) in e.iter_mut().zip(self.cmd.iter().zip(&self.act)) {
+            *e = c - a;
+        }
+        e
+    }
+
     /// The settle at the end of the path, if it began: its cycles, the error figures over it
     /// and each motor's command − actual at its end.
     pub fn settle_figures(&self) -> Option<(u64, &ErrorStats, [f64; MAX_MOTORS])> {
-        let mut last = [0.0; MAX_MOTORS];
-        for (l, (c, a)) in last.iter_mut().zip(self.cmd.iter().zip(&self.act)) {
-            *l = c - a;
-        }
-        (self.settle_executed > 0).then_some((self.settle_executed, &self.settle_errors, last))
+        (self.settle_executed > 0).then_some((
+            self.settle_executed,
+            &self.settle_errors,
+            self.last_error(),
+        ))
     }
 
     /// Samples of the path, if known.
@@ -328,7 +391,7 @@ impl Servo {
     /// where the robot is, start the path from there, reset the law, size the gather buffer
     /// from the path's length, and only then enable the motors.
     pub fn prepare(&mut self, link: &mut dyn HwLink) -> Result<(), MoveError> {
-        self.phase = Phase::Preparing;
+        self.enter(Phase::Preparing);
         Servo::request(link, HwMsg::request(MsgType::ClearSafetyStatus))?;
         let monitor =
             if self.plan.monitor_switches { MsgType::EnableSafety } else { MsgType::DisableSafety };
@@ -447,7 +510,7 @@ impl Servo {
             self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
         }
         self.timing.record_cycle(tick, read_start, read_done, computed, written);
-        if self.gather.due(self.executed) {
+        if self.gather.due(n) {
             // Integer ns divided once: the correctly rounded decimal, no accumulated noise.
             let time_ns = if self.plan.deterministic {
                 n * self.plan.period_ns
@@ -464,6 +527,9 @@ impl Servo {
             });
         }
         self.executed += 1;
+        if let Some(p) = &self.progress {
+            p.set_cycle(self.executed, self.generator.progress());
+        }
         match Fault::from_status(resp.status(), n) {
             Some(f) => CycleEnd::Fault(f),
             None => CycleEnd::Continue,
@@ -520,7 +586,7 @@ impl Servo {
     pub fn handle_fault(&mut self, link: &mut dyn HwLink, fault: Fault) {
         let disabled = !server_gone(Some(fault)) && self.disable_all(link);
         self.fault = Some(Fault { disabled, ..fault });
-        self.phase = Phase::Fault;
+        self.enter(Phase::Fault);
     }
 
     /// Commands `DisableAll`; true if the hwserver acknowledged it. Never fails: a fault path
@@ -581,7 +647,7 @@ impl Servo {
         starved: Fault,
     ) {
         self.holding = true;
-        self.phase = Phase::Holding;
+        self.enter(Phase::Holding);
         let mut fault = starved;
         for _ in 0..self.plan.starve_hold_cycles {
             if stop.load(Ordering::Relaxed) {
@@ -608,7 +674,7 @@ impl Servo {
     ) -> Result<(), MoveError> {
         self.holding = true;
         self.settling = true;
-        self.phase = Phase::Settling;
+        self.enter(Phase::Settling);
         for _ in 0..self.plan.settle_cycles {
             let Some(tick) = self.next_tick(link, ticker, stop)? else { break };
             if let CycleEnd::Fault(f) = self.cycle(link, &tick) {
@@ -638,7 +704,7 @@ impl Servo {
             }
         };
         self.set_t0(t0);
-        self.phase = if self.plan.mode == "home" { Phase::Homing } else { Phase::Moving };
+        self.enter(if self.plan.mode == "home" { Phase::Homing } else { Phase::Moving });
         while let Some(tick) = self.next_tick(link, ticker, stop)? {
             match self.cycle(link, &tick) {
                 CycleEnd::Continue => {}
@@ -661,7 +727,7 @@ impl Servo {
             let _ = link.exchange(&HwMsg::request(MsgType::DisableSafety));
         }
         if self.fault.is_none() {
-            self.phase = Phase::Done;
+            self.enter(Phase::Done);
         }
         Ok(())
     }

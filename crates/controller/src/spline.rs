@@ -7,7 +7,10 @@
 //! [`CubicSpline`] is the generator: one spline per motor, sampled at t₀ + n·T.
 
 use crate::config::Settings;
-use crate::knots::{KnotFileError, OfflineKnots, parse_offline, read_knot_file, text_of};
+use crate::knots::{
+    KnotFileError, KnotRules, MAX_KNOT_FILE_BYTES, OfflineKnots, parse_offline, read_knot_file,
+    text_of,
+};
 use crate::traj::{
     KnotSource, QUEUE_BUDGET_BYTES, Sample, TrajBuildError, TrajStartError, TrajectoryGenerator,
     check_start,
@@ -158,12 +161,37 @@ pub fn samples_between(t0: f64, t_end: f64, period_s: f64) -> u64 {
     ((t_end - t0) / period_s + 1e-9).floor() as u64 + 1
 }
 
+/// A stream's whole offline knot file, at most [`MAX_KNOT_FILE_BYTES`], parsed.
+fn read_offline_stream(
+    source: &KnotSource,
+    rules: &KnotRules,
+) -> Result<OfflineKnots, KnotFileError> {
+    let (name, mut reader) = source.open()?;
+    let mut raw = Vec::new();
+    reader
+        .by_ref()
+        .take(MAX_KNOT_FILE_BYTES + 1)
+        .read_to_end(&mut raw)
+        .map_err(|e| KnotFileError::Read { file: name.clone(), reason: e.to_string() })?;
+    if raw.len() as u64 > MAX_KNOT_FILE_BYTES {
+        return Err(KnotFileError::TooLarge {
+            file: name,
+            bytes: raw.len() as u64,
+            limit: MAX_KNOT_FILE_BYTES,
+        });
+    }
+    parse_offline(&name, &text_of(&name, raw)?, rules)
+}
+
 /// The offline cubic-spline generator: the whole command queue is computed before the move.
 #[derive(Debug)]
 #[doc(alias = "CubSplineTrajGen")]
 pub struct CubicSpline {
     source: KnotSource,
     n_motors: usize,
+    rules: KnotRules,
+    /// A stream's whole file must arrive within this.
+    stream_wait: std::time::Duration,
     period_s: f64,
     start_tolerance: f64,
     queue: Vec<[f64; MAX_MOTORS]>,
@@ -182,6 +210,8 @@ impl CubicSpline {
         let mut g = CubicSpline {
             source: KnotSource::Stdin,
             n_motors: knots.n_motors,
+            rules: KnotRules::new(knots.n_motors),
+            stream_wait: std::time::Duration::from_secs(10),
             period_s,
             start_tolerance,
             queue: Vec::new(),
@@ -198,6 +228,8 @@ impl CubicSpline {
         let mut g = CubicSpline {
             source: source.clone(),
             n_motors: s.n_motors,
+            rules: s.knot_rules(),
+            stream_wait: std::time::Duration::from_secs_f64(s.trajectory.stream_wait_s),
             period_s: s.period_s(),
             start_tolerance: s.trajectory.start_tolerance_counts,
             queue: Vec::new(),
@@ -205,7 +237,7 @@ impl CubicSpline {
         };
         if let KnotSource::File(path) = &source {
             let text = read_knot_file(path)?;
-            g.compute(&parse_offline(&path.display().to_string(), &text, s.n_motors)?)?;
+            g.compute(&parse_offline(&path.display().to_string(), &text, &g.rules)?)?;
         }
         Ok(g)
     }
@@ -243,23 +275,36 @@ impl CubicSpline {
         Ok(())
     }
 
+    /// Reads and parses a stream's whole file in a helper thread (opening a FIFO blocks until
+    /// a writer comes), waiting at most `stream_wait` and ending at once on a stop signal.
     fn read_stream(&mut self) -> Result<(), TrajStartError> {
-        let (name, mut reader) = self.source.open()?;
-        let mut raw = Vec::new();
-        reader
-            .by_ref()
-            .take(crate::knots::MAX_KNOT_FILE_BYTES + 1)
-            .read_to_end(&mut raw)
-            .map_err(|e| KnotFileError::Read { file: name.clone(), reason: e.to_string() })?;
-        if raw.len() as u64 > crate::knots::MAX_KNOT_FILE_BYTES {
-            return Err(KnotFileError::TooLarge {
-                file: name,
-                bytes: raw.len() as u64,
-                limit: crate::knots::MAX_KNOT_FILE_BYTES,
+        let (source, rules) = (self.source.clone(), self.rules);
+        let (tx, rx) = std::sync::mpsc::channel();
+        qmarc_timer::rt::spawn_normal("qmarc-knots", move || {
+            let _ = tx.send(read_offline_stream(&source, &rules));
+        })
+        .map_err(|e| KnotFileError::Read {
+            file: self.source.name(),
+            reason: format!("reader thread: {e}"),
+        })?;
+        let started = std::time::Instant::now();
+        let knots = loop {
+            match rx.recv_timeout(std::time::Duration::from_millis(10)) {
+                Ok(result) => break result?,
+                Err(_) if qmarc_timer::stop::requested() => {
+                    return Err(TrajStartError::Interrupted { stream: self.source.name() });
+                }
+                Err(_) if started.elapsed() < self.stream_wait => {}
+                Err(_) => {
+                    return Err(TrajStartError::NoKnots {
+                        stream: self.source.name(),
+                        got: 0,
+                        needed: 2,
+                        waited_s: self.stream_wait.as_secs_f64(),
+                    });
+                }
             }
-            .into());
-        }
-        let knots = parse_offline(&name, &text_of(&name, raw)?, self.n_motors)?;
+        };
         self.compute(&knots).map_err(TrajStartError::Build)
     }
 

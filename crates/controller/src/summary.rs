@@ -40,11 +40,13 @@ impl AxisErrors {
     }
 }
 
-/// Error figures of every motor.
+/// Error figures of every motor, and how far each was commanded and moved.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ErrorStats {
     /// Per motor.
     pub axes: [AxisErrors; MAX_MOTORS],
+    /// Per motor: the range of the command and of the actual position.
+    pub travel: [Travel; MAX_MOTORS],
 }
 
 impl ErrorStats {
@@ -53,7 +55,49 @@ impl ErrorStats {
     pub fn add(&mut self, n_motors: usize, cmd: &[f64; MAX_MOTORS], act: &[f64; MAX_MOTORS]) {
         for m in 0..n_motors {
             self.axes[m].add(cmd[m] - act[m]);
+            self.travel[m].add(cmd[m], act[m]);
         }
+    }
+}
+
+/// How far one motor was commanded and how far it moved, counts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Travel {
+    /// Smallest and largest command.
+    pub cmd: (f64, f64),
+    /// Smallest and largest actual position.
+    pub act: (f64, f64),
+}
+
+impl Default for Travel {
+    fn default() -> Travel {
+        Travel { cmd: (f64::INFINITY, f64::NEG_INFINITY), act: (f64::INFINITY, f64::NEG_INFINITY) }
+    }
+}
+
+impl Travel {
+    /// Commanded travel at least this long (counts) is checked for being followed.
+    pub const CHECKED_COUNTS: f64 = 10.0;
+
+    /// Adds one cycle.
+    #[inline]
+    pub fn add(&mut self, cmd: f64, act: f64) {
+        self.cmd = (self.cmd.0.min(cmd), self.cmd.1.max(cmd));
+        self.act = (self.act.0.min(act), self.act.1.max(act));
+    }
+
+    /// The commanded and the actual travel (largest − smallest), counts.
+    pub fn lengths(&self) -> (f64, f64) {
+        ((self.cmd.1 - self.cmd.0).max(0.0), (self.act.1 - self.act.0).max(0.0))
+    }
+
+    /// True when the motor did not follow its command: it was commanded over at least
+    /// [`Travel::CHECKED_COUNTS`] and moved less than half of that, or ended (its
+    /// `final_error`) more than half of it away from its last command.
+    pub fn not_followed(&self, final_error: f64) -> bool {
+        let (commanded, moved) = self.lengths();
+        commanded >= Travel::CHECKED_COUNTS
+            && (moved < 0.5 * commanded || final_error.abs() > 0.5 * commanded)
     }
 }
 
@@ -293,7 +337,14 @@ impl Fault {
                 self.motor.map_or(0, |m| m + 1)
             ),
             FaultKind::ProtocolError => format!("the hwserver refused a request: {}", self.status),
-            FaultKind::Aborted => format!("aborted by signal {}", self.signal),
+            FaultKind::Aborted => format!(
+                "aborted by {}",
+                if self.signal == 0 {
+                    "a stop signal"
+                } else {
+                    qmarc_timer::stop::signal_name(self.signal)
+                }
+            ),
             FaultKind::TrajectoryStarved => {
                 "the knot stream ran dry before it ended (motors held, then disabled)".to_string()
             }
@@ -375,6 +426,14 @@ pub struct MotorSummary {
     pub accumulated_abs_error_rad: f64,
     /// Σ error², rad².
     pub sum_squares_error_rad2: f64,
+    /// False when the motor did not follow its command ([`Travel::not_followed`]): a seized
+    /// joint, a dead amplifier. Such a motor is never reported ok.
+    #[serde(default = "yes")]
+    pub followed: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 impl MotorSummary {
@@ -389,6 +448,7 @@ impl MotorSummary {
             max_error_rad: e.max / counts_per_rad,
             accumulated_abs_error_rad: e.sum_abs / counts_per_rad,
             sum_squares_error_rad2: e.sum_sq / (counts_per_rad * counts_per_rad),
+            followed: true,
         }
     }
 }
@@ -503,7 +563,10 @@ pub struct Summary {
     pub deterministic: bool,
     /// The fault that ended the move, or null.
     pub fault: Option<FaultReport>,
-    /// Servo cycles executed.
+    /// Motors driven.
+    #[serde(default)]
+    pub n_motors: usize,
+    /// Servo cycles executed (of the path; the settle is apart).
     pub cycles: u64,
     /// Samples the path has (duration / period + 1), if known.
     pub planned_samples: Option<u64>,
@@ -530,6 +593,12 @@ pub struct Summary {
     pub timing: TimingSummary,
     /// Warnings of the run (degraded real time, dropped rows).
     pub warnings: Vec<String>,
+    /// The pid of the run's `qmarc-starter` (the controller's parent): whose files these are.
+    #[serde(default)]
+    pub starter_pid: u32,
+    /// The files this move wrote (summary.json among them), where they are.
+    #[serde(default)]
+    pub files: Vec<std::path::PathBuf>,
     /// `home` only: per motor where the top switch was found and cleared and where the motor
     /// ended (counts in the frame before homing; each counter reads 0 there afterwards).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -537,8 +606,15 @@ pub struct Summary {
 }
 
 impl Summary {
-    /// The summary the starter writes when the controller died before writing its own.
-    pub fn controller_lost(mode: &str, period_us: u32, message: String) -> Summary {
+    /// The summary the starter writes when the controller died before writing its own: what
+    /// it knows (the motors, the cycles the move reached, why).
+    pub fn controller_lost(
+        mode: &str,
+        n_motors: usize,
+        period_us: u32,
+        cycles: u64,
+        message: String,
+    ) -> Summary {
         Summary {
             mode: mode.to_string(),
             trajectory: String::new(),
@@ -548,11 +624,12 @@ impl Summary {
             fault: Some(FaultReport {
                 kind: FaultKind::ControllerLost.name().to_string(),
                 motor: None,
-                cycle: 0,
+                cycle: cycles,
                 message,
                 hw_time_ns: None,
             }),
-            cycles: 0,
+            n_motors,
+            cycles,
             planned_samples: None,
             period_us,
             gather_every: 0,
@@ -564,6 +641,8 @@ impl Summary {
             settle: None,
             timing: TimingSummary::default(),
             warnings: Vec::new(),
+            starter_pid: std::process::id(),
+            files: Vec::new(),
             homing: None,
         }
     }

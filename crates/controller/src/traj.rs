@@ -40,6 +40,14 @@ impl KnotSource {
     /// else (a FIFO) a stream. Streams are not opened here.
     pub fn from_path(path: &Path) -> Result<KnotSource, KnotFileError> {
         if path == Path::new("-") {
+            if std::io::IsTerminal::is_terminal(&std::io::stdin()) {
+                return Err(KnotFileError::Read {
+                    file: "-".to_string(),
+                    reason: "standard input is a terminal, not a stream of knots: pipe them \
+                             in (`qmarc-starter run --knots - < path.txt`, or from a program)"
+                        .to_string(),
+                });
+            }
             return Ok(KnotSource::Stdin);
         }
         let meta = std::fs::metadata(path).map_err(|e| KnotFileError::Read {
@@ -168,8 +176,17 @@ pub enum TrajStartError {
     /// The path read at the start cannot be built.
     #[error(transparent)]
     Build(#[from] TrajBuildError),
+    /// A stop signal arrived while waiting for a stream's knots.
+    #[error("{stream}: interrupted by a stop signal while waiting for the knots")]
+    Interrupted {
+        /// The stream.
+        stream: String,
+    },
     /// A stream delivered too few knots in time.
-    #[error("{stream}: {got} of the first {needed} knots arrived within {waited_s} s")]
+    #[error(
+        "{stream}: {got} of the first {needed} knots arrived within {waited_s} s \
+         (trajectory.stream_wait_s; is anything writing to it?)"
+    )]
     NoKnots {
         /// The stream.
         stream: String,
@@ -245,6 +262,14 @@ pub trait TrajectoryGenerator: Send {
     /// if known before the move (checked against the software limits); `None` for streams.
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
         None
+    }
+
+    /// Where the generator is, as a number for the progress file (homing: which motor and
+    /// what it is doing; see [`crate::homing::describe_progress`]). Same contract as `sample`.
+    /// Default: 0.
+    #[inline]
+    fn progress(&self) -> u32 {
+        0
     }
 
     /// Each motor's velocity at the end of the path, counts/s, once known (after `start` for a

@@ -92,6 +92,10 @@ pub struct HwServerArgs {
     /// clock) to this file when the server ends.
     #[arg(long)]
     pub sim_events: Option<std::path::PathBuf>,
+    /// Simulator: keep the homed frame between runs in this file (a tmpfs file: a reboot
+    /// clears it, as a power cycle clears the card's counters).
+    #[arg(long)]
+    pub sim_state: Option<std::path::PathBuf>,
 }
 
 impl Default for HwServerArgs {
@@ -135,6 +139,9 @@ impl HwServerArgs {
         }
         if let Some(p) = &self.sim_events {
             a.push(format!("--sim-events={}", p.display()));
+        }
+        if let Some(p) = &self.sim_state {
+            a.push(format!("--sim-state={}", p.display()));
         }
         if !self.sim_start.is_empty() {
             let list: Vec<String> = self.sim_start.iter().map(f64::to_string).collect();
@@ -216,6 +223,7 @@ mod tests {
         a.sim_stall = Some(2);
         a.sim_stuck_top = Some(1);
         a.sim_events = Some("/tmp/e.csv".into());
+        a.sim_state = Some("/dev/shm/s".into());
         let back = HwServerArgs::parse_from(std::iter::once("x".to_string()).chain(a.to_args()));
         assert_eq!(back, a);
         let p = back.sim_params().unwrap();

@@ -71,7 +71,8 @@ pub trait Backend: Send {
         false
     }
 
-    /// Homing has just set `motor`'s counter frame (persist it where the hardware does).
+    /// Homing has just set `motor`'s counter frame (persist it where the hardware does; this
+    /// hook runs after homing, outside the servo loop, and may do I/O).
     fn set_homed(&mut self, motor: usize) {
         let _ = motor;
     }

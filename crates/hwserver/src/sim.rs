@@ -186,6 +186,10 @@ pub struct SimDeltabot {
     origin_ns: u64,
     /// Sign of the direction toward the top switch (−1 when top < bottom).
     top_dir: f64,
+    /// Per motor: the counter frame is homed.
+    homed: [bool; MAX_MOTORS],
+    /// Where the homed frame is kept between runs ([`SimDeltabot::with_state_file`]).
+    state_file: Option<std::path::PathBuf>,
 }
 
 impl SimDeltabot {
@@ -210,7 +214,36 @@ impl SimDeltabot {
             t_ns: 0,
             origin_ns: monotonic_now_ns(),
             top_dir,
+            homed: [p.homed; MAX_MOTORS],
+            state_file: None,
         })
+    }
+
+    /// Keeps the homed frame in `path` between runs, the way the 626's counters keep theirs
+    /// while the card is powered: a motor homed by an earlier run (the file says so) starts
+    /// homed — its counter in the homed frame — whatever `homed` says. Put the file on a
+    /// tmpfs (`/dev/shm`) so that a reboot clears it, as a power cycle clears the card.
+    /// Nothing is kept when the file cannot be read (a fresh machine) or written.
+    pub fn with_state_file(mut self, path: &std::path::Path) -> SimDeltabot {
+        if let Ok(text) = std::fs::read_to_string(path) {
+            let kept = text.strip_prefix("homed").map(|rest| rest.split_whitespace());
+            for (m, flag) in kept.into_iter().flatten().enumerate().take(self.p.n_motors) {
+                if flag == "1" && !self.homed[m] {
+                    self.homed[m] = true;
+                    self.axes[m].counter_offset = COUNTER_ZERO;
+                }
+            }
+        }
+        self.state_file = Some(path.to_path_buf());
+        self
+    }
+
+    fn save_state(&self) {
+        if let Some(path) = &self.state_file {
+            let flags: Vec<&str> =
+                self.homed[..self.p.n_motors].iter().map(|&h| if h { "1" } else { "0" }).collect();
+            let _ = std::fs::write(path, format!("homed {}\n", flags.join(" ")));
+        }
     }
 
     /// The recorded events (time on the simulator's clock, ns).
@@ -390,8 +423,15 @@ impl Backend for SimDeltabot {
         }
     }
 
-    fn homed(&self, _motor: usize) -> bool {
-        self.p.homed
+    fn homed(&self, motor: usize) -> bool {
+        self.homed[motor]
+    }
+
+    /// Records the homed frame, in the state file too if there is one (a file write: this
+    /// hook runs after homing, not in the servo loop).
+    fn set_homed(&mut self, motor: usize) {
+        self.homed[motor] = true;
+        self.save_state();
     }
 
     /// CSV: `t_ns,event,motor` (motor 1-based; events `top_on`, `top_off`, `bottom_on`,

@@ -65,7 +65,7 @@ fn watchdog_disables_the_motors_when_the_controller_falls_silent() {
     assert!(link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0)).unwrap().status().is_ok());
     // Silence: the server must give up on us by itself.
     let (code, stderr) = server.wait(Duration::from_secs(10));
-    assert_eq!(code, Some(3), "{stderr}");
+    assert_eq!(code, Some(2), "{stderr}");
     assert!(stderr.contains("watchdog: controller silent for"), "{stderr}");
     assert!(stderr.contains("its process still runs"), "{stderr}");
     assert!(stderr.contains("raise hwserver.watchdog_periods"), "{stderr}");

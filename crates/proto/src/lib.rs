@@ -19,6 +19,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod exit;
 pub mod msg;
 pub mod service;
 pub mod status;

@@ -8,7 +8,7 @@
 //!
 //! ```
 //! use qmarc_starter::{Exit, describe_exit};
-//! assert_eq!(describe_exit("qmarc-hwserver", Exit::Signal(9)), "qmarc-hwserver was killed by signal 9 (SIGKILL)");
+//! assert_eq!(describe_exit("qmarc-hwserver", Exit::Signal(9)), "qmarc-hwserver was killed by SIGKILL");
 //! ```
 #![deny(missing_docs)]
 
@@ -58,6 +58,7 @@ pub fn hwserver_args(
         sim_stall: sim.stall_motor,
         sim_stuck_top: sim.stuck_top_motor,
         sim_events: sim.events_file.clone(),
+        sim_state: sim.state_file.clone(),
         ..HwServerArgs::default()
     }
 }
@@ -75,9 +76,12 @@ fn any_process_mentions(needle: &str) -> bool {
     })
 }
 
-/// Removes the iceoryx2 files of earlier starters under `root` that died without cleaning
-/// up: their prefix `qmarc_<pid>_` names a starter that no longer exists *and* no process
-/// (an orphaned child still shutting down) uses it. Returns how many files were removed.
+/// Removes what earlier starters under `root` left when they died without cleaning up: their
+/// prefix `qmarc_<pid>_` names a starter that no longer exists *and* no process (an orphaned
+/// child still shutting down) uses it. iceoryx2 first removes the resources of the prefix's
+/// dead nodes itself (`Node::list`, `try_remove_stale_resources`); then every file left with
+/// the prefix goes (its global management segment among them). Returns how many files were
+/// removed.
 pub fn remove_stale_files(root: &str) -> usize {
     let Ok(entries) = std::fs::read_dir(qmarc_proto::service::SHM_DIR) else {
         return 0;
@@ -96,7 +100,68 @@ pub fn remove_stale_files(root: &str) -> usize {
         .collect();
     stale.sort();
     stale.dedup();
-    stale.iter().map(|p| IpcLocation::new(p, root).remove_files()).sum()
+    stale
+        .iter()
+        .map(|p| {
+            let location = IpcLocation::new(p, root);
+            remove_dead_nodes(&location);
+            location.remove_files()
+        })
+        .sum()
+}
+
+/// Lets iceoryx2 remove the resources of every dead node at `location`.
+fn remove_dead_nodes(location: &IpcLocation) {
+    use iceoryx2::node::NodeView;
+    use iceoryx2::prelude::*;
+    let Ok(cfg) = location.config() else { return };
+    let _ = Node::<ipc::Service>::list(&cfg, |state| {
+        // Without its details iceoryx2 would clean up with its global configuration (which
+        // reads ./config/iceoryx2.toml): the files of such a node go by prefix below.
+        if let NodeState::Dead(view) = state
+            && view.details().is_some()
+        {
+            let _ = view.try_remove_stale_resources();
+        }
+        CallbackProgression::Continue
+    });
+}
+
+/// Checks the iceoryx2 root before a run. `explicit`: the user named it (`--iox-root`), and
+/// then it must exist — a mistyped folder is refused rather than created. The default
+/// (`/tmp/iceoryx2/`) may be missing; iceoryx2 creates it. Where it exists, it and its
+/// `services` and `nodes` folders must be writable: after a run as root they belong to root,
+/// and iceoryx2 would fail with a bare `InternalError`.
+pub fn check_iox_root(root: &str, explicit: bool) -> Result<(), String> {
+    use nix::unistd::{AccessFlags, access};
+    let dir = std::path::Path::new(root);
+    if !dir.exists() {
+        return if explicit {
+            Err(format!(
+                "--iox-root {root}: no such folder; create it first (mkdir -p {root}) or leave \
+                 --iox-root out"
+            ))
+        } else {
+            Ok(())
+        };
+    }
+    if !dir.is_dir() {
+        return Err(format!("iceoryx2 root {root} is not a folder"));
+    }
+    for d in [dir.to_path_buf(), dir.join("services"), dir.join("nodes")] {
+        if d.exists() && access(&d, AccessFlags::W_OK | AccessFlags::X_OK).is_err() {
+            use std::os::unix::fs::MetadataExt;
+            let owner = std::fs::metadata(&d).map(|m| m.uid()).unwrap_or(0);
+            return Err(format!(
+                "iceoryx2 files are in the way: {} belongs to uid {owner} (a run by another \
+                 user, or as root, made it) and you cannot write there. When no QMARC run is \
+                 going: remove it (`sudo rm -rf {root}`), or give this run its own folder \
+                 (`--iox-root DIR`)",
+                d.display()
+            ));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

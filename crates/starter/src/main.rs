@@ -1,23 +1,26 @@
-//! `qmarc-starter`: runs one move (`step`) on the robot through the real process split.
+//! `qmarc-starter`: runs one move (`home`, `step`, `run`) on the robot through the real
+//! process split.
 //!
-//! Exit codes: 0 when the move ran to its end and both children exited cleanly, 2 when a
-//! fault ended it, 1 when it could not run (bad settings, a child that failed or died).
+//! Exit codes: the table of [`qmarc_proto::exit`] (README "Exit codes") — 0 the move ran to
+//! its end and both children exited cleanly, 2 a fault ended it, 3 refused before anything
+//! moved, 130 interrupted by a stop signal, 64 a bad command line, 1 anything else.
 
-use anyhow::{Context, bail};
+use anyhow::{Context, anyhow};
 use clap::Parser;
 use qmarc_controller::cli::{Mode, MoveOptions};
 use qmarc_controller::config::Settings;
 use qmarc_controller::gather::check_budget;
+use qmarc_controller::progress::Progress;
 use qmarc_controller::registry;
-use qmarc_controller::run::remove_outputs;
 use qmarc_controller::summary::Summary;
+use qmarc_proto::exit;
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
 use qmarc_starter::supervise::{self, Supervised};
 use qmarc_starter::{
-    Exit, default_prefix, describe_exit, hwserver_args, remove_stale_files, table,
+    Exit, check_iox_root, default_prefix, describe_exit, hwserver_args, remove_stale_files, table,
 };
-use std::io::Write;
-use std::path::PathBuf;
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -34,7 +37,9 @@ macro_rules! say {
 #[command(
     name = "qmarc-starter",
     version,
-    about = "Run the QMARC controller: spawns qmarc-hwserver and qmarc-controller for one move"
+    about = "Run the QMARC controller: spawns qmarc-hwserver and qmarc-controller for one move",
+    after_help = "Exit codes: 0 ok, 1 internal error, 2 fault during the move, 3 refused before \
+                  moving, 64 usage error, 130 interrupted."
 )]
 struct StarterArgs {
     #[command(flatten)]
@@ -42,9 +47,9 @@ struct StarterArgs {
     /// Prefix of this run's iceoryx2 files (default: qmarc_<pid>_, unique per run).
     #[arg(long, global = true)]
     iox_prefix: Option<String>,
-    /// iceoryx2 root directory.
-    #[arg(long, global = true, default_value = DEFAULT_ROOT)]
-    iox_root: String,
+    /// iceoryx2 root directory; it must exist (default: /tmp/iceoryx2/, created if missing).
+    #[arg(long, global = true)]
+    iox_root: Option<String>,
     /// Directory holding qmarc-hwserver and qmarc-controller (default: next to this program).
     #[arg(long, global = true)]
     bin_dir: Option<PathBuf>,
@@ -52,109 +57,222 @@ struct StarterArgs {
     mode: Mode,
 }
 
-fn run(args: &StarterArgs) -> anyhow::Result<ExitCode> {
+/// An error and the exit code it ends the run with.
+type Failure = (u8, anyhow::Error);
+
+/// `?` for errors of the user's input: the run is refused.
+fn refused<E: Into<anyhow::Error>>(e: E) -> Failure {
+    (exit::REFUSED, e.into())
+}
+
+/// `?` for everything else.
+fn internal<E: Into<anyhow::Error>>(e: E) -> Failure {
+    (exit::INTERNAL, e.into())
+}
+
+fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     // Everything is checked before anything starts.
-    let mut settings = args.opts.load()?;
-    args.mode.apply(&mut settings)?;
+    let mut settings = args.opts.load().map_err(refused)?;
+    args.mode.apply(&mut settings).map_err(refused)?;
     let bin_dir = match &args.bin_dir {
         Some(d) => d.clone(),
-        None => std::env::current_exe()?
+        None => std::env::current_exe()
+            .map_err(internal)?
             .parent()
-            .context("no directory for this program")?
+            .context("no directory for this program")
+            .map_err(internal)?
             .to_path_buf(),
     };
     let hwserver_bin = bin_dir.join("qmarc-hwserver");
     let controller_bin = bin_dir.join("qmarc-controller");
     for b in [&hwserver_bin, &controller_bin] {
         if !b.is_file() {
-            bail!("{} not found: build the workspace first (`cargo build --release`)", b.display());
+            return Err(internal(anyhow!(
+                "{} not found: build the workspace first (`cargo build --release`)",
+                b.display()
+            )));
         }
     }
     let prefix = args.iox_prefix.clone().unwrap_or_else(default_prefix);
-    let location = IpcLocation::checked(&prefix, &args.iox_root).map_err(anyhow::Error::msg)?;
-    location.config()?;
+    let root = args.iox_root.clone().unwrap_or_else(|| DEFAULT_ROOT.to_string());
+    let location = IpcLocation::checked(&prefix, &root).map_err(|e| refused(anyhow!(e)))?;
+    check_iox_root(&location.root, args.iox_root.is_some()).map_err(|e| refused(anyhow!(e)))?;
+    location.config().map_err(refused)?;
     let hw_args = hwserver_args(&settings, args.opts.deterministic, &location);
-    hw_args.sim_params().context("simulator settings")?;
+    hw_args.sim_params().context("simulator settings").map_err(refused)?;
     let mut ctl_args = args.opts.to_args();
     ctl_args.push(format!("--iox-prefix={}", location.prefix));
     ctl_args.push(format!("--iox-root={}", location.root));
     ctl_args.extend(args.mode.to_args());
 
     // The path: knot files are read and checked now (streams are the controller's to read:
-    // it inherits standard input), and its data must fit the gather budget.
+    // it inherits standard input), and its data must fit the gather budget and the disk.
     let generator = args.mode.generator(&settings);
     let entry = registry::generator(generator)
-        .with_context(|| format!("no trajectory generator `{generator}`"))?;
-    let path = (entry.build)(&settings)?;
-    if let Some(samples) = path.samples() {
-        check_budget(samples, settings.gather.every)?;
-    }
+        .with_context(|| format!("no trajectory generator `{generator}`"))
+        .map_err(refused)?;
+    let path = (entry.build)(&settings).map_err(refused)?;
+    let planned = path.samples();
     drop(path);
-
+    let settle = (settings.trajectory.settle_s / settings.period_s()).round() as u64;
+    let samples = planned.unwrap_or(qmarc_controller::servo::STREAM_GATHER_SAMPLES) + settle;
+    check_budget(samples, settings.gather.every).map_err(refused)?;
     let out_dir = settings.gather.out_dir.clone();
-    remove_outputs(&out_dir);
+    let rows = samples.div_ceil(u64::from(settings.gather.every));
+    qmarc_controller::output::check(
+        &out_dir,
+        qmarc_controller::output::estimate_bytes(rows, settings.n_motors),
+    )
+    .map_err(refused)?;
+    let _lock = qmarc_controller::output::lock(&out_dir).map_err(refused)?;
+
     remove_stale_files(&location.root);
-    let stop = qmarc_timer::stop::install()?;
+    let stop = qmarc_timer::stop::install().map_err(internal)?;
+    let progress = Progress::create(&Progress::path(&location.prefix)).ok();
 
     let hwserver = supervise::spawn(&hwserver_bin, &hw_args.to_args())
-        .with_context(|| format!("cannot start {}", hwserver_bin.display()))?;
+        .with_context(|| format!("cannot start {}", hwserver_bin.display()))
+        .map_err(|e| {
+            location.remove_files();
+            internal(e)
+        })?;
     // The hwserver has nothing to save: 3 s to end by itself, 2 s after SIGTERM. The
-    // controller may be writing a long move's data: two minutes for each.
+    // controller may be writing a long move's data: two minutes to end by itself, and after
+    // SIGTERM (which it answers within a second, writing or not) 10 s.
     let secs = Duration::from_secs;
     let mut children = vec![Supervised::new("qmarc-hwserver", hwserver, secs(3), secs(2))];
     match supervise::spawn(&controller_bin, &ctl_args) {
-        Ok(c) => children.push(Supervised::new("qmarc-controller", c, secs(120), secs(120))),
+        Ok(c) => children.push(Supervised::new("qmarc-controller", c, secs(120), secs(10))),
         Err(e) => {
             say!("qmarc-starter: cannot start {}: {e}", controller_bin.display());
-            supervise::send(&children[0].child, libc::SIGTERM);
+            supervise::send(&children[0].child, nix::sys::signal::Signal::SIGTERM);
         }
     }
-    supervise::wait_all(&mut children, stop, |s| {
-        if let Some(exit) = s.exit.filter(|e| !e.success()) {
-            say!("qmarc-starter: {}", describe_exit(s.name, exit));
-        }
-    });
+    let status = std::cell::RefCell::new(StatusLine::new(progress.as_ref()));
+    supervise::wait_all(
+        &mut children,
+        stop,
+        |s| {
+            status.borrow_mut().clear();
+            if let Some(exit) = s.exit.filter(|e| !e.success()) {
+                say!("qmarc-starter: {}", describe_exit(s.name, exit));
+            }
+        },
+        || status.borrow_mut().update(),
+    );
+    status.borrow_mut().clear();
+    let reached = progress.as_ref().map(Progress::read);
+    drop(progress);
     location.remove_files();
 
     let all_clean =
         children.len() == 2 && children.iter().all(|s| s.exit.is_some_and(|e| e.success()));
-    let summary_path = out_dir.join("summary.json");
-    let mut summary: Option<Summary> =
-        std::fs::read(&summary_path).ok().and_then(|b| serde_json::from_slice(&b).ok());
-    // A controller that died wrote nothing: say what happened, and what the hwserver did.
     let controller = children.iter().find(|s| s.name == "qmarc-controller").and_then(|s| s.exit);
     let hwserver = children[0].exit;
+    let mut summary = read_own_summary(&out_dir);
+    // A controller that died wrote nothing: say what is known, and what the hwserver did.
     if summary.is_none()
         && let Some(exit @ Exit::Signal(_)) = controller
     {
         let lost = Summary::controller_lost(
             args.mode.name(),
+            settings.n_motors,
             settings.period_us,
-            controller_lost_message(exit, hwserver, &settings),
+            reached.map_or(0, |r| r.cycle),
+            controller_lost_message(exit, hwserver, &settings, reached),
         );
-        if let Err(e) = write_summary(&summary_path, &lost) {
-            say!("qmarc-starter: cannot write {}: {e}", summary_path.display());
+        let path = out_dir.join("summary.json");
+        if let Err(e) = write_summary(&path, &lost) {
+            say!("qmarc-starter: cannot write {}: {e}", path.display());
         }
         summary = Some(lost);
     }
     match &summary {
         Some(s) => {
-            let _ = write!(std::io::stdout(), "{}", table::render(s, &out_dir));
+            let _ = write!(std::io::stdout(), "{}", table::render(s));
         }
-        None => say!("qmarc-starter: no summary was written: the move did not complete"),
+        None => say!(
+            "qmarc-starter: no move was made{}",
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                ": interrupted before it began"
+            } else {
+                ""
+            }
+        ),
     }
-    Ok(match summary {
-        Some(s) if s.ok && all_clean => ExitCode::SUCCESS,
-        Some(s) if s.fault.is_some() => ExitCode::from(2),
-        _ => ExitCode::from(1),
-    })
+    let code = match (&summary, controller) {
+        (Some(s), _) if s.ok && all_clean => exit::OK,
+        (Some(s), _) if s.fault.as_ref().is_some_and(|f| f.kind == "aborted") => exit::INTERRUPTED,
+        (Some(s), _) if s.fault.is_some() => exit::FAULT,
+        (None, Some(Exit::Code(c))) if c == i32::from(exit::REFUSED) => exit::REFUSED,
+        (None, Some(Exit::Code(c))) if c == i32::from(exit::INTERRUPTED) => exit::INTERRUPTED,
+        _ if stop.load(std::sync::atomic::Ordering::Relaxed) => exit::INTERRUPTED,
+        _ => exit::INTERNAL,
+    };
+    Ok(ExitCode::from(code))
 }
 
-/// What the starter knows when the controller died: how, and how the hwserver ended.
-fn controller_lost_message(controller: Exit, hwserver: Option<Exit>, s: &Settings) -> String {
+/// The summary this run's controller wrote: `summary.json` in `out_dir` if this starter's
+/// (an older run's is not this run's result), else the one in the rescue folder.
+fn read_own_summary(out_dir: &Path) -> Option<Summary> {
+    let me = std::process::id();
+    let rescue = qmarc_controller::output::rescue_dir(me);
+    [out_dir, rescue.as_path()]
+        .iter()
+        .filter_map(|d| std::fs::read(d.join("summary.json")).ok())
+        .filter_map(|b| serde_json::from_slice::<Summary>(&b).ok())
+        .find(|s| s.starter_pid == me)
+}
+
+/// Homing shown as it happens on a terminal: one status line on standard error, rewritten
+/// in place, cleared before anything else is printed.
+struct StatusLine<'a> {
+    progress: Option<&'a Progress>,
+    shown: String,
+    on_terminal: bool,
+}
+
+impl<'a> StatusLine<'a> {
+    fn new(progress: Option<&'a Progress>) -> StatusLine<'a> {
+        StatusLine { progress, shown: String::new(), on_terminal: std::io::stderr().is_terminal() }
+    }
+
+    fn update(&mut self) {
+        let Some(p) = self.progress.filter(|_| self.on_terminal) else { return };
+        let text = qmarc_controller::homing::describe_progress(p.read().detail).unwrap_or_default();
+        if text != self.shown {
+            let _ = write!(std::io::stderr(), "\r\x1b[K{text}");
+            self.shown = text;
+        }
+    }
+
+    fn clear(&mut self) {
+        if !self.shown.is_empty() {
+            let _ = write!(std::io::stderr(), "\r\x1b[K");
+            self.shown.clear();
+        }
+    }
+}
+
+/// What the starter knows when the controller died: how, how far the move got, and how the
+/// hwserver ended.
+fn controller_lost_message(
+    controller: Exit,
+    hwserver: Option<Exit>,
+    s: &Settings,
+    reached: Option<qmarc_controller::progress::Snapshot>,
+) -> String {
     let how = describe_exit("qmarc-controller", controller);
+    let at = match reached {
+        Some(r) if r.phase > 0 => format!(
+            " at cycle {} while {}",
+            r.cycle,
+            qmarc_controller::servo::Phase::from_code(r.phase).map_or("?", |p| p.name())
+        ),
+        _ => " before the move began".to_string(),
+    };
     let motors = match hwserver {
-        Some(Exit::Code(3)) => format!(
+        Some(Exit::Code(2)) => format!(
             "the hwserver's watchdog disabled the motors after {} periods without a request",
             s.hwserver.watchdog_periods
         ),
@@ -162,10 +280,10 @@ fn controller_lost_message(controller: Exit, hwserver: Option<Exit>, s: &Setting
         Some(e) => format!("{}: the motors' state is unknown", describe_exit("qmarc-hwserver", e)),
         None => "the hwserver did not end".to_string(),
     };
-    format!("{how}; {motors}")
+    format!("{how}{at}; {motors}")
 }
 
-fn write_summary(path: &std::path::Path, s: &Summary) -> std::io::Result<()> {
+fn write_summary(path: &Path, s: &Summary) -> std::io::Result<()> {
     let text = serde_json::to_string_pretty(s).map_err(std::io::Error::other)?;
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir)?;
@@ -174,12 +292,12 @@ fn write_summary(path: &std::path::Path, s: &Summary) -> std::io::Result<()> {
 }
 
 fn main() -> ExitCode {
-    let args = StarterArgs::parse();
+    let args: StarterArgs = qmarc_controller::cli::parse_or_exit();
     match run(&args) {
         Ok(code) => code,
-        Err(e) => {
+        Err((code, e)) => {
             say!("qmarc-starter: error: {e:#}");
-            ExitCode::from(1)
+            ExitCode::from(code)
         }
     }
 }

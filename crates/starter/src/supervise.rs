@@ -30,46 +30,45 @@ impl Exit {
     }
 }
 
-fn signal_name(sig: i32) -> &'static str {
-    match sig {
-        libc::SIGKILL => "SIGKILL",
-        libc::SIGTERM => "SIGTERM",
-        libc::SIGINT => "SIGINT",
-        libc::SIGSEGV => "SIGSEGV",
-        libc::SIGABRT => "SIGABRT",
-        libc::SIGBUS => "SIGBUS",
-        libc::SIGPIPE => "SIGPIPE",
-        libc::SIGHUP => "SIGHUP",
-        _ => "signal",
-    }
-}
-
-/// "qmarc-hwserver exited with code 3", "… was killed by signal 9 (SIGKILL)".
+/// "qmarc-hwserver exited with code 2 (fault)", "… was killed by SIGKILL".
 pub fn describe_exit(name: &str, exit: Exit) -> String {
     match exit {
-        Exit::Code(c) => format!("{name} exited with code {c}"),
-        Exit::Signal(s) => format!("{name} was killed by signal {s} ({})", signal_name(s)),
+        Exit::Code(c) => {
+            format!("{name} exited with code {c} ({})", qmarc_proto::exit::describe(c))
+        }
+        Exit::Signal(s) => {
+            format!("{name} was killed by {}", qmarc_controller::run::signal_name(s))
+        }
     }
 }
 
 /// Spawns `program` with `args`. The child gets SIGTERM when the starter dies
-/// (`PR_SET_PDEATHSIG`), and kills itself at once if the starter is already gone.
+/// (`PR_SET_PDEATHSIG`), and ends itself at once if the starter is already gone.
 pub fn spawn(program: &Path, args: &[String]) -> std::io::Result<Child> {
-    let parent = std::process::id() as libc::pid_t;
     let mut cmd = Command::new(program);
     cmd.args(args);
+    with_parent_death_signal(&mut cmd);
+    cmd.spawn()
+}
+
+/// Makes the child of `cmd` receive SIGTERM when the process that spawns it dies, and end
+/// itself at once if that process is already gone when it starts (the race the prctl alone
+/// leaves). Used for every child a QMARC program starts: no child outlives its parent.
+pub fn with_parent_death_signal(cmd: &mut Command) -> &mut Command {
+    use nix::sys::prctl;
+    use nix::sys::signal::{Signal, raise};
+    let parent = nix::unistd::getpid();
     // SAFETY: the closure runs between fork and exec and only makes async-signal-safe calls
     // (prctl, getppid, raise).
     unsafe {
         cmd.pre_exec(move || {
-            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong, 0, 0, 0);
-            if libc::getppid() != parent {
-                libc::raise(libc::SIGTERM);
+            prctl::set_pdeathsig(Signal::SIGTERM)?;
+            if nix::unistd::getppid() != parent {
+                raise(Signal::SIGTERM)?;
             }
             Ok(())
-        });
+        })
     }
-    cmd.spawn()
 }
 
 /// A child under supervision.
@@ -101,9 +100,8 @@ impl Supervised {
 }
 
 /// Sends `sig` to `child` (not yet reaped, so its pid cannot have been reused).
-pub fn send(child: &Child, sig: i32) {
-    // SAFETY: plain kill(2) on our own child's pid (not yet reaped, so not reused).
-    unsafe { libc::kill(child.id() as libc::pid_t, sig) };
+pub fn send(child: &Child, sig: nix::sys::signal::Signal) {
+    let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(child.id() as i32), sig);
 }
 
 /// Waits until every child has ended. When one ends, each other gets its `term_after` to
@@ -112,12 +110,14 @@ pub fn send(child: &Child, sig: i32) {
 /// SIGKILL. A stop request (`stop`) forwards SIGTERM to all at once, in reverse order of
 /// `children` (the controller before the hwserver: its signal is pending by the time the
 /// hwserver shuts down, so it reports an abort, not a hwserver fault). Each child's end is
-/// reported through `report` as it happens.
+/// reported through `report` as it happens; `tick` runs every few ms meanwhile.
 pub fn wait_all(
     children: &mut [Supervised],
     stop: &AtomicBool,
     mut report: impl FnMut(&Supervised),
+    mut tick: impl FnMut(),
 ) {
+    use nix::sys::signal::Signal;
     let mut first_exit: Option<Instant> = None;
     let mut termed: Vec<Option<Instant>> = vec![None; children.len()];
     let mut forwarded = false;
@@ -138,13 +138,14 @@ pub fn wait_all(
         for (s, termed) in alive.rev() {
             let due = forward || first_exit.is_some_and(|t| t.elapsed() >= s.term_after);
             if termed.is_none() && due {
-                send(&s.child, libc::SIGTERM);
+                send(&s.child, Signal::SIGTERM);
                 *termed = Some(Instant::now());
             }
             if termed.is_some_and(|t| t.elapsed() >= s.kill_after) {
-                send(&s.child, libc::SIGKILL);
+                send(&s.child, Signal::SIGKILL);
             }
         }
+        tick();
         std::thread::sleep(Duration::from_millis(5));
     }
 }
@@ -155,8 +156,8 @@ mod tests {
 
     #[test]
     fn exits_are_described() {
-        assert_eq!(describe_exit("a", Exit::Code(3)), "a exited with code 3");
-        assert_eq!(describe_exit("b", Exit::Signal(15)), "b was killed by signal 15 (SIGTERM)");
+        assert_eq!(describe_exit("a", Exit::Code(3)), "a exited with code 3 (refused)");
+        assert_eq!(describe_exit("b", Exit::Signal(15)), "b was killed by SIGTERM");
         assert!(Exit::Code(0).success());
         assert!(!Exit::Signal(9).success());
     }
@@ -173,7 +174,7 @@ mod tests {
         ];
         let stop = AtomicBool::new(false);
         let mut seen = Vec::new();
-        wait_all(&mut kids, &stop, |s| seen.push(s.name));
+        wait_all(&mut kids, &stop, |s| seen.push(s.name), || {});
         assert_eq!(seen, ["quick", "stubborn"]);
         assert_eq!(kids[0].exit, Some(Exit::Code(4)));
         assert_eq!(kids[1].exit, Some(Exit::Signal(libc::SIGKILL)), "TERM ignored, then KILL");

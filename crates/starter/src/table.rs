@@ -1,27 +1,33 @@
 //! The summary table the starter prints after a move (the figures QMARC users tune by,
-//! thesis 3.4 and 5.2).
+//! thesis 3.4 and 5.2). Columns are as wide as their widest cell, so figures never run
+//! together; times are in µs, ms or s as fits.
 
 use qmarc_controller::summary::{Pct, Summary};
 use std::fmt::Write;
-use std::path::Path;
 
-/// Renders `s` as a table for the terminal; `out_dir` is where the data files are.
-pub fn render(s: &Summary, out_dir: &Path) -> String {
+/// Renders `s` as a table for the terminal, ending with the data files it wrote that exist.
+pub fn render(s: &Summary) -> String {
     let mut t = String::new();
     let verdict = match &s.fault {
-        None if s.ok => "ok".to_string(),
+        None if s.ok && s.motors.iter().all(|m| m.followed) => "ok".to_string(),
+        None if s.ok => "done, but a motor did not follow its command (see the warnings)".into(),
         None => "FAILED".to_string(),
         Some(f) => format!("FAULT {}: {}", f.kind, f.message),
     };
+    let n_motors = if s.n_motors > 0 { s.n_motors } else { s.motors.len() };
     let _ = writeln!(
         t,
-        "QMARC {}{}: {verdict}\n  {} motors, {} cycles of {} µs, {}{}{}",
+        "QMARC {}{}: {verdict}\n  {} motors, {} cycles of {} µs{}{}{}",
         s.mode,
-        if s.trajectory == s.mode { String::new() } else { format!(" ({})", s.trajectory) },
-        s.motors.len(),
+        if s.trajectory == s.mode || s.trajectory.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", s.trajectory)
+        },
+        n_motors,
         s.cycles,
         s.period_us,
-        s.timing.policy,
+        if s.timing.policy.is_empty() { String::new() } else { format!(", {}", s.timing.policy) },
         if s.degraded { " — DEGRADED: not real time" } else { "" },
         if s.deterministic { ", deterministic (simulated time)" } else { "" },
     );
@@ -49,76 +55,156 @@ pub fn render(s: &Summary, out_dir: &Path) -> String {
             );
         }
     }
-    let _ = writeln!(t, "\n  following error (command − actual)");
-    let _ = writeln!(
-        t,
-        "  {:>5} {:>10} {:>10} {:>14} {:>16} {:>11} {:>11} {:>11} {:>12}",
-        "motor",
-        "min cnt",
-        "max cnt",
-        "Σ|e| cnt",
-        "Σe² cnt²",
-        "min rad",
-        "max rad",
-        "Σ|e| rad",
-        "Σe² rad²"
-    );
-    for (i, m) in s.motors.iter().enumerate() {
-        let _ = writeln!(
-            t,
-            "  {:>5} {:>10.1} {:>10.1} {:>14.1} {:>16.1} {:>11.3e} {:>11.3e} {:>11.4} {:>12.4e}",
-            i + 1,
-            m.min_error_counts,
-            m.max_error_counts,
-            m.accumulated_abs_error_counts,
-            m.sum_squares_error_counts2,
-            m.min_error_rad,
-            m.max_error_rad,
-            m.accumulated_abs_error_rad,
-            m.sum_squares_error_rad2,
-        );
+    if !s.motors.is_empty() {
+        let _ = writeln!(t, "\n  following error (command − actual)");
+        let mut rows = vec![
+            [
+                "motor",
+                "min cnt",
+                "max cnt",
+                "Σ|e| cnt",
+                "Σe² cnt²",
+                "min rad",
+                "max rad",
+                "Σ|e| rad",
+                "Σe² rad²",
+            ]
+            .map(String::from)
+            .to_vec(),
+        ];
+        for (i, m) in s.motors.iter().enumerate() {
+            rows.push(vec![
+                format!("{}{}", i + 1, if m.followed { "" } else { " DID NOT FOLLOW" }),
+                format!("{:.1}", m.min_error_counts),
+                format!("{:.1}", m.max_error_counts),
+                format!("{:.1}", m.accumulated_abs_error_counts),
+                format!("{:.1}", m.sum_squares_error_counts2),
+                format!("{:.3e}", m.min_error_rad),
+                format!("{:.3e}", m.max_error_rad),
+                format!("{:.4}", m.accumulated_abs_error_rad),
+                format!("{:.4e}", m.sum_squares_error_rad2),
+            ]);
+        }
+        aligned(&mut t, &rows);
     }
     if let Some(st) = &s.settle {
         let list = |v: &[f64]| v.iter().map(|e| format!("{e:.1}")).collect::<Vec<_>>().join(" ");
         let _ = writeln!(
             t,
-            "\n  settle, last command held {:.3} s ({} cycles): error at its end {} cnt, largest |e| {} cnt",
-            st.seconds,
+            "\n  settle, last command held {} ({} cycles): error at its end {} cnt, largest |e| {} cnt",
+            human_s(st.seconds),
             st.cycles,
             list(&st.final_error_counts),
             list(&st.max_abs_error_counts),
         );
     }
     let tm = &s.timing;
-    let _ = writeln!(t, "\n  timing, µs ({})      p50      p99    p99.9      max", tm.method);
-    let row = |t: &mut String, name: &str, p: &Pct| {
+    if !tm.method.is_empty() {
+        let _ = writeln!(t, "\n  timing ({})", tm.method);
+        let mut rows = vec![["", "p50", "p99", "p99.9", "max"].map(String::from).to_vec()];
+        for (name, p) in [
+            ("wake latency", &tm.wake_latency_us),
+            ("period error", &tm.period_error_us),
+            ("read round trip", &tm.read_us),
+            ("trajectory + law", &tm.compute_us),
+            ("tick → DAC written", &tm.output_latency_us),
+        ] {
+            rows.push(pct_row(name, p));
+        }
+        aligned(&mut t, &rows);
         let _ = writeln!(
             t,
-            "  {name:<20} {:>8.0} {:>8.0} {:>8.0} {:>8.1}",
-            p.p50, p.p99, p.p999, p.max
+            "  periods off by > 40 µs: {}   missed periods: {}",
+            tm.outside_40us, tm.missed_periods
         );
-    };
-    row(&mut t, "wake latency", &tm.wake_latency_us);
-    row(&mut t, "period error", &tm.period_error_us);
-    row(&mut t, "read round trip", &tm.read_us);
-    row(&mut t, "trajectory + law", &tm.compute_us);
-    row(&mut t, "tick → DAC written", &tm.output_latency_us);
-    let _ = writeln!(
-        t,
-        "  periods off by > 40 µs: {}   missed periods: {}",
-        tm.outside_40us, tm.missed_periods
-    );
+    }
     for w in &s.warnings {
         let _ = writeln!(t, "  warning: {w}");
     }
-    let _ = writeln!(
-        t,
-        "\n  data ({} rows, every {} cycles): {}",
-        s.gathered_rows,
-        s.gather_every,
-        ["gather.csv", "gather.m", "summary.json"]
-            .map(|f| out_dir.join(f).display().to_string())
-            .join(", ")
-    );
+    let files: Vec<String> =
+        s.files.iter().filter(|f| f.exists()).map(|f| f.display().to_string()).collect();
+    if files.is_empty() {
+        let _ = writeln!(t, "\n  no data files: the move wrote none");
+    } else {
+        let _ = writeln!(
+            t,
+            "\n  data ({} rows, every {} cycles): {}",
+            s.gathered_rows,
+            s.gather_every,
+            files.join(", ")
+        );
+    }
     t
+}
+
+/// A timing row: the name, then p50/p99/p99.9/max in human units.
+fn pct_row(name: &str, p: &Pct) -> Vec<String> {
+    let mut row = vec![name.to_string()];
+    row.extend([p.p50, p.p99, p.p999, p.max].map(human_us));
+    row
+}
+
+/// A duration given in µs as a person reads it: `37 µs`, `1.24 ms`, `2.5 s`.
+pub fn human_us(us: f64) -> String {
+    if us < 1_000.0 {
+        format!("{us:.0} µs")
+    } else if us < 1_000_000.0 {
+        format!("{:.2} ms", us / 1e3)
+    } else {
+        format!("{:.2} s", us / 1e6)
+    }
+}
+
+/// A duration given in s, as [`human_us`].
+pub fn human_s(s: f64) -> String {
+    human_us(s * 1e6)
+}
+
+/// Appends `rows` with every column as wide as its widest cell: the first left-aligned, the
+/// others right-aligned, two spaces between columns, two spaces of indent.
+fn aligned(t: &mut String, rows: &[Vec<String>]) {
+    let cols = rows.iter().map(Vec::len).max().unwrap_or(0);
+    let width: Vec<usize> = (0..cols)
+        .map(|c| rows.iter().filter_map(|r| r.get(c)).map(|s| s.chars().count()).max().unwrap_or(0))
+        .collect();
+    for r in rows {
+        let mut line = String::from(" ");
+        for (c, cell) in r.iter().enumerate() {
+            let pad = width[c] - cell.chars().count();
+            if c == 0 {
+                let _ = write!(line, " {cell}{}", " ".repeat(pad));
+            } else {
+                let _ = write!(line, "  {}{cell}", " ".repeat(pad));
+            }
+        }
+        let _ = writeln!(t, "{}", line.trim_end());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_are_in_human_units() {
+        assert_eq!(human_us(37.4), "37 µs");
+        assert_eq!(human_us(1_240.0), "1.24 ms");
+        assert_eq!(human_us(142_030.3), "142.03 ms");
+        assert_eq!(human_us(2_500_000.0), "2.50 s");
+    }
+
+    /// Issue 10, item 15: wide figures do not run together.
+    #[test]
+    fn columns_never_run_together_issue_10() {
+        let mut t = String::new();
+        let rows = vec![
+            vec!["wake latency".to_string(), "142030.25".into(), "1".into()],
+            vec!["x".to_string(), "2".into(), "99999999.5".into()],
+        ];
+        aligned(&mut t, &rows);
+        assert_eq!(
+            t,
+            "  wake latency  142030.25           1\n  x                     2  99999999.5\n"
+        );
+    }
 }

@@ -163,6 +163,31 @@ where
         })
 }
 
+/// Makes the calling thread SCHED_OTHER at nice 0, whatever it inherited.
+pub fn set_current_thread_normal() -> Result<(), i32> {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: pthread_self() is the calling thread; `param` is valid. (nix has no wrapper for
+    // pthread_setschedparam.)
+    let rc =
+        unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_OTHER, &param) };
+    if rc == 0 { Ok(()) } else { Err(rc) }
+}
+
+/// Spawns a helper thread named `name` with normal scheduling. Linux threads inherit their
+/// creator's policy, so a helper spawned by the SCHED_FIFO servo thread (a knot reader) would
+/// otherwise compete with it at real-time priority; only the servo thread runs real time.
+pub fn spawn_normal<F, T>(name: &str, f: F) -> std::io::Result<std::thread::JoinHandle<T>>
+where
+    F: FnOnce() -> T + Send + 'static,
+    T: Send + 'static,
+{
+    std::thread::Builder::new().name(name.to_string()).spawn(move || {
+        // Refused only for a thread that is not ours to change: it then keeps what it had.
+        let _ = set_current_thread_normal();
+        f()
+    })
+}
+
 /// Holds `/dev/cpu_dma_latency` at 0 µs while alive (keeps the CPU out of deep C-states).
 /// Root only; closing the file restores the default.
 #[derive(Debug)]
@@ -199,6 +224,25 @@ mod tests {
         s.requested_priority = None;
         assert_eq!(s.policy(), "SCHED_OTHER");
         assert!(!s.degraded());
+    }
+
+    /// Issue 10, item 4: a helper spawned by a real-time thread runs SCHED_OTHER.
+    #[test]
+    fn helper_threads_run_normal_scheduling_issue_10() {
+        let policy = || {
+            // SAFETY: sched_getscheduler(0) asks about the calling thread.
+            unsafe { libc::sched_getscheduler(0) }
+        };
+        // As root the spawning thread really is SCHED_FIFO; elsewhere both are SCHED_OTHER.
+        let req = RtRequest { priority: Some(1), lock_memory: false, prefault_stack_bytes: 0 };
+        let (parent, child) = spawn("rt-parent", req, move |_| {
+            let helper = spawn_normal("helper", policy).unwrap().join().unwrap();
+            (policy(), helper)
+        })
+        .unwrap()
+        .join()
+        .unwrap();
+        assert_eq!(child, libc::SCHED_OTHER, "the helper (its creator: {parent})");
     }
 
     #[test]

@@ -66,6 +66,11 @@ pub fn arrived_or_pending() -> bool {
         .any(|sig| unsafe { libc::sigismember(&pending, sig) } == 1)
 }
 
+/// `SIGTERM`, `SIGINT`, …: a signal's name for messages.
+pub fn signal_name(sig: i32) -> &'static str {
+    nix::sys::signal::Signal::try_from(sig).map_or("an unknown signal", |s| s.as_str())
+}
+
 /// The signal that asked to stop, if any.
 pub fn signal() -> Option<i32> {
     match SIGNAL.load(Ordering::Relaxed) {

@@ -1,19 +1,27 @@
 //! `qmarc-hwserver`: the hardware server process, started by `qmarc-starter`.
 //!
-//! Exit codes: 0 after an exit message or a stop signal (motors disabled), 3 when the
-//! watchdog fired (controller silent with motors enabled), 1 on any other error.
+//! Exit codes ([`qmarc_proto::exit`]): 0 after an exit message or a stop signal (motors
+//! disabled), 2 (fault) when the watchdog fired (controller silent with motors enabled),
+//! 64 for a bad command line, 1 on any other error.
 
 use anyhow::Context;
 use clap::Parser;
 use qmarc_hwserver::args::{BackendKind, HwServerArgs};
 use qmarc_hwserver::server::{ServeEnd, ServeOptions, serve};
 use qmarc_hwserver::{Backend, HwCore, SimDeltabot};
+use qmarc_proto::exit;
 use qmarc_timer::rt::{RtRequest, apply_to_current_thread};
 use std::process::ExitCode;
 
 fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
     let backend: Box<dyn Backend> = match args.backend {
-        BackendKind::Sim => Box::new(SimDeltabot::new(args.sim_params()?)?),
+        BackendKind::Sim => {
+            let sim = SimDeltabot::new(args.sim_params()?)?;
+            Box::new(match &args.sim_state {
+                Some(path) => sim.with_state_file(path),
+                None => sim,
+            })
+        }
     };
     let stop = qmarc_timer::stop::install().context("cannot install signal handlers")?;
     let rt = apply_to_current_thread(&RtRequest {
@@ -45,8 +53,9 @@ fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
     Ok(match end {
         ServeEnd::Exit => ExitCode::SUCCESS,
         ServeEnd::Stopped => {
-            let sig = qmarc_timer::stop::signal().unwrap_or(0);
-            eprintln!("qmarc-hwserver: stopped by signal {sig}: all motors disabled");
+            let sig =
+                qmarc_timer::stop::signal().map_or("a stop signal", qmarc_timer::stop::signal_name);
+            eprintln!("qmarc-hwserver: stopped by {sig}: all motors disabled");
             ExitCode::SUCCESS
         }
         ServeEnd::Watchdog { silent_ns, controller_alive } => {
@@ -64,13 +73,19 @@ fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
                     ""
                 },
             );
-            ExitCode::from(3)
+            ExitCode::from(exit::FAULT)
         }
     })
 }
 
 fn main() -> ExitCode {
-    let args = HwServerArgs::parse();
+    let args = match HwServerArgs::try_parse() {
+        Ok(a) => a,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { exit::USAGE } else { exit::OK });
+        }
+    };
     match run(&args) {
         Ok(code) => code,
         Err(e) => {

@@ -1,0 +1,247 @@
+//! The output folder of a move (`--out`): checked before anything is enabled, locked for the
+//! run, and written so that no result is ever lost (README "The output folder").
+//!
+//! - Before the move the starter checks that the folder exists or can be created, that it
+//!   can write there, and that its filesystem has room for the move's data ([`check`]), and
+//!   takes an exclusive lock on it ([`OutLock`]): a second run on the same folder is refused,
+//!   naming the run that holds it.
+//! - Earlier results are never removed first. The controller writes the new files into a
+//!   fresh folder inside (`.incoming-<pid>`), and only when every one is written renames them
+//!   over the old ones, `summary.json` last ([`write_set`]). A refused run writes nothing; a
+//!   failed write leaves the last good results as they were.
+//! - If writing still fails after a move (a full disk), the data go to a rescue folder
+//!   ([`rescue_dir`]) and the message says where.
+
+use nix::fcntl::{Flock, FlockArg};
+use std::io::{Read, Seek, Write};
+use std::path::{Path, PathBuf};
+
+/// The lock file in an output folder; it holds the pid of the run that locked it.
+pub const LOCK_FILE: &str = ".qmarc.lock";
+
+/// Room kept free on the output filesystem beyond a move's data, bytes.
+pub const SPARE_BYTES: u64 = 1 << 20;
+
+/// The output folder cannot be used.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum OutDirError {
+    /// It does not exist and cannot be created, or is not a folder.
+    #[error("output folder {dir}: cannot create it: {reason}")]
+    Create {
+        /// The folder.
+        dir: PathBuf,
+        /// Why.
+        reason: std::io::Error,
+    },
+    /// A file cannot be written there.
+    #[error("output folder {dir}: cannot write there: {reason}")]
+    NotWritable {
+        /// The folder.
+        dir: PathBuf,
+        /// Why.
+        reason: std::io::Error,
+    },
+    /// Its filesystem has too little room.
+    #[error(
+        "output folder {dir}: its filesystem has {free} bytes free, the move's data need about \
+         {need}: free some space, gather less (--gather-every) or give another --out"
+    )]
+    NoRoom {
+        /// The folder.
+        dir: PathBuf,
+        /// Bytes free.
+        free: u64,
+        /// Bytes needed (with [`SPARE_BYTES`]).
+        need: u64,
+    },
+    /// Another run holds its lock.
+    #[error(
+        "output folder {dir} is in use by another run (qmarc-starter pid {pid}): wait for it \
+         or give another --out"
+    )]
+    Locked {
+        /// The folder.
+        dir: PathBuf,
+        /// The other run's pid, 0 if unknown.
+        pid: u32,
+    },
+}
+
+/// An exclusive lock on an output folder, held while it lives (released when the process
+/// ends, however it ends).
+#[derive(Debug)]
+pub struct OutLock {
+    _lock: Flock<std::fs::File>,
+}
+
+/// Locks `dir` (which must exist) for this process, writing its pid into the lock file.
+pub fn lock(dir: &Path) -> Result<OutLock, OutDirError> {
+    let path = dir.join(LOCK_FILE);
+    let not_writable = |reason| OutDirError::NotWritable { dir: dir.to_path_buf(), reason };
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(not_writable)?;
+    match Flock::lock(file, FlockArg::LockExclusiveNonblock) {
+        Ok(mut lock) => {
+            let pid = std::process::id().to_string();
+            lock.set_len(0)
+                .and_then(|()| lock.rewind())
+                .and_then(|()| lock.write_all(pid.as_bytes()))
+                .map_err(not_writable)?;
+            Ok(OutLock { _lock: lock })
+        }
+        Err((mut file, _)) => {
+            let mut text = String::new();
+            let _ = file.read_to_string(&mut text);
+            Err(OutDirError::Locked {
+                dir: dir.to_path_buf(),
+                pid: text.trim().parse().unwrap_or(0),
+            })
+        }
+    }
+}
+
+/// Checks before a move that `dir` exists (or is created), can be written (a probe file is
+/// written and removed) and that its filesystem has room for `bytes` of data.
+pub fn check(dir: &Path, bytes: u64) -> Result<(), OutDirError> {
+    std::fs::create_dir_all(dir)
+        .map_err(|reason| OutDirError::Create { dir: dir.to_path_buf(), reason })?;
+    let probe = dir.join(format!(".qmarc-probe-{}", std::process::id()));
+    let written = std::fs::write(&probe, b"qmarc");
+    let _ = std::fs::remove_file(&probe);
+    written.map_err(|reason| OutDirError::NotWritable { dir: dir.to_path_buf(), reason })?;
+    if let Ok(st) = nix::sys::statvfs::statvfs(dir) {
+        let free = st.blocks_available().saturating_mul(st.fragment_size());
+        let need = bytes.saturating_add(SPARE_BYTES);
+        if free < need {
+            return Err(OutDirError::NoRoom { dir: dir.to_path_buf(), free, need });
+        }
+    }
+    Ok(())
+}
+
+/// Bytes the data files of `rows` gathered rows of `n_motors` take at most: gather.csv and
+/// gather.m hold the same numbers (about 24 characters each at most), summary.json a few KiB.
+pub fn estimate_bytes(rows: u64, n_motors: usize) -> u64 {
+    let per_row = 2 * 24 * (2 + 3 * n_motors as u64);
+    rows.saturating_mul(per_row).saturating_add(64 << 10)
+}
+
+/// Where the data of a move go when its output folder cannot take them:
+/// `<temp dir>/qmarc-rescue-<pid of the run>` (the run: the starter, the controller's parent).
+pub fn rescue_dir(run_pid: u32) -> PathBuf {
+    std::env::temp_dir().join(format!("qmarc-rescue-{run_pid}"))
+}
+
+/// One data file: its name and what writes it.
+pub type FileWriter<'a> = (&'a str, &'a dyn Fn(&mut dyn Write) -> std::io::Result<()>);
+
+/// Writing the data files failed (the rescue folder included).
+#[derive(Debug, thiserror::Error)]
+#[error("cannot write {file}: {reason}")]
+pub struct WriteError {
+    /// The file.
+    pub file: PathBuf,
+    /// Why.
+    pub reason: std::io::Error,
+}
+
+/// Writes `files` into `dir` as one set: each into `dir/.incoming-<pid>/`, then, when all are
+/// written and flushed, renamed into `dir` in order (put `summary.json` last). Returns the
+/// final paths. On failure the folder keeps what it had, and the incoming folder is removed.
+pub fn write_set(dir: &Path, files: &[FileWriter<'_>]) -> Result<Vec<PathBuf>, WriteError> {
+    let incoming = dir.join(format!(".incoming-{}", std::process::id()));
+    let fail = |file: PathBuf, reason| {
+        let _ = std::fs::remove_dir_all(&incoming);
+        WriteError { file, reason }
+    };
+    std::fs::create_dir_all(&incoming).map_err(|e| fail(incoming.clone(), e))?;
+    for (name, write) in files {
+        let path = incoming.join(name);
+        let result = std::fs::File::create(&path).and_then(|f| {
+            let mut w = std::io::BufWriter::new(f);
+            write(&mut w)?;
+            w.flush()?;
+            w.get_ref().sync_data()
+        });
+        result.map_err(|e| fail(dir.join(name), e))?;
+    }
+    let mut done = Vec::with_capacity(files.len());
+    for (name, _) in files {
+        let to = dir.join(name);
+        std::fs::rename(incoming.join(name), &to).map_err(|e| fail(to.clone(), e))?;
+        done.push(to);
+    }
+    let _ = std::fs::remove_dir(&incoming);
+    Ok(done)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("qmarc-out-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    #[test]
+    fn a_set_replaces_the_old_files_only_when_all_are_written() {
+        let dir = scratch("set");
+        let ok = |text: &'static str| move |w: &mut dyn Write| w.write_all(text.as_bytes());
+        let (a, b) = (ok("a1"), ok("b1"));
+        write_set(&dir, &[("a.txt", &a), ("b.txt", &b)]).unwrap();
+        let failing =
+            |_: &mut dyn Write| -> std::io::Result<()> { Err(std::io::Error::other("disk full")) };
+        let a2 = ok("a2");
+        let e = write_set(&dir, &[("a.txt", &a2), ("b.txt", &failing)]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!("cannot write {}: disk full", dir.join("b.txt").display())
+        );
+        assert_eq!(std::fs::read_to_string(dir.join("a.txt")).unwrap(), "a1", "kept as it was");
+        let left: Vec<_> =
+            std::fs::read_dir(&dir).unwrap().flatten().map(|e| e.file_name()).collect();
+        assert_eq!(left.len(), 2, "no incoming folder left: {left:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_second_lock_is_refused_naming_the_first() {
+        let dir = scratch("lock");
+        std::fs::create_dir_all(&dir).unwrap();
+        let held = lock(&dir).unwrap();
+        // Another open file description of the same file: another run.
+        let e = lock(&dir).unwrap_err();
+        assert!(
+            e.to_string().ends_with(&format!(
+                "is in use by another run (qmarc-starter pid {}): wait for it or give another --out",
+                std::process::id()
+            )),
+            "{e}"
+        );
+        drop(held);
+        assert!(lock(&dir).is_ok(), "released");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_folder_that_cannot_be_made_or_filled_is_refused() {
+        let e = check(Path::new("/proc/qmarc-out"), 0).unwrap_err();
+        assert!(
+            e.to_string().starts_with("output folder /proc/qmarc-out: cannot create it: "),
+            "{e}"
+        );
+        let dir = scratch("room");
+        let e = check(&dir, u64::MAX / 2).unwrap_err();
+        assert!(matches!(e, OutDirError::NoRoom { .. }), "{e}");
+        check(&dir, 1000).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

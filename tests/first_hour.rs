@@ -1,0 +1,630 @@
+//! A user's first hour (issue 10): hostile inputs are bounded errors, Ctrl-C ends every phase,
+//! no result is lost and nothing is left behind, reports tell the truth, and one exit-code
+//! table holds for every program.
+
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+use qmarc_proto::exit;
+use qmarc_tests::{
+    TestRun, bin_dir, default_config, processes_matching, read_summary, run_with_timeout,
+    wait_with_timeout, workspace,
+};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const TIMEOUT: Duration = Duration::from_secs(60);
+/// Longest a process may take to end after a stop signal before a test calls it a hang (the
+/// rule is one second; this bound only tells a hang from a slow machine).
+const STOPPED_WITHIN: Duration = Duration::from_secs(20);
+
+fn config_arg() -> String {
+    format!("--config={}", default_config().display())
+}
+
+fn out_arg(out: &Path) -> String {
+    format!("--out={}", out.display())
+}
+
+fn signal(pid: u32, sig: Signal) {
+    let _ = kill(Pid::from_raw(pid as i32), sig);
+}
+
+/// The pid of the run's process whose command line contains `name`, waiting for it.
+fn pid_of(run: &TestRun, name: &str) -> u32 {
+    let start = Instant::now();
+    loop {
+        if let Some((pid, _)) =
+            processes_matching(&run.prefix).into_iter().find(|(_, c)| c.contains(name))
+        {
+            return pid;
+        }
+        assert!(start.elapsed() < TIMEOUT, "{name} did not start");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// Waits until no process of the run is left; panics naming them after [`STOPPED_WITHIN`].
+fn wait_until_gone(run: &TestRun, what: &str) {
+    let start = Instant::now();
+    while !run.processes().is_empty() {
+        assert!(start.elapsed() < STOPPED_WITHIN, "{what}: {:?}", run.processes());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+fn fifo(run: &TestRun, name: &str) -> PathBuf {
+    let path = run.dir.join(name);
+    nix::unistd::mkfifo(&path, nix::sys::stat::Mode::from_bits_truncate(0o600)).unwrap();
+    path
+}
+
+/// Item 14: one table of exit codes, the same for the starter and the console's plain
+/// subcommands: 0 ok, 1 internal, 2 fault, 3 refused, 64 usage, 130 interrupted.
+#[test]
+fn exit_codes_follow_the_table_issue_10() {
+    let run = TestRun::new("exitcodes");
+    let out = run.out("out");
+    let ok = run.starter(
+        &[&config_arg(), &out_arg(&out), "--deterministic", "step", "--duration=0.05"],
+        TIMEOUT,
+    );
+    assert_eq!(ok.code, Some(i32::from(exit::OK)), "{}", ok.stderr);
+    let usage = run.starter(&["step", "--sise=5"], TIMEOUT);
+    assert_eq!(usage.code, Some(i32::from(exit::USAGE)), "{}", usage.stderr);
+    let mut qmarc = Command::new(bin_dir().join("qmarc"));
+    qmarc.args(["step", "--bogus"]).current_dir(workspace());
+    assert_eq!(run_with_timeout(&mut qmarc, TIMEOUT).code, Some(i32::from(exit::USAGE)));
+    let mut console = Command::new(bin_dir().join("qmarc"));
+    console.arg("--bogus").current_dir(workspace());
+    assert_eq!(run_with_timeout(&mut console, TIMEOUT).code, Some(i32::from(exit::USAGE)));
+    let refused = run.starter(&[&config_arg(), "--period-us=7", "step"], TIMEOUT);
+    assert_eq!(refused.code, Some(i32::from(exit::REFUSED)), "{}", refused.stderr);
+    let empty = run.out("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let internal =
+        run.starter(&[&config_arg(), &format!("--bin-dir={}", empty.display()), "step"], TIMEOUT);
+    assert_eq!(internal.code, Some(i32::from(exit::INTERNAL)), "{}", internal.stderr);
+    // A fault: motor 1 stalled, with a following-error limit it must break.
+    let cfg = run.config_with(&[("stall_motor", "1"), ("max_following_error_counts", "500.0")]);
+    let fault = run.starter(
+        &[&format!("--config={}", cfg.display()), &out_arg(&out), "--deterministic", "step"],
+        TIMEOUT,
+    );
+    assert_eq!(fault.code, Some(i32::from(exit::FAULT)), "{}", fault.stderr);
+    // Interrupted: Ctrl-C during a move.
+    let child = run.spawn_starter(&[
+        &config_arg(),
+        &out_arg(&out),
+        "--deterministic",
+        "step",
+        "--duration=30",
+    ]);
+    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    signal(child.id(), Signal::SIGINT);
+    let r = wait_with_timeout(child, STOPPED_WITHIN);
+    assert_eq!(r.code, Some(i32::from(exit::INTERRUPTED)), "{}\n{}", r.stdout, r.stderr);
+    let s = qmarc_tests::assert_aborted_with_motors_disabled(&out);
+    assert!(s.fault.unwrap().message.starts_with("aborted by SIGTERM"), "signals by name");
+    run.assert_clean();
+}
+
+/// Items 1, 2 and 15: every number that becomes a count or a duration, and every read from
+/// the user, is bounded; each breach is an error naming file, line and field (or the
+/// limit), before anything moves.
+#[test]
+fn hostile_inputs_are_bounded_errors_issue_10() {
+    let run = TestRun::new("hostile");
+    let refused = |args: &[&str], expected: &str| {
+        let r = run.starter(args, TIMEOUT);
+        assert_eq!(r.code, Some(i32::from(exit::REFUSED)), "{args:?}: {}", r.stderr);
+        assert!(r.stderr.contains(expected), "{args:?}: expected `{expected}` in\n{}", r.stderr);
+        assert_eq!(
+            r.stderr.lines().filter(|l| l.contains("error")).count(),
+            1,
+            "one line: {}",
+            r.stderr
+        );
+    };
+    refused(&["--config=/dev/zero", "step"], "/dev/zero: the file has more than 1048576 bytes");
+    let zero = ["--knots=/dev/zero", "--method=pvt"];
+    refused(
+        &[&config_arg(), "--deterministic", "run", zero[0], zero[1]],
+        "/dev/zero:1:1: the line has more than 4096 bytes",
+    );
+    let long = run.dir.join("long.txt");
+    std::fs::write(&long, "2\n0 0 0 0\n1e20 5 5 5\n").unwrap();
+    refused(
+        &[&config_arg(), "run", "--method=spline", &format!("--knots={}", long.display())],
+        &format!("{}:3:1: time 1e20 s is 1e20 s after the first knot", long.display()),
+    );
+    let forever = run.dir.join("forever.txt");
+    std::fs::write(&forever, "X 0 0 10 Y 0 0 10 Z 0 0 10\nX 1 0 1e300 Y 1 0 1e300 Z 1 0 1e300\nX 2 0 10 Y 2 0 10 Z 2 0 10\n").unwrap();
+    refused(
+        &[&config_arg(), "run", "--method=pvt", &format!("--knots={}", forever.display())],
+        &format!(
+            "{}:2:7: this knot's segment ends 1e297 s after the first knot",
+            forever.display()
+        ),
+    );
+    // An OS error is said once.
+    refused(
+        &["--config=/nonexistent/q.toml", "step"],
+        "/nonexistent/q.toml: cannot read the settings file: No such file or directory (os error 2)",
+    );
+    let r = run.starter(&["--config=/nonexistent/q.toml", "step"], TIMEOUT);
+    assert_eq!(r.stderr.matches("os error 2").count(), 1, "{}", r.stderr);
+    // A settings file saved with a byte-order mark (Windows editors) is read as it is.
+    let bom = run.dir.join("bom.toml");
+    let mut text = vec![0xEF, 0xBB, 0xBF];
+    text.extend(std::fs::read(default_config()).unwrap());
+    std::fs::write(&bom, text).unwrap();
+    let out = run.out("out");
+    run.starter_ok(&[
+        &format!("--config={}", bom.display()),
+        &out_arg(&out),
+        "--deterministic",
+        "step",
+        "--duration=0.05",
+    ]);
+    run.assert_clean();
+}
+
+/// Item 3: `--knots -` on a terminal is refused with what to do instead.
+#[test]
+fn knots_from_a_terminal_are_refused_issue_10() {
+    let run = TestRun::new("ttyknots");
+    let pty = nix::pty::openpty(None, None).unwrap();
+    let tty = std::fs::File::from(pty.slave.try_clone().unwrap());
+    let mut cmd = Command::new(bin_dir().join("qmarc-starter"));
+    cmd.args(run.isolation_args())
+        .args([config_arg(), "run".into(), "--method=pvt".into(), "--knots=-".into()])
+        .current_dir(workspace())
+        .stdin(Stdio::from(tty));
+    let r = run_with_timeout(&mut cmd, TIMEOUT);
+    drop(pty);
+    assert_eq!(r.code, Some(i32::from(exit::REFUSED)), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("standard input is a terminal, not a stream of knots: pipe them in"),
+        "{}",
+        r.stderr
+    );
+    run.assert_clean();
+}
+
+/// Item 3: Ctrl-C ends a run waiting for a FIFO that has no writer, and a killed starter's
+/// children never outlive it, even blocked there.
+#[test]
+fn ctrl_c_and_a_dead_starter_end_a_run_waiting_for_its_knots_issue_10() {
+    let run = TestRun::new("fifowait");
+    let path = fifo(&run, "knots.fifo");
+    let knots = format!("--knots={}", path.display());
+    let args = [config_arg(), "--deterministic".into(), "run".into(), "--method=pvt".into(), knots];
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    for spline in [false, true] {
+        let mut a = args.clone();
+        if spline {
+            a[3] = "--method=spline";
+        }
+        let child = run.spawn_starter(&a);
+        pid_of(&run, "qmarc-controller");
+        std::thread::sleep(Duration::from_millis(300));
+        signal(child.id(), Signal::SIGINT);
+        let r = wait_with_timeout(child, STOPPED_WITHIN);
+        assert_eq!(r.code, Some(i32::from(exit::INTERRUPTED)), "{}\n{}", r.stdout, r.stderr);
+        assert!(
+            r.stderr.contains("interrupted by a stop signal while waiting for the knots"),
+            "{}",
+            r.stderr
+        );
+        run.assert_clean();
+    }
+    let mut child = run.spawn_starter(&args);
+    pid_of(&run, "qmarc-controller");
+    std::thread::sleep(Duration::from_millis(300));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    wait_until_gone(&run, "children outlived the killed starter");
+    run.location().remove_files();
+    run.assert_clean();
+}
+
+/// The scheduling policy of every thread of `pid`: (name, policy) (`/proc/<pid>/task/*`).
+fn thread_policies(pid: u32) -> Vec<(String, u32)> {
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else { return vec![] };
+    tasks
+        .flatten()
+        .filter_map(|t| {
+            let comm = std::fs::read_to_string(t.path().join("comm")).ok()?;
+            let stat = std::fs::read_to_string(t.path().join("stat")).ok()?;
+            // Fields after the `(comm)`: state is field 3, policy field 41.
+            let rest = stat.rsplit_once(')')?.1;
+            let policy = rest.split_whitespace().nth(38)?.parse().ok()?;
+            Some((comm.trim().to_string(), policy))
+        })
+        .collect()
+}
+
+/// Item 4: only the servo thread runs real time; the knot reader (and every other helper)
+/// runs with normal scheduling, although the servo thread starts it.
+#[test]
+fn only_the_servo_thread_runs_real_time_issue_10() {
+    let run = TestRun::new("policies");
+    let path = fifo(&run, "knots.fifo");
+    let out = run.out("out");
+    let child = run.spawn_starter(&[
+        &config_arg(),
+        &out_arg(&out),
+        "--deterministic",
+        "run",
+        "--method=pvt",
+        &format!("--knots={}", path.display()),
+    ]);
+    // Feed the knots slowly, so that the reader thread lives while we look.
+    let text = std::fs::read_to_string(qmarc_tests::knots("pvt-3motors.txt")).unwrap();
+    let writer = std::thread::spawn(move || {
+        use std::io::Write;
+        let mut f = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
+        for l in text.lines() {
+            let _ = writeln!(f, "{l}");
+            std::thread::sleep(Duration::from_millis(15));
+        }
+    });
+    let ctl = pid_of(&run, "qmarc-controller");
+    let mut seen = Vec::new();
+    let start = Instant::now();
+    while start.elapsed() < TIMEOUT {
+        seen = thread_policies(ctl);
+        if seen.iter().any(|(n, _)| n == "qmarc-knots")
+            && seen.iter().any(|(n, _)| n == "qmarc-servo")
+        {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    writer.join().unwrap();
+    let r = wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    assert!(seen.iter().any(|(n, _)| n == "qmarc-knots"), "threads: {seen:?}");
+    let servo_fifo = seen.iter().any(|(n, p)| n == "qmarc-servo" && *p == 1);
+    let root = nix::unistd::geteuid().is_root();
+    assert_eq!(servo_fifo, root, "the servo thread is SCHED_FIFO when it may be: {seen:?}");
+    for (name, policy) in seen.iter().filter(|(n, _)| n != "qmarc-servo") {
+        assert_eq!(*policy, 0, "{name} runs SCHED_OTHER: {seen:?}");
+    }
+    run.assert_clean();
+}
+
+/// Items 5, 6 and 7: the output folder is checked before anything starts, locked against a
+/// second run, and a refused or failed run never destroys the last good results.
+#[test]
+fn the_output_folder_never_loses_results_issue_10() {
+    let run = TestRun::new("outdir");
+    let out = run.out("out");
+    // Not a folder: refused before any process starts.
+    let file = run.out("a-file");
+    std::fs::write(&file, "x").unwrap();
+    let r = run.starter(&[&config_arg(), &out_arg(&file.join("sub")), "step"], TIMEOUT);
+    assert_eq!(r.code, Some(i32::from(exit::REFUSED)), "{}", r.stderr);
+    assert!(r.stderr.contains("cannot create it"), "{}", r.stderr);
+    assert!(run.location().files().is_empty(), "nothing started");
+    // A good run, then a refused one (the robot is not homed): the results stay.
+    let step = [
+        config_arg(),
+        out_arg(&out),
+        "--deterministic".into(),
+        "step".into(),
+        "--duration=0.05".into(),
+    ];
+    let step: Vec<&str> = step.iter().map(String::as_str).collect();
+    run.starter_ok(&step);
+    let before: Vec<Vec<u8>> = ["gather.csv", "gather.m", "summary.json"]
+        .iter()
+        .map(|f| std::fs::read(out.join(f)).unwrap())
+        .collect();
+    let unhomed = run.config_with(&[("homed", "false")]);
+    let r = run.starter(
+        &[&format!("--config={}", unhomed.display()), &out_arg(&out), "--deterministic", "step"],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(i32::from(exit::REFUSED)), "{}", r.stderr);
+    assert!(r.stderr.contains("motor 1 is not homed"), "{}", r.stderr);
+    let after: Vec<Vec<u8>> = ["gather.csv", "gather.m", "summary.json"]
+        .iter()
+        .map(|f| std::fs::read(out.join(f)).unwrap())
+        .collect();
+    assert!(before == after, "the last good results are as they were");
+    // A second run on the same folder is refused, naming the first.
+    let long = [
+        config_arg(),
+        out_arg(&out),
+        "--deterministic".into(),
+        "step".into(),
+        "--duration=30".into(),
+    ];
+    let first = run.spawn_starter(&long.iter().map(String::as_str).collect::<Vec<_>>());
+    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    let other = TestRun::new("outdir2");
+    let r = other.starter(&step, TIMEOUT);
+    assert_eq!(r.code, Some(i32::from(exit::REFUSED)), "{}", r.stderr);
+    assert!(
+        r.stderr.contains(&format!("is in use by another run (qmarc-starter pid {})", first.id())),
+        "{}",
+        r.stderr
+    );
+    signal(first.id(), Signal::SIGTERM);
+    let r = wait_with_timeout(first, STOPPED_WITHIN);
+    assert_eq!(r.code, Some(i32::from(exit::INTERRUPTED)), "{}", r.stderr);
+    other.assert_clean();
+    run.assert_clean();
+}
+
+/// Item 5, as root: a full filesystem. A move whose data cannot fit is refused before it
+/// starts; when the disk fills during the move, the data go to the rescue folder and the
+/// message says where.
+#[test]
+fn a_full_disk_never_loses_a_move_issue_10() {
+    if !nix::unistd::geteuid().is_root() {
+        return; // mounting a small filesystem needs root (CI runs as root)
+    }
+    let run = TestRun::new("fulldisk");
+    let small = run.out("small");
+    std::fs::create_dir_all(&small).unwrap();
+    let mounted =
+        Command::new("mount").args(["-t", "tmpfs", "-o", "size=4m", "tmpfs"]).arg(&small).status();
+    if !mounted.is_ok_and(|s| s.success()) {
+        return; // no mount(8) or no tmpfs here
+    }
+    struct Unmount(PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg("-l").arg(&self.0).status();
+        }
+    }
+    let _unmount = Unmount(small.clone());
+    // 40 s gathered every cycle: about 50 MB of data, refused at once.
+    let r = run.starter(
+        &[&config_arg(), &out_arg(&small), "--deterministic", "step", "--duration=40"],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(i32::from(exit::REFUSED)), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("its filesystem has") && r.stderr.contains("bytes free"),
+        "{}",
+        r.stderr
+    );
+    // A short move fits, but the disk fills up while it runs.
+    let child = run.spawn_starter(&[
+        &config_arg(),
+        &out_arg(&small),
+        "--deterministic",
+        "step",
+        "--duration=1",
+    ]);
+    let starter_pid = child.id();
+    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    let filler = small.join("filler");
+    let _ = std::fs::write(&filler, vec![0u8; 4 << 20]);
+    let r = wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    let rescue = std::env::temp_dir().join(format!("qmarc-rescue-{starter_pid}"));
+    assert!(
+        r.stderr.contains(&format!("the data of this move are in {}", rescue.display())),
+        "{}",
+        r.stderr
+    );
+    let s = read_summary(&rescue);
+    assert!(s.ok && s.files.iter().all(|f| f.starts_with(&rescue) && f.exists()), "{:?}", s.files);
+    assert!(r.stdout.contains(&rescue.join("gather.csv").display().to_string()), "{}", r.stdout);
+    let _ = std::fs::remove_dir_all(&rescue);
+    run.assert_clean();
+}
+
+/// Item 10: when the controller dies, the report says what is known — the motors, the
+/// cycles the move reached, the phase, the signal by name — and lists no file that does not
+/// exist.
+#[test]
+fn a_dead_controller_is_reported_with_what_is_known_issue_10() {
+    let run = TestRun::new("deadctl");
+    let out = run.out("out");
+    let child = run.spawn_starter(&[
+        &config_arg(),
+        &out_arg(&out),
+        "--deterministic",
+        "step",
+        "--duration=30",
+    ]);
+    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    std::thread::sleep(Duration::from_millis(300));
+    signal(pid_of(&run, "qmarc-controller"), Signal::SIGKILL);
+    let r = wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(i32::from(exit::FAULT)), "{}\n{}", r.stdout, r.stderr);
+    let s = read_summary(&out);
+    let fault = s.fault.as_ref().expect("controller_lost");
+    assert_eq!(fault.kind, "controller_lost");
+    assert!(s.cycles > 100, "the cycles reached: {}", s.cycles);
+    assert!(
+        fault.message.starts_with(&format!(
+            "qmarc-controller was killed by SIGKILL at cycle {} while moving; ",
+            s.cycles
+        )),
+        "{}",
+        fault.message
+    );
+    assert!(r.stdout.contains(&format!("3 motors, {} cycles of 400 µs", s.cycles)), "{}", r.stdout);
+    assert!(r.stdout.contains("no data files"), "no file that does not exist: {}", r.stdout);
+    assert!(!r.stdout.contains("gather.csv"), "{}", r.stdout);
+    run.assert_clean();
+}
+
+/// Item 11: a motor that does not follow its command is never reported ok.
+#[test]
+fn a_stalled_motor_is_never_ok_issue_10() {
+    let run = TestRun::new("stalled");
+    let out = run.out("out");
+    let cfg = run.config_with(&[("stall_motor", "2")]);
+    let r = run.starter(
+        &[
+            &format!("--config={}", cfg.display()),
+            &out_arg(&out),
+            "--deterministic",
+            "step",
+            "--duration=0.5",
+        ],
+        TIMEOUT,
+    );
+    let s = read_summary(&out);
+    assert!(
+        !s.motors[1].followed && s.motors[0].followed && s.motors[2].followed,
+        "{:?}",
+        s.motors
+    );
+    assert!(
+        s.warnings.iter().any(|w| w.starts_with(
+            "motor 2 did not follow its command: it moved 0 of the 1000 counts commanded"
+        )),
+        "{:?}",
+        s.warnings
+    );
+    assert!(!r.stdout.starts_with("QMARC step: ok"), "{}", r.stdout);
+    assert!(r.stdout.contains("2 DID NOT FOLLOW"), "{}", r.stdout);
+    run.assert_clean();
+}
+
+/// Item 12: the advice "home first" can be followed on the simulated robot: its homed frame
+/// is kept between runs (in `sim.state_file`), as the card keeps its counters.
+#[test]
+fn the_simulated_robot_keeps_its_homing_between_runs_issue_10() {
+    let run = TestRun::new("keephome");
+    let out = run.out("out");
+    let cfg = run.config_with(&[
+        ("homed", "false"),
+        ("counter_offset", "5000"),
+        ("velocity_counts_per_s", "20000.0"),
+        ("creep_counts_per_s", "1000.0"),
+        ("home_offset_counts", "2000.0"),
+    ]);
+    let config = format!("--config={}", cfg.display());
+    let step = [config.as_str(), "--deterministic", "step", "--duration=0.05"];
+    let r = run.starter(&step, TIMEOUT);
+    assert_eq!(r.code, Some(i32::from(exit::REFUSED)), "{}", r.stderr);
+    assert!(r.stderr.contains("run `qmarc-starter home` first"), "{}", r.stderr);
+    run.starter_ok(&[&config, &out_arg(&out), "--deterministic", "home"]);
+    run.starter_ok(&step);
+    run.assert_clean();
+}
+
+/// Item 16: homing shows its phase and motor on a terminal.
+#[test]
+fn homing_shows_its_progress_on_a_terminal_issue_10() {
+    let run = TestRun::new("homeprog");
+    let out = run.out("out");
+    let cfg = run.config_with(&[
+        ("homed", "false"),
+        ("home_offset_counts", "2000.0"),
+        ("velocity_counts_per_s", "20000.0"),
+    ]);
+    let pty = nix::pty::openpty(None, None).unwrap();
+    let mut master = std::fs::File::from(pty.master);
+    let tty = std::fs::File::from(pty.slave);
+    let reader = std::thread::spawn(move || {
+        let mut all = Vec::new();
+        let mut buf = [0u8; 4096];
+        // Ends with EIO once the last writer (the starter) closed the terminal.
+        while let Ok(n) = master.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            all.extend_from_slice(&buf[..n]);
+        }
+        String::from_utf8_lossy(&all).into_owned()
+    });
+    let mut child = Command::new(bin_dir().join("qmarc-starter"))
+        .args(run.isolation_args())
+        .args([format!("--config={}", cfg.display()), out_arg(&out)])
+        .args(["--deterministic", "home"])
+        .current_dir(workspace())
+        .stdout(Stdio::null())
+        .stderr(Stdio::from(tty.try_clone().unwrap()))
+        .spawn()
+        .unwrap();
+    // Only the starter (and its children) hold the terminal now: the reader ends with them.
+    drop(tty);
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(start.elapsed() < TIMEOUT, "homing did not end");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(status.success(), "{status:?}");
+    let shown = reader.join().unwrap();
+    for m in 1..=3 {
+        assert!(
+            shown.contains(&format!("homing motor {m}: approaching the top switch")),
+            "{shown:?}"
+        );
+        assert!(shown.contains(&format!("homing motor {m}: moving to home")), "{shown:?}");
+    }
+    run.assert_clean();
+}
+
+/// Item 9: iceoryx2 files that are in the way are named with what to do, and a missing
+/// `--iox-root` is refused, not created.
+#[test]
+fn iceoryx2_files_in_the_way_are_named_issue_10() {
+    let run = TestRun::new("ioxroot");
+    let missing = run.dir.join("no-such-root");
+    let mut cmd = Command::new(bin_dir().join("qmarc-starter"));
+    cmd.args([config_arg(), format!("--iox-root={}", missing.display()), "step".into()])
+        .arg(format!("--iox-prefix={}", run.prefix))
+        .current_dir(workspace());
+    let r = run_with_timeout(&mut cmd, TIMEOUT);
+    assert_eq!(r.code, Some(i32::from(exit::REFUSED)), "{}", r.stderr);
+    assert!(r.stderr.contains("no such folder; create it first"), "{}", r.stderr);
+    assert!(!missing.exists(), "not created");
+    if nix::unistd::geteuid().is_root() {
+        // A root left by a run as root; this run is an ordinary user's.
+        use std::os::unix::fs::PermissionsExt;
+        use std::os::unix::process::CommandExt;
+        let theirs = run.dir.join("root-owned");
+        std::fs::create_dir_all(theirs.join("services")).unwrap();
+        std::fs::set_permissions(&theirs, std::fs::Permissions::from_mode(0o750)).unwrap();
+        std::fs::set_permissions(&run.dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let bin = run.out("bin");
+        std::fs::create_dir_all(&bin).unwrap();
+        std::fs::set_permissions(&bin, std::fs::Permissions::from_mode(0o755)).unwrap();
+        for b in ["qmarc-starter", "qmarc-hwserver", "qmarc-controller"] {
+            std::fs::copy(bin_dir().join(b), bin.join(b)).unwrap();
+        }
+        let cfg = run.out("q.toml");
+        std::fs::copy(default_config(), &cfg).unwrap();
+        let mut cmd = Command::new(bin.join("qmarc-starter"));
+        cmd.args([
+            format!("--config={}", cfg.display()),
+            format!("--iox-root={}", theirs.display()),
+        ])
+        .args([format!("--iox-prefix={}", run.prefix), "step".into()])
+        .current_dir(&run.dir)
+        .uid(65534)
+        .gid(65534);
+        let r = run_with_timeout(&mut cmd, TIMEOUT);
+        assert_eq!(r.code, Some(i32::from(exit::REFUSED)), "{}", r.stderr);
+        assert!(r.stderr.contains("belongs to uid 0"), "{}", r.stderr);
+        assert!(r.stderr.contains("--iox-root DIR"), "{}", r.stderr);
+    }
+    run.assert_clean();
+}
+
+/// Item 15: `qmarc step --help` calls itself `qmarc`.
+#[test]
+fn the_consoles_subcommands_call_themselves_qmarc_issue_10() {
+    let mut cmd = Command::new(bin_dir().join("qmarc"));
+    cmd.args(["step", "--help"]).current_dir(workspace());
+    let r = run_with_timeout(&mut cmd, TIMEOUT);
+    assert_eq!(r.code, Some(0));
+    assert!(r.stdout.contains("Usage: qmarc step"), "{}", r.stdout);
+    assert!(!r.stdout.contains("qmarc-starter step"), "{}", r.stdout);
+}
