@@ -176,7 +176,7 @@ fn console_edits_a_gain_steps_shows_results_and_charts_saves_and_reloads() {
         // The log page has the starter's output, its table included.
         tmux.keys(&["F3"]);
         tmux.wait_for("the starter's output", Duration::from_secs(10), |s| {
-            s.contains("qmarc-starter output") && s.contains("following error (command − actual)")
+            s.contains("qmarc-starter output") && s.contains("data (") && s.contains("timing")
         });
 
         // Charts: command vs actual, following error, servo period.
@@ -405,6 +405,100 @@ fn killing_the_console_during_a_move_stops_it_with_motors_disabled() {
     // The starter gets SIGTERM from the kernel (its parent-death signal) and stops the move.
     wait_until_stopped(&run, "the move outlived the console");
     assert_aborted_with_motors_disabled(&run.out("out"));
+    drop(tmux);
+    run.assert_clean();
+}
+
+/// Issue 10, items 8 and 17: every page usable at 80×24 and smaller — the log wraps and
+/// scrolls, the charts have legends, the results of a homing show the switches, hints follow
+/// the page, Ctrl-U empties a field, the actions fit a small terminal — and a second move is
+/// never started while one runs.
+#[test]
+fn console_pages_are_usable_and_one_move_runs_at_a_time_issue_10() {
+    let run = TestRun::new("conspage");
+    let long = run.dir.join("long.txt");
+    let mut text = String::from("1001\n");
+    for i in 0..=1000 {
+        let t = f64::from(i) * 0.01;
+        let p = (300.0 * (1.0 - (std::f64::consts::PI * t / 5.0).cos())).round();
+        text += &format!("{t:.2} {p} {p} {p}\n");
+    }
+    std::fs::write(&long, text).expect("knot file");
+    run.config_with(&[
+        ("knots", &format!("{:?}", long.display().to_string())),
+        ("velocity_counts_per_s", "20000.0"),
+        ("creep_counts_per_s", "1000.0"),
+        ("home_offset_counts", "2000.0"),
+    ]);
+    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
+    tmux.wait_for("the setup screen", Duration::from_secs(30), setup_drawn);
+    let message = |s: &str| s.lines().rev().nth(1).unwrap_or_default().trim().to_string();
+
+    // Ctrl-U empties the focused field (an error then), Esc brings the value back.
+    tmux.focus("Period µs:");
+    tmux.keys(&["C-u"]);
+    tmux.wait_for("the emptied period", Duration::from_secs(10), |s| {
+        message(s).contains("invalid type") && s.contains(" Period µs !")
+    });
+    tmux.keys(&["Escape"]);
+    tmux.wait_for("the period back", Duration::from_secs(10), |s| s.contains("Period µs  400"));
+
+    // F5 twice: one move, and the second key says why it did nothing.
+    tmux.keys(&["F5", "F5"]);
+    wait_until_moving(&run);
+    let starters = processes_matching(&run.prefix)
+        .into_iter()
+        .filter(|(_, c)| c.contains("qmarc-starter"))
+        .count();
+    assert_eq!(starters, 1, "one move at a time");
+    tmux.wait_for("the refusal of a second move", Duration::from_secs(10), |s| {
+        message(s).contains("a move is running")
+    });
+    // The log page's keys, not a stale hint; then abort.
+    tmux.keys(&["F3"]);
+    tmux.wait_for("the log page's keys", Duration::from_secs(10), |s| {
+        message(s).starts_with("↑↓ PgUp PgDn scroll")
+    });
+    tmux.keys(&["F9"]);
+    tmux.wait_for("the aborted run's results", Duration::from_secs(60), results_drawn);
+    // The log: the long data line wraps (its end is on the next row, not cut off); Home
+    // shows the first line.
+    tmux.keys(&["F3"]);
+    tmux.wait_for("the wrapped data line", Duration::from_secs(10), |s| {
+        let rows: Vec<&str> = s.lines().collect();
+        let at = rows.iter().position(|r| r.contains("  data (") && r.contains("out/gather.csv"));
+        // The row after it continues the line (no indent): it was wrapped, not cut.
+        at.and_then(|i| rows.get(i + 1)).is_some_and(|next| {
+            next.strip_prefix('│').is_some_and(|t| t.starts_with(|c: char| c.is_alphanumeric()))
+        })
+    });
+    tmux.keys(&["Home"]);
+    tmux.wait_for("the first log line", Duration::from_secs(10), |s| {
+        s.contains("── run ──") && s.contains("(End: follow)")
+    });
+    // The charts name their lines.
+    tmux.keys(&["F7"]);
+    tmux.wait_for("the legends", Duration::from_secs(10), |s| {
+        s.contains("━ command") && s.contains("━ actual") && s.contains("━ period")
+    });
+    // Home: the results show where each switch was found.
+    tmux.keys(&["F2"]);
+    let s = tmux.wait_for("the homing results", Duration::from_secs(90), |s| {
+        s.contains("home: ok") && s.contains("M3 switch found")
+    });
+    assert!(s.contains("M1 switch found") && s.contains("reads 0"), "{s}");
+    // A report longer than the screen scrolls: End shows its last line.
+    tmux.keys(&["End"]);
+    tmux.wait_for("the end of the report", Duration::from_secs(10), |s| s.contains("missed:"));
+    // A short terminal: the actions shrink to one line instead of overflowing.
+    tmux.keys(&["F1"]);
+    tmux.tmux(&["resize-window", "-x", "80", "-y", "18"]);
+    tmux.wait_for("the compact actions", Duration::from_secs(10), |s| {
+        s.contains("ready: F2 F5 F6 F10 F12")
+    });
+    tmux.keys(&["F12"]);
+    let (status, _) = tmux.wait_exit(Duration::from_secs(20));
+    assert_eq!(status, 0);
     drop(tmux);
     run.assert_clean();
 }

@@ -107,6 +107,10 @@ fn exit_codes_follow_the_table_issue_10() {
     assert_eq!(r.code, Some(i32::from(exit::INTERRUPTED)), "{}\n{}", r.stdout, r.stderr);
     let s = qmarc_tests::assert_aborted_with_motors_disabled(&out);
     assert!(s.fault.unwrap().message.starts_with("aborted by SIGTERM"), "signals by name");
+    // The stop that ended the move does not cost its data.
+    let (_, rows) = qmarc_tests::read_gather(&out);
+    assert_eq!(rows.len() as u64, s.gathered_rows);
+    assert!(!rows.is_empty(), "the interrupted move's rows are written");
     run.assert_clean();
 }
 

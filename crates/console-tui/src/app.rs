@@ -47,8 +47,18 @@ pub struct App {
     pub editing: Option<String>,
     /// The message line and whether it is an error.
     pub status: (String, bool),
+    /// The status line holds a message of this key or of the last move: not replaced by the
+    /// page's hint until the next key.
+    said: bool,
     /// The starter's output.
     pub log: Vec<String>,
+    /// How far the log page is scrolled up from its end, in screen rows (0: it follows the
+    /// output as it comes).
+    pub log_scroll: usize,
+    /// How far the results and history pages are scrolled down from their top, in rows.
+    pub page_scroll: usize,
+    /// The iceoryx2 root of the moves (to clean up after a starter that had to be killed).
+    pub iox_root: String,
     /// A move in progress.
     pub running: Option<Running>,
     /// The last move's outcome.
@@ -76,7 +86,11 @@ impl App {
             focus: 0,
             editing: None,
             status: (String::new(), false),
+            said: false,
             log: Vec::new(),
+            log_scroll: 0,
+            page_scroll: 0,
+            iox_root: qmarc_proto::service::DEFAULT_ROOT.to_string(),
             running: None,
             last: None,
             history: Vec::new(),
@@ -99,14 +113,29 @@ impl App {
 
     fn say(&mut self, msg: impl Into<String>, error: bool) {
         self.status = (msg.into(), error);
+        self.said = true;
+    }
+
+    /// What the message line says when no message is due: the keys of the page shown (on
+    /// the setup page, the focused field's error or keys). A hint never outlives its page.
+    fn hint(&mut self) {
+        let keys = match self.page {
+            Page::Setup => return self.field_hint(),
+            Page::Log => "↑↓ PgUp PgDn scroll · Home: first line · End: follow the output",
+            Page::Charts => "←/→ or 1–4: the motor charted",
+            Page::Results | Page::History => {
+                "↑↓ PgUp PgDn Home End scroll · F7 charts · F8 history"
+            }
+        };
+        self.status = (keys.to_string(), false);
     }
 
     /// The focused field's error or the keys, on the message line.
-    fn hint(&mut self) {
+    fn field_hint(&mut self) {
         match self.form.fields.get(self.focus).and_then(|f| f.error.clone()) {
-            Some(e) => self.say(e, true),
+            Some(e) => self.status = (e, true),
             None => match &self.form.file_error {
-                Some(e) => self.say(e.clone(), true),
+                Some(e) => self.status = (e.clone(), true),
                 None => {
                     let Some(f) = self.form.fields.get(self.focus) else { return };
                     let keys = match (f.kind, f.place.motor()) {
@@ -121,7 +150,7 @@ impl App {
                         Some(_) => format!("{} = {}", f.name(), f.text),
                         None => f.name(),
                     };
-                    self.say(format!("{name}: {keys}"), false)
+                    self.status = (format!("{name}: {keys}"), false)
                 }
             },
         }
@@ -193,6 +222,19 @@ impl App {
         };
         text.push(c);
         self.form.set_text(i, &text);
+        self.hint();
+    }
+
+    /// Ctrl-U: empties the focused field (the terminal convention), Esc brings it back.
+    fn clear_field(&mut self) {
+        let i = self.focus;
+        if !self.form.enabled(i) || self.form.fields[i].kind == Kind::Choice {
+            return;
+        }
+        if self.editing.is_none() {
+            self.editing = Some(self.form.fields[i].text.clone());
+        }
+        self.form.set_text(i, "");
         self.hint();
     }
 
@@ -321,7 +363,13 @@ impl App {
         self.log.extend(r.drain_to_end(std::time::Duration::from_secs(2)));
         self.trim_log();
         let Some(r) = self.running.take() else { return };
-        match MoveResult::load_since(&r.out_dir, r.started_wall) {
+        if r.killed {
+            // Its children stop on their parent-death signal; what it could not remove goes
+            // now (or with the next run) — only prefixes no live process uses.
+            std::thread::sleep(std::time::Duration::from_millis(200));
+            qmarc_starter::remove_stale_files(&self.iox_root);
+        }
+        match MoveResult::load_for(&r.out_dir, r.pid()) {
             Ok(result) => {
                 self.record(r.mode, r.gains.clone(), &result);
                 let fault = result
@@ -333,7 +381,8 @@ impl App {
                 // The period is checked again against what this move measured.
                 self.form.validate();
                 self.last = Some(result);
-                self.page = Page::Results;
+                self.show(Page::Results);
+                self.page_scroll = 0;
                 match fault {
                     Some(f) => self.say(f, true),
                     None => {
@@ -372,8 +421,17 @@ impl App {
         });
     }
 
-    /// Handles one key.
+    /// Handles one key. Afterwards the message line says what the key did, or else the
+    /// page's keys: a message never outlives the next key.
     pub fn on_key(&mut self, key: KeyEvent) {
+        self.said = false;
+        self.handle_key(key);
+        if !self.said {
+            self.hint();
+        }
+    }
+
+    fn handle_key(&mut self, key: KeyEvent) {
         let ctrl = key.modifiers.contains(KeyModifiers::CONTROL);
         match key.code {
             KeyCode::Char('c') if ctrl => {
@@ -383,11 +441,11 @@ impl App {
                     self.quit = Some(Quit::Cancelled);
                 }
             }
-            KeyCode::F(1) => self.page = Page::Setup,
-            KeyCode::F(3) => self.page = Page::Log,
-            KeyCode::F(4) => self.page = Page::Results,
-            KeyCode::F(7) => self.page = Page::Charts,
-            KeyCode::F(8) => self.page = Page::History,
+            KeyCode::F(1) => self.show(Page::Setup),
+            KeyCode::F(3) => self.show(Page::Log),
+            KeyCode::F(4) => self.show(Page::Results),
+            KeyCode::F(7) => self.show(Page::Charts),
+            KeyCode::F(8) => self.show(Page::History),
             KeyCode::F(2) => self.start(Mode::Home),
             KeyCode::F(5) => self.start(Mode::Run),
             KeyCode::F(6) => self.start(Mode::Step),
@@ -408,10 +466,52 @@ impl App {
                 }
                 self.quit = Some(Quit::Cancelled);
             }
+            KeyCode::Char('u') if ctrl && self.page == Page::Setup => self.clear_field(),
+            // Other control and Alt combinations are not text.
+            KeyCode::Char(_)
+                if key.modifiers.intersects(KeyModifiers::CONTROL | KeyModifiers::ALT) => {}
             _ if self.page == Page::Charts => self.on_chart_key(key.code),
             _ if self.page == Page::Setup => self.on_setup_key(key.code),
-            _ => {}
+            _ if self.page == Page::Log => self.on_log_key(key.code),
+            _ => self.on_page_key(key.code),
         }
+    }
+
+    /// Scrolls the results or history page (from its top).
+    fn on_page_key(&mut self, code: KeyCode) {
+        const PAGE: usize = 10;
+        self.page_scroll = match code {
+            KeyCode::Up => self.page_scroll.saturating_sub(1),
+            KeyCode::Down => self.page_scroll + 1,
+            KeyCode::PageUp => self.page_scroll.saturating_sub(PAGE),
+            KeyCode::PageDown => self.page_scroll + PAGE,
+            KeyCode::Home => 0,
+            KeyCode::End => usize::MAX / 2,
+            _ => self.page_scroll,
+        };
+    }
+
+    /// Shows `page` from its top.
+    fn show(&mut self, page: Page) {
+        if page != self.page {
+            self.page_scroll = 0;
+        }
+        self.page = page;
+    }
+
+    /// Scrolls the log: by a row, by a page (`LOG_PAGE` rows), to the first line, back to
+    /// following the output.
+    fn on_log_key(&mut self, code: KeyCode) {
+        const LOG_PAGE: usize = 10;
+        self.log_scroll = match code {
+            KeyCode::Up => self.log_scroll + 1,
+            KeyCode::Down => self.log_scroll.saturating_sub(1),
+            KeyCode::PageUp => self.log_scroll + LOG_PAGE,
+            KeyCode::PageDown => self.log_scroll.saturating_sub(LOG_PAGE),
+            KeyCode::Home => usize::MAX,
+            KeyCode::End => 0,
+            _ => self.log_scroll,
+        };
     }
 
     fn on_chart_key(&mut self, code: KeyCode) {

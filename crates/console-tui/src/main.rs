@@ -65,6 +65,9 @@ fn run_console(args: &Args) -> anyhow::Result<Option<Quit>> {
     let mut app = App::new(form, args.starter.clone().unwrap_or_else(starter_next_to_me), workdir);
     app.starter_args.extend(args.iox_prefix.iter().map(|p| format!("--iox-prefix={p}")));
     app.starter_args.extend(args.iox_root.iter().map(|r| format!("--iox-root={r}")));
+    if let Some(root) = &args.iox_root {
+        app.iox_root = root.clone();
+    }
     // SIGTERM, SIGHUP and a SIGINT from outside end the console like Cancel (aborting a move
     // first); Ctrl-C typed in the console arrives as a key.
     let stop = qmarc_timer::stop::install().context("signal handlers")?;

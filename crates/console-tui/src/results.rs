@@ -144,20 +144,23 @@ impl MoveResult {
         })
     }
 
-    /// [`MoveResult::load`], refusing a `summary.json` older than `since`: a move that
-    /// ended before writing its own (refused settings, a crash) must not show the one
-    /// before it as its result.
-    pub fn load_since(out: &Path, since: std::time::SystemTime) -> Result<MoveResult, String> {
-        let path = out.join("summary.json");
-        let written = std::fs::metadata(&path)
-            .and_then(|m| m.modified())
-            .map_err(|e| format!("{}: {e}", path.display()))?;
-        // File times come from the kernel's coarse clock, up to a tick behind the fine one.
-        let slack = std::time::Duration::from_millis(20);
-        if written + slack < since {
-            return Err(format!("{} is from an earlier move", path.display()));
+    /// The results of the move the starter with pid `starter` made: its `summary.json` in
+    /// `out` — refused if another run wrote it (a move that ended before writing its own must
+    /// not show the one before it as its result) — or, when the output folder could not take
+    /// them, in the rescue folder the starter named.
+    pub fn load_for(out: &Path, starter: u32) -> Result<MoveResult, String> {
+        let rescue = qmarc_controller::output::rescue_dir(starter);
+        let mut why = format!("{}: no summary.json of this move", out.display());
+        for dir in [out, rescue.as_path()] {
+            match MoveResult::load(dir) {
+                Ok(r) if r.summary.starter_pid == starter => return Ok(r),
+                Ok(_) if dir == out => {
+                    why = format!("{} is from an earlier move", dir.join("summary.json").display())
+                }
+                _ => {}
+            }
         }
-        MoveResult::load(out)
+        Err(why)
     }
 }
 

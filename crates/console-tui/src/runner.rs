@@ -14,7 +14,7 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 
 /// What to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -49,14 +49,14 @@ pub struct Running {
     pub mode: Mode,
     /// Since when.
     pub started: Instant,
-    /// Since when, wall clock (results older than this are not this move's).
-    pub started_wall: SystemTime,
     /// When an abort was sent, if one was.
     pub aborted: Option<Instant>,
     /// Where its results will be (the settings' output folder when it started).
     pub out_dir: PathBuf,
     /// (Kp, Kd, Kvff) per motor it runs with.
     pub gains: Vec<(f64, f64, f64)>,
+    /// The starter had to be killed (it could not remove its files).
+    pub killed: bool,
 }
 
 /// The starter's output goes to a file, not a pipe: if the console dies, the starter and its
@@ -117,7 +117,6 @@ impl Running {
         mode: Mode,
         cwd: &Path,
     ) -> std::io::Result<Running> {
-        let started_wall = SystemTime::now();
         let mut config_arg = OsString::from("--config=");
         config_arg.push(config);
         let (writer, reader) = output_file()?;
@@ -130,15 +129,8 @@ impl Running {
             .stdout(Stdio::from(writer.try_clone()?))
             .stderr(Stdio::from(writer))
             .process_group(0);
-        // SAFETY: prctl(2) is async-signal-safe; the closure touches nothing else.
-        unsafe {
-            cmd.pre_exec(|| {
-                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                Ok(())
-            });
-        }
+        // The starter's own spawn rules: SIGTERM when the console dies, at once if it is gone.
+        qmarc_starter::supervise::with_parent_death_signal(&mut cmd);
         let child = cmd.spawn()?;
         // `cmd` holds the writer's copies: gone with it, so only the starter's side stays open.
         drop(cmd);
@@ -151,10 +143,10 @@ impl Running {
             done,
             mode,
             started: Instant::now(),
-            started_wall,
             aborted: None,
             out_dir: cwd.to_path_buf(),
             gains: Vec::new(),
+            killed: false,
         })
     }
 
@@ -181,8 +173,7 @@ impl Running {
     /// stops both children (motors disabled, data written).
     pub fn abort(&mut self) {
         if self.aborted.is_none() {
-            // SAFETY: kill(2) on our own child, not yet reaped.
-            unsafe { libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM) };
+            qmarc_starter::supervise::send(&self.child, nix::sys::signal::Signal::SIGTERM);
             self.aborted = Some(Instant::now());
         }
     }
@@ -191,6 +182,7 @@ impl Running {
     /// (their parent-death signal) and stop as they would have for it.
     pub fn kill(&mut self) {
         let _ = self.child.kill();
+        self.killed = true;
         self.aborted.get_or_insert_with(Instant::now);
     }
 

@@ -125,8 +125,8 @@ fn draw_setup(f: &mut Frame, app: &App, area: Rect) {
     }
     f.render_widget(Paragraph::new(lines).block(Block::new().borders(Borders::RIGHT)), left);
 
-    let [gains, actions] =
-        Layout::vertical([Constraint::Length(13), Constraint::Min(0)]).areas(right);
+    // The gains take what they need (13 rows) as long as the actions keep three.
+    let [gains, actions] = Layout::vertical([Constraint::Max(13), Constraint::Min(3)]).areas(right);
     draw_gains(f, app, gains);
     draw_actions(f, app, actions);
 }
@@ -182,59 +182,95 @@ fn draw_gains(f: &mut Frame, app: &App, area: Rect) {
 }
 
 fn draw_actions(f: &mut Frame, app: &App, area: Rect) {
+    let rows = usize::from(area.height.saturating_sub(2));
+    let width = usize::from(area.width.saturating_sub(2));
+    let actions = [
+        ("F2", "Home robot", Some(Action::Home)),
+        ("F5", "Start controller", Some(Action::Run)),
+        ("F6", "Step motors now", Some(Action::Step)),
+        ("F10", "Exit (save)", Some(Action::Save)),
+        ("F12", "Cancel (leave without saving)", None),
+    ];
     let mut lines = Vec::new();
-    for (key, name, action) in [
-        ("F2", "Home robot", Action::Home),
-        ("F5", "Start controller", Action::Run),
-        ("F6", "Step motors now", Action::Step),
-        ("F10", "Exit (save)", Action::Save),
-    ] {
-        match app.form.blocking(action) {
-            None if app.running.is_none() => lines.push(Line::from(vec![
-                Span::styled(format!(" {key:<4}"), Style::new().bold()),
-                Span::raw(name),
-            ])),
-            None => lines.push(Line::styled(
-                format!(" {key:<4}{name} — a move is running"),
-                Style::new().dim(),
-            )),
-            Some((field, _)) => {
-                // The reason is shown at the field itself; here only which field it is.
-                let by =
-                    field.map_or("the settings file".to_string(), |i| app.form.fields[i].name());
-                lines.push(Line::styled(
-                    format!(" {key:<4}{name} — blocked by {by}"),
-                    Style::new().fg(Color::DarkGray),
-                ))
-            }
+    if rows >= actions.len() {
+        // One line per action, cut at the box's edge: the box never overflows.
+        for (key, name, action) in actions {
+            let (text, style) = match action.map(|a| app.form.blocking(a)) {
+                Some(Some((field, _))) => {
+                    // The reason is shown at the field itself; here only which field it is.
+                    let by = field
+                        .map_or("the settings file".to_string(), |i| app.form.fields[i].name());
+                    (format!(" {key:<4}{name} — blocked by {by}"), Style::new().fg(Color::DarkGray))
+                }
+                Some(None) if app.running.is_some() && key != "F12" => {
+                    (format!(" {key:<4}{name} — a move is running"), Style::new().dim())
+                }
+                _ => (format!(" {key:<4}{name}"), Style::new()),
+            };
+            lines.push(Line::styled(clip(&text, width), style));
         }
+    } else if rows > 0 {
+        // Too short for a line each: the keys that can act now, on one line.
+        let ready: Vec<&str> = actions
+            .iter()
+            .filter(|(_, _, a)| a.is_none_or(|a| app.form.blocking(a).is_none()))
+            .map(|(k, _, _)| *k)
+            .collect();
+        lines.push(Line::from(clip(&format!(" ready: {}", ready.join(" ")), width)));
     }
-    lines.push(Line::from(vec![
-        Span::styled(" F12 ", Style::new().bold()),
-        Span::raw("Cancel (leave without saving)"),
-    ]));
-    f.render_widget(
-        Paragraph::new(lines)
-            .wrap(Wrap { trim: false })
-            .block(Block::bordered().title(" Actions ")),
-        area,
-    );
+    f.render_widget(Paragraph::new(lines).block(Block::bordered().title(" Actions ")), area);
+}
+
+/// `text` cut to `width` characters, with `…` where it was cut.
+fn clip(text: &str, width: usize) -> String {
+    let n = text.chars().count();
+    if n <= width {
+        text.to_string()
+    } else {
+        text.chars().take(width.saturating_sub(1)).chain(['…']).collect()
+    }
+}
+
+/// `line` cut into rows of at most `width` characters (the log wraps, it does not cut).
+fn wrap_rows(line: &str, width: usize) -> Vec<String> {
+    let chars: Vec<char> = line.chars().collect();
+    if chars.is_empty() {
+        return vec![String::new()];
+    }
+    chars.chunks(width.max(1)).map(|c| c.iter().collect()).collect()
 }
 
 fn draw_log(f: &mut Frame, app: &App, area: Rect) {
-    let h = usize::from(area.height.saturating_sub(2));
-    let start = app.log.len().saturating_sub(h);
-    let lines: Vec<Line> = app.log[start..]
+    let (w, h) =
+        (usize::from(area.width.saturating_sub(2)), usize::from(area.height.saturating_sub(2)));
+    let rows: Vec<(String, bool)> = app
+        .log
         .iter()
-        .map(|l| {
+        .flat_map(|l| {
             let red = l.contains("FAULT") || l.contains("error") || l.contains("fault");
-            Line::styled(l.clone(), if red { Style::new().fg(Color::Red) } else { Style::new() })
+            wrap_rows(l, w).into_iter().map(move |r| (r, red))
         })
         .collect();
-    f.render_widget(
-        Paragraph::new(lines).block(Block::bordered().title(" qmarc-starter output ")),
-        area,
-    );
+    // Scrolled up from the end by `log_scroll` rows, never past the first.
+    let last_start = rows.len().saturating_sub(h);
+    let start = last_start.saturating_sub(app.log_scroll.min(last_start));
+    let lines: Vec<Line> = rows[start..(start + h).min(rows.len())]
+        .iter()
+        .map(|(r, red)| {
+            Line::styled(r.clone(), if *red { Style::new().fg(Color::Red) } else { Style::new() })
+        })
+        .collect();
+    let title = if start < last_start {
+        format!(
+            " qmarc-starter output — rows {}‥{} of {} (End: follow) ",
+            start + 1,
+            start + lines.len(),
+            rows.len()
+        )
+    } else {
+        " qmarc-starter output ".to_string()
+    };
+    f.render_widget(Paragraph::new(lines).block(Block::bordered().title(title)), area);
 }
 
 fn draw_results(f: &mut Frame, app: &App, area: Rect) {
@@ -253,10 +289,15 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
     } else {
         format!("{} ({})", s.mode, s.trajectory)
     };
+    let all_followed = s.motors.iter().all(|m| m.followed);
     match &s.fault {
-        None => lines.push(Line::styled(
+        None if all_followed => lines.push(Line::styled(
             format!("{what}: ok — {} cycles of {} µs", s.cycles, s.period_us),
             Style::new().fg(Color::Green).bold(),
+        )),
+        None => lines.push(Line::styled(
+            format!("{what}: done — a motor did not follow its command ({} cycles)", s.cycles),
+            Style::new().fg(Color::Red).bold(),
         )),
         Some(fl) => lines.push(Line::styled(
             format!("{what}: FAULT {}: {}", fl.kind, fl.message),
@@ -268,13 +309,29 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
         s.timing.policy,
         if s.degraded { " — DEGRADED: not real time" } else { "" }
     )));
-    lines.push(Line::styled(
-        format!(
-            "{:<3}{:>9}{:>9}{:>12}{:>14}{:>10}{:>10}",
-            "M", "min cnt", "max cnt", "Σ|e| cnt", "Σe² cnt²", "Σ|e| rad", "Σe² rad²"
-        ),
-        Style::new().bold(),
-    ));
+    if let Some(motors) = s.homing.as_ref().and_then(|h| h["motors"].as_array()) {
+        lines.push(Line::styled("homing (counts before homing)", Style::new().bold()));
+        for m in motors {
+            let v = |k: &str| m[k].as_f64().unwrap_or(f64::NAN);
+            lines.push(Line::from(format!(
+                "M{} switch found {:.0}, cleared {:.0}, home {:.0}{}",
+                m["motor"],
+                v("switch_found_counts"),
+                v("switch_cleared_counts"),
+                v("home_counts"),
+                if m["home"].as_bool() == Some(true) { " ✓ reads 0" } else { " — not reached" }
+            )));
+        }
+    }
+    if !s.motors.is_empty() {
+        lines.push(Line::styled(
+            format!(
+                "{:<3}{:>9}{:>9}{:>12}{:>14}{:>10}{:>10}",
+                "M", "min cnt", "max cnt", "Σ|e| cnt", "Σe² cnt²", "Σ|e| rad", "Σe² rad²"
+            ),
+            Style::new().bold(),
+        ));
+    }
     for (m, e) in s.motors.iter().enumerate() {
         lines.push(Line::from(format!(
             "{:<3}{:>9.1}{:>9.1}{:>12.0}{:>14.3e}{:>10.3}{:>10.3e}",
@@ -286,17 +343,26 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
             e.accumulated_abs_error_rad,
             e.sum_squares_error_rad2
         )));
+        let note = if e.followed { String::new() } else { "  DID NOT FOLLOW".to_string() };
         lines.push(Line::styled(
             format!(
-                "{:<3}{:>9}{:>9}   rad: min {:.3e}  max {:.3e}",
+                "{:<3}{:>9}{:>9}   rad: min {:.3e}  max {:.3e}{note}",
                 "", "", "", e.min_error_rad, e.max_error_rad
             ),
-            Style::new().dim(),
+            if e.followed { Style::new().dim() } else { Style::new().fg(Color::Red).bold() },
         ));
+    }
+    if let Some(st) = &s.settle {
+        let list = |v: &[f64]| v.iter().map(|e| format!("{e:.1}")).collect::<Vec<_>>().join(" ");
+        lines.push(Line::from(format!(
+            "settle {:.2} s: error at its end {} cnt",
+            st.seconds,
+            list(&st.final_error_counts)
+        )));
     }
     let t = &s.timing;
     lines.push(Line::styled(
-        format!("{:<20}{:>7}{:>7}{:>8}{:>9}", "timing µs", "p50", "p99", "p99.9", "max"),
+        format!("{:<20}{:>10}{:>10}{:>10}{:>10}", "timing", "p50", "p99", "p99.9", "max"),
         Style::new().bold(),
     ));
     for (name, p) in [
@@ -305,17 +371,25 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
         ("read round trip", &t.read_us),
         ("tick → DAC written", &t.output_latency_us),
     ] {
+        let u = qmarc_starter::table::human_us;
         lines.push(Line::from(format!(
-            "{name:<20}{:>7.0}{:>7.0}{:>8.0}{:>9.1}",
-            p.p50, p.p99, p.p999, p.max
+            "{name:<20}{:>10}{:>10}{:>10}{:>10}",
+            u(p.p50),
+            u(p.p99),
+            u(p.p999),
+            u(p.max)
         )));
     }
     lines.push(Line::from(format!(
         "periods off by > 40 µs: {}   missed: {}",
         t.outside_40us, t.missed_periods
     )));
-    // Wrapped, so a long fault message is read whole at 80 columns.
-    let p = Paragraph::new(lines).wrap(Wrap { trim: false });
+    for w in &s.warnings {
+        lines.push(Line::styled(format!("warning: {w}"), Style::new().fg(Color::Yellow)));
+    }
+    // Wrapped, so a long fault message is read whole at 80 columns; scrolled (↑↓ PgUp PgDn),
+    // so a long report is read whole at 80×24.
+    let p = scrolled(lines, app.page_scroll, area);
     let title = match r.age(std::time::SystemTime::now()) {
         Some(age) => format!(" Results of the last move ({age}) "),
         None => " Results of the last move ".to_string(),
@@ -342,6 +416,14 @@ type Trace<'a> = (&'a str, Color, &'a [(f64, f64)]);
 
 fn chart<'a>(title: impl Into<Line<'a>>, sets: Vec<Trace<'a>>) -> Chart<'a> {
     let slices: Vec<&[(f64, f64)]> = sets.iter().map(|s| s.2).collect();
+    let legend = Line::from(
+        sets.iter()
+            .flat_map(|(name, color, _)| {
+                [Span::styled(" ━ ", Style::new().fg(*color)), Span::raw(format!("{name} "))]
+            })
+            .collect::<Vec<_>>(),
+    )
+    .right_aligned();
     let (xb, yb) = bounds(&slices);
     let datasets = sets
         .into_iter()
@@ -355,7 +437,9 @@ fn chart<'a>(title: impl Into<Line<'a>>, sets: Vec<Trace<'a>>) -> Chart<'a> {
         })
         .collect();
     Chart::new(datasets)
-        .block(Block::bordered().title(title))
+        // The legend is in the bottom border, so it costs the plot no room at any size.
+        .block(Block::bordered().title(title).title_bottom(legend))
+        .legend_position(None)
         .x_axis(
             Axis::default().bounds(xb).labels([format!("{:.2}s", xb[0]), format!("{:.2}s", xb[1])]),
         )
@@ -386,19 +470,15 @@ fn draw_charts(f: &mut Frame, app: &App, area: Rect) {
     .areas(area);
     f.render_widget(
         chart(
-            // The title names the colours: at 80×24 there is no room for a legend.
-            Line::from(vec![
-                Span::raw(format!(" motor {} (←/→): ", m + 1)),
-                Span::styled("command", Style::new().fg(Color::Cyan)),
-                Span::raw(" vs "),
-                Span::styled("actual", Style::new().fg(Color::Yellow)),
-                Span::raw(", counts "),
-            ]),
-            vec![("cmd", Color::Cyan, &cmd), ("act", Color::Yellow, &act)],
+            format!(" motor {} (←/→): command vs actual, counts ", m + 1),
+            vec![("command", Color::Cyan, &cmd), ("actual", Color::Yellow, &act)],
         ),
         a,
     );
-    f.render_widget(chart(" following error, counts ", vec![("cmd − act", Color::Red, &err)]), b);
+    f.render_widget(
+        chart(" following error, counts ", vec![("command − actual", Color::Red, &err)]),
+        b,
+    );
     f.render_widget(chart(" servo period, µs ", vec![("period", Color::Green, &period)]), c);
 }
 
@@ -443,7 +523,7 @@ fn draw_history(f: &mut Frame, app: &App, area: Rect) {
         lines
             .push(Line::styled(format!("    Kp/Kd/Kvff {}", gains.join("  ")), Style::new().dim()));
     }
-    let p = Paragraph::new(lines).wrap(Wrap { trim: false });
+    let p = scrolled(lines, app.page_scroll, area);
     f.render_widget(
         p.block(
             Block::bordered()
@@ -451,6 +531,17 @@ fn draw_history(f: &mut Frame, app: &App, area: Rect) {
         ),
         area,
     );
+}
+
+/// `lines` wrapped to `area` and scrolled down by `scroll` rows, never past the last page.
+fn scrolled<'a>(lines: Vec<Line<'a>>, scroll: usize, area: Rect) -> Paragraph<'a> {
+    let width = usize::from(area.width.saturating_sub(2)).max(1);
+    let height = usize::from(area.height.saturating_sub(2));
+    let rows: usize = lines.iter().map(|l| l.width().max(1).div_ceil(width)).sum();
+    let top = scroll.min(rows.saturating_sub(height));
+    Paragraph::new(lines)
+        .wrap(Wrap { trim: false })
+        .scroll((u16::try_from(top).unwrap_or(u16::MAX), 0))
 }
 
 #[cfg(test)]
@@ -665,5 +756,97 @@ mod tests {
         assert!(row("4").contains("8000 ↓"), "{s}");
         assert!(row("2").contains("following_error"), "{s}");
         assert!(s.contains("Kp/Kd/Kvff 182000/3000/119000"), "{s}");
+    }
+
+    fn key(code: ratatui::crossterm::event::KeyCode) -> ratatui::crossterm::event::KeyEvent {
+        ratatui::crossterm::event::KeyEvent::from(code)
+    }
+
+    /// Issue 10, item 17: the log wraps long lines and scrolls (↑↓ PgUp PgDn Home End).
+    #[test]
+    fn the_log_wraps_and_scrolls_issue_10() {
+        use ratatui::crossterm::event::KeyCode;
+        let (_d, mut app) = app();
+        app.log = (0..60).map(|i| format!("line {i}")).collect();
+        let long = format!("qmarc-controller: error: {}END", "x".repeat(150));
+        app.log.push(long);
+        app.on_key(key(KeyCode::F(3)));
+        let s = text(&render(&app, 80, 24));
+        assert!(s.contains("END"), "the end of a long line is shown, wrapped:\n{s}");
+        assert!(!s.contains("line 0 "), "{s}");
+        app.on_key(key(KeyCode::Home));
+        let s = text(&render(&app, 80, 24));
+        assert!(s.contains("line 0"), "Home: the first line:\n{s}");
+        assert!(s.contains("rows 1‥"), "the title says where:\n{s}");
+        app.on_key(key(KeyCode::End));
+        app.on_key(key(KeyCode::PageUp));
+        let s = text(&render(&app, 80, 24));
+        assert!(!s.contains("END") && s.contains("line 5"), "a page up:\n{s}");
+        // The message line has the page's keys, not the setup page's hint.
+        assert!(app.status.0.starts_with("↑↓ PgUp PgDn scroll"), "{:?}", app.status);
+    }
+
+    /// Issue 10, item 17: Ctrl-U empties a field instead of typing a `u`; a hint never
+    /// outlives its page or its key.
+    #[test]
+    fn ctrl_u_clears_a_field_and_hints_follow_the_page_issue_10() {
+        use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+        let (_d, mut app) = app();
+        let period = app.form.index(Place::Key("general", "period_us")).unwrap();
+        app.focus = period;
+        app.on_key(KeyEvent::new(KeyCode::Char('u'), KeyModifiers::CONTROL));
+        assert_eq!(app.form.fields[period].text, "", "emptied");
+        assert!(app.status.1, "an empty period is an error: {:?}", app.status);
+        app.on_key(key(KeyCode::Esc));
+        assert_eq!(app.form.fields[period].text, "400", "Esc brings it back");
+        app.on_key(KeyEvent::new(KeyCode::Char('x'), KeyModifiers::ALT));
+        assert_eq!(app.form.fields[period].text, "400", "Alt-x types nothing");
+        app.on_key(key(KeyCode::F(7)));
+        assert!(app.status.0.starts_with("←/→ or 1–4"), "{:?}", app.status);
+        app.on_key(key(KeyCode::F(1)));
+        assert!(app.status.0.starts_with("Period µs: type a value"), "{:?}", app.status);
+    }
+
+    /// Issue 10, item 17: the charts have legends; the results of a homing show where each
+    /// switch was found.
+    #[test]
+    fn charts_have_legends_and_homing_results_show_the_switches_issue_10() {
+        let (_d, mut app) = app();
+        let mut r = result(false);
+        r.summary.mode = "home".into();
+        r.summary.homing = Some(serde_json::json!({ "motors": [
+            { "motor": 1, "switch_found_counts": -9500.0, "switch_cleared_counts": -9498.0,
+              "home_counts": -7498.0, "home": true }
+        ]}));
+        app.last = Some(r);
+        app.page = Page::Charts;
+        let s = text(&render(&app, 80, 24));
+        for want in ["command", "actual", "command − actual", "period"] {
+            assert!(s.contains(want), "legend {want:?}:\n{s}");
+        }
+        app.page = Page::Results;
+        let s = text(&render(&app, 80, 24));
+        assert!(s.contains("M1 switch found -9500, cleared -9498, home -7498 ✓ reads 0"), "{s}");
+    }
+
+    /// Issue 10, item 17: the actions never overflow their box, however small the terminal.
+    #[test]
+    fn the_actions_fit_their_box_at_any_size_issue_10() {
+        let (_d, app) = app();
+        for (w, h) in [(80, 24), (80, 18), (60, 14), (40, 10)] {
+            let s = text(&render(&app, w, h));
+            let box_rows: Vec<&str> =
+                s.lines().filter(|l| l.contains("F12") || l.contains("ready:")).collect();
+            assert!(!box_rows.is_empty() || h < 12, "{w}×{h}: no actions:\n{s}");
+            for l in s.lines() {
+                assert_eq!(
+                    l.chars().count(),
+                    usize::from(w),
+                    "{w}×{h}: a row of the wrong width:\n{s}"
+                );
+            }
+        }
+        let s = text(&render(&app, 80, 18));
+        assert!(s.contains("ready: F2 F5 F6 F10 F12"), "compact at 80×18:\n{s}");
     }
 }

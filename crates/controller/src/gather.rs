@@ -5,15 +5,6 @@ use crate::config::GatherFields;
 use qmarc_proto::MAX_MOTORS;
 use std::io::{self, Write};
 
-/// Every 4096 rows: an `Interrupted` error once a stop signal has arrived, so that Ctrl-C
-/// ends the writing of a long move's data within a moment.
-fn stop_check(row: usize) -> io::Result<()> {
-    if row.is_multiple_of(4096) && qmarc_timer::stop::requested() {
-        return Err(io::Error::new(io::ErrorKind::Interrupted, "a stop signal arrived"));
-    }
-    Ok(())
-}
-
 /// One gathered servo cycle.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct GatherRow {
@@ -178,8 +169,7 @@ impl Gather {
     /// Writes `gather.csv`: a header line, then one line per row.
     pub fn write_csv(&self, w: &mut (impl Write + ?Sized)) -> io::Result<()> {
         writeln!(w, "{}", self.columns().join(","))?;
-        for (i, r) in self.rows.iter().enumerate() {
-            stop_check(i)?;
+        for r in &self.rows {
             self.write_row(w, r, ",")?;
         }
         Ok(())
@@ -198,8 +188,7 @@ impl Gather {
         let quoted: Vec<String> = cols.iter().map(|c| format!("'{c}'")).collect();
         writeln!(w, "qmarc_columns = {{{}}};", quoted.join(", "))?;
         writeln!(w, "qmarc_data = [")?;
-        for (i, r) in self.rows.iter().enumerate() {
-            stop_check(i)?;
+        for r in &self.rows {
             self.write_row(w, r, " ")?;
         }
         writeln!(w, "];")?;

@@ -151,10 +151,41 @@ pub struct WriteError {
     pub reason: std::io::Error,
 }
 
+/// A writer that fails (`Interrupted`) once a stop signal arrives after it was made: the
+/// stop that ended a move does not cut its data short, a second one (Ctrl-C again) ends the
+/// writing at once.
+struct StopAware<W> {
+    inner: W,
+    signals: u32,
+}
+
+impl<W: Write> Write for StopAware<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if qmarc_timer::stop::count() > self.signals {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::Interrupted,
+                "a stop signal arrived while the data were written",
+            ));
+        }
+        self.inner.write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// True when `e` is the interruption of [`StopAware`].
+pub fn interrupted(e: &WriteError) -> bool {
+    e.reason.kind() == std::io::ErrorKind::Interrupted
+}
+
 /// Writes `files` into `dir` as one set: each into `dir/.incoming-<pid>/`, then, when all are
 /// written and flushed, renamed into `dir` in order (put `summary.json` last). Returns the
 /// final paths. On failure the folder keeps what it had, and the incoming folder is removed.
+/// A stop signal that arrives while it writes ends it (an `Interrupted` error).
 pub fn write_set(dir: &Path, files: &[FileWriter<'_>]) -> Result<Vec<PathBuf>, WriteError> {
+    let signals = qmarc_timer::stop::count();
     let incoming = dir.join(format!(".incoming-{}", std::process::id()));
     let fail = |file: PathBuf, reason| {
         let _ = std::fs::remove_dir_all(&incoming);
@@ -164,10 +195,10 @@ pub fn write_set(dir: &Path, files: &[FileWriter<'_>]) -> Result<Vec<PathBuf>, W
     for (name, write) in files {
         let path = incoming.join(name);
         let result = std::fs::File::create(&path).and_then(|f| {
-            let mut w = std::io::BufWriter::new(f);
+            let mut w = std::io::BufWriter::new(StopAware { inner: f, signals });
             write(&mut w)?;
             w.flush()?;
-            w.get_ref().sync_data()
+            w.get_ref().inner.sync_data()
         });
         result.map_err(|e| fail(dir.join(name), e))?;
     }

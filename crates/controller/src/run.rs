@@ -346,9 +346,10 @@ pub fn summarize(
 
 /// Writes the move's data files and `summary.json` into `dir` as one set
 /// ([`crate::output::write_set`]): the previous results stay until all of them are written.
-/// A stop signal while the rows are written abandons the data files (the summary is still
-/// written, with a warning); a failure writes everything to the rescue folder instead, with
-/// a warning, and says so on standard error.
+/// The stop that ended the move does not cut the writing short; a further stop signal while
+/// the rows are written abandons the data files (the summary is still written, with a
+/// warning); a failure writes everything to the rescue folder instead, with a warning, and
+/// says so on standard error.
 pub fn write_results(dir: &Path, servo: &Servo, summary: &mut Summary) -> Result<(), RunError> {
     let gather = servo.gather();
     let csv = |w: &mut dyn Write| gather.write_csv(w);
@@ -366,10 +367,10 @@ pub fn write_results(dir: &Path, servo: &Servo, summary: &mut Summary) -> Result
         crate::output::write_set(dir, if data { &all } else { &all[2..] })
     };
     let Err(e) = attempt(dir, summary, true) else { return Ok(()) };
-    if qmarc_timer::stop::requested() {
+    if crate::output::interrupted(&e) {
         summary.warnings.push(format!(
-            "a stop signal arrived while the data were written: gather.csv and gather.m were \
-             not written (in {} the previous ones, if any, are as they were)",
+            "a second stop signal arrived while the data were written: gather.csv and \
+             gather.m were not written (in {} the previous ones, if any, are as they were)",
             dir.display()
         ));
         attempt(dir, summary, false)?;

@@ -4,14 +4,22 @@
 //! The handler only stores to an atomic, so a loop can poll it every cycle without locking or
 //! allocating. Handlers are installed with `SA_RESTART`; waits that still return `EINTR` retry.
 
-use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU32, Ordering};
 
 static STOP: AtomicBool = AtomicBool::new(false);
 static SIGNAL: AtomicI32 = AtomicI32::new(0);
+static COUNT: AtomicU32 = AtomicU32::new(0);
 
 extern "C" fn on_signal(sig: libc::c_int) {
     SIGNAL.store(sig, Ordering::Relaxed);
+    COUNT.fetch_add(1, Ordering::Relaxed);
     STOP.store(true, Ordering::Relaxed);
+}
+
+/// How many stop signals have arrived: a phase that must not be cut short by the stop that
+/// ended the move (writing its data) ends only on a later one.
+pub fn count() -> u32 {
+    COUNT.load(Ordering::Relaxed)
 }
 
 /// Installs the stop handler for SIGTERM, SIGINT and SIGHUP. Returns the flag it sets.
