@@ -446,7 +446,7 @@ fn a_dead_controller_is_reported_with_what_is_known_issue_10() {
     assert_eq!(r.code, Some(i32::from(exit::FAULT)), "{}\n{}", r.stdout, r.stderr);
     let s = read_summary(&out);
     let fault = s.fault.as_ref().expect("controller_lost");
-    assert_eq!(fault.kind, "controller_lost");
+    assert_eq!(fault.kind.name(), "controller_lost");
     assert!(s.cycles > 100, "the cycles reached: {}", s.cycles);
     assert!(
         fault.message.starts_with(&format!(

@@ -77,7 +77,7 @@ fn a_path_into_the_top_switch_disables_every_motor_within_a_period() {
         r.stdout
     );
     let fault = read_summary(&out).fault.expect("a fault");
-    assert_eq!((fault.kind.as_str(), fault.motor), ("limit_switch", Some(1)));
+    assert_eq!((fault.kind.name(), fault.motor), ("limit_switch", Some(1)));
     assert!(fault.message.ends_with("all motors disabled"), "{}", fault.message);
     let ev = read_sim_events(&events);
     let on = ev.iter().find(|e| e.1 == "top_on" && e.2 == 1).expect("the switch tripped").0;
@@ -136,7 +136,7 @@ fn a_stream_that_leaves_the_software_limits_is_stopped_in_the_loop() {
     let r = wait_with_timeout(child, TIMEOUT);
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     let fault = read_summary(&out).fault.expect("a fault");
-    assert_eq!((fault.kind.as_str(), fault.motor), ("software_limit", Some(1)));
+    assert_eq!((fault.kind.name(), fault.motor), ("software_limit", Some(1)));
     assert!(
         fault.message.starts_with("motor 1 was commanded to -900")
             && fault.message.contains("past its software limit -9000"),
@@ -170,7 +170,7 @@ fn a_stalled_motor_trips_the_following_error_limit_within_a_period() {
     );
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     let fault = read_summary(&out).fault.expect("a fault");
-    assert_eq!((fault.kind.as_str(), fault.motor), ("following_error", Some(1)));
+    assert_eq!((fault.kind.name(), fault.motor), ("following_error", Some(1)));
     assert!(
         fault.message.starts_with("motor 1 instantaneous following error 200"),
         "{}",
@@ -272,7 +272,7 @@ fn killing_the_hwserver_during_a_move_ends_it_as_hwserver_lost() {
         assert_eq!(r.code, Some(2), "{delay_ms} ms: {}\n{}", r.stdout, r.stderr);
         assert!(r.stderr.contains("qmarc-hwserver was killed by SIGKILL"), "{}", r.stderr);
         let fault = read_summary(&run.out("out")).fault.expect("a fault");
-        assert_eq!(fault.kind, "hwserver_lost", "{delay_ms} ms");
+        assert_eq!(fault.kind.name(), "hwserver_lost", "{delay_ms} ms");
         assert!(fault.message.contains("(server process gone)"), "{}", fault.message);
         assert!(
             fault.message.contains("did not acknowledge disabling the motors"),
@@ -304,7 +304,7 @@ fn killing_the_controller_during_a_move_trips_the_hwserver_watchdog_within_its_b
     assert!(r.stderr.contains("qmarc-controller was killed by SIGKILL"), "{}", r.stderr);
     assert!(r.stderr.contains("qmarc-hwserver: watchdog: controller silent for"), "{}", r.stderr);
     let fault = read_summary(&run.out("out")).fault.expect("the starter's summary");
-    assert_eq!(fault.kind, "controller_lost");
+    assert_eq!(fault.kind.name(), "controller_lost");
     assert!(
         fault.message.contains("the hwserver's watchdog disabled the motors after 250 periods"),
         "{}",
@@ -332,7 +332,7 @@ fn killing_the_controller_before_the_move_stops_the_hwserver() {
     let r = kill_during_step(&run, &cfg, &["--deterministic"], "qmarc-controller", Duration::ZERO);
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     let fault = read_summary(&run.out("out")).fault.expect("the starter's summary");
-    assert_eq!(fault.kind, "controller_lost");
+    assert_eq!(fault.kind.name(), "controller_lost");
     assert!(
         fault.message.starts_with("qmarc-controller was killed by SIGKILL before the move began; "),
         "{}",
@@ -412,26 +412,26 @@ fn homing_from_several_start_positions_finds_every_switch() {
         assert!(r.stdout.contains("QMARC home: ok"), "{}", r.stdout);
         let s = read_summary(&out);
         let homing = s.homing.expect("a homing report");
-        let motors = homing["motors"].as_array().unwrap();
+        let motors = &homing.motors;
         assert_eq!(motors.len(), 3);
+        let after = homing.after.expect("the read after the preset");
         for (m, rep) in motors.iter().enumerate() {
-            let f = |k: &str| rep[k].as_f64().unwrap();
-            assert!(rep["home"].as_bool().unwrap(), "{start}: motor {} {rep}", m + 1);
+            assert!(rep.home, "{start}: motor {} {rep:?}", m + 1);
             // The counters read 5000 off the homed frame: the switch at −9500 reads −4500.
-            assert!((f("switch_found_counts") - -4_500.0).abs() <= 10.0, "{start}: {rep}");
-            assert!((f("switch_cleared_counts") - -4_500.0).abs() <= 10.0, "{start}: {rep}");
+            assert!((rep.switch_found_counts - -4_500.0).abs() <= 10.0, "{start}: {rep:?}");
+            assert!((rep.switch_cleared_counts - -4_500.0).abs() <= 10.0, "{start}: {rep:?}");
             // Home: 2000 counts below where the switch cleared, away from it.
-            assert_eq!(f("home_counts"), f("switch_cleared_counts") + 2_000.0, "{start}: {rep}");
+            assert_eq!(rep.home_counts, rep.switch_cleared_counts + 2_000.0, "{start}: {rep:?}");
             // Afterwards home reads 0: the motor reads how far it stands from home.
-            let after = homing["after"]["positions_counts"][m].as_f64().unwrap();
+            let stands = after.positions_counts[m];
             assert!(
-                after.abs() < 400.0,
-                "{start}: motor {} stands {after} counts from home",
+                stands.abs() < 400.0,
+                "{start}: motor {} stands {stands} counts from home",
                 m + 1
             );
-            assert!(homing["after"]["homed"][m].as_bool().unwrap());
+            assert!(after.homed[m]);
         }
-        assert_eq!(motors[0]["started_on_switch"].as_bool(), Some(start.starts_with("[-9600")));
+        assert_eq!(motors[0].started_on_switch, start.starts_with("[-9600"));
         run.assert_clean();
     }
 }
@@ -447,7 +447,7 @@ fn a_stuck_top_switch_fails_homing_within_ten_counts() {
     );
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     let fault = read_summary(&out).fault.expect("a fault");
-    assert_eq!(fault.kind, "homing_failed");
+    assert_eq!(fault.kind.name(), "homing_failed");
     let backed: f64 = fault
         .message
         .strip_prefix("homing motor 1: its top switch was still active ")
@@ -552,7 +552,7 @@ fn killing_the_controller_of_a_lock_step_run_trips_the_watchdog_at_once() {
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     assert!(r.stderr.contains("its process is gone"), "{}", r.stderr);
     let fault = read_summary(&out).fault.expect("the starter's summary");
-    assert_eq!(fault.kind, "controller_lost");
+    assert_eq!(fault.kind.name(), "controller_lost");
     assert!(fault.message.contains("the hwserver's watchdog disabled the motors"), "{fault:?}");
     run.assert_clean();
 }

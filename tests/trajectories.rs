@@ -71,7 +71,10 @@ fn spline_run_passes_through_every_knot() {
         &["--deterministic", "run", "--method=spline", &format!("--knots={}", k.display())],
     );
     let s = read_summary(&out);
-    assert_eq!((s.mode.as_str(), s.trajectory.as_str(), s.cycles), ("run", "spline", 5001));
+    assert_eq!(
+        (s.mode.to_string(), s.trajectory.as_str(), s.cycles),
+        ("run".into(), "spline", 5001)
+    );
     let (_, rows) = read_gather(&out);
     assert_passes_through(&rows, &offline_knots("sine-3motors.txt"), 0.0);
     // It tracks: the errors are the law's, not a runaway (thesis gains, sim plant).
@@ -207,7 +210,7 @@ fn a_stream_that_runs_dry_faults_with_the_motors_held_then_disabled() {
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     let s = read_summary(&out);
     let fault = s.fault.expect("a fault");
-    assert_eq!(fault.kind, "trajectory_starved");
+    assert_eq!(fault.kind.name(), "trajectory_starved");
     assert_eq!(fault.cycle, 451, "the first sample after the last knot (180 ms / 400 µs = 450)");
     assert!(fault.message.ends_with("all motors disabled"), "{}", fault.message);
     assert!(r.stdout.contains("FAULT trajectory_starved"), "{}", r.stdout);
@@ -234,7 +237,7 @@ fn a_bad_knot_in_a_stream_ends_the_move_naming_line_and_column() {
     let r = run_stream(&run, &out, &[], lines, true);
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     let fault = read_summary(&out).fault.expect("a fault");
-    assert_eq!(fault.kind, "trajectory_error");
+    assert_eq!(fault.kind.name(), "trajectory_error");
     assert!(
         fault.message.starts_with("-:7:")
             && fault

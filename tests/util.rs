@@ -6,8 +6,8 @@
 //! --workspace` builds them (every binary crate has an integration test target).
 #![deny(missing_docs)]
 
-use qmarc_controller::summary::Summary;
 use qmarc_proto::service::IpcLocation;
+use qmarc_report::Summary;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -335,7 +335,7 @@ pub fn read_summary(out: &Path) -> Summary {
 pub fn assert_aborted_with_motors_disabled(out: &Path) -> Summary {
     let s = read_summary(out);
     let fault = s.fault.as_ref().expect("the move was aborted");
-    assert_eq!(fault.kind, "aborted", "{fault:?}");
+    assert_eq!(fault.kind.name(), "aborted", "{fault:?}");
     assert!(fault.message.ends_with("all motors disabled"), "{fault:?}");
     s
 }

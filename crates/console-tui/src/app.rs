@@ -371,7 +371,7 @@ impl App {
         }
         match MoveResult::load_for(&r.out_dir, r.pid()) {
             Ok(result) => {
-                self.record(r.mode, r.gains.clone(), &result);
+                self.record(r.gains.clone(), &result);
                 let fault = result
                     .summary
                     .fault
@@ -405,17 +405,13 @@ impl App {
         }
     }
 
-    fn record(&mut self, mode: Mode, gains: Vec<(f64, f64, f64)>, r: &MoveResult) {
+    fn record(&mut self, gains: Vec<(f64, f64, f64)>, r: &MoveResult) {
         let s = &r.summary;
-        let what = if s.trajectory.is_empty() || s.trajectory == s.mode {
-            mode.arg().to_string()
-        } else {
-            format!("{} ({})", s.mode, s.trajectory)
-        };
+        let what = s.what();
         self.history.push(HistoryEntry {
             n: self.history.len() + 1,
             what,
-            fault: s.fault.as_ref().map(|f| f.kind.clone()),
+            fault: s.fault.as_ref().map(|f| f.kind),
             accumulated: s.motors.iter().map(|m| m.accumulated_abs_error_counts).collect(),
             gains,
         });

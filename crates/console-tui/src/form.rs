@@ -2,9 +2,9 @@
 //! from and written back to the settings file the starter reads — its comments, order and
 //! formatting kept — and checked with the very code the starter and controller use.
 
-use qmarc_controller::config::{ConfigLoadError, Settings};
-use qmarc_controller::registry;
-use qmarc_controller::traj::KnotSource;
+use qmarc_config::{ConfigLoadError, Settings};
+use qmarc_plugins::registry;
+use qmarc_plugins::step::KnotSource;
 use std::path::{Path, PathBuf};
 use toml_edit::{Array, DocumentMut, Item, Table, Value};
 
@@ -371,7 +371,7 @@ impl Form {
         let mut skip: Vec<usize> = Vec::new();
         for _ in 0..=self.fields.len() {
             let text = self.doc_with(&skip).to_string();
-            match Settings::parse(&self.path, &text) {
+            match Settings::parse(&self.path, &text, &qmarc_starter::names()) {
                 Ok(s) => {
                     if skip.is_empty() {
                         self.checked = Some(s);

@@ -7,7 +7,7 @@ use clap::{Args as _, CommandFactory, Parser};
 use qmarc_console::app::{App, Quit};
 use qmarc_console::form::Form;
 use qmarc_console::ui;
-use qmarc_controller::cli::MoveOptions;
+use qmarc_starter::cli::MoveOptions;
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
 use std::ffi::OsString;
 use std::io::Write;
@@ -50,10 +50,12 @@ fn starter_next_to_me() -> PathBuf {
 
 /// True when the console's terminal has hung up (its other end closed).
 fn terminal_gone() -> bool {
-    let mut fd = libc::pollfd { fd: libc::STDOUT_FILENO, events: 0, revents: 0 };
-    // SAFETY: poll(2) on one valid pollfd, zero timeout.
-    let n = unsafe { libc::poll(&mut fd, 1, 0) };
-    n > 0 && fd.revents & (libc::POLLHUP | libc::POLLERR | libc::POLLNVAL) != 0
+    use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
+    let stdout = std::io::stdout();
+    let mut fds = [PollFd::new(std::os::fd::AsFd::as_fd(&stdout), PollFlags::empty())];
+    let gone = PollFlags::POLLHUP | PollFlags::POLLERR | PollFlags::POLLNVAL;
+    matches!(poll(&mut fds, PollTimeout::ZERO), Ok(n) if n > 0)
+        && fds[0].revents().is_some_and(|r| r.intersects(gone))
 }
 
 fn run_console(args: &Args) -> anyhow::Result<Option<Quit>> {
@@ -172,7 +174,7 @@ fn main() -> ExitCode {
         let _ = writeln!(std::io::stderr(), "qmarc: cannot run {}: {err}", starter.display());
         return ExitCode::from(1);
     }
-    let args: Args = qmarc_controller::cli::parse_or_exit();
+    let args: Args = qmarc_starter::cli::parse_or_exit();
     match run_console(&args) {
         // Written without panicking: the terminal may be gone.
         Ok(Some(Quit::Saved)) => {

@@ -1,7 +1,7 @@
 //! What the console shows after a move: the summary, the series for the charts from
 //! `gather.csv`, and the history of the session's moves.
 
-use qmarc_controller::summary::Summary;
+use qmarc_report::Summary;
 use std::path::Path;
 
 /// The series of one move, per motor, from `gather.csv`.
@@ -149,7 +149,7 @@ impl MoveResult {
     /// not show the one before it as its result) — or, when the output folder could not take
     /// them, in the rescue folder the starter named.
     pub fn load_for(out: &Path, starter: u32) -> Result<MoveResult, String> {
-        let rescue = qmarc_controller::output::rescue_dir(starter);
+        let rescue = qmarc_report::output::rescue_dir(starter);
         let mut why = format!("{}: no summary.json of this move", out.display());
         for dir in [out, rescue.as_path()] {
             match MoveResult::load(dir) {
@@ -172,7 +172,7 @@ pub struct HistoryEntry {
     /// `step`, `run (spline)`, `home`.
     pub what: String,
     /// The fault kind, if one ended it.
-    pub fault: Option<String>,
+    pub fault: Option<qmarc_controller::fault::FaultKind>,
     /// Σ|error| per motor, counts.
     pub accumulated: Vec<f64>,
     /// (Kp, Kd, Kvff) per motor when it ran.

@@ -284,11 +284,7 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
     };
     let s = &r.summary;
     let mut lines = Vec::new();
-    let what = if s.trajectory.is_empty() || s.trajectory == s.mode {
-        s.mode.clone()
-    } else {
-        format!("{} ({})", s.mode, s.trajectory)
-    };
+    let what = s.what();
     let all_followed = s.motors.iter().all(|m| m.followed);
     match &s.fault {
         None if all_followed => lines.push(Line::styled(
@@ -309,17 +305,16 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
         s.timing.policy,
         if s.degraded { " — DEGRADED: not real time" } else { "" }
     )));
-    if let Some(motors) = s.homing.as_ref().and_then(|h| h["motors"].as_array()) {
+    if let Some(homing) = &s.homing {
         lines.push(Line::styled("homing (counts before homing)", Style::new().bold()));
-        for m in motors {
-            let v = |k: &str| m[k].as_f64().unwrap_or(f64::NAN);
+        for m in &homing.motors {
             lines.push(Line::from(format!(
                 "M{} switch found {:.0}, cleared {:.0}, home {:.0}{}",
-                m["motor"],
-                v("switch_found_counts"),
-                v("switch_cleared_counts"),
-                v("home_counts"),
-                if m["home"].as_bool() == Some(true) { " ✓ reads 0" } else { " — not reached" }
+                m.motor,
+                m.switch_found_counts,
+                m.switch_cleared_counts,
+                m.home_counts,
+                if m.home { " ✓ reads 0" } else { " — not reached" }
             )));
         }
     }
@@ -371,7 +366,7 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
         ("read round trip", &t.read_us),
         ("tick → DAC written", &t.output_latency_us),
     ] {
-        let u = qmarc_starter::table::human_us;
+        let u = qmarc_report::table::human_us;
         lines.push(Line::from(format!(
             "{name:<20}{:>10}{:>10}{:>10}{:>10}",
             u(p.p50),
@@ -499,7 +494,7 @@ fn draw_history(f: &mut Frame, app: &App, area: Rect) {
             .find(|p| p.what == h.what && p.fault.is_none())
             .filter(|_| h.fault.is_none())
             .map(|p| &p.accumulated);
-        let outcome = h.fault.clone().unwrap_or_else(|| "ok".into());
+        let outcome = h.fault.map_or("ok".to_string(), |k| k.to_string());
         let acc: Vec<String> = h
             .accumulated
             .iter()
@@ -549,7 +544,8 @@ mod tests {
     use super::*;
     use crate::form::{Form, Place};
     use crate::results::{MoveResult, Series};
-    use qmarc_controller::summary::{FaultReport, Summary};
+    use qmarc_controller::fault::FaultKind;
+    use qmarc_report::summary::{FaultReport, Summary};
     use ratatui::Terminal;
     use ratatui::backend::TestBackend;
     use ratatui::buffer::Buffer;
@@ -685,9 +681,10 @@ mod tests {
     }
 
     fn result(fault: bool) -> MoveResult {
-        let mut summary = Summary::controller_lost("step", 3, 400, 0, String::new());
+        let mut summary =
+            Summary::controller_lost(qmarc_config::Mode::Step, 3, 400, 0, String::new());
         summary.fault = fault.then(|| FaultReport {
-            kind: "limit_switch".into(),
+            kind: FaultKind::LimitSwitch,
             motor: Some(1),
             cycle: 12,
             message: "motor 1 hit its top limit switch at cycle 12; all motors disabled".into(),
@@ -732,16 +729,17 @@ mod tests {
     #[test]
     fn history_trends_compare_whole_moves_of_the_same_kind() {
         let (_d, mut app) = app();
-        let entry = |n, what: &str, fault: Option<&str>, acc: f64| crate::results::HistoryEntry {
-            n,
-            what: what.into(),
-            fault: fault.map(str::to_string),
-            accumulated: vec![acc; 3],
-            gains: vec![(182000.0, 3000.0, 119000.0); 3],
-        };
+        let entry =
+            |n, what: &str, fault: Option<FaultKind>, acc: f64| crate::results::HistoryEntry {
+                n,
+                what: what.into(),
+                fault,
+                accumulated: vec![acc; 3],
+                gains: vec![(182000.0, 3000.0, 119000.0); 3],
+            };
         app.history = vec![
             entry(1, "step", None, 9000.0),
-            entry(2, "step", Some("following_error"), 500.0),
+            entry(2, "step", Some(FaultKind::FollowingError), 500.0),
             entry(3, "run (spline)", None, 100.0),
             entry(4, "step", None, 8000.0),
         ];
@@ -813,11 +811,19 @@ mod tests {
     fn charts_have_legends_and_homing_results_show_the_switches_issue_10() {
         let (_d, mut app) = app();
         let mut r = result(false);
-        r.summary.mode = "home".into();
-        r.summary.homing = Some(serde_json::json!({ "motors": [
-            { "motor": 1, "switch_found_counts": -9500.0, "switch_cleared_counts": -9498.0,
-              "home_counts": -7498.0, "home": true }
-        ]}));
+        r.summary.mode = qmarc_config::Mode::Home;
+        r.summary.homing = Some(qmarc_report::summary::HomingReport {
+            motors: vec![qmarc_report::summary::MotorHome {
+                motor: 1,
+                switch_found_counts: -9500.0,
+                switch_cleared_counts: -9498.0,
+                home_counts: -7498.0,
+                ended_counts: -7498.0,
+                started_on_switch: false,
+                home: true,
+            }],
+            after: None,
+        });
         app.last = Some(r);
         app.page = Page::Charts;
         let s = text(&render(&app, 80, 24));

@@ -5,16 +5,18 @@
 //! cycle`.
 
 use criterion::{BatchSize, BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use qmarc_controller::config::Settings;
-use qmarc_controller::knots::{OfflineKnots, PvtKnot};
-use qmarc_controller::law::{PidFf, ServoInput, ServoLaw};
+use qmarc_config::Settings;
+use qmarc_controller::law::{ServoInput, ServoLaw};
 use qmarc_controller::link::{HwLink, LinkError};
-use qmarc_controller::pvt::Pvt;
-use qmarc_controller::registry::GENERATORS;
 use qmarc_controller::servo::{CycleEnd, MovePlan, Servo};
-use qmarc_controller::spline::{CubicSpline, NaturalSpline};
-use qmarc_controller::traj::{Sample, Step, TrajectoryGenerator};
+use qmarc_controller::traj::{Sample, TrajectoryGenerator};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
+use qmarc_plugins::knots::{OfflineKnots, PvtKnot};
+use qmarc_plugins::pidff::PidFf;
+use qmarc_plugins::pvt::Pvt;
+use qmarc_plugins::registry::GENERATORS;
+use qmarc_plugins::spline::{CubicSpline, NaturalSpline};
+use qmarc_plugins::step::Step;
 use qmarc_proto::{HwMsg, MAX_MOTORS};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
 use std::hint::black_box;
@@ -31,7 +33,13 @@ impl HwLink for CoreLink {
 }
 
 fn settings() -> Settings {
-    Settings::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml")).unwrap()
+    let names = qmarc_config::Names {
+        laws: qmarc_plugins::registry::law_names(),
+        methods: qmarc_plugins::registry::path_generator_names(),
+        backends: qmarc_hwserver::backends::names(),
+    };
+    Settings::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml"), &names)
+        .unwrap()
 }
 
 fn bench_cycle(c: &mut Criterion) {
@@ -39,7 +47,7 @@ fn bench_cycle(c: &mut Criterion) {
     // A long step so the path never ends while criterion iterates.
     let mut s_long = s.clone();
     s_long.step.duration_s = 3_600.0;
-    let plan = MovePlan { gather_every: 4, ..MovePlan::new("step", 3, 400_000) };
+    let plan = MovePlan { gather_every: 4, ..MovePlan::new(qmarc_config::Mode::Step, 3, 400_000) };
     let generator = (GENERATORS[0].build)(&s_long).unwrap();
     let law = Box::new(PidFf::from_settings(&s));
     let mut servo = Servo::new(plan, generator, law, Box::new(MockClock::new(0)));

@@ -1,9 +1,9 @@
-//! Data gathering (thesis 3.4, 4.2): every N-th cycle's time, command, actual position and
-//! DAC per motor, into a buffer sized before the move, written to files after it.
+//! Data gathering (thesis 3.4, 4.2): every N-th sample's time, command, actual position and
+//! DAC per motor, into a buffer sized before the move (`qmarc-report` writes it to files
+//! after it).
 
-use crate::config::GatherFields;
+use qmarc_config::GatherFields;
 use qmarc_proto::MAX_MOTORS;
-use std::io::{self, Write};
 
 /// One gathered servo cycle.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -127,75 +127,9 @@ impl Gather {
         self.dropped
     }
 
-    /// Column names: `cycle,time_s,cmd1,act1,dac1,cmd2,…`.
-    pub fn columns(&self) -> Vec<String> {
-        let f = self.fields;
-        let mut c = vec!["cycle".to_string()];
-        if f.time {
-            c.push("time_s".to_string());
-        }
-        for m in 1..=self.n_motors {
-            for (on, name) in [(f.cmd, "cmd"), (f.act, "act"), (f.dac, "dac")] {
-                if on {
-                    c.push(format!("{name}{m}"));
-                }
-            }
-        }
-        c
-    }
-
-    fn write_row(&self, w: &mut (impl Write + ?Sized), r: &GatherRow, sep: &str) -> io::Result<()> {
-        // `{}` on f64 is the shortest text that parses back to the same value, so figures
-        // recomputed from the file equal the ones computed in the loop.
-        let f = self.fields;
-        write!(w, "{}", r.cycle)?;
-        if f.time {
-            write!(w, "{sep}{}", r.time_s)?;
-        }
-        for m in 0..self.n_motors {
-            if f.cmd {
-                write!(w, "{sep}{}", r.cmd[m])?;
-            }
-            if f.act {
-                write!(w, "{sep}{}", r.act[m])?;
-            }
-            if f.dac {
-                write!(w, "{sep}{}", r.dac[m])?;
-            }
-        }
-        writeln!(w)
-    }
-
-    /// Writes `gather.csv`: a header line, then one line per row.
-    pub fn write_csv(&self, w: &mut (impl Write + ?Sized)) -> io::Result<()> {
-        writeln!(w, "{}", self.columns().join(","))?;
-        for r in &self.rows {
-            self.write_row(w, r, ",")?;
-        }
-        Ok(())
-    }
-
-    /// Writes `gather.m`: the same data as an Octave/Matlab script defining `qmarc_data`,
-    /// `qmarc_columns` and one column vector per column name.
-    pub fn write_octave(&self, w: &mut (impl Write + ?Sized)) -> io::Result<()> {
-        let cols = self.columns();
-        writeln!(w, "% QMARC gathered data, written by qmarc-controller after the move.")?;
-        writeln!(w, "% One row per gathered servo cycle (every {} cycles).", self.every)?;
-        writeln!(
-            w,
-            "% cycle: servo sample n; time_s: s; cmdM/actM: counts; dacM: DAC codes (±8191 = ±10 V)."
-        )?;
-        let quoted: Vec<String> = cols.iter().map(|c| format!("'{c}'")).collect();
-        writeln!(w, "qmarc_columns = {{{}}};", quoted.join(", "))?;
-        writeln!(w, "qmarc_data = [")?;
-        for r in &self.rows {
-            self.write_row(w, r, " ")?;
-        }
-        writeln!(w, "];")?;
-        for (i, c) in cols.iter().enumerate() {
-            writeln!(w, "{c} = qmarc_data(:, {});", i + 1)?;
-        }
-        Ok(())
+    /// Which fields the data files carry.
+    pub fn fields(&self) -> GatherFields {
+        self.fields
     }
 }
 
@@ -241,58 +175,5 @@ mod tests {
         }
         let cycles: Vec<u64> = g.rows().iter().map(|r| r.cycle).collect();
         assert_eq!(cycles, [0, 4, 9, 12, 18, 20]);
-    }
-
-    #[test]
-    fn csv_and_octave_carry_the_same_rows() {
-        let mut g = Gather::for_move(3, 1, 2);
-        for k in 0..3 {
-            g.push(row(k));
-        }
-        let mut csv = Vec::new();
-        g.write_csv(&mut csv).unwrap();
-        let csv = String::from_utf8(csv).unwrap();
-        assert_eq!(
-            csv,
-            "cycle,time_s,cmd1,act1,dac1,cmd2,act2,dac2\n\
-             0,0,1000.5,998,12,-3,-1,-8191\n\
-             1,0.0004,1000.5,998,12,-3,-1,-8191\n\
-             2,0.0008,1000.5,998,12,-3,-1,-8191\n"
-        );
-        let mut m = Vec::new();
-        g.write_octave(&mut m).unwrap();
-        let m = String::from_utf8(m).unwrap();
-        assert!(m.contains(
-            "qmarc_columns = {'cycle', 'time_s', 'cmd1', 'act1', 'dac1', 'cmd2', 'act2', 'dac2'};\n"
-        ));
-        let data: Vec<&str> = m
-            .split("qmarc_data = [\n")
-            .nth(1)
-            .unwrap()
-            .split("];")
-            .next()
-            .unwrap()
-            .lines()
-            .collect();
-        let csv_rows: Vec<String> = csv.lines().skip(1).map(|l| l.replace(',', " ")).collect();
-        assert_eq!(data, csv_rows);
-        assert!(m.ends_with("dac2 = qmarc_data(:, 8);\n"));
-    }
-
-    #[test]
-    fn only_the_chosen_fields_are_written() {
-        let mut g = Gather::for_move(1, 1, 2).with_fields(GatherFields {
-            time: false,
-            cmd: true,
-            act: true,
-            dac: false,
-        });
-        g.push(row(7));
-        let mut csv = Vec::new();
-        g.write_csv(&mut csv).unwrap();
-        assert_eq!(
-            String::from_utf8(csv).unwrap(),
-            "cycle,cmd1,act1,cmd2,act2\n7,1000.5,998,-3,-1\n"
-        );
     }
 }

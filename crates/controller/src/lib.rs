@@ -1,31 +1,50 @@
-//! The QMARC controller (thesis 3.8): trajectory generation, the servo law, the servo loop
-//! and data gathering, talking to the hardware server through one link.
+//! The QMARC controller's servo loop (thesis 3.8, 4.1): one cycle reads every encoder,
+//! samples the trajectory, runs the servo law, writes every DAC and gathers — allocating,
+//! locking and formatting nothing — and the state machine and faults around it.
 //!
-//! The loop is [`servo::Servo`]; its plug-ins are the [`traj::TrajectoryGenerator`] and
-//! [`law::ServoLaw`] traits, chosen by name from the [`registry`]. [`link::IoxLink`] is the
-//! iceoryx2 link to `qmarc-hwserver`; [`run::run_move`] puts it all together on a
-//! SCHED_FIFO thread and writes `gather.csv`, `gather.m` and `summary.json`.
+//! The loop is [`servo::Servo`]. Its plug-ins are the [`traj::TrajectoryGenerator`] and
+//! [`law::ServoLaw`] traits (the thesis' generators and law, and their registry, are in
+//! `qmarc-plugins`); it talks to the hardware server through a [`link::HwLink`]
+//! ([`link::IoxLink`] over iceoryx2). `qmarc-runner` builds a move from the settings and runs
+//! it on a SCHED_FIFO thread; `qmarc-report` writes what it leaves behind.
 //!
-//! A move against an in-process hardware core, with simulated time:
+//! A move against a hardware that stands still, on simulated time:
 //!
 //! ```
-//! use qmarc_controller::law::PidFf;
-//! use qmarc_controller::servo::{MovePlan, Servo};
-//! use qmarc_controller::traj::Step;
-//! use qmarc_controller::config::MotorGains;
+//! use qmarc_config::Mode;
+//! use qmarc_controller::law::{ServoInput, ServoLaw};
 //! use qmarc_controller::link::{HwLink, LinkError};
-//! use qmarc_proto::HwMsg;
+//! use qmarc_controller::servo::{MovePlan, Servo};
+//! use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
+//! use qmarc_proto::{HwMsg, MAX_MOTORS};
 //! use qmarc_timer::{ManualTicker, MockClock};
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! /// 100 counts, held for 10 samples.
+//! struct Hold;
+//! impl TrajectoryGenerator for Hold {
+//!     fn name(&self) -> &'static str { "hold" }
+//!     fn start(&mut self, _: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> { Ok(()) }
+//!     fn samples(&self) -> Option<u64> { Some(11) }
+//!     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+//!         if n > 10 { return Sample::Done }
+//!         cmd[0] = 100.0;
+//!         Sample::Ready
+//!     }
+//! }
+//! /// No output at all.
+//! struct Off;
+//! impl ServoLaw for Off {
+//!     fn name(&self) -> &'static str { "off" }
+//!     fn reset(&mut self, _: &[f64; MAX_MOTORS], _: &[f64; MAX_MOTORS]) {}
+//!     fn step(&mut self, _: &ServoInput<'_>, dac: &mut [i32; MAX_MOTORS]) { *dac = [0; MAX_MOTORS] }
+//! }
 //! /// A hardware that answers every read with position 0.
 //! struct Still;
 //! impl HwLink for Still {
 //!     fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, LinkError> { Ok(req.response()) }
 //! }
-//! let plan = MovePlan { deterministic: true, ..MovePlan::new("step", 1, 400_000) };
-//! let gains = MotorGains { kp: 182_000.0, ..MotorGains::default() };
-//! let mut servo = Servo::new(plan, Box::new(Step::new(100, 0.004, 0.0004, 1)),
-//!                            Box::new(PidFf::new(&[gains])), Box::new(MockClock::new(0)));
+//! let plan = MovePlan { deterministic: true, ..MovePlan::new(Mode::Step, 1, 400_000) };
+//! let mut servo = Servo::new(plan, Box::new(Hold), Box::new(Off), Box::new(MockClock::new(0)));
 //! let stop = std::sync::atomic::AtomicBool::new(false);
 //! servo.run(&mut Still, &mut ManualTicker::new(400_000), &stop)?;
 //! assert_eq!(servo.cycles(), 11);
@@ -34,21 +53,11 @@
 //! ```
 #![deny(missing_docs)]
 
-pub mod cli;
-pub mod config;
-#[doc = include_str!("../../../docs/extending.md")]
-pub mod extending {}
+pub mod fault;
 pub mod gather;
-pub mod homing;
-pub mod knots;
 pub mod law;
 pub mod link;
-pub mod output;
 pub mod progress;
-pub mod pvt;
-pub mod registry;
-pub mod run;
 pub mod servo;
-pub mod spline;
-pub mod summary;
+pub mod stats;
 pub mod traj;

@@ -6,11 +6,13 @@
 //! does no I/O besides the two exchanges of the link; a fault is recorded as a `Copy` value
 //! and handled by disabling every motor.
 
+use crate::fault::{Fault, FaultKind};
 use crate::gather::{Gather, GatherRow};
 use crate::law::{ServoInput, ServoLaw};
 use crate::link::{HwLink, LinkError};
-use crate::summary::{ErrorStats, Fault, FaultKind, FaultReport, TimingStats};
+use crate::stats::{ErrorStats, TimingStats};
 use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_config::{GatherFields, Mode};
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_timer::{Clock, Tick, Ticker, TickerError};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -47,8 +49,8 @@ impl MoveLimits {
 /// What a move is, apart from its path and law.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MovePlan {
-    /// `step`, `run` or `home`.
-    pub mode: String,
+    /// What the move does.
+    pub mode: Mode,
     /// Motors driven.
     pub n_motors: usize,
     /// Servo period, ns.
@@ -56,7 +58,7 @@ pub struct MovePlan {
     /// Gather every N cycles.
     pub gather_every: u32,
     /// Which fields the data files carry.
-    pub gather_fields: crate::config::GatherFields,
+    pub gather_fields: GatherFields,
     /// Simulated time: the sample index is the cycle count and gathered time is n·T.
     pub deterministic: bool,
     /// When the trajectory starves: cycles to hold the last command before disabling.
@@ -74,13 +76,13 @@ pub struct MovePlan {
 impl MovePlan {
     /// A plan for `n_motors` at `period_ns`: gather every cycle, real time, no limits, no
     /// homing required, switches monitored.
-    pub fn new(mode: &str, n_motors: usize, period_ns: u64) -> MovePlan {
+    pub fn new(mode: Mode, n_motors: usize, period_ns: u64) -> MovePlan {
         MovePlan {
-            mode: mode.to_string(),
+            mode,
             n_motors,
             period_ns,
             gather_every: 1,
-            gather_fields: crate::config::GatherFields::default(),
+            gather_fields: GatherFields::default(),
             deterministic: false,
             starve_hold_cycles: 0,
             settle_cycles: 0,
@@ -153,7 +155,7 @@ impl Phase {
 }
 
 /// The move could not start (nothing was enabled), or its timer failed.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum MoveError {
     /// The hwserver did not answer during set-up.
@@ -300,9 +302,9 @@ impl Servo {
         self.generator.homed_frame()
     }
 
-    /// What the generator reports for `summary.json` (homing: where it found the switches).
-    pub fn generator_summary(&self) -> Option<serde_json::Value> {
-        self.generator.summary()
+    /// Where homing found each motor's switch, after a homing.
+    pub fn homing_report(&self) -> Option<&[crate::traj::MotorHomeReport]> {
+        self.generator.homing_report()
     }
 
     /// The plan.
@@ -330,16 +332,13 @@ impl Servo {
         self.fault
     }
 
-    /// The fault for the summary, with the generator's own explanation where it has one.
-    pub fn fault_report(&self) -> Option<FaultReport> {
-        let f = self.fault?;
-        let mut report = f.report();
-        if let (FaultKind::TrajectoryError | FaultKind::HomingFailed, Some(why)) =
-            (f.kind, self.generator.failure())
-        {
-            report.message = format!("{why}; {}", report.message);
+    /// The generator's own explanation of the fault that ended the move, where it has one
+    /// (a bad knot in a stream, why homing failed).
+    pub fn failure(&self) -> Option<String> {
+        match self.fault?.kind {
+            FaultKind::TrajectoryError | FaultKind::HomingFailed => self.generator.failure(),
+            _ => None,
         }
-        Some(report)
     }
 
     /// Each motor's velocity at the end of the path, counts/s, if the generator knows it.
@@ -704,7 +703,7 @@ impl Servo {
             }
         };
         self.set_t0(t0);
-        self.enter(if self.plan.mode == "home" { Phase::Homing } else { Phase::Moving });
+        self.enter(if self.plan.mode == Mode::Home { Phase::Homing } else { Phase::Moving });
         while let Some(tick) = self.next_tick(link, ticker, stop)? {
             match self.cycle(link, &tick) {
                 CycleEnd::Continue => {}

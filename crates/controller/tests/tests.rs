@@ -4,12 +4,12 @@
 
 mod util;
 
+use qmarc_controller::fault::FaultKind;
 use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
-use qmarc_controller::registry::{GENERATORS, LAWS};
 use qmarc_controller::servo::{CycleEnd, MoveLimits, MovePlan, Phase, Servo};
-use qmarc_controller::summary::FaultKind;
 use qmarc_hwserver::server::{ServeEnd, ServeOptions, serve};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
+use qmarc_plugins::registry::{GENERATORS, LAWS};
 
 use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
@@ -21,11 +21,14 @@ use util::{CoreLink, CountingAllocator, ThreadCounters, allocations, knots, sett
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
 fn plan(n_motors: usize) -> MovePlan {
-    MovePlan { starve_hold_cycles: 25, ..MovePlan::new("step", n_motors, 400_000) }
+    MovePlan {
+        starve_hold_cycles: 25,
+        ..MovePlan::new(qmarc_config::Mode::Step, n_motors, 400_000)
+    }
 }
 
 /// The step move with the PID feed-forward law, timed on a mock clock.
-fn step_servo(s: &qmarc_controller::config::Settings) -> Servo {
+fn step_servo(s: &qmarc_config::Settings) -> Servo {
     Servo::new(
         plan(3),
         (GENERATORS[0].build)(s).unwrap(),
@@ -310,8 +313,8 @@ fn fuzz_corpus_replays_cleanly() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus");
     let mut replayed = 0;
     for (target, check) in [
-        ("knots_offline", qmarc_controller::knots::fuzzing::offline as fn(&[u8])),
-        ("knots_pvt", qmarc_controller::knots::fuzzing::pvt),
+        ("knots_offline", qmarc_plugins::knots::fuzzing::offline as fn(&[u8])),
+        ("knots_pvt", qmarc_plugins::knots::fuzzing::pvt),
     ] {
         for entry in std::fs::read_dir(root.join(target)).unwrap() {
             let path = entry.unwrap().path();
@@ -489,11 +492,12 @@ fn homing_in_process_finds_the_switches_and_presets_the_frame() {
     s.homing.creep_counts_per_s = 1_000.0;
     s.homing.settle_s = 0.02;
     let p = SimParams { homed: false, counter_offset: 5_000, ..lockstep() };
-    let plan = MovePlan { monitor_switches: false, ..MovePlan::new("home", 3, 400_000) };
+    let plan =
+        MovePlan { monitor_switches: false, ..MovePlan::new(qmarc_config::Mode::Home, 3, 400_000) };
     let (servo, mut link, r) =
-        run_with(plan, Box::new(qmarc_controller::homing::Homing::from_settings(&s)), p);
+        run_with(plan, Box::new(qmarc_plugins::homing::Homing::from_settings(&s)), p);
     r.unwrap();
-    assert!(servo.fault().is_none(), "{:?}", servo.fault_report());
+    assert!(servo.fault().is_none(), "{:?}", servo.fault());
     assert_eq!(servo.phase(), Phase::Done);
     let home = servo.homed_frame().expect("a homed frame");
     for (m, h) in home.iter().enumerate().take(3) {

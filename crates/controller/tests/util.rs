@@ -1,7 +1,7 @@
 //! Helpers for the controller's integration tests: a counting allocator (per thread), an
 //! in-process hardware link, and settings.
 
-use qmarc_controller::config::Settings;
+use qmarc_config::Settings;
 use qmarc_controller::link::{HwLink, LinkError};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
 use qmarc_proto::HwMsg;
@@ -52,7 +52,13 @@ pub fn allocations() -> u64 {
 
 /// The shipped settings.
 pub fn settings() -> Settings {
-    Settings::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml")).unwrap()
+    let names = qmarc_config::Names {
+        laws: qmarc_plugins::registry::law_names(),
+        methods: qmarc_plugins::registry::path_generator_names(),
+        backends: qmarc_hwserver::backends::names(),
+    };
+    Settings::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml"), &names)
+        .unwrap()
 }
 
 /// A file of the repository's `knots/`.

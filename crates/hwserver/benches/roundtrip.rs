@@ -32,10 +32,17 @@ fn main() {
     let pid = std::process::id();
     let dir = std::env::temp_dir().join(format!("qmarc-bench-rt-{pid}"));
     let location = IpcLocation::new(&format!("qb{pid}_"), &format!("{}/", dir.display()));
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    let spec = qmarc_hwserver::backends::standalone_run(
+        "[hwserver]\nwatchdog_periods = 2500\n[sim]\nstate_file = \"\"\n",
+        &location,
+        false,
+    )
+    .expect("bench settings");
+    let run_file = dir.join("run.json");
+    spec.write(&run_file).expect("run file");
     let mut server = Command::new(env!("CARGO_BIN_EXE_qmarc-hwserver"))
-        .arg(format!("--iox-prefix={}", location.prefix))
-        .arg(format!("--iox-root={}", location.root))
-        .args(["--priority=85", "--watchdog-periods=2500"])
+        .arg(format!("--settings={}", run_file.display()))
         .spawn()
         .expect("spawn qmarc-hwserver");
 

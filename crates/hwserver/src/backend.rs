@@ -22,6 +22,41 @@ pub struct HwFault {
     pub code: i32,
 }
 
+/// What the hardware outputs now, as far as the backend can read it back: the conformance
+/// suite checks that every way out of a move leaves it at 0 V with the amplifiers off.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Outputs {
+    /// The DAC code of every motor.
+    pub dac: [i32; MAX_MOTORS],
+    /// Whether each amplifier is enabled.
+    pub enabled: [bool; MAX_MOTORS],
+}
+
+/// A backend could not be opened (a device that is not there, settings it cannot use).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum BackendOpenError {
+    /// The settings do not describe hardware this backend can drive.
+    #[error("{0}")]
+    Invalid(String),
+    /// The device could not be opened.
+    #[error("{device}: {reason}")]
+    Device {
+        /// The device, e.g. `/dev/comedi0`.
+        device: String,
+        /// Why.
+        reason: String,
+    },
+    /// No backend has this name.
+    #[error("no backend `{name}`; available: {available}")]
+    Unknown {
+        /// The name asked for.
+        name: String,
+        /// The registered names.
+        available: String,
+    },
+}
+
 /// The hardware: counters, DACs, amplifier enables, limit switches, an external watchdog.
 ///
 /// Real-time contract: construction may allocate and fail and takes validated parameters;
@@ -77,9 +112,20 @@ pub trait Backend: Send {
         let _ = motor;
     }
 
-    /// Writes what the backend recorded (the simulator's event log), after the server ends.
+    /// Writes what the backend recorded (the simulator's event log).
     fn write_log(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
         let _ = w;
+        Ok(())
+    }
+
+    /// What the outputs are now, if the backend can read them back. Default: it cannot.
+    fn outputs(&self) -> Option<Outputs> {
+        None
+    }
+
+    /// Called once when the server ends, the hardware already safe: flush what the backend
+    /// keeps (a log, a state file). Default: nothing.
+    fn finish(&mut self) -> std::io::Result<()> {
         Ok(())
     }
 }

@@ -81,9 +81,14 @@ impl HwCore {
         self.backend.name()
     }
 
-    /// The backend (to write its log after the server ends).
+    /// The backend.
     pub fn backend(&self) -> &dyn Backend {
         self.backend.as_ref()
+    }
+
+    /// The server ends: the backend flushes what it keeps ([`Backend::finish`]).
+    pub fn finish(&mut self) -> std::io::Result<()> {
+        self.backend.finish()
     }
 
     /// The flags a read response carries for `motor`.
@@ -269,7 +274,7 @@ impl HwCore {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::{SimDeltabot, SimParams};
+    use crate::backends::sim::{SimDeltabot, SimParams};
 
     fn core_with(p: SimParams) -> HwCore {
         HwCore::new(Box::new(SimDeltabot::new(p).unwrap()))

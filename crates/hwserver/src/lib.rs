@@ -4,8 +4,10 @@
 //! with the status word. The [`HwCore`] holds what is backend-independent: the 64-bit
 //! software position extended from each 24-bit counter (thesis 3.10.2), enable state, latched
 //! limit-switch bits and the watchdog. [`server::serve`] is the iceoryx2 loop around it.
-//! The default backend is [`SimDeltabot`], a simulated Deltabot with velocity-mode amplifiers,
-//! quadrature counters and limit switches (`../shared/notes/deltabot.md`).
+//! Backends are chosen by name from [`backends::BACKENDS`] (one file and one registry line
+//! each); the default is [`SimDeltabot`], a simulated Deltabot with velocity-mode amplifiers,
+//! quadrature counters and limit switches (`../shared/notes/deltabot.md`). Every backend
+//! passes the [`conformance`] suite.
 //!
 //! ```
 //! use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
@@ -21,12 +23,12 @@
 //! ```
 #![deny(missing_docs)]
 
-pub mod args;
 pub mod backend;
+pub mod backends;
+pub mod conformance;
 pub mod core;
 pub mod server;
-pub mod sim;
 
 pub use crate::core::HwCore;
-pub use backend::{Backend, HwFault, Inputs};
-pub use sim::{SimDeltabot, SimParams, SimParamsError};
+pub use backend::{Backend, BackendOpenError, HwFault, Inputs, Outputs};
+pub use backends::sim::{SimDeltabot, SimParams, SimParamsError};

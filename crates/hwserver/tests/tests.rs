@@ -1,5 +1,6 @@
 //! Integration tests of `qmarc-hwserver`: the real binary answering over iceoryx2.
 
+mod conformance;
 mod util;
 
 use qmarc_controller::link::HwLink;
@@ -9,7 +10,7 @@ use util::Server;
 
 #[test]
 fn unknown_message_types_get_a_status_bit_and_the_server_carries_on() {
-    let mut server = Server::start("unknown", &[]);
+    let mut server = Server::start("unknown", "");
     let mut link = server.connect();
     for raw in [0, 13, 4242] {
         let resp = link.exchange(&HwMsg { msg_type: raw, ..HwMsg::default() }).unwrap();
@@ -29,7 +30,8 @@ fn unknown_message_types_get_a_status_bit_and_the_server_carries_on() {
 
 #[test]
 fn all_twelve_messages_are_served() {
-    let mut server = Server::start("twelve", &["--motors=2", "--sim-start=100,-40"]);
+    let mut server =
+        Server::start("twelve", "[general]\nn_motors = 2\n[sim]\nstart_counts = [100, -40]\n");
     let mut link = server.connect();
     let mut ask = |m: HwMsg| link.exchange(&m).unwrap();
     assert_eq!(&ask(HwMsg::read_all_encoders()).data[..2], &[100.0, -40.0]);
@@ -60,7 +62,7 @@ fn all_twelve_messages_are_served() {
 #[test]
 fn watchdog_disables_the_motors_when_the_controller_falls_silent() {
     // Real time: silence is measured on the wall clock.
-    let mut server = Server::start_with("watchdog", &["--watchdog-periods=50"], false);
+    let mut server = Server::start_with("watchdog", "[hwserver]\nwatchdog_periods = 50\n", false);
     let mut link = server.connect();
     assert!(link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0)).unwrap().status().is_ok());
     // Silence: the server must give up on us by itself.
@@ -76,7 +78,7 @@ fn watchdog_disables_the_motors_when_the_controller_falls_silent() {
 /// lives (a host stall) does not trip the watchdog; it is still served afterwards.
 #[test]
 fn in_lock_step_a_living_silent_controller_does_not_trip_the_watchdog_issue_9() {
-    let mut server = Server::start("lockwd", &["--watchdog-periods=10"]);
+    let mut server = Server::start("lockwd", "[hwserver]\nwatchdog_periods = 10\n");
     let mut link = server.connect();
     assert!(link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0)).unwrap().status().is_ok());
     // 300 ms of silence: 750 periods, 75 watchdogs of wall time.
@@ -90,11 +92,11 @@ fn in_lock_step_a_living_silent_controller_does_not_trip_the_watchdog_issue_9() 
 
 #[test]
 fn sigterm_disables_the_motors_and_refuses_to_enable_them() {
-    let mut server = Server::start("sigterm", &[]);
+    let mut server = Server::start("sigterm", "");
     let mut link = server.connect();
     assert!(link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0)).unwrap().status().is_ok());
-    // SAFETY: kill(2) on our own child.
-    unsafe { libc::kill(server.child.id() as libc::pid_t, libc::SIGTERM) };
+    let pid = nix::unistd::Pid::from_raw(server.child.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).expect("SIGTERM our child");
     let mut status = Status::OK;
     for _ in 0..200 {
         status = link.exchange(&HwMsg::read_all_encoders()).unwrap().status();

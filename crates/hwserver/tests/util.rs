@@ -19,30 +19,33 @@ pub struct Server {
 }
 
 impl Server {
-    /// Starts the server with `extra` arguments (SCHED_OTHER, no mlock, lock-step sim).
-    pub fn start(test: &str, extra: &[&str]) -> Server {
-        Server::start_with(test, extra, true)
+    /// Starts the server on the settings file `text` (SCHED_OTHER, no mlock, lock-step sim).
+    pub fn start(test: &str, text: &str) -> Server {
+        Server::start_with(test, text, true)
     }
 
-    /// Starts the server with `extra` arguments (SCHED_OTHER, no mlock), its simulated robot
-    /// in lock-step or in real time.
-    pub fn start_with(test: &str, extra: &[&str], lockstep: bool) -> Server {
+    /// Starts the server on the settings file `text` (SCHED_OTHER, no mlock), its simulated
+    /// robot in lock-step or in real time. Its watchdog is 2500 periods unless `text` sets
+    /// one: the test thread is no real-time loop, and a short watchdog would fire whenever it
+    /// is descheduled between two requests.
+    pub fn start_with(test: &str, text: &str, lockstep: bool) -> Server {
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
         let pid = std::process::id();
         let dir = std::env::temp_dir().join(format!("qmarc-hw-{pid}-{n}-{test}"));
+        std::fs::create_dir_all(&dir).expect("scratch dir");
         let location = IpcLocation::new(&format!("qh{pid}_{n}_"), &format!("{}/", dir.display()));
+        let mut spec = qmarc_hwserver::backends::standalone_run(text, &location, lockstep)
+            .expect("test settings");
+        let s = &mut spec.settings;
+        (s.timer.hwserver_priority, s.timer.servo_priority, s.timer.lock_memory) = (0, 0, false);
+        s.sim.state_file = None;
+        if !s.explicit.watchdog_periods {
+            s.hwserver.watchdog_periods = 2500;
+        }
+        let file = dir.join("run.json");
+        spec.write(&file).expect("run file");
         let child = Command::new(env!("CARGO_BIN_EXE_qmarc-hwserver"))
-            .arg(format!("--iox-prefix={}", location.prefix))
-            .arg(format!("--iox-root={}", location.root))
-            .args(["--priority=0", "--no-mlock"])
-            .args(lockstep.then_some("--deterministic"))
-            // The test thread is no real-time loop: a 4 ms watchdog would fire whenever it
-            // is descheduled between two requests. The watchdog test sets its own.
-            .args(
-                (!extra.iter().any(|a| a.starts_with("--watchdog-periods")))
-                    .then_some("--watchdog-periods=2500"),
-            )
-            .args(extra)
+            .arg(format!("--settings={}", file.display()))
             .stderr(Stdio::piped())
             .spawn()
             .expect("spawn qmarc-hwserver");

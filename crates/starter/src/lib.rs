@@ -12,13 +12,12 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod cli;
 pub mod supervise;
-pub mod table;
 
 pub use supervise::{Exit, describe_exit};
 
-use qmarc_controller::config::Settings;
-use qmarc_hwserver::args::HwServerArgs;
+use qmarc_config::Names;
 use qmarc_proto::service::IpcLocation;
 
 /// Prefix of the starter's default iceoryx2 prefixes (`qmarc_<pid>_`).
@@ -30,37 +29,20 @@ pub fn default_prefix() -> String {
     format!("{PREFIX_STEM}{}_", std::process::id())
 }
 
-/// The hwserver's command line for `settings`.
-pub fn hwserver_args(
-    settings: &Settings,
-    deterministic: bool,
-    location: &IpcLocation,
-) -> HwServerArgs {
-    let sim = &settings.sim;
-    HwServerArgs {
-        iox_prefix: location.prefix.clone(),
-        iox_root: location.root.clone(),
-        motors: settings.n_motors,
-        period_us: u64::from(settings.period_us),
-        deterministic,
-        watchdog_periods: settings.hwserver.watchdog_periods,
-        max_counts_per_s: settings.hwserver.max_counts_per_s,
-        priority: settings.timer.hwserver_priority,
-        no_mlock: !settings.timer.lock_memory,
-        sim_kv: sim.kv,
-        sim_tau_s: sim.tau_s,
-        sim_coast_tau_s: sim.coast_tau_s,
-        sim_start: sim.start_counts.iter().copied().take(settings.n_motors).collect(),
-        sim_top_switch: sim.top_switch_counts,
-        sim_bottom_switch: sim.bottom_switch_counts,
-        sim_unhomed: !sim.homed,
-        sim_counter_offset: sim.counter_offset,
-        sim_stall: sim.stall_motor,
-        sim_stuck_top: sim.stuck_top_motor,
-        sim_events: sim.events_file.clone(),
-        sim_state: sim.state_file.clone(),
-        ..HwServerArgs::default()
+/// The names the settings accept: the plug-ins' laws and path generators, the hwserver's
+/// backends. The settings crate knows none of them; they are handed to it from here.
+pub fn names() -> Names {
+    Names {
+        laws: qmarc_plugins::registry::law_names(),
+        methods: qmarc_plugins::registry::path_generator_names(),
+        backends: qmarc_hwserver::backends::names(),
     }
+}
+
+/// Where the run file of the run with iceoryx2 prefix `prefix` goes: next to its shared
+/// memory, so that it goes with the run's other files.
+pub fn run_file(prefix: &str) -> std::path::PathBuf {
+    std::path::Path::new(qmarc_proto::service::SHM_DIR).join(format!("{prefix}run.json"))
 }
 
 /// True if a process whose command line mentions `needle` is running (the children of a
@@ -168,16 +150,14 @@ pub fn check_iox_root(root: &str, explicit: bool) -> Result<(), String> {
 mod tests {
     use super::*;
 
+    /// Issue 11: the settings crate gets its names from the registries, not the other way.
     #[test]
-    fn hwserver_gets_the_settings_plant_and_priorities() {
+    fn the_names_come_from_the_registries() {
+        let n = names();
+        assert_eq!(n.laws, ["pidff"]);
+        assert_eq!(n.methods, ["step", "spline", "pvt"]);
+        assert_eq!(n.backends, ["sim"]);
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
-        let s = Settings::load(&path).unwrap();
-        let a = hwserver_args(&s, true, &IpcLocation::new("p_", "/tmp/r"));
-        assert_eq!((a.motors, a.period_us, a.priority, a.watchdog_periods), (3, 400, 85, 250));
-        assert_eq!(a.iox_root, "/tmp/r/");
-        assert!(a.deterministic);
-        assert_eq!(a.sim_start, vec![0.0, 0.0, 0.0]);
-        let p = a.sim_params().unwrap();
-        assert_eq!((p.kv_counts_per_s_per_v, p.tau_s), (25_000.0, 0.004));
+        assert!(qmarc_config::Settings::load(&path, &n).is_ok());
     }
 }

@@ -7,17 +7,19 @@
 
 use anyhow::{Context, anyhow};
 use clap::Parser;
-use qmarc_controller::cli::{Mode, MoveOptions};
-use qmarc_controller::config::Settings;
+use qmarc_config::{RunSpec, Settings};
+use qmarc_controller::fault::FaultKind;
 use qmarc_controller::gather::check_budget;
 use qmarc_controller::progress::Progress;
-use qmarc_controller::registry;
-use qmarc_controller::summary::Summary;
+use qmarc_plugins::registry;
 use qmarc_proto::exit;
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
+use qmarc_report::Summary;
+use qmarc_report::table;
+use qmarc_starter::cli::{Command, MoveOptions};
 use qmarc_starter::supervise::{self, Supervised};
 use qmarc_starter::{
-    Exit, check_iox_root, default_prefix, describe_exit, hwserver_args, remove_stale_files, table,
+    Exit, check_iox_root, default_prefix, describe_exit, names, remove_stale_files, run_file,
 };
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
@@ -53,8 +55,12 @@ struct StarterArgs {
     /// Directory holding qmarc-hwserver and qmarc-controller (default: next to this program).
     #[arg(long, global = true)]
     bin_dir: Option<PathBuf>,
+    /// Check everything, print the run both children would get (JSON) and exit: to run
+    /// `qmarc-hwserver --settings FILE` and `qmarc-controller --settings FILE` by hand.
+    #[arg(long, global = true)]
+    print_settings: bool,
     #[command(subcommand)]
-    mode: Mode,
+    command: Command,
 }
 
 /// An error and the exit code it ends the run with.
@@ -72,8 +78,10 @@ fn internal<E: Into<anyhow::Error>>(e: E) -> Failure {
 
 fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     // Everything is checked before anything starts.
-    let mut settings = args.opts.load().map_err(refused)?;
-    args.mode.apply(&mut settings).map_err(refused)?;
+    let names = names();
+    let mut settings = args.opts.load(&names).map_err(refused)?;
+    args.command.apply(&mut settings, &names).map_err(refused)?;
+    let mode = args.command.mode();
     let bin_dir = match &args.bin_dir {
         Some(d) => d.clone(),
         None => std::env::current_exe()
@@ -98,20 +106,23 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     let location = IpcLocation::checked(&prefix, &root).map_err(|e| refused(anyhow!(e)))?;
     check_iox_root(&location.root, args.iox_root.is_some()).map_err(|e| refused(anyhow!(e)))?;
     location.config().map_err(refused)?;
-    let hw_args = hwserver_args(&settings, args.opts.deterministic, &location);
-    hw_args.sim_params().context("simulator settings").map_err(refused)?;
-    let mut ctl_args = args.opts.to_args();
-    ctl_args.push(format!("--iox-prefix={}", location.prefix));
-    ctl_args.push(format!("--iox-root={}", location.root));
-    ctl_args.extend(args.mode.to_args());
+    let spec = RunSpec {
+        settings,
+        mode,
+        deterministic: args.opts.deterministic,
+        unhomed: args.opts.unhomed,
+        iox_prefix: location.prefix.clone(),
+        iox_root: location.root.clone(),
+    };
+    let settings = &spec.settings;
 
     // The path: knot files are read and checked now (streams are the controller's to read:
     // it inherits standard input), and its data must fit the gather budget and the disk.
-    let generator = args.mode.generator(&settings);
+    let generator = qmarc_runner::run::generator_name(mode, settings);
     let entry = registry::generator(generator)
         .with_context(|| format!("no trajectory generator `{generator}`"))
         .map_err(refused)?;
-    let path = (entry.build)(&settings).map_err(refused)?;
+    let path = (entry.build)(settings).map_err(refused)?;
     let planned = path.samples();
     drop(path);
     let settle = (settings.trajectory.settle_s / settings.period_s()).round() as u64;
@@ -119,18 +130,26 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     check_budget(samples, settings.gather.every).map_err(refused)?;
     let out_dir = settings.gather.out_dir.clone();
     let rows = samples.div_ceil(u64::from(settings.gather.every));
-    qmarc_controller::output::check(
+    qmarc_report::output::check(
         &out_dir,
-        qmarc_controller::output::estimate_bytes(rows, settings.n_motors),
+        qmarc_report::output::estimate_bytes(rows, settings.n_motors),
     )
     .map_err(refused)?;
-    let _lock = qmarc_controller::output::lock(&out_dir).map_err(refused)?;
+    if args.print_settings {
+        println!("{}", spec.to_json());
+        return Ok(ExitCode::SUCCESS);
+    }
+    let _lock = qmarc_report::output::lock(&out_dir).map_err(refused)?;
 
     remove_stale_files(&location.root);
     let stop = qmarc_timer::stop::install().map_err(internal)?;
     let progress = Progress::create(&Progress::path(&location.prefix)).ok();
+    // The one settings value both children get, next to the run's shared memory.
+    let run = run_file(&location.prefix);
+    spec.write(&run).map_err(internal)?;
+    let child_args = [format!("--settings={}", run.display())];
 
-    let hwserver = supervise::spawn(&hwserver_bin, &hw_args.to_args())
+    let hwserver = supervise::spawn(&hwserver_bin, &child_args)
         .with_context(|| format!("cannot start {}", hwserver_bin.display()))
         .map_err(|e| {
             location.remove_files();
@@ -141,7 +160,7 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     // SIGTERM (which it answers within a second, writing or not) 10 s.
     let secs = Duration::from_secs;
     let mut children = vec![Supervised::new("qmarc-hwserver", hwserver, secs(3), secs(2))];
-    match supervise::spawn(&controller_bin, &ctl_args) {
+    match supervise::spawn(&controller_bin, &child_args) {
         Ok(c) => children.push(Supervised::new("qmarc-controller", c, secs(120), secs(10))),
         Err(e) => {
             say!("qmarc-starter: cannot start {}: {e}", controller_bin.display());
@@ -175,11 +194,11 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
         && let Some(exit @ Exit::Signal(_)) = controller
     {
         let lost = Summary::controller_lost(
-            args.mode.name(),
+            mode,
             settings.n_motors,
             settings.period_us,
             reached.map_or(0, |r| r.cycle),
-            controller_lost_message(exit, hwserver, &settings, reached),
+            controller_lost_message(exit, hwserver, settings, reached),
         );
         let path = out_dir.join("summary.json");
         if let Err(e) = write_summary(&path, &lost) {
@@ -202,7 +221,9 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     }
     let code = match (&summary, controller) {
         (Some(s), _) if s.ok && all_clean => exit::OK,
-        (Some(s), _) if s.fault.as_ref().is_some_and(|f| f.kind == "aborted") => exit::INTERRUPTED,
+        (Some(s), _) if s.fault.as_ref().is_some_and(|f| f.kind == FaultKind::Aborted) => {
+            exit::INTERRUPTED
+        }
         (Some(s), _) if s.fault.is_some() => exit::FAULT,
         (None, Some(Exit::Code(c))) if c == i32::from(exit::REFUSED) => exit::REFUSED,
         (None, Some(Exit::Code(c))) if c == i32::from(exit::INTERRUPTED) => exit::INTERRUPTED,
@@ -216,7 +237,7 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
 /// (an older run's is not this run's result), else the one in the rescue folder.
 fn read_own_summary(out_dir: &Path) -> Option<Summary> {
     let me = std::process::id();
-    let rescue = qmarc_controller::output::rescue_dir(me);
+    let rescue = qmarc_report::output::rescue_dir(me);
     [out_dir, rescue.as_path()]
         .iter()
         .filter_map(|d| std::fs::read(d.join("summary.json")).ok())
@@ -239,7 +260,7 @@ impl<'a> StatusLine<'a> {
 
     fn update(&mut self) {
         let Some(p) = self.progress.filter(|_| self.on_terminal) else { return };
-        let text = qmarc_controller::homing::describe_progress(p.read().detail).unwrap_or_default();
+        let text = qmarc_plugins::homing::describe_progress(p.read().detail).unwrap_or_default();
         if text != self.shown {
             let _ = write!(std::io::stderr(), "\r\x1b[K{text}");
             self.shown = text;
@@ -292,7 +313,7 @@ fn write_summary(path: &Path, s: &Summary) -> std::io::Result<()> {
 }
 
 fn main() -> ExitCode {
-    let args: StarterArgs = qmarc_controller::cli::parse_or_exit();
+    let args: StarterArgs = qmarc_starter::cli::parse_or_exit();
     match run(&args) {
         Ok(code) => code,
         Err((code, e)) => {

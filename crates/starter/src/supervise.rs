@@ -37,7 +37,7 @@ pub fn describe_exit(name: &str, exit: Exit) -> String {
             format!("{name} exited with code {c} ({})", qmarc_proto::exit::describe(c))
         }
         Exit::Signal(s) => {
-            format!("{name} was killed by {}", qmarc_controller::run::signal_name(s))
+            format!("{name} was killed by {}", qmarc_timer::stop::signal_name(s))
         }
     }
 }
@@ -177,6 +177,10 @@ mod tests {
         wait_all(&mut kids, &stop, |s| seen.push(s.name), || {});
         assert_eq!(seen, ["quick", "stubborn"]);
         assert_eq!(kids[0].exit, Some(Exit::Code(4)));
-        assert_eq!(kids[1].exit, Some(Exit::Signal(libc::SIGKILL)), "TERM ignored, then KILL");
+        assert_eq!(
+            kids[1].exit,
+            Some(Exit::Signal(nix::sys::signal::Signal::SIGKILL as i32)),
+            "TERM ignored, then KILL"
+        );
     }
 }

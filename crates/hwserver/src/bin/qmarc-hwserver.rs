@@ -1,55 +1,68 @@
-//! `qmarc-hwserver`: the hardware server process, started by `qmarc-starter`.
+//! `qmarc-hwserver`: the hardware server process, started by `qmarc-starter` with the run it
+//! prepared (`--settings FILE`, a [`qmarc_config::RunSpec`]); run by hand for debugging with a
+//! file from `qmarc-starter --print-settings`.
 //!
 //! Exit codes ([`qmarc_proto::exit`]): 0 after an exit message or a stop signal (motors
 //! disabled), 2 (fault) when the watchdog fired (controller silent with motors enabled),
-//! 64 for a bad command line, 1 on any other error.
+//! 64 for a bad command line or run file, 1 on any other error.
 
 use anyhow::Context;
 use clap::Parser;
-use qmarc_hwserver::args::{BackendKind, HwServerArgs};
+use qmarc_config::RunSpec;
+use qmarc_hwserver::HwCore;
 use qmarc_hwserver::server::{ServeEnd, ServeOptions, serve};
-use qmarc_hwserver::{Backend, HwCore, SimDeltabot};
 use qmarc_proto::exit;
+use qmarc_proto::service::IpcLocation;
 use qmarc_timer::rt::{RtRequest, apply_to_current_thread};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
-fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
-    let backend: Box<dyn Backend> = match args.backend {
-        BackendKind::Sim => {
-            let sim = SimDeltabot::new(args.sim_params()?)?;
-            Box::new(match &args.sim_state {
-                Some(path) => sim.with_state_file(path),
-                None => sim,
-            })
-        }
-    };
-    let stop = qmarc_timer::stop::install().context("cannot install signal handlers")?;
+/// Command line of `qmarc-hwserver`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "qmarc-hwserver",
+    version,
+    about = "QMARC hardware server (started by qmarc-starter; by hand: qmarc-starter --print-settings … > run.json)"
+)]
+struct HwServerArgs {
+    /// The run: settings, mode, iceoryx2 location (JSON, as `qmarc-starter --print-settings`
+    /// writes it).
+    #[arg(long)]
+    settings: PathBuf,
+    /// Busy-poll for requests instead of blocking (only on an isolated core).
+    #[arg(long)]
+    spin: bool,
+}
+
+fn run(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
+    let spec = RunSpec::read(&args.settings).map_err(|e| (exit::USAGE, e.into()))?;
+    let s = &spec.settings;
+    let internal = |e: anyhow::Error| (exit::INTERNAL, e);
+    let backend = qmarc_hwserver::backends::open(s, spec.deterministic)
+        .map_err(|e| (exit::REFUSED, e.into()))?;
+    let location = IpcLocation::checked(&spec.iox_prefix, &spec.iox_root)
+        .map_err(|e| (exit::USAGE, anyhow::Error::msg(e)))?;
+    let stop =
+        qmarc_timer::stop::install().context("cannot install signal handlers").map_err(internal)?;
+    let priority = s.timer.hwserver_priority;
     let rt = apply_to_current_thread(&RtRequest {
-        priority: (args.priority > 0).then_some(args.priority),
-        lock_memory: !args.no_mlock,
+        priority: (priority > 0).then_some(priority),
+        lock_memory: s.timer.lock_memory,
         prefault_stack_bytes: 64 * 1024,
     });
     for w in &rt.warnings {
         eprintln!("qmarc-hwserver: warning: {w}");
     }
-    if args.max_counts_per_s.is_nan() || args.max_counts_per_s <= 0.0 {
-        anyhow::bail!("--max-counts-per-s must be > 0, found {}", args.max_counts_per_s);
-    }
-    let mut core = HwCore::new(backend).with_encoder_limit(args.max_counts_per_s);
+    let mut core = HwCore::new(backend).with_encoder_limit(s.hwserver.max_counts_per_s);
     let opts = ServeOptions {
-        watchdog_ns: u64::from(args.watchdog_periods) * args.period_ns(),
+        watchdog_ns: u64::from(s.hwserver.watchdog_periods) * s.period_ns(),
         spin: args.spin,
         shutdown_grace_ns: 1_000_000_000,
-        lockstep: args.deterministic,
+        lockstep: spec.deterministic,
     };
-    let location = args.location().map_err(anyhow::Error::msg)?;
     let end = serve(&mut core, &location, &opts, stop);
-    if let Some(path) = &args.sim_events {
-        let mut out = Vec::new();
-        core.backend().write_log(&mut out)?;
-        std::fs::write(path, out).with_context(|| format!("cannot write {}", path.display()))?;
-    }
-    let end = end?;
+    core.finish().context("the backend's files").map_err(internal)?;
+    let end = end.map_err(|e| internal(e.into()))?;
     Ok(match end {
         ServeEnd::Exit => ExitCode::SUCCESS,
         ServeEnd::Stopped => {
@@ -63,8 +76,8 @@ fn run(args: &HwServerArgs) -> anyhow::Result<ExitCode> {
                 "qmarc-hwserver: watchdog: controller silent for {:.3} ms (limit {} periods of {} µs; \
                  its process {}) with motors enabled: all DACs zeroed, all motors disabled{}",
                 silent_ns as f64 / 1e6,
-                args.watchdog_periods,
-                args.period_us,
+                s.hwserver.watchdog_periods,
+                s.period_us,
                 if controller_alive { "still runs" } else { "is gone" },
                 if controller_alive {
                     " (without PREEMPT_RT, host stalls of a few ms can do that: raise \
@@ -88,9 +101,9 @@ fn main() -> ExitCode {
     };
     match run(&args) {
         Ok(code) => code,
-        Err(e) => {
+        Err((code, e)) => {
             eprintln!("qmarc-hwserver: error: {e:#}");
-            ExitCode::from(1)
+            ExitCode::from(code)
         }
     }
 }

@@ -12,7 +12,9 @@
 //! - If writing still fails after a move (a full disk), the data go to a rescue folder
 //!   ([`rescue_dir`]) and the message says where.
 
+use crate::summary::Summary;
 use nix::fcntl::{Flock, FlockArg};
+use qmarc_controller::servo::Servo;
 use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
 
@@ -175,7 +177,7 @@ impl<W: Write> Write for StopAware<W> {
     }
 }
 
-/// True when `e` is the interruption of [`StopAware`].
+/// True when `e` is the interruption of `StopAware`.
 pub fn interrupted(e: &WriteError) -> bool {
     e.reason.kind() == std::io::ErrorKind::Interrupted
 }
@@ -210,6 +212,50 @@ pub fn write_set(dir: &Path, files: &[FileWriter<'_>]) -> Result<Vec<PathBuf>, W
     }
     let _ = std::fs::remove_dir(&incoming);
     Ok(done)
+}
+
+/// Files of a move's data, in the output directory, in the order they are put in place
+/// (`summary.json` last: once it is there, the set is complete).
+pub const OUTPUT_FILES: [&str; 3] = ["gather.csv", "gather.m", "summary.json"];
+
+/// Writes the move's data files and `summary.json` into `dir` as one set
+/// ([`write_set`]): the previous results stay until all of them are written.
+/// The stop that ended the move does not cut the writing short; a further stop signal while
+/// the rows are written abandons the data files (the summary is still written, with a
+/// warning); a failure writes everything to the rescue folder instead, with a warning, and
+/// says so on standard error.
+pub fn write_results(dir: &Path, servo: &Servo, summary: &mut Summary) -> Result<(), WriteError> {
+    let gather = servo.gather();
+    let csv = |w: &mut dyn Write| crate::files::write_csv(gather, w);
+    let octave = |w: &mut dyn Write| crate::files::write_octave(gather, w);
+    let attempt = |dir: &Path, summary: &mut Summary, data: bool| {
+        let names: &[&str] = if data { &OUTPUT_FILES } else { &OUTPUT_FILES[2..] };
+        summary.files = names.iter().map(|f| dir.join(f)).collect();
+        let frozen = summary.clone();
+        let json = move |w: &mut dyn Write| {
+            serde_json::to_writer_pretty(&mut *w, &frozen).map_err(std::io::Error::other)?;
+            writeln!(w)
+        };
+        let all: [FileWriter<'_>; 3] =
+            [("gather.csv", &csv), ("gather.m", &octave), ("summary.json", &json)];
+        write_set(dir, if data { &all } else { &all[2..] })
+    };
+    let Err(e) = attempt(dir, summary, true) else { return Ok(()) };
+    if interrupted(&e) {
+        summary.warnings.push(format!(
+            "a second stop signal arrived while the data were written: gather.csv and \
+             gather.m were not written (in {} the previous ones, if any, are as they were)",
+            dir.display()
+        ));
+        attempt(dir, summary, false)?;
+        return Ok(());
+    }
+    let rescue = rescue_dir(nix::unistd::getppid().as_raw() as u32);
+    let warning = format!("{e}; the data of this move are in {} instead", rescue.display());
+    let _ = writeln!(std::io::stderr(), "qmarc-controller: {warning}");
+    summary.warnings.push(warning);
+    attempt(&rescue, summary, true)?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! thesis 3.4 and 5.2). Columns are as wide as their widest cell, so figures never run
 //! together; times are in µs, ms or s as fits.
 
-use qmarc_controller::summary::{Pct, Summary};
+use crate::summary::{Pct, Summary};
 use std::fmt::Write;
 
 /// Renders `s` as a table for the terminal, ending with the data files it wrote that exist.
@@ -17,13 +17,8 @@ pub fn render(s: &Summary) -> String {
     let n_motors = if s.n_motors > 0 { s.n_motors } else { s.motors.len() };
     let _ = writeln!(
         t,
-        "QMARC {}{}: {verdict}\n  {} motors, {} cycles of {} µs{}{}{}",
-        s.mode,
-        if s.trajectory == s.mode || s.trajectory.is_empty() {
-            String::new()
-        } else {
-            format!(" ({})", s.trajectory)
-        },
+        "QMARC {}: {verdict}\n  {} motors, {} cycles of {} µs{}{}{}",
+        s.what(),
         n_motors,
         s.cycles,
         s.period_us,
@@ -31,27 +26,18 @@ pub fn render(s: &Summary) -> String {
         if s.degraded { " — DEGRADED: not real time" } else { "" },
         if s.deterministic { ", deterministic (simulated time)" } else { "" },
     );
-    if let Some(motors) = s.homing.as_ref().and_then(|h| h["motors"].as_array()) {
+    if let Some(homing) = &s.homing {
         let _ = writeln!(t, "\n  homing (counts in the frame before homing)");
-        for r in motors {
-            let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+        for r in &homing.motors {
             let _ = writeln!(
                 t,
                 "  motor {}: top switch found at {:.0}{}, cleared at {:.0}; home at {:.0}{}",
-                r["motor"],
-                f("switch_found_counts"),
-                if r["started_on_switch"].as_bool() == Some(true) {
-                    " (started on it)"
-                } else {
-                    ""
-                },
-                f("switch_cleared_counts"),
-                f("home_counts"),
-                if r["home"].as_bool() == Some(true) {
-                    ", reads 0 from now on"
-                } else {
-                    " — not reached"
-                },
+                r.motor,
+                r.switch_found_counts,
+                if r.started_on_switch { " (started on it)" } else { "" },
+                r.switch_cleared_counts,
+                r.home_counts,
+                if r.home { ", reads 0 from now on" } else { " — not reached" },
             );
         }
     }

@@ -8,15 +8,14 @@
 //! move; a stream knot by knot as it arrives. If the queue runs dry before the stream ends,
 //! the generator reports [`Sample::Starved`].
 
-use crate::config::Settings;
 use crate::knots::{
     KnotFileError, KnotRules, MAX_LINE_BYTES, MIN_PVT_KNOTS, PvtKnot, PvtLineParser, parse_pvt,
     read_knot_file, read_line_bounded,
 };
 use crate::spline::samples_between;
-use crate::traj::{
-    KnotSource, Sample, TrajBuildError, TrajStartError, TrajectoryGenerator, check_start,
-};
+use crate::step::{KnotSource, TrajBuildError};
+use qmarc_config::Settings;
+use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of, check_start};
 use qmarc_proto::MAX_MOTORS;
 use rtrb::{Consumer, Producer, PushError, RingBuffer};
 use std::sync::{Arc, Mutex};
@@ -280,7 +279,7 @@ impl Pvt {
     pub fn from_settings(s: &Settings) -> Result<Pvt, TrajBuildError> {
         let tol = s.trajectory.start_tolerance_counts;
         let wait = Duration::from_secs_f64(s.trajectory.stream_wait_s);
-        let rules = s.knot_rules();
+        let rules = KnotRules::from_settings(s);
         let pvt = match KnotSource::from_settings(s)? {
             KnotSource::File(path) => {
                 let text = read_knot_file(&path)?;
@@ -457,7 +456,7 @@ impl TrajectoryGenerator for Pvt {
     /// long the path. They bound every sample, so a path is never passed that a sample breaks.
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
         let PvtSource::Knots(knots) = &self.source else { return None };
-        let mut b = crate::traj::bounds_of(knots.iter().map(|k| &k.pos));
+        let mut b = bounds_of(knots.iter().map(|k| &k.pos));
         for w in knots.windows(2) {
             for (m, bm) in b.iter_mut().enumerate().take(self.n_motors) {
                 let seg =

@@ -38,7 +38,7 @@ pub const MAX_KNOT_FILE_BYTES: u64 = 64 << 20;
 /// Longest line of a knot file or stream, bytes (a knot of four motors needs about 200).
 pub const MAX_LINE_BYTES: usize = 4096;
 /// Default longest path, s (`trajectory.max_duration_s`): 24 h.
-pub const DEFAULT_MAX_DURATION_S: f64 = 86_400.0;
+pub const DEFAULT_MAX_DURATION_S: f64 = qmarc_config::DEFAULT_MAX_DURATION_S;
 /// Largest position magnitude, counts: the range of the thesis' 32-bit software counter
 /// (3.10.2), far beyond any physical path (2³¹ counts ≈ 43 700 motor revolutions).
 pub const MAX_POSITION_COUNTS: i64 = i32::MAX as i64;
@@ -94,9 +94,21 @@ impl KnotRules {
         KnotRules { n_motors, max_duration_s: DEFAULT_MAX_DURATION_S }
     }
 
+    /// The rules of `s`: the motors it drives, its longest path.
+    pub fn from_settings(s: &qmarc_config::Settings) -> KnotRules {
+        KnotRules::new(s.n_motors).max_duration_s(s.trajectory.max_duration_s)
+    }
+
     /// The same rules with the longest path `max_duration_s`.
     pub fn max_duration_s(self, max_duration_s: f64) -> KnotRules {
         KnotRules { max_duration_s, ..self }
+    }
+}
+
+impl From<KnotFileError> for qmarc_controller::traj::TrajStartError {
+    /// Bad knots met as the move starts (a stream's): the loop's start error carries them.
+    fn from(e: KnotFileError) -> Self {
+        qmarc_controller::traj::TrajStartError::Generator(Box::new(e))
     }
 }
 

@@ -6,15 +6,13 @@
 //! between knots j and j+1 the curve is eq. 3-3, y = A·y_j + B·y_{j+1} + C·y″_j + D·y″_{j+1}.
 //! [`CubicSpline`] is the generator: one spline per motor, sampled at t₀ + n·T.
 
-use crate::config::Settings;
 use crate::knots::{
     KnotFileError, KnotRules, MAX_KNOT_FILE_BYTES, OfflineKnots, parse_offline, read_knot_file,
     text_of,
 };
-use crate::traj::{
-    KnotSource, QUEUE_BUDGET_BYTES, Sample, TrajBuildError, TrajStartError, TrajectoryGenerator,
-    check_start,
-};
+use crate::step::{KnotSource, QUEUE_BUDGET_BYTES, TrajBuildError};
+use qmarc_config::Settings;
+use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of, check_start};
 use qmarc_proto::MAX_MOTORS;
 use std::io::Read;
 
@@ -228,7 +226,7 @@ impl CubicSpline {
         let mut g = CubicSpline {
             source: source.clone(),
             n_motors: s.n_motors,
-            rules: s.knot_rules(),
+            rules: KnotRules::from_settings(s),
             stream_wait: std::time::Duration::from_secs_f64(s.trajectory.stream_wait_s),
             period_s: s.period_s(),
             start_tolerance: s.trajectory.start_tolerance_counts,
@@ -283,14 +281,16 @@ impl CubicSpline {
         qmarc_timer::rt::spawn_normal("qmarc-knots", move || {
             let _ = tx.send(read_offline_stream(&source, &rules));
         })
-        .map_err(|e| KnotFileError::Read {
-            file: self.source.name(),
-            reason: format!("reader thread: {e}"),
+        .map_err(|e| {
+            TrajStartError::from(KnotFileError::Read {
+                file: self.source.name(),
+                reason: format!("reader thread: {e}"),
+            })
         })?;
         let started = std::time::Instant::now();
         let knots = loop {
             match rx.recv_timeout(std::time::Duration::from_millis(10)) {
-                Ok(result) => break result?,
+                Ok(result) => break result.map_err(TrajStartError::from)?,
                 Err(_) if qmarc_timer::stop::requested() => {
                     return Err(TrajStartError::Interrupted { stream: self.source.name() });
                 }
@@ -305,7 +305,7 @@ impl CubicSpline {
                 }
             }
         };
-        self.compute(&knots).map_err(TrajStartError::Build)
+        self.compute(&knots).map_err(TrajStartError::from)
     }
 
     /// The command queue.
@@ -331,7 +331,7 @@ impl TrajectoryGenerator for CubicSpline {
     }
 
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
-        (!self.queue.is_empty()).then(|| crate::traj::bounds_of(&self.queue))
+        (!self.queue.is_empty()).then(|| bounds_of(&self.queue))
     }
 
     fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {

@@ -6,7 +6,7 @@
 //! (thesis: 10) back from where it tripped, something is wrong (a stuck switch, a broken wire)
 //! and homing fails; then move to the home offset (counts from where the switch cleared, away
 //! from it) and let it settle. When every motor is home, the move ends and the caller resets
-//! every counter so that home reads 0 ([`crate::run`]), which makes the frame homed. The frame
+//! every counter so that home reads 0 (`qmarc-runner`), which makes the frame homed. The frame
 //! comes from where each switch cleared, not from where the motor came to rest, so a sluggish
 //! position loop does not shift it.
 //!
@@ -14,30 +14,10 @@
 //! latching monitor is off while homing: a homing expects its switch to trip). A switch other
 //! than the one being sought fails the homing.
 
-use crate::config::{HomingSettings, MotorSafety, Settings};
-use crate::summary::FaultKind;
-use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_config::{HomingSettings, MotorSafety, Settings};
+use qmarc_controller::fault::FaultKind;
+use qmarc_controller::traj::{MotorHomeReport, Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
-use serde::Serialize;
-
-/// Where homing found and left one motor, counts in the frame before homing.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
-pub struct MotorHomeReport {
-    /// 1-based motor.
-    pub motor: usize,
-    /// Where the top switch was first seen active.
-    pub switch_found_counts: f64,
-    /// Where it cleared while backing off.
-    pub switch_cleared_counts: f64,
-    /// Home: the home offset from where the switch cleared. It reads 0 afterwards.
-    pub home_counts: f64,
-    /// Where the motor stood when the next one started (it reads `ended − home` afterwards).
-    pub ended_counts: f64,
-    /// The motor was already on its top switch when its homing began.
-    pub started_on_switch: bool,
-    /// It got home (false: homing failed on this motor).
-    pub home: bool,
-}
 
 /// The words for a homing progress number ([`TrajectoryGenerator::progress`]):
 /// `homing motor 2: backing off the top switch`; `None` for 0.
@@ -374,8 +354,8 @@ impl TrajectoryGenerator for Homing {
         (self.phase == Phase::Done).then_some(home)
     }
 
-    fn summary(&self) -> Option<serde_json::Value> {
-        serde_json::to_value(self.reports()).ok()
+    fn homing_report(&self) -> Option<&[MotorHomeReport]> {
+        Some(self.reports())
     }
 }
 

@@ -1,9 +1,9 @@
-//! The command line shared by `qmarc-starter` and `qmarc-controller`: the starter parses it,
-//! checks it, and hands the controller the same options with [`MoveOptions::to_args`] and
-//! [`Mode::to_args`].
+//! The command line of a move (`qmarc-starter` and `qmarc home|step|run`): its global options
+//! ([`MoveOptions`]) and subcommand ([`Command`]), applied to the settings file once, into the
+//! one [`Settings`] value both children get.
 
-use crate::config::{ConfigLoadError, Settings};
 use clap::{Args, Subcommand};
+use qmarc_config::{ConfigLoadError, Mode, Names, Settings};
 use std::path::PathBuf;
 
 /// Parses the command line of a QMARC program. A wrong command line prints clap's message and
@@ -53,9 +53,9 @@ pub struct MoveOptions {
 }
 
 impl MoveOptions {
-    /// Loads the settings file and applies the overrides.
-    pub fn load(&self) -> Result<Settings, ConfigLoadError> {
-        let mut s = Settings::load(&self.config)?;
+    /// Loads the settings file and applies the overrides, the names it accepts from `names`.
+    pub fn load(&self, names: &Names) -> Result<Settings, ConfigLoadError> {
+        let mut s = Settings::load(&self.config, names)?;
         if let Some(p) = self.period_us {
             s.set_period_us(p)?;
         }
@@ -69,42 +69,15 @@ impl MoveOptions {
             s.gather.out_dir = out.clone();
         }
         if let Some(b) = &self.backend {
-            s.set_backend(b)?;
+            s.set_backend(b, names)?;
         }
         Ok(s)
     }
-
-    /// The same options as arguments.
-    pub fn to_args(&self) -> Vec<String> {
-        let mut a = vec![format!("--config={}", self.config.display())];
-        if let Some(out) = &self.out {
-            a.push(format!("--out={}", out.display()));
-        }
-        if let Some(n) = self.gather_every {
-            a.push(format!("--gather-every={n}"));
-        }
-        if let Some(p) = self.period_us {
-            a.push(format!("--period-us={p}"));
-        }
-        if let Some(n) = self.motors {
-            a.push(format!("--motors={n}"));
-        }
-        if self.deterministic {
-            a.push("--deterministic".into());
-        }
-        if self.unhomed {
-            a.push("--unhomed".into());
-        }
-        if let Some(b) = &self.backend {
-            a.push(format!("--backend={b}"));
-        }
-        a
-    }
 }
 
-/// What to do.
+/// What to do, with the subcommand's own options.
 #[derive(Debug, Clone, PartialEq, Subcommand)]
-pub enum Mode {
+pub enum Command {
     /// Step every motor by `--size` counts and hold for `--duration` s (tuning, thesis 3.4).
     Step(StepArgs),
     /// Run a path from a knot file or stream (thesis 3.12, A.2.3).
@@ -136,29 +109,20 @@ pub struct StepArgs {
     pub duration: Option<f64>,
 }
 
-impl Mode {
-    /// The mode's name (`step`, `run`).
-    pub fn name(&self) -> &'static str {
+impl Command {
+    /// The mode it runs.
+    pub fn mode(&self) -> Mode {
         match self {
-            Mode::Step(_) => "step",
-            Mode::Run(_) => "run",
-            Mode::Home => "home",
+            Command::Step(_) => Mode::Step,
+            Command::Run(_) => Mode::Run,
+            Command::Home => Mode::Home,
         }
     }
 
-    /// The registered generator the mode uses with settings `s` (after [`Mode::apply`]).
-    pub fn generator<'a>(&self, s: &'a Settings) -> &'a str {
+    /// Applies the subcommand's options to `s`.
+    pub fn apply(&self, s: &mut Settings, names: &Names) -> Result<(), ConfigLoadError> {
         match self {
-            Mode::Step(_) => "step",
-            Mode::Run(_) => &s.trajectory.method,
-            Mode::Home => "home",
-        }
-    }
-
-    /// Applies the mode's overrides to `s`.
-    pub fn apply(&self, s: &mut Settings) -> Result<(), ConfigLoadError> {
-        match self {
-            Mode::Step(a) => {
+            Command::Step(a) => {
                 if let Some(size) = a.size {
                     s.set_step_size(size)?;
                 }
@@ -166,44 +130,17 @@ impl Mode {
                     s.set_step_duration(d)?;
                 }
             }
-            Mode::Run(a) => {
+            Command::Run(a) => {
                 if let Some(k) = &a.knots {
                     s.set_knots(k);
                 }
                 if let Some(m) = &a.method {
-                    s.set_method(m)?;
+                    s.set_method(m, names)?;
                 }
             }
-            Mode::Home => {}
+            Command::Home => {}
         }
         Ok(())
-    }
-
-    /// The mode as arguments (subcommand first).
-    pub fn to_args(&self) -> Vec<String> {
-        match self {
-            Mode::Step(a) => {
-                let mut v = vec!["step".to_string()];
-                if let Some(size) = a.size {
-                    v.push(format!("--size={size}"));
-                }
-                if let Some(d) = a.duration {
-                    v.push(format!("--duration={d}"));
-                }
-                v
-            }
-            Mode::Run(a) => {
-                let mut v = vec!["run".to_string()];
-                if let Some(k) = &a.knots {
-                    v.push(format!("--knots={}", k.display()));
-                }
-                if let Some(m) = &a.method {
-                    v.push(format!("--method={m}"));
-                }
-                v
-            }
-            Mode::Home => vec!["home".to_string()],
-        }
     }
 }
 
@@ -217,40 +154,18 @@ mod tests {
         #[command(flatten)]
         opts: MoveOptions,
         #[command(subcommand)]
-        mode: Mode,
+        command: Command,
     }
 
     #[test]
-    fn arguments_round_trip() {
-        let t = T::parse_from([
-            "x",
-            "--out",
-            "/tmp/o",
-            "--gather-every",
-            "4",
-            "--period-us",
-            "500",
-            "--deterministic",
-            "step",
-            "--size",
-            "-250",
-            "--duration",
-            "0.75",
-        ]);
-        let args: Vec<String> = std::iter::once("x".to_string())
-            .chain(t.opts.to_args())
-            .chain(t.mode.to_args())
-            .collect();
-        let back = T::parse_from(args);
-        assert_eq!(back.opts, t.opts);
-        assert_eq!(back.mode, t.mode);
-        assert_eq!(back.mode, Mode::Step(StepArgs { size: Some(-250), duration: Some(0.75) }));
-        let t = T::parse_from(["x", "--motors", "2", "run", "--knots", "-", "--method", "pvt"]);
-        let args: Vec<String> = std::iter::once("x".to_string())
-            .chain(t.opts.to_args())
-            .chain(t.mode.to_args())
-            .collect();
-        let back = T::parse_from(args);
-        assert_eq!((back.opts.motors, &back.mode), (Some(2), &t.mode));
+    fn options_go_before_or_after_the_subcommand() {
+        let before =
+            T::parse_from(["x", "--out", "/tmp/o", "--period-us", "500", "step", "--size", "-250"]);
+        let after =
+            T::parse_from(["x", "step", "--size", "-250", "--out", "/tmp/o", "--period-us", "500"]);
+        assert_eq!(before.opts, after.opts);
+        assert_eq!(before.command, after.command);
+        assert_eq!(after.command, Command::Step(StepArgs { size: Some(-250), duration: None }));
+        assert_eq!(after.command.mode(), Mode::Step);
     }
 }

@@ -11,7 +11,8 @@
 //! lock-step (every read of the inputs advances it by exactly one servo period, so two runs
 //! with the same requests give identical data).
 
-use crate::backend::{Backend, HwFault, Inputs};
+use crate::backend::{Backend, BackendOpenError, HwFault, Inputs, Outputs};
+use qmarc_config::Settings;
 use qmarc_proto::{COUNTER_MASK, COUNTER_ZERO, DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, Status};
 use qmarc_timer::clock::monotonic_now_ns;
 
@@ -87,6 +88,33 @@ pub enum SimParamsError {
 }
 
 impl SimParams {
+    /// The simulated robot of `s` (`[sim]`, the motors and period of `[general]`), in
+    /// lock-step when `lockstep`. Fault-injection motors go from 1-based to 0-based here.
+    pub fn from_settings(s: &Settings, lockstep: bool) -> SimParams {
+        let sim = &s.sim;
+        let mut start_counts = [0.0; MAX_MOTORS];
+        for (c, v) in start_counts.iter_mut().zip(&sim.start_counts) {
+            *c = *v;
+        }
+        SimParams {
+            n_motors: s.n_motors,
+            period_ns: s.period_ns(),
+            lockstep,
+            kv_counts_per_s_per_v: sim.kv,
+            tau_s: sim.tau_s,
+            coast_tau_s: sim.coast_tau_s,
+            start_counts,
+            top_switch_counts: sim.top_switch_counts,
+            bottom_switch_counts: sim.bottom_switch_counts,
+            homed: sim.homed,
+            counter_offset: sim.counter_offset,
+            // 1-based in the settings; 0 there means none, and a 0 that reaches us anyway
+            // (a hand-written run file) is refused by `validate`, never wrapped around.
+            stall_motor: sim.stall_motor.map(|m| m.checked_sub(1).unwrap_or(usize::MAX)),
+            stuck_top_motor: sim.stuck_top_motor.map(|m| m.checked_sub(1).unwrap_or(usize::MAX)),
+        }
+    }
+
     /// Checks every parameter.
     pub fn validate(&self) -> Result<(), SimParamsError> {
         let bad = |name, value, expected| Err(SimParamsError::OutOfRange { name, value, expected });
@@ -116,7 +144,8 @@ impl SimParams {
         }
         for m in [self.stall_motor, self.stuck_top_motor].into_iter().flatten() {
             if m >= self.n_motors {
-                return bad("fault-injection motor", m as f64 + 1.0, "one of the simulated motors");
+                let one_based = if m == usize::MAX { 0.0 } else { m as f64 + 1.0 };
+                return bad("fault-injection motor", one_based, "one of the simulated motors");
             }
         }
         for &s in &self.start_counts[..self.n_motors] {
@@ -190,6 +219,8 @@ pub struct SimDeltabot {
     homed: [bool; MAX_MOTORS],
     /// Where the homed frame is kept between runs ([`SimDeltabot::with_state_file`]).
     state_file: Option<std::path::PathBuf>,
+    /// Where the event log goes when the server ends ([`Backend::finish`]).
+    events_file: Option<std::path::PathBuf>,
 }
 
 impl SimDeltabot {
@@ -216,7 +247,21 @@ impl SimDeltabot {
             top_dir,
             homed: [p.homed; MAX_MOTORS],
             state_file: None,
+            events_file: None,
         })
+    }
+
+    /// The simulated robot of the settings `s`, its homed frame kept in `sim.state_file` and
+    /// its event log written to `sim.events_file` when the server ends: the registry's
+    /// constructor.
+    pub fn open(s: &Settings, lockstep: bool) -> Result<SimDeltabot, BackendOpenError> {
+        let sim = SimDeltabot::new(SimParams::from_settings(s, lockstep))
+            .map_err(|e| BackendOpenError::Invalid(e.to_string()))?;
+        let sim = match &s.sim.state_file {
+            Some(path) => sim.with_state_file(path),
+            None => sim,
+        };
+        Ok(SimDeltabot { events_file: s.sim.events_file.clone(), ..sim })
     }
 
     /// Keeps the homed frame in `path` between runs, the way the 626's counters keep theirs
@@ -463,6 +508,58 @@ impl Backend for SimDeltabot {
 
     fn now_ns(&self) -> u64 {
         if self.p.lockstep { self.t_ns } else { monotonic_now_ns().saturating_sub(self.origin_ns) }
+    }
+
+    fn outputs(&self) -> Option<Outputs> {
+        let mut o = Outputs::default();
+        for m in 0..self.p.n_motors {
+            o.dac[m] = self.axes[m].dac;
+            o.enabled[m] = self.axes[m].enabled;
+        }
+        Some(o)
+    }
+
+    /// Writes the event log to `sim.events_file`, if one is set.
+    fn finish(&mut self) -> std::io::Result<()> {
+        let Some(path) = self.events_file.clone() else { return Ok(()) };
+        let mut out = Vec::new();
+        self.write_log(&mut out)?;
+        std::fs::write(&path, out)
+            .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))
+    }
+}
+
+/// The simulator's rig for the conformance suite: fresh lock-step robots, switches tripped
+/// by driving the motor into them.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SimRig;
+
+impl crate::conformance::Rig for SimRig {
+    fn backend(&mut self, n_motors: usize, start_counts: f64) -> Box<dyn Backend> {
+        let p = SimParams {
+            n_motors,
+            lockstep: true,
+            start_counts: [start_counts; MAX_MOTORS],
+            ..SimParams::default()
+        };
+        Box::new(SimDeltabot::new(p).expect("the rig's robot is valid"))
+    }
+
+    fn trip_switch(&mut self, core: &mut crate::HwCore, motor: usize, top: bool) {
+        use qmarc_proto::{HwMsg, MotorFlags, MsgType};
+        core.handle(&HwMsg::request(MsgType::DisableSafety));
+        core.handle(&HwMsg::for_motor(MsgType::EnableMotor, motor as u32));
+        let mut codes = [0; MAX_MOTORS];
+        // The top switch lies toward negative counts on the default robot.
+        codes[motor] = if top { -4000 } else { 4000 };
+        core.handle(&HwMsg::write_all_dacs(&codes));
+        for _ in 0..100_000 {
+            let f = MotorFlags(core.handle(&HwMsg::read_all_encoders()).aux[motor]);
+            if (top && f.top()) || (!top && f.bottom()) {
+                break;
+            }
+        }
+        core.handle(&HwMsg::for_motor(MsgType::DisableMotor, motor as u32));
     }
 }
 

@@ -2,12 +2,14 @@
 //! type plus one line here; the settings file, the command line and the console list and
 //! choose from these tables (see `docs/extending.md`).
 
-use crate::config::Settings;
 use crate::homing::Homing;
-use crate::law::{PidFf, ServoLaw};
+use crate::pidff::PidFf;
 use crate::pvt::Pvt;
 use crate::spline::CubicSpline;
-use crate::traj::{Step, TrajBuildError, TrajectoryGenerator};
+use crate::step::{Step, TrajBuildError};
+use qmarc_config::Settings;
+use qmarc_controller::law::ServoLaw;
+use qmarc_controller::traj::TrajectoryGenerator;
 
 /// A registered servo law.
 #[derive(Clone, Copy)]

@@ -1,0 +1,98 @@
+//! `[gather]`: what is recorded every N-th cycle (thesis 3.4, 4.2), and where it goes.
+
+use crate::ConfigLoadError;
+use crate::source::{S, Source, not_empty};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// Data gathering.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GatherSettings {
+    /// Gather every N-th servo cycle.
+    pub every: u32,
+    /// Directory the data files go to.
+    pub out_dir: PathBuf,
+    /// Which fields go into the files (thesis 3.4: time, DAC, command, actual position).
+    pub fields: GatherFields,
+}
+
+impl Default for GatherSettings {
+    fn default() -> GatherSettings {
+        GatherSettings { every: 1, out_dir: PathBuf::from("out"), fields: GatherFields::default() }
+    }
+}
+
+/// Which per-cycle fields the data files carry; `cycle` is always there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GatherFields {
+    /// `time_s`.
+    pub time: bool,
+    /// `cmdM`.
+    pub cmd: bool,
+    /// `actM`.
+    pub act: bool,
+    /// `dacM`.
+    pub dac: bool,
+}
+
+impl Default for GatherFields {
+    fn default() -> GatherFields {
+        GatherFields { time: true, cmd: true, act: true, dac: true }
+    }
+}
+
+impl GatherFields {
+    /// The names used in `gather.fields`.
+    pub const NAMES: [&'static str; 4] = ["time", "cmd", "act", "dac"];
+
+    /// Parses a list of names; the error names the first unknown one.
+    pub fn from_names<'a>(
+        names: impl IntoIterator<Item = &'a str>,
+    ) -> Result<GatherFields, String> {
+        let mut f = GatherFields { time: false, cmd: false, act: false, dac: false };
+        for n in names {
+            match n {
+                "time" => f.time = true,
+                "cmd" => f.cmd = true,
+                "act" => f.act = true,
+                "dac" => f.dac = true,
+                other => {
+                    return Err(format!(
+                        "unknown field `{other}`: the fields are time, cmd, act, dac"
+                    ));
+                }
+            }
+        }
+        Ok(f)
+    }
+
+    /// The names of the selected fields.
+    pub fn names(&self) -> Vec<&'static str> {
+        let on = [self.time, self.cmd, self.act, self.dac];
+        GatherFields::NAMES.iter().zip(on).filter(|(_, on)| *on).map(|(n, _)| *n).collect()
+    }
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawGather {
+    every: S<i64>,
+    out_dir: S<String>,
+    fields: S<Vec<String>>,
+}
+
+impl RawGather {
+    pub(crate) fn check(&self, src: &Source<'_>) -> Result<GatherSettings, ConfigLoadError> {
+        let d = GatherSettings::default();
+        let out_dir = d.out_dir.display().to_string();
+        let all = d.fields.names().into_iter().map(str::to_string).collect();
+        let names = src.take(&self.fields, "gather.fields", all, |v| {
+            GatherFields::from_names(v.iter().map(String::as_str)).map(|_| ())
+        })?;
+        Ok(GatherSettings {
+            every: src.int(&self.every, "gather.every", d.every.into(), 1, 1_000_000)? as u32,
+            out_dir: src.take(&self.out_dir, "gather.out_dir", out_dir, not_empty)?.into(),
+            fields: GatherFields::from_names(names.iter().map(String::as_str)).unwrap_or_default(),
+        })
+    }
+}

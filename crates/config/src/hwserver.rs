@@ -1,0 +1,153 @@
+//! `[hwserver]` and `[safety]`: the link to the hardware server, its watchdog, and the timing
+//! bounds whose defaults depend on the backend.
+
+use crate::source::{S, Source, one_of, positive};
+use crate::{ConfigLoadError, Names};
+use serde::{Deserialize, Serialize};
+
+/// The link to the hardware server.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HwServerSettings {
+    /// Backend name (`sim`, from the hwserver's registry).
+    pub backend: String,
+    /// Controller silence, in periods, after which the hwserver disables everything.
+    pub watchdog_periods: u32,
+    /// A response later than this many periods makes the controller check whether the
+    /// hwserver process is still alive.
+    pub deadline_periods: u32,
+    /// No response within this many periods means the hwserver is lost.
+    pub response_timeout_periods: u32,
+    /// Fastest an encoder can physically count, counts/s; a larger jump is an encoder fault.
+    pub max_counts_per_s: f64,
+}
+
+impl Default for HwServerSettings {
+    fn default() -> HwServerSettings {
+        HwServerSettings {
+            backend: "sim".to_string(),
+            watchdog_periods: TimingDefaults::SIMULATED.watchdog_periods,
+            deadline_periods: 5,
+            response_timeout_periods: 250,
+            max_counts_per_s: 500_000.0,
+        }
+    }
+}
+
+/// Timing bounds whose defaults depend on the backend. Real hardware keeps the tight bounds a
+/// PREEMPT_RT machine meets (thesis 4.2; PMAC and Mesa watchdogs are a few periods). The
+/// simulated robot runs on ordinary desktops and VMs, whose host stalls reach tens of ms
+/// (`../shared/notes/realtime-linux.md`): nothing physical is at stake there, so its bounds
+/// ride those out. A value set in the file holds for every backend.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TimingDefaults {
+    /// `hwserver.watchdog_periods`.
+    pub watchdog_periods: u32,
+    /// `safety.max_missed_in_row`.
+    pub max_missed_in_row: u64,
+}
+
+impl TimingDefaults {
+    /// On real hardware: 10 periods (4 ms at 400 µs) and 25 periods (10 ms).
+    pub const HARDWARE: TimingDefaults =
+        TimingDefaults { watchdog_periods: 10, max_missed_in_row: 25 };
+    /// On the simulated robot: 250 periods (100 ms at 400 µs) for both.
+    pub const SIMULATED: TimingDefaults =
+        TimingDefaults { watchdog_periods: 250, max_missed_in_row: 250 };
+
+    /// The defaults of `backend`.
+    pub fn of(backend: &str) -> TimingDefaults {
+        if backend == "sim" { TimingDefaults::SIMULATED } else { TimingDefaults::HARDWARE }
+    }
+}
+
+/// Which of the [`TimingDefaults`] the settings file set itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct ExplicitTiming {
+    /// `hwserver.watchdog_periods` is in the file.
+    pub watchdog_periods: bool,
+    /// `safety.max_missed_in_row` is in the file.
+    pub max_missed_in_row: bool,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawHwServer {
+    backend: S<String>,
+    watchdog_periods: S<i64>,
+    deadline_periods: S<i64>,
+    response_timeout_periods: S<i64>,
+    max_counts_per_s: S<f64>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSafety {
+    max_missed_in_row: S<i64>,
+}
+
+impl RawHwServer {
+    /// Checked; the watchdog's default is the backend's.
+    pub(crate) fn check(
+        &self,
+        src: &Source<'_>,
+        names: &Names,
+    ) -> Result<HwServerSettings, ConfigLoadError> {
+        let d = HwServerSettings::default();
+        let backend = src.take(
+            &self.backend,
+            "hwserver.backend",
+            d.backend,
+            one_of(&names.backends, "backend"),
+        )?;
+        let watchdog = TimingDefaults::of(&backend).watchdog_periods;
+        let deadline_periods = src.int(
+            &self.deadline_periods,
+            "hwserver.deadline_periods",
+            d.deadline_periods.into(),
+            1,
+            1_000_000,
+        )?;
+        Ok(HwServerSettings {
+            watchdog_periods: src.int(
+                &self.watchdog_periods,
+                "hwserver.watchdog_periods",
+                watchdog.into(),
+                2,
+                1_000_000,
+            )? as u32,
+            deadline_periods: deadline_periods as u32,
+            response_timeout_periods: src.int(
+                &self.response_timeout_periods,
+                "hwserver.response_timeout_periods",
+                d.response_timeout_periods.into(),
+                deadline_periods,
+                1_000_000,
+            )? as u32,
+            max_counts_per_s: src.take(
+                &self.max_counts_per_s,
+                "hwserver.max_counts_per_s",
+                d.max_counts_per_s,
+                positive,
+            )?,
+            backend,
+        })
+    }
+
+    /// Whether the file sets the watchdog.
+    pub(crate) fn sets_watchdog(&self) -> bool {
+        self.watchdog_periods.is_some()
+    }
+}
+
+impl RawSafety {
+    /// `safety.max_missed_in_row`, its default the backend's.
+    pub(crate) fn check(&self, src: &Source<'_>, backend: &str) -> Result<u64, ConfigLoadError> {
+        let d = TimingDefaults::of(backend).max_missed_in_row as i64;
+        Ok(src.int(&self.max_missed_in_row, "safety.max_missed_in_row", d, 1, 1_000_000)? as u64)
+    }
+
+    /// Whether the file sets it.
+    pub(crate) fn sets_max_missed(&self) -> bool {
+        self.max_missed_in_row.is_some()
+    }
+}

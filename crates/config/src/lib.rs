@@ -1,0 +1,362 @@
+//! The QMARC settings: `config/qmarc.toml` and the command line, loaded and checked once into
+//! one [`Settings`] value, which the starter hands to both children as a [`RunSpec`].
+//!
+//! The file is parsed into raw structs that keep every value's position, then checked section
+//! by section (one module each) into [`Settings`]. Every error names the file, line, column
+//! and field (`config/qmarc.toml:31:6: motor[2].kp: ...`); unknown keys are errors. Each
+//! default is defined once, in its section's `Default`. The crate knows nothing of the
+//! plug-ins or the hardware: the names it accepts for the law, the trajectory method and the
+//! backend are given to it ([`Names`], from the registries).
+//!
+//! ```
+//! use qmarc_config::{Names, Settings};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let names = Names { laws: vec!["pidff"], methods: vec!["spline", "pvt"], backends: vec!["sim"] };
+//! let table = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
+//! let s = Settings::parse("q.toml".as_ref(), &format!("[general]\nn_motors = 1\n{table}"), &names)?;
+//! assert_eq!((s.n_motors, s.period_us, s.hwserver.watchdog_periods), (1, 400, 250));
+//! # Ok(()) }
+//! ```
+#![deny(missing_docs)]
+
+mod error;
+mod gather;
+mod general;
+mod homing;
+mod hwserver;
+mod motor;
+mod run;
+mod sim;
+mod source;
+mod step;
+mod timer;
+mod trajectory;
+
+pub use error::ConfigLoadError;
+pub use gather::{GatherFields, GatherSettings};
+pub use homing::HomingSettings;
+pub use hwserver::{ExplicitTiming, HwServerSettings, TimingDefaults};
+pub use motor::{MotorGains, MotorSafety};
+pub use run::{Mode, RunSpec, RunSpecError};
+pub use sim::{DEFAULT_SIM_STATE_FILE, SimSettings};
+pub use step::{MAX_STEP_COUNTS, StepSettings};
+pub use timer::{TimerMethod, TimerSettings};
+pub use trajectory::{DEFAULT_MAX_DURATION_S, TrajectorySettings};
+
+use qmarc_proto::MAX_MOTORS;
+use serde::{Deserialize, Serialize};
+use source::Source;
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// The names the settings may use, from the registries of the crates that implement them.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Names {
+    /// Servo laws (`general.law`).
+    pub laws: Vec<&'static str>,
+    /// Trajectory generators that follow a path (`trajectory.method`, `--method`).
+    pub methods: Vec<&'static str>,
+    /// Hardware backends (`hwserver.backend`, `--backend`).
+    pub backends: Vec<&'static str>,
+}
+
+/// The checked settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Settings {
+    /// The file they came from.
+    pub source: PathBuf,
+    /// Motors driven (1‥[`MAX_MOTORS`]).
+    pub n_motors: usize,
+    /// Servo period in µs.
+    pub period_us: u32,
+    /// The servo period the gains were tuned at, µs: gains that act per period are rescaled
+    /// to `period_us` ([`Settings::effective_gains`]).
+    pub gains_period_us: u32,
+    /// Registered name of the servo law.
+    pub law: String,
+    /// Encoder counts per motor revolution (post-quadrature).
+    pub counts_per_rev: f64,
+    /// Motor revolutions per arm revolution.
+    pub gear_ratio: f64,
+    /// Timer settings.
+    pub timer: TimerSettings,
+    /// Data gathering.
+    pub gather: GatherSettings,
+    /// The step move.
+    pub step: StepSettings,
+    /// The `run` move.
+    pub trajectory: TrajectorySettings,
+    /// Homing.
+    pub homing: HomingSettings,
+    /// Missed periods in a row that end a move (`overrun`).
+    pub max_missed_in_row: u64,
+    /// The hwserver link.
+    pub hwserver: HwServerSettings,
+    /// The simulator.
+    pub sim: SimSettings,
+    /// Gains of every `[[motor]]` table (at least `n_motors`, at most [`MAX_MOTORS`]).
+    pub motors: Vec<MotorGains>,
+    /// Limits and homing of every `[[motor]]` table.
+    pub safety: Vec<MotorSafety>,
+    /// Which backend-dependent values the file set ([`TimingDefaults`]).
+    pub explicit: ExplicitTiming,
+}
+
+/// Largest settings file, bytes.
+pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
+/// Reads the settings file `path`, refusing more than [`MAX_CONFIG_BYTES`] (`/dev/zero`
+/// included) and text that is not UTF-8.
+pub fn read_config(path: &Path) -> Result<String, ConfigLoadError> {
+    use std::io::Read;
+    let file = || path.to_path_buf();
+    let mut raw = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(MAX_CONFIG_BYTES + 1).read_to_end(&mut raw))
+        .map_err(|reason| ConfigLoadError::Read { file: file(), reason })?;
+    if raw.len() as u64 > MAX_CONFIG_BYTES {
+        return Err(ConfigLoadError::TooLarge { file: file(), limit: MAX_CONFIG_BYTES });
+    }
+    String::from_utf8(raw).map_err(|e| ConfigLoadError::Read {
+        file: file(),
+        reason: std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error()),
+    })
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    #[serde(default)]
+    general: general::RawGeneral,
+    #[serde(default)]
+    timer: timer::RawTimer,
+    #[serde(default)]
+    gather: gather::RawGather,
+    #[serde(default)]
+    step: step::RawStep,
+    #[serde(default)]
+    trajectory: trajectory::RawTrajectory,
+    #[serde(default)]
+    homing: homing::RawHoming,
+    #[serde(default)]
+    safety: hwserver::RawSafety,
+    #[serde(default)]
+    hwserver: hwserver::RawHwServer,
+    #[serde(default)]
+    sim: sim::RawSim,
+    #[serde(default)]
+    motor: Vec<Spanned<motor::RawMotor>>,
+}
+
+impl RawFile {
+    /// Checks the sections in the file's order of importance: the first error is the one
+    /// reported.
+    fn check(self, src: &Source<'_>, names: &Names) -> Result<Settings, ConfigLoadError> {
+        let general = self.general.check(src, names)?;
+        let n_motors = general.n_motors;
+        let timer = self.timer.check(src)?;
+        let gather = self.gather.check(src)?;
+        let trajectory = self.trajectory.check(src, names)?;
+        let step = self.step.check(src, trajectory.max_duration_s)?;
+        let hwserver = self.hwserver.check(src, names)?;
+        let sim = self.sim.check(src, n_motors)?;
+        if self.motor.len() > MAX_MOTORS {
+            return Err(src.invalid(
+                self.motor[MAX_MOTORS].span(),
+                &format!("motor[{}]", MAX_MOTORS + 1),
+                format!("at most {MAX_MOTORS} [[motor]] tables"),
+            ));
+        }
+        if self.motor.len() < n_motors {
+            return Err(src.invalid(
+                self.general.n_motors_span(),
+                "general.n_motors",
+                format!(
+                    "{n_motors} motors need {n_motors} [[motor]] tables, found {}",
+                    self.motor.len()
+                ),
+            ));
+        }
+        let mut motors = Vec::with_capacity(self.motor.len());
+        let mut safety = Vec::with_capacity(self.motor.len());
+        for (i, m) in self.motor.iter().enumerate() {
+            let (g, s) = motor::check_motor(src, m, i + 1)?;
+            motors.push(g);
+            safety.push(s);
+        }
+        Ok(Settings {
+            source: src.path.to_path_buf(),
+            n_motors,
+            period_us: general.period_us,
+            gains_period_us: general.gains_period_us,
+            law: general.law,
+            counts_per_rev: general.counts_per_rev,
+            gear_ratio: general.gear_ratio,
+            timer,
+            gather,
+            step,
+            trajectory,
+            homing: self.homing.check(src)?,
+            max_missed_in_row: self.safety.check(src, &hwserver.backend)?,
+            sim,
+            explicit: ExplicitTiming {
+                watchdog_periods: self.hwserver.sets_watchdog(),
+                max_missed_in_row: self.safety.sets_max_missed(),
+            },
+            hwserver,
+            motors,
+            safety,
+        })
+    }
+}
+
+impl Settings {
+    /// Reads (at most [`MAX_CONFIG_BYTES`]) and checks `path`.
+    pub fn load(path: &Path, names: &Names) -> Result<Settings, ConfigLoadError> {
+        Settings::parse(path, &read_config(path)?, names)
+    }
+
+    /// Checks `text`, which came from `path` (a leading byte-order mark is dropped).
+    pub fn parse(path: &Path, text: &str, names: &Names) -> Result<Settings, ConfigLoadError> {
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let src = Source { path, text };
+        let raw: RawFile = toml::from_str(text).map_err(|e| src.toml_error(&e))?;
+        raw.check(&src, names)
+    }
+
+    /// The servo period in ns.
+    pub fn period_ns(&self) -> u64 {
+        u64::from(self.period_us) * 1_000
+    }
+
+    /// The servo period in s.
+    pub fn period_s(&self) -> f64 {
+        f64::from(self.period_us) * 1e-6
+    }
+
+    /// The gains of `motor` at the servo period in use. The law works in counts per period:
+    /// a velocity in counts/period scales with T, an acceleration with T², a sum of errors
+    /// with 1/T. Gains tuned at `gains_period_us` = T₀ keep the loop they were tuned for at
+    /// `period_us` = T when Kd and Kvff are multiplied by T₀/T, Kaff by (T₀/T)² and Ki by
+    /// T/T₀; Kp and the notch (which acts per sample) are kept.
+    pub fn effective_gains(&self, motor: usize) -> MotorGains {
+        let g = self.motors[motor];
+        let r = f64::from(self.gains_period_us) / f64::from(self.period_us);
+        MotorGains { ki: g.ki / r, kd: g.kd * r, kvff: g.kvff * r, kaff: g.kaff * r * r, ..g }
+    }
+
+    /// True when the gains are rescaled ([`Settings::effective_gains`]).
+    pub fn gains_rescaled(&self) -> bool {
+        self.gains_period_us != self.period_us
+    }
+
+    /// Encoder counts per radian of arm rotation: counts_per_rev · gear_ratio / 2π.
+    pub fn counts_per_rad(&self) -> f64 {
+        self.counts_per_rev * self.gear_ratio / std::f64::consts::TAU
+    }
+
+    /// Overrides the servo period (`--period-us`).
+    pub fn set_period_us(&mut self, period_us: u32) -> Result<(), ConfigLoadError> {
+        general::check_period(i64::from(period_us))
+            .map_err(|message| ConfigLoadError::Override { flag: "--period-us", message })?;
+        self.period_us = period_us;
+        Ok(())
+    }
+
+    /// Overrides the gathering interval (`--gather-every`).
+    pub fn set_gather_every(&mut self, every: u32) -> Result<(), ConfigLoadError> {
+        if every == 0 {
+            return Err(ConfigLoadError::Override {
+                flag: "--gather-every",
+                message: "must be at least 1".into(),
+            });
+        }
+        self.gather.every = every;
+        Ok(())
+    }
+
+    /// Overrides the number of motors (`--motors`).
+    pub fn set_n_motors(&mut self, n: usize) -> Result<(), ConfigLoadError> {
+        let flag = "--motors";
+        if !(1..=MAX_MOTORS).contains(&n) {
+            return Err(ConfigLoadError::Override {
+                flag,
+                message: format!("must be 1‥{MAX_MOTORS}, found {n}"),
+            });
+        }
+        if n > self.motors.len() {
+            return Err(ConfigLoadError::Override {
+                flag,
+                message: format!(
+                    "{n} motors need {n} [[motor]] tables in {}, found {}",
+                    self.source.display(),
+                    self.motors.len()
+                ),
+            });
+        }
+        self.n_motors = n;
+        Ok(())
+    }
+
+    /// Overrides the hardware backend (`--backend`); the timing bounds the file does not set
+    /// become the new backend's defaults.
+    pub fn set_backend(&mut self, backend: &str, names: &Names) -> Result<(), ConfigLoadError> {
+        if !names.backends.contains(&backend) {
+            return Err(ConfigLoadError::Override {
+                flag: "--backend",
+                message: format!(
+                    "unknown backend `{backend}`; available: {}",
+                    names.backends.join(", ")
+                ),
+            });
+        }
+        self.hwserver.backend = backend.to_string();
+        let d = TimingDefaults::of(backend);
+        if !self.explicit.watchdog_periods {
+            self.hwserver.watchdog_periods = d.watchdog_periods;
+        }
+        if !self.explicit.max_missed_in_row {
+            self.max_missed_in_row = d.max_missed_in_row;
+        }
+        Ok(())
+    }
+
+    /// Overrides the knot file (`--knots`).
+    pub fn set_knots(&mut self, path: &Path) {
+        self.trajectory.knots = Some(path.to_path_buf());
+    }
+
+    /// Overrides the trajectory method (`--method`).
+    pub fn set_method(&mut self, method: &str, names: &Names) -> Result<(), ConfigLoadError> {
+        if !names.methods.contains(&method) {
+            return Err(ConfigLoadError::Override {
+                flag: "--method",
+                message: format!(
+                    "unknown trajectory method `{method}`; registered: {}",
+                    names.methods.join(", ")
+                ),
+            });
+        }
+        self.trajectory.method = method.to_string();
+        Ok(())
+    }
+
+    /// Overrides the step size (`--size`).
+    pub fn set_step_size(&mut self, size: i64) -> Result<(), ConfigLoadError> {
+        step::check_step_size(size)
+            .map_err(|message| ConfigLoadError::Override { flag: "--size", message })?;
+        self.step.size = size;
+        Ok(())
+    }
+
+    /// Overrides the step duration (`--duration`).
+    pub fn set_step_duration(&mut self, duration_s: f64) -> Result<(), ConfigLoadError> {
+        step::check_duration(duration_s, self.trajectory.max_duration_s)
+            .map_err(|message| ConfigLoadError::Override { flag: "--duration", message })?;
+        self.step.duration_s = duration_s;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,108 @@
+//! [`RunSpec`]: one run as the starter hands it to both children — the checked settings, the
+//! mode and how to run it — so that no child parses a command line or a settings file again.
+//!
+//! It travels as a JSON file (`--settings FILE`), which the children deserialize as it is:
+//! the same way whether the starter wrote it (next to the run's iceoryx2 files, removed with
+//! them) or a developer did (`qmarc-starter --print-settings … > run.json`), to run a child
+//! by hand.
+
+use crate::Settings;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// What a move does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Step every motor (thesis 3.4, tuning).
+    Step,
+    /// Follow a path (thesis 3.12).
+    Run,
+    /// Home on the top switches (thesis 3.10.1.1).
+    Home,
+}
+
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Mode::Step => "step",
+            Mode::Run => "run",
+            Mode::Home => "home",
+        })
+    }
+}
+
+impl std::str::FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Mode, String> {
+        match s {
+            "step" => Ok(Mode::Step),
+            "run" => Ok(Mode::Run),
+            "home" => Ok(Mode::Home),
+            other => Err(format!("unknown mode `{other}`: step, run or home")),
+        }
+    }
+}
+
+/// One run, for both children.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunSpec {
+    /// The checked settings, every override applied.
+    pub settings: Settings,
+    /// What the move does.
+    pub mode: Mode,
+    /// Lock-step simulated time.
+    pub deterministic: bool,
+    /// Move in a frame that may not be homed (software limits off).
+    pub unhomed: bool,
+    /// Prefix of the run's iceoryx2 files.
+    pub iox_prefix: String,
+    /// iceoryx2 root directory.
+    pub iox_root: String,
+}
+
+/// A run file could not be written or read.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RunSpecError {
+    /// Reading or writing the file failed.
+    #[error("{file}: {reason}")]
+    Io {
+        /// The file.
+        file: PathBuf,
+        /// Why.
+        reason: std::io::Error,
+    },
+    /// The file is not a run file of this version.
+    #[error(
+        "{file}: not a QMARC run file: {reason} (write it with `qmarc-starter --print-settings`)"
+    )]
+    Format {
+        /// The file.
+        file: PathBuf,
+        /// serde's message.
+        reason: String,
+    },
+}
+
+impl RunSpec {
+    /// The run as JSON.
+    pub fn to_json(&self) -> String {
+        // Plain data of strings, numbers and paths: serializing it cannot fail.
+        serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+
+    /// Writes the run to `path`.
+    pub fn write(&self, path: &Path) -> Result<(), RunSpecError> {
+        std::fs::write(path, self.to_json() + "\n")
+            .map_err(|reason| RunSpecError::Io { file: path.to_path_buf(), reason })
+    }
+
+    /// Reads a run written by [`RunSpec::write`].
+    pub fn read(path: &Path) -> Result<RunSpec, RunSpecError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|reason| RunSpecError::Io { file: path.to_path_buf(), reason })?;
+        serde_json::from_str(&text)
+            .map_err(|e| RunSpecError::Format { file: path.to_path_buf(), reason: e.to_string() })
+    }
+}

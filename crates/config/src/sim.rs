@@ -1,0 +1,154 @@
+//! `[sim]`: the simulated Deltabot (`../shared/notes/deltabot.md`; the geometry is an
+//! assumption) and its fault injection.
+
+use crate::ConfigLoadError;
+use crate::source::{S, Source, finite, positive, span_of};
+use qmarc_proto::MAX_MOTORS;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// Where the simulated robot keeps its homed frame between runs by default: on the tmpfs
+/// `/dev/shm`, which a reboot clears.
+pub const DEFAULT_SIM_STATE_FILE: &str = "/dev/shm/qmarc-sim.state";
+
+/// The simulated Deltabot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SimSettings {
+    /// Amplifier gain, counts/s per volt.
+    pub kv: f64,
+    /// Velocity lag of an enabled amplifier, s.
+    pub tau_s: f64,
+    /// Coasting time constant of a disabled motor, s.
+    pub coast_tau_s: f64,
+    /// Start position per motor, counts (motors beyond the list start at 0).
+    pub start_counts: Vec<f64>,
+    /// Top limit switch position, counts.
+    pub top_switch_counts: f64,
+    /// Bottom limit switch position, counts.
+    pub bottom_switch_counts: f64,
+    /// The robot starts homed.
+    pub homed: bool,
+    /// Offset of an unhomed counter frame, counts.
+    pub counter_offset: i64,
+    /// Fault injection: this motor (1-based) does not move.
+    pub stall_motor: Option<usize>,
+    /// Fault injection: this motor's (1-based) top switch sticks once tripped.
+    pub stuck_top_motor: Option<usize>,
+    /// Where the simulator writes its event log when it ends.
+    pub events_file: Option<PathBuf>,
+    /// Where the simulator keeps its homed frame between runs; `None`: nowhere.
+    pub state_file: Option<PathBuf>,
+}
+
+impl Default for SimSettings {
+    fn default() -> SimSettings {
+        SimSettings {
+            kv: 25_000.0,
+            tau_s: 0.004,
+            coast_tau_s: 0.05,
+            start_counts: Vec::new(),
+            top_switch_counts: -9_500.0,
+            bottom_switch_counts: 10_500.0,
+            homed: true,
+            counter_offset: 0,
+            stall_motor: None,
+            stuck_top_motor: None,
+            events_file: None,
+            state_file: Some(PathBuf::from(DEFAULT_SIM_STATE_FILE)),
+        }
+    }
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSim {
+    kv: S<f64>,
+    tau_s: S<f64>,
+    coast_tau_s: S<f64>,
+    start_counts: S<Vec<f64>>,
+    top_switch_counts: S<f64>,
+    bottom_switch_counts: S<f64>,
+    homed: S<bool>,
+    counter_offset: S<i64>,
+    stall_motor: S<i64>,
+    stuck_top_motor: S<i64>,
+    events_file: S<String>,
+    state_file: S<String>,
+}
+
+/// A path setting: `""` means none.
+fn path_or_none(p: String) -> Option<PathBuf> {
+    (!p.is_empty()).then(|| PathBuf::from(p))
+}
+
+impl RawSim {
+    /// Checked for `n_motors` motors (the fault-injection motors must be among them).
+    pub(crate) fn check(
+        &self,
+        src: &Source<'_>,
+        n_motors: usize,
+    ) -> Result<SimSettings, ConfigLoadError> {
+        let d = SimSettings::default();
+        let motor = |v: &S<i64>, field: &str| -> Result<Option<usize>, ConfigLoadError> {
+            let m = src.int(v, field, 0, 0, n_motors as i64)?;
+            Ok((m > 0).then_some(m as usize))
+        };
+        let path = |v: &S<String>, field: &str, default: Option<PathBuf>| {
+            let d = default.map_or(String::new(), |p| p.display().to_string());
+            src.take(v, field, d, |_| Ok(())).map(path_or_none)
+        };
+        let sim = SimSettings {
+            kv: src.take(&self.kv, "sim.kv", d.kv, positive)?,
+            tau_s: src.take(&self.tau_s, "sim.tau_s", d.tau_s, positive)?,
+            coast_tau_s: src.take(&self.coast_tau_s, "sim.coast_tau_s", d.coast_tau_s, positive)?,
+            start_counts: src.take(
+                &self.start_counts,
+                "sim.start_counts",
+                d.start_counts,
+                |v| {
+                    if v.len() > MAX_MOTORS {
+                        return Err(format!("at most {MAX_MOTORS} positions, found {}", v.len()));
+                    }
+                    match v.iter().find(|x| !(x.is_finite() && x.abs() < f64::from(1u32 << 23))) {
+                        Some(bad) => Err(format!(
+                            "positions must be finite and within ±2^23 counts, found {bad}"
+                        )),
+                        None => Ok(()),
+                    }
+                },
+            )?,
+            top_switch_counts: src.take(
+                &self.top_switch_counts,
+                "sim.top_switch_counts",
+                d.top_switch_counts,
+                finite,
+            )?,
+            bottom_switch_counts: src.take(
+                &self.bottom_switch_counts,
+                "sim.bottom_switch_counts",
+                d.bottom_switch_counts,
+                finite,
+            )?,
+            homed: src.take(&self.homed, "sim.homed", d.homed, |_| Ok(()))?,
+            counter_offset: src.int(
+                &self.counter_offset,
+                "sim.counter_offset",
+                d.counter_offset,
+                -(1 << 23),
+                1 << 23,
+            )?,
+            stall_motor: motor(&self.stall_motor, "sim.stall_motor")?,
+            stuck_top_motor: motor(&self.stuck_top_motor, "sim.stuck_top_motor")?,
+            events_file: path(&self.events_file, "sim.events_file", d.events_file)?,
+            state_file: path(&self.state_file, "sim.state_file", d.state_file)?,
+        };
+        if sim.top_switch_counts == sim.bottom_switch_counts {
+            return Err(src.invalid(
+                span_of(&self.bottom_switch_counts),
+                "sim.bottom_switch_counts",
+                "must differ from sim.top_switch_counts",
+            ));
+        }
+        Ok(sim)
+    }
+}

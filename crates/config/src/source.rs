@@ -1,0 +1,201 @@
+//! Where a value came from: byte offsets of the settings file turned into `file:line:column`
+//! and the dotted field name, and the small checks every section uses.
+
+use crate::ConfigLoadError;
+use std::ops::Range;
+use std::path::Path;
+use toml::Spanned;
+
+/// An optional value of the file with its position.
+pub(crate) type S<T> = Option<Spanned<T>>;
+
+/// The text of the settings file, for turning byte offsets into lines and fields.
+pub(crate) struct Source<'a> {
+    pub path: &'a Path,
+    pub text: &'a str,
+}
+
+impl Source<'_> {
+    fn line_col(&self, offset: usize) -> (usize, usize) {
+        let before = &self.text[..offset.min(self.text.len())];
+        let line = before.matches('\n').count() + 1;
+        let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+        (line, column)
+    }
+
+    /// The error for the value at `span`.
+    pub fn invalid(
+        &self,
+        span: Range<usize>,
+        field: &str,
+        message: impl Into<String>,
+    ) -> ConfigLoadError {
+        let (line, column) = self.line_col(span.start);
+        ConfigLoadError::Invalid {
+            file: self.path.to_path_buf(),
+            line,
+            column,
+            field: field.to_string(),
+            message: message.into(),
+        }
+    }
+
+    /// The dotted field path at `offset`: the enclosing table header (with the 1-based index
+    /// of an array of tables) and the key whose value holds the offset — found on the
+    /// nearest line at or before it that starts with `key =`, so that a value spanning lines
+    /// (a multi-line array) is named by its key, not by the line the error is on.
+    pub fn field_at(&self, offset: usize) -> String {
+        let mut table = String::new();
+        let mut key = String::new();
+        let mut counts: Vec<(String, usize)> = Vec::new();
+        let mut line_start = 0;
+        for line in self.text.split_inclusive('\n') {
+            if line_start > offset {
+                break;
+            }
+            line_start += line.len();
+            let t = line.trim();
+            let is_array = t.starts_with("[[");
+            let header = t
+                .strip_prefix("[[")
+                .and_then(|r| r.split("]]").next())
+                .or_else(|| t.strip_prefix('[').and_then(|r| r.split(']').next()));
+            if let Some(name) = header.map(str::trim).filter(|n| !n.is_empty() && !n.contains(','))
+            {
+                let name = name.to_string();
+                key.clear();
+                table = if is_array {
+                    let n = match counts.iter_mut().find(|(k, _)| *k == name) {
+                        Some((_, n)) => {
+                            *n += 1;
+                            *n
+                        }
+                        None => {
+                            counts.push((name.clone(), 1));
+                            1
+                        }
+                    };
+                    format!("{name}[{n}]")
+                } else {
+                    name
+                };
+            } else if let Some((k, _)) = t.split_once('=') {
+                let k = k.trim();
+                if !k.is_empty() && k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+                    key = k.to_string();
+                }
+            }
+        }
+        match (table.is_empty(), key.is_empty()) {
+            (true, _) => key,
+            (false, true) => table,
+            (false, false) => format!("{table}.{key}"),
+        }
+    }
+
+    /// The error of toml's own parse, at its position.
+    pub fn toml_error(&self, e: &toml::de::Error) -> ConfigLoadError {
+        let span = e.span().unwrap_or(0..0);
+        let field = self.field_at(span.start);
+        let message = e.message().trim().to_string();
+        self.invalid(span, if field.is_empty() { "(file)" } else { &field }, message)
+    }
+
+    /// `v` or, when the file does not set it, `default`; checked with `ok`.
+    pub fn take<T: Clone>(
+        &self,
+        v: &S<T>,
+        field: &str,
+        default: T,
+        ok: impl FnOnce(&T) -> Result<(), String>,
+    ) -> Result<T, ConfigLoadError> {
+        match v {
+            None => Ok(default),
+            Some(s) => {
+                ok(s.get_ref()).map_err(|m| self.invalid(s.span(), field, m))?;
+                Ok(s.get_ref().clone())
+            }
+        }
+    }
+
+    /// An integer setting within `lo‥=hi`, or `default` (callers narrow it: it is in range).
+    pub fn int(
+        &self,
+        v: &S<i64>,
+        field: &str,
+        default: i64,
+        lo: i64,
+        hi: i64,
+    ) -> Result<i64, ConfigLoadError> {
+        self.take(v, field, default, in_range(lo, hi))
+    }
+}
+
+/// The position of an optional value, or the file's start.
+pub(crate) fn span_of<T>(v: &S<T>) -> Range<usize> {
+    v.as_ref().map_or(0..0, Spanned::span)
+}
+
+/// `lo‥=hi`.
+pub(crate) fn in_range(lo: i64, hi: i64) -> impl FnOnce(&i64) -> Result<(), String> {
+    move |v| {
+        if (lo..=hi).contains(v) { Ok(()) } else { Err(format!("must be {lo}‥{hi}, found {v}")) }
+    }
+}
+
+/// A finite number.
+pub(crate) fn finite(v: &f64) -> Result<(), String> {
+    if v.is_finite() { Ok(()) } else { Err(format!("must be a finite number, found {v}")) }
+}
+
+/// A finite number > 0.
+pub(crate) fn positive(v: &f64) -> Result<(), String> {
+    if v.is_finite() && *v > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("must be a finite number > 0, found {v}"))
+    }
+}
+
+/// A finite number ≥ 0.
+pub(crate) fn non_negative(v: &f64) -> Result<(), String> {
+    if v.is_finite() && *v >= 0.0 {
+        Ok(())
+    } else {
+        Err(format!("must be a finite number ≥ 0, found {v}"))
+    }
+}
+
+/// A finite number within `lo‥=hi` of `unit`.
+pub(crate) fn within(
+    lo: f64,
+    hi: f64,
+    unit: &'static str,
+) -> impl FnOnce(&f64) -> Result<(), String> {
+    move |v| {
+        if v.is_finite() && (lo..=hi).contains(v) {
+            Ok(())
+        } else {
+            Err(format!("must be {lo}‥{hi} {unit}, found {v}"))
+        }
+    }
+}
+
+/// A non-empty text.
+pub(crate) fn not_empty<T: AsRef<str>>(v: &T) -> Result<(), String> {
+    if v.as_ref().trim().is_empty() { Err("must not be empty".into()) } else { Ok(()) }
+}
+
+/// One of `names` (`what`: e.g. "servo law").
+pub(crate) fn one_of<'a>(
+    names: &'a [&'static str],
+    what: &'static str,
+) -> impl FnOnce(&String) -> Result<(), String> + 'a {
+    move |v| {
+        if names.contains(&v.as_str()) {
+            Ok(())
+        } else {
+            Err(format!("unknown {what} `{v}`; registered: {}", names.join(", ")))
+        }
+    }
+}

@@ -1,0 +1,267 @@
+//! Unit tests of the settings: exact error messages, defaults, overrides, and the round trip
+//! of the value handed to the children.
+
+use super::*;
+use std::path::Path;
+
+/// The names the tests accept (the registries' at the time of writing).
+fn names() -> Names {
+    Names { laws: vec!["pidff"], methods: vec!["step", "spline", "pvt"], backends: vec!["sim"] }
+}
+
+fn shipped_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml")
+}
+
+fn shipped() -> Settings {
+    Settings::load(&shipped_path(), &names()).unwrap()
+}
+
+const MOTOR: &str = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
+
+fn parse(text: &str) -> Result<Settings, ConfigLoadError> {
+    Settings::parse(Path::new("q.toml"), text, &names())
+}
+
+fn check(text: &str, expected: &str) {
+    match parse(text) {
+        Ok(_) => panic!("accepted:\n{text}"),
+        Err(e) => assert_eq!(e.to_string(), expected),
+    }
+}
+
+#[test]
+fn shipped_settings_are_the_thesis_defaults() {
+    let s = shipped();
+    assert_eq!((s.n_motors, s.period_us, s.law.as_str()), (3, 400, "pidff"));
+    let table_5_1 = [(182_000.0, 119_000.0), (182_000.0, 103_500.0), (183_000.0, 104_000.0)];
+    for (m, (kp, kvff)) in s.motors.iter().zip(table_5_1) {
+        assert_eq!((m.kp, m.ki, m.kd, m.kvff, m.kaff), (kp, 100.0, 3_000.0, kvff, 100.0));
+        assert_eq!(m.notch, [0.0; 4]);
+    }
+    assert!((s.counts_per_rad() - 7_822.78).abs() < 0.01, "{}", s.counts_per_rad());
+    assert_eq!(s.timer.method, TimerMethod::Timerfd);
+}
+
+#[test]
+fn minimal_file_takes_defaults() {
+    let s = parse(&MOTOR.repeat(3)).unwrap();
+    assert_eq!((s.n_motors, s.period_us, s.gather.every, s.step.size), (3, 400, 1, 1000));
+    assert_eq!(s.hwserver.watchdog_periods, 250, "the simulated robot's default");
+}
+
+#[test]
+fn errors_name_file_line_column_and_field() {
+    check(
+        "[general]\nperiod_us = 50\n",
+        "q.toml:2:13: general.period_us: servo period must be 100‥100000 µs, found 50",
+    );
+    check("[general]\nn_motors = 5\n", "q.toml:2:12: general.n_motors: must be 1‥4, found 5");
+    check(
+        "[general]\nn_motors = 2\n[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n",
+        "q.toml:2:12: general.n_motors: 2 motors need 2 [[motor]] tables, found 1",
+    );
+    check(
+        &format!("{MOTOR}{MOTOR}[[motor]]\nkp = 1.0\nkpp = 2\n"),
+        "q.toml:15:1: motor[3].kpp: unknown field `kpp`, expected one of `kp`, `ki`, `kd`, `kvff`, `kaff`, `notch`, `soft_limits`, `max_following_error_counts`, `max_integrated_error_counts`, `home_offset_counts`, `top_direction`",
+    );
+    check(
+        &format!("{MOTOR}{MOTOR}[[motor]]\nkp = \"big\"\n"),
+        "q.toml:14:6: motor[3].kp: invalid type: string \"big\", expected f64",
+    );
+    check(
+        &format!("{MOTOR}[[motor]]\nkp = 1.0\n{MOTOR}"),
+        "q.toml:7:1: motor[2].ki: missing key `ki`",
+    );
+    check(
+        &format!(
+            "{}[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\nnotch = [0, 0, -2.5, 0.9]\n",
+            MOTOR.repeat(2)
+        ),
+        "q.toml:19:9: motor[3].notch: the denominator 1 + d1·z⁻¹ + d2·z⁻² with d1 = -2.5, d2 = 0.9 is unstable (needs |d2| < 1 and |d1| < 1 + d2)",
+    );
+    check(
+        "[general]\nlaw = \"lqr\"\n",
+        "q.toml:2:7: general.law: unknown servo law `lqr`; registered: pidff",
+    );
+    check(
+        "[timer]\nmethod = \"posix\"\n",
+        "q.toml:2:10: timer.method: must be \"timerfd\" or \"nanosleep\", found \"posix\"",
+    );
+    check(
+        "[bogus]\nx = 1\n",
+        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `motor`",
+    );
+    check(
+        "[trajectory]\nmethod = \"home\"\n",
+        "q.toml:2:10: trajectory.method: unknown trajectory method `home`; registered: step, spline, pvt",
+    );
+    check(
+        "[general]\nperiod_us = \n",
+        "q.toml:2:13: general.period_us: string values must be quoted, expected literal string",
+    );
+    check(
+        "[step]\nduration_s = nan\n",
+        "q.toml:2:14: step.duration_s: duration must be > 0 and ≤ 86400 s (trajectory.max_duration_s), found NaN",
+    );
+    check(
+        "[timer]\nservo_priority = 90\nhwserver_priority = 80\n",
+        "q.toml:3:21: timer.hwserver_priority: must be at least timer.servo_priority (90): the servo thread waits on the hwserver, so the hwserver must not be preempted by it",
+    );
+}
+
+#[test]
+fn overrides_are_checked() {
+    let mut s = parse(&MOTOR.repeat(3)).unwrap();
+    assert_eq!(
+        s.set_period_us(99).unwrap_err().to_string(),
+        "--period-us: servo period must be 100‥100000 µs, found 99"
+    );
+    assert_eq!(
+        s.set_gather_every(0).unwrap_err().to_string(),
+        "--gather-every: must be at least 1"
+    );
+    assert_eq!(
+        s.set_step_duration(-1.0).unwrap_err().to_string(),
+        "--duration: duration must be > 0 and ≤ 86400 s (trajectory.max_duration_s), found -1"
+    );
+    s.set_period_us(1000).unwrap();
+    s.set_step_size(-500).unwrap();
+    assert_eq!((s.period_us, s.step.size), (1000, -500));
+}
+
+#[test]
+fn missing_file_is_named() {
+    let e = Settings::load(Path::new("/nonexistent/q.toml"), &names()).unwrap_err().to_string();
+    assert!(e.starts_with("/nonexistent/q.toml: cannot read the settings file: "), "{e}");
+}
+
+/// Issue 11: a value whose text spans lines is named by its key, at the element at fault.
+#[test]
+fn errors_in_values_that_span_lines_name_their_key_issue_11() {
+    check(
+        &format!(
+            "{}[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\nnotch = [\n  0,\n  \"x\",\n  0,\n  0,\n]\n",
+            MOTOR.repeat(2)
+        ),
+        "q.toml:21:3: motor[3].notch: invalid type: string \"x\", expected f64",
+    );
+    check(
+        "[sim]\nstart_counts = [\n  0,\n  true,\n]\n",
+        "q.toml:4:3: sim.start_counts: invalid type: boolean `true`, expected f64",
+    );
+}
+
+/// Issue 11: every field of the settings survives the trip to the children: each number
+/// and flag of the serialized value is changed to a value of its own, and what the child
+/// reads back serializes to exactly that.
+#[test]
+fn every_field_round_trips_to_the_children_issue_11() {
+    let spec = RunSpec {
+        settings: shipped(),
+        mode: Mode::Run,
+        deterministic: true,
+        unhomed: false,
+        iox_prefix: "qmarc_7_".into(),
+        iox_root: "/tmp/iceoryx2/".into(),
+    };
+    let mut json: serde_json::Value = serde_json::from_str(&spec.to_json()).unwrap();
+    let mut n = 0u32;
+    fn vary(v: &mut serde_json::Value, n: &mut u32) {
+        match v {
+            serde_json::Value::Number(x) => {
+                *n += 1;
+                *v = if x.is_f64() {
+                    serde_json::json!(f64::from(*n) + 0.25)
+                } else {
+                    serde_json::json!(*n)
+                };
+            }
+            serde_json::Value::Bool(b) => *b = !*b,
+            serde_json::Value::String(s) if !matches!(s.as_str(), "timerfd" | "run") => {
+                *n += 1;
+                s.push_str(&n.to_string());
+            }
+            serde_json::Value::Array(a) => a.iter_mut().for_each(|x| vary(x, n)),
+            serde_json::Value::Object(o) => o.values_mut().for_each(|x| vary(x, n)),
+            _ => {}
+        }
+    }
+    vary(&mut json, &mut n);
+    assert!(n > 60, "every field was varied: {n}");
+    let dir = std::env::temp_dir().join(format!("qmarc-runspec-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("run.json");
+    std::fs::write(&file, json.to_string()).unwrap();
+    let back = RunSpec::read(&file).unwrap();
+    let again: serde_json::Value = serde_json::from_str(&back.to_json()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(again, json, "a field was lost or changed on the way");
+    // And the shipped settings themselves, unchanged.
+    let file = std::env::temp_dir().join(format!("qmarc-runspec-{}.json", std::process::id()));
+    spec.write(&file).unwrap();
+    assert_eq!(RunSpec::read(&file).unwrap(), spec);
+    let _ = std::fs::remove_file(&file);
+    let e = RunSpec::read(Path::new("/nonexistent/run.json")).unwrap_err().to_string();
+    assert!(e.starts_with("/nonexistent/run.json: "), "{e}");
+}
+
+/// Issue 11: each default is defined once, and the shipped file states it: for every section
+/// but the per-motor tables, the knot file and the start positions (the shipped choices),
+/// the shipped values are the defaults. (Homing's velocity was 1000 counts/s in the code and
+/// 2000 in the file.)
+#[test]
+fn the_shipped_file_states_the_defaults_issue_11() {
+    let s = shipped();
+    let tables = std::fs::read_to_string(shipped_path()).unwrap();
+    let motors = &tables[tables.find("\n[[motor]]").unwrap()..];
+    let d = parse(motors).unwrap();
+    assert_eq!(s.homing, d.homing);
+    assert_eq!(s.homing.velocity_counts_per_s, 2_000.0);
+    assert_eq!(
+        (s.n_motors, s.period_us, s.gains_period_us, &s.law, s.counts_per_rev, s.gear_ratio),
+        (d.n_motors, d.period_us, d.gains_period_us, &d.law, d.counts_per_rev, d.gear_ratio)
+    );
+    assert_eq!((s.timer, &s.gather, s.step), (d.timer, &d.gather, d.step));
+    assert_eq!(
+        TrajectorySettings { knots: None, ..s.trajectory.clone() },
+        d.trajectory,
+        "trajectory"
+    );
+    assert_eq!((&s.hwserver, s.max_missed_in_row), (&d.hwserver, d.max_missed_in_row));
+    assert_eq!(SimSettings { start_counts: vec![], ..s.sim.clone() }, d.sim);
+    assert!(s.sim.start_counts.iter().all(|&c| c == 0.0), "start at 0, the default");
+}
+
+/// Issue 11: `stall_motor = 0` is "none" (it used to wrap around on the way to the
+/// hwserver), and a motor that is not simulated is refused by name.
+#[test]
+fn fault_injection_motors_are_one_based_or_none_issue_11() {
+    let s = parse(&format!("[sim]\nstall_motor = 0\nstuck_top_motor = 2\n{}", MOTOR.repeat(3)))
+        .unwrap();
+    assert_eq!((s.sim.stall_motor, s.sim.stuck_top_motor), (None, Some(2)));
+    check(
+        &format!("[sim]\nstall_motor = 4\n{}", MOTOR.repeat(3)),
+        "q.toml:2:15: sim.stall_motor: must be 0‥3, found 4",
+    );
+}
+
+/// A backend given on the command line brings its own timing defaults, unless the file
+/// set them.
+#[test]
+fn the_backend_chooses_the_timing_defaults() {
+    let mut names = names();
+    names.backends.push("s626");
+    let mut s = Settings::parse(Path::new("q.toml"), &MOTOR.repeat(3), &names).unwrap();
+    assert_eq!((s.hwserver.watchdog_periods, s.max_missed_in_row), (250, 250));
+    s.set_backend("s626", &names).unwrap();
+    assert_eq!((s.hwserver.watchdog_periods, s.max_missed_in_row), (10, 25));
+    let text = format!("[hwserver]\nwatchdog_periods = 40\n{}", MOTOR.repeat(3));
+    let mut s = Settings::parse(Path::new("q.toml"), &text, &names).unwrap();
+    s.set_backend("s626", &names).unwrap();
+    assert_eq!((s.hwserver.watchdog_periods, s.max_missed_in_row), (40, 25));
+    assert_eq!(
+        s.set_backend("s7", &names).unwrap_err().to_string(),
+        "--backend: unknown backend `s7`; available: sim, s626"
+    );
+}

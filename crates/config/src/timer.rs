@@ -1,0 +1,104 @@
+//! `[timer]`: how the servo thread is paced, and the real-time priorities.
+
+use crate::ConfigLoadError;
+use crate::source::{S, Source, span_of};
+use serde::{Deserialize, Serialize};
+
+/// How the servo thread waits for its next period.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TimerMethod {
+    /// A periodic absolute timerfd: the design's choice.
+    #[default]
+    Timerfd,
+    /// `clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME)`.
+    Nanosleep,
+}
+
+impl std::fmt::Display for TimerMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            TimerMethod::Timerfd => "timerfd",
+            TimerMethod::Nanosleep => "nanosleep",
+        })
+    }
+}
+
+impl std::str::FromStr for TimerMethod {
+    type Err = String;
+    fn from_str(s: &str) -> Result<TimerMethod, String> {
+        match s {
+            "timerfd" => Ok(TimerMethod::Timerfd),
+            "nanosleep" => Ok(TimerMethod::Nanosleep),
+            other => Err(format!("must be \"timerfd\" or \"nanosleep\", found \"{other}\"")),
+        }
+    }
+}
+
+/// Timer and real-time priorities.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TimerSettings {
+    /// How the servo thread waits.
+    pub method: TimerMethod,
+    /// SCHED_FIFO priority of the servo thread; 0 = SCHED_OTHER.
+    pub servo_priority: i32,
+    /// SCHED_FIFO priority of the hwserver; 0 = SCHED_OTHER.
+    pub hwserver_priority: i32,
+    /// Lock all memory of both processes.
+    pub lock_memory: bool,
+}
+
+impl Default for TimerSettings {
+    fn default() -> TimerSettings {
+        TimerSettings {
+            method: TimerMethod::Timerfd,
+            servo_priority: 80,
+            hwserver_priority: 85,
+            lock_memory: true,
+        }
+    }
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawTimer {
+    method: S<String>,
+    servo_priority: S<i64>,
+    hwserver_priority: S<i64>,
+    lock_memory: S<bool>,
+}
+
+impl RawTimer {
+    pub(crate) fn check(&self, src: &Source<'_>) -> Result<TimerSettings, ConfigLoadError> {
+        let d = TimerSettings::default();
+        let method = src.take(&self.method, "timer.method", d.method.to_string(), |v| {
+            v.parse::<TimerMethod>().map(|_| ())
+        })?;
+        let servo_priority =
+            src.int(&self.servo_priority, "timer.servo_priority", d.servo_priority.into(), 0, 98)?;
+        let hwserver_priority = src.int(
+            &self.hwserver_priority,
+            "timer.hwserver_priority",
+            d.hwserver_priority.into(),
+            0,
+            98,
+        )?;
+        if servo_priority > 0 && hwserver_priority > 0 && hwserver_priority < servo_priority {
+            return Err(src.invalid(
+                span_of(&self.hwserver_priority),
+                "timer.hwserver_priority",
+                format!(
+                    "must be at least timer.servo_priority ({servo_priority}): the servo thread \
+                     waits on the hwserver, so the hwserver must not be preempted by it"
+                ),
+            ));
+        }
+        Ok(TimerSettings {
+            method: method.parse().unwrap_or_default(),
+            servo_priority: servo_priority as i32,
+            hwserver_priority: hwserver_priority as i32,
+            lock_memory: src
+                .take(&self.lock_memory, "timer.lock_memory", d.lock_memory, |_| Ok(()))?,
+        })
+    }
+}

@@ -1,0 +1,112 @@
+//! `[trajectory]`: the `run` move (thesis 3.12, A.2.3) and what holds for every path.
+
+use crate::source::{S, Source, non_negative, not_empty, one_of, positive, within};
+use crate::{ConfigLoadError, Names};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// The `run` move.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrajectorySettings {
+    /// Longest move, s: a knot file's path, a stream's, a step (it bounds every count and
+    /// allocation that follows from a time).
+    pub max_duration_s: f64,
+    /// Registered generator that reads knots (`spline`, `pvt`).
+    pub method: String,
+    /// Knot file; `-` is standard input. `None` until given.
+    pub knots: Option<PathBuf>,
+    /// The path must start within this many counts of where each motor is.
+    pub start_tolerance_counts: f64,
+    /// A stream's first knots (a spline stream's whole file) must arrive within this many s.
+    pub stream_wait_s: f64,
+    /// When a stream runs dry: hold the last command this long, then disable, ms.
+    pub starve_hold_ms: f64,
+    /// When a path ends (`step` and `run`): hold its last command with the loop closed this
+    /// long before disabling, s.
+    pub settle_s: f64,
+}
+
+/// Default longest path, s: 24 h.
+pub const DEFAULT_MAX_DURATION_S: f64 = 86_400.0;
+
+impl Default for TrajectorySettings {
+    fn default() -> TrajectorySettings {
+        TrajectorySettings {
+            max_duration_s: DEFAULT_MAX_DURATION_S,
+            method: "spline".to_string(),
+            knots: None,
+            start_tolerance_counts: 100.0,
+            stream_wait_s: 10.0,
+            starve_hold_ms: 50.0,
+            settle_s: 0.2,
+        }
+    }
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawTrajectory {
+    method: S<String>,
+    knots: S<String>,
+    start_tolerance_counts: S<f64>,
+    stream_wait_s: S<f64>,
+    starve_hold_ms: S<f64>,
+    settle_s: S<f64>,
+    max_duration_s: S<f64>,
+}
+
+impl RawTrajectory {
+    pub(crate) fn check(
+        &self,
+        src: &Source<'_>,
+        names: &Names,
+    ) -> Result<TrajectorySettings, ConfigLoadError> {
+        let d = TrajectorySettings::default();
+        let knots = src.take(&self.knots, "trajectory.knots", String::new(), not_empty)?;
+        Ok(TrajectorySettings {
+            max_duration_s: src.take(
+                &self.max_duration_s,
+                "trajectory.max_duration_s",
+                d.max_duration_s,
+                |v| {
+                    if v.is_finite() && *v > 0.0 && *v <= 1e7 {
+                        Ok(())
+                    } else {
+                        Err(format!("must be > 0 and ≤ 10000000 s, found {v}"))
+                    }
+                },
+            )?,
+            method: src.take(
+                &self.method,
+                "trajectory.method",
+                d.method,
+                one_of(&names.methods, "trajectory method"),
+            )?,
+            knots: (!knots.is_empty()).then(|| PathBuf::from(knots)),
+            start_tolerance_counts: src.take(
+                &self.start_tolerance_counts,
+                "trajectory.start_tolerance_counts",
+                d.start_tolerance_counts,
+                non_negative,
+            )?,
+            stream_wait_s: src.take(
+                &self.stream_wait_s,
+                "trajectory.stream_wait_s",
+                d.stream_wait_s,
+                positive,
+            )?,
+            starve_hold_ms: src.take(
+                &self.starve_hold_ms,
+                "trajectory.starve_hold_ms",
+                d.starve_hold_ms,
+                within(0.0, 10_000.0, "ms"),
+            )?,
+            settle_s: src.take(
+                &self.settle_s,
+                "trajectory.settle_s",
+                d.settle_s,
+                within(0.0, 10.0, "s"),
+            )?,
+        })
+    }
+}

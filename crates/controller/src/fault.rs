@@ -1,0 +1,249 @@
+//! [`Fault`]: what ended a move, as the loop records it — a `Copy` value of numbers, decided
+//! in the cycle and put into words ([`Fault::message`]) after the move.
+
+use crate::link::LinkError;
+use qmarc_proto::Status;
+
+/// What ended a move early. In `summary.json` it is the snake-case name
+/// ([`FaultKind::name`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultKind {
+    /// A limit switch tripped.
+    LimitSwitch,
+    /// The hwserver stopped answering or died.
+    HwserverLost,
+    /// The hwserver was stopped by a signal and refuses to drive.
+    HwserverShutdown,
+    /// The hwserver's watchdog fired.
+    Watchdog,
+    /// The hardware reported an error.
+    HardwareFault,
+    /// An encoder count jumped further than the motor can move (a counter or cable fault).
+    EncoderFault,
+    /// The hwserver did not understand a request (a bug on one side).
+    ProtocolError,
+    /// A stop signal (Ctrl-C, SIGTERM) aborted the move.
+    Aborted,
+    /// The trajectory generator had no command for a sample.
+    TrajectoryStarved,
+    /// The trajectory generator could not go on (a bad knot in a stream).
+    TrajectoryError,
+    /// |command − actual| or |Σ (command − actual)| went past its limit.
+    FollowingError,
+    /// A command went outside the software position limits.
+    SoftwareLimit,
+    /// Too many servo periods in a row went by without a cycle.
+    Overrun,
+    /// Homing could not find, clear or leave a switch as it should.
+    HomingFailed,
+    /// The controller process died (reported by the starter).
+    ControllerLost,
+}
+
+impl FaultKind {
+    /// The `kind` string of `summary.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            FaultKind::LimitSwitch => "limit_switch",
+            FaultKind::HwserverLost => "hwserver_lost",
+            FaultKind::HwserverShutdown => "hwserver_shutdown",
+            FaultKind::Watchdog => "watchdog",
+            FaultKind::HardwareFault => "hardware_fault",
+            FaultKind::EncoderFault => "encoder_fault",
+            FaultKind::ProtocolError => "protocol_error",
+            FaultKind::Aborted => "aborted",
+            FaultKind::TrajectoryStarved => "trajectory_starved",
+            FaultKind::TrajectoryError => "trajectory_error",
+            FaultKind::FollowingError => "following_error",
+            FaultKind::SoftwareLimit => "software_limit",
+            FaultKind::Overrun => "overrun",
+            FaultKind::HomingFailed => "homing_failed",
+            FaultKind::ControllerLost => "controller_lost",
+        }
+    }
+}
+
+/// A fault, as the loop records it: numbers only, `Copy`, formatted after the move.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fault {
+    /// What happened.
+    pub kind: FaultKind,
+    /// 0-based motor, if it concerns one.
+    pub motor: Option<usize>,
+    /// Servo sample index at which it was seen.
+    pub cycle: u64,
+    /// The hwserver status word of the response that reported it.
+    pub status: Status,
+    /// The link failure, for [`FaultKind::HwserverLost`] and IPC errors.
+    pub link: Option<LinkError>,
+    /// The signal, for [`FaultKind::Aborted`].
+    pub signal: i32,
+    /// Whether the hwserver acknowledged disabling every motor afterwards.
+    pub disabled: bool,
+    /// The offending value (following error, command, missed periods), counts.
+    pub value: f64,
+    /// The limit it broke.
+    pub limit: f64,
+    /// A following error that is the integrated one (Σ), not the instantaneous one.
+    pub integrated: bool,
+    /// The hwserver's timestamp of the read that showed the fault (its own clock: simulated
+    /// time in lock-step), 0 if none.
+    pub hw_time_ns: u64,
+}
+
+impl Fault {
+    /// A fault of `kind` at sample `cycle` with nothing else known.
+    #[inline]
+    pub fn new(kind: FaultKind, cycle: u64) -> Fault {
+        Fault {
+            kind,
+            motor: None,
+            cycle,
+            status: Status::OK,
+            link: None,
+            signal: 0,
+            disabled: false,
+            value: 0.0,
+            limit: 0.0,
+            integrated: false,
+            hw_time_ns: 0,
+        }
+    }
+
+    /// The fault a non-zero status word means, most severe first; `None` for a clean status.
+    #[inline]
+    pub fn from_status(status: Status, cycle: u64) -> Option<Fault> {
+        if status.is_ok() {
+            return None;
+        }
+        let (kind, motor) = if status.contains(Status::WATCHDOG) {
+            (FaultKind::Watchdog, None)
+        } else if status.contains(Status::SHUTDOWN) {
+            (FaultKind::HwserverShutdown, None)
+        } else if status.contains(Status::HARDWARE_FAULT) {
+            (FaultKind::HardwareFault, None)
+        } else if let Some((m, _)) = status.first_limit() {
+            (FaultKind::LimitSwitch, Some(m))
+        } else if let Some(m) = status.first_encoder_overflow() {
+            (FaultKind::EncoderFault, Some(m))
+        } else {
+            (FaultKind::ProtocolError, None)
+        };
+        Some(Fault { motor, status, ..Fault::new(kind, cycle) })
+    }
+
+    /// A lost or failed link at sample `cycle`; a wait a stop signal ended is an abort.
+    #[inline]
+    pub fn from_link(e: LinkError, cycle: u64) -> Fault {
+        let kind = match e {
+            LinkError::Stopped { .. } => FaultKind::Aborted,
+            _ => FaultKind::HwserverLost,
+        };
+        Fault { link: Some(e), ..Fault::new(kind, cycle) }
+    }
+
+    /// The message for the terminal and `summary.json`, motors 1-based.
+    pub fn message(&self) -> String {
+        let what = match self.kind {
+            FaultKind::LimitSwitch => {
+                let m = self.motor.unwrap_or(0);
+                let side =
+                    if self.status.contains(Status::limit_top(m)) { "top" } else { "bottom" };
+                format!("motor {} hit its {side} limit switch", m + 1)
+            }
+            FaultKind::HwserverLost => match self.link {
+                Some(e) => format!("lost the hwserver: {e}"),
+                None => "lost the hwserver".to_string(),
+            },
+            FaultKind::HwserverShutdown => {
+                "the hwserver was stopped and disabled the motors".to_string()
+            }
+            FaultKind::Watchdog => "the hwserver's watchdog fired: the controller was silent for \
+                longer than hwserver.watchdog_periods with motors enabled (without PREEMPT_RT, \
+                host stalls of a few ms can do that: raise the limit)"
+                .to_string(),
+            FaultKind::HardwareFault => "the hardware reported an error".to_string(),
+            FaultKind::EncoderFault => format!(
+                "motor {} encoder fault: its count jumped further than the motor can move",
+                self.motor.map_or(0, |m| m + 1)
+            ),
+            FaultKind::ProtocolError => format!("the hwserver refused a request: {}", self.status),
+            FaultKind::Aborted => format!(
+                "aborted by {}",
+                if self.signal == 0 {
+                    "a stop signal"
+                } else {
+                    qmarc_timer::stop::signal_name(self.signal)
+                }
+            ),
+            FaultKind::TrajectoryStarved => {
+                "the knot stream ran dry before it ended (motors held, then disabled)".to_string()
+            }
+            FaultKind::TrajectoryError => "the trajectory failed".to_string(),
+            FaultKind::FollowingError => format!(
+                "motor {} {} following error {:.1} counts passed its limit {}",
+                self.motor.map_or(0, |m| m + 1),
+                if self.integrated { "integrated" } else { "instantaneous" },
+                self.value,
+                self.limit
+            ),
+            FaultKind::SoftwareLimit => format!(
+                "motor {} was commanded to {:.1} counts, past its software limit {}",
+                self.motor.map_or(0, |m| m + 1),
+                self.value,
+                self.limit
+            ),
+            FaultKind::Overrun => format!(
+                "{} servo periods in a row went by without a cycle (limit {}: without \
+                 PREEMPT_RT, host stalls of a few ms can do that; raise safety.max_missed_in_row)",
+                self.value, self.limit
+            ),
+            FaultKind::HomingFailed => "homing failed".to_string(),
+            FaultKind::ControllerLost => "the controller died".to_string(),
+        };
+        let after = if self.disabled {
+            "all motors disabled"
+        } else {
+            "the hwserver did not acknowledge disabling the motors (on hardware the charge-pump \
+             relay drops them when the hwserver stops)"
+        };
+        format!("{what} at cycle {}; {after}", self.cycle)
+    }
+}
+
+impl std::fmt::Display for FaultKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn status_words_map_to_fault_kinds() {
+        let check = |s: Status, kind: FaultKind, motor: Option<usize>| {
+            let f = Fault::from_status(s, 7).unwrap();
+            assert_eq!((f.kind, f.motor, f.cycle), (kind, motor, 7), "{s}");
+        };
+        assert_eq!(Fault::from_status(Status::OK, 1), None);
+        check(Status::limit_bottom(2), FaultKind::LimitSwitch, Some(2));
+        check(Status::limit_top(0) | Status::WATCHDOG, FaultKind::Watchdog, None);
+        check(Status::SHUTDOWN, FaultKind::HwserverShutdown, None);
+        check(Status::encoder_overflow(1), FaultKind::EncoderFault, Some(1));
+        check(Status::UNKNOWN_MESSAGE, FaultKind::ProtocolError, None);
+        let mut f = Fault::from_status(Status::limit_top(0), 1234).unwrap();
+        assert!(f.message().ends_with(
+            "the hwserver did not acknowledge disabling the motors (on hardware the charge-pump \
+             relay drops them when the hwserver stops)"
+        ));
+        f.disabled = true;
+        assert_eq!(
+            f.message(),
+            "motor 1 hit its top limit switch at cycle 1234; all motors disabled"
+        );
+        assert_eq!(f.kind.to_string(), "limit_switch");
+    }
+}

@@ -1,0 +1,348 @@
+//! [`PidFf`]: the thesis' law — PID with velocity and acceleration feed-forward, PMAC form
+//! (eq. 3-1), then the notch of eq. 3-2.
+
+use qmarc_config::{MotorGains, Settings};
+use qmarc_controller::law::{ServoInput, ServoLaw, to_dac_code};
+use qmarc_proto::MAX_MOTORS;
+
+/// The biquad notch of thesis eq. 3-2 (PMAC Ix36–Ix39):
+/// H(z) = (1 + n1·z⁻¹ + n2·z⁻²) / (1 + d1·z⁻¹ + d2·z⁻²). All-zero coefficients pass the
+/// signal unchanged.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Notch {
+    /// `[n1, n2, d1, d2]`.
+    pub coeffs: [f64; 4],
+    x1: f64,
+    x2: f64,
+    y1: f64,
+    y2: f64,
+}
+
+impl Notch {
+    /// A notch with coefficients `[n1, n2, d1, d2]` and zero state.
+    pub fn new(coeffs: [f64; 4]) -> Notch {
+        Notch { coeffs, ..Notch::default() }
+    }
+
+    /// Filters one sample: y(n) = x(n) + n1·x(n−1) + n2·x(n−2) − d1·y(n−1) − d2·y(n−2).
+    #[inline]
+    pub fn filter(&mut self, x: f64) -> f64 {
+        let [n1, n2, d1, d2] = self.coeffs;
+        let y = x + n1 * self.x1 + n2 * self.x2 - d1 * self.y1 - d2 * self.y2;
+        self.x2 = self.x1;
+        self.x1 = x;
+        self.y2 = self.y1;
+        self.y1 = y;
+        y
+    }
+
+    /// Zeroes the state.
+    pub fn reset(&mut self) {
+        *self = Notch::new(self.coeffs);
+    }
+}
+
+/// Per-motor state of [`PidFf`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct AxisState {
+    prev_cmd: f64,
+    /// CV of the previous cycle, counts per period.
+    prev_cv: f64,
+    /// Periods the previous cycle's differences spanned (0 before the first cycle).
+    prev_elapsed: u64,
+    prev_act: f64,
+    /// FE of the previous cycle, held over the periods until this one.
+    prev_fe: f64,
+    /// IE(n) = Σ_{j<n} FE(j).
+    ie: f64,
+    notch: Notch,
+}
+
+/// 2⁻¹⁹, the PMAC output scale.
+const TWO_POW_M19: f64 = 1.0 / 524_288.0;
+/// 2²³, the PMAC integrator scale.
+const TWO_POW_23: f64 = 8_388_608.0;
+
+/// PID with velocity and acceleration feed-forward, PMAC form (thesis eq. 3-1, PMAC
+/// `Ix08 = Ix09 = 1`), divided by 4 for the 626's 14-bit DAC, then the notch of eq. 3-2, then
+/// clamped to ±8191 and rounded to a DAC code:
+///
+/// DAC(n) = 2⁻¹⁹·Kp·(FE + (Kvff·CV + Kaff·CA)/128 + Ki·IE/2²³ − Kd·AV/128) / 4
+///
+/// with FE = CP(n) − AP(n), CV = CP(n) − CP(n−1), CA = CV(n) − CV(n−1),
+/// AV = AP(n) − AP(n−1) and IE(n) = Σ_{j<n} FE(j), all in counts per servo period.
+///
+/// After missed periods (the previous cycle was k = [`ServoInput::elapsed`] periods ago) the
+/// differences span k periods: CV and AV are divided by k, CA by the periods between the
+/// midpoints of the two velocity spans, and the integral counts the previous FE k times (the
+/// DAC held its output meanwhile). A late cycle thus outputs what a punctual one would, not
+/// a feed-forward kick k times too large.
+#[derive(Debug, Clone, PartialEq)]
+#[doc(alias = "PIDffCtrl")]
+pub struct PidFf {
+    n_motors: usize,
+    gains: [MotorGains; MAX_MOTORS],
+    state: [AxisState; MAX_MOTORS],
+}
+
+impl PidFf {
+    /// The law for the first `gains.len()` motors (at most [`MAX_MOTORS`]).
+    pub fn new(gains: &[MotorGains]) -> PidFf {
+        let n_motors = gains.len().min(MAX_MOTORS);
+        let mut g = [MotorGains::default(); MAX_MOTORS];
+        g[..n_motors].copy_from_slice(&gains[..n_motors]);
+        let mut state = [AxisState::default(); MAX_MOTORS];
+        for (s, gains) in state.iter_mut().zip(&g) {
+            s.notch = Notch::new(gains.notch);
+        }
+        PidFf { n_motors, gains: g, state }
+    }
+
+    /// The law with the gains of the motors in use, rescaled to the servo period
+    /// ([`Settings::effective_gains`]).
+    pub fn from_settings(settings: &Settings) -> PidFf {
+        let gains: Vec<MotorGains> =
+            (0..settings.n_motors).map(|m| settings.effective_gains(m)).collect();
+        PidFf::new(&gains)
+    }
+
+    /// The output of eq. 3-1 / 4 for one motor, before the notch (DAC codes, unclamped).
+    #[inline]
+    pub fn pmac_output(g: &MotorGains, fe: f64, cv: f64, ca: f64, ie: f64, av: f64) -> f64 {
+        TWO_POW_M19
+            * g.kp
+            * (fe + (g.kvff * cv + g.kaff * ca) / 128.0 + g.ki * ie / TWO_POW_23
+                - g.kd * av / 128.0)
+            / 4.0
+    }
+}
+
+impl ServoLaw for PidFf {
+    fn name(&self) -> &'static str {
+        "pidff"
+    }
+
+    fn reset(&mut self, cmd: &[f64; MAX_MOTORS], act: &[f64; MAX_MOTORS]) {
+        for m in 0..MAX_MOTORS {
+            let s = &mut self.state[m];
+            *s = AxisState {
+                prev_cmd: cmd[m],
+                prev_act: act[m],
+                notch: s.notch,
+                ..AxisState::default()
+            };
+            s.notch.reset();
+        }
+    }
+
+    #[inline]
+    fn step(&mut self, input: &ServoInput<'_>, dac: &mut [i32; MAX_MOTORS]) {
+        let k = input.elapsed.max(1);
+        let span = k as f64;
+        let axes = self.gains.iter().zip(self.state.iter_mut()).zip(dac.iter_mut());
+        for (m, ((g, s), out)) in axes.enumerate().take(self.n_motors) {
+            let (cp, ap) = (input.cmd[m], input.act[m]);
+            // IE(n) = Σ_{j<n} FE(j): the previous error held over the periods since.
+            s.ie += s.prev_fe * span;
+            let fe = cp - ap;
+            let cv = (cp - s.prev_cmd) / span;
+            // Periods between the midpoints of this velocity's span and the previous one's.
+            let ca_span = (k + s.prev_elapsed.max(1)) as f64 / 2.0;
+            let ca = (cv - s.prev_cv) / ca_span;
+            let av = (ap - s.prev_act) / span;
+            let u = PidFf::pmac_output(g, fe, cv, ca, s.ie, av);
+            s.prev_fe = fe;
+            s.prev_cmd = cp;
+            s.prev_cv = cv;
+            s.prev_elapsed = k;
+            s.prev_act = ap;
+            *out = to_dac_code(s.notch.filter(u));
+        }
+        for d in &mut dac[self.n_motors..] {
+            *d = 0;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn thesis_motor_1() -> MotorGains {
+        MotorGains {
+            kp: 182_000.0,
+            ki: 100.0,
+            kd: 3_000.0,
+            kvff: 119_000.0,
+            kaff: 100.0,
+            notch: [0.0; 4],
+        }
+    }
+
+    fn run(law: &mut PidFf, cmd: f64, act: f64) -> i32 {
+        let mut c = [0.0; MAX_MOTORS];
+        let mut a = [0.0; MAX_MOTORS];
+        c[0] = cmd;
+        a[0] = act;
+        let mut dac = [7; MAX_MOTORS];
+        law.step(&ServoInput { n: 0, elapsed: 1, cmd: &c, act: &a }, &mut dac);
+        assert_eq!(&dac[1..], &[0; MAX_MOTORS - 1], "unused motors get 0");
+        dac[0]
+    }
+
+    /// Two cycles of eq. 3-1 with Table 5-1's motor-1 gains, worked by hand:
+    ///
+    /// cycle 1: CP 0→10, AP 0→2: FE 8, CV 10, CA 10, AV 2, IE 0.
+    ///   inner = 8 + (119000·10 + 100·10)/128 + 0 − 3000·2/128 = 8 + 9304.6875 − 46.875
+    ///         = 9265.8125; DAC = 182000 · 9265.8125 / 2¹⁹ / 4 = 804.128 → 804.
+    /// cycle 2: CP 10→15, AP 2→5: FE 10, CV 5, CA −5, AV 3, IE 8.
+    ///   inner = 10 + (595000 − 500)/128 + 100·8/2²³ − 9000/128
+    ///         = 10 + 4644.53125 + 0.0000953674 − 70.3125 = 4584.2188454;
+    ///   DAC = 182000 · 4584.2188454 / 2¹⁹ / 4 = 397.838… → 398.
+    #[test]
+    fn eq_3_1_matches_the_hand_computation() {
+        let mut law = PidFf::new(&[thesis_motor_1()]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        let inner1: f64 = 8.0 + 9_304.687_5 - 46.875;
+        assert_eq!(inner1, 9_265.812_5);
+        let u1 = 182_000.0 * inner1 / 524_288.0 / 4.0;
+        assert!((u1 - 804.127_6).abs() < 1e-3, "{u1}");
+        assert_eq!(run(&mut law, 10.0, 2.0), 804);
+        let inner2: f64 = 10.0 + 4_644.531_25 + 800.0 / 8_388_608.0 - 70.312_5;
+        let u2 = 182_000.0 * inner2 / 524_288.0 / 4.0;
+        assert!((u2 - 397.838).abs() < 1e-3, "{u2}");
+        assert_eq!(run(&mut law, 15.0, 5.0), 398);
+        let g = thesis_motor_1();
+        assert_eq!(PidFf::pmac_output(&g, 10.0, 5.0, -5.0, 8.0, 3.0), u2);
+    }
+
+    #[test]
+    fn output_is_clamped_to_the_14_bit_range_and_rounded() {
+        let mut law = PidFf::new(&[thesis_motor_1()]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        assert_eq!(run(&mut law, 1_000.0, 0.0), 8191, "the step's velocity kick saturates");
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        assert_eq!(run(&mut law, -1_000.0, 0.0), -8191);
+        for (u, code) in
+            [(0.49, 0), (0.5, 1), (-0.5, -1), (8190.6, 8191), (1e300, 8191), (f64::NAN, 0)]
+        {
+            assert_eq!(to_dac_code(u), code, "{u}");
+        }
+    }
+
+    #[test]
+    fn proportional_term_alone_is_kp_fe_over_2_pow_21() {
+        let g = MotorGains { kp: 2_097_152.0, ..MotorGains::default() }; // 2²¹: 1 code per count
+        let mut law = PidFf::new(&[g]);
+        law.reset(&[100.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        assert_eq!(run(&mut law, 100.0, 0.0), 100);
+        assert_eq!(run(&mut law, 100.0, 60.0), 40);
+    }
+
+    #[test]
+    fn integrator_sums_past_errors_only() {
+        // Ki alone: IE(n) = Σ_{j<n} FE(j); Kp·Ki/2^19/2^23/4 = 1 code per count·cycle.
+        let g = MotorGains { kp: 1.0, ki: (1u64 << 44) as f64, ..MotorGains::default() };
+        let mut law = PidFf::new(&[g]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        // FE = 5 every cycle; the P term is 5·2⁻²¹ ≈ 0, invisible after rounding.
+        assert_eq!(run(&mut law, 5.0, 0.0), 0);
+        assert_eq!(run(&mut law, 5.0, 0.0), 5);
+        assert_eq!(run(&mut law, 5.0, 0.0), 10);
+    }
+
+    #[test]
+    fn notch_is_the_biquad_of_eq_3_2() {
+        let c = [-1.6, 0.8, -1.2, 0.5];
+        let mut n = Notch::new(c);
+        let x = [1.0, 2.0, -1.0, 0.5];
+        let y0 = 1.0;
+        let y1 = 2.0 + (-1.6) * 1.0 - (-1.2) * y0;
+        let y2 = -1.0 + (-1.6) * 2.0 + 0.8 * 1.0 - (-1.2) * y1 - 0.5 * y0;
+        let y3 = 0.5 + (-1.6) * -1.0 + 0.8 * 2.0 - (-1.2) * y2 - 0.5 * y1;
+        for (xi, yi) in x.iter().zip([y0, y1, y2, y3]) {
+            assert_eq!(n.filter(*xi), yi);
+        }
+        n.reset();
+        assert_eq!(n.filter(3.0), 3.0);
+        let mut off = Notch::new([0.0; 4]);
+        for v in [1.0, -7.5, 1e6] {
+            assert_eq!(off.filter(v), v, "all-zero coefficients pass the signal");
+        }
+    }
+
+    #[test]
+    fn notch_follows_the_law_before_clamping() {
+        let g =
+            MotorGains { kp: 2_097_152.0, notch: [0.0, 0.0, -0.5, 0.0], ..MotorGains::default() };
+        let mut law = PidFf::new(&[g]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        // u = FE = 100 each cycle; y(n) = u + 0.5·y(n−1): 100, 150, 175.
+        assert_eq!(run(&mut law, 100.0, 0.0), 100);
+        assert_eq!(run(&mut law, 100.0, 0.0), 150);
+        assert_eq!(run(&mut law, 100.0, 0.0), 175);
+    }
+
+    /// Issue 9, item 1: after missed periods the sample index skips, and one late cycle must
+    /// output what a punctual one would. A 17 counts/sample ramp followed with a constant lag:
+    /// a punctual loop and one that misses 3 periods before sample 8 give the same DAC code
+    /// at sample 8 (before the fix, CV, CA and AV spanned 4 periods: 5353 instead of ≈ 1338).
+    #[test]
+    fn missed_periods_do_not_kick_the_feed_forward_issue_9() {
+        let g = thesis_motor_1();
+        let ramp = |n: u64| 17.0 * n as f64;
+        let lag = 3.0;
+        let at = |law: &mut PidFf, n: u64, elapsed: u64| -> i32 {
+            let mut c = [0.0; MAX_MOTORS];
+            let mut a = [0.0; MAX_MOTORS];
+            c[0] = ramp(n);
+            a[0] = ramp(n) - lag;
+            let mut dac = [0; MAX_MOTORS];
+            law.step(&ServoInput { n, elapsed, cmd: &c, act: &a }, &mut dac);
+            dac[0]
+        };
+        let start = |law: &mut PidFf| {
+            let mut a = [0.0; MAX_MOTORS];
+            a[0] = -lag;
+            law.reset(&[0.0; MAX_MOTORS], &a);
+        };
+        let mut punctual = PidFf::new(&[g]);
+        start(&mut punctual);
+        let mut late = PidFf::new(&[g]);
+        start(&mut late);
+        let mut expected = 0;
+        for n in 1..=8 {
+            expected = at(&mut punctual, n, 1);
+        }
+        for n in 1..=4 {
+            at(&mut late, n, 1);
+        }
+        let got = at(&mut late, 8, 4);
+        // The integrator saw the same (constant) error for the same number of periods.
+        assert_eq!(got, expected, "late cycle {got}, punctual {expected}");
+        assert!((1300..1400).contains(&expected), "{expected}");
+        // And the next punctual cycle is unaffected as well.
+        assert_eq!(at(&mut late, 9, 1), at(&mut punctual, 9, 1));
+    }
+
+    /// On an accelerating path, CA after a skip is the acceleration per period², not k
+    /// times it: c(n) = n², so CA is 2 counts/period² whatever the spacing of the cycles.
+    #[test]
+    fn acceleration_feed_forward_is_per_period_after_a_skip() {
+        let g = MotorGains { kp: 2_097_152.0, kaff: 128.0, ..MotorGains::default() };
+        let mut law = PidFf::new(&[g]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        let step = |law: &mut PidFf, n: u64, elapsed: u64| {
+            let mut c = [0.0; MAX_MOTORS];
+            c[0] = (n * n) as f64;
+            let mut dac = [0; MAX_MOTORS];
+            // act = cmd: FE = 0 and AV does not enter (Kd = 0); the output is Kaff·CA/128 = CA.
+            law.step(&ServoInput { n, elapsed, cmd: &c, act: &c }, &mut dac);
+            dac[0]
+        };
+        step(&mut law, 1, 1);
+        assert_eq!(step(&mut law, 2, 1), 2);
+        assert_eq!(step(&mut law, 6, 4), 2, "skipped 3 periods");
+        assert_eq!(step(&mut law, 7, 1), 2);
+    }
+}

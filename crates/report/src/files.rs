@@ -1,0 +1,150 @@
+//! The data files of a move: `gather.csv` and `gather.m` (Octave/Matlab), written from the
+//! gather buffer after the move.
+
+use qmarc_controller::gather::{Gather, GatherRow};
+use std::io::{self, Write};
+
+/// Column names: `cycle,time_s,cmd1,act1,dac1,cmd2,…`.
+pub fn columns(g: &Gather) -> Vec<String> {
+    let f = g.fields();
+    let mut c = vec!["cycle".to_string()];
+    if f.time {
+        c.push("time_s".to_string());
+    }
+    for m in 1..=g.n_motors() {
+        for (on, name) in [(f.cmd, "cmd"), (f.act, "act"), (f.dac, "dac")] {
+            if on {
+                c.push(format!("{name}{m}"));
+            }
+        }
+    }
+    c
+}
+
+fn write_row(
+    g: &Gather,
+    w: &mut (impl Write + ?Sized),
+    r: &GatherRow,
+    sep: &str,
+) -> io::Result<()> {
+    // `{}` on f64 is the shortest text that parses back to the same value, so figures
+    // recomputed from the file equal the ones computed in the loop.
+    let f = g.fields();
+    write!(w, "{}", r.cycle)?;
+    if f.time {
+        write!(w, "{sep}{}", r.time_s)?;
+    }
+    for m in 0..g.n_motors() {
+        if f.cmd {
+            write!(w, "{sep}{}", r.cmd[m])?;
+        }
+        if f.act {
+            write!(w, "{sep}{}", r.act[m])?;
+        }
+        if f.dac {
+            write!(w, "{sep}{}", r.dac[m])?;
+        }
+    }
+    writeln!(w)
+}
+
+/// Writes `gather.csv`: a header line, then one line per row.
+pub fn write_csv(g: &Gather, w: &mut (impl Write + ?Sized)) -> io::Result<()> {
+    writeln!(w, "{}", columns(g).join(","))?;
+    for r in g.rows() {
+        write_row(g, w, r, ",")?;
+    }
+    Ok(())
+}
+
+/// Writes `gather.m`: the same data as an Octave/Matlab script defining `qmarc_data`,
+/// `qmarc_columns` and one column vector per column name.
+pub fn write_octave(g: &Gather, w: &mut (impl Write + ?Sized)) -> io::Result<()> {
+    let cols = columns(g);
+    writeln!(w, "% QMARC gathered data, written by qmarc-controller after the move.")?;
+    writeln!(w, "% One row per gathered servo cycle (every {} cycles).", g.every())?;
+    writeln!(
+        w,
+        "% cycle: servo sample n; time_s: s; cmdM/actM: counts; dacM: DAC codes (±8191 = ±10 V)."
+    )?;
+    let quoted: Vec<String> = cols.iter().map(|c| format!("'{c}'")).collect();
+    writeln!(w, "qmarc_columns = {{{}}};", quoted.join(", "))?;
+    writeln!(w, "qmarc_data = [")?;
+    for r in g.rows() {
+        write_row(g, w, r, " ")?;
+    }
+    writeln!(w, "];")?;
+    for (i, c) in cols.iter().enumerate() {
+        writeln!(w, "{c} = qmarc_data(:, {});", i + 1)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use qmarc_config::GatherFields;
+
+    fn row(cycle: u64) -> GatherRow {
+        GatherRow {
+            cycle,
+            time_s: cycle as f64 * 0.0004,
+            cmd: [1000.5, -3.0, 0.0, 0.0],
+            act: [998.0, -1.0, 0.0, 0.0],
+            dac: [12, -8191, 0, 0],
+        }
+    }
+
+    #[test]
+    fn csv_and_octave_carry_the_same_rows() {
+        let mut g = Gather::for_move(3, 1, 2);
+        for k in 0..3 {
+            g.push(row(k));
+        }
+        let mut csv = Vec::new();
+        write_csv(&g, &mut csv).unwrap();
+        let csv = String::from_utf8(csv).unwrap();
+        assert_eq!(
+            csv,
+            "cycle,time_s,cmd1,act1,dac1,cmd2,act2,dac2\n\
+             0,0,1000.5,998,12,-3,-1,-8191\n\
+             1,0.0004,1000.5,998,12,-3,-1,-8191\n\
+             2,0.0008,1000.5,998,12,-3,-1,-8191\n"
+        );
+        let mut m = Vec::new();
+        write_octave(&g, &mut m).unwrap();
+        let m = String::from_utf8(m).unwrap();
+        assert!(m.contains(
+            "qmarc_columns = {'cycle', 'time_s', 'cmd1', 'act1', 'dac1', 'cmd2', 'act2', 'dac2'};\n"
+        ));
+        let data: Vec<&str> = m
+            .split("qmarc_data = [\n")
+            .nth(1)
+            .unwrap()
+            .split("];")
+            .next()
+            .unwrap()
+            .lines()
+            .collect();
+        let csv_rows: Vec<String> = csv.lines().skip(1).map(|l| l.replace(',', " ")).collect();
+        assert_eq!(data, csv_rows);
+        assert!(m.ends_with("dac2 = qmarc_data(:, 8);\n"));
+    }
+
+    #[test]
+    fn only_the_chosen_fields_are_written() {
+        let mut g = Gather::for_move(1, 1, 2).with_fields(GatherFields {
+            time: false,
+            cmd: true,
+            act: true,
+            dac: false,
+        });
+        g.push(row(7));
+        let mut csv = Vec::new();
+        write_csv(&g, &mut csv).unwrap();
+        assert_eq!(
+            String::from_utf8(csv).unwrap(),
+            "cycle,cmd1,act1,cmd2,act2\n7,1000.5,998,-3,-1\n"
+        );
+    }
+}

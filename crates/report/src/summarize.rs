@@ -1,0 +1,119 @@
+//! [`summarize`]: the summary of a finished move, from the loop's figures and the settings —
+//! with the warnings a user must read (a path that ends moving, rescaled gains, a motor that
+//! did not follow its command).
+
+use crate::summary::{FaultReport, MotorSummary, SettleSummary, Summary, TimingSummary};
+use qmarc_config::{Mode, Settings};
+use qmarc_controller::servo::Servo;
+use qmarc_timer::rt::RtStatus;
+
+/// A path whose last command moves slower than this (counts/s) ends at rest.
+pub const END_AT_REST_COUNTS_PER_S: f64 = 1.0;
+
+/// The summary of a finished move.
+pub fn summarize(
+    settings: &Settings,
+    servo: &Servo,
+    rt: &RtStatus,
+    mode: Mode,
+    deterministic: bool,
+) -> Summary {
+    let cpr = settings.counts_per_rad();
+    let n = settings.n_motors;
+    let mut warnings = rt.warnings.clone();
+    if servo.gather().dropped() > 0 {
+        warnings.push(format!("{} gathered rows did not fit the buffer", servo.gather().dropped()));
+    }
+    if let Some(v) = servo.end_velocity()
+        && let Some(m) = (0..n).find(|&m| v[m].abs() > END_AT_REST_COUNTS_PER_S)
+    {
+        warnings.push(format!(
+            "the path ends moving (motor {} at {:.1} counts/s): its last command was held for \
+             trajectory.settle_s = {} s so that the motors stop under control; end the path at \
+             rest (a last knot repeated, or a PVT velocity of 0) to avoid the jolt",
+            m + 1,
+            v[m],
+            settings.trajectory.settle_s
+        ));
+    }
+    if settings.gains_rescaled() {
+        warnings.push(format!(
+            "the gains were tuned at general.gains_period_us = {} µs and run at {} µs: Kd and \
+             Kvff × {r}, Kaff × {r2}, Ki ÷ {r} (the effective gains are in summary.json)",
+            settings.gains_period_us,
+            settings.period_us,
+            r = f64::from(settings.gains_period_us) / f64::from(settings.period_us),
+            r2 = (f64::from(settings.gains_period_us) / f64::from(settings.period_us)).powi(2),
+        ));
+    }
+    // The error at the end: of the settle, or of the path when there was none.
+    let final_error = match servo.settle_figures() {
+        Some((_, _, last)) => last,
+        None => servo.last_error(),
+    };
+    let mut motors: Vec<MotorSummary> =
+        servo.errors().axes[..n].iter().map(|e| MotorSummary::new(e, cpr)).collect();
+    let mut travel = servo.errors().travel;
+    if let Some((_, settled, _)) = servo.settle_figures() {
+        for (t, s) in travel.iter_mut().zip(&settled.travel) {
+            t.add(s.act.0, s.act.0);
+            t.add(s.act.1, s.act.1);
+        }
+    }
+    for (m, summary) in motors.iter_mut().enumerate() {
+        if travel[m].not_followed(final_error[m]) {
+            summary.followed = false;
+            let (commanded, moved) = travel[m].lengths();
+            warnings.push(format!(
+                "motor {} did not follow its command: it moved {moved:.0} of the {commanded:.0} \
+                 counts commanded and ended {:.0} counts from its last command (a seized joint, \
+                 an amplifier that is off or not wired, a gain of the wrong sign?)",
+                m + 1,
+                final_error[m]
+            ));
+        }
+    }
+    let settle = servo.settle_figures().map(|(cycles, errors, last)| SettleSummary {
+        cycles,
+        seconds: (cycles * u64::from(settings.period_us)) as f64 / 1e6,
+        final_error_counts: last[..n].to_vec(),
+        max_abs_error_counts: errors.axes[..n]
+            .iter()
+            .map(|e| e.max.abs().max(e.min.abs()))
+            .collect(),
+    });
+    Summary {
+        mode,
+        trajectory: servo.generator_name().to_string(),
+        ok: servo.fault().is_none(),
+        degraded: rt.degraded(),
+        deterministic,
+        fault: servo.fault().map(|f| {
+            let mut r = FaultReport::from(&f);
+            if let Some(why) = servo.failure() {
+                r.message = format!("{why}; {}", r.message);
+            }
+            r
+        }),
+        n_motors: n,
+        cycles: servo.cycles(),
+        planned_samples: servo.planned_samples(),
+        period_us: settings.period_us,
+        gather_every: settings.gather.every,
+        gathered_rows: servo.gather().rows().len() as u64,
+        counts_per_rad: cpr,
+        motors,
+        gains_period_us: settings.gains_period_us,
+        gains: (0..n).map(|m| settings.effective_gains(m).into()).collect(),
+        settle,
+        timing: TimingSummary::new(
+            servo.timing(),
+            &settings.timer.method.to_string(),
+            &rt.policy(),
+        ),
+        warnings,
+        starter_pid: nix::unistd::getppid().as_raw() as u32,
+        files: Vec::new(),
+        homing: None,
+    }
+}

@@ -1,0 +1,368 @@
+//! `summary.json`: everything about one move, as the starter, the console and the tests read
+//! it. The schema lives here, apart from the figures the loop keeps (`qmarc_controller::stats`).
+
+use qmarc_config::{Mode, MotorGains};
+use qmarc_controller::fault::{Fault, FaultKind};
+use qmarc_controller::stats::{AxisErrors, TimingStats};
+use qmarc_controller::traj::MotorHomeReport;
+use qmarc_timer::Percentiles;
+use serde::{Deserialize, Serialize};
+
+/// A fault in `summary.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FaultReport {
+    /// What happened (`"limit_switch"`, `"aborted"`, …).
+    pub kind: FaultKind,
+    /// 1-based motor, or null.
+    pub motor: Option<usize>,
+    /// Servo sample index.
+    pub cycle: u64,
+    /// What happened, in words.
+    pub message: String,
+    /// The hwserver's clock when the fault was read (simulated time in lock-step), ns.
+    #[serde(default)]
+    pub hw_time_ns: Option<u64>,
+}
+
+/// Error figures of one motor in `summary.json`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MotorSummary {
+    /// Smallest error, counts.
+    pub min_error_counts: f64,
+    /// Largest error, counts.
+    pub max_error_counts: f64,
+    /// Σ |error|, counts.
+    pub accumulated_abs_error_counts: f64,
+    /// Σ error², counts².
+    pub sum_squares_error_counts2: f64,
+    /// Smallest error, rad at the arm.
+    pub min_error_rad: f64,
+    /// Largest error, rad.
+    pub max_error_rad: f64,
+    /// Σ |error|, rad.
+    pub accumulated_abs_error_rad: f64,
+    /// Σ error², rad².
+    pub sum_squares_error_rad2: f64,
+    /// False when the motor did not follow its command ([`Travel::not_followed`](qmarc_controller::stats::Travel::not_followed)): a seized
+    /// joint, a dead amplifier. Such a motor is never reported ok.
+    #[serde(default = "yes")]
+    pub followed: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl MotorSummary {
+    /// The figures of `e`, with `counts_per_rad` to convert (rad = counts / counts_per_rad).
+    pub fn new(e: &AxisErrors, counts_per_rad: f64) -> MotorSummary {
+        MotorSummary {
+            min_error_counts: e.min,
+            max_error_counts: e.max,
+            accumulated_abs_error_counts: e.sum_abs,
+            sum_squares_error_counts2: e.sum_sq,
+            min_error_rad: e.min / counts_per_rad,
+            max_error_rad: e.max / counts_per_rad,
+            accumulated_abs_error_rad: e.sum_abs / counts_per_rad,
+            sum_squares_error_rad2: e.sum_sq / (counts_per_rad * counts_per_rad),
+            followed: true,
+        }
+    }
+}
+
+/// The gains a motor's law ran with (rescaled to the servo period, see
+/// [`qmarc_config::Settings::effective_gains`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct GainsReport {
+    /// Kp.
+    pub kp: f64,
+    /// Ki.
+    pub ki: f64,
+    /// Kd.
+    pub kd: f64,
+    /// Kvff.
+    pub kvff: f64,
+    /// Kaff.
+    pub kaff: f64,
+}
+
+impl From<MotorGains> for GainsReport {
+    fn from(g: MotorGains) -> GainsReport {
+        GainsReport { kp: g.kp, ki: g.ki, kd: g.kd, kvff: g.kvff, kaff: g.kaff }
+    }
+}
+
+/// The hold at the end of a path (`trajectory.settle_s`) in `summary.json`: the error figures
+/// of the move leave it out; these are its own.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SettleSummary {
+    /// Cycles of the settle (fewer than planned if a fault ended it).
+    pub cycles: u64,
+    /// Their duration, s.
+    pub seconds: f64,
+    /// Per motor: command − actual at the end of the settle, counts.
+    pub final_error_counts: Vec<f64>,
+    /// Per motor: the largest |command − actual| during the settle, counts.
+    pub max_abs_error_counts: Vec<f64>,
+}
+
+/// Percentiles in `summary.json`, µs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Pct {
+    /// Median.
+    pub p50: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// 99.9th percentile.
+    pub p999: f64,
+    /// Maximum.
+    pub max: f64,
+}
+
+impl From<Percentiles> for Pct {
+    fn from(p: Percentiles) -> Pct {
+        Pct { p50: p.p50_us, p99: p.p99_us, p999: p.p999_us, max: p.max_us }
+    }
+}
+
+/// Homing's part of `summary.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HomingReport {
+    /// Per motor, counts in the frame before homing.
+    pub motors: Vec<MotorHome>,
+    /// What the hwserver read right after the counters were preset, if it got that far.
+    pub after: Option<AfterHoming>,
+}
+
+/// Where homing found and left one motor, counts in the frame before homing.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MotorHome {
+    /// 1-based motor.
+    pub motor: usize,
+    /// Where the top switch was first seen active.
+    pub switch_found_counts: f64,
+    /// Where it cleared while backing off.
+    pub switch_cleared_counts: f64,
+    /// Home; it reads 0 afterwards.
+    pub home_counts: f64,
+    /// Where the motor stood when the next one started.
+    pub ended_counts: f64,
+    /// The motor was already on its top switch when its homing began.
+    pub started_on_switch: bool,
+    /// It got home.
+    pub home: bool,
+}
+
+impl From<&MotorHomeReport> for MotorHome {
+    fn from(r: &MotorHomeReport) -> MotorHome {
+        MotorHome {
+            motor: r.motor,
+            switch_found_counts: r.switch_found_counts,
+            switch_cleared_counts: r.switch_cleared_counts,
+            home_counts: r.home_counts,
+            ended_counts: r.ended_counts,
+            started_on_switch: r.started_on_switch,
+            home: r.home,
+        }
+    }
+}
+
+/// The positions and homed flags the hwserver read after homing preset the counters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AfterHoming {
+    /// Position per motor, counts (0 at home, give or take how it settled).
+    pub positions_counts: Vec<f64>,
+    /// Per motor: the frame is homed.
+    pub homed: Vec<bool>,
+}
+
+/// Timing figures in `summary.json`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct TimingSummary {
+    /// `timerfd` or `nanosleep`.
+    pub method: String,
+    /// Scheduling policy of the servo thread, e.g. `SCHED_FIFO 80`.
+    pub policy: String,
+    /// Wake latency against the intended expiry, µs.
+    pub wake_latency_us: Pct,
+    /// |interval between wakes − period|, µs.
+    pub period_error_us: Pct,
+    /// Wakes more than 40 µs off the period.
+    pub outside_40us: u64,
+    /// Periods that expired without a cycle.
+    pub missed_periods: u64,
+    /// Read round trip, µs.
+    pub read_us: Pct,
+    /// Trajectory + law, µs.
+    pub compute_us: Pct,
+    /// Intended tick → DAC write acknowledged, µs.
+    pub output_latency_us: Pct,
+}
+
+impl TimingSummary {
+    /// The figures of `t`.
+    pub fn new(t: &TimingStats, method: &str, policy: &str) -> TimingSummary {
+        TimingSummary {
+            method: method.to_string(),
+            policy: policy.to_string(),
+            wake_latency_us: t.wake_latency.percentiles().into(),
+            period_error_us: t.period_error.percentiles().into(),
+            outside_40us: t.outside_40us,
+            missed_periods: t.missed,
+            read_us: t.read.percentiles().into(),
+            compute_us: t.compute.percentiles().into(),
+            output_latency_us: t.output_latency.percentiles().into(),
+        }
+    }
+}
+
+/// `summary.json`: everything about one move.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// What the move did.
+    pub mode: Mode,
+    /// The trajectory generator (`step`, `spline`, `pvt`).
+    pub trajectory: String,
+    /// True when the move ran to its end without a fault.
+    pub ok: bool,
+    /// True when SCHED_FIFO was refused and the loop ran SCHED_OTHER.
+    pub degraded: bool,
+    /// True for a lock-step simulated run.
+    pub deterministic: bool,
+    /// The fault that ended the move, or null.
+    pub fault: Option<FaultReport>,
+    /// Motors driven.
+    #[serde(default)]
+    pub n_motors: usize,
+    /// Servo cycles executed (of the path; the settle is apart).
+    pub cycles: u64,
+    /// Samples the path has (duration / period + 1), if known.
+    pub planned_samples: Option<u64>,
+    /// Servo period, µs.
+    pub period_us: u32,
+    /// Gathered every N cycles.
+    pub gather_every: u32,
+    /// Rows in gather.csv.
+    pub gathered_rows: u64,
+    /// Counts per radian used for the rad figures.
+    pub counts_per_rad: f64,
+    /// Error figures per motor, over the path (the settle at its end is in `settle`).
+    pub motors: Vec<MotorSummary>,
+    /// The servo period the configured gains were tuned at, µs.
+    #[serde(default)]
+    pub gains_period_us: u32,
+    /// Per motor: the gains the law ran with, rescaled from `gains_period_us` to `period_us`.
+    #[serde(default)]
+    pub gains: Vec<GainsReport>,
+    /// The hold at the end of the path, if it began.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settle: Option<SettleSummary>,
+    /// Timing figures.
+    pub timing: TimingSummary,
+    /// Warnings of the run (degraded real time, dropped rows).
+    pub warnings: Vec<String>,
+    /// The pid of the run's `qmarc-starter` (the controller's parent): whose files these are.
+    #[serde(default)]
+    pub starter_pid: u32,
+    /// The files this move wrote (summary.json among them), where they are.
+    #[serde(default)]
+    pub files: Vec<std::path::PathBuf>,
+    /// `home` only: per motor where the top switch was found and cleared and where home is,
+    /// and what the hwserver read right after the counters were preset.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub homing: Option<HomingReport>,
+}
+
+impl Summary {
+    /// What the move was in words: `step`, `home`, `run (spline)`.
+    pub fn what(&self) -> String {
+        if self.trajectory.is_empty() || self.trajectory == self.mode.to_string() {
+            self.mode.to_string()
+        } else {
+            format!("{} ({})", self.mode, self.trajectory)
+        }
+    }
+
+    /// The summary the starter writes when the controller died before writing its own: what
+    /// it knows (the motors, the cycles the move reached, why).
+    pub fn controller_lost(
+        mode: Mode,
+        n_motors: usize,
+        period_us: u32,
+        cycles: u64,
+        message: String,
+    ) -> Summary {
+        Summary {
+            mode,
+            trajectory: String::new(),
+            ok: false,
+            degraded: false,
+            deterministic: false,
+            fault: Some(FaultReport {
+                kind: FaultKind::ControllerLost,
+                motor: None,
+                cycle: cycles,
+                message,
+                hw_time_ns: None,
+            }),
+            n_motors,
+            cycles,
+            planned_samples: None,
+            period_us,
+            gather_every: 0,
+            gathered_rows: 0,
+            counts_per_rad: 0.0,
+            motors: Vec::new(),
+            gains_period_us: 0,
+            gains: Vec::new(),
+            settle: None,
+            timing: TimingSummary::default(),
+            warnings: Vec::new(),
+            starter_pid: std::process::id(),
+            files: Vec::new(),
+            homing: None,
+        }
+    }
+}
+
+impl From<&Fault> for FaultReport {
+    /// The JSON form of a fault, its message in words.
+    fn from(f: &Fault) -> FaultReport {
+        FaultReport {
+            kind: f.kind,
+            motor: f.motor.map(|m| m + 1),
+            cycle: f.cycle,
+            message: f.message(),
+            hw_time_ns: (f.hw_time_ns > 0).then_some(f.hw_time_ns),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn figures_convert_to_radians() {
+        let mut e = AxisErrors::default();
+        for v in [2.0, -3.0, 1.0] {
+            e.add(v);
+        }
+        let s = MotorSummary::new(&e, 2.0);
+        assert_eq!(
+            (s.min_error_rad, s.accumulated_abs_error_rad, s.sum_squares_error_rad2),
+            (-1.5, 3.0, 3.5)
+        );
+    }
+
+    #[test]
+    fn faults_report_their_kind_by_name() {
+        let mut f = Fault::from_status(qmarc_proto::Status::limit_top(0), 1234).unwrap();
+        f.disabled = true;
+        let r = FaultReport::from(&f);
+        assert_eq!((r.kind, r.motor, r.cycle), (FaultKind::LimitSwitch, Some(1), 1234));
+        let json = serde_json::to_string(&r).unwrap();
+        assert!(json.starts_with(r#"{"kind":"limit_switch","motor":1,"cycle":1234"#), "{json}");
+        assert_eq!(serde_json::from_str::<FaultReport>(&json).unwrap(), r);
+    }
+}

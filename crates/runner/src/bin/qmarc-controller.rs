@@ -1,0 +1,61 @@
+//! `qmarc-controller`: the controller process, started by `qmarc-starter` with the run it
+//! prepared (`--settings FILE`, a [`qmarc_config::RunSpec`]); run by hand for debugging with a
+//! file from `qmarc-starter --print-settings`.
+//!
+//! Exit codes: the table of [`qmarc_proto::exit`] — 0 the move ran to its end, 2 a fault ended
+//! it (the summary says which), 3 refused before anything moved, 130 a stop signal, 64 a bad
+//! command line, 1 anything else.
+
+use clap::Parser;
+use qmarc_config::RunSpec;
+use qmarc_controller::fault::FaultKind;
+use qmarc_proto::exit;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Command line of `qmarc-controller`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "qmarc-controller",
+    version,
+    about = "QMARC controller (started by qmarc-starter; by hand: qmarc-starter --print-settings … > run.json)"
+)]
+struct ControllerArgs {
+    /// The run: settings, mode, iceoryx2 location (JSON, as `qmarc-starter --print-settings`
+    /// writes it).
+    #[arg(long)]
+    settings: PathBuf,
+}
+
+fn run(args: &ControllerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
+    let spec = RunSpec::read(&args.settings).map_err(|e| (exit::USAGE, e.into()))?;
+    qmarc_timer::stop::install().map_err(|e| (exit::INTERNAL, e.into()))?;
+    let summary = qmarc_runner::run::run_move(&spec).map_err(|e| (e.exit_code(), e.into()))?;
+    for w in &summary.warnings {
+        eprintln!("qmarc-controller: warning: {w}");
+    }
+    Ok(ExitCode::from(match &summary.fault {
+        None => exit::OK,
+        Some(f) => {
+            eprintln!("qmarc-controller: fault ({}): {}", f.kind, f.message);
+            if f.kind == FaultKind::Aborted { exit::INTERRUPTED } else { exit::FAULT }
+        }
+    }))
+}
+
+fn main() -> ExitCode {
+    let args = match ControllerArgs::try_parse() {
+        Ok(a) => a,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { exit::USAGE } else { exit::OK });
+        }
+    };
+    match run(&args) {
+        Ok(code) => code,
+        Err((code, e)) => {
+            eprintln!("qmarc-controller: error: {e:#}");
+            ExitCode::from(code)
+        }
+    }
+}

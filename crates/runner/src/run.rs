@@ -1,0 +1,274 @@
+//! [`run_move`]: one move, from the run the starter hands over to files on disk.
+//!
+//! The generator and the law come from the registry, the plan from the settings; a
+//! SCHED_FIFO thread (or a degraded one) connects to the hwserver, runs the loop, presets
+//! the counters after a homing, tells the hwserver to exit and hands everything back; this
+//! thread then writes `gather.csv`, `gather.m` and `summary.json`. Formatting and file I/O
+//! happen only here, after the loop.
+
+use qmarc_config::{Mode, RunSpec, Settings};
+use qmarc_controller::link::{HwLink, IoxLink, LinkConnectError, LinkTimeouts};
+use qmarc_controller::progress::Progress;
+use qmarc_controller::servo::{MoveError, MoveLimits, MovePlan, Servo, server_gone};
+use qmarc_controller::traj::TrajStartError;
+use qmarc_plugins::registry;
+use qmarc_plugins::step::TrajBuildError;
+use qmarc_proto::service::IpcLocation;
+use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType};
+use qmarc_report::Summary;
+use qmarc_report::output::{WriteError, write_results};
+use qmarc_report::summarize::summarize;
+use qmarc_report::summary::{AfterHoming, HomingReport, MotorHome};
+use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
+use qmarc_timer::{MonotonicClock, TickerKind};
+use std::time::{Duration, Instant};
+
+/// How long the servo thread may take to end after a stop signal before the controller
+/// exits without it (it is then blocked outside the loop, where nothing is enabled; the
+/// hwserver, which got the same signal, has disabled the motors).
+pub const STOP_GRACE: Duration = Duration::from_secs(2);
+
+/// How long the controller waits for the hwserver to appear.
+pub const CONNECT_WAIT: Duration = Duration::from_secs(5);
+
+/// A move could not run (nothing was enabled, or the outputs could not be written).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// No generator or law is registered under the name the settings give.
+    #[error("nothing is registered as `{0}`")]
+    Unregistered(String),
+    /// The trajectory could not be built (a bad knot file).
+    #[error(transparent)]
+    Trajectory(#[from] TrajBuildError),
+    /// The iceoryx2 prefix or root of the run is not usable.
+    #[error("{0}")]
+    Location(String),
+    /// The hwserver could not be reached.
+    #[error(transparent)]
+    Connect(#[from] LinkConnectError),
+    /// The move could not start.
+    #[error(transparent)]
+    Move(#[from] MoveError),
+    /// The servo thread could not be started or died.
+    #[error("servo thread: {0}")]
+    Thread(String),
+    /// The data files could not be written, not even to the rescue folder.
+    #[error(transparent)]
+    Output(#[from] WriteError),
+    /// A stop signal ended the run before the move began.
+    #[error("interrupted by {signal} before the move began: nothing was enabled")]
+    Interrupted {
+        /// The signal's name.
+        signal: &'static str,
+    },
+}
+
+impl RunError {
+    /// The exit code for this error ([`qmarc_proto::exit`]): the user's input refused
+    /// before anything moved, a stop signal, or an internal failure.
+    pub fn exit_code(&self) -> u8 {
+        use qmarc_proto::exit;
+        match self {
+            RunError::Interrupted { .. }
+            | RunError::Move(MoveError::Trajectory(TrajStartError::Interrupted { .. })) => {
+                exit::INTERRUPTED
+            }
+            RunError::Unregistered(_)
+            | RunError::Trajectory(_)
+            | RunError::Location(_)
+            | RunError::Move(
+                MoveError::Trajectory(_)
+                | MoveError::NotHomed { .. }
+                | MoveError::OutsideSoftLimits { .. }
+                | MoveError::Refused(_)
+                | MoveError::Gather(_),
+            ) => exit::REFUSED,
+            _ => exit::INTERNAL,
+        }
+    }
+}
+
+/// What the servo thread hands back: the move, what it was granted, how it ended, and the
+/// read right after a homing preset the counters.
+type Moved = (Servo, RtStatus, Result<(), RunError>, Option<HwMsg>);
+
+/// The registered generator `mode` uses with `settings`.
+pub fn generator_name(mode: Mode, settings: &Settings) -> &str {
+    match mode {
+        Mode::Step => "step",
+        Mode::Run => &settings.trajectory.method,
+        Mode::Home => "home",
+    }
+}
+
+/// Runs `spec` against its hwserver, writes the data files into the settings' output
+/// folder and returns the summary (also on a fault: a fault is a result, not an error).
+pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
+    let settings = &spec.settings;
+    let location =
+        IpcLocation::checked(&spec.iox_prefix, &spec.iox_root).map_err(RunError::Location)?;
+    let servo = build_servo(spec, &location)?;
+    let handle = spawn_servo(settings, spec.deterministic, location, servo)?;
+    // The servo thread ends by itself on a stop signal, motors disabled first. Should it be
+    // blocked outside the loop (nothing enabled), the controller does not wait for it.
+    let mut stopped_at: Option<Instant> = None;
+    while !handle.is_finished() {
+        if qmarc_timer::stop::requested()
+            && stopped_at.get_or_insert_with(Instant::now).elapsed() > STOP_GRACE
+        {
+            let signal =
+                qmarc_timer::stop::signal().map_or("a stop signal", qmarc_timer::stop::signal_name);
+            return Err(RunError::Interrupted { signal });
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let (servo, rt, result, homed_read) =
+        handle.join().map_err(|_| RunError::Thread("panicked".into()))?;
+    result?;
+
+    let mut summary = summarize(settings, &servo, &rt, spec.mode, spec.deterministic);
+    if spec.mode == Mode::Home {
+        summary.homing = Some(homing_report(&servo, homed_read, settings.n_motors));
+    }
+    if spec.unhomed && spec.mode != Mode::Home {
+        summary.warnings.push(
+            "--unhomed: the frame may not be homed; software position limits were off".into(),
+        );
+    }
+    write_results(&settings.gather.out_dir, &servo, &mut summary)?;
+    Ok(summary)
+}
+
+/// The move: its generator and law from the registry, its plan, its progress file.
+fn build_servo(spec: &RunSpec, location: &IpcLocation) -> Result<Servo, RunError> {
+    let settings = &spec.settings;
+    let name = generator_name(spec.mode, settings);
+    let generator =
+        registry::generator(name).ok_or_else(|| RunError::Unregistered(name.to_string()))?;
+    let law =
+        registry::law(&settings.law).ok_or_else(|| RunError::Unregistered(settings.law.clone()))?;
+    let plan = plan_for(settings, spec.mode, spec.deterministic, spec.unhomed);
+    let progress = Progress::open(&Progress::path(&location.prefix)).ok();
+    Ok(Servo::new(
+        plan,
+        (generator.build)(settings)?,
+        (law.build)(settings),
+        Box::new(MonotonicClock),
+    )
+    .with_progress(progress))
+}
+
+/// Starts the servo thread: SCHED_FIFO as the settings ask, the link, the move, the homing
+/// preset, the hwserver's exit.
+fn spawn_servo(
+    settings: &Settings,
+    deterministic: bool,
+    location: IpcLocation,
+    mut servo: Servo,
+) -> Result<std::thread::JoinHandle<Moved>, RunError> {
+    let method = match settings.timer.method {
+        qmarc_config::TimerMethod::Timerfd => TickerKind::TimerFd,
+        qmarc_config::TimerMethod::Nanosleep => TickerKind::Nanosleep,
+    };
+    let mut ticker = method.build(settings.period_ns());
+    let period = settings.period_ns();
+    // In lock-step the hwserver is lost only when its process is gone: a host stall is not
+    // the simulated robot's time. The liveness check still runs every deadline.
+    let timeouts = LinkTimeouts {
+        deadline_ns: u64::from(settings.hwserver.deadline_periods) * period,
+        give_up_ns: if deterministic {
+            u64::MAX
+        } else {
+            u64::from(settings.hwserver.response_timeout_periods) * period
+        },
+    };
+    let req = RtRequest {
+        priority: (settings.timer.servo_priority > 0).then_some(settings.timer.servo_priority),
+        lock_memory: settings.timer.lock_memory,
+        prefault_stack_bytes: 128 * 1024,
+    };
+    let n_motors = settings.n_motors;
+    qmarc_timer::rt::spawn("qmarc-servo", req, move |rt: RtStatus| {
+        let _dma = DmaLatencyGuard::request_zero();
+        let mut homed_read = None;
+        let result = (|| -> Result<(), RunError> {
+            let stop = qmarc_timer::stop::flag();
+            let mut link = IoxLink::connect(&location, timeouts, CONNECT_WAIT)?.with_stop(stop);
+            let moved = servo.run(&mut link, ticker.as_mut(), stop);
+            if let (Ok(()), None, Some(home)) = (&moved, servo.fault(), servo.homed_frame()) {
+                homed_read = Some(preset_home(&mut link, &home, n_motors)?);
+            }
+            // The thesis' last message: the hwserver makes the hardware safe and exits.
+            if !server_gone(servo.fault()) {
+                let _ = link.exchange(&HwMsg::request(MsgType::Exit));
+            }
+            moved.map_err(RunError::from)
+        })();
+        (servo, rt, result, homed_read)
+    })
+    .map_err(|e| RunError::Thread(e.to_string()))
+}
+
+/// Homing ends with every motor at its home offset: home reads 0 from now on and the frame is
+/// homed (thesis 3.10.1.1). Each motor's position is preset to where it stands relative to
+/// home, so the frame does not depend on how well it settled. Returns the read after it.
+fn preset_home(
+    link: &mut dyn HwLink,
+    home: &[f64; MAX_MOTORS],
+    n_motors: usize,
+) -> Result<HwMsg, MoveError> {
+    let now = link.exchange(&HwMsg::read_all_encoders())?;
+    let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS);
+    for ((p, now), home) in preset.data.iter_mut().zip(now.data).zip(home).take(n_motors) {
+        *p = now - home;
+    }
+    link.exchange(&preset)?;
+    Ok(link.exchange(&HwMsg::read_all_encoders())?)
+}
+
+/// Homing's part of the summary: where each switch was found and where home is, and what
+/// the hwserver read right after the counters were preset.
+fn homing_report(servo: &Servo, after: Option<HwMsg>, n: usize) -> HomingReport {
+    HomingReport {
+        motors: servo.homing_report().unwrap_or_default().iter().map(MotorHome::from).collect(),
+        after: after.map(|r| AfterHoming {
+            positions_counts: r.data[..n].to_vec(),
+            homed: r.aux[..n].iter().map(|&f| MotorFlags(f).homed()).collect(),
+        }),
+    }
+}
+
+/// The plan of `mode` with `settings`: the limits of the settings, software limits only in a
+/// homed frame (off when homing or with `--unhomed`), homing required unless homing or
+/// `--unhomed`, the hwserver's switch latch off while homing.
+pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: bool) -> MovePlan {
+    let homing = mode == Mode::Home;
+    let mut limits = MoveLimits::none();
+    let mut soft = [(f64::NEG_INFINITY, f64::INFINITY); MAX_MOTORS];
+    for (m, s) in settings.safety.iter().enumerate().take(settings.n_motors) {
+        soft[m] = (s.soft_limits[0], s.soft_limits[1]);
+        limits.max_following_error[m] = s.max_following_error_counts;
+        limits.max_integrated_error[m] = s.max_integrated_error_counts;
+    }
+    limits.soft = (!homing && !unhomed).then_some(soft);
+    // Lock-step time is simulated: a host stall skips no sample there, so it is no overrun.
+    limits.max_missed_in_row = if deterministic { u64::MAX } else { settings.max_missed_in_row };
+    MovePlan {
+        gather_every: settings.gather.every,
+        gather_fields: settings.gather.fields,
+        deterministic,
+        starve_hold_cycles: (settings.trajectory.starve_hold_ms * 1e6 / settings.period_ns() as f64)
+            .ceil() as u64,
+        // Homing settles every motor at home itself.
+        settle_cycles: if homing {
+            0
+        } else {
+            (settings.trajectory.settle_s / settings.period_s()).round() as u64
+        },
+        limits,
+        require_homed: !homing && !unhomed,
+        monitor_switches: !homing,
+        ..MovePlan::new(mode, settings.n_motors, settings.period_ns())
+    }
+}
