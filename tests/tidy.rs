@@ -53,3 +53,181 @@ fn the_state_diagram_in_architecture_md_names_every_phase_of_the_code() {
         assert!(diagram.contains(v), "ARCHITECTURE.md's state diagram lacks `{v}`");
     }
 }
+
+/// The workspace's crates, lowest layer first: a crate may depend only on crates before it.
+/// `config` knows nothing of the plug-ins or the hardware (the registries inject the names it
+/// accepts), `controller` is the loop and knows no plug-in, the hardware server knows no
+/// controller, and the processes (`runner`, `starter`, the console) sit on top.
+const LAYERS: &[&str] = &[
+    "proto",
+    "timer",
+    "config",
+    "controller",
+    "hwserver",
+    "plugins",
+    "report",
+    "runner",
+    "starter",
+    "console-tui",
+];
+
+/// The `qmarc-*` crates in the `[dependencies]` table of `crates/<name>/Cargo.toml`.
+fn our_dependencies(name: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(workspace().join("crates").join(name).join("Cargo.toml"))
+        .unwrap_or_else(|e| panic!("crates/{name}/Cargo.toml: {e}"));
+    let table =
+        text.split("\n[dependencies]\n").nth(1).map_or("", |t| t.split("\n[").next().unwrap());
+    table
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("qmarc-"))
+        .map(|l| l.split(['.', ' ', '=']).next().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn crates_depend_only_on_lower_layers_issue_11() {
+    let mut listed: Vec<String> = std::fs::read_dir(workspace().join("crates"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    listed.sort();
+    let mut layers: Vec<String> = LAYERS.iter().map(|s| s.to_string()).collect();
+    layers.sort();
+    assert_eq!(listed, layers, "every crate has its place in LAYERS");
+    let layer = |dep: &str| {
+        let dep = if dep == "console" { "console-tui" } else { dep };
+        LAYERS.iter().position(|l| *l == dep).unwrap_or_else(|| panic!("unknown crate {dep}"))
+    };
+    for (i, name) in LAYERS.iter().enumerate() {
+        for dep in our_dependencies(name) {
+            assert!(layer(&dep) < i, "crates/{name} depends on qmarc-{dep}, a layer above it");
+        }
+    }
+    assert_eq!(our_dependencies("config"), ["proto"], "config knows no registry or backend");
+}
+
+/// Every crate that builds a binary has an integration test target, so `cargo test
+/// --workspace` (README's command) builds the binary the end-to-end tests run.
+#[test]
+fn every_binary_crate_has_an_integration_test_target() {
+    for name in LAYERS {
+        let dir = workspace().join("crates").join(name);
+        let manifest = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap();
+        let has_bin = manifest.contains("[[bin]]") || dir.join("src/main.rs").is_file();
+        if has_bin {
+            assert!(
+                manifest.contains("[[test]]") && dir.join("tests/tests.rs").is_file(),
+                "crates/{name} builds a binary but has no tests/tests.rs target"
+            );
+        }
+    }
+}
+
+/// Source lines that are code: string literals and `//` comments blanked, so braces in
+/// them do not count.
+fn code_of(line: &str) -> String {
+    let mut out = String::new();
+    let mut chars = line.chars().peekable();
+    let mut in_str = false;
+    while let Some(c) = chars.next() {
+        match (in_str, c) {
+            (true, '\\') => {
+                chars.next();
+            }
+            (true, '"') => in_str = false,
+            (true, _) => {}
+            (false, '"') => in_str = true,
+            (false, '/') if chars.peek() == Some(&'/') => break,
+            (false, '\'') => {
+                // A char literal ('{', '\'', '\u{feff}') or a lifetime ('a): skip a literal.
+                let rest: String = chars.clone().take(12).collect();
+                if let Some(escaped) = rest.strip_prefix('\\') {
+                    let len = escaped.chars().skip(1).position(|c| c == '\'').map_or(0, |p| p + 3);
+                    for _ in 0..len {
+                        chars.next();
+                    }
+                } else if rest.chars().nth(1) == Some('\'') {
+                    chars.nth(1);
+                }
+            }
+            (false, c) => out.push(c),
+        }
+    }
+    out
+}
+
+/// `(line, name, length)` of every function body in `text` longer than `limit` lines.
+fn long_functions(text: &str, limit: usize) -> Vec<(usize, String, usize)> {
+    let lines: Vec<String> = text.lines().map(code_of).collect();
+    let mut found = Vec::new();
+    for (i, l) in lines.iter().enumerate() {
+        let Some(at) = l.find("fn ") else { continue };
+        if at > 0 && l.as_bytes()[at - 1].is_ascii_alphanumeric() {
+            continue;
+        }
+        let name: String =
+            l[at + 3..].chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+        let (mut depth, mut opened) = (0i32, false);
+        for (j, body) in lines.iter().enumerate().skip(i) {
+            if !opened && !body.contains('{') && body.trim_end().ends_with(';') {
+                break; // a declaration without a body
+            }
+            for c in body.chars() {
+                match c {
+                    '{' => {
+                        depth += 1;
+                        opened = true;
+                    }
+                    '}' => depth -= 1,
+                    _ => {}
+                }
+            }
+            if opened && depth <= 0 {
+                if j - i + 1 > limit {
+                    found.push((i + 1, name.clone(), j - i + 1));
+                }
+                break;
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn the_function_length_check_finds_bodies() {
+    let text = "fn short() {\n    let s = \"}}}\";\n}\nfn long() {\n    1\n    2\n    3\n}\n";
+    assert_eq!(long_functions(text, 3), [(4, "long".to_string(), 5)]);
+    assert_eq!(long_functions("fn decl();\nfn f() { '{' }\n", 0).len(), 1);
+    let escapes = "fn f() {\n    g('\\u{feff}', '\\'', '}');\n}\nfn h() {\n}\n";
+    assert_eq!(long_functions(escapes, 2), [(1, "f".to_string(), 3)]);
+}
+
+/// No source file over 600 lines (tests, in `tests.rs` files, excepted), and no function
+/// over 80 lines in the crates the servo loop runs in: each stays readable in one sitting.
+#[test]
+fn files_and_loop_functions_stay_short_issue_11() {
+    const LOOP_CRATES: &[&str] = &["proto", "timer", "controller", "hwserver", "plugins"];
+    let mut problems = Vec::new();
+    for name in LAYERS {
+        let mut files = Vec::new();
+        rust_files(&workspace().join("crates").join(name).join("src"), &mut files);
+        for f in files.iter().filter(|f| !f.ends_with("tests.rs")) {
+            let text = std::fs::read_to_string(f).unwrap();
+            let shown = f.strip_prefix(workspace()).unwrap().display().to_string();
+            if text.lines().count() > 600 {
+                problems.push(format!("{shown}: {} lines", text.lines().count()));
+            }
+            if LOOP_CRATES.contains(name) {
+                for (line, func, len) in long_functions(&text, 80) {
+                    problems.push(format!("{shown}:{line}: fn {func} has {len} lines"));
+                }
+            }
+        }
+    }
+    assert!(
+        problems.is_empty(),
+        "too long (move tests to a tests.rs, split):\n{}",
+        problems.join("\n")
+    );
+}

@@ -8,7 +8,8 @@ use criterion::{BatchSize, BenchmarkId, Criterion, Throughput, criterion_group, 
 use qmarc_config::Settings;
 use qmarc_controller::law::{ServoInput, ServoLaw};
 use qmarc_controller::link::{HwLink, LinkError};
-use qmarc_controller::servo::{CycleEnd, MovePlan, Servo};
+use qmarc_controller::plan::MovePlan;
+use qmarc_controller::servo::{CycleEnd, Servo};
 use qmarc_controller::traj::{Sample, TrajectoryGenerator};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
 use qmarc_plugins::knots::{OfflineKnots, PvtKnot};

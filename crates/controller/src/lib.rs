@@ -14,7 +14,8 @@
 //! use qmarc_config::Mode;
 //! use qmarc_controller::law::{ServoInput, ServoLaw};
 //! use qmarc_controller::link::{HwLink, LinkError};
-//! use qmarc_controller::servo::{MovePlan, Servo};
+//! use qmarc_controller::plan::MovePlan;
+//! use qmarc_controller::servo::Servo;
 //! use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
 //! use qmarc_proto::{HwMsg, MAX_MOTORS};
 //! use qmarc_timer::{ManualTicker, MockClock};
@@ -57,6 +58,7 @@ pub mod fault;
 pub mod gather;
 pub mod law;
 pub mod link;
+pub mod plan;
 pub mod progress;
 pub mod servo;
 pub mod stats;

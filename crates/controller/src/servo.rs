@@ -10,88 +10,13 @@ use crate::fault::{Fault, FaultKind};
 use crate::gather::{Gather, GatherRow};
 use crate::law::{ServoInput, ServoLaw};
 use crate::link::{HwLink, LinkError};
+use crate::plan::{MovePlan, STREAM_GATHER_SAMPLES};
 use crate::stats::{ErrorStats, TimingStats};
 use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
-use qmarc_config::{GatherFields, Mode};
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
-use qmarc_timer::{Clock, Tick, Ticker, TickerError};
-use std::sync::atomic::{AtomicBool, Ordering};
+use qmarc_timer::{Clock, Tick, TickerError};
 
-/// Samples gathered when a generator cannot say how long its path is.
-pub const STREAM_GATHER_SAMPLES: u64 = 150_000;
-
-/// The limits a move is held to (thesis 3.10; PMAC Ixx11).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MoveLimits {
-    /// Software position limits `(min, max)` per motor, counts; `None`: off (not homed, or
-    /// `--unhomed`).
-    pub soft: Option<[(f64, f64); MAX_MOTORS]>,
-    /// Largest |command − actual| per motor, counts.
-    pub max_following_error: [f64; MAX_MOTORS],
-    /// Largest |Σ (command − actual)| per motor, counts.
-    pub max_integrated_error: [f64; MAX_MOTORS],
-    /// Missed periods in a row that end the move.
-    pub max_missed_in_row: u64,
-}
-
-impl MoveLimits {
-    /// No limits at all.
-    pub fn none() -> MoveLimits {
-        MoveLimits {
-            soft: None,
-            max_following_error: [f64::INFINITY; MAX_MOTORS],
-            max_integrated_error: [f64::INFINITY; MAX_MOTORS],
-            max_missed_in_row: u64::MAX,
-        }
-    }
-}
-
-/// What a move is, apart from its path and law.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MovePlan {
-    /// What the move does.
-    pub mode: Mode,
-    /// Motors driven.
-    pub n_motors: usize,
-    /// Servo period, ns.
-    pub period_ns: u64,
-    /// Gather every N cycles.
-    pub gather_every: u32,
-    /// Which fields the data files carry.
-    pub gather_fields: GatherFields,
-    /// Simulated time: the sample index is the cycle count and gathered time is n·T.
-    pub deterministic: bool,
-    /// When the trajectory starves: cycles to hold the last command before disabling.
-    pub starve_hold_cycles: u64,
-    /// When the path ends: cycles to hold its last command, loop closed, before disabling.
-    pub settle_cycles: u64,
-    /// Limits checked before and during the move.
-    pub limits: MoveLimits,
-    /// Refuse to move unless every motor's frame is homed.
-    pub require_homed: bool,
-    /// Latch limit switches in the hwserver (off while homing: homing watches its switch).
-    pub monitor_switches: bool,
-}
-
-impl MovePlan {
-    /// A plan for `n_motors` at `period_ns`: gather every cycle, real time, no limits, no
-    /// homing required, switches monitored.
-    pub fn new(mode: Mode, n_motors: usize, period_ns: u64) -> MovePlan {
-        MovePlan {
-            mode,
-            n_motors,
-            period_ns,
-            gather_every: 1,
-            gather_fields: GatherFields::default(),
-            deterministic: false,
-            starve_hold_cycles: 0,
-            settle_cycles: 0,
-            limits: MoveLimits::none(),
-            require_homed: false,
-            monitor_switches: true,
-        }
-    }
-}
+mod run;
 
 /// Where a move is. `run` goes Idle → Preparing → Moving (or Homing) → Settling → Done, or to
 /// Fault from Preparing onwards; Holding lies between Moving and Fault when a knot stream runs
@@ -459,30 +384,17 @@ impl Servo {
 
         // 1. Read all encoders.
         let read_start = self.clock.now_ns();
-        let resp = match link.exchange(&HwMsg::read_all_encoders()) {
-            Ok(r) => r,
-            Err(e) => return CycleEnd::Fault(Fault::from_link(e, n)),
+        let hw_time_ns = match self.read_encoders(link, n) {
+            Ok(t) => t,
+            Err(f) => return CycleEnd::Fault(f),
         };
-        let hw_time_ns = resp.time_ns;
-        if let Some(f) = Fault::from_status(resp.status(), n) {
-            return CycleEnd::Fault(Fault { hw_time_ns, ..f });
-        }
-        self.act = resp.data;
         let read_done = self.clock.now_ns();
-        self.generator.observe(&self.act, &resp.aux.map(MotorFlags));
 
         // 2. Command position (frozen while holding after a starved trajectory).
-        if !self.holding {
-            match self.generator.sample(n, &mut self.cmd) {
-                Sample::Ready => {}
-                Sample::Done => return CycleEnd::Done,
-                Sample::Starved => {
-                    return CycleEnd::Fault(Fault::new(FaultKind::TrajectoryStarved, n));
-                }
-                Sample::Failed => {
-                    return CycleEnd::Fault(Fault::new(self.generator.failure_kind(), n));
-                }
-            }
+        if !self.holding
+            && let Some(end) = self.sample(n)
+        {
+            return end;
         }
         if let Some(f) = self.check_limits(n) {
             return CycleEnd::Fault(Fault { hw_time_ns, ..f });
@@ -502,29 +414,8 @@ impl Servo {
         let written = self.clock.now_ns();
 
         // 5. Gather.
-        if self.settling {
-            self.settle_errors.add(self.plan.n_motors, &self.cmd, &self.act);
-            self.settle_executed += 1;
-        } else {
-            self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
-        }
         self.timing.record_cycle(tick, read_start, read_done, computed, written);
-        if self.gather.due(n) {
-            // Integer ns divided once: the correctly rounded decimal, no accumulated noise.
-            let time_ns = if self.plan.deterministic {
-                n * self.plan.period_ns
-            } else {
-                tick.woke_ns.saturating_sub(self.t0_ns)
-            };
-            let time_s = time_ns as f64 / 1e9;
-            self.gather.push(GatherRow {
-                cycle: n,
-                time_s,
-                cmd: self.cmd,
-                act: self.act,
-                dac: self.dac,
-            });
-        }
+        self.record(n, tick);
         self.executed += 1;
         if let Some(p) = &self.progress {
             p.set_cycle(self.executed, self.generator.progress());
@@ -580,6 +471,61 @@ impl Servo {
         None
     }
 
+    /// Step 1 of a cycle: reads every encoder into `act` and shows the generator the
+    /// feedback; the hardware's timestamp, or the fault the response carries.
+    #[inline]
+    fn read_encoders(&mut self, link: &mut dyn HwLink, n: u64) -> Result<u64, Fault> {
+        let resp =
+            link.exchange(&HwMsg::read_all_encoders()).map_err(|e| Fault::from_link(e, n))?;
+        let hw_time_ns = resp.time_ns;
+        if let Some(f) = Fault::from_status(resp.status(), n) {
+            return Err(Fault { hw_time_ns, ..f });
+        }
+        self.act = resp.data;
+        self.generator.observe(&self.act, &resp.aux.map(MotorFlags));
+        Ok(hw_time_ns)
+    }
+
+    /// Step 2 of a cycle: the command of sample `n` into `cmd`, or how the cycle ends when
+    /// the path has ended or failed.
+    #[inline]
+    fn sample(&mut self, n: u64) -> Option<CycleEnd> {
+        match self.generator.sample(n, &mut self.cmd) {
+            Sample::Ready => None,
+            Sample::Done => Some(CycleEnd::Done),
+            Sample::Starved => Some(CycleEnd::Fault(Fault::new(FaultKind::TrajectoryStarved, n))),
+            Sample::Failed => Some(CycleEnd::Fault(Fault::new(self.generator.failure_kind(), n))),
+        }
+    }
+
+    /// Step 5 of a cycle: the error figures (the path's, or the settle's) and, when sample
+    /// `n` is due, a row of the gather buffer.
+    #[inline]
+    fn record(&mut self, n: u64, tick: &Tick) {
+        if self.settling {
+            self.settle_errors.add(self.plan.n_motors, &self.cmd, &self.act);
+            self.settle_executed += 1;
+        } else {
+            self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
+        }
+        if self.gather.due(n) {
+            // Integer ns divided once: the correctly rounded decimal, no accumulated noise.
+            let time_ns = if self.plan.deterministic {
+                n * self.plan.period_ns
+            } else {
+                tick.woke_ns.saturating_sub(self.t0_ns)
+            };
+            let time_s = time_ns as f64 / 1e9;
+            self.gather.push(GatherRow {
+                cycle: n,
+                time_s,
+                cmd: self.cmd,
+                act: self.act,
+                dac: self.dac,
+            });
+        }
+    }
+
     /// The fault handler: disables every motor (DACs to 0 V first) unless the hwserver is
     /// known to be gone, and records `fault` with whether the disable was acknowledged.
     pub fn handle_fault(&mut self, link: &mut dyn HwLink, fault: Fault) {
@@ -593,162 +539,10 @@ impl Servo {
     fn disable_all(&mut self, link: &mut dyn HwLink) -> bool {
         link.exchange(&HwMsg::request(MsgType::DisableAll)).is_ok()
     }
-
-    /// Waits for the next tick. A timer failure disables every motor and is the move's error;
-    /// a stop request (Ctrl-C, the starter dying) is the `aborted` fault: `None`.
-    fn next_tick(
-        &mut self,
-        link: &mut dyn HwLink,
-        ticker: &mut dyn Ticker,
-        stop: &AtomicBool,
-    ) -> Result<Option<Tick>, MoveError> {
-        let tick = match ticker.wait() {
-            Ok(t) => t,
-            Err(e) => {
-                self.disable_all(link);
-                return Err(e.into());
-            }
-        };
-        if stop.load(Ordering::Relaxed) {
-            let fault = Fault {
-                signal: qmarc_timer::stop::signal().unwrap_or(0),
-                ..Fault::new(FaultKind::Aborted, self.last_sample)
-            };
-            self.handle_fault(link, fault);
-            return Ok(None);
-        }
-        Ok(Some(tick))
-    }
-
-    /// The fault handler for a fault a cycle reported. A stop signal (Ctrl-C, the starter
-    /// dying) reaches both processes: a hwserver that shut down because of it is our abort,
-    /// not a hwserver fault. Our own signal may land a moment after its response.
-    fn cycle_fault(&mut self, link: &mut dyn HwLink, f: Fault, stop: &AtomicBool) {
-        let signal = qmarc_timer::stop::signal().unwrap_or(0);
-        let f = if f.kind == FaultKind::HwserverShutdown && stop_arrives(stop) {
-            Fault { kind: FaultKind::Aborted, signal, ..f }
-        } else if f.kind == FaultKind::Aborted {
-            Fault { signal, ..f }
-        } else {
-            f
-        };
-        self.handle_fault(link, f);
-    }
-
-    /// The trajectory starved: keep servoing on the last command for the plan's hold time
-    /// (the robot decelerates under control instead of coasting), then disable. Any other
-    /// fault during the hold ends it at once.
-    fn hold(
-        &mut self,
-        link: &mut dyn HwLink,
-        ticker: &mut dyn Ticker,
-        stop: &AtomicBool,
-        starved: Fault,
-    ) {
-        self.holding = true;
-        self.enter(Phase::Holding);
-        let mut fault = starved;
-        for _ in 0..self.plan.starve_hold_cycles {
-            if stop.load(Ordering::Relaxed) {
-                break;
-            }
-            let Ok(tick) = ticker.wait() else { break };
-            if let CycleEnd::Fault(f) = self.cycle(link, &tick) {
-                fault = f;
-                break;
-            }
-        }
-        self.holding = false;
-        self.handle_fault(link, fault);
-    }
-
-    /// The path ended: hold its last command with the loop closed for the plan's settle
-    /// time, so that a path that ends moving stops under control instead of coasting. Every
-    /// check goes on; a fault ends the settle as it would the move.
-    fn settle(
-        &mut self,
-        link: &mut dyn HwLink,
-        ticker: &mut dyn Ticker,
-        stop: &AtomicBool,
-    ) -> Result<(), MoveError> {
-        self.holding = true;
-        self.settling = true;
-        self.enter(Phase::Settling);
-        for _ in 0..self.plan.settle_cycles {
-            let Some(tick) = self.next_tick(link, ticker, stop)? else { break };
-            if let CycleEnd::Fault(f) = self.cycle(link, &tick) {
-                self.cycle_fault(link, f, stop);
-                break;
-            }
-        }
-        self.holding = false;
-        self.settling = false;
-        Ok(())
-    }
-
-    /// Runs the whole move: prepare, tick until the path ends (then settle), a fault or
-    /// `stop`, then disable every motor and stop the safety monitoring.
-    pub fn run(
-        &mut self,
-        link: &mut dyn HwLink,
-        ticker: &mut dyn Ticker,
-        stop: &AtomicBool,
-    ) -> Result<(), MoveError> {
-        self.prepare(link)?;
-        let t0 = match ticker.start() {
-            Ok(t0) => t0,
-            Err(e) => {
-                self.disable_all(link);
-                return Err(e.into());
-            }
-        };
-        self.set_t0(t0);
-        self.enter(if self.plan.mode == Mode::Home { Phase::Homing } else { Phase::Moving });
-        while let Some(tick) = self.next_tick(link, ticker, stop)? {
-            match self.cycle(link, &tick) {
-                CycleEnd::Continue => {}
-                CycleEnd::Done => {
-                    self.settle(link, ticker, stop)?;
-                    break;
-                }
-                CycleEnd::Fault(f) if f.kind == FaultKind::TrajectoryStarved => {
-                    self.hold(link, ticker, stop, f);
-                    break;
-                }
-                CycleEnd::Fault(f) => {
-                    self.cycle_fault(link, f, stop);
-                    break;
-                }
-            }
-        }
-        if !server_gone(self.fault) {
-            self.disable_all(link);
-            let _ = link.exchange(&HwMsg::request(MsgType::DisableSafety));
-        }
-        if self.fault.is_none() {
-            self.enter(Phase::Done);
-        }
-        Ok(())
-    }
 }
 
 /// True when `fault` says the hwserver process is gone: nothing can reach the hardware. A
 /// link that failed with the server still alive still gets the disable commands.
 pub fn server_gone(fault: Option<Fault>) -> bool {
     matches!(fault.and_then(|f| f.link), Some(LinkError::Lost { server_alive: false, .. }))
-}
-
-/// True when a stop signal arrived or is pending for this process, waiting up to 1 s for one
-/// (off the loop's fast path: only after the hwserver shut down, the motors already off).
-/// The starter forwards a stop to the controller before the hwserver, so its signal is
-/// normally pending by then; the wait covers two signals sent at once (the kernel's
-/// parent-death signal), whose handler may run late on a loaded machine.
-fn stop_arrives(stop: &AtomicBool) -> bool {
-    for _ in 0..1_000 {
-        if stop.load(Ordering::Relaxed) || qmarc_timer::stop::arrived_or_pending() {
-            return true;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(1));
-    }
-    stop.load(Ordering::Relaxed)
 }

@@ -6,7 +6,8 @@ mod util;
 
 use qmarc_controller::fault::FaultKind;
 use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
-use qmarc_controller::servo::{CycleEnd, MoveLimits, MovePlan, Phase, Servo};
+use qmarc_controller::plan::{MoveLimits, MovePlan};
+use qmarc_controller::servo::{CycleEnd, Phase, Servo};
 use qmarc_hwserver::server::{ServeEnd, ServeOptions, serve};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
 use qmarc_plugins::registry::{GENERATORS, LAWS};

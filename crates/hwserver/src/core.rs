@@ -185,6 +185,44 @@ impl HwCore {
         Status::OK
     }
 
+    /// Enables `motor`'s amplifier, unless a watchdog trip or a stop forbids it for good.
+    fn enable(&mut self, motor: usize) -> Status {
+        if self.latched.intersects(Status::SHUTDOWN | Status::WATCHDOG) {
+            Status::SHUTDOWN
+        } else if self.backend.set_amp_enable(motor, true).is_ok() {
+            self.enabled[motor] = true;
+            Status::OK
+        } else {
+            Status::HARDWARE_FAULT
+        }
+    }
+
+    /// Zeroes `motor`'s DAC and disables its amplifier (both tried, whatever fails).
+    fn disable(&mut self, motor: usize) -> Status {
+        self.dacs[motor] = 0;
+        let dac_ok = self.backend.write_dacs(&self.dacs).is_ok();
+        let amp_ok = self.backend.set_amp_enable(motor, false).is_ok();
+        self.enabled[motor] = false;
+        if dac_ok && amp_ok { Status::OK } else { Status::HARDWARE_FAULT }
+    }
+
+    /// Presets `motor`'s position to `value` counts (rounded, within the counter's ±2²²)
+    /// and marks its frame homed: homing's `ResetEncoderZero`.
+    fn preset(&mut self, motor: usize, value: f64) -> Status {
+        let preset = value.round().clamp(-f64::from(1 << 22), f64::from(1 << 22)) as i64;
+        let raw = COUNTER_ZERO.wrapping_add(preset as u32) & qmarc_proto::COUNTER_MASK;
+        let status = if self.backend.load_counter(motor, raw).is_err() {
+            Status::HARDWARE_FAULT
+        } else {
+            Status::OK
+        };
+        self.inputs.counters[motor] = raw;
+        self.position[motor] = preset;
+        self.homed[motor] = true;
+        self.backend.set_homed(motor);
+        status
+    }
+
     /// Answers one request. Unknown types and bad motor indices are answered with a status
     /// bit, never a crash.
     pub fn handle(&mut self, req: &HwMsg) -> HwMsg {
@@ -219,38 +257,13 @@ impl HwCore {
                     status |= Status::HARDWARE_FAULT;
                 }
             }
-            Ok(MsgType::EnableMotor) if single => {
-                if self.latched.intersects(Status::SHUTDOWN | Status::WATCHDOG) {
-                    status |= Status::SHUTDOWN;
-                } else if self.backend.set_amp_enable(motor, true).is_ok() {
-                    self.enabled[motor] = true;
-                } else {
-                    status |= Status::HARDWARE_FAULT;
-                }
-            }
-            Ok(MsgType::DisableMotor) if single => {
-                self.dacs[motor] = 0;
-                let dac_ok = self.backend.write_dacs(&self.dacs).is_ok();
-                let amp_ok = self.backend.set_amp_enable(motor, false).is_ok();
-                self.enabled[motor] = false;
-                if !(dac_ok && amp_ok) {
-                    status |= Status::HARDWARE_FAULT;
-                }
-            }
+            Ok(MsgType::EnableMotor) if single => status |= self.enable(motor),
+            Ok(MsgType::DisableMotor) if single => status |= self.disable(motor),
             Ok(MsgType::DisableAll) => self.safe_state(),
             Ok(MsgType::ResetEncoderZero) if single || req.motor == HwMsg::ALL_MOTORS => {
                 let range = if single { motor..motor + 1 } else { 0..self.n_motors };
                 for m in range {
-                    let preset =
-                        req.data[m].round().clamp(-f64::from(1 << 22), f64::from(1 << 22)) as i64;
-                    let raw = COUNTER_ZERO.wrapping_add(preset as u32) & qmarc_proto::COUNTER_MASK;
-                    if self.backend.load_counter(m, raw).is_err() {
-                        status |= Status::HARDWARE_FAULT;
-                    }
-                    self.inputs.counters[m] = raw;
-                    self.position[m] = preset;
-                    self.homed[m] = true;
-                    self.backend.set_homed(m);
+                    status |= self.preset(m, req.data[m]);
                 }
             }
             Ok(MsgType::EnableSafety) => self.monitoring = true,

@@ -142,22 +142,7 @@ fn serve_inner(
             return Ok(end);
         }
 
-        if !opts.spin {
-            let budget = if core.any_enabled() {
-                opts.watchdog_ns.saturating_sub(silent_ns).max(1_000)
-            } else {
-                IDLE_WAIT_NS
-            };
-            match listener.timed_wait(|_| {}, Duration::from_nanos(budget.min(IDLE_WAIT_NS))) {
-                Ok(_) => {}
-                Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => continue,
-                Err(e) => return Err(port_err("listener wait")(&e)),
-            }
-        } else {
-            // Consume the wake-ups without blocking so the event counter stays small.
-            listener.try_wait(|_| {}).map_err(|e| port_err("listener try_wait")(&e))?;
-            std::hint::spin_loop();
-        }
+        wait_for_request(&listener, opts, core.any_enabled(), silent_ns)?;
 
         while let Some(active) = server.receive().map_err(|e| port_err("server receive")(&e))? {
             last_request_ns = monotonic_now_ns();
@@ -169,5 +154,27 @@ fn serve_inner(
                 return Ok(ending.map_or(ServeEnd::Exit, |(_, end)| end));
             }
         }
+    }
+}
+
+/// Waits for the controller's request event: blocks until it comes, at most until the
+/// watchdog could expire (50 ms while no motor is enabled, so a stop is noticed); with
+/// `opts.spin`, only consumes the wake-ups so the event counter stays small.
+fn wait_for_request(
+    listener: &iceoryx2::port::listener::Listener<iceoryx2::prelude::ipc::Service>,
+    opts: &ServeOptions,
+    enabled: bool,
+    silent_ns: u64,
+) -> Result<(), ServeError> {
+    if opts.spin {
+        listener.try_wait(|_| {}).map_err(|e| port_err("listener try_wait")(&e))?;
+        std::hint::spin_loop();
+        return Ok(());
+    }
+    let budget =
+        if enabled { opts.watchdog_ns.saturating_sub(silent_ns).max(1_000) } else { IDLE_WAIT_NS };
+    match listener.timed_wait(|_| {}, Duration::from_nanos(budget.min(IDLE_WAIT_NS))) {
+        Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
+        Err(e) => Err(port_err("listener wait")(&e)),
     }
 }

@@ -183,6 +183,102 @@ impl Homing {
         self.failure = Some(why);
         Sample::Failed
     }
+
+    /// One sample of the motor being homed: moves its command by the phase it is in and
+    /// moves on to the next phase (or motor) when the phase's condition is met.
+    fn advance(&mut self) -> Result<(), HomingFailure> {
+        let m = self.motor;
+        let dir = self.motors[m].top_direction;
+        let step = self.settings.velocity_counts_per_s * self.period_s;
+        match self.phase {
+            Phase::LeaveSwitch => self.leave_switch(m, dir, step)?,
+            Phase::Approach if self.flags[m].top() && self.samples_on_motor == 0 => {
+                self.reports[m].started_on_switch = true;
+                self.phase = Phase::LeaveSwitch;
+            }
+            Phase::Approach => self.approach(m, dir, step)?,
+            Phase::Backoff => self.back_off(m, dir)?,
+            Phase::ToOffset => {
+                let left = self.target - self.cmd[m];
+                if left.abs() <= step {
+                    self.cmd[m] = self.target;
+                    self.phase = Phase::Settle;
+                    self.settle_left = (self.settings.settle_s / self.period_s).round() as u64;
+                } else {
+                    self.cmd[m] += step.copysign(left);
+                }
+            }
+            Phase::Settle => self.settle(m),
+            Phase::Done => {}
+        }
+        Ok(())
+    }
+
+    /// Started on the switch: move away from it until it clears.
+    fn leave_switch(&mut self, m: usize, dir: f64, step: f64) -> Result<(), HomingFailure> {
+        if self.flags[m].top() {
+            self.cmd[m] -= dir * step;
+            let travel = (self.cmd[m] - self.origin).abs();
+            if travel > self.settings.max_travel_counts {
+                return Err(HomingFailure::NotCleared { motor: m, backed_off: travel });
+            }
+        } else {
+            self.origin = self.cmd[m];
+            self.phase = Phase::Approach;
+        }
+        Ok(())
+    }
+
+    /// Towards the top switch at the homing velocity until it trips.
+    fn approach(&mut self, m: usize, dir: f64, step: f64) -> Result<(), HomingFailure> {
+        if self.flags[m].top() {
+            // Stop where it is and back off from there.
+            self.reports[m].switch_found_counts = self.act[m];
+            self.trip = self.act[m];
+            self.cmd[m] = self.act[m];
+            self.phase = Phase::Backoff;
+        } else {
+            self.cmd[m] += dir * step;
+            let travel = (self.cmd[m] - self.origin).abs();
+            if travel > self.settings.max_travel_counts {
+                return Err(HomingFailure::NoSwitch { motor: m, travel });
+            }
+        }
+        Ok(())
+    }
+
+    /// Off the switch at the creep velocity until it clears: home is the offset from there.
+    fn back_off(&mut self, m: usize, dir: f64) -> Result<(), HomingFailure> {
+        if !self.flags[m].top() {
+            self.reports[m].switch_cleared_counts = self.act[m];
+            self.target = self.act[m] - dir * self.motors[m].home_offset_counts;
+            self.reports[m].home_counts = self.target;
+            self.phase = Phase::ToOffset;
+        } else {
+            let backed_off = (self.trip - self.act[m]) * dir;
+            if backed_off >= self.settings.clear_within_counts {
+                return Err(HomingFailure::NotCleared { motor: m, backed_off });
+            }
+            self.cmd[m] -= dir * self.settings.creep_counts_per_s * self.period_s;
+        }
+        Ok(())
+    }
+
+    /// Holds home for the settle time, then the next motor (or done).
+    fn settle(&mut self, m: usize) {
+        if self.settle_left == 0 {
+            self.reports[m].ended_counts = self.act[m];
+            self.reports[m].home = true;
+            if m + 1 < self.n_motors {
+                self.begin(m + 1);
+            } else {
+                self.motor = self.n_motors;
+                self.phase = Phase::Done;
+            }
+        } else {
+            self.settle_left -= 1;
+        }
+    }
 }
 
 impl TrajectoryGenerator for Homing {
@@ -228,81 +324,8 @@ impl TrajectoryGenerator for Homing {
         if let Some(why) = self.unexpected_switch() {
             return self.fail(why);
         }
-        let m = self.motor;
-        let dir = self.motors[m].top_direction;
-        let step = self.settings.velocity_counts_per_s * self.period_s;
-        match self.phase {
-            Phase::LeaveSwitch => {
-                if self.flags[m].top() {
-                    self.cmd[m] -= dir * step;
-                    let travel = (self.cmd[m] - self.origin).abs();
-                    if travel > self.settings.max_travel_counts {
-                        return self
-                            .fail(HomingFailure::NotCleared { motor: m, backed_off: travel });
-                    }
-                } else {
-                    self.origin = self.cmd[m];
-                    self.phase = Phase::Approach;
-                }
-            }
-            Phase::Approach if self.flags[m].top() && self.samples_on_motor == 0 => {
-                self.reports[m].started_on_switch = true;
-                self.phase = Phase::LeaveSwitch;
-            }
-            Phase::Approach => {
-                if self.flags[m].top() {
-                    // Stop where it is and back off from there.
-                    self.reports[m].switch_found_counts = self.act[m];
-                    self.trip = self.act[m];
-                    self.cmd[m] = self.act[m];
-                    self.phase = Phase::Backoff;
-                } else {
-                    self.cmd[m] += dir * step;
-                    let travel = (self.cmd[m] - self.origin).abs();
-                    if travel > self.settings.max_travel_counts {
-                        return self.fail(HomingFailure::NoSwitch { motor: m, travel });
-                    }
-                }
-            }
-            Phase::Backoff => {
-                if !self.flags[m].top() {
-                    self.reports[m].switch_cleared_counts = self.act[m];
-                    self.target = self.act[m] - dir * self.motors[m].home_offset_counts;
-                    self.reports[m].home_counts = self.target;
-                    self.phase = Phase::ToOffset;
-                } else {
-                    let backed_off = (self.trip - self.act[m]) * dir;
-                    if backed_off >= self.settings.clear_within_counts {
-                        return self.fail(HomingFailure::NotCleared { motor: m, backed_off });
-                    }
-                    self.cmd[m] -= dir * self.settings.creep_counts_per_s * self.period_s;
-                }
-            }
-            Phase::ToOffset => {
-                let left = self.target - self.cmd[m];
-                if left.abs() <= step {
-                    self.cmd[m] = self.target;
-                    self.phase = Phase::Settle;
-                    self.settle_left = (self.settings.settle_s / self.period_s).round() as u64;
-                } else {
-                    self.cmd[m] += step.copysign(left);
-                }
-            }
-            Phase::Settle => {
-                if self.settle_left == 0 {
-                    self.reports[m].ended_counts = self.act[m];
-                    self.reports[m].home = true;
-                    if m + 1 < self.n_motors {
-                        self.begin(m + 1);
-                    } else {
-                        self.motor = self.n_motors;
-                        self.phase = Phase::Done;
-                    }
-                } else {
-                    self.settle_left -= 1;
-                }
-            }
-            Phase::Done => {}
+        if let Err(why) = self.advance() {
+            return self.fail(why);
         }
         self.samples_on_motor += 1;
         *cmd = self.cmd;

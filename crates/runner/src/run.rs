@@ -8,8 +8,9 @@
 
 use qmarc_config::{Mode, RunSpec, Settings};
 use qmarc_controller::link::{HwLink, IoxLink, LinkConnectError, LinkTimeouts};
+use qmarc_controller::plan::{MoveLimits, MovePlan};
 use qmarc_controller::progress::Progress;
-use qmarc_controller::servo::{MoveError, MoveLimits, MovePlan, Servo, server_gone};
+use qmarc_controller::servo::{MoveError, Servo, server_gone};
 use qmarc_controller::traj::TrajStartError;
 use qmarc_plugins::registry;
 use qmarc_plugins::step::TrajBuildError;

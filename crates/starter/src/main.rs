@@ -126,7 +126,7 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     let planned = path.samples();
     drop(path);
     let settle = (settings.trajectory.settle_s / settings.period_s()).round() as u64;
-    let samples = planned.unwrap_or(qmarc_controller::servo::STREAM_GATHER_SAMPLES) + settle;
+    let samples = planned.unwrap_or(qmarc_controller::plan::STREAM_GATHER_SAMPLES) + settle;
     check_budget(samples, settings.gather.every).map_err(refused)?;
     let out_dir = settings.gather.out_dir.clone();
     let rows = samples.div_ceil(u64::from(settings.gather.every));

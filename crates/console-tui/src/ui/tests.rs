@@ -1,0 +1,312 @@
+//! Unit tests of `ui`.
+
+use super::*;
+use crate::form::{Form, Place};
+use crate::results::{MoveResult, Series};
+use qmarc_controller::fault::FaultKind;
+use qmarc_report::summary::{FaultReport, Summary};
+use ratatui::Terminal;
+use ratatui::backend::TestBackend;
+use ratatui::buffer::Buffer;
+
+struct Scratch(std::path::PathBuf);
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn app() -> (Scratch, App) {
+    static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("qmarc-ui-{}-{n}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
+    let cfg = dir.join("qmarc.toml");
+    std::fs::copy(shipped, &cfg).unwrap();
+    // Relative paths (knots) resolve from the repository, as when run from its root.
+    let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let mut form = Form::load_in(&cfg, &repo).unwrap();
+    let out = form.index(Place::Key("gather", "out_dir")).unwrap();
+    form.set_text(out, dir.join("out").to_str().unwrap());
+    let app = App::new(form, "qmarc-starter".into(), repo);
+    (Scratch(dir), app)
+}
+
+fn render(app: &App, w: u16, h: u16) -> Buffer {
+    let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+    t.draw(|f| draw(f, app)).unwrap();
+    t.backend().buffer().clone()
+}
+
+fn text(b: &Buffer) -> String {
+    let a = b.area;
+    (0..a.height)
+        .map(|y| (0..a.width).map(|x| b[(x, y)].symbol()).collect::<String>())
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// The position of the first occurrence of `needle` (in cells).
+fn find(b: &Buffer, needle: &str) -> Option<(u16, u16)> {
+    let a = b.area;
+    (0..a.height).find_map(|y| {
+        let row: Vec<&str> = (0..a.width).map(|x| b[(x, y)].symbol()).collect();
+        let chars: Vec<char> = needle.chars().collect();
+        (0..row.len().saturating_sub(chars.len() - 1)).find_map(|x| {
+            chars
+                .iter()
+                .enumerate()
+                .all(|(k, c)| row[x + k] == c.to_string())
+                .then_some((x as u16, y))
+        })
+    })
+}
+
+#[test]
+fn setup_shows_the_five_sections_and_the_actions_at_80x24() {
+    let (_d, app) = app();
+    let b = render(&app, 80, 24);
+    let s = text(&b);
+    for want in [
+        "General",
+        "Motors",
+        "Period µs",
+        "Trajectory",
+        "‹ spline ›",
+        "knots/sine-3motors.txt",
+        "Step",
+        "Size",
+        "Duration s",
+        "Data gathering",
+        "Every",
+        "Out dir",
+        "Fields",
+        "Gains (one column per motor)",
+        "Home",
+        "Kp",
+        "Kvff",
+        "d2",
+        "182000",
+        "119000",
+        "Home robot",
+        "Start controller",
+        "Step motors now",
+        "Exit (save)",
+        "Cancel (leave without saving)",
+    ] {
+        assert!(s.contains(want), "missing {want:?} in\n{s}");
+    }
+}
+
+#[test]
+fn gain_columns_beyond_the_number_of_motors_are_disabled() {
+    let (_d, mut app) = app();
+    let b = render(&app, 80, 24);
+    let (x, y) = find(&b, "M4").unwrap();
+    assert_eq!(b[(x, y)].fg, Color::DarkGray, "motor 4 disabled with 3 motors");
+    let (x3, y3) = find(&b, "M3").unwrap();
+    assert_ne!(b[(x3, y3)].fg, Color::DarkGray);
+    // The Kp of motor 4 is dim too, and not focusable.
+    let kp4 = app.form.index(Place::Motor(3, "kp")).unwrap();
+    assert!(!app.form.enabled(kp4));
+    app.form.set_text(0, "4");
+    let b = render(&app, 80, 24);
+    let (x, y) = find(&b, "M4").unwrap();
+    assert_ne!(b[(x, y)].fg, Color::DarkGray, "enabled with 4 motors");
+}
+
+#[test]
+fn an_invalid_field_shows_its_message_in_place_and_blocks_the_actions() {
+    let (_d, mut app) = app();
+    let period = app.form.index(Place::Key("general", "period_us")).unwrap();
+    app.form.set_text(period, "50");
+    let b = render(&app, 80, 24);
+    let s = text(&b);
+    assert!(s.contains("↳ servo period must be 100‥100000"), "{s}");
+    assert!(s.contains("Step motors now — blocked"), "{s}");
+    let (x, y) = find(&b, "50 ").unwrap();
+    assert_eq!(b[(x, y)].fg, Color::Red);
+    // A bad gain: red in its cell, the reason on the message line when focused.
+    let kd2 = app.form.index(Place::Motor(1, "kd")).unwrap();
+    app.form.set_text(kd2, "x");
+    app.focus = kd2;
+    app.on_key(ratatui::crossterm::event::KeyEvent::from(
+        ratatui::crossterm::event::KeyCode::Char('y'),
+    ));
+    let s = text(&render(&app, 80, 24));
+    assert!(s.contains("invalid type: string \"y\", expected f64"), "{s}");
+}
+
+fn result(fault: bool) -> MoveResult {
+    let mut summary = Summary::controller_lost(qmarc_config::Mode::Step, 3, 400, 0, String::new());
+    summary.fault = fault.then(|| FaultReport {
+        kind: FaultKind::LimitSwitch,
+        motor: Some(1),
+        cycle: 12,
+        message: "motor 1 hit its top limit switch at cycle 12; all motors disabled".into(),
+        hw_time_ns: None,
+    });
+    summary.trajectory = "step".into();
+    summary.ok = !fault;
+    let csv =
+        "cycle,time_s,cmd1,act1,dac1\n0,0,0,0,0\n1,0.0004,1000,3,8191\n2,0.0008,1000,20,500\n";
+    MoveResult { summary, series: Some(Series::parse(csv, 0.0004).unwrap()), written: None }
+}
+
+#[test]
+fn results_show_a_fault_in_red_and_the_charts_draw() {
+    let (_d, mut app) = app();
+    app.last = Some(result(true));
+    app.page = Page::Results;
+    let b = render(&app, 80, 24);
+    let (x, y) = find(&b, "FAULT limit_switch").unwrap();
+    assert_eq!(b[(x, y)].fg, Color::Red);
+    assert!(text(&b).contains("motor 1 hit its top limit switch"));
+    app.page = Page::Charts;
+    let s = text(&render(&app, 80, 24));
+    for want in ["command vs actual", "following error", "servo period"] {
+        assert!(s.contains(want), "{s}");
+    }
+}
+
+#[test]
+fn no_page_panics_at_any_size() {
+    let (_d, mut app) = app();
+    app.last = Some(result(false));
+    app.log = (0..100).map(|i| format!("line {i}")).collect();
+    for page in [Page::Setup, Page::Log, Page::Results, Page::Charts, Page::History] {
+        app.page = page;
+        for (w, h) in [(1, 1), (10, 3), (40, 10), (80, 24), (79, 23), (200, 60)] {
+            render(&app, w, h);
+        }
+    }
+}
+
+#[test]
+fn history_trends_compare_whole_moves_of_the_same_kind() {
+    let (_d, mut app) = app();
+    let entry = |n, what: &str, fault: Option<FaultKind>, acc: f64| crate::results::HistoryEntry {
+        n,
+        what: what.into(),
+        fault,
+        accumulated: vec![acc; 3],
+        gains: vec![(182000.0, 3000.0, 119000.0); 3],
+    };
+    app.history = vec![
+        entry(1, "step", None, 9000.0),
+        entry(2, "step", Some(FaultKind::FollowingError), 500.0),
+        entry(3, "run (spline)", None, 100.0),
+        entry(4, "step", None, 8000.0),
+    ];
+    app.page = Page::History;
+    let s = text(&render(&app, 80, 24));
+    let row = |n: &str| s.lines().find(|l| l.starts_with(&format!("│{n}   "))).unwrap().to_string();
+    // The cut-short move and the first run have nothing to compare with; move 4 is
+    // compared with move 1, not with the faulted move 2 or the run.
+    assert!(!row("2").contains('↓') && !row("2").contains('↑'), "{s}");
+    assert!(!row("3").contains('↓') && !row("3").contains('↑'), "{s}");
+    assert!(row("4").contains("8000 ↓"), "{s}");
+    assert!(row("2").contains("following_error"), "{s}");
+    assert!(s.contains("Kp/Kd/Kvff 182000/3000/119000"), "{s}");
+}
+
+fn key(code: ratatui::crossterm::event::KeyCode) -> ratatui::crossterm::event::KeyEvent {
+    ratatui::crossterm::event::KeyEvent::from(code)
+}
+
+/// Issue 10, item 17: the log wraps long lines and scrolls (↑↓ PgUp PgDn Home End).
+#[test]
+fn the_log_wraps_and_scrolls_issue_10() {
+    use ratatui::crossterm::event::KeyCode;
+    let (_d, mut app) = app();
+    app.log = (0..60).map(|i| format!("line {i}")).collect();
+    let long = format!("qmarc-controller: error: {}END", "x".repeat(150));
+    app.log.push(long);
+    app.on_key(key(KeyCode::F(3)));
+    let s = text(&render(&app, 80, 24));
+    assert!(s.contains("END"), "the end of a long line is shown, wrapped:\n{s}");
+    assert!(!s.contains("line 0 "), "{s}");
+    app.on_key(key(KeyCode::Home));
+    let s = text(&render(&app, 80, 24));
+    assert!(s.contains("line 0"), "Home: the first line:\n{s}");
+    assert!(s.contains("rows 1‥"), "the title says where:\n{s}");
+    app.on_key(key(KeyCode::End));
+    app.on_key(key(KeyCode::PageUp));
+    let s = text(&render(&app, 80, 24));
+    assert!(!s.contains("END") && s.contains("line 5"), "a page up:\n{s}");
+    // The message line has the page's keys, not the setup page's hint.
+    assert!(app.status.0.starts_with("↑↓ PgUp PgDn scroll"), "{:?}", app.status);
+}
+
+/// Issue 10, item 17: Ctrl-U empties a field instead of typing a `u`; a hint never
+/// outlives its page or its key.
+#[test]
+fn ctrl_u_clears_a_field_and_hints_follow_the_page_issue_10() {
+    use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+    let (_d, mut app) = app();
+    let period = app.form.index(Place::Key("general", "period_us")).unwrap();
+    app.focus = period;
+    app.on_key(KeyEvent::new(KeyCode::Char('u'), KeyModifiers::CONTROL));
+    assert_eq!(app.form.fields[period].text, "", "emptied");
+    assert!(app.status.1, "an empty period is an error: {:?}", app.status);
+    app.on_key(key(KeyCode::Esc));
+    assert_eq!(app.form.fields[period].text, "400", "Esc brings it back");
+    app.on_key(KeyEvent::new(KeyCode::Char('x'), KeyModifiers::ALT));
+    assert_eq!(app.form.fields[period].text, "400", "Alt-x types nothing");
+    app.on_key(key(KeyCode::F(7)));
+    assert!(app.status.0.starts_with("←/→ or 1–4"), "{:?}", app.status);
+    app.on_key(key(KeyCode::F(1)));
+    assert!(app.status.0.starts_with("Period µs: type a value"), "{:?}", app.status);
+}
+
+/// Issue 10, item 17: the charts have legends; the results of a homing show where each
+/// switch was found.
+#[test]
+fn charts_have_legends_and_homing_results_show_the_switches_issue_10() {
+    let (_d, mut app) = app();
+    let mut r = result(false);
+    r.summary.mode = qmarc_config::Mode::Home;
+    r.summary.homing = Some(qmarc_report::summary::HomingReport {
+        motors: vec![qmarc_report::summary::MotorHome {
+            motor: 1,
+            switch_found_counts: -9500.0,
+            switch_cleared_counts: -9498.0,
+            home_counts: -7498.0,
+            ended_counts: -7498.0,
+            started_on_switch: false,
+            home: true,
+        }],
+        after: None,
+    });
+    app.last = Some(r);
+    app.page = Page::Charts;
+    let s = text(&render(&app, 80, 24));
+    for want in ["command", "actual", "command − actual", "period"] {
+        assert!(s.contains(want), "legend {want:?}:\n{s}");
+    }
+    app.page = Page::Results;
+    let s = text(&render(&app, 80, 24));
+    assert!(s.contains("M1 switch found -9500, cleared -9498, home -7498 ✓ reads 0"), "{s}");
+}
+
+/// Issue 10, item 17: the actions never overflow their box, however small the terminal.
+#[test]
+fn the_actions_fit_their_box_at_any_size_issue_10() {
+    let (_d, app) = app();
+    for (w, h) in [(80, 24), (80, 18), (60, 14), (40, 10)] {
+        let s = text(&render(&app, w, h));
+        let box_rows: Vec<&str> =
+            s.lines().filter(|l| l.contains("F12") || l.contains("ready:")).collect();
+        assert!(!box_rows.is_empty() || h < 12, "{w}×{h}: no actions:\n{s}");
+        for l in s.lines() {
+            assert_eq!(
+                l.chars().count(),
+                usize::from(w),
+                "{w}×{h}: a row of the wrong width:\n{s}"
+            );
+        }
+    }
+    let s = text(&render(&app, 80, 18));
+    assert!(s.contains("ready: F2 F5 F6 F10 F12"), "compact at 80×18:\n{s}");
+}

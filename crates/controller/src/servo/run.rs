@@ -1,0 +1,165 @@
+//! Running a whole move: [`Servo::run`] prepares it, paces the cycles by the ticker until the
+//! path ends (then settles), a fault or a stop request, and answers each way out by disabling
+//! the motors; the holds after a starved stream and at the end of a path live here too.
+
+use super::{CycleEnd, MoveError, Phase, Servo, server_gone};
+use crate::fault::{Fault, FaultKind};
+use crate::link::HwLink;
+use qmarc_config::Mode;
+use qmarc_proto::{HwMsg, MsgType};
+use qmarc_timer::{Tick, Ticker};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+impl Servo {
+    /// Waits for the next tick. A timer failure disables every motor and is the move's error;
+    /// a stop request (Ctrl-C, the starter dying) is the `aborted` fault: `None`.
+    fn next_tick(
+        &mut self,
+        link: &mut dyn HwLink,
+        ticker: &mut dyn Ticker,
+        stop: &AtomicBool,
+    ) -> Result<Option<Tick>, MoveError> {
+        let tick = match ticker.wait() {
+            Ok(t) => t,
+            Err(e) => {
+                self.disable_all(link);
+                return Err(e.into());
+            }
+        };
+        if stop.load(Ordering::Relaxed) {
+            let fault = Fault {
+                signal: qmarc_timer::stop::signal().unwrap_or(0),
+                ..Fault::new(FaultKind::Aborted, self.last_sample)
+            };
+            self.handle_fault(link, fault);
+            return Ok(None);
+        }
+        Ok(Some(tick))
+    }
+
+    /// The fault handler for a fault a cycle reported. A stop signal (Ctrl-C, the starter
+    /// dying) reaches both processes: a hwserver that shut down because of it is our abort,
+    /// not a hwserver fault. Our own signal may land a moment after its response.
+    fn cycle_fault(&mut self, link: &mut dyn HwLink, f: Fault, stop: &AtomicBool) {
+        let signal = qmarc_timer::stop::signal().unwrap_or(0);
+        let f = if f.kind == FaultKind::HwserverShutdown && stop_arrives(stop) {
+            Fault { kind: FaultKind::Aborted, signal, ..f }
+        } else if f.kind == FaultKind::Aborted {
+            Fault { signal, ..f }
+        } else {
+            f
+        };
+        self.handle_fault(link, f);
+    }
+
+    /// The trajectory starved: keep servoing on the last command for the plan's hold time
+    /// (the robot decelerates under control instead of coasting), then disable. Any other
+    /// fault during the hold ends it at once.
+    fn hold(
+        &mut self,
+        link: &mut dyn HwLink,
+        ticker: &mut dyn Ticker,
+        stop: &AtomicBool,
+        starved: Fault,
+    ) {
+        self.holding = true;
+        self.enter(Phase::Holding);
+        let mut fault = starved;
+        for _ in 0..self.plan.starve_hold_cycles {
+            if stop.load(Ordering::Relaxed) {
+                break;
+            }
+            let Ok(tick) = ticker.wait() else { break };
+            if let CycleEnd::Fault(f) = self.cycle(link, &tick) {
+                fault = f;
+                break;
+            }
+        }
+        self.holding = false;
+        self.handle_fault(link, fault);
+    }
+
+    /// The path ended: hold its last command with the loop closed for the plan's settle
+    /// time, so that a path that ends moving stops under control instead of coasting. Every
+    /// check goes on; a fault ends the settle as it would the move.
+    fn settle(
+        &mut self,
+        link: &mut dyn HwLink,
+        ticker: &mut dyn Ticker,
+        stop: &AtomicBool,
+    ) -> Result<(), MoveError> {
+        self.holding = true;
+        self.settling = true;
+        self.enter(Phase::Settling);
+        for _ in 0..self.plan.settle_cycles {
+            let Some(tick) = self.next_tick(link, ticker, stop)? else { break };
+            if let CycleEnd::Fault(f) = self.cycle(link, &tick) {
+                self.cycle_fault(link, f, stop);
+                break;
+            }
+        }
+        self.holding = false;
+        self.settling = false;
+        Ok(())
+    }
+
+    /// Runs the whole move: prepare, tick until the path ends (then settle), a fault or
+    /// `stop`, then disable every motor and stop the safety monitoring.
+    pub fn run(
+        &mut self,
+        link: &mut dyn HwLink,
+        ticker: &mut dyn Ticker,
+        stop: &AtomicBool,
+    ) -> Result<(), MoveError> {
+        self.prepare(link)?;
+        let t0 = match ticker.start() {
+            Ok(t0) => t0,
+            Err(e) => {
+                self.disable_all(link);
+                return Err(e.into());
+            }
+        };
+        self.set_t0(t0);
+        self.enter(if self.plan.mode == Mode::Home { Phase::Homing } else { Phase::Moving });
+        while let Some(tick) = self.next_tick(link, ticker, stop)? {
+            match self.cycle(link, &tick) {
+                CycleEnd::Continue => {}
+                CycleEnd::Done => {
+                    self.settle(link, ticker, stop)?;
+                    break;
+                }
+                CycleEnd::Fault(f) if f.kind == FaultKind::TrajectoryStarved => {
+                    self.hold(link, ticker, stop, f);
+                    break;
+                }
+                CycleEnd::Fault(f) => {
+                    self.cycle_fault(link, f, stop);
+                    break;
+                }
+            }
+        }
+        if !server_gone(self.fault) {
+            self.disable_all(link);
+            let _ = link.exchange(&HwMsg::request(MsgType::DisableSafety));
+        }
+        if self.fault.is_none() {
+            self.enter(Phase::Done);
+        }
+        Ok(())
+    }
+}
+
+/// True when a stop signal arrived or is pending for this process, waiting up to 1 s for one
+/// (off the loop's fast path: only after the hwserver shut down, the motors already off).
+/// The starter forwards a stop to the controller before the hwserver, so its signal is
+/// normally pending by then; the wait covers two signals sent at once (the kernel's
+/// parent-death signal), whose handler may run late on a loaded machine.
+fn stop_arrives(stop: &AtomicBool) -> bool {
+    for _ in 0..1_000 {
+        if stop.load(Ordering::Relaxed) || qmarc_timer::stop::arrived_or_pending() {
+            return true;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    stop.load(Ordering::Relaxed)
+}

@@ -1,0 +1,110 @@
+//! Unit tests of `sim`.
+
+use super::*;
+
+fn lockstep(n_motors: usize) -> SimDeltabot {
+    SimDeltabot::new(SimParams { n_motors, lockstep: true, ..SimParams::default() }).unwrap()
+}
+
+#[test]
+fn enabled_axis_approaches_kv_times_volts_with_lag_tau() {
+    let mut sim = lockstep(1);
+    sim.set_amp_enable(0, true).unwrap();
+    sim.write_dacs(&[8191, 0, 0, 0]).unwrap();
+    // One τ (4 ms = 10 periods): 1 − 1/e of the commanded 250 000 counts/s.
+    let mut inputs = Inputs::default();
+    for _ in 0..10 {
+        sim.read_inputs(&mut inputs).unwrap();
+    }
+    let target = 25_000.0 * 10.0;
+    let expected_v = target * (1.0 - (-1.0f64).exp());
+    assert!((sim.velocity(0) - expected_v).abs() < 1e-6 * target, "{}", sim.velocity(0));
+    // x(t) = target·(t − τ(1 − e^(−t/τ))) for t = τ.
+    let expected_x = target * (0.004 - 0.004 * (1.0 - (-1.0f64).exp()));
+    assert!((sim.position(0) - expected_x).abs() < 1e-6, "{}", sim.position(0));
+    assert_eq!(inputs.counters[0], COUNTER_ZERO + expected_x.floor() as u32);
+}
+
+#[test]
+fn disabled_axis_is_not_driven() {
+    let mut sim = lockstep(2);
+    sim.write_dacs(&[8191, -8191, 0, 0]).unwrap();
+    sim.advance(100_000_000);
+    assert_eq!(sim.position(0), 0.0);
+    assert_eq!(sim.position(1), 0.0);
+}
+
+#[test]
+fn counter_wraps_at_24_bits_and_loads() {
+    let mut sim = SimDeltabot::new(SimParams {
+        n_motors: 1,
+        lockstep: true,
+        start_counts: [8_388_608.0, 0.0, 0.0, 0.0],
+        top_switch_counts: -1e9,
+        bottom_switch_counts: 1e9,
+        ..SimParams::default()
+    });
+    assert!(sim.is_err(), "start beyond ±2^23 is refused");
+    sim = SimDeltabot::new(SimParams {
+        n_motors: 1,
+        lockstep: true,
+        start_counts: [8_388_000.0, 0.0, 0.0, 0.0],
+        top_switch_counts: -1e9,
+        bottom_switch_counts: 1e9,
+        ..SimParams::default()
+    });
+    let mut sim = sim.unwrap();
+    let mut inputs = Inputs::default();
+    sim.read_inputs(&mut inputs).unwrap();
+    assert_eq!(inputs.counters[0], (COUNTER_ZERO + 8_388_000) & COUNTER_MASK);
+    sim.load_counter(0, 0xff_fff0).unwrap();
+    sim.read_inputs(&mut inputs).unwrap();
+    assert_eq!(inputs.counters[0], 0xff_fff0);
+    sim.set_amp_enable(0, true).unwrap();
+    sim.write_dacs(&[100, 0, 0, 0]).unwrap();
+    for _ in 0..200 {
+        sim.read_inputs(&mut inputs).unwrap();
+    }
+    let moved = sim.position(0).floor() - 8_388_000.0;
+    assert!(moved > 16.0);
+    assert_eq!(inputs.counters[0], (0xff_fff0 + moved as u32) & COUNTER_MASK);
+    assert!(inputs.counters[0] < 0xff_fff0, "wrapped");
+}
+
+#[test]
+fn switches_trip_beyond_their_positions() {
+    let mut p = SimParams { n_motors: 2, lockstep: true, ..SimParams::default() };
+    p.start_counts[0] = -9_500.0;
+    p.start_counts[1] = 10_600.0;
+    let mut sim = SimDeltabot::new(p).unwrap();
+    let mut inputs = Inputs::default();
+    sim.read_inputs(&mut inputs).unwrap();
+    assert_eq!(inputs.limits, Status::limit_top(0) | Status::limit_bottom(1));
+    // Reversed orientation: top above bottom.
+    p.top_switch_counts = 100.0;
+    p.bottom_switch_counts = -100.0;
+    p.start_counts = [150.0, -150.0, 0.0, 0.0];
+    let mut sim = SimDeltabot::new(p).unwrap();
+    sim.read_inputs(&mut inputs).unwrap();
+    assert_eq!(inputs.limits, Status::limit_top(0) | Status::limit_bottom(1));
+}
+
+#[test]
+fn lockstep_advances_one_period_per_read() {
+    let mut sim = lockstep(1);
+    let mut inputs = Inputs::default();
+    for _ in 0..5 {
+        sim.read_inputs(&mut inputs).unwrap();
+        sim.write_dacs(&[1, 0, 0, 0]).unwrap();
+    }
+    assert_eq!(sim.now_ns(), 5 * 400_000);
+}
+
+#[test]
+fn invalid_parameters_are_named() {
+    let p = SimParams { tau_s: -1.0, ..SimParams::default() };
+    assert_eq!(
+        SimDeltabot::new(p).unwrap_err().to_string(),
+        "simulator parameter `tau_s` = -1 is invalid: finite and > 0"
+    );
+}
