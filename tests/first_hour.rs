@@ -137,6 +137,27 @@ fn hostile_inputs_are_bounded_errors_issue_10() {
         &[&config_arg(), "--deterministic", "run", zero[0], zero[1]],
         "/dev/zero:1:1: the line has more than 4096 bytes",
     );
+    // The size a device reports says nothing: a spline's knot file is bounded as it is read.
+    refused(
+        &[&config_arg(), "run", "--method=spline", "--knots=/dev/zero"],
+        "/dev/zero: the file has more than 67108864 bytes, the most a knot file may have",
+    );
+    // A value that becomes a duration is bounded (1e20 s panicked in `Duration`).
+    let waits = run.config_with(&[("trajectory.stream_wait_s", "1e20")]);
+    refused(
+        &[&format!("--config={}", waits.display()), "run"],
+        "trajectory.stream_wait_s: must be > 0 and ≤ 3600 s, found 1e20",
+    );
+    // The console reads its settings file with the same bound.
+    let console = run_with_timeout(
+        Command::new(bin_dir().join("qmarc")).arg("--config=/dev/zero").stdin(Stdio::null()),
+        TIMEOUT,
+    );
+    assert_eq!(console.code, Some(i32::from(exit::REFUSED)), "{}", console.stderr);
+    assert_eq!(
+        console.stderr.trim(),
+        "qmarc: error: /dev/zero: the file has more than 1048576 bytes, the most a settings file may have"
+    );
     let long = run.dir.join("long.txt");
     std::fs::write(&long, "2\n0 0 0 0\n1e20 5 5 5\n").unwrap();
     refused(
@@ -432,6 +453,14 @@ fn a_full_disk_never_loses_a_move_issue_10() {
 fn a_dead_controller_is_reported_with_what_is_known_issue_10() {
     let run = TestRun::new("deadctl");
     let out = run.out("out");
+    // The folder holds a good run's results: the dead run's summary must neither sit beside
+    // their data nor destroy them.
+    let good = run.starter(
+        &[&config_arg(), &out_arg(&out), "--deterministic", "step", "--duration=0.1"],
+        TIMEOUT,
+    );
+    assert_eq!(good.code, Some(0), "{}", good.stderr);
+    let good_summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
     let child = run.spawn_starter(&[
         &config_arg(),
         &out_arg(&out),
@@ -459,6 +488,10 @@ fn a_dead_controller_is_reported_with_what_is_known_issue_10() {
     assert!(r.stdout.contains(&format!("3 motors, {} cycles of 400 µs", s.cycles)), "{}", r.stdout);
     assert!(r.stdout.contains("no data files"), "no file that does not exist: {}", r.stdout);
     assert!(!r.stdout.contains("gather.csv"), "{}", r.stdout);
+    assert!(!out.join("gather.csv").exists(), "the good run's data beside the dead run's summary");
+    let previous = out.join(qmarc_report::output::PREVIOUS_DIR);
+    assert_eq!(std::fs::read_to_string(previous.join("summary.json")).unwrap(), good_summary);
+    assert!(previous.join("gather.csv").is_file() && previous.join("gather.m").is_file());
     run.assert_clean();
 }
 

@@ -1,7 +1,7 @@
 //! `[homing]`: how `home` moves (thesis 3.10.1.1).
 
 use crate::ConfigLoadError;
-use crate::source::{S, Source, positive, within};
+use crate::source::{S, Source, within};
 use serde::{Deserialize, Serialize};
 
 /// How homing moves.
@@ -17,6 +17,20 @@ pub struct HomingSettings {
     pub max_travel_counts: f64,
     /// Time each motor rests at home before the next one starts, s.
     pub settle_s: f64,
+}
+
+/// Largest homing distance, counts: what the 24-bit counters can measure.
+pub const MAX_HOMING_COUNTS: f64 = 8_388_608.0;
+
+impl HomingSettings {
+    /// The longest homing of one motor, s, whose home lies `home_offset_counts` from its
+    /// switch: away from a switch it starts on and back (twice the travel), off the switch at
+    /// the creep speed, to the offset, and the rest at home.
+    pub fn longest_s(&self, home_offset_counts: f64) -> f64 {
+        (2.0 * self.max_travel_counts + home_offset_counts) / self.velocity_counts_per_s
+            + self.clear_within_counts / self.creep_counts_per_s
+            + self.settle_s
+    }
 }
 
 impl Default for HomingSettings {
@@ -42,28 +56,39 @@ pub(crate) struct RawHoming {
 }
 
 impl RawHoming {
+    /// Where the homing speed is set (the file's start when it is not).
+    pub(crate) fn velocity_span(&self) -> std::ops::Range<usize> {
+        crate::source::span_of(&self.velocity_counts_per_s)
+    }
+
     pub(crate) fn check(&self, src: &Source<'_>) -> Result<HomingSettings, ConfigLoadError> {
         let d = HomingSettings::default();
-        let f = |v: &S<f64>, key: &str, default: f64| {
-            src.take(v, &format!("homing.{key}"), default, positive)
+        // Speeds of at least a count per second and distances within the counters' range:
+        // homing's duration is bounded (and checked against the longest move with the home
+        // offsets, `HomingSettings::longest_s`).
+        let speed = |v: &S<f64>, key: &str, default: f64| {
+            src.take(v, &format!("homing.{key}"), default, within(1.0, 1e7, "counts/s"))
+        };
+        let distance = |v: &S<f64>, key: &str, default: f64| {
+            src.take(v, &format!("homing.{key}"), default, within(1.0, MAX_HOMING_COUNTS, "counts"))
         };
         Ok(HomingSettings {
-            velocity_counts_per_s: f(
+            velocity_counts_per_s: speed(
                 &self.velocity_counts_per_s,
                 "velocity_counts_per_s",
                 d.velocity_counts_per_s,
             )?,
-            creep_counts_per_s: f(
+            creep_counts_per_s: speed(
                 &self.creep_counts_per_s,
                 "creep_counts_per_s",
                 d.creep_counts_per_s,
             )?,
-            clear_within_counts: f(
+            clear_within_counts: distance(
                 &self.clear_within_counts,
                 "clear_within_counts",
                 d.clear_within_counts,
             )?,
-            max_travel_counts: f(
+            max_travel_counts: distance(
                 &self.max_travel_counts,
                 "max_travel_counts",
                 d.max_travel_counts,

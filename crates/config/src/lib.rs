@@ -105,18 +105,23 @@ pub struct Settings {
 /// Largest settings file, bytes.
 pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
 
+/// Reads at most `limit` bytes of the file `path`: `Ok(None)` when it holds more (a device
+/// such as `/dev/zero` included, whatever its size says). Every file a user names is read
+/// through this, so no input can grow memory without bound.
+pub fn read_bounded(path: &Path, limit: u64) -> std::io::Result<Option<Vec<u8>>> {
+    use std::io::Read;
+    let mut raw = Vec::new();
+    std::fs::File::open(path)?.take(limit.saturating_add(1)).read_to_end(&mut raw)?;
+    Ok((raw.len() as u64 <= limit).then_some(raw))
+}
+
 /// Reads the settings file `path`, refusing more than [`MAX_CONFIG_BYTES`] (`/dev/zero`
 /// included) and text that is not UTF-8.
 pub fn read_config(path: &Path) -> Result<String, ConfigLoadError> {
-    use std::io::Read;
     let file = || path.to_path_buf();
-    let mut raw = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| f.take(MAX_CONFIG_BYTES + 1).read_to_end(&mut raw))
-        .map_err(|reason| ConfigLoadError::Read { file: file(), reason })?;
-    if raw.len() as u64 > MAX_CONFIG_BYTES {
-        return Err(ConfigLoadError::TooLarge { file: file(), limit: MAX_CONFIG_BYTES });
-    }
+    let raw = read_bounded(path, MAX_CONFIG_BYTES)
+        .map_err(|reason| ConfigLoadError::Read { file: file(), reason })?
+        .ok_or_else(|| ConfigLoadError::TooLarge { file: file(), limit: MAX_CONFIG_BYTES })?;
     String::from_utf8(raw).map_err(|e| ConfigLoadError::Read {
         file: file(),
         reason: std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error()),
@@ -184,6 +189,20 @@ impl RawFile {
             motors.push(g);
             safety.push(s);
         }
+        let homing = self.homing.check(src)?;
+        let longest: f64 = safety.iter().map(|s| homing.longest_s(s.home_offset_counts)).sum();
+        if longest > trajectory.max_duration_s {
+            return Err(src.invalid(
+                self.homing.velocity_span(),
+                "homing.velocity_counts_per_s",
+                format!(
+                    "homing could take {longest:.0} s, longer than the longest move \
+                     (trajectory.max_duration_s = {} s): raise the homing speeds or lower \
+                     max_travel_counts",
+                    trajectory.max_duration_s
+                ),
+            ));
+        }
         Ok(Settings {
             source: src.path.to_path_buf(),
             n_motors,
@@ -196,7 +215,7 @@ impl RawFile {
             gather,
             step,
             trajectory,
-            homing: self.homing.check(src)?,
+            homing,
             max_missed_in_row: self.safety.check(src, &hwserver.backend)?,
             sim,
             explicit: ExplicitTiming {

@@ -2,7 +2,7 @@
 //! homing offsets of each motor.
 
 use crate::ConfigLoadError;
-use crate::source::{S, Source, finite, non_negative, positive};
+use crate::source::{S, Source, finite, positive, within};
 use serde::{Deserialize, Serialize};
 use toml::Spanned;
 
@@ -134,7 +134,7 @@ pub(crate) fn check_motor(
             &r.home_offset_counts,
             &name("home_offset_counts"),
             d.home_offset_counts,
-            non_negative,
+            within(0.0, crate::homing::MAX_HOMING_COUNTS, "counts"),
         )?,
         top_direction: src.take(&r.top_direction, &name("top_direction"), -1, |v| {
             if *v == 1 || *v == -1 { Ok(()) } else { Err(format!("must be -1 or 1, found {v}")) }

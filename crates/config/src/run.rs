@@ -100,9 +100,20 @@ impl RunSpec {
 
     /// Reads a run written by [`RunSpec::write`].
     pub fn read(path: &Path) -> Result<RunSpec, RunSpecError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|reason| RunSpecError::Io { file: path.to_path_buf(), reason })?;
-        serde_json::from_str(&text)
+        let io = |reason| RunSpecError::Io { file: path.to_path_buf(), reason };
+        let too_large = || {
+            io(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "larger than {} bytes, the most a run file may have",
+                    crate::MAX_CONFIG_BYTES
+                ),
+            ))
+        };
+        let raw = crate::read_bounded(path, crate::MAX_CONFIG_BYTES)
+            .map_err(io)?
+            .ok_or_else(too_large)?;
+        serde_json::from_slice(&raw)
             .map_err(|e| RunSpecError::Format { file: path.to_path_buf(), reason: e.to_string() })
     }
 }

@@ -148,12 +148,22 @@ pub(crate) fn finite(v: &f64) -> Result<(), String> {
     if v.is_finite() { Ok(()) } else { Err(format!("must be a finite number, found {v}")) }
 }
 
+/// `x` as a person reads it: plain between 10⁻⁴ and 10⁷, in exponent notation beyond
+/// (`1e20`, `1e-300`).
+pub(crate) fn num(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-4..1e7).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 /// A finite number > 0.
 pub(crate) fn positive(v: &f64) -> Result<(), String> {
     if v.is_finite() && *v > 0.0 {
         Ok(())
     } else {
-        Err(format!("must be a finite number > 0, found {v}"))
+        Err(format!("must be a finite number > 0, found {}", num(*v)))
     }
 }
 
@@ -162,7 +172,21 @@ pub(crate) fn non_negative(v: &f64) -> Result<(), String> {
     if v.is_finite() && *v >= 0.0 {
         Ok(())
     } else {
-        Err(format!("must be a finite number ≥ 0, found {v}"))
+        Err(format!("must be a finite number ≥ 0, found {}", num(*v)))
+    }
+}
+
+/// A finite number > 0 and ≤ `hi` of `unit`: a value that becomes a duration or a count.
+pub(crate) fn positive_at_most(
+    hi: f64,
+    unit: &'static str,
+) -> impl FnOnce(&f64) -> Result<(), String> {
+    move |v| {
+        if v.is_finite() && *v > 0.0 && *v <= hi {
+            Ok(())
+        } else {
+            Err(format!("must be > 0 and ≤ {hi} {unit}, found {}", num(*v)))
+        }
     }
 }
 
@@ -176,7 +200,7 @@ pub(crate) fn within(
         if v.is_finite() && (lo..=hi).contains(v) {
             Ok(())
         } else {
-            Err(format!("must be {lo}‥{hi} {unit}, found {v}"))
+            Err(format!("must be {lo}‥{hi} {unit}, found {}", num(*v)))
         }
     }
 }

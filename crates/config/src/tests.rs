@@ -110,6 +110,34 @@ fn errors_name_file_line_column_and_field() {
     );
 }
 
+/// Issue 10, item 1: every number that becomes a duration or a count is bounded, so none
+/// can overflow or panic downstream (`stream_wait_s = 1e20` panicked in `Duration`).
+#[test]
+fn durations_and_counts_are_bounded_issue_10() {
+    let one = format!("[general]\nn_motors = 1\n{MOTOR}");
+    let check = |text: &str, expected: &str| check(&format!("{text}{one}"), expected);
+    check(
+        "[trajectory]\nstream_wait_s = 1e20\n",
+        "q.toml:2:17: trajectory.stream_wait_s: must be > 0 and ≤ 3600 s, found 1e20",
+    );
+    check(
+        "[homing]\ncreep_counts_per_s = 1e-300\n",
+        "q.toml:2:22: homing.creep_counts_per_s: must be 1‥10000000 counts/s, found 1e-300",
+    );
+    check(
+        "[homing]\nmax_travel_counts = 1e12\n",
+        "q.toml:2:21: homing.max_travel_counts: must be 1‥8388608 counts, found 1e12",
+    );
+    check(
+        &format!("{MOTOR}home_offset_counts = 1e9\n"),
+        "q.toml:7:22: motor[1].home_offset_counts: must be 0‥8388608 counts, found 1e9",
+    );
+    check(
+        "[trajectory]\nmax_duration_s = 10\n[homing]\nvelocity_counts_per_s = 1000\n",
+        "q.toml:4:25: homing.velocity_counts_per_s: homing could take 70 s, longer than the longest move (trajectory.max_duration_s = 10 s): raise the homing speeds or lower max_travel_counts",
+    );
+}
+
 #[test]
 fn overrides_are_checked() {
     let mut s = parse(&MOTOR.repeat(3)).unwrap();

@@ -1,6 +1,6 @@
 //! `[trajectory]`: the `run` move (thesis 3.12, A.2.3) and what holds for every path.
 
-use crate::source::{S, Source, non_negative, not_empty, one_of, positive, within};
+use crate::source::{S, Source, non_negative, not_empty, one_of, positive_at_most, within};
 use crate::{ConfigLoadError, Names};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -25,6 +25,9 @@ pub struct TrajectorySettings {
     /// long before disabling, s.
     pub settle_s: f64,
 }
+
+/// Longest wait for a stream's first knots, s: an hour.
+pub const MAX_STREAM_WAIT_S: f64 = 3_600.0;
 
 /// Default longest path, s: 24 h.
 pub const DEFAULT_MAX_DURATION_S: f64 = 86_400.0;
@@ -93,7 +96,7 @@ impl RawTrajectory {
                 &self.stream_wait_s,
                 "trajectory.stream_wait_s",
                 d.stream_wait_s,
-                positive,
+                positive_at_most(MAX_STREAM_WAIT_S, "s"),
             )?,
             starve_hold_ms: src.take(
                 &self.starve_hold_ms,

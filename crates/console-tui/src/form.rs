@@ -171,8 +171,7 @@ impl Form {
     /// moves will run. Fails only when the file cannot be read or is not TOML at all (it could
     /// not be edited then); invalid values load and show their errors in place.
     pub fn load_in(path: &Path, base: &Path) -> Result<Form, String> {
-        let original = std::fs::read_to_string(path)
-            .map_err(|e| format!("{}: cannot read the settings file: {e}", path.display()))?;
+        let original = qmarc_config::read_config(path).map_err(|e| e.to_string())?;
         let doc: DocumentMut = original.parse().map_err(|e| format!("{}: {e}", path.display()))?;
         let motor_tables = doc
             .get("motor")

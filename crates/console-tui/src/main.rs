@@ -58,9 +58,14 @@ fn terminal_gone() -> bool {
         && fds[0].revents().is_some_and(|r| r.intersects(gone))
 }
 
+/// The settings file cannot be opened: nothing can be done (exit code "refused").
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct Refused(String);
+
 fn run_console(args: &Args) -> anyhow::Result<Option<Quit>> {
     let workdir = std::env::current_dir().context("no working directory")?;
-    let form = Form::load_in(&args.config, &workdir).map_err(anyhow::Error::msg)?;
+    let form = Form::load_in(&args.config, &workdir).map_err(|e| anyhow::Error::new(Refused(e)))?;
     if !std::io::IsTerminal::is_terminal(&std::io::stdout()) {
         anyhow::bail!("the console needs a terminal; without one, use `qmarc home|step|run …`");
     }
@@ -188,7 +193,11 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             let _ = writeln!(std::io::stderr(), "qmarc: error: {e:#}");
-            ExitCode::from(qmarc_proto::exit::INTERNAL)
+            ExitCode::from(if e.is::<Refused>() {
+                qmarc_proto::exit::REFUSED
+            } else {
+                qmarc_proto::exit::INTERNAL
+            })
         }
     }
 }

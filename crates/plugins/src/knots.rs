@@ -56,12 +56,10 @@ pub enum KnotFileError {
         reason: String,
     },
     /// The file is larger than a knot file may be.
-    #[error("{file}: the file has {bytes} bytes, more than the {limit} a knot file may have")]
+    #[error("{file}: the file has more than {limit} bytes, the most a knot file may have")]
     TooLarge {
         /// The file.
         file: String,
-        /// Its size.
-        bytes: u64,
         /// [`MAX_KNOT_FILE_BYTES`].
         limit: u64,
     },
@@ -139,11 +137,14 @@ pub fn read_knot_file(path: &Path) -> Result<String, KnotFileError> {
     let file = path.display().to_string();
     let read_err =
         |e: std::io::Error| KnotFileError::Read { file: file.clone(), reason: e.to_string() };
-    let bytes = std::fs::metadata(path).map_err(read_err)?.len();
-    if bytes > MAX_KNOT_FILE_BYTES {
-        return Err(KnotFileError::TooLarge { file, bytes, limit: MAX_KNOT_FILE_BYTES });
+    let too_large = || KnotFileError::TooLarge { file: file.clone(), limit: MAX_KNOT_FILE_BYTES };
+    if std::fs::metadata(path).map_err(read_err)?.len() > MAX_KNOT_FILE_BYTES {
+        return Err(too_large());
     }
-    let raw = std::fs::read(path).map_err(read_err)?;
+    // The size a device reports (`/dev/zero`: 0) says nothing: the read is bounded too.
+    let raw = qmarc_config::read_bounded(path, MAX_KNOT_FILE_BYTES)
+        .map_err(read_err)?
+        .ok_or_else(too_large)?;
     text_of(&file, raw)
 }
 

@@ -172,11 +172,7 @@ fn read_offline_stream(
         .read_to_end(&mut raw)
         .map_err(|e| KnotFileError::Read { file: name.clone(), reason: e.to_string() })?;
     if raw.len() as u64 > MAX_KNOT_FILE_BYTES {
-        return Err(KnotFileError::TooLarge {
-            file: name,
-            bytes: raw.len() as u64,
-            limit: MAX_KNOT_FILE_BYTES,
-        });
+        return Err(KnotFileError::TooLarge { file: name, limit: MAX_KNOT_FILE_BYTES });
     }
     parse_offline(&name, &text_of(&name, raw)?, rules)
 }

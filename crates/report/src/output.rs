@@ -6,9 +6,14 @@
 //!   takes an exclusive lock on it ([`OutLock`]): a second run on the same folder is refused,
 //!   naming the run that holds it.
 //! - Earlier results are never removed first. The controller writes the new files into a
-//!   fresh folder inside (`.incoming-<pid>`), and only when every one is written renames them
-//!   over the old ones, `summary.json` last ([`write_set`]). A refused run writes nothing; a
-//!   failed write leaves the last good results as they were.
+//!   fresh folder inside (`.incoming-<pid>`), and only when every one is written puts them in
+//!   place, `summary.json` last ([`write_set`]). A refused run writes nothing; a failed write
+//!   leaves the last good results as they were.
+//! - The folder never mixes two runs' files. Before a new set goes in, the set there is
+//!   retired: a complete one (data and summary) is moved to `previous/` (replacing the one
+//!   there), an incomplete one (a summary without data: a run whose controller died, or whose
+//!   data a second Ctrl-C abandoned) is removed. So the last complete results are always in
+//!   the folder or in `previous/`.
 //! - If writing still fails after a move (a full disk), the data go to a rescue folder
 //!   ([`rescue_dir`]) and the message says where.
 
@@ -113,6 +118,7 @@ pub fn lock(dir: &Path) -> Result<OutLock, OutDirError> {
 pub fn check(dir: &Path, bytes: u64) -> Result<(), OutDirError> {
     std::fs::create_dir_all(dir)
         .map_err(|reason| OutDirError::Create { dir: dir.to_path_buf(), reason })?;
+    remove_dead_incoming(dir);
     let probe = dir.join(format!(".qmarc-probe-{}", std::process::id()));
     let written = std::fs::write(&probe, b"qmarc");
     let _ = std::fs::remove_file(&probe);
@@ -125,6 +131,19 @@ pub fn check(dir: &Path, bytes: u64) -> Result<(), OutDirError> {
         }
     }
     Ok(())
+}
+
+/// Removes the `.incoming-<pid>` folders of `dir` whose process is gone (a controller killed
+/// while it wrote its data): what they hold never became a result.
+fn remove_dead_incoming(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(pid) = name.to_str().and_then(|n| n.strip_prefix(".incoming-")) else { continue };
+        if pid.parse::<u32>().is_ok_and(|p| !Path::new(&format!("/proc/{p}")).exists()) {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
 }
 
 /// Bytes the data files of `rows` gathered rows of `n_motors` take at most: gather.csv and
@@ -204,6 +223,7 @@ pub fn write_set(dir: &Path, files: &[FileWriter<'_>]) -> Result<Vec<PathBuf>, W
         });
         result.map_err(|e| fail(dir.join(name), e))?;
     }
+    retire_current_set(dir).map_err(|e| fail(dir.join(PREVIOUS_DIR), e))?;
     let mut done = Vec::with_capacity(files.len());
     for (name, _) in files {
         let to = dir.join(name);
@@ -217,6 +237,47 @@ pub fn write_set(dir: &Path, files: &[FileWriter<'_>]) -> Result<Vec<PathBuf>, W
 /// Files of a move's data, in the output directory, in the order they are put in place
 /// (`summary.json` last: once it is there, the set is complete).
 pub const OUTPUT_FILES: [&str; 3] = ["gather.csv", "gather.m", "summary.json"];
+
+/// The folder inside an output folder that keeps the last complete set a newer one replaced.
+pub const PREVIOUS_DIR: &str = "previous";
+
+/// Makes room for a new set in `dir`: a complete set there (data and summary) is moved into
+/// `dir/previous/`, replacing the set that was there; the files of an incomplete one (a
+/// summary without its data) are removed, so `previous/` keeps the last complete results.
+fn retire_current_set(dir: &Path) -> std::io::Result<()> {
+    let present: Vec<&str> = OUTPUT_FILES.into_iter().filter(|f| dir.join(f).exists()).collect();
+    let complete = present.contains(&"gather.csv") && present.contains(&"summary.json");
+    if complete {
+        let previous = dir.join(PREVIOUS_DIR);
+        match std::fs::remove_dir_all(&previous) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
+            _ => {}
+        }
+        std::fs::create_dir(&previous)?;
+        for f in &present {
+            std::fs::rename(dir.join(f), previous.join(f))?;
+        }
+    } else {
+        for f in &present {
+            std::fs::remove_file(dir.join(f))?;
+        }
+    }
+    Ok(())
+}
+
+/// Writes `summary` alone into `dir` as a set ([`write_set`]): the summary of a run that has
+/// no data to write (its controller died), which must neither sit beside an earlier run's
+/// data nor destroy them.
+pub fn write_summary_set(dir: &Path, summary: &Summary) -> Result<PathBuf, WriteError> {
+    let json = |w: &mut dyn Write| {
+        serde_json::to_writer_pretty(&mut *w, summary).map_err(std::io::Error::other)?;
+        writeln!(w)
+    };
+    std::fs::create_dir_all(dir)
+        .map_err(|reason| WriteError { file: dir.to_path_buf(), reason })?;
+    let mut done = write_set(dir, &[("summary.json", &json)])?;
+    Ok(done.remove(0))
+}
 
 /// Writes the move's data files and `summary.json` into `dir` as one set
 /// ([`write_set`]): the previous results stay until all of them are written.
@@ -286,6 +347,56 @@ mod tests {
         let left: Vec<_> =
             std::fs::read_dir(&dir).unwrap().flatten().map(|e| e.file_name()).collect();
         assert_eq!(left.len(), 2, "no incoming folder left: {left:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Issue 10, item 6: a run that has only a summary (its controller died) neither sits
+    /// beside the previous run's data nor destroys them; the last complete set is kept in
+    /// `previous/`, and a second incomplete run does not push it out.
+    #[test]
+    fn a_new_set_retires_the_old_one_whole_issue_10() {
+        let dir = scratch("retire");
+        let text = |t: &'static str| move |w: &mut dyn Write| w.write_all(t.as_bytes());
+        let (csv, m, json) = (text("data 1"), text("octave 1"), text("summary 1"));
+        write_set(&dir, &[("gather.csv", &csv), ("gather.m", &m), ("summary.json", &json)])
+            .unwrap();
+        let lost = text("summary 2 (controller lost)");
+        write_set(&dir, &[("summary.json", &lost)]).unwrap();
+        let read = |p: &str| std::fs::read_to_string(dir.join(p)).ok();
+        assert_eq!(read("summary.json").as_deref(), Some("summary 2 (controller lost)"));
+        assert_eq!(read("gather.csv"), None, "no data of another run beside the summary");
+        assert_eq!(read("previous/gather.csv").as_deref(), Some("data 1"));
+        assert_eq!(read("previous/summary.json").as_deref(), Some("summary 1"));
+        let lost_again = text("summary 3 (controller lost)");
+        write_set(&dir, &[("summary.json", &lost_again)]).unwrap();
+        assert_eq!(read("summary.json").as_deref(), Some("summary 3 (controller lost)"));
+        assert_eq!(read("previous/summary.json").as_deref(), Some("summary 1"), "kept");
+        let (csv4, m4, json4) = (text("data 4"), text("octave 4"), text("summary 4"));
+        write_set(&dir, &[("gather.csv", &csv4), ("gather.m", &m4), ("summary.json", &json4)])
+            .unwrap();
+        assert_eq!(read("gather.csv").as_deref(), Some("data 4"));
+        assert_eq!(
+            read("previous/summary.json").as_deref(),
+            Some("summary 1"),
+            "an incomplete set never replaces the last complete one"
+        );
+        let (csv5, m5, json5) = (text("data 5"), text("octave 5"), text("summary 5"));
+        write_set(&dir, &[("gather.csv", &csv5), ("gather.m", &m5), ("summary.json", &json5)])
+            .unwrap();
+        assert_eq!(read("previous/gather.csv").as_deref(), Some("data 4"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_dead_runs_incoming_folder_is_removed_a_live_ones_kept() {
+        let dir = scratch("incoming");
+        let dead = dir.join(".incoming-2147483646"); // above pid_max: never a live process
+        let live = dir.join(format!(".incoming-{}", std::process::id()));
+        for d in [&dead, &live] {
+            std::fs::create_dir_all(d).unwrap();
+        }
+        check(&dir, 0).unwrap();
+        assert!(!dead.exists() && live.exists());
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -200,9 +200,8 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
             reached.map_or(0, |r| r.cycle),
             controller_lost_message(exit, hwserver, settings, reached),
         );
-        let path = out_dir.join("summary.json");
-        if let Err(e) = write_summary(&path, &lost) {
-            say!("qmarc-starter: cannot write {}: {e}", path.display());
+        if let Err(e) = qmarc_report::output::write_summary_set(&out_dir, &lost) {
+            say!("qmarc-starter: {e}");
         }
         summary = Some(lost);
     }
@@ -302,14 +301,6 @@ fn controller_lost_message(
         None => "the hwserver did not end".to_string(),
     };
     format!("{how}{at}; {motors}")
-}
-
-fn write_summary(path: &Path, s: &Summary) -> std::io::Result<()> {
-    let text = serde_json::to_string_pretty(s).map_err(std::io::Error::other)?;
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir)?;
-    }
-    std::fs::write(path, text + "\n")
 }
 
 fn main() -> ExitCode {

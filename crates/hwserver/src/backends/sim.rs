@@ -270,7 +270,8 @@ impl SimDeltabot {
     /// tmpfs (`/dev/shm`) so that a reboot clears it, as a power cycle clears the card.
     /// Nothing is kept when the file cannot be read (a fresh machine) or written.
     pub fn with_state_file(mut self, path: &std::path::Path) -> SimDeltabot {
-        if let Ok(text) = std::fs::read_to_string(path) {
+        let text = qmarc_config::read_bounded(path, 4096).ok().flatten();
+        if let Some(text) = text.and_then(|raw| String::from_utf8(raw).ok()) {
             let kept = text.strip_prefix("homed").map(|rest| rest.split_whitespace());
             for (m, flag) in kept.into_iter().flatten().enumerate().take(self.p.n_motors) {
                 if flag == "1" && !self.homed[m] {
