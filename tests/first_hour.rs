@@ -106,7 +106,10 @@ fn exit_codes_follow_the_table_issue_10() {
     let r = wait_with_timeout(child, STOPPED_WITHIN);
     assert_eq!(r.code, Some(i32::from(exit::INTERRUPTED)), "{}\n{}", r.stdout, r.stderr);
     let s = qmarc_tests::assert_aborted_with_motors_disabled(&out);
-    assert!(s.fault.unwrap().message.starts_with("aborted by SIGTERM"), "signals by name");
+    assert!(
+        s.fault.unwrap().message.starts_with("aborted by SIGINT"),
+        "the signal the user sent, by name"
+    );
     // The stop that ended the move does not cost its data.
     let (_, rows) = qmarc_tests::read_gather(&out);
     assert_eq!(rows.len() as u64, s.gathered_rows);
@@ -443,6 +446,30 @@ fn a_full_disk_never_loses_a_move_issue_10() {
     assert!(s.ok && s.files.iter().all(|f| f.starts_with(&rescue) && f.exists()), "{:?}", s.files);
     assert!(r.stdout.contains(&rescue.join("gather.csv").display().to_string()), "{}", r.stdout);
     let _ = std::fs::remove_dir_all(&rescue);
+    // The disk fills up and the rescue folder cannot be made either: the controller fails
+    // after its move without a summary, and the report still says the move was made.
+    std::fs::remove_file(&filler).unwrap();
+    let child = Command::new(bin_dir().join("qmarc-starter"))
+        .args(run.isolation_args())
+        .args([config_arg(), out_arg(&small), "--deterministic".into(), "step".into()])
+        .arg("--duration=1")
+        .env("TMPDIR", "/dev/null/no-folder-here")
+        .current_dir(workspace())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    let _ = std::fs::write(&filler, vec![0u8; 4 << 20]);
+    let r = wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(i32::from(exit::INTERNAL)), "{}\n{}", r.stdout, r.stderr);
+    assert!(
+        r.stdout.contains("qmarc-controller exited with code 1 (internal error) at cycle"),
+        "the move was made and ended: {}\n{}",
+        r.stdout,
+        r.stderr
+    );
+    assert!(!r.stderr.contains("no move was made"), "{}", r.stderr);
     run.assert_clean();
 }
 

@@ -394,3 +394,37 @@ fn gains_keep_their_loop_at_another_period_issue_9() {
     assert!(unscaled > 3.0 * at_400, "not rescaled: {unscaled} counts, {at_400} at 400 µs");
     run.assert_clean();
 }
+
+/// Issue 10 ("never lose data"): a stream longer than its gather buffer keeps its first
+/// `gather.stream_max_s`, and the summary says how many rows were not kept and what to raise.
+#[test]
+fn a_stream_longer_than_its_buffer_says_what_was_not_kept_issue_10() {
+    let run = TestRun::new("pvtcap");
+    let out = run.out("out");
+    let cfg = run.config_with(&[("stream_max_s", "0.5")]);
+    let args = [
+        format!("--config={}", cfg.display()),
+        format!("--out={}", out.display()),
+        "--deterministic".into(),
+        "run".into(),
+        "--method=pvt".into(),
+        "--knots=-".into(),
+    ];
+    let mut child = run.spawn_starter(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let writer = feed(child.stdin.take().unwrap(), pvt_lines(usize::MAX), true);
+    let r = wait_with_timeout(child, TIMEOUT);
+    writer.join().unwrap();
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    let s = read_summary(&out);
+    let (_, rows) = read_gather(&out);
+    // 0.5 s of the stream and the settle's 0.2 s, at 400 µs.
+    assert_eq!(rows.len(), 1_250 + 500);
+    let kept_all = s.cycles + 500;
+    let warning = format!(
+        "{} rows of the stream were not kept: the gather buffer holds gather.stream_max_s = 0.5 s",
+        kept_all - rows.len() as u64
+    );
+    assert!(s.warnings.iter().any(|w| w.starts_with(&warning)), "{:?}", s.warnings);
+    assert!(r.stdout.contains(&warning), "the table says so too: {}", r.stdout);
+    run.assert_clean();
+}

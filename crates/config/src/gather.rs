@@ -1,7 +1,7 @@
 //! `[gather]`: what is recorded every N-th cycle (thesis 3.4, 4.2), and where it goes.
 
 use crate::ConfigLoadError;
-use crate::source::{S, Source, not_empty};
+use crate::source::{S, Source, not_empty, within};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
@@ -14,11 +14,19 @@ pub struct GatherSettings {
     pub out_dir: PathBuf,
     /// Which fields go into the files (thesis 3.4: time, DAC, command, actual position).
     pub fields: GatherFields,
+    /// How much of a stream (a path of unknown length: PVT from a pipe or a FIFO) the buffer
+    /// holds, s; rows beyond are counted and reported, not kept.
+    pub stream_max_s: f64,
 }
 
 impl Default for GatherSettings {
     fn default() -> GatherSettings {
-        GatherSettings { every: 1, out_dir: PathBuf::from("out"), fields: GatherFields::default() }
+        GatherSettings {
+            every: 1,
+            out_dir: PathBuf::from("out"),
+            fields: GatherFields::default(),
+            stream_max_s: 60.0,
+        }
     }
 }
 
@@ -79,6 +87,7 @@ pub(crate) struct RawGather {
     every: S<i64>,
     out_dir: S<String>,
     fields: S<Vec<String>>,
+    stream_max_s: S<f64>,
 }
 
 impl RawGather {
@@ -93,6 +102,12 @@ impl RawGather {
             every: src.int(&self.every, "gather.every", d.every.into(), 1, 1_000_000)? as u32,
             out_dir: src.take(&self.out_dir, "gather.out_dir", out_dir, not_empty)?.into(),
             fields: GatherFields::from_names(names.iter().map(String::as_str)).unwrap_or_default(),
+            stream_max_s: src.take(
+                &self.stream_max_s,
+                "gather.stream_max_s",
+                d.stream_max_s,
+                within(0.001, crate::DEFAULT_MAX_DURATION_S, "s"),
+            )?,
         })
     }
 }

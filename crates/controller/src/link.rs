@@ -69,6 +69,9 @@ pub enum LinkConnectError {
         /// iceoryx2's error.
         reason: String,
     },
+    /// A stop signal arrived while waiting for the server.
+    #[error("a stop signal arrived while waiting for the hwserver")]
+    Stopped,
     /// The server did not appear in time.
     #[error("no hwserver at prefix `{prefix}` under {root} after {waited_ms} ms")]
     NoServer {
@@ -112,10 +115,13 @@ fn port_err(port: &'static str, e: impl std::fmt::Debug) -> LinkConnectError {
 
 impl IoxLink {
     /// Opens the link at `location` and waits up to `wait` for the hwserver to be listening.
+    /// With `stop`, a stop signal ends that wait (`Stopped`) and any later wait for a
+    /// response that does not come (checked at each deadline).
     pub fn connect(
         location: &IpcLocation,
         timeouts: LinkTimeouts,
         wait: Duration,
+        stop: Option<&'static AtomicBool>,
     ) -> Result<IoxLink, LinkConnectError> {
         let node = create_node(CONTROLLER_NODE, location)?;
         let started = std::time::Instant::now();
@@ -127,6 +133,9 @@ impl IoxLink {
                         && s.request_event.dynamic_config().number_of_listeners() > 0 =>
                 {
                     break s;
+                }
+                _ if stop.is_some_and(|s| s.load(Ordering::Relaxed)) => {
+                    return Err(LinkConnectError::Stopped);
                 }
                 Ok(_) | Err(_) if started.elapsed() < wait => {
                     std::thread::sleep(Duration::from_millis(2))
@@ -152,14 +161,7 @@ impl IoxLink {
             .listener_builder()
             .create()
             .map_err(|e| port_err("listener", e))?;
-        Ok(IoxLink { node, services, client, notifier, listener, timeouts, seq: 0, stop: None })
-    }
-
-    /// A late response is given up when `stop` is set (checked at each deadline): a stop
-    /// signal ends any wait for a hwserver that does not answer.
-    pub fn with_stop(mut self, stop: &'static AtomicBool) -> IoxLink {
-        self.stop = Some(stop);
-        self
+        Ok(IoxLink { node, services, client, notifier, listener, timeouts, seq: 0, stop })
     }
 
     /// True while the hwserver's node is alive: dead nodes are cleaned up first (liveness is

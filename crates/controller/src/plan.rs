@@ -4,7 +4,8 @@
 use qmarc_config::{GatherFields, Mode};
 use qmarc_proto::MAX_MOTORS;
 
-/// Samples gathered when a generator cannot say how long its path is.
+/// Samples gathered by default when a generator cannot say how long its path is (a
+/// stream): 60 s at 400 µs (`gather.stream_max_s`).
 pub const STREAM_GATHER_SAMPLES: u64 = 150_000;
 
 /// The limits a move is held to (thesis 3.10; PMAC Ixx11).
@@ -52,6 +53,8 @@ pub struct MovePlan {
     pub starve_hold_cycles: u64,
     /// When the path ends: cycles to hold its last command, loop closed, before disabling.
     pub settle_cycles: u64,
+    /// Samples the gather buffer holds for a path of unknown length (a stream).
+    pub stream_gather_samples: u64,
     /// Limits checked before and during the move.
     pub limits: MoveLimits,
     /// Refuse to move unless every motor's frame is homed.
@@ -73,6 +76,7 @@ impl MovePlan {
             deterministic: false,
             starve_hold_cycles: 0,
             settle_cycles: 0,
+            stream_gather_samples: STREAM_GATHER_SAMPLES,
             limits: MoveLimits::none(),
             require_homed: false,
             monitor_switches: true,

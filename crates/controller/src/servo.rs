@@ -10,7 +10,7 @@ use crate::fault::{Fault, FaultKind};
 use crate::gather::{Gather, GatherRow};
 use crate::law::{ServoInput, ServoLaw};
 use crate::link::{HwLink, LinkError};
-use crate::plan::{MovePlan, STREAM_GATHER_SAMPLES};
+use crate::plan::MovePlan;
 use crate::stats::{ErrorStats, TimingStats};
 use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
@@ -341,8 +341,8 @@ impl Servo {
         self.generator.sample(0, &mut self.cmd);
         self.law.reset(&self.cmd, &self.act);
         self.law_sample = 0;
-        let samples =
-            self.planned_samples.unwrap_or(STREAM_GATHER_SAMPLES) + self.plan.settle_cycles;
+        let samples = self.planned_samples.unwrap_or(self.plan.stream_gather_samples)
+            + self.plan.settle_cycles;
         crate::gather::check_budget(samples, self.plan.gather_every)?;
         self.gather = Gather::for_move(samples, self.plan.gather_every, self.plan.n_motors)
             .with_fields(self.plan.gather_fields);

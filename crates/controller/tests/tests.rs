@@ -141,7 +141,7 @@ fn over_iceoryx2_each_cycle_allocates_only_the_two_request_loans() {
     });
     // Deadlines far beyond any stall: a missed one would allocate (the liveness check).
     let timeouts = LinkTimeouts { deadline_ns: 1_000_000_000, give_up_ns: 5_000_000_000 };
-    let mut link = IoxLink::connect(&location, timeouts, Duration::from_secs(5)).unwrap();
+    let mut link = IoxLink::connect(&location, timeouts, Duration::from_secs(5), None).unwrap();
     let s = settings();
     let mut servo = step_servo(&s);
     let mut ticker = ManualTicker::new(400_000);
@@ -517,4 +517,73 @@ fn homing_in_process_finds_the_switches_and_presets_the_frame() {
         // The robot coasts a count or so between the two reads.
         assert!((after.data[m] - w).abs() <= 2.0, "{} vs {w}", after.data[m]);
     }
+}
+
+/// Issue 9, item 1: the loop tells the law how many servo periods a late cycle spans, so the
+/// real `PidFf` outputs after a stall what a punctual cycle would — no feed-forward kick.
+#[test]
+fn a_late_cycle_outputs_what_a_punctual_one_would_issue_9() {
+    use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
+    use std::cell::Cell;
+    use std::rc::Rc;
+
+    /// 17 counts per sample on motor 1.
+    struct Ramp;
+    impl TrajectoryGenerator for Ramp {
+        fn name(&self) -> &'static str {
+            "ramp"
+        }
+        fn start(&mut self, _: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+            Ok(())
+        }
+        fn samples(&self) -> Option<u64> {
+            Some(1_000)
+        }
+        fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+            cmd[0] = 17.0 * n as f64;
+            Sample::Ready
+        }
+    }
+    /// A motor exactly on its command (the test says where), recording the DAC code written.
+    struct OnCommand {
+        at: Rc<Cell<f64>>,
+        dac: Rc<Cell<i32>>,
+    }
+    impl HwLink for OnCommand {
+        fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, qmarc_controller::link::LinkError> {
+            let mut resp = req.response();
+            match req.msg_type() {
+                Ok(MsgType::ReadAllEncoders) => resp.data[0] = self.at.get(),
+                Ok(MsgType::WriteAllDacs) => self.dac.set(req.aux[0]),
+                _ => {}
+            }
+            Ok(resp)
+        }
+    }
+
+    let gains = qmarc_config::MotorGains { kp: 182_000.0, kvff: 119_000.0, ..Default::default() };
+    let law = qmarc_plugins::pidff::PidFf::new(&[gains]);
+    let plan = MovePlan::new(qmarc_config::Mode::Run, 1, 400_000);
+    let mut servo = Servo::new(plan, Box::new(Ramp), Box::new(law), Box::new(MockClock::new(0)));
+    let (at, dac) = (Rc::new(Cell::new(0.0)), Rc::new(Cell::new(0)));
+    let mut link = OnCommand { at: at.clone(), dac: dac.clone() };
+    let mut ticker = ManualTicker::new(400_000);
+    servo.prepare(&mut link).unwrap();
+    servo.set_t0(ticker.start().unwrap());
+    let mut cycle = |ticker: &mut ManualTicker| {
+        let tick = ticker.wait().unwrap();
+        at.set(17.0 * tick.index as f64); // no following error: only the feed-forward acts
+        assert_eq!(servo.cycle(&mut link, &tick), CycleEnd::Continue);
+        (tick.index, tick.missed, dac.get())
+    };
+    let mut punctual = (0, 0, 0);
+    for _ in 0..10 {
+        punctual = cycle(&mut ticker);
+    }
+    assert!(punctual.2 > 1_000, "the feed-forward drives the ramp: {punctual:?}");
+    ticker.inject_delay(50_000, 3); // three periods missed
+    let late = cycle(&mut ticker);
+    assert_eq!((late.0, late.1), (punctual.0 + 4, 3), "the late cycle skipped three samples");
+    assert_eq!(late.2, punctual.2, "a late cycle outputs what a punctual one would");
+    assert_eq!(cycle(&mut ticker).2, punctual.2, "and so does the next");
 }

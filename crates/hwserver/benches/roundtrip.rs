@@ -53,7 +53,7 @@ fn main() {
         move |rt| {
             let timeouts = LinkTimeouts { deadline_ns: 5 * PERIOD_NS, give_up_ns: 1_000_000_000 };
             let mut link =
-                IoxLink::connect(&loc, timeouts, Duration::from_secs(10)).expect("connect");
+                IoxLink::connect(&loc, timeouts, Duration::from_secs(10), None).expect("connect");
             let read = HwMsg::read_all_encoders();
             let write = HwMsg::write_all_dacs(&[0; 4]);
 

@@ -55,7 +55,7 @@ impl Server {
     /// Connects the controller's end of the link.
     pub fn connect(&self) -> IoxLink {
         let timeouts = LinkTimeouts { deadline_ns: 100_000_000, give_up_ns: 2_000_000_000 };
-        IoxLink::connect(&self.location, timeouts, Duration::from_secs(10)).expect("connect")
+        IoxLink::connect(&self.location, timeouts, Duration::from_secs(10), None).expect("connect")
     }
 
     /// Waits up to `timeout` for the process to end; its exit code and stderr.

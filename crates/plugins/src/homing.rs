@@ -514,4 +514,38 @@ mod tests {
         assert_eq!(end, Sample::Failed);
         assert_eq!(why.unwrap(), "homing motor 1: motor 2's bottom limit switch tripped");
     }
+
+    /// Issue 9, item 3: a motor homed already is watched too — its switch tripping while a
+    /// later motor homes (a cable caught, the arm pushed) ends the homing.
+    #[test]
+    fn a_homed_motors_switch_ends_the_homing_of_the_next_issue_9() {
+        let mut h = Homing::new(2, 0.0004, settings(), safety(300.0));
+        let mut act = [0.0; MAX_MOTORS];
+        let mut cmd = [0.0; MAX_MOTORS];
+        h.start(&act).unwrap();
+        for n in 0..200_000 {
+            let mut flags = [MotorFlags::default(); MAX_MOTORS];
+            for (f, &a) in flags.iter_mut().zip(&act).take(2) {
+                if a <= -200.0 {
+                    *f = MotorFlags(MotorFlags::TOP); // each motor's top switch
+                }
+            }
+            if h.motor == 1 && n % 1_000 == 999 {
+                flags[0] = MotorFlags(MotorFlags::TOP); // motor 1, home, bumped into its switch
+            }
+            h.observe(&act, &flags);
+            match h.sample(n, &mut cmd) {
+                Sample::Ready => act = cmd,
+                end => {
+                    assert_eq!(end, Sample::Failed);
+                    assert_eq!(
+                        h.failure().unwrap(),
+                        "homing motor 2: motor 1's top limit switch tripped"
+                    );
+                    return;
+                }
+            }
+        }
+        panic!("motor 1's switch went unnoticed while motor 2 homed");
+    }
 }

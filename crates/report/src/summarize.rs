@@ -22,7 +22,12 @@ pub fn summarize(
     let n = settings.n_motors;
     let mut warnings = rt.warnings.clone();
     if servo.gather().dropped() > 0 {
-        warnings.push(format!("{} gathered rows did not fit the buffer", servo.gather().dropped()));
+        warnings.push(format!(
+            "{} rows of the stream were not kept: the gather buffer holds gather.stream_max_s \
+             = {} s of a stream (raise it, or gather less often with gather.every)",
+            servo.gather().dropped(),
+            settings.gather.stream_max_s
+        ));
     }
     if let Some(v) = servo.end_velocity()
         && let Some(m) = (0..n).find(|&m| v[m].abs() > END_AT_REST_COUNTS_PER_S)

@@ -286,7 +286,7 @@ impl Summary {
     /// The summary the starter writes when the controller died before writing its own: what
     /// it knows (the motors, the cycles the move reached, why).
     pub fn controller_lost(
-        mode: Mode,
+        (mode, deterministic): (Mode, bool),
         n_motors: usize,
         period_us: u32,
         cycles: u64,
@@ -297,7 +297,7 @@ impl Summary {
             trajectory: String::new(),
             ok: false,
             degraded: false,
-            deterministic: false,
+            deterministic,
             fault: Some(FaultReport {
                 kind: FaultKind::ControllerLost,
                 motor: None,

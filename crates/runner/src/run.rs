@@ -94,6 +94,13 @@ impl RunError {
 /// read right after a homing preset the counters.
 type Moved = (Servo, RtStatus, Result<(), RunError>, Option<HwMsg>);
 
+/// The error of a run a stop signal ended before its move began.
+fn interrupted() -> RunError {
+    let signal =
+        qmarc_timer::stop::signal().map_or("a stop signal", qmarc_timer::stop::signal_name);
+    RunError::Interrupted { signal }
+}
+
 /// The registered generator `mode` uses with `settings`.
 pub fn generator_name(mode: Mode, settings: &Settings) -> &str {
     match mode {
@@ -118,9 +125,7 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
         if qmarc_timer::stop::requested()
             && stopped_at.get_or_insert_with(Instant::now).elapsed() > STOP_GRACE
         {
-            let signal =
-                qmarc_timer::stop::signal().map_or("a stop signal", qmarc_timer::stop::signal_name);
-            return Err(RunError::Interrupted { signal });
+            return Err(interrupted());
         }
         std::thread::sleep(Duration::from_millis(10));
     }
@@ -195,7 +200,10 @@ fn spawn_servo(
         let mut homed_read = None;
         let result = (|| -> Result<(), RunError> {
             let stop = qmarc_timer::stop::flag();
-            let mut link = IoxLink::connect(&location, timeouts, CONNECT_WAIT)?.with_stop(stop);
+            let mut link = match IoxLink::connect(&location, timeouts, CONNECT_WAIT, Some(stop)) {
+                Err(LinkConnectError::Stopped) => return Err(interrupted()),
+                link => link?,
+            };
             let moved = servo.run(&mut link, ticker.as_mut(), stop);
             if let (Ok(()), None, Some(home)) = (&moved, servo.fault(), servo.homed_frame()) {
                 homed_read = Some(preset_home(&mut link, &home, n_motors)?);
@@ -240,6 +248,11 @@ fn homing_report(servo: &Servo, after: Option<HwMsg>, n: usize) -> HomingReport 
     }
 }
 
+/// Samples the gather buffer holds for a stream: `gather.stream_max_s` of servo periods.
+pub fn stream_gather_samples(settings: &Settings) -> u64 {
+    (settings.gather.stream_max_s / settings.period_s()).ceil() as u64
+}
+
 /// The plan of `mode` with `settings`: the limits of the settings, software limits only in a
 /// homed frame (off when homing or with `--unhomed`), homing required unless homing or
 /// `--unhomed`, the hwserver's switch latch off while homing.
@@ -267,6 +280,7 @@ pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: b
         } else {
             (settings.trajectory.settle_s / settings.period_s()).round() as u64
         },
+        stream_gather_samples: stream_gather_samples(settings),
         limits,
         require_homed: !homing && !unhomed,
         monitor_switches: !homing,

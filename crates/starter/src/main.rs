@@ -126,7 +126,7 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     let planned = path.samples();
     drop(path);
     let settle = (settings.trajectory.settle_s / settings.period_s()).round() as u64;
-    let samples = planned.unwrap_or(qmarc_controller::plan::STREAM_GATHER_SAMPLES) + settle;
+    let samples = planned.unwrap_or(qmarc_runner::run::stream_gather_samples(settings)) + settle;
     check_budget(samples, settings.gather.every).map_err(refused)?;
     let out_dir = settings.gather.out_dir.clone();
     let rows = samples.div_ceil(u64::from(settings.gather.every));
@@ -189,12 +189,15 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     let controller = children.iter().find(|s| s.name == "qmarc-controller").and_then(|s| s.exit);
     let hwserver = children[0].exit;
     let mut summary = read_own_summary(&out_dir);
-    // A controller that died wrote nothing: say what is known, and what the hwserver did.
+    // A controller that died — killed, or failed once its move had begun (a panic, data it
+    // could not write anywhere) — wrote nothing: say what is known, and what the hwserver
+    // did. One that refused before anything moved has said why.
+    let began = reached.is_some_and(|r| r.phase > 0);
     if summary.is_none()
-        && let Some(exit @ Exit::Signal(_)) = controller
+        && let Some(exit) = controller.filter(|e| matches!(e, Exit::Signal(_)) || began)
     {
         let lost = Summary::controller_lost(
-            mode,
+            (mode, spec.deterministic),
             settings.n_motors,
             settings.period_us,
             reached.map_or(0, |r| r.cycle),
@@ -222,6 +225,13 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
         (Some(s), _) if s.ok && all_clean => exit::OK,
         (Some(s), _) if s.fault.as_ref().is_some_and(|f| f.kind == FaultKind::Aborted) => {
             exit::INTERRUPTED
+        }
+        // The move ran, but its controller failed after it (its data could not be written).
+        (Some(s), Some(Exit::Code(c)))
+            if c == i32::from(exit::INTERNAL)
+                && s.fault.as_ref().is_some_and(|f| f.kind == FaultKind::ControllerLost) =>
+        {
+            exit::INTERNAL
         }
         (Some(s), _) if s.fault.is_some() => exit::FAULT,
         (None, Some(Exit::Code(c))) if c == i32::from(exit::REFUSED) => exit::REFUSED,

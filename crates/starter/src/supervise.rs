@@ -107,7 +107,8 @@ pub fn send(child: &Child, sig: nix::sys::signal::Signal) {
 /// Waits until every child has ended. When one ends, each other gets its `term_after` to
 /// finish on its own (the controller notices a dead hwserver and writes its data, the
 /// hwserver's watchdog notices a dead controller), then SIGTERM, then after its `kill_after`
-/// SIGKILL. A stop request (`stop`) forwards SIGTERM to all at once, in reverse order of
+/// SIGKILL. A stop request (`stop`) forwards its signal (SIGINT from Ctrl-C stays SIGINT, so
+/// the summaries name what the user did) to all at once, in reverse order of
 /// `children` (the controller before the hwserver: its signal is pending by the time the
 /// hwserver shuts down, so it reports an abort, not a hwserver fault). Each child's end is
 /// reported through `report` as it happens; `tick` runs every few ms meanwhile.
@@ -136,8 +137,11 @@ pub fn wait_all(
         forwarded |= forward;
         let alive = children.iter().zip(termed.iter_mut()).filter(|(s, _)| s.exit.is_none());
         for (s, termed) in alive.rev() {
-            let due = forward || first_exit.is_some_and(|t| t.elapsed() >= s.term_after);
-            if termed.is_none() && due {
+            if termed.is_none() && forward {
+                send(&s.child, forwarded_signal());
+                *termed = Some(Instant::now());
+            }
+            if termed.is_none() && first_exit.is_some_and(|t| t.elapsed() >= s.term_after) {
                 send(&s.child, Signal::SIGTERM);
                 *termed = Some(Instant::now());
             }
@@ -148,6 +152,13 @@ pub fn wait_all(
         tick();
         std::thread::sleep(Duration::from_millis(5));
     }
+}
+
+/// The stop signal this process received (SIGTERM when it is not known).
+fn forwarded_signal() -> nix::sys::signal::Signal {
+    qmarc_timer::stop::signal()
+        .and_then(|s| nix::sys::signal::Signal::try_from(s).ok())
+        .unwrap_or(nix::sys::signal::Signal::SIGTERM)
 }
 
 #[cfg(test)]

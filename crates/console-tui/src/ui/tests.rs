@@ -139,7 +139,8 @@ fn an_invalid_field_shows_its_message_in_place_and_blocks_the_actions() {
 }
 
 fn result(fault: bool) -> MoveResult {
-    let mut summary = Summary::controller_lost(qmarc_config::Mode::Step, 3, 400, 0, String::new());
+    let mut summary =
+        Summary::controller_lost((qmarc_config::Mode::Step, false), 3, 400, 0, String::new());
     summary.fault = fault.then(|| FaultReport {
         kind: FaultKind::LimitSwitch,
         motor: Some(1),
