@@ -10,7 +10,7 @@ fn a_missing_settings_file_is_named_and_the_terminal_untouched() {
         .args(["--config", "/nonexistent/qmarc.toml"])
         .output()
         .expect("run qmarc");
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(i32::from(qmarc_proto::exit::REFUSED)), "the exit table");
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/nonexistent/qmarc.toml: cannot read the settings file"), "{err}");
     // No escape sequence (alternate screen, raw mode) was written.
@@ -27,7 +27,7 @@ fn a_console_without_a_terminal_says_so() {
         .stdin(std::process::Stdio::null())
         .output()
         .expect("run qmarc");
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(i32::from(qmarc_proto::exit::INTERNAL)));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("the console needs a terminal"), "{err}");
     assert!(!out.stdout.contains(&0x1b), "escape sequences written");

@@ -153,6 +153,10 @@ impl Fault {
                 format!("motor {} hit its {side} limit switch", m + 1)
             }
             FaultKind::HwserverLost => match self.link {
+                Some(e @ LinkError::Lost { server_alive: true, .. }) => format!(
+                    "lost the hwserver: {e} (without PREEMPT_RT, host stalls can do that: raise \
+                     hwserver.response_timeout_periods)"
+                ),
                 Some(e) => format!("lost the hwserver: {e}"),
                 None => "lost the hwserver".to_string(),
             },
@@ -245,5 +249,32 @@ mod tests {
             "motor 1 hit its top limit switch at cycle 1234; all motors disabled"
         );
         assert_eq!(f.kind.to_string(), "limit_switch");
+    }
+
+    /// Issue 9, item 7: a timing fault that a host stall can cause says which setting to
+    /// raise; a dead hwserver does not (no setting helps).
+    #[test]
+    fn timing_faults_name_the_setting_to_raise_issue_9() {
+        let overrun = Fault { value: 300.0, limit: 250.0, ..Fault::new(FaultKind::Overrun, 9) };
+        assert!(overrun.message().starts_with(
+            "300 servo periods in a row went by without a cycle (limit 250: without PREEMPT_RT, \
+             host stalls of a few ms can do that; raise safety.max_missed_in_row) at cycle 9"
+        ));
+        let lost = |server_alive| {
+            Fault::from_link(LinkError::Lost { waited_ns: 100_000_000, server_alive }, 5).message()
+        };
+        assert!(
+            lost(true).starts_with(
+                "lost the hwserver: no response from the hwserver for 100.0 ms (server process \
+                 alive) (without PREEMPT_RT, host stalls can do that: raise \
+                 hwserver.response_timeout_periods) at cycle 5"
+            ),
+            "{}",
+            lost(true)
+        );
+        assert!(!lost(false).contains("raise"), "{}", lost(false));
+        let watchdog = Fault::from_status(Status::WATCHDOG, 3).unwrap().message();
+        assert!(watchdog.contains("raise the limit"), "{watchdog}");
+        assert!(watchdog.contains("hwserver.watchdog_periods"), "{watchdog}");
     }
 }

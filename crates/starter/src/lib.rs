@@ -45,14 +45,15 @@ pub fn run_file(prefix: &str) -> std::path::PathBuf {
     std::path::Path::new(qmarc_proto::service::SHM_DIR).join(format!("{prefix}run.json"))
 }
 
-/// True if a process whose command line mentions `needle` is running (the children of a
-/// starter carry its prefix in their arguments).
+/// True if a process other than this one whose command line mentions `needle` is running
+/// (the children of a starter carry its prefix in their arguments).
 fn any_process_mentions(needle: &str) -> bool {
     let Ok(entries) = std::fs::read_dir("/proc") else {
         return false;
     };
+    let me = std::process::id().to_string();
     entries.flatten().any(|e| {
-        e.file_name().to_str().is_some_and(|n| n.bytes().all(|b| b.is_ascii_digit()))
+        e.file_name().to_str().is_some_and(|n| n.bytes().all(|b| b.is_ascii_digit()) && n != me)
             && std::fs::read(e.path().join("cmdline"))
                 .is_ok_and(|c| c.windows(needle.len()).any(|w| w == needle.as_bytes()))
     })
@@ -90,6 +91,17 @@ pub fn remove_stale_files(root: &str) -> usize {
             location.remove_files()
         })
         .sum()
+}
+
+/// Removes what an earlier run with this run's own prefix (`--iox-prefix`) left when it
+/// died, if no other process uses the prefix now (a run still going is refused later by
+/// iceoryx2 itself, its services being in use). Returns how many files were removed.
+pub fn remove_own_stale_files(location: &IpcLocation) -> usize {
+    if any_process_mentions(&location.prefix) {
+        return 0;
+    }
+    remove_dead_nodes(location);
+    location.remove_files()
 }
 
 /// Lets iceoryx2 remove the resources of every dead node at `location`.

@@ -11,6 +11,7 @@ use qmarc_config::{RunSpec, Settings};
 use qmarc_controller::fault::FaultKind;
 use qmarc_controller::gather::check_budget;
 use qmarc_controller::progress::Progress;
+use qmarc_controller::servo::Phase;
 use qmarc_plugins::registry;
 use qmarc_proto::exit;
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
@@ -142,6 +143,9 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     let _lock = qmarc_report::output::lock(&out_dir).map_err(refused)?;
 
     remove_stale_files(&location.root);
+    if args.iox_prefix.is_some() {
+        qmarc_starter::remove_own_stale_files(&location);
+    }
     let stop = qmarc_timer::stop::install().map_err(internal)?;
     let progress = Progress::create(&Progress::path(&location.prefix)).ok();
     // The one settings value both children get, next to the run's shared memory.
@@ -192,7 +196,9 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
     // A controller that died — killed, or failed once its move had begun (a panic, data it
     // could not write anywhere) — wrote nothing: say what is known, and what the hwserver
     // did. One that refused before anything moved has said why.
-    let began = reached.is_some_and(|r| r.phase > 0);
+    let began = reached
+        .and_then(|r| qmarc_controller::servo::Phase::from_code(r.phase))
+        .is_some_and(|p| !matches!(p, Phase::Idle | Phase::Preparing));
     if summary.is_none()
         && let Some(exit) = controller.filter(|e| matches!(e, Exit::Signal(_)) || began)
     {
