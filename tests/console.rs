@@ -400,8 +400,7 @@ fn killing_the_console_during_a_move_stops_it_with_motors_disabled() {
         .map(|(pid, _)| pid)
         .collect();
     assert_eq!(console.len(), 1, "{:?}", processes_matching(&run.prefix));
-    // SAFETY: kill(2) on the console found a moment ago.
-    unsafe { libc::kill(console[0] as libc::pid_t, libc::SIGKILL) };
+    qmarc_tests::send_signal(console[0], nix::sys::signal::Signal::SIGKILL);
     // The starter gets SIGTERM from the kernel (its parent-death signal) and stops the move.
     wait_until_stopped(&run, "the move outlived the console");
     assert_aborted_with_motors_disabled(&run.out("out"));

@@ -250,8 +250,7 @@ fn without_realtime_privileges_the_run_is_degraded_and_says_so() {
         .args([format!("--config={}", config.display()), format!("--out={}", out.display())])
         .args(["--deterministic", "step", "--duration=0.2"])
         .current_dir(&run.dir);
-    // SAFETY: geteuid has no preconditions.
-    let root = unsafe { libc::geteuid() } == 0;
+    let root = nix::unistd::geteuid().is_root();
     if root {
         cmd.uid(65534).gid(65534); // nobody: no CAP_SYS_NICE, RLIMIT_RTPRIO 0
     }

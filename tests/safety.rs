@@ -251,8 +251,7 @@ fn kill_during_step(
         qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
     }
     std::thread::sleep(delay);
-    // SAFETY: kill(2) on a pid found a moment ago.
-    unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
+    qmarc_tests::send_signal(pid, nix::sys::signal::Signal::SIGKILL);
     wait_with_timeout(child, TIMEOUT)
 }
 
@@ -511,11 +510,9 @@ fn lock_step_runs_ride_out_host_stalls_issue_9() {
     for victim in ["qmarc-controller", "qmarc-hwserver"] {
         let procs = processes_matching(&run.prefix);
         let (pid, _) = procs.iter().find(|(_, c)| c.contains(victim)).expect(victim);
-        // SAFETY: kill(2) on a child of the run found a moment ago.
-        unsafe { libc::kill(*pid as libc::pid_t, libc::SIGSTOP) };
+        qmarc_tests::send_signal(*pid, nix::sys::signal::Signal::SIGSTOP);
         std::thread::sleep(Duration::from_millis(300));
-        // SAFETY: as above.
-        unsafe { libc::kill(*pid as libc::pid_t, libc::SIGCONT) };
+        qmarc_tests::send_signal(*pid, nix::sys::signal::Signal::SIGCONT);
         std::thread::sleep(Duration::from_millis(100));
     }
     let r = wait_with_timeout(child, TIMEOUT);
@@ -546,8 +543,7 @@ fn killing_the_controller_of_a_lock_step_run_trips_the_watchdog_at_once() {
     qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
     let procs = processes_matching(&run.prefix);
     let (pid, _) = procs.iter().find(|(_, c)| c.contains("qmarc-controller")).expect("controller");
-    // SAFETY: kill(2) on a child of the run found a moment ago.
-    unsafe { libc::kill(*pid as libc::pid_t, libc::SIGKILL) };
+    qmarc_tests::send_signal(*pid, nix::sys::signal::Signal::SIGKILL);
     let r = wait_with_timeout(child, TIMEOUT);
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     assert!(r.stderr.contains("its process is gone"), "{}", r.stderr);

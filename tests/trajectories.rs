@@ -277,9 +277,8 @@ fn pvt_stream_through_a_fifo_runs() {
     let run = TestRun::new("pvtfifo");
     let out = run.out("out");
     let fifo = run.dir.join("knots.fifo");
-    let c_path = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
-    // SAFETY: a valid NUL-terminated path.
-    assert_eq!(unsafe { libc::mkfifo(c_path.as_ptr(), 0o600) }, 0, "mkfifo");
+    nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRUSR | nix::sys::stat::Mode::S_IWUSR)
+        .expect("mkfifo");
     let child = run.spawn_starter(&[
         &config_arg(),
         &format!("--out={}", out.display()),

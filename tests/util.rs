@@ -226,12 +226,16 @@ impl TestRun {
 impl Drop for TestRun {
     fn drop(&mut self) {
         for (pid, _) in self.processes() {
-            // SAFETY: kill(2) on a pid found a moment ago; at worst it is already gone.
-            unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
+            send_signal(pid, nix::sys::signal::Signal::SIGKILL); // at worst it is already gone
         }
         self.location().remove_files();
         let _ = std::fs::remove_dir_all(&self.dir);
     }
+}
+
+/// Sends `sig` to process `pid` (found a moment ago; at worst it is gone and nothing happens).
+pub fn send_signal(pid: u32, sig: nix::sys::signal::Signal) {
+    let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), sig);
 }
 
 /// Waits until a move of the run with iceoryx2 prefix `prefix` is under way: its hwserver has

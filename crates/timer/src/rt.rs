@@ -54,34 +54,28 @@ impl RtStatus {
     }
 }
 
-fn last_errno() -> i32 {
-    std::io::Error::last_os_error().raw_os_error().unwrap_or(0)
-}
-
 /// Locks all current and future pages of the process in RAM.
 pub fn lock_memory() -> Result<(), i32> {
-    // SAFETY: plain syscall with constant flags.
-    let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
-    if rc == 0 { Ok(()) } else { Err(last_errno()) }
+    use nix::sys::mman::{MlockAllFlags, mlockall};
+    mlockall(MlockAllFlags::MCL_CURRENT | MlockAllFlags::MCL_FUTURE).map_err(|e| e as i32)
 }
 
 /// Raises the soft `RLIMIT_RTPRIO` to the hard limit, as cyclictest does, so that an
 /// unprivileged user with an `rtprio` entry in limits.conf gets SCHED_FIFO.
 pub fn raise_rtprio_limit() {
-    let mut lim = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
-    // SAFETY: `lim` is a valid rlimit to read into and write from.
-    unsafe {
-        if libc::getrlimit(libc::RLIMIT_RTPRIO, &mut lim) == 0 && lim.rlim_cur < lim.rlim_max {
-            lim.rlim_cur = lim.rlim_max;
-            libc::setrlimit(libc::RLIMIT_RTPRIO, &lim);
-        }
+    use nix::sys::resource::{Resource, getrlimit, setrlimit};
+    if let Ok((soft, hard)) = getrlimit(Resource::RLIMIT_RTPRIO)
+        && soft < hard
+    {
+        let _ = setrlimit(Resource::RLIMIT_RTPRIO, hard, hard);
     }
 }
 
 /// Makes the calling thread SCHED_FIFO at `priority`.
 pub fn set_current_thread_fifo(priority: i32) -> Result<(), i32> {
     let param = libc::sched_param { sched_priority: priority };
-    // SAFETY: pthread_self() is the calling thread; `param` is valid.
+    // SAFETY: pthread_self() is the calling thread; `param` is valid. (nix has no wrapper for
+    // pthread_setschedparam.)
     let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
     if rc == 0 { Ok(()) } else { Err(rc) }
 }
@@ -89,8 +83,7 @@ pub fn set_current_thread_fifo(priority: i32) -> Result<(), i32> {
 /// Sets the calling thread's timer slack (`PR_SET_TIMERSLACK`): 1 ns makes a SCHED_OTHER
 /// sleeper wake on time instead of up to 50 µs late.
 pub fn set_timer_slack_ns(ns: u64) {
-    // SAFETY: prctl with an integer argument.
-    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, ns as libc::c_ulong, 0, 0, 0) };
+    let _ = nix::sys::prctl::set_timerslack(ns as libc::c_ulong);
 }
 
 /// Touches `bytes` of stack (in 16 KiB frames) so that the loop never faults a stack page.

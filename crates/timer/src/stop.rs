@@ -24,18 +24,11 @@ pub fn count() -> u32 {
 
 /// Installs the stop handler for SIGTERM, SIGINT and SIGHUP. Returns the flag it sets.
 pub fn install() -> std::io::Result<&'static AtomicBool> {
-    for sig in [libc::SIGTERM, libc::SIGINT, libc::SIGHUP] {
-        // SAFETY: `act` is fully initialised; the handler is async-signal-safe (atomic stores).
-        let rc = unsafe {
-            let mut act: libc::sigaction = std::mem::zeroed();
-            act.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
-            act.sa_flags = libc::SA_RESTART;
-            libc::sigemptyset(&mut act.sa_mask);
-            libc::sigaction(sig, &act, std::ptr::null_mut())
-        };
-        if rc != 0 {
-            return Err(std::io::Error::last_os_error());
-        }
+    use nix::sys::signal::{SaFlags, SigAction, SigHandler, SigSet, Signal, sigaction};
+    let act = SigAction::new(SigHandler::Handler(on_signal), SaFlags::SA_RESTART, SigSet::empty());
+    for sig in [Signal::SIGTERM, Signal::SIGINT, Signal::SIGHUP] {
+        // SAFETY: the handler is async-signal-safe: it only stores to atomics.
+        unsafe { sigaction(sig, &act) }.map_err(std::io::Error::from)?;
     }
     Ok(&STOP)
 }
@@ -59,7 +52,7 @@ pub fn arrived_or_pending() -> bool {
     if requested() {
         return true;
     }
-    // SAFETY: sigpending(2) fills the set it is given; nix has no wrapper for it.
+    // SAFETY: sigpending(2) fills the set it is given (nix has no wrapper for sigpending).
     let pending = unsafe {
         let mut set: libc::sigset_t = std::mem::zeroed();
         libc::sigemptyset(&mut set);

@@ -8,7 +8,10 @@
 
 use crate::clock::{MockClock, monotonic_now_ns};
 use crate::{Clock, NS_PER_S};
-use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+use nix::errno::Errno;
+use nix::sys::time::TimeSpec;
+use nix::sys::timerfd::{ClockId, Expiration, TimerFd, TimerFlags, TimerSetTimeFlags};
+use nix::time::{ClockNanosleepFlags, clock_nanosleep};
 
 /// One wake of a [`Ticker`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -94,15 +97,8 @@ impl TickerKind {
     }
 }
 
-fn timespec(ns: u64) -> libc::timespec {
-    libc::timespec {
-        tv_sec: (ns / NS_PER_S) as libc::time_t,
-        tv_nsec: (ns % NS_PER_S) as libc::c_long,
-    }
-}
-
-fn errno() -> i32 {
-    std::io::Error::last_os_error().raw_os_error().unwrap_or(0)
+fn timespec(ns: u64) -> TimeSpec {
+    TimeSpec::new((ns / NS_PER_S) as libc::time_t, (ns % NS_PER_S) as libc::c_long)
 }
 
 /// Bookkeeping shared by the tickers: which tick is next and when it is due.
@@ -144,7 +140,7 @@ impl Schedule {
 #[derive(Debug)]
 pub struct TimerFdTicker {
     period_ns: u64,
-    fd: Option<OwnedFd>,
+    fd: Option<TimerFd>,
     schedule: Option<Schedule>,
 }
 
@@ -161,29 +157,12 @@ impl Ticker for TimerFdTicker {
     }
 
     fn start(&mut self) -> Result<u64, TickerError> {
-        // SAFETY: plain syscall; the returned fd is owned below.
-        let raw = unsafe { libc::timerfd_create(libc::CLOCK_MONOTONIC, libc::TFD_CLOEXEC) };
-        if raw < 0 {
-            return Err(TickerError::Arm(errno()));
-        }
-        // SAFETY: `raw` is a fresh fd nobody else owns.
-        let fd = unsafe { OwnedFd::from_raw_fd(raw) };
+        let arm = |e: Errno| TickerError::Arm(e as i32);
+        let fd = TimerFd::new(ClockId::CLOCK_MONOTONIC, TimerFlags::TFD_CLOEXEC).map_err(arm)?;
         let schedule = Schedule::starting(self.period_ns, monotonic_now_ns());
         let t0_ns = schedule.t0_ns;
-        let spec =
-            libc::itimerspec { it_interval: timespec(self.period_ns), it_value: timespec(t0_ns) };
-        // SAFETY: `fd` is a timerfd and `spec` a valid itimerspec.
-        let rc = unsafe {
-            libc::timerfd_settime(
-                fd.as_raw_fd(),
-                libc::TFD_TIMER_ABSTIME,
-                &spec,
-                std::ptr::null_mut(),
-            )
-        };
-        if rc < 0 {
-            return Err(TickerError::Arm(errno()));
-        }
+        let periodic = Expiration::IntervalDelayed(timespec(t0_ns), timespec(self.period_ns));
+        fd.set(periodic, TimerSetTimeFlags::TFD_TIMER_ABSTIME).map_err(arm)?;
         self.fd = Some(fd);
         self.schedule = Some(schedule);
         Ok(t0_ns)
@@ -193,26 +172,17 @@ impl Ticker for TimerFdTicker {
         let (Some(fd), Some(schedule)) = (&self.fd, &mut self.schedule) else {
             return Err(TickerError::NotStarted);
         };
-        let mut expirations: u64 = 0;
+        // The expirations since the last read, a native-endian u64 (timerfd_create(2)).
+        let mut expirations = [0u8; 8];
         loop {
-            // SAFETY: reading 8 bytes into a u64 from a timerfd.
-            let n = unsafe {
-                libc::read(
-                    fd.as_raw_fd(),
-                    (&mut expirations as *mut u64).cast(),
-                    std::mem::size_of::<u64>(),
-                )
-            };
-            if n == 8 {
-                break;
+            match nix::unistd::read(fd, &mut expirations) {
+                Ok(8) => break,
+                Err(Errno::EINTR) => continue,
+                Ok(_) => return Err(TickerError::Wait(Errno::EIO as i32)),
+                Err(e) => return Err(TickerError::Wait(e as i32)),
             }
-            let e = errno();
-            if n < 0 && e == libc::EINTR {
-                continue;
-            }
-            return Err(TickerError::Wait(e));
         }
-        Ok(schedule.service(monotonic_now_ns(), expirations))
+        Ok(schedule.service(monotonic_now_ns(), u64::from_ne_bytes(expirations)))
     }
 }
 
@@ -248,19 +218,14 @@ impl Ticker for NanosleepTicker {
         };
         let due = timespec(schedule.due_ns(schedule.next_index));
         loop {
-            // SAFETY: `due` is a valid timespec; no remaining-time output with TIMER_ABSTIME.
-            let rc = unsafe {
-                libc::clock_nanosleep(
-                    libc::CLOCK_MONOTONIC,
-                    libc::TIMER_ABSTIME,
-                    &due,
-                    std::ptr::null_mut(),
-                )
-            };
-            match rc {
-                0 => break,
-                libc::EINTR => continue,
-                e => return Err(TickerError::Wait(e)),
+            match clock_nanosleep(
+                nix::time::ClockId::CLOCK_MONOTONIC,
+                ClockNanosleepFlags::TIMER_ABSTIME,
+                &due,
+            ) {
+                Ok(_) => break,
+                Err(Errno::EINTR) => continue,
+                Err(e) => return Err(TickerError::Wait(e as i32)),
             }
         }
         let woke_ns = monotonic_now_ns();
