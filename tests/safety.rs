@@ -327,13 +327,39 @@ fn killing_the_controller_during_a_move_trips_the_hwserver_watchdog_within_its_b
 #[test]
 fn killing_the_controller_before_the_move_stops_the_hwserver() {
     let run = TestRun::new("killctl0");
-    let cfg = qmarc_tests::default_config();
-    let r = kill_during_step(&run, &cfg, &["--deterministic"], "qmarc-controller", Duration::ZERO);
+    // The controller waits for its knots from a FIFO nobody writes: it is certainly before
+    // its move when it is killed, however loaded the machine (a step would race ahead).
+    let knots = run.dir.join("knots.fifo");
+    nix::unistd::mkfifo(&knots, nix::sys::stat::Mode::S_IRUSR | nix::sys::stat::Mode::S_IWUSR)
+        .unwrap();
+    let child = run.spawn_starter(&[
+        &arg("config", qmarc_tests::default_config().display()),
+        &arg("out", run.out("out").display()),
+        "--deterministic",
+        "run",
+        "--method=pvt",
+        &arg("knots", knots.display()),
+    ]);
+    let deadline = Instant::now() + TIMEOUT;
+    let pid = loop {
+        let procs = processes_matching(&run.prefix);
+        if let Some((pid, _)) = procs.iter().find(|(_, c)| c.contains("qmarc-controller")) {
+            break *pid;
+        }
+        assert!(Instant::now() < deadline, "the controller did not start");
+        std::thread::sleep(Duration::from_millis(2));
+    };
+    std::thread::sleep(Duration::from_millis(200));
+    qmarc_tests::send_signal(pid, nix::sys::signal::Signal::SIGKILL);
+    let r = wait_with_timeout(child, TIMEOUT);
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     let fault = read_summary(&run.out("out")).fault.expect("the starter's summary");
     assert_eq!(fault.kind.name(), "controller_lost");
     assert!(
-        fault.message.starts_with("qmarc-controller was killed by SIGKILL before the move began; "),
+        fault.message.starts_with(
+            "qmarc-controller was killed by SIGKILL at cycle 0 while preparing; the hwserver \
+             disabled the motors as it stopped"
+        ),
         "{}",
         fault.message
     );
@@ -365,7 +391,11 @@ fn killing_the_starter_at_the_start_and_near_the_end_stops_everything() {
         child.kill().unwrap();
         child.wait().unwrap();
         while !processes_matching(&run.prefix).is_empty() {
-            assert!(Instant::now() < deadline, "children outlived the starter ({delay_ms} ms)");
+            assert!(
+                Instant::now() < deadline,
+                "children outlived the starter ({delay_ms} ms):\n{}",
+                qmarc_tests::describe_processes(&run.prefix)
+            );
             std::thread::sleep(Duration::from_millis(10));
         }
         // If the move had begun, its summary says the motors were disabled.

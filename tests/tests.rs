@@ -4,6 +4,7 @@
 mod console;
 mod e2e;
 mod first_hour;
+mod hardware;
 mod safety;
 mod tidy;
 mod trajectories;

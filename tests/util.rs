@@ -287,6 +287,34 @@ pub fn processes_matching(needle: &str) -> Vec<(u32, String)> {
         .collect()
 }
 
+/// What the processes whose command line contains `needle` are doing, for a failure message:
+/// pid, state and where each thread waits in the kernel.
+pub fn describe_processes(needle: &str) -> String {
+    let read = |p: std::path::PathBuf| std::fs::read_to_string(p).unwrap_or_default();
+    processes_matching(needle)
+        .into_iter()
+        .map(|(pid, cmd)| {
+            let threads: Vec<String> = std::fs::read_dir(format!("/proc/{pid}/task"))
+                .into_iter()
+                .flatten()
+                .flatten()
+                .map(|t| {
+                    let stat = read(t.path().join("stat"));
+                    let state = stat.rsplit_once(')').map_or("?", |(_, r)| r.trim()).chars().next();
+                    format!(
+                        "{} {} in {}",
+                        read(t.path().join("comm")).trim(),
+                        state.unwrap_or('?'),
+                        read(t.path().join("wchan")).trim()
+                    )
+                })
+                .collect();
+            format!("{pid} {cmd}\n    {}", threads.join("\n    "))
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 /// Runs `cmd` to completion, capturing its output; kills it and panics after `timeout`.
 pub fn run_with_timeout(cmd: &mut Command, timeout: Duration) -> Finished {
     let child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("spawn");

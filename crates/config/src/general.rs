@@ -78,7 +78,12 @@ impl RawGeneral {
                 "general.gains_period_us",
                 d.gains_period_us,
             )?,
-            law: src.take(&self.law, "general.law", d.law, one_of(&names.laws, "servo law"))?,
+            law: src.take(
+                &self.law,
+                "general.law",
+                d.law,
+                one_of(if names.any_plugin { &[] } else { &names.laws }, "servo law"),
+            )?,
             counts_per_rev: src.take(
                 &self.counts_per_rev,
                 "general.counts_per_rev",

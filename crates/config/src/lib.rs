@@ -11,7 +11,7 @@
 //! ```
 //! use qmarc_config::{Names, Settings};
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let names = Names { laws: vec!["pidff"], methods: vec!["spline", "pvt"], backends: vec!["sim"] };
+//! let names = Names { laws: vec!["pidff"], methods: vec!["spline", "pvt"], backends: vec!["sim"], any_plugin: false };
 //! let table = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
 //! let s = Settings::parse("q.toml".as_ref(), &format!("[general]\nn_motors = 1\n{table}"), &names)?;
 //! assert_eq!((s.n_motors, s.period_us, s.hwserver.watchdog_periods), (1, 400, 250));
@@ -26,6 +26,7 @@ mod homing;
 mod hwserver;
 mod motor;
 mod run;
+mod s626;
 mod sim;
 mod source;
 mod step;
@@ -38,6 +39,7 @@ pub use homing::HomingSettings;
 pub use hwserver::{ExplicitTiming, HwServerSettings, TimingDefaults};
 pub use motor::{MotorGains, MotorSafety};
 pub use run::{Mode, RunSpec, RunSpecError};
+pub use s626::{S626_DIO_CHANNELS, S626Settings};
 pub use sim::{DEFAULT_SIM_STATE_FILE, SimSettings};
 pub use step::{MAX_STEP_COUNTS, StepSettings};
 pub use timer::{TimerMethod, TimerSettings};
@@ -58,6 +60,16 @@ pub struct Names {
     pub methods: Vec<&'static str>,
     /// Hardware backends (`hwserver.backend`, `--backend`).
     pub backends: Vec<&'static str>,
+    /// Accept any law and method name: for a process that runs none of them (the
+    /// hwserver's selftest), which cannot know the plug-ins' registry.
+    pub any_plugin: bool,
+}
+
+impl Names {
+    /// The names of a process that knows only the backends ([`Names::any_plugin`]).
+    pub fn backends_only(backends: Vec<&'static str>) -> Names {
+        Names { backends, any_plugin: true, ..Names::default() }
+    }
 }
 
 /// The checked settings.
@@ -94,6 +106,8 @@ pub struct Settings {
     pub hwserver: HwServerSettings,
     /// The simulator.
     pub sim: SimSettings,
+    /// The Sensoray 626.
+    pub s626: S626Settings,
     /// Gains of every `[[motor]]` table (at least `n_motors`, at most [`MAX_MOTORS`]).
     pub motors: Vec<MotorGains>,
     /// Limits and homing of every `[[motor]]` table.
@@ -150,6 +164,8 @@ struct RawFile {
     #[serde(default)]
     sim: sim::RawSim,
     #[serde(default)]
+    s626: s626::RawS626,
+    #[serde(default)]
     motor: Vec<Spanned<motor::RawMotor>>,
 }
 
@@ -165,6 +181,7 @@ impl RawFile {
         let step = self.step.check(src, trajectory.max_duration_s)?;
         let hwserver = self.hwserver.check(src, names)?;
         let sim = self.sim.check(src, n_motors)?;
+        let s626 = self.s626.check(src, n_motors, hwserver.backend == "s626")?;
         if self.motor.len() > MAX_MOTORS {
             return Err(src.invalid(
                 self.motor[MAX_MOTORS].span(),
@@ -223,6 +240,7 @@ impl RawFile {
                 max_missed_in_row: self.safety.sets_max_missed(),
             },
             hwserver,
+            s626,
             motors,
             safety,
         })
@@ -269,9 +287,40 @@ impl Settings {
         self.gains_period_us != self.period_us
     }
 
-    /// Encoder counts per radian of arm rotation: counts_per_rev · gear_ratio / 2π.
+    /// Encoder counts per motor revolution as the backend counts them: `[s626]
+    /// counts_per_rev` (1×) on the Sensoray 626, `general.counts_per_rev` otherwise.
+    pub fn counts_per_rev(&self) -> f64 {
+        if self.hwserver.backend == "s626" { self.s626.counts_per_rev } else { self.counts_per_rev }
+    }
+
+    /// Encoder counts per radian of arm rotation: counts per revolution · gear_ratio / 2π.
     pub fn counts_per_rad(&self) -> f64 {
-        self.counts_per_rev * self.gear_ratio / std::f64::consts::TAU
+        self.counts_per_rev() * self.gear_ratio / std::f64::consts::TAU
+    }
+
+    /// What the 626's wiring lacks for the motors in use, when it is the backend.
+    fn check_s626_wiring(&self, flag: &'static str) -> Result<(), ConfigLoadError> {
+        match self.s626.wiring_problem(self.n_motors) {
+            Some((key, message)) if self.hwserver.backend == "s626" => {
+                Err(ConfigLoadError::Override {
+                    flag,
+                    message: format!("s626.{key} in {}: {message}", self.source.display()),
+                })
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Overrides the 626's device (`--device`).
+    pub fn set_device(&mut self, device: &Path) -> Result<(), ConfigLoadError> {
+        if device.as_os_str().is_empty() {
+            return Err(ConfigLoadError::Override {
+                flag: "--device",
+                message: "must not be empty".into(),
+            });
+        }
+        self.s626.device = device.to_path_buf();
+        Ok(())
     }
 
     /// Overrides the servo period (`--period-us`).
@@ -314,7 +363,7 @@ impl Settings {
             });
         }
         self.n_motors = n;
-        Ok(())
+        self.check_s626_wiring(flag)
     }
 
     /// Overrides the hardware backend (`--backend`); the timing bounds the file does not set
@@ -337,7 +386,7 @@ impl Settings {
         if !self.explicit.max_missed_in_row {
             self.max_missed_in_row = d.max_missed_in_row;
         }
-        Ok(())
+        self.check_s626_wiring("--backend")
     }
 
     /// Overrides the knot file (`--knots`).
@@ -347,7 +396,7 @@ impl Settings {
 
     /// Overrides the trajectory method (`--method`).
     pub fn set_method(&mut self, method: &str, names: &Names) -> Result<(), ConfigLoadError> {
-        if !names.methods.contains(&method) {
+        if !names.any_plugin && !names.methods.contains(&method) {
             return Err(ConfigLoadError::Override {
                 flag: "--method",
                 message: format!(

@@ -210,13 +210,14 @@ pub(crate) fn not_empty<T: AsRef<str>>(v: &T) -> Result<(), String> {
     if v.as_ref().trim().is_empty() { Err("must not be empty".into()) } else { Ok(()) }
 }
 
-/// One of `names` (`what`: e.g. "servo law").
+/// One of `names` (`what`: e.g. "servo law"); any name that is not empty when `names` is
+/// empty (a process that does not know them: [`crate::Names::any_plugin`]).
 pub(crate) fn one_of<'a>(
     names: &'a [&'static str],
     what: &'static str,
 ) -> impl FnOnce(&String) -> Result<(), String> + 'a {
     move |v| {
-        if names.contains(&v.as_str()) {
+        if names.contains(&v.as_str()) || (names.is_empty() && !v.trim().is_empty()) {
             Ok(())
         } else {
             Err(format!("unknown {what} `{v}`; registered: {}", names.join(", ")))

@@ -6,7 +6,12 @@ use std::path::Path;
 
 /// The names the tests accept (the registries' at the time of writing).
 fn names() -> Names {
-    Names { laws: vec!["pidff"], methods: vec!["step", "spline", "pvt"], backends: vec!["sim"] }
+    Names {
+        laws: vec!["pidff"],
+        methods: vec!["step", "spline", "pvt"],
+        backends: vec!["sim", "s626"],
+        any_plugin: false,
+    }
 }
 
 fn shipped_path() -> PathBuf {
@@ -90,7 +95,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         "[bogus]\nx = 1\n",
-        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `motor`",
+        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `motor`",
     );
     check(
         "[trajectory]\nmethod = \"home\"\n",
@@ -258,6 +263,7 @@ fn the_shipped_file_states_the_defaults_issue_11() {
     );
     assert_eq!((&s.hwserver, s.max_missed_in_row), (&d.hwserver, d.max_missed_in_row));
     assert_eq!(SimSettings { start_counts: vec![], ..s.sim.clone() }, d.sim);
+    assert_eq!(s.s626, d.s626, "[s626]");
     assert!(s.sim.start_counts.iter().all(|&c| c == 0.0), "start at 0, the default");
 }
 
@@ -278,8 +284,7 @@ fn fault_injection_motors_are_one_based_or_none_issue_11() {
 /// set them.
 #[test]
 fn the_backend_chooses_the_timing_defaults() {
-    let mut names = names();
-    names.backends.push("s626");
+    let names = names();
     let mut s = Settings::parse(Path::new("q.toml"), &MOTOR.repeat(3), &names).unwrap();
     assert_eq!((s.hwserver.watchdog_periods, s.max_missed_in_row), (250, 250));
     s.set_backend("s626", &names).unwrap();
@@ -292,4 +297,49 @@ fn the_backend_chooses_the_timing_defaults() {
         s.set_backend("s7", &names).unwrap_err().to_string(),
         "--backend: unknown backend `s7`; available: sim, s626"
     );
+}
+
+/// Issue 12: the 626's wiring is checked where it is used — every motor with its channels,
+/// no DIO channel twice or reserved — naming the key; `--device` and `--backend` too.
+#[test]
+fn the_626_wiring_is_checked_when_it_is_the_backend_issue_12() {
+    let motors = MOTOR.repeat(3);
+    let on = |s626: &str| format!("[hwserver]\nbackend = \"s626\"\n[s626]\n{s626}{motors}");
+    check(
+        &on("enable_dio = [0, 1]\n"),
+        "q.toml:4:14: s626.enable_dio: 3 motors need 3 entries, found 2",
+    );
+    check(
+        &on("limit_top_dio = [9, 8, 13]\n"),
+        "q.toml:4:17: s626.limit_top_dio: DIO8 is reserved (s626.reserved_dio: the counters' index inputs)",
+    );
+    check(
+        &on("charge_pump_dio = 9\n"),
+        "q.toml:4:19: s626.charge_pump_dio: DIO9 is already s626.limit_top_dio",
+    );
+    check(
+        &on("dac_channels = [0, 1, 1]\n"),
+        "q.toml:4:16: s626.dac_channels: each motor needs a channel of its own, found [0, 1, 1]",
+    );
+    check(
+        &on("dac_sign = [1, 0, 1]\n"),
+        "q.toml:4:12: s626.dac_sign: entries must be 1 or -1, found 0",
+    );
+    check(
+        &on("enable_dio = [0, 1, 16]\n"),
+        "q.toml:4:14: s626.enable_dio: entries must be 0‥15, found 16",
+    );
+    // The sim ignores the 626's wiring; switching to the 626 checks it.
+    let text = format!("[s626]\nenable_dio = [0, 1]\n{motors}");
+    let mut s = parse(&text).unwrap();
+    let e = s.set_backend("s626", &names()).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "--backend: s626.enable_dio in q.toml: 3 motors need 3 entries, found 2"
+    );
+    let mut s = parse(&on("")).unwrap();
+    s.set_device(Path::new("/dev/comedi1")).unwrap();
+    assert_eq!(s.s626.device, Path::new("/dev/comedi1"));
+    assert_eq!(s.counts_per_rev(), 1024.0, "1× counting on the 626");
+    assert_eq!(parse(&motors).unwrap().counts_per_rev(), 4096.0);
 }

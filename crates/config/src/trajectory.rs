@@ -83,7 +83,7 @@ impl RawTrajectory {
                 &self.method,
                 "trajectory.method",
                 d.method,
-                one_of(&names.methods, "trajectory method"),
+                one_of(if names.any_plugin { &[] } else { &names.methods }, "trajectory method"),
             )?,
             knots: (!knots.is_empty()).then(|| PathBuf::from(knots)),
             start_tolerance_counts: src.take(

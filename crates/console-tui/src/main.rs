@@ -39,6 +39,12 @@ struct Args {
     /// Passed to qmarc-starter: iceoryx2 root directory.
     #[arg(long)]
     iox_root: Option<String>,
+    /// Passed to qmarc-starter: the hardware backend of the moves (`sim`, `s626`).
+    #[arg(long)]
+    backend: Option<String>,
+    /// Passed to qmarc-starter: the Sensoray 626's comedi device.
+    #[arg(long)]
+    device: Option<PathBuf>,
 }
 
 fn starter_next_to_me() -> PathBuf {
@@ -72,6 +78,8 @@ fn run_console(args: &Args) -> anyhow::Result<Option<Quit>> {
     let mut app = App::new(form, args.starter.clone().unwrap_or_else(starter_next_to_me), workdir);
     app.starter_args.extend(args.iox_prefix.iter().map(|p| format!("--iox-prefix={p}")));
     app.starter_args.extend(args.iox_root.iter().map(|r| format!("--iox-root={r}")));
+    app.starter_args.extend(args.backend.iter().map(|b| format!("--backend={b}")));
+    app.starter_args.extend(args.device.iter().map(|d| format!("--device={}", d.display())));
     if let Some(root) = &args.iox_root {
         app.iox_root = root.clone();
     }

@@ -587,3 +587,29 @@ fn a_late_cycle_outputs_what_a_punctual_one_would_issue_9() {
     assert_eq!(late.2, punctual.2, "a late cycle outputs what a punctual one would");
     assert_eq!(cycle(&mut ticker).2, punctual.2, "and so does the next");
 }
+
+/// Issue 12: with the Sensoray 626 backend (its instruction lists against the fake of the
+/// driver) the servo cycle — and the hardware server's side of it — allocates nothing either.
+#[test]
+fn the_626_backends_cycle_allocates_nothing_issue_12() {
+    let mut s = settings();
+    let names = qmarc_config::Names::backends_only(qmarc_hwserver::backends::names());
+    s.set_backend("s626", &names).unwrap();
+    s.set_device(std::path::Path::new("fake")).unwrap();
+    let card = qmarc_hwserver::backends::s626::S626::open(&s, false).unwrap();
+    let mut link = CoreLink(qmarc_hwserver::HwCore::new(Box::new(card)));
+    let mut servo = step_servo(&s);
+    let mut ticker = ManualTicker::new(400_000);
+    servo.prepare(&mut link).unwrap();
+    servo.set_t0(ticker.start().unwrap());
+    for _ in 0..10 {
+        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+    }
+    let before = allocations();
+    for _ in 0..2_000 {
+        let tick = ticker.wait().unwrap();
+        assert_eq!(servo.cycle(&mut link, &tick), CycleEnd::Continue);
+    }
+    assert_eq!(allocations() - before, 0, "allocations in 2000 cycles over the 626 backend");
+    assert!(link.0.position(0) > 100, "the fake card's motor followed the step");
+}

@@ -56,6 +56,7 @@ pub fn settings() -> Settings {
         laws: qmarc_plugins::registry::law_names(),
         methods: qmarc_plugins::registry::path_generator_names(),
         backends: qmarc_hwserver::backends::names(),
+        any_plugin: false,
     };
     Settings::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml"), &names)
         .unwrap()

@@ -36,7 +36,8 @@ pub struct Outputs {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum BackendOpenError {
-    /// The settings do not describe hardware this backend can drive.
+    /// The hardware cannot be used, or the settings do not describe hardware this backend
+    /// can drive: the message names what and says what to do.
     #[error("{0}")]
     Invalid(String),
     /// The device could not be opened.

@@ -47,9 +47,13 @@ pub struct MoveOptions {
     /// Move although the frame is not homed; software position limits are then off.
     #[arg(long, global = true)]
     pub unhomed: bool,
-    /// Hardware backend (default: `hwserver.backend`): `sim`, the simulated Deltabot.
+    /// Hardware backend (default: `hwserver.backend`): `sim`, the simulated Deltabot, or
+    /// `s626`, the Sensoray 626 through the kernel's comedi driver.
     #[arg(long, global = true)]
     pub backend: Option<String>,
+    /// The Sensoray 626's comedi device (default: `s626.device`, /dev/comedi0).
+    #[arg(long, global = true)]
+    pub device: Option<PathBuf>,
 }
 
 impl MoveOptions {
@@ -70,6 +74,9 @@ impl MoveOptions {
         }
         if let Some(b) = &self.backend {
             s.set_backend(b, names)?;
+        }
+        if let Some(d) = &self.device {
+            s.set_device(d)?;
         }
         Ok(s)
     }
@@ -159,10 +166,36 @@ mod tests {
 
     #[test]
     fn options_go_before_or_after_the_subcommand() {
-        let before =
-            T::parse_from(["x", "--out", "/tmp/o", "--period-us", "500", "step", "--size", "-250"]);
-        let after =
-            T::parse_from(["x", "step", "--size", "-250", "--out", "/tmp/o", "--period-us", "500"]);
+        let before = T::parse_from([
+            "x",
+            "--out",
+            "/tmp/o",
+            "--period-us",
+            "500",
+            "--backend",
+            "s626",
+            "--device",
+            "/dev/c1",
+            "step",
+            "--size",
+            "-250",
+        ]);
+        let after = T::parse_from([
+            "x",
+            "step",
+            "--size",
+            "-250",
+            "--out",
+            "/tmp/o",
+            "--period-us",
+            "500",
+            "--device",
+            "/dev/c1",
+            "--backend",
+            "s626",
+        ]);
+        assert_eq!(before.opts.device, Some(PathBuf::from("/dev/c1")));
+        assert_eq!(before.opts.backend.as_deref(), Some("s626"));
         assert_eq!(before.opts, after.opts);
         assert_eq!(before.command, after.command);
         assert_eq!(after.command, Command::Step(StepArgs { size: Some(-250), duration: None }));

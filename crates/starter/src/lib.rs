@@ -36,6 +36,7 @@ pub fn names() -> Names {
         laws: qmarc_plugins::registry::law_names(),
         methods: qmarc_plugins::registry::path_generator_names(),
         backends: qmarc_hwserver::backends::names(),
+        any_plugin: false,
     }
 }
 
@@ -168,7 +169,7 @@ mod tests {
         let n = names();
         assert_eq!(n.laws, ["pidff"]);
         assert_eq!(n.methods, ["step", "spline", "pvt"]);
-        assert_eq!(n.backends, ["sim"]);
+        assert_eq!(n.backends, ["sim", "s626"]);
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
         assert!(qmarc_config::Settings::load(&path, &n).is_ok());
     }

@@ -116,6 +116,9 @@ fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
         iox_root: location.root.clone(),
     };
     let settings = &spec.settings;
+    // The hardware: there, usable and as the settings describe it (a missing device fails
+    // here, at once, naming it).
+    qmarc_hwserver::backends::check(settings, spec.deterministic).map_err(refused)?;
 
     // The path: knot files are read and checked now (streams are the controller's to read:
     // it inherits standard input), and its data must fit the gather budget and the disk.

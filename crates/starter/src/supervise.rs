@@ -59,9 +59,15 @@ pub fn with_parent_death_signal(cmd: &mut Command) -> &mut Command {
     use nix::sys::signal::{Signal, raise};
     let parent = nix::unistd::getpid();
     // SAFETY: the closure runs between fork and exec and only makes async-signal-safe calls
-    // (prctl, getppid, raise).
+    // (sigaction, prctl, getppid, raise).
     unsafe {
         cmd.pre_exec(move || {
+            // Until exec the child runs with its parent's signal handlers: a stop signal that
+            // arrived now would set the parent's flag in the child's copy of memory and be
+            // lost, leaving a child whose parent is gone. With the default action it ends it.
+            for sig in [Signal::SIGTERM, Signal::SIGINT, Signal::SIGHUP] {
+                nix::sys::signal::signal(sig, nix::sys::signal::SigHandler::SigDfl)?;
+            }
             prctl::set_pdeathsig(Signal::SIGTERM)?;
             if nix::unistd::getppid() != parent {
                 raise(Signal::SIGTERM)?;

@@ -9,7 +9,9 @@ use qmarc_config::{ConfigLoadError, Mode, Names, RunSpec, Settings};
 use qmarc_proto::MAX_MOTORS;
 use qmarc_proto::service::IpcLocation;
 
+pub mod s626;
 pub mod sim;
+pub mod state;
 
 /// Opens a backend from the settings; the flag is lock-step (simulated) time.
 pub type OpenFn = fn(&Settings, bool) -> Result<Box<dyn Backend>, BackendOpenError>;
@@ -24,18 +26,30 @@ pub struct BackendEntry {
     /// Opens the hardware of the settings; `lockstep`: simulated time, where the backend has
     /// it (`--deterministic`).
     pub open: OpenFn,
-    /// A rig for the conformance suite, or `None` where none is at hand (a card whose device
-    /// no environment variable names).
+    /// Checks, without keeping or driving anything, that the settings' hardware is there and
+    /// usable: the starter runs it before it spawns anything, so a bad set-up fails at once.
+    pub check: fn(&Settings, bool) -> Result<(), BackendOpenError>,
+    /// A rig for the conformance suite, or `None` where none is at hand.
     pub rig: fn() -> Option<Box<dyn Rig>>,
 }
 
 /// Every backend.
-pub const BACKENDS: &[BackendEntry] = &[BackendEntry {
-    name: "sim",
-    description: "the simulated Deltabot: velocity-mode amplifiers, 24-bit counters, limit switches",
-    open: |s, lockstep| Ok(Box::new(sim::SimDeltabot::open(s, lockstep)?)),
-    rig: || Some(Box::new(sim::SimRig)),
-}];
+pub const BACKENDS: &[BackendEntry] = &[
+    BackendEntry {
+        name: "sim",
+        description: "the simulated Deltabot: velocity-mode amplifiers, 24-bit counters, limit switches",
+        open: |s, lockstep| Ok(Box::new(sim::SimDeltabot::open(s, lockstep)?)),
+        check: |s, lockstep| sim::SimDeltabot::open(s, lockstep).map(drop),
+        rig: || Some(Box::new(sim::SimRig)),
+    },
+    BackendEntry {
+        name: "s626",
+        description: "the Sensoray 626 through the kernel's comedi driver (--device /dev/comediN)",
+        open: |s, lockstep| Ok(Box::new(s626::S626::open(s, lockstep)?)),
+        check: s626::S626::check,
+        rig: || Some(Box::new(s626::FakeRig::default())),
+    },
+];
 
 /// The backend named `name`.
 pub fn backend(name: &str) -> Option<&'static BackendEntry> {
@@ -47,13 +61,22 @@ pub fn names() -> Vec<&'static str> {
     BACKENDS.iter().map(|b| b.name).collect()
 }
 
-/// Opens the backend the settings name.
-pub fn open(s: &Settings, lockstep: bool) -> Result<Box<dyn Backend>, BackendOpenError> {
-    let entry = backend(&s.hwserver.backend).ok_or_else(|| BackendOpenError::Unknown {
+/// The registry entry of the backend the settings name.
+fn entry_of(s: &Settings) -> Result<&'static BackendEntry, BackendOpenError> {
+    backend(&s.hwserver.backend).ok_or_else(|| BackendOpenError::Unknown {
         name: s.hwserver.backend.clone(),
         available: names().join(", "),
-    })?;
-    (entry.open)(s, lockstep)
+    })
+}
+
+/// Opens the backend the settings name.
+pub fn open(s: &Settings, lockstep: bool) -> Result<Box<dyn Backend>, BackendOpenError> {
+    (entry_of(s)?.open)(s, lockstep)
+}
+
+/// Checks the backend the settings name ([`BackendEntry::check`]).
+pub fn check(s: &Settings, lockstep: bool) -> Result<(), BackendOpenError> {
+    (entry_of(s)?.check)(s, lockstep)
 }
 
 /// A run of the server alone — for its tests, its benchmark and debugging by hand: the
@@ -66,7 +89,7 @@ pub fn standalone_run(
 ) -> Result<RunSpec, ConfigLoadError> {
     let table = "\n[[motor]]\nkp = 0.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
     let text = format!("{text}{}", table.repeat(MAX_MOTORS));
-    let names = Names { laws: vec!["pidff"], methods: vec![], backends: names() };
+    let names = Names::backends_only(names());
     Ok(RunSpec {
         settings: Settings::parse("standalone.toml".as_ref(), &text, &names)?,
         mode: Mode::Step,

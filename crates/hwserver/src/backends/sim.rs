@@ -270,14 +270,11 @@ impl SimDeltabot {
     /// tmpfs (`/dev/shm`) so that a reboot clears it, as a power cycle clears the card.
     /// Nothing is kept when the file cannot be read (a fresh machine) or written.
     pub fn with_state_file(mut self, path: &std::path::Path) -> SimDeltabot {
-        let text = qmarc_config::read_bounded(path, 4096).ok().flatten();
-        if let Some(text) = text.and_then(|raw| String::from_utf8(raw).ok()) {
-            let kept = text.strip_prefix("homed").map(|rest| rest.split_whitespace());
-            for (m, flag) in kept.into_iter().flatten().enumerate().take(self.p.n_motors) {
-                if flag == "1" && !self.homed[m] {
-                    self.homed[m] = true;
-                    self.axes[m].counter_offset = COUNTER_ZERO;
-                }
+        let kept = super::state::load_homed(path, self.p.n_motors);
+        for (m, _) in kept.iter().enumerate().take(self.p.n_motors).filter(|(_, k)| **k) {
+            if !self.homed[m] {
+                self.homed[m] = true;
+                self.axes[m].counter_offset = COUNTER_ZERO;
             }
         }
         self.state_file = Some(path.to_path_buf());
@@ -286,9 +283,7 @@ impl SimDeltabot {
 
     fn save_state(&self) {
         if let Some(path) = &self.state_file {
-            let flags: Vec<&str> =
-                self.homed[..self.p.n_motors].iter().map(|&h| if h { "1" } else { "0" }).collect();
-            let _ = std::fs::write(path, format!("homed {}\n", flags.join(" ")));
+            super::state::save_homed(path, &self.homed[..self.p.n_motors]);
         }
     }
 

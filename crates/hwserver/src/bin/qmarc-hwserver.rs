@@ -2,9 +2,13 @@
 //! prepared (`--settings FILE`, a [`qmarc_config::RunSpec`]); run by hand for debugging with a
 //! file from `qmarc-starter --print-settings`.
 //!
+//! `--selftest` (with `--backend s626 --device PATH`) checks a Sensoray 626 and times its
+//! instruction lists instead, enabling nothing.
+//!
 //! Exit codes ([`qmarc_proto::exit`]): 0 after an exit message or a stop signal (motors
-//! disabled), 2 (fault) when the watchdog fired (controller silent with motors enabled),
-//! 64 for a bad command line or run file, 1 on any other error.
+//! disabled), 2 (fault) when the watchdog fired (controller silent with motors enabled), 3
+//! when the hardware cannot be used, 64 for a bad command line or run file, 1 on any other
+//! error.
 
 use anyhow::Context;
 use clap::Parser;
@@ -27,15 +31,49 @@ use std::process::ExitCode;
 struct HwServerArgs {
     /// The run: settings, mode, iceoryx2 location (JSON, as `qmarc-starter --print-settings`
     /// writes it).
-    #[arg(long)]
-    settings: PathBuf,
+    #[arg(long, required_unless_present = "selftest")]
+    settings: Option<PathBuf>,
     /// Busy-poll for requests instead of blocking (only on an isolated core).
     #[arg(long)]
     spin: bool,
+    /// Check the card and time its instruction lists, enabling nothing: run it first on a
+    /// new PC (`--backend s626 --device /dev/comedi0 --selftest`).
+    #[arg(long, conflicts_with = "settings")]
+    selftest: bool,
+    /// Settings file (with --selftest).
+    #[arg(long, default_value = "config/qmarc.toml", requires = "selftest")]
+    config: PathBuf,
+    /// Hardware backend (with --selftest; default: `hwserver.backend`).
+    #[arg(long, requires = "selftest")]
+    backend: Option<String>,
+    /// The Sensoray 626's comedi device (with --selftest; default: `s626.device`).
+    #[arg(long, requires = "selftest")]
+    device: Option<PathBuf>,
+    /// Instruction lists of each kind to time (with --selftest).
+    #[arg(long, default_value_t = 10_000, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
+    count: u32,
+}
+
+/// `--selftest`: the settings file with the flags, then the card's check and timing.
+fn selftest(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
+    let names = qmarc_config::Names::backends_only(qmarc_hwserver::backends::names());
+    let refused = |e: anyhow::Error| (exit::REFUSED, e);
+    let mut s =
+        qmarc_config::Settings::load(&args.config, &names).map_err(|e| refused(e.into()))?;
+    if let Some(b) = &args.backend {
+        s.set_backend(b, &names).map_err(|e| refused(e.into()))?;
+    }
+    if let Some(d) = &args.device {
+        s.set_device(d).map_err(|e| refused(e.into()))?;
+    }
+    let report = qmarc_hwserver::selftest::run(&s, args.count).map_err(|e| refused(e.into()))?;
+    print!("{report}");
+    Ok(ExitCode::SUCCESS)
 }
 
 fn run(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
-    let spec = RunSpec::read(&args.settings).map_err(|e| (exit::USAGE, e.into()))?;
+    let Some(settings) = &args.settings else { return selftest(args) };
+    let spec = RunSpec::read(settings).map_err(|e| (exit::USAGE, e.into()))?;
     let s = &spec.settings;
     let internal = |e: anyhow::Error| (exit::INTERNAL, e);
     let backend = qmarc_hwserver::backends::open(s, spec.deterministic)

@@ -1,0 +1,354 @@
+//! [`FakeS626`]: the Sensoray 626 and its `s626` driver in process, following the driver's
+//! rules (`../shared/notes/s626-comedi.md`), for the tests and for trying the backend without
+//! a card (`--device fake`).
+//!
+//! - The subdevices of [`crate::s626::LAYOUT`]; devinfo says `s626`.
+//! - AO: `INSN_WRITE` stores the sample, the output is `sample − 0x1fff` sign-magnitude with
+//!   its magnitude clamped to `0x1fff`; `INSN_READ` reads back the last sample written.
+//! - Counters: 24 bits; `INSN_READ` returns the live count, `INSN_WRITE` preloads it.
+//!   `INSN_CONFIG` is refused (`EINVAL`), as the driver does for many values.
+//! - DIO: `INSN_BITS` writes `data[1]` under the mask `data[0]` into the output register and
+//!   returns in `data[1]` the state of every pin, a pin pulled to 0 V reading 1 (an output
+//!   written 1 drives its pin to 0 V; a switch closed to ground pulls an input low). The
+//!   driver's hazard is there too: `INSN_CONFIG` writes the direction mask (initially all
+//!   ones) into the output register, turning on the bank's other outputs — and is counted.
+//! - Errors on demand ([`FakeS626::fail_next`]): an errno, or a list cut short.
+//! - A plant, when motors are wired to it ([`FakeS626::wire`]): a velocity-mode amplifier per
+//!   motor, counting `counts_per_s_per_volt` × its DAC's volts while its enable output is on,
+//!   advancing one servo period per list that reads counters.
+//!
+//! Nothing here allocates after construction.
+
+use crate::device::{DevInfo, SubdInfo, Transport};
+use crate::list::InsnList;
+use crate::s626::{COUNTER_MASK, LAYOUT, SUBDEV_AO, SUBDEV_COUNTER, SUBDEV_DIO0, dac_volts};
+use crate::uapi::{INSN_BITS, INSN_CONFIG, INSN_READ, INSN_WRITE};
+use nix::errno::Errno;
+
+/// How a motor of the plant is wired.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wire {
+    /// Its DAC channel.
+    pub dac: u32,
+    /// Its counter channel.
+    pub counter: u32,
+    /// Its amplifier's enable output (DIO bank 0).
+    pub enable_dio: u32,
+    /// The output bit that enables it.
+    pub enable_bit: u32,
+    /// Counting speed per volt of command while enabled, counts/s.
+    pub counts_per_s_per_volt: f64,
+}
+
+/// A failure the next list meets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Failure {
+    /// The ioctl fails with this errno (nothing is done).
+    Errno(Errno),
+    /// Only the first `n` instructions complete.
+    Short(usize),
+}
+
+/// Most instructions of one list the fake remembers ([`FakeS626::last_list`]).
+pub const REMEMBERED: usize = 16;
+
+/// The fake card and driver.
+#[derive(Debug, Clone)]
+pub struct FakeS626 {
+    driver: &'static str,
+    layout: [SubdInfo; 6],
+    ao: [u32; 4],
+    dio_out: [u32; 3],
+    dio_dir: [u32; 3],
+    external_low: [u32; 3],
+    counters: [u32; 6],
+    residual: [f64; 6],
+    locked: u32,
+    fail: Option<Failure>,
+    runs: u64,
+    dio_configs: u64,
+    masks_written: u32,
+    last: [(u32, u32, u32); REMEMBERED],
+    last_len: usize,
+    plant: [Option<Wire>; 4],
+    period_s: f64,
+}
+
+impl Default for FakeS626 {
+    fn default() -> FakeS626 {
+        FakeS626::new()
+    }
+}
+
+impl FakeS626 {
+    /// A 626 as the driver leaves it after attach: DACs at 0 V, outputs off, counters at 0,
+    /// every switch input open (nothing pulls a pin low), no motor wired.
+    pub fn new() -> FakeS626 {
+        let layout = LAYOUT.map(|(_, kind, n_chan, maxdata)| SubdInfo { kind, n_chan, maxdata });
+        FakeS626 {
+            driver: crate::s626::DRIVER,
+            layout,
+            ao: [crate::s626::DAC_ZERO; 4],
+            dio_out: [0; 3],
+            dio_dir: [0xffff; 3],
+            external_low: [0; 3],
+            counters: [0; 6],
+            residual: [0.0; 6],
+            locked: 0,
+            fail: None,
+            runs: 0,
+            dio_configs: 0,
+            masks_written: 0,
+            last: [(0, 0, 0); REMEMBERED],
+            last_len: 0,
+            plant: [None; 4],
+            period_s: 400e-6,
+        }
+    }
+
+    /// The same, but its devinfo names `driver` (a device that is not a 626).
+    pub fn with_driver(mut self, driver: &'static str) -> FakeS626 {
+        self.driver = driver;
+        self
+    }
+
+    /// The same, with subdevice `idx` described as `info`.
+    pub fn with_subdevice(mut self, idx: usize, info: SubdInfo) -> FakeS626 {
+        self.layout[idx] = info;
+        self
+    }
+
+    /// Wires `motor` (0‥3) of the plant; the plant advances `period_s` per list that reads
+    /// counters.
+    pub fn wire(&mut self, motor: usize, wire: Wire, period_s: f64) {
+        self.plant[motor] = Some(wire);
+        self.period_s = period_s;
+    }
+
+    /// Sets whether something outside pulls DIO `chan` of bank 0 to 0 V (a switch closed to
+    /// ground) or leaves it open (a tripped normally-closed switch, a broken wire).
+    pub fn set_input_low(&mut self, chan: u32, low: bool) {
+        let bit = 1 << chan;
+        if low { self.external_low[0] |= bit } else { self.external_low[0] &= !bit }
+    }
+
+    /// Sets counter `chan` to `count` (24 bits).
+    pub fn set_counter(&mut self, chan: usize, count: u32) {
+        self.counters[chan] = count & COUNTER_MASK;
+    }
+
+    /// The next list meets `failure`.
+    pub fn fail_next(&mut self, failure: Failure) {
+        self.fail = Some(failure);
+    }
+
+    /// Lists run so far (one system call each on the real device).
+    pub fn runs(&self) -> u64 {
+        self.runs
+    }
+
+    /// `INSN_CONFIG` instructions on a DIO subdevice so far (the driver's hazard).
+    pub fn dio_configs(&self) -> u64 {
+        self.dio_configs
+    }
+
+    /// Every DIO bank 0 channel any `INSN_BITS` mask ever wrote.
+    pub fn masks_written(&self) -> u32 {
+        self.masks_written
+    }
+
+    /// `(insn, subdev, channel)` of the last list's instructions, in order.
+    pub fn last_list(&self) -> &[(u32, u32, u32)] {
+        &self.last[..self.last_len]
+    }
+
+    /// The volts DAC `chan` outputs now.
+    pub fn dac_volts(&self, chan: usize) -> f64 {
+        dac_volts(self.ao[chan])
+    }
+
+    /// Whether DIO `chan` of bank 0 is at 0 V now (an output written 1, or pulled low).
+    pub fn pin_low(&self, chan: u32) -> bool {
+        ((self.dio_out[0] | self.external_low[0]) >> chan) & 1 == 1
+    }
+
+    /// The output register of DIO bank 0.
+    pub fn outputs(&self) -> u32 {
+        self.dio_out[0]
+    }
+
+    /// Counter `chan` now.
+    pub fn counter(&self, chan: usize) -> u32 {
+        self.counters[chan]
+    }
+
+    /// The plant: one period of every wired motor.
+    fn advance(&mut self) {
+        for w in self.plant.iter().flatten() {
+            let on = (self.dio_out[0] >> w.enable_dio) & 1 == w.enable_bit;
+            if !on {
+                continue;
+            }
+            let c = w.counter as usize;
+            let counts =
+                w.counts_per_s_per_volt * dac_volts(self.ao[w.dac as usize]) * self.period_s
+                    + self.residual[c];
+            let whole = counts.trunc();
+            self.residual[c] = counts - whole;
+            self.counters[c] = self.counters[c].wrapping_add(whole as i64 as u32) & COUNTER_MASK;
+        }
+    }
+
+    /// One instruction (`data`: its samples).
+    fn execute(
+        &mut self,
+        insn: u32,
+        subdev: u32,
+        chan: u32,
+        data: &mut [u32],
+    ) -> Result<(), Errno> {
+        let info = self.layout.get(subdev as usize).ok_or(Errno::EINVAL)?;
+        if chan >= info.n_chan || data.is_empty() {
+            return Err(Errno::EINVAL);
+        }
+        let c = chan as usize;
+        match (subdev, insn) {
+            (SUBDEV_AO, INSN_WRITE) => self.ao[c] = data[0] & 0x3fff,
+            (SUBDEV_AO, INSN_READ) => data[0] = self.ao[c],
+            (SUBDEV_COUNTER, INSN_READ) => data[0] = self.counters[c],
+            (SUBDEV_COUNTER, INSN_WRITE) => {
+                self.counters[c] = data[0] & COUNTER_MASK;
+                self.residual[c] = 0.0;
+            }
+            (2..=4, INSN_BITS) if data.len() == 2 => {
+                let bank = (subdev - SUBDEV_DIO0) as usize;
+                let mask = data[0] & 0xffff;
+                self.dio_out[bank] = (self.dio_out[bank] & !mask) | (data[1] & mask);
+                if bank == 0 {
+                    self.masks_written |= mask;
+                }
+                data[1] = self.dio_out[bank] | self.external_low[bank];
+            }
+            (2..=4, INSN_CONFIG) => {
+                // s626_dio_insn_config: the direction mask goes into the output register.
+                let bank = (subdev - SUBDEV_DIO0) as usize;
+                match data[0] {
+                    0 => self.dio_dir[bank] &= !(1 << chan),
+                    1 => self.dio_dir[bank] |= 1 << chan,
+                    _ => return Err(Errno::EINVAL),
+                }
+                self.dio_out[bank] = self.dio_dir[bank];
+                self.dio_configs += 1;
+            }
+            _ => return Err(Errno::EINVAL),
+        }
+        Ok(())
+    }
+}
+
+impl Transport for FakeS626 {
+    fn devinfo(&mut self) -> Result<DevInfo, Errno> {
+        Ok(DevInfo { driver: self.driver.to_string(), board: "fake".into(), n_subdevs: 6 })
+    }
+
+    fn subdinfo(&mut self, n_subdevs: usize) -> Result<Vec<SubdInfo>, Errno> {
+        Ok(self.layout.iter().take(n_subdevs).copied().collect())
+    }
+
+    fn lock(&mut self, subdev: u32) -> Result<(), Errno> {
+        let bit = 1u32.checked_shl(subdev).ok_or(Errno::EINVAL)?;
+        if self.locked & bit != 0 {
+            return Err(Errno::EBUSY);
+        }
+        self.locked |= bit;
+        Ok(())
+    }
+
+    fn run(&mut self, list: &mut InsnList) -> Result<usize, Errno> {
+        self.runs += 1;
+        let limit = match self.fail.take() {
+            Some(Failure::Errno(e)) => return Err(e),
+            Some(Failure::Short(n)) => n.min(list.len()),
+            None => list.len(),
+        };
+        let reads_counters = (0..list.len())
+            .any(|i| list.insn(i).subdev == SUBDEV_COUNTER && list.insn(i).insn == INSN_READ);
+        if reads_counters {
+            self.advance();
+        }
+        self.last_len = list.len().min(REMEMBERED);
+        for i in 0..limit {
+            let (insn, subdev, chan) = {
+                let h = list.insn(i);
+                (h.insn, h.subdev, h.chanspec & 0xffff)
+            };
+            if i < REMEMBERED {
+                self.last[i] = (insn, subdev, chan);
+            }
+            self.execute(insn, subdev, chan, list.data_mut(i))?;
+        }
+        Ok(limit)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::list::Insn;
+
+    #[test]
+    fn configuring_one_dio_input_turns_on_the_other_outputs_of_its_bank() {
+        let mut fake = FakeS626::new();
+        let mut config = InsnList::new(&[Insn::one(INSN_CONFIG, SUBDEV_DIO0, 9)]);
+        config.data_mut(0)[0] = 0; // COMEDI_INPUT
+        fake.run(&mut config).unwrap();
+        assert_eq!(fake.outputs(), 0xffff & !(1 << 9), "15 outputs on: the hazard");
+        assert_eq!(fake.dio_configs(), 1);
+    }
+
+    #[test]
+    fn bits_write_under_the_mask_and_read_pins_pulled_low_as_one() {
+        let mut fake = FakeS626::new();
+        fake.set_input_low(9, true); // a closed switch to ground
+        let mut bits = InsnList::new(&[Insn::bits(SUBDEV_DIO0)]);
+        bits.data_mut(0).copy_from_slice(&[0b1011, 0b0011]);
+        assert_eq!(fake.run(&mut bits), Ok(1));
+        assert_eq!(fake.outputs(), 0b0011, "bit 3 written 0 under the mask");
+        assert_eq!(bits.data(0)[1], 0b0011 | 1 << 9);
+        bits.data_mut(0).copy_from_slice(&[0, 0]);
+        fake.run(&mut bits).unwrap();
+        assert_eq!(fake.outputs(), 0b0011, "a zero mask reads only");
+    }
+
+    #[test]
+    fn counters_wrap_at_24_bits_and_preload_with_write() {
+        let mut fake = FakeS626::new();
+        let mut list = InsnList::new(&[
+            Insn::one(INSN_WRITE, SUBDEV_COUNTER, 1),
+            Insn::one(INSN_READ, SUBDEV_COUNTER, 1),
+        ]);
+        list.data_mut(0)[0] = 0x0100_0005; // beyond 24 bits
+        fake.run(&mut list).unwrap();
+        assert_eq!(list.data(1)[0], 5);
+        let mut config = InsnList::new(&[Insn::one(INSN_CONFIG, SUBDEV_COUNTER, 1)]);
+        assert_eq!(fake.run(&mut config), Err(Errno::EINVAL));
+    }
+
+    #[test]
+    fn failures_come_on_demand() {
+        let mut fake = FakeS626::new();
+        let mut list = InsnList::new(&[
+            Insn::one(INSN_WRITE, SUBDEV_AO, 0),
+            Insn::one(INSN_WRITE, SUBDEV_AO, 1),
+        ]);
+        list.data_mut(0)[0] = 0x3000;
+        list.data_mut(1)[0] = 0x3000;
+        fake.fail_next(Failure::Short(1));
+        assert_eq!(fake.run(&mut list), Ok(1));
+        assert!(fake.dac_volts(0) > 4.0 && fake.dac_volts(1) == 0.0);
+        fake.fail_next(Failure::Errno(Errno::EIO));
+        assert_eq!(fake.run(&mut list), Err(Errno::EIO));
+        assert_eq!(fake.run(&mut list), Ok(2));
+        assert_eq!(fake.runs(), 3);
+    }
+}

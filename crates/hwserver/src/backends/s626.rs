@@ -1,0 +1,512 @@
+//! [`S626`]: the Sensoray 626 through the kernel's comedi `s626` driver (thesis A.4,
+//! `docs/hardware.md`, `../shared/notes/s626-comedi.md`).
+//!
+//! Per servo cycle two instruction lists, each one `COMEDI_INSNLIST` ioctl, built once at open
+//! and reused: the read list (every motor's counter, then the DIO bank with the switches) and
+//! the write list (every motor's DAC, then the DIO bank: amplifier enables and the charge
+//! pump, which toggles once per write). Nothing else touches the card during a move. DIO is
+//! only ever `INSN_BITS` (never `INSN_CONFIG`, which would switch on the bank's other outputs),
+//! and a write mask holds outputs only. DAC samples are computed around the exact zero
+//! `0x1fff`; counters are preset with `INSN_WRITE`. An amplifier is enabled only after a read
+//! and a write have both succeeded. Every way out zeroes all four DACs and drops every enable.
+//!
+//! `--device fake` drives [`FakeS626`] in process: the same lists against a fake of the driver
+//! with a velocity-mode plant, to try the backend without a card.
+
+use crate::backend::{Backend, BackendOpenError, HwFault, Inputs, Outputs};
+use crate::backends::state::{load_homed, save_homed};
+use qmarc_comedi::fake::{FakeS626, Wire};
+use qmarc_comedi::list::{Insn, InsnList};
+use qmarc_comedi::s626::{
+    COUNTER_MASK, SUBDEV_AO, SUBDEV_COUNTER, SUBDEV_DIO0, dac_sample, layout_problem,
+};
+use qmarc_comedi::uapi::{INSN_READ, INSN_WRITE};
+use qmarc_comedi::{Comedi, ComediOpenError, Transport};
+use qmarc_config::{S626Settings, Settings};
+use qmarc_proto::{COUNTER_ZERO, MAX_MOTORS, Status};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// The `--device` that drives the in-process fake of the card.
+pub const FAKE_DEVICE: &str = "fake";
+
+/// DAC channels of the card: all four are zeroed on every way out.
+const DAC_CHANNELS: u32 = 4;
+
+/// The wiring of the settings, per motor, resolved once.
+#[derive(Debug, Clone, Copy)]
+struct Wiring {
+    n_motors: usize,
+    dac: [u32; MAX_MOTORS],
+    dac_sign: [i32; MAX_MOTORS],
+    counter: [u32; MAX_MOTORS],
+    counter_sign: [i32; MAX_MOTORS],
+    enable: [u32; MAX_MOTORS],
+    enable_bit: u32,
+    top: [u32; MAX_MOTORS],
+    bottom: [u32; MAX_MOTORS],
+    closed_bit: u32,
+    pump: Option<u32>,
+}
+
+impl Wiring {
+    fn of(s: &S626Settings, n_motors: usize) -> Result<Wiring, BackendOpenError> {
+        if let Some((key, message)) = s.wiring_problem(n_motors) {
+            return Err(BackendOpenError::Invalid(format!("s626.{key}: {message}")));
+        }
+        let pick = |v: &[u32]| std::array::from_fn(|m| v.get(m).copied().unwrap_or(0));
+        let sign = |v: &[i32]| std::array::from_fn(|m| v.get(m).copied().unwrap_or(1));
+        Ok(Wiring {
+            n_motors,
+            dac: pick(&s.dac_channels),
+            dac_sign: sign(&s.dac_sign),
+            counter: pick(&s.counter_channels),
+            counter_sign: sign(&s.counter_sign),
+            enable: pick(&s.enable_dio),
+            enable_bit: s.enable_bit,
+            top: pick(&s.limit_top_dio),
+            bottom: pick(&s.limit_bottom_dio),
+            closed_bit: s.switch_closed_bit,
+            pump: s.charge_pump_dio,
+        })
+    }
+
+    /// The DIO channels the backend writes: the enables (and the charge pump).
+    fn enable_mask(&self) -> u32 {
+        self.enable[..self.n_motors].iter().fold(0, |m, &c| m | 1 << c)
+    }
+
+    /// The enable bits for `enabled`, under [`Wiring::enable_mask`].
+    fn enable_bits(&self, enabled: &[bool; MAX_MOTORS]) -> u32 {
+        (0..self.n_motors).fold(0, |bits, m| {
+            let on = if enabled[m] { self.enable_bit } else { 1 - self.enable_bit };
+            bits | on << self.enable[m]
+        })
+    }
+}
+
+/// The Sensoray 626 backend.
+pub struct S626 {
+    transport: Box<dyn Transport>,
+    device: String,
+    w: Wiring,
+    read: InsnList,
+    write: InsnList,
+    enables: InsnList,
+    safe: InsnList,
+    presets: Vec<InsnList>,
+    enabled: [bool; MAX_MOTORS],
+    dac: [i32; MAX_MOTORS],
+    pump_level: u32,
+    pump_running: bool,
+    read_ok: bool,
+    write_ok: bool,
+    homed: [bool; MAX_MOTORS],
+    state_file: Option<PathBuf>,
+}
+
+/// What an ioctl error or a short list becomes: a [`HwFault`] of operation `op`.
+fn ran(result: Result<usize, nix::errno::Errno>, len: usize, op: u8) -> Result<(), HwFault> {
+    match result {
+        Ok(n) if n == len => Ok(()),
+        Ok(n) => Err(HwFault { op, code: -(n as i32) - 1 }),
+        Err(e) => Err(HwFault { op, code: e as i32 }),
+    }
+}
+
+impl S626 {
+    /// The card of the settings `s` (`s626.device`; [`FAKE_DEVICE`] for the fake), checked to
+    /// be a 626 as its driver presents it, its subdevices locked for this process.
+    pub fn open(s: &Settings, lockstep: bool) -> Result<S626, BackendOpenError> {
+        if lockstep {
+            return Err(BackendOpenError::Invalid(
+                "--deterministic runs the simulated robot only: the 626 moves in real time".into(),
+            ));
+        }
+        let device = s.s626.device.display().to_string();
+        if device == FAKE_DEVICE {
+            let fake = fake_card(s);
+            return S626::with_transport(Box::new(fake), &device, &s.s626, s.n_motors, None)
+                .map(S626::all_homed);
+        }
+        let card = Comedi::open(&s.s626.device).map_err(open_error)?;
+        let state = s.s626.state_dir.join(format!("s626-{}.state", file_name(&s.s626.device)));
+        S626::with_transport(Box::new(card), &device, &s.s626, s.n_motors, Some(state))
+    }
+
+    /// Checks, without writing anything or keeping the card, that the settings' wiring
+    /// holds and that their device opens and is a 626 (the starter's check before it spawns
+    /// anything, so a bad set-up fails at once, naming the device).
+    pub fn check(s: &Settings, lockstep: bool) -> Result<(), BackendOpenError> {
+        if lockstep {
+            return S626::open(s, lockstep).map(drop);
+        }
+        Wiring::of(&s.s626, s.n_motors)?;
+        let device = s.s626.device.display().to_string();
+        if device == FAKE_DEVICE {
+            return Ok(());
+        }
+        let mut card = Comedi::open(&s.s626.device).map_err(open_error)?;
+        let io = |e: nix::errno::Errno| BackendOpenError::Device {
+            device: device.clone(),
+            reason: e.to_string(),
+        };
+        let info = card.devinfo().map_err(io)?;
+        let subs = card.subdinfo(info.n_subdevs).map_err(io)?;
+        match layout_problem(&device, &info, &subs) {
+            Some(problem) => Err(BackendOpenError::Invalid(problem)),
+            None => Ok(()),
+        }
+    }
+
+    /// The backend over `transport`, which must present a 626; the homed frame is read from
+    /// `state_file` (none: nothing homed, nothing kept).
+    pub fn with_transport(
+        mut transport: Box<dyn Transport>,
+        device: &str,
+        settings: &S626Settings,
+        n_motors: usize,
+        state_file: Option<PathBuf>,
+    ) -> Result<S626, BackendOpenError> {
+        let w = Wiring::of(settings, n_motors)?;
+        let io = |e: nix::errno::Errno| BackendOpenError::Device {
+            device: device.to_string(),
+            reason: e.to_string(),
+        };
+        let info = transport.devinfo().map_err(io)?;
+        let subs = transport.subdinfo(info.n_subdevs).map_err(io)?;
+        if let Some(problem) = layout_problem(device, &info, &subs) {
+            return Err(BackendOpenError::Invalid(problem));
+        }
+        for subdev in [SUBDEV_AO, SUBDEV_DIO0, SUBDEV_COUNTER] {
+            transport.lock(subdev).map_err(|e| BackendOpenError::Device {
+                device: device.to_string(),
+                reason: format!(
+                    "cannot lock subdevice {subdev} ({e}): another process uses the card"
+                ),
+            })?;
+        }
+        let homed = state_file.as_deref().map_or([false; MAX_MOTORS], |p| load_homed(p, n_motors));
+        Ok(S626 {
+            transport,
+            device: device.to_string(),
+            read: read_list(&w),
+            write: write_list(&w),
+            enables: InsnList::new(&[Insn::bits(SUBDEV_DIO0)]),
+            safe: safe_list(),
+            presets: (0..n_motors)
+                .map(|m| InsnList::new(&[Insn::one(INSN_WRITE, SUBDEV_COUNTER, w.counter[m])]))
+                .collect(),
+            w,
+            enabled: [false; MAX_MOTORS],
+            dac: [0; MAX_MOTORS],
+            pump_level: 0,
+            pump_running: true,
+            read_ok: false,
+            write_ok: false,
+            homed,
+            state_file,
+        })
+    }
+
+    fn all_homed(mut self) -> S626 {
+        self.homed = [true; MAX_MOTORS];
+        self
+    }
+
+    /// The comedi device the backend drives.
+    pub fn device(&self) -> &str {
+        &self.device
+    }
+
+    /// Runs the read list once (counters and switches): the selftest's unit of work.
+    pub fn run_read_list(&mut self) -> Result<(), HwFault> {
+        let mut inputs = Inputs::default();
+        self.read_inputs(&mut inputs)
+    }
+
+    /// Runs the write list once with every DAC at 0 V and every amplifier as it is (off in
+    /// the selftest): its other unit of work.
+    pub fn run_write_list(&mut self) -> Result<(), HwFault> {
+        self.write_dacs(&[0; MAX_MOTORS])
+    }
+
+    /// The counter sample of a raw 24-bit count, or the count of a sample, for `motor`'s
+    /// counting direction (the same map both ways).
+    fn oriented(&self, motor: usize, raw: u32) -> u32 {
+        if self.w.counter_sign[motor] < 0 { raw.wrapping_neg() & COUNTER_MASK } else { raw }
+    }
+}
+
+/// The read list: every motor's counter, then DIO bank 0 read (mask 0: nothing written).
+fn read_list(w: &Wiring) -> InsnList {
+    let mut items: Vec<Insn> =
+        (0..w.n_motors).map(|m| Insn::one(INSN_READ, SUBDEV_COUNTER, w.counter[m])).collect();
+    items.push(Insn::bits(SUBDEV_DIO0));
+    InsnList::new(&items)
+}
+
+/// The write list: every motor's DAC, then DIO bank 0 with the enables and the charge pump.
+fn write_list(w: &Wiring) -> InsnList {
+    let mut items: Vec<Insn> =
+        (0..w.n_motors).map(|m| Insn::one(INSN_WRITE, SUBDEV_AO, w.dac[m])).collect();
+    items.push(Insn::bits(SUBDEV_DIO0));
+    InsnList::new(&items)
+}
+
+/// The safe list: all four DACs at 0 V, then DIO bank 0 with every enable off.
+fn safe_list() -> InsnList {
+    let mut items: Vec<Insn> =
+        (0..DAC_CHANNELS).map(|c| Insn::one(INSN_WRITE, SUBDEV_AO, c)).collect();
+    items.push(Insn::bits(SUBDEV_DIO0));
+    let mut list = InsnList::new(&items);
+    for c in 0..DAC_CHANNELS as usize {
+        list.data_mut(c)[0] = dac_sample(0);
+    }
+    list
+}
+
+fn file_name(device: &Path) -> String {
+    device.file_name().map_or_else(|| "card".into(), |n| n.to_string_lossy().into_owned())
+}
+
+/// The open error of a device (its message names the device and says what to do).
+fn open_error(e: ComediOpenError) -> BackendOpenError {
+    BackendOpenError::Invalid(e.to_string())
+}
+
+/// The fake card of the settings ([`wired_fake`] with the simulated robot's amplifier gain in
+/// the 626's 1× counts).
+pub fn fake_card(s: &Settings) -> FakeS626 {
+    let kv = s.sim.kv * s.s626.counts_per_rev / s.counts_per_rev;
+    wired_fake(&s.s626, s.n_motors, kv, s.period_s())
+}
+
+/// A fake 626 wired as `w` says: a velocity-mode plant of `kv` counts/s per volt per motor
+/// advancing `period_s` per read, switches closed, counters at the homed frame's zero.
+pub fn wired_fake(w: &S626Settings, n_motors: usize, kv: f64, period_s: f64) -> FakeS626 {
+    let mut fake = FakeS626::new();
+    for m in 0..n_motors.min(MAX_MOTORS) {
+        let at = |v: &[u32]| v.get(m).copied().unwrap_or(0);
+        let wire = Wire {
+            dac: at(&w.dac_channels),
+            counter: at(&w.counter_channels),
+            enable_dio: at(&w.enable_dio),
+            enable_bit: w.enable_bit,
+            counts_per_s_per_volt: kv
+                * f64::from(w.dac_sign.get(m).copied().unwrap_or(1))
+                * f64::from(w.counter_sign.get(m).copied().unwrap_or(1)),
+        };
+        fake.wire(m, wire, period_s);
+        fake.set_counter(wire.counter as usize, COUNTER_ZERO);
+        for chan in [at(&w.limit_top_dio), at(&w.limit_bottom_dio)] {
+            fake.set_input_low(chan, w.switch_closed_bit == 1);
+        }
+    }
+    fake
+}
+
+/// A transport over a fake the conformance rig shares, to act on the world around the card.
+struct SharedFake(Arc<Mutex<FakeS626>>);
+
+impl SharedFake {
+    fn card(&self) -> std::sync::MutexGuard<'_, FakeS626> {
+        self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
+
+impl Transport for SharedFake {
+    fn devinfo(&mut self) -> Result<qmarc_comedi::DevInfo, nix::errno::Errno> {
+        self.card().devinfo()
+    }
+    fn subdinfo(&mut self, n: usize) -> Result<Vec<qmarc_comedi::SubdInfo>, nix::errno::Errno> {
+        self.card().subdinfo(n)
+    }
+    fn lock(&mut self, subdev: u32) -> Result<(), nix::errno::Errno> {
+        self.card().lock(subdev)
+    }
+    fn run(&mut self, list: &mut InsnList) -> Result<usize, nix::errno::Errno> {
+        self.card().run(list)
+    }
+}
+
+/// The 626's rig for the conformance suite: the backend over a fake of the driver wired as
+/// the thesis' robot (`[s626]` defaults), its switches and outputs seen from outside the card.
+#[derive(Default)]
+pub struct FakeRig {
+    fake: Arc<Mutex<FakeS626>>,
+    wiring: S626Settings,
+}
+
+impl FakeRig {
+    fn card(&self) -> std::sync::MutexGuard<'_, FakeS626> {
+        self.fake.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
+
+impl crate::conformance::Rig for FakeRig {
+    fn backend(&mut self, n_motors: usize, start_counts: f64) -> Box<dyn Backend> {
+        let w = &self.wiring;
+        let mut fake = wired_fake(w, n_motors, 25_000.0 / 4.0, 400e-6);
+        for &chan in &w.counter_channels[..n_motors] {
+            fake.set_counter(chan as usize, COUNTER_ZERO.wrapping_add(start_counts as i64 as u32));
+        }
+        self.fake = Arc::new(Mutex::new(fake));
+        let transport = Box::new(SharedFake(self.fake.clone()));
+        let card = S626::with_transport(transport, FAKE_DEVICE, w, n_motors, None)
+            .expect("the rig's card is a 626");
+        Box::new(card.all_homed())
+    }
+
+    fn trip_switch(&mut self, _core: &mut crate::HwCore, motor: usize, top: bool) {
+        let w = &self.wiring;
+        let chan = if top { w.limit_top_dio[motor] } else { w.limit_bottom_dio[motor] };
+        // A tripped normally-closed switch opens: nothing pulls its input low any more.
+        let closed_low = w.switch_closed_bit == 1;
+        self.card().set_input_low(chan, !closed_low);
+    }
+
+    fn outputs(&mut self, core: &crate::HwCore) -> Option<Outputs> {
+        let card = self.card();
+        let w = &self.wiring;
+        let mut o = Outputs::default();
+        for m in 0..core.n_motors() {
+            let volts = card.dac_volts(w.dac_channels[m] as usize);
+            o.dac[m] = (volts * f64::from(qmarc_comedi::s626::DAC_SPAN) / 10.0).round() as i32
+                * w.dac_sign[m];
+            let written = (card.outputs() >> w.enable_dio[m]) & 1;
+            o.enabled[m] = written == w.enable_bit;
+        }
+        // The DACs of no motor must be at 0 V too.
+        let others = (0..4).filter(|c| !w.dac_channels[..core.n_motors()].contains(c));
+        if others.into_iter().any(|c| card.dac_volts(c as usize) != 0.0) {
+            o.dac = [i32::MAX; MAX_MOTORS];
+        }
+        Some(o)
+    }
+}
+
+impl Backend for S626 {
+    fn name(&self) -> &'static str {
+        "s626"
+    }
+
+    fn n_motors(&self) -> usize {
+        self.w.n_motors
+    }
+
+    fn read_inputs(&mut self, inputs: &mut Inputs) -> Result<(), HwFault> {
+        let n = self.w.n_motors;
+        let done = ran(self.transport.run(&mut self.read), n + 1, 1);
+        self.read_ok = done.is_ok();
+        done?;
+        for m in 0..n {
+            inputs.counters[m] = self.oriented(m, self.read.data(m)[0] & COUNTER_MASK);
+        }
+        let pins = self.read.data(n)[1];
+        let tripped = |chan: u32| (pins >> chan) & 1 != self.w.closed_bit;
+        let mut limits = Status::OK;
+        for m in 0..n {
+            if tripped(self.w.top[m]) {
+                limits |= Status::limit_top(m);
+            }
+            if tripped(self.w.bottom[m]) {
+                limits |= Status::limit_bottom(m);
+            }
+        }
+        inputs.limits = limits;
+        Ok(())
+    }
+
+    fn write_dacs(&mut self, codes: &[i32; MAX_MOTORS]) -> Result<(), HwFault> {
+        let n = self.w.n_motors;
+        for (m, &code) in codes.iter().enumerate().take(n) {
+            self.write.data_mut(m)[0] = dac_sample(self.w.dac_sign[m] * code);
+        }
+        let mut mask = self.w.enable_mask();
+        let mut bits = self.w.enable_bits(&self.enabled);
+        if let Some(pump) = self.w.pump {
+            self.pump_level ^= u32::from(self.pump_running);
+            mask |= 1 << pump;
+            bits |= (self.pump_level & u32::from(self.pump_running)) << pump;
+        }
+        self.write.data_mut(n).copy_from_slice(&[mask, bits]);
+        let done = ran(self.transport.run(&mut self.write), n + 1, 2);
+        self.write_ok = done.is_ok();
+        done?;
+        self.dac[..n].copy_from_slice(&codes[..n]);
+        Ok(())
+    }
+
+    fn set_amp_enable(&mut self, motor: usize, on: bool) -> Result<(), HwFault> {
+        if on && !(self.read_ok && self.write_ok) {
+            // Never power a motor before the card has answered a read and a write.
+            return Err(HwFault { op: 3, code: nix::errno::Errno::EAGAIN as i32 });
+        }
+        self.enabled[motor] = on;
+        let mask = self.w.enable_mask();
+        let bits = self.w.enable_bits(&self.enabled);
+        self.enables.data_mut(0).copy_from_slice(&[mask, bits]);
+        let result = self.transport.run(&mut self.enables);
+        if result != Ok(1) {
+            self.enabled[motor] = false;
+        }
+        ran(result, 1, 3)
+    }
+
+    fn load_counter(&mut self, motor: usize, raw: u32) -> Result<(), HwFault> {
+        let sample = self.oriented(motor, raw & COUNTER_MASK);
+        let preset = &mut self.presets[motor];
+        preset.data_mut(0)[0] = sample;
+        ran(self.transport.run(preset), 1, 4)
+    }
+
+    fn safe_state(&mut self) {
+        self.enabled = [false; MAX_MOTORS];
+        self.dac = [0; MAX_MOTORS];
+        let mut mask = self.w.enable_mask();
+        if let Some(pump) = self.w.pump {
+            mask |= 1 << pump; // the pump pin held low: the relay drops
+            self.pump_level = 0;
+        }
+        let bits = self.w.enable_bits(&self.enabled);
+        let n = DAC_CHANNELS as usize;
+        self.safe.data_mut(n).copy_from_slice(&[mask, bits]);
+        let result = self.transport.run(&mut self.safe);
+        self.write_ok = result == Ok(n + 1);
+    }
+
+    fn now_ns(&self) -> u64 {
+        qmarc_timer::clock::monotonic_now_ns()
+    }
+
+    fn stop_charge_pump(&mut self) {
+        self.pump_running = false;
+    }
+
+    fn homed(&self, motor: usize) -> bool {
+        self.homed[motor]
+    }
+
+    fn set_homed(&mut self, motor: usize) {
+        self.homed[motor] = true;
+        if let Some(path) = &self.state_file {
+            save_homed(path, &self.homed[..self.w.n_motors]);
+        }
+    }
+
+    /// What the backend last wrote (the card reads the DACs back the same).
+    fn outputs(&self) -> Option<Outputs> {
+        Some(Outputs { dac: self.dac, enabled: self.enabled })
+    }
+}
+
+impl Drop for S626 {
+    fn drop(&mut self) {
+        // Best effort: nothing resets the DACs when the process is gone.
+        self.safe_state();
+    }
+}
+
+#[cfg(test)]
+mod tests;
