@@ -3,7 +3,7 @@
 //! in-process fake of the driver (`--device fake`), as it would against the card.
 
 use qmarc_proto::exit;
-use qmarc_tests::{TestRun, bin_dir, read_summary, run_with_timeout, workspace};
+use qmarc_tests::{TestRun, bin_dir, read_summary, run_with_timeout, s626_config, workspace};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -12,6 +12,7 @@ const TIMEOUT: Duration = Duration::from_secs(60);
 #[test]
 fn a_missing_card_fails_at_once_naming_its_device_issue_12() {
     let run = TestRun::new("nocard");
+    // The shipped settings (the simulated robot's): the device is what is wrong first.
     let config = run.config_with(&[]);
     let started = std::time::Instant::now();
     for (program, args) in [
@@ -42,6 +43,7 @@ fn a_missing_card_fails_at_once_naming_its_device_issue_12() {
 #[test]
 fn the_hwserver_selftest_checks_the_card_and_times_its_lists_issue_12() {
     let run = TestRun::new("selftest");
+    // The shipped settings: the selftest moves nothing, their counts do not matter to it.
     let config = run.config_with(&[]);
     let selftest = |device: &str| {
         let mut cmd = Command::new(bin_dir().join("qmarc-hwserver"));
@@ -74,8 +76,10 @@ fn a_step_runs_through_the_626_backend_against_the_fake_card_issue_12() {
     let out = run.out("out");
     // The 626 keeps the hardware bounds (10 and 25 periods); this VM's stalls are not the
     // backend's to survive, so this test raises them in its own settings.
-    let config = run
-        .config_with(&[("hwserver.watchdog_periods", "250"), ("safety.max_missed_in_row", "250")]);
+    let config = run.config_from(
+        &s626_config(),
+        &[("hwserver.watchdog_periods", "250"), ("safety.max_missed_in_row", "250")],
+    );
     let r = run.starter(
         &[
             &format!("--config={}", config.display()),
@@ -91,9 +95,28 @@ fn a_step_runs_through_the_626_backend_against_the_fake_card_issue_12() {
     let s = read_summary(&out);
     assert!(s.fault.is_none() && s.ok, "{:?}", s.fault);
     assert!(s.motors.iter().all(|m| m.followed), "{:?}", s.motors);
-    // 1× counting: errors in rad use the 626's counts per revolution.
+    // 1× counting: errors in rad use the 626's counts per revolution; the loop is the
+    // simulated robot's at 4× (gains × 4, counts ÷ 4), so its errors in rad are alike.
     let cpr = 1024.0 * 12.0 / std::f64::consts::TAU;
     assert!((s.counts_per_rad - cpr).abs() < 1e-9, "{}", s.counts_per_rad);
+    // Settings in other counts than the card's are refused, naming what to do.
+    let r = run.starter(
+        &[
+            &format!("--config={}", qmarc_tests::default_config().display()),
+            "--backend=s626",
+            "--device=fake",
+            "step",
+        ],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(i32::from(exit::REFUSED)));
+    assert!(
+        r.stderr.contains(
+            "general.counts_per_rev = 4096 counts per revolution, but the 626 counts 1024"
+        ),
+        "{}",
+        r.stderr
+    );
     // The lock-step clock is the simulated robot's only.
     let r = run.starter(
         &[

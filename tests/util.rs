@@ -45,6 +45,11 @@ pub fn shipped_config() -> PathBuf {
     workspace().join("config/qmarc.toml")
 }
 
+/// The shipped settings for the Sensoray 626 (its counts, 1×).
+pub fn s626_config() -> PathBuf {
+    workspace().join("config/s626.toml")
+}
+
 /// The settings the end-to-end tests run with: the shipped file. Its simulated robot rides
 /// out the multi-millisecond host stalls of a loaded VM without PREEMPT_RT (the backend's
 /// timing defaults, `config::TimingDefaults`), which the tests meet running in parallel; the
@@ -127,7 +132,12 @@ impl TestRun {
     /// `[section]`. Panics if a plain key is not in the file. The simulated robot keeps its
     /// homed frame in the run's own folder (`sim.state_file`), so runs never share it.
     pub fn config_with(&self, edits: &[(&str, &str)]) -> PathBuf {
-        let mut text = std::fs::read_to_string(default_config()).expect("test settings");
+        self.config_from(&default_config(), edits)
+    }
+
+    /// [`TestRun::config_with`] on the settings file `base` (`config/s626.toml`, say).
+    pub fn config_from(&self, base: &Path, edits: &[(&str, &str)]) -> PathBuf {
+        let mut text = std::fs::read_to_string(base).expect("test settings");
         let state = format!("{:?}", self.dir.join("sim.state").display().to_string());
         let own_state = [("state_file", state.as_str())];
         for (key, value) in own_state.iter().chain(edits) {

@@ -56,17 +56,25 @@ pub enum ComediOpenError {
         /// The device.
         path: PathBuf,
     },
-    /// The file exists but may not be opened.
+    /// The file exists but may not be opened; its group may use it.
     #[error(
-        "{path}: permission denied: the device belongs to group `{group}`: add yourself \
-         (`sudo usermod -aG {group} $USER`, then log in again) or install the udev rule of \
-         docs/hardware.md"
+        "{path}: permission denied: the device is for group `{group}`: add yourself \
+         (`sudo usermod -aG {group} $USER`, then log in again)"
     )]
     Permission {
         /// The device.
         path: PathBuf,
         /// Its group.
         group: String,
+    },
+    /// The file exists but only root may open it.
+    #[error(
+        "{path}: permission denied: only root may use the device: install the udev rule of \
+         docs/hardware.md (group `iocard`, mode 0660) and add yourself to that group"
+    )]
+    RootOnly {
+        /// The device.
+        path: PathBuf,
     },
     /// The file answers no comedi ioctl.
     #[error(
@@ -106,9 +114,10 @@ impl Comedi {
                 Errno::ENOENT | Errno::ENODEV | Errno::ENXIO => {
                     ComediOpenError::Missing { path: p() }
                 }
-                Errno::EACCES | Errno::EPERM => {
-                    ComediOpenError::Permission { path: p(), group: group_of(path) }
-                }
+                Errno::EACCES | Errno::EPERM => match group_of(path) {
+                    Some(group) => ComediOpenError::Permission { path: p(), group },
+                    None => ComediOpenError::RootOnly { path: p() },
+                },
                 errno => ComediOpenError::Os { path: p(), errno },
             })?;
         let mut dev = Comedi { fd, path: p() };
@@ -122,14 +131,17 @@ impl Comedi {
     }
 }
 
-/// The name of the group that owns `path` (its number if it has no name).
-fn group_of(path: &Path) -> String {
+/// The group that may read and write `path` — the name of its group, when that is not root's
+/// and has read-write permission (its number if it has no name) — or `None`: only root may.
+fn group_of(path: &Path) -> Option<String> {
     use std::os::unix::fs::MetadataExt;
-    let Ok(gid) = std::fs::metadata(path).map(|m| m.gid()) else { return "?".into() };
-    nix::unistd::Group::from_gid(nix::unistd::Gid::from_raw(gid))
-        .ok()
-        .flatten()
-        .map_or_else(|| gid.to_string(), |g| g.name)
+    let meta = std::fs::metadata(path).ok()?;
+    let (gid, mode) = (meta.gid(), meta.mode());
+    if gid == 0 || mode & 0o060 != 0o060 {
+        return None;
+    }
+    let group = nix::unistd::Group::from_gid(nix::unistd::Gid::from_raw(gid)).ok().flatten();
+    Some(group.map_or_else(|| gid.to_string(), |g| g.name))
 }
 
 /// A NUL-terminated C name as text.
@@ -178,3 +190,25 @@ impl Transport for Comedi {
 
 // The ioctl numbers above come from the same macros as the calls; this keeps them in view.
 const _: () = assert!(uapi::COMEDI_INSNLIST == 0x8010_640b);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+
+    #[test]
+    fn permission_advice_names_the_group_only_where_it_helps() {
+        let dir = std::env::temp_dir().join(format!("qmarc-perm-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let node = dir.join("comedi9");
+        std::fs::write(&node, b"").unwrap();
+        std::fs::set_permissions(&node, std::fs::Permissions::from_mode(0o600)).unwrap();
+        assert_eq!(group_of(&node), None, "0600: only its owner (root, for a device)");
+        std::fs::set_permissions(&node, std::fs::Permissions::from_mode(0o660)).unwrap();
+        let gid = std::fs::metadata(&node).unwrap().gid();
+        assert_eq!(group_of(&node).is_some(), gid != 0, "0660 for a group other than root's");
+        let _ = std::fs::remove_dir_all(&dir);
+        let e = ComediOpenError::RootOnly { path: "/dev/comedi0".into() };
+        assert!(e.to_string().contains("install the udev rule"), "{e}");
+    }
+}

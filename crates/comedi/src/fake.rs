@@ -43,9 +43,16 @@ pub struct Wire {
 /// A failure the next list meets.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Failure {
-    /// The ioctl fails with this errno (nothing is done).
-    Errno(Errno),
-    /// Only the first `n` instructions complete.
+    /// The first `done` instructions complete, then the ioctl fails with `errno` — what the
+    /// kernel's `do_insnlist_ioctl` does when an instruction fails (it reports no count).
+    ErrnoAfter {
+        /// Instructions that complete before the failure.
+        done: usize,
+        /// The errno the ioctl returns.
+        errno: Errno,
+    },
+    /// Only the first `n` instructions complete and the ioctl returns `n` (not what this
+    /// kernel does; a backend must treat it as a failure all the same).
     Short(usize),
 }
 
@@ -212,12 +219,16 @@ impl FakeS626 {
             return Err(Errno::EINVAL);
         }
         let c = chan as usize;
+        // The comedi core refuses a sample above the subdevice's largest.
+        if insn == INSN_WRITE && data[0] > info.maxdata {
+            return Err(Errno::EINVAL);
+        }
         match (subdev, insn) {
-            (SUBDEV_AO, INSN_WRITE) => self.ao[c] = data[0] & 0x3fff,
+            (SUBDEV_AO, INSN_WRITE) => self.ao[c] = data[0],
             (SUBDEV_AO, INSN_READ) => data[0] = self.ao[c],
             (SUBDEV_COUNTER, INSN_READ) => data[0] = self.counters[c],
             (SUBDEV_COUNTER, INSN_WRITE) => {
-                self.counters[c] = data[0] & COUNTER_MASK;
+                self.counters[c] = data[0];
                 self.residual[c] = 0.0;
             }
             (2..=4, INSN_BITS) if data.len() == 2 => {
@@ -266,10 +277,10 @@ impl Transport for FakeS626 {
 
     fn run(&mut self, list: &mut InsnList) -> Result<usize, Errno> {
         self.runs += 1;
-        let limit = match self.fail.take() {
-            Some(Failure::Errno(e)) => return Err(e),
-            Some(Failure::Short(n)) => n.min(list.len()),
-            None => list.len(),
+        let (limit, then) = match self.fail.take() {
+            Some(Failure::ErrnoAfter { done, errno }) => (done.min(list.len()), Some(errno)),
+            Some(Failure::Short(n)) => (n.min(list.len()), None),
+            None => (list.len(), None),
         };
         let reads_counters = (0..list.len())
             .any(|i| list.insn(i).subdev == SUBDEV_COUNTER && list.insn(i).insn == INSN_READ);
@@ -287,7 +298,10 @@ impl Transport for FakeS626 {
             }
             self.execute(insn, subdev, chan, list.data_mut(i))?;
         }
-        Ok(limit)
+        match then {
+            Some(errno) => Err(errno),
+            None => Ok(limit),
+        }
     }
 }
 
@@ -327,9 +341,11 @@ mod tests {
             Insn::one(INSN_WRITE, SUBDEV_COUNTER, 1),
             Insn::one(INSN_READ, SUBDEV_COUNTER, 1),
         ]);
-        list.data_mut(0)[0] = 0x0100_0005; // beyond 24 bits
+        list.data_mut(0)[0] = 0x0100_0005; // beyond 24 bits: refused, as by the comedi core
+        assert_eq!(fake.run(&mut list), Err(Errno::EINVAL));
+        list.data_mut(0)[0] = 0x00ff_fffb;
         fake.run(&mut list).unwrap();
-        assert_eq!(list.data(1)[0], 5);
+        assert_eq!(list.data(1)[0], 0x00ff_fffb);
         let mut config = InsnList::new(&[Insn::one(INSN_CONFIG, SUBDEV_COUNTER, 1)]);
         assert_eq!(fake.run(&mut config), Err(Errno::EINVAL));
     }
@@ -346,8 +362,10 @@ mod tests {
         fake.fail_next(Failure::Short(1));
         assert_eq!(fake.run(&mut list), Ok(1));
         assert!(fake.dac_volts(0) > 4.0 && fake.dac_volts(1) == 0.0);
-        fake.fail_next(Failure::Errno(Errno::EIO));
+        list.data_mut(0)[0] = 0x1fff;
+        fake.fail_next(Failure::ErrnoAfter { done: 1, errno: Errno::EIO });
         assert_eq!(fake.run(&mut list), Err(Errno::EIO));
+        assert_eq!(fake.dac_volts(0), 0.0, "the instructions before the failure ran");
         assert_eq!(fake.run(&mut list), Ok(2));
         assert_eq!(fake.runs(), 3);
     }

@@ -89,9 +89,13 @@ impl InsnList {
         &mut self.data[i][..n]
     }
 
-    /// The list as the `COMEDI_INSNLIST` ioctl takes it; valid while `self` lives unmoved
-    /// in memory it points into (its boxed buffers).
+    /// The list as the `COMEDI_INSNLIST` ioctl takes it, every instruction pointing at its
+    /// samples afresh (pointers derived now, from this borrow, so no earlier borrow of the
+    /// buffers is relied on); valid until the list is used again.
     pub fn raw(&mut self) -> ComediInsnlist {
+        for (insn, data) in self.insns.iter_mut().zip(self.data.iter_mut()) {
+            insn.data = data.as_mut_ptr();
+        }
         ComediInsnlist { n_insns: self.insns.len() as u32, insns: self.insns.as_mut_ptr() }
     }
 }
@@ -118,8 +122,8 @@ mod tests {
         // SAFETY: as above; instruction 1 has two samples.
         let bits = unsafe { std::slice::from_raw_parts(insns[1].data, 2) };
         assert_eq!(bits, [0b1011, 0b0001]);
-        let moved = list; // the buffers do not move with the value
+        let mut moved = list; // the buffers do not move with the value
         assert_eq!(moved.data(1), [0b1011, 0b0001]);
-        assert_eq!(moved.insn(1).data, insns[1].data);
+        assert_eq!(moved.raw().insns, raw.insns);
     }
 }

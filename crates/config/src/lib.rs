@@ -287,15 +287,9 @@ impl Settings {
         self.gains_period_us != self.period_us
     }
 
-    /// Encoder counts per motor revolution as the backend counts them: `[s626]
-    /// counts_per_rev` (1×) on the Sensoray 626, `general.counts_per_rev` otherwise.
-    pub fn counts_per_rev(&self) -> f64 {
-        if self.hwserver.backend == "s626" { self.s626.counts_per_rev } else { self.counts_per_rev }
-    }
-
-    /// Encoder counts per radian of arm rotation: counts per revolution · gear_ratio / 2π.
+    /// Encoder counts per radian of arm rotation: counts_per_rev · gear_ratio / 2π.
     pub fn counts_per_rad(&self) -> f64 {
-        self.counts_per_rev() * self.gear_ratio / std::f64::consts::TAU
+        self.counts_per_rev * self.gear_ratio / std::f64::consts::TAU
     }
 
     /// What the 626's wiring lacks for the motors in use, when it is the backend.
@@ -309,6 +303,28 @@ impl Settings {
             }
             _ => Ok(()),
         }
+    }
+
+    /// Why the settings' counts are not the 626's, if they are not: every count-valued
+    /// setting (limits, offsets, distances, speeds, steps) and every gain means something else
+    /// on a card that counts `[s626] counts_per_rev` — 4× too far, 4× too strong for the
+    /// thesis' encoders. Nothing is rescaled silently: a file for the card says its counts.
+    /// The 626 backend refuses to move with such settings (its selftest, which moves
+    /// nothing, does not mind).
+    pub fn s626_counts_problem(&self) -> Option<String> {
+        (self.counts_per_rev != self.s626.counts_per_rev).then(|| {
+            format!(
+                "{}: general.counts_per_rev = {} counts per revolution, but the 626 counts {} \
+                 ([s626] counts_per_rev): this file's limits, offsets, distances and gains are \
+                 in other counts than the card's — use a settings file written for the 626 \
+                 (config/s626.toml), or give general.counts_per_rev = {} and every count in \
+                 the card's counts (docs/hardware.md)",
+                self.source.display(),
+                self.counts_per_rev,
+                self.s626.counts_per_rev,
+                self.s626.counts_per_rev
+            )
+        })
     }
 
     /// Overrides the 626's device (`--device`).

@@ -285,11 +285,12 @@ fn fault_injection_motors_are_one_based_or_none_issue_11() {
 #[test]
 fn the_backend_chooses_the_timing_defaults() {
     let names = names();
-    let mut s = Settings::parse(Path::new("q.toml"), &MOTOR.repeat(3), &names).unwrap();
+    let motors = MOTOR.repeat(3);
+    let mut s = Settings::parse(Path::new("q.toml"), &motors, &names).unwrap();
     assert_eq!((s.hwserver.watchdog_periods, s.max_missed_in_row), (250, 250));
     s.set_backend("s626", &names).unwrap();
     assert_eq!((s.hwserver.watchdog_periods, s.max_missed_in_row), (10, 25));
-    let text = format!("[hwserver]\nwatchdog_periods = 40\n{}", MOTOR.repeat(3));
+    let text = format!("[hwserver]\nwatchdog_periods = 40\n{motors}");
     let mut s = Settings::parse(Path::new("q.toml"), &text, &names).unwrap();
     s.set_backend("s626", &names).unwrap();
     assert_eq!((s.hwserver.watchdog_periods, s.max_missed_in_row), (40, 25));
@@ -304,7 +305,11 @@ fn the_backend_chooses_the_timing_defaults() {
 #[test]
 fn the_626_wiring_is_checked_when_it_is_the_backend_issue_12() {
     let motors = MOTOR.repeat(3);
-    let on = |s626: &str| format!("[hwserver]\nbackend = \"s626\"\n[s626]\n{s626}{motors}");
+    let on = |s626: &str| {
+        format!(
+            "[hwserver]\nbackend = \"s626\"\n[s626]\n{s626}[general]\ncounts_per_rev = 1024\n{motors}"
+        )
+    };
     check(
         &on("enable_dio = [0, 1]\n"),
         "q.toml:4:14: s626.enable_dio: 3 motors need 3 entries, found 2",
@@ -340,6 +345,14 @@ fn the_626_wiring_is_checked_when_it_is_the_backend_issue_12() {
     let mut s = parse(&on("")).unwrap();
     s.set_device(Path::new("/dev/comedi1")).unwrap();
     assert_eq!(s.s626.device, Path::new("/dev/comedi1"));
-    assert_eq!(s.counts_per_rev(), 1024.0, "1× counting on the 626");
-    assert_eq!(parse(&motors).unwrap().counts_per_rev(), 4096.0);
+    // Counts meant for 4× on a card that counts 1×: named, for the backend to refuse.
+    let four_x = parse(&format!("[hwserver]\nbackend = \"s626\"\n{motors}")).unwrap();
+    assert!(
+        four_x.s626_counts_problem().unwrap().starts_with(
+            "q.toml: general.counts_per_rev = 4096 counts per revolution, but the 626 counts 1024"
+        ),
+        "{:?}",
+        four_x.s626_counts_problem()
+    );
+    assert_eq!(parse(&on("")).unwrap().s626_counts_problem(), None);
 }

@@ -592,9 +592,7 @@ fn a_late_cycle_outputs_what_a_punctual_one_would_issue_9() {
 /// driver) the servo cycle — and the hardware server's side of it — allocates nothing either.
 #[test]
 fn the_626_backends_cycle_allocates_nothing_issue_12() {
-    let mut s = settings();
-    let names = qmarc_config::Names::backends_only(qmarc_hwserver::backends::names());
-    s.set_backend("s626", &names).unwrap();
+    let mut s = util::settings_of("s626.toml");
     s.set_device(std::path::Path::new("fake")).unwrap();
     let card = qmarc_hwserver::backends::s626::S626::open(&s, false).unwrap();
     let mut link = CoreLink(qmarc_hwserver::HwCore::new(Box::new(card)));

@@ -13,9 +13,8 @@ use std::path::Path;
 
 fn fake_card() -> S626 {
     let names = Names::backends_only(qmarc_hwserver::backends::names());
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
-    let mut s = Settings::load(&path, &names).expect("the shipped settings");
-    s.set_backend("s626", &names).expect("the 626");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/s626.toml");
+    let mut s = Settings::load(&path, &names).expect("the shipped settings for the 626");
     s.set_device(Path::new("fake")).expect("the fake card");
     S626::open(&s, false).expect("the fake card opens")
 }

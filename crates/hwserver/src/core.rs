@@ -51,11 +51,11 @@ impl HwCore {
             max_counts_per_s: f64::INFINITY,
             last_read_ns: 0,
         };
-        for m in 0..n_motors {
-            core.homed[m] = core.backend.homed(m);
-        }
+        // The kept frame holds only where the counters could be read: their distance from
+        // COUNTER_ZERO is the position. Without that read no motor counts as homed.
         if core.backend.read_inputs(&mut core.inputs).is_ok() {
             for m in 0..n_motors {
+                core.homed[m] = core.backend.homed(m);
                 core.position[m] = i64::from(counter_delta(COUNTER_ZERO, core.inputs.counters[m]));
             }
         }
@@ -144,11 +144,38 @@ impl HwCore {
         self.latched |= Status::WATCHDOG;
     }
 
-    /// A stop was requested (signal): safe state, and every later response carries
-    /// [`Status::SHUTDOWN`]; enabling is refused from now on.
+    /// A stop was requested (signal): safe state, the charge pump stops, and every later
+    /// response carries [`Status::SHUTDOWN`]; enabling is refused from now on.
     pub fn shut_down(&mut self) {
         self.safe_state();
+        self.backend.stop_charge_pump();
         self.latched |= Status::SHUTDOWN;
+    }
+
+    /// The hardware failed (a driver error, an operation cut short): safe state at once,
+    /// whatever the controller does next, and [`Status::HARDWARE_FAULT`] latched: every later
+    /// response carries it and enabling is refused for the rest of the server's life.
+    fn hardware_failed(&mut self) -> Status {
+        self.safe_state();
+        self.latched |= Status::HARDWARE_FAULT;
+        Status::HARDWARE_FAULT
+    }
+
+    /// True once the server must keep the outputs off for good: a watchdog trip, a stop, a
+    /// hardware fault.
+    fn outputs_locked(&self) -> bool {
+        self.latched.intersects(Status::SHUTDOWN | Status::WATCHDOG | Status::HARDWARE_FAULT)
+    }
+
+    /// Writes the DAC codes `dacs` holds (all 0 V once the outputs are locked).
+    fn write_dacs(&mut self) -> Status {
+        if self.outputs_locked() {
+            self.dacs = [0; MAX_MOTORS];
+        }
+        if self.backend.write_dacs(&self.dacs).is_err() {
+            return self.hardware_failed();
+        }
+        Status::OK
     }
 
     /// Reads the inputs, extends the counters into the positions (a physically impossible
@@ -157,7 +184,7 @@ impl HwCore {
     fn read(&mut self) -> Status {
         let mut fresh = Inputs::default();
         if self.backend.read_inputs(&mut fresh).is_err() {
-            return Status::HARDWARE_FAULT;
+            return self.hardware_failed();
         }
         let now = self.backend.now_ns();
         let dt_s = now.saturating_sub(self.last_read_ns) as f64 * 1e-9;
@@ -185,15 +212,18 @@ impl HwCore {
         Status::OK
     }
 
-    /// Enables `motor`'s amplifier, unless a watchdog trip or a stop forbids it for good.
+    /// Enables `motor`'s amplifier, unless a watchdog trip, a stop or a hardware fault
+    /// forbids it for good.
     fn enable(&mut self, motor: usize) -> Status {
-        if self.latched.intersects(Status::SHUTDOWN | Status::WATCHDOG) {
+        if self.latched.intersects(Status::HARDWARE_FAULT) {
+            Status::HARDWARE_FAULT
+        } else if self.outputs_locked() {
             Status::SHUTDOWN
         } else if self.backend.set_amp_enable(motor, true).is_ok() {
             self.enabled[motor] = true;
             Status::OK
         } else {
-            Status::HARDWARE_FAULT
+            self.hardware_failed()
         }
     }
 
@@ -203,7 +233,7 @@ impl HwCore {
         let dac_ok = self.backend.write_dacs(&self.dacs).is_ok();
         let amp_ok = self.backend.set_amp_enable(motor, false).is_ok();
         self.enabled[motor] = false;
-        if dac_ok && amp_ok { Status::OK } else { Status::HARDWARE_FAULT }
+        if dac_ok && amp_ok { Status::OK } else { self.hardware_failed() }
     }
 
     /// Presets `motor`'s position to `value` counts (rounded, within the counter's ±2²²)
@@ -211,16 +241,16 @@ impl HwCore {
     fn preset(&mut self, motor: usize, value: f64) -> Status {
         let preset = value.round().clamp(-f64::from(1 << 22), f64::from(1 << 22)) as i64;
         let raw = COUNTER_ZERO.wrapping_add(preset as u32) & qmarc_proto::COUNTER_MASK;
-        let status = if self.backend.load_counter(motor, raw).is_err() {
-            Status::HARDWARE_FAULT
-        } else {
-            Status::OK
-        };
+        if self.backend.load_counter(motor, raw).is_err() {
+            // The counter holds who knows what: the frame is not homed, and is not kept.
+            self.homed[motor] = false;
+            return self.hardware_failed();
+        }
         self.inputs.counters[motor] = raw;
         self.position[motor] = preset;
         self.homed[motor] = true;
         self.backend.set_homed(motor);
-        status
+        Status::OK
     }
 
     /// Answers one request. Unknown types and bad motor indices are answered with a status
@@ -247,15 +277,11 @@ impl HwCore {
                 for m in 0..self.n_motors {
                     self.dacs[m] = req.aux[m].clamp(-DAC_MAX, DAC_MAX);
                 }
-                if self.backend.write_dacs(&self.dacs).is_err() {
-                    status |= Status::HARDWARE_FAULT;
-                }
+                status |= self.write_dacs();
             }
             Ok(MsgType::WriteDac) if single => {
                 self.dacs[motor] = req.aux[motor].clamp(-DAC_MAX, DAC_MAX);
-                if self.backend.write_dacs(&self.dacs).is_err() {
-                    status |= Status::HARDWARE_FAULT;
-                }
+                status |= self.write_dacs();
             }
             Ok(MsgType::EnableMotor) if single => status |= self.enable(motor),
             Ok(MsgType::DisableMotor) if single => status |= self.disable(motor),

@@ -24,7 +24,7 @@ use qmarc_comedi::uapi::{INSN_READ, INSN_WRITE};
 use qmarc_comedi::{Comedi, ComediOpenError, Transport};
 use qmarc_config::{S626Settings, Settings};
 use qmarc_proto::{COUNTER_ZERO, MAX_MOTORS, Status};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 /// The `--device` that drives the in-process fake of the card.
@@ -94,6 +94,8 @@ pub struct S626 {
     write: InsnList,
     enables: InsnList,
     safe: InsnList,
+    /// The safe list's instructions one by one, for when the list fails part-way.
+    safe_singles: Vec<InsnList>,
     presets: Vec<InsnList>,
     enabled: [bool; MAX_MOTORS],
     dac: [i32; MAX_MOTORS],
@@ -103,6 +105,8 @@ pub struct S626 {
     write_ok: bool,
     homed: [bool; MAX_MOTORS],
     state_file: Option<PathBuf>,
+    /// What the kept frame belongs to ([`card_identity`]).
+    identity: String,
 }
 
 /// What an ioctl error or a short list becomes: a [`HwFault`] of operation `op`.
@@ -130,33 +134,41 @@ impl S626 {
                 .map(S626::all_homed);
         }
         let card = Comedi::open(&s.s626.device).map_err(open_error)?;
-        let state = s.s626.state_dir.join(format!("s626-{}.state", file_name(&s.s626.device)));
-        S626::with_transport(Box::new(card), &device, &s.s626, s.n_motors, Some(state))
+        S626::with_transport(Box::new(card), &device, &s.s626, s.n_motors, Some(state_file(s)))
     }
 
-    /// Checks, without writing anything or keeping the card, that the settings' wiring
-    /// holds and that their device opens and is a 626 (the starter's check before it spawns
-    /// anything, so a bad set-up fails at once, naming the device).
+    /// Checks, without writing anything or keeping the card, that the settings can drive it
+    /// (the starter's check before it spawns anything, so a bad set-up fails at once): the
+    /// wiring holds, the device opens and is a 626, the homed frame can be kept, and the
+    /// settings are in the card's counts ([`Settings::s626_counts_problem`]).
     pub fn check(s: &Settings, lockstep: bool) -> Result<(), BackendOpenError> {
         if lockstep {
             return S626::open(s, lockstep).map(drop);
         }
         Wiring::of(&s.s626, s.n_motors)?;
         let device = s.s626.device.display().to_string();
-        if device == FAKE_DEVICE {
-            return Ok(());
+        if device != FAKE_DEVICE {
+            S626::check_card(s, &device)?;
         }
+        match s.s626_counts_problem() {
+            Some(problem) => Err(BackendOpenError::Invalid(problem)),
+            None => Ok(()),
+        }
+    }
+
+    /// The card of `device` opens, is a 626, and its homed frame can be kept.
+    fn check_card(s: &Settings, device: &str) -> Result<(), BackendOpenError> {
         let mut card = Comedi::open(&s.s626.device).map_err(open_error)?;
         let io = |e: nix::errno::Errno| BackendOpenError::Device {
-            device: device.clone(),
+            device: device.to_string(),
             reason: e.to_string(),
         };
         let info = card.devinfo().map_err(io)?;
         let subs = card.subdinfo(info.n_subdevs).map_err(io)?;
-        match layout_problem(&device, &info, &subs) {
-            Some(problem) => Err(BackendOpenError::Invalid(problem)),
-            None => Ok(()),
+        if let Some(problem) = layout_problem(device, &info, &subs) {
+            return Err(BackendOpenError::Invalid(problem));
         }
+        check_state_dir(s)
     }
 
     /// The backend over `transport`, which must present a 626; the homed frame is read from
@@ -186,7 +198,10 @@ impl S626 {
                 ),
             })?;
         }
-        let homed = state_file.as_deref().map_or([false; MAX_MOTORS], |p| load_homed(p, n_motors));
+        let identity = card_identity(device, settings);
+        let homed = state_file
+            .as_deref()
+            .map_or([false; MAX_MOTORS], |p| load_homed(p, n_motors, &identity));
         Ok(S626 {
             transport,
             device: device.to_string(),
@@ -194,6 +209,7 @@ impl S626 {
             write: write_list(&w),
             enables: InsnList::new(&[Insn::bits(SUBDEV_DIO0)]),
             safe: safe_list(),
+            safe_singles: safe_singles(),
             presets: (0..n_motors)
                 .map(|m| InsnList::new(&[Insn::one(INSN_WRITE, SUBDEV_COUNTER, w.counter[m])]))
                 .collect(),
@@ -206,6 +222,7 @@ impl S626 {
             write_ok: false,
             homed,
             state_file,
+            identity,
         })
     }
 
@@ -254,20 +271,64 @@ fn write_list(w: &Wiring) -> InsnList {
     InsnList::new(&items)
 }
 
-/// The safe list: all four DACs at 0 V, then DIO bank 0 with every enable off.
+/// The safe list's instructions, one list each (the DACs' samples set: 0 V).
+fn safe_singles() -> Vec<InsnList> {
+    let mut singles = vec![InsnList::new(&[Insn::bits(SUBDEV_DIO0)])];
+    singles.extend((0..DAC_CHANNELS).map(|c| {
+        let mut one = InsnList::new(&[Insn::one(INSN_WRITE, SUBDEV_AO, c)]);
+        one.data_mut(0)[0] = dac_sample(0);
+        one
+    }));
+    singles
+}
+
+/// The safe list: DIO bank 0 with every enable off first (the kernel stops a list at the
+/// first instruction that fails: the enables must not wait behind a DAC), then all four DACs
+/// at 0 V.
 fn safe_list() -> InsnList {
-    let mut items: Vec<Insn> =
-        (0..DAC_CHANNELS).map(|c| Insn::one(INSN_WRITE, SUBDEV_AO, c)).collect();
-    items.push(Insn::bits(SUBDEV_DIO0));
+    let mut items = vec![Insn::bits(SUBDEV_DIO0)];
+    items.extend((0..DAC_CHANNELS).map(|c| Insn::one(INSN_WRITE, SUBDEV_AO, c)));
     let mut list = InsnList::new(&items);
-    for c in 0..DAC_CHANNELS as usize {
+    for c in 1..=DAC_CHANNELS as usize {
         list.data_mut(c)[0] = dac_sample(0);
     }
     list
 }
 
-fn file_name(device: &Path) -> String {
-    device.file_name().map_or_else(|| "card".into(), |n| n.to_string_lossy().into_owned())
+/// Where the settings' card keeps its homed frame: `<state_dir>/s626-<device name>.state`.
+fn state_file(s: &Settings) -> PathBuf {
+    let device = &s.s626.device;
+    let name = device.file_name().map_or_else(|| "card".into(), |n| n.to_string_lossy());
+    s.s626.state_dir.join(format!("s626-{name}.state"))
+}
+
+/// What a kept frame belongs to: the device node (a reloaded driver makes a new one, with
+/// counters reset) and the counters and their directions.
+fn card_identity(device: &str, w: &S626Settings) -> String {
+    use std::os::unix::fs::MetadataExt;
+    let node = std::fs::metadata(device).map_or_else(
+        |_| "?".into(),
+        |m| format!("ino {} ctime {}.{}", m.ino(), m.ctime(), m.ctime_nsec()),
+    );
+    format!("{device} {node} counters {:?} signs {:?}", w.counter_channels, w.counter_sign)
+}
+
+/// Checks that the homed frame can be kept in `[s626] state_dir` (made if missing): without
+/// it a homing would be forgotten at once and every move refused as unhomed.
+fn check_state_dir(s: &Settings) -> Result<(), BackendOpenError> {
+    let dir = &s.s626.state_dir;
+    let probe = dir.join(format!(".qmarc-probe-{}", std::process::id()));
+    let written = std::fs::create_dir_all(dir).and_then(|()| std::fs::write(&probe, b"qmarc"));
+    let _ = std::fs::remove_file(&probe);
+    written.map_err(|e| {
+        BackendOpenError::Invalid(format!(
+            "{}: cannot keep the homed frame there ({e}): create it for the card's group \
+             (`sudo install -d -m 2770 -g iocard {}`, or the tmpfiles.d line of \
+             docs/hardware.md), or set [s626] state_dir",
+            dir.display(),
+            dir.display()
+        ))
+    })
 }
 
 /// The open error of a device (its message names the device and says what to do).
@@ -275,11 +336,10 @@ fn open_error(e: ComediOpenError) -> BackendOpenError {
     BackendOpenError::Invalid(e.to_string())
 }
 
-/// The fake card of the settings ([`wired_fake`] with the simulated robot's amplifier gain in
-/// the 626's 1× counts).
+/// The fake card of the settings ([`wired_fake`] with the simulated robot's amplifier gain,
+/// `sim.kv`, in the settings' counts).
 pub fn fake_card(s: &Settings) -> FakeS626 {
-    let kv = s.sim.kv * s.s626.counts_per_rev / s.counts_per_rev;
-    wired_fake(&s.s626, s.n_motors, kv, s.period_s())
+    wired_fake(&s.s626, s.n_motors, s.sim.kv, s.period_s())
 }
 
 /// A fake 626 wired as `w` says: a velocity-mode plant of `kv` counts/s per volt per motor
@@ -470,10 +530,16 @@ impl Backend for S626 {
             self.pump_level = 0;
         }
         let bits = self.w.enable_bits(&self.enabled);
-        let n = DAC_CHANNELS as usize;
-        self.safe.data_mut(n).copy_from_slice(&[mask, bits]);
-        let result = self.transport.run(&mut self.safe);
-        self.write_ok = result == Ok(n + 1);
+        self.safe.data_mut(0).copy_from_slice(&[mask, bits]);
+        let whole = self.transport.run(&mut self.safe) == Ok(self.safe.len());
+        if !whole {
+            // Part of it failed: every instruction on its own, each as far as it goes.
+            self.safe_singles[0].data_mut(0).copy_from_slice(&[mask, bits]);
+            for one in &mut self.safe_singles {
+                let _ = self.transport.run(one);
+            }
+        }
+        self.write_ok = whole;
     }
 
     fn now_ns(&self) -> u64 {
@@ -490,8 +556,16 @@ impl Backend for S626 {
 
     fn set_homed(&mut self, motor: usize) {
         self.homed[motor] = true;
-        if let Some(path) = &self.state_file {
-            save_homed(path, &self.homed[..self.w.n_motors]);
+        if let Some(path) = &self.state_file
+            && let Err(e) = save_homed(path, &self.homed[..self.w.n_motors], &self.identity)
+        {
+            // Rare (the starter checked the folder): said, not hidden.
+            eprintln!(
+                "qmarc-hwserver: warning: cannot keep the homed frame in {}: {e}: the next \
+                 run will find motor {} unhomed",
+                path.display(),
+                motor + 1
+            );
         }
     }
 

@@ -223,6 +223,9 @@ pub struct SimDeltabot {
     events_file: Option<std::path::PathBuf>,
 }
 
+/// What the simulated robot's state file says its frame belongs to.
+const SIM_IDENTITY: &str = "the simulated Deltabot";
+
 impl SimDeltabot {
     /// A robot at rest at its start positions, amplifiers off, DACs at 0 V.
     pub fn new(p: SimParams) -> Result<SimDeltabot, SimParamsError> {
@@ -270,7 +273,7 @@ impl SimDeltabot {
     /// tmpfs (`/dev/shm`) so that a reboot clears it, as a power cycle clears the card.
     /// Nothing is kept when the file cannot be read (a fresh machine) or written.
     pub fn with_state_file(mut self, path: &std::path::Path) -> SimDeltabot {
-        let kept = super::state::load_homed(path, self.p.n_motors);
+        let kept = super::state::load_homed(path, self.p.n_motors, SIM_IDENTITY);
         for (m, _) in kept.iter().enumerate().take(self.p.n_motors).filter(|(_, k)| **k) {
             if !self.homed[m] {
                 self.homed[m] = true;
@@ -283,7 +286,7 @@ impl SimDeltabot {
 
     fn save_state(&self) {
         if let Some(path) = &self.state_file {
-            super::state::save_homed(path, &self.homed[..self.p.n_motors]);
+            let _ = super::state::save_homed(path, &self.homed[..self.p.n_motors], SIM_IDENTITY);
         }
     }
 

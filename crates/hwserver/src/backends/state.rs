@@ -1,32 +1,45 @@
 //! The homed frame kept between runs, the way a card whose counters keep counting while it is
-//! powered keeps it: one line `homed 1 0 1` in a file on a tmpfs, which a reboot clears as a
-//! power cycle clears the counters.
+//! powered keeps it: a small file on a tmpfs, which a reboot clears as a power cycle clears
+//! the counters —
+//!
+//! ```text
+//! homed 1 0 1
+//! card /dev/comedi0 ino 412 ctime 1763900000.123456789 counters [0, 1, 2] signs [1, 1, 1]
+//! ```
+//!
+//! — whose second line names what the frame belongs to: a frame is kept only while that is
+//! still the same (a reloaded driver makes a new device node; other wiring, another frame).
 
 use qmarc_proto::MAX_MOTORS;
 use std::path::Path;
 
-/// Which of `n_motors` motors `path` says are homed; none when it cannot be read (a fresh
-/// machine) or says nothing.
-pub fn load_homed(path: &Path, n_motors: usize) -> [bool; MAX_MOTORS] {
+/// Which of `n_motors` motors `path` says are homed for `identity`; none when it cannot be
+/// read (a fresh machine), says nothing, or was written for something else.
+pub fn load_homed(path: &Path, n_motors: usize, identity: &str) -> [bool; MAX_MOTORS] {
     let mut homed = [false; MAX_MOTORS];
     let text = qmarc_config::read_bounded(path, 4096).ok().flatten();
-    if let Some(text) = text.and_then(|raw| String::from_utf8(raw).ok()) {
-        let kept = text.strip_prefix("homed").map(|rest| rest.split_whitespace());
-        for (m, flag) in kept.into_iter().flatten().enumerate().take(n_motors.min(MAX_MOTORS)) {
+    let Some(text) = text.and_then(|raw| String::from_utf8(raw).ok()) else { return homed };
+    let mut lines = text.lines();
+    let flags = lines.next().and_then(|l| l.strip_prefix("homed"));
+    let card = lines.next().and_then(|l| l.strip_prefix("card "));
+    if card != Some(identity) {
+        return homed;
+    }
+    for (m, flag) in flags.into_iter().flat_map(str::split_whitespace).enumerate() {
+        if m < n_motors.min(MAX_MOTORS) {
             homed[m] = flag == "1";
         }
     }
     homed
 }
 
-/// Writes `homed` to `path` (its folder made if missing); nothing is kept when it cannot be
-/// written.
-pub fn save_homed(path: &Path, homed: &[bool]) {
+/// Writes `homed` for `identity` to `path`, its folder made if missing.
+pub fn save_homed(path: &Path, homed: &[bool], identity: &str) -> std::io::Result<()> {
     if let Some(dir) = path.parent() {
-        let _ = std::fs::create_dir_all(dir);
+        std::fs::create_dir_all(dir)?;
     }
     let flags: Vec<&str> = homed.iter().map(|&h| if h { "1" } else { "0" }).collect();
-    let _ = std::fs::write(path, format!("homed {}\n", flags.join(" ")));
+    std::fs::write(path, format!("homed {}\ncard {identity}\n", flags.join(" ")))
 }
 
 #[cfg(test)]
@@ -34,13 +47,20 @@ mod tests {
     use super::*;
 
     #[test]
-    fn homed_flags_round_trip_and_a_missing_file_homes_nothing() {
+    fn homed_flags_round_trip_for_the_same_card_only() {
         let dir = std::env::temp_dir().join(format!("qmarc-state-{}", std::process::id()));
         let path = dir.join("sub/s.state");
-        assert_eq!(load_homed(&path, 3), [false; MAX_MOTORS]);
-        save_homed(&path, &[true, false, true]);
-        assert_eq!(load_homed(&path, 3)[..3], [true, false, true]);
-        assert_eq!(load_homed(&path, 2)[..3], [true, false, false], "only the motors asked for");
+        assert_eq!(load_homed(&path, 3, "a"), [false; MAX_MOTORS]);
+        save_homed(&path, &[true, false, true], "a").unwrap();
+        assert_eq!(load_homed(&path, 3, "a")[..3], [true, false, true]);
+        assert_eq!(
+            load_homed(&path, 2, "a")[..3],
+            [true, false, false],
+            "only the motors asked for"
+        );
+        assert_eq!(load_homed(&path, 3, "b"), [false; MAX_MOTORS], "another card: not homed");
+        std::fs::write(&path, "homed 1 1 1\n").unwrap();
+        assert_eq!(load_homed(&path, 3, "a"), [false; MAX_MOTORS], "a file of unknown origin");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -63,6 +63,8 @@ fn selftest(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
     if let Some(b) = &args.backend {
         s.set_backend(b, &names).map_err(|e| refused(e.into()))?;
     }
+    // The selftest moves nothing: the settings' counts (4× in config/qmarc.toml) do not
+    // matter to it, only the card and its wiring.
     if let Some(d) = &args.device {
         s.set_device(d).map_err(|e| refused(e.into()))?;
     }

@@ -6,6 +6,7 @@ use crate::HwCore;
 use qmarc_comedi::fake::Failure;
 use qmarc_comedi::uapi::INSN_BITS;
 use qmarc_proto::{HwMsg, MsgType};
+use std::path::Path;
 
 /// The backend over a fake wired as the thesis' robot, and the fake.
 fn card(n_motors: usize) -> (S626, Arc<Mutex<FakeS626>>) {
@@ -82,21 +83,83 @@ fn no_motor_is_enabled_before_a_read_and_a_write_succeeded() {
 }
 
 #[test]
-fn a_driver_error_mid_move_is_a_hardware_fault_and_everything_goes_off() {
+fn a_driver_error_mid_move_makes_everything_safe_at_once_and_for_good() {
     let (s, fake) = card(3);
     let mut core = HwCore::new(Box::new(s));
     core.handle(&HwMsg::for_motor(MsgType::EnableMotor, 0));
     core.handle(&HwMsg::write_all_dacs(&[800, 0, 0, 0]));
-    locked(&fake).fail_next(Failure::Errno(nix::errno::Errno::EIO));
+    assert!(locked(&fake).pin_low(0) && locked(&fake).dac_volts(0) > 0.9);
+    // The kernel runs the counters, then the DIO read fails: no count, an errno.
+    locked(&fake).fail_next(Failure::ErrnoAfter { done: 2, errno: nix::errno::Errno::EIO });
     let st = core.handle(&HwMsg::read_all_encoders()).status();
     assert!(st.contains(Status::HARDWARE_FAULT), "{st}");
-    locked(&fake).fail_next(Failure::Short(2));
-    let st = core.handle(&HwMsg::write_all_dacs(&[800, 0, 0, 0])).status();
-    assert!(st.contains(Status::HARDWARE_FAULT), "a list cut short: {st}");
+    {
+        let fake = locked(&fake);
+        assert!((0..4).all(|c| fake.dac_volts(c) == 0.0), "DACs at 0 V without a DisableAll");
+        assert!(!fake.pin_low(0), "motor 1's enable off without a DisableAll");
+    }
+    // Latched: every response says so, nothing is enabled or driven again.
+    let st = core.handle(&HwMsg::for_motor(MsgType::EnableMotor, 0)).status();
+    assert!(st.contains(Status::HARDWARE_FAULT), "{st}");
+    core.handle(&HwMsg::write_all_dacs(&[800, 0, 0, 0]));
+    assert!(!locked(&fake).pin_low(0) && locked(&fake).dac_volts(0) == 0.0);
+    assert!(core.handle(&HwMsg::read_all_encoders()).status().contains(Status::HARDWARE_FAULT));
+}
+
+#[test]
+fn a_safe_list_that_fails_part_way_still_drops_every_enable_and_dac() {
+    let (s, fake) = card(3);
+    let mut core = HwCore::new(Box::new(s));
+    core.handle(&HwMsg::for_motor(MsgType::EnableMotor, 2));
+    core.handle(&HwMsg::write_all_dacs(&[0, 0, -900, 0]));
+    // The safe list's first instruction fails: its singles run one by one.
+    locked(&fake).fail_next(Failure::ErrnoAfter { done: 0, errno: nix::errno::Errno::EIO });
     core.handle(&HwMsg::request(MsgType::DisableAll));
     let fake = locked(&fake);
+    assert!(!fake.pin_low(3), "motor 3's enable (DIO3) off");
     assert!((0..4).all(|c| fake.dac_volts(c) == 0.0));
-    assert!(!fake.pin_low(0), "motor 1's enable off");
+    assert_eq!(fake.last_list()[0].1, 1, "the last single was a DAC: all of them ran");
+}
+
+#[test]
+fn a_failed_preset_leaves_the_motor_unhomed() {
+    let (s, fake) = card(2);
+    let mut core = HwCore::new(Box::new(s));
+    locked(&fake).fail_next(Failure::ErrnoAfter { done: 0, errno: nix::errno::Errno::EIO });
+    let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, 1);
+    preset.data[1] = 10.0;
+    let st = core.handle(&preset).status();
+    assert!(st.contains(Status::HARDWARE_FAULT), "{st}");
+    let flags = qmarc_proto::MotorFlags(core.handle(&HwMsg::read_all_encoders()).aux[1]);
+    assert!(!flags.homed(), "a counter that may hold anything is no homed frame");
+}
+
+#[test]
+fn a_stop_signal_stills_the_pump_and_holds_the_dacs_at_zero() {
+    let (s, fake) = card(3);
+    let mut core = HwCore::new(Box::new(s));
+    core.handle(&HwMsg::write_all_dacs(&[0; MAX_MOTORS]));
+    core.shut_down();
+    let pump = locked(&fake).pin_low(4);
+    for _ in 0..3 {
+        core.handle(&HwMsg::write_all_dacs(&[700, 700, 700, 0]));
+        let fake = locked(&fake);
+        assert_eq!(fake.pin_low(4), pump, "no more edges: the relay drops");
+        assert!((0..4).all(|c| fake.dac_volts(c) == 0.0), "0 V once stopped");
+    }
+}
+
+#[test]
+fn a_homed_frame_that_cannot_be_kept_is_refused_before_the_run() {
+    let names = qmarc_config::Names::backends_only(crate::backends::names());
+    let text = "[general]\ncounts_per_rev = 1024\n[hwserver]\nbackend = \"s626\"\n[s626]\n\
+                state_dir = \"/proc/qmarc\"\n"
+        .to_string()
+        + &"[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n".repeat(3);
+    let s = qmarc_config::Settings::parse(Path::new("q.toml"), &text, &names).unwrap();
+    let e = check_state_dir(&s).unwrap_err().to_string();
+    assert!(e.starts_with("/proc/qmarc: cannot keep the homed frame there ("), "{e}");
+    assert!(e.contains("or set [s626] state_dir"), "{e}");
 }
 
 #[test]
