@@ -106,9 +106,10 @@ fn exit_codes_follow_the_table_issue_10() {
     let r = wait_with_timeout(child, STOPPED_WITHIN);
     assert_eq!(r.code, Some(i32::from(exit::INTERRUPTED)), "{}\n{}", r.stdout, r.stderr);
     let s = qmarc_tests::assert_aborted_with_motors_disabled(&out);
+    let message = s.fault.unwrap().message;
     assert!(
-        s.fault.unwrap().message.starts_with("aborted by SIGINT"),
-        "the signal the user sent, by name"
+        message.starts_with("aborted by SIGINT"),
+        "the signal the user sent, by name: {message}"
     );
     // The stop that ended the move does not cost its data.
     let (_, rows) = qmarc_tests::read_gather(&out);

@@ -44,27 +44,27 @@ pub fn requested() -> bool {
     STOP.load(Ordering::Relaxed)
 }
 
-/// True when a stop signal has arrived or is pending (sent, its handler not run yet). Under
-/// load the handler can run milliseconds after the signal was sent; a loop that learns of a
-/// stop from elsewhere (the hwserver shutting down on the same signal) asks here whether it
-/// is its own. A system call: not for the fast path.
-pub fn arrived_or_pending() -> bool {
+/// The stop signal that has arrived or is pending (sent, its handler not run yet), if any.
+/// Under load the handler can run milliseconds after the signal was sent; a loop that learns
+/// of a stop from elsewhere (the hwserver shutting down on the same signal) asks here whether
+/// it is its own, and which. A system call: not for the fast path.
+pub fn arrived_or_pending() -> Option<i32> {
     if requested() {
-        return true;
+        return Some(signal().unwrap_or(0));
     }
     // SAFETY: sigpending(2) fills the set it is given (nix has no wrapper for sigpending).
     let pending = unsafe {
         let mut set: libc::sigset_t = std::mem::zeroed();
         libc::sigemptyset(&mut set);
         if libc::sigpending(&mut set) != 0 {
-            return false;
+            return None;
         }
         set
     };
     // SAFETY: sigismember on an initialised set.
     [libc::SIGTERM, libc::SIGINT, libc::SIGHUP]
         .into_iter()
-        .any(|sig| unsafe { libc::sigismember(&pending, sig) } == 1)
+        .find(|&sig| unsafe { libc::sigismember(&pending, sig) } == 1)
 }
 
 /// `SIGTERM`, `SIGINT`, …: a signal's name for messages.

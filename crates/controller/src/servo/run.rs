@@ -41,13 +41,13 @@ impl Servo {
     /// dying) reaches both processes: a hwserver that shut down because of it is our abort,
     /// not a hwserver fault. Our own signal may land a moment after its response.
     fn cycle_fault(&mut self, link: &mut dyn HwLink, f: Fault, stop: &AtomicBool) {
-        let signal = qmarc_timer::stop::signal().unwrap_or(0);
-        let f = if f.kind == FaultKind::HwserverShutdown && stop_arrives(stop) {
-            Fault { kind: FaultKind::Aborted, signal, ..f }
-        } else if f.kind == FaultKind::Aborted {
-            Fault { signal, ..f }
-        } else {
-            f
+        let f = match f.kind {
+            FaultKind::HwserverShutdown => match stop_arrives(stop) {
+                Some(signal) => Fault { kind: FaultKind::Aborted, signal, ..f },
+                None => f,
+            },
+            FaultKind::Aborted => Fault { signal: qmarc_timer::stop::signal().unwrap_or(0), ..f },
+            _ => f,
         };
         self.handle_fault(link, f);
     }
@@ -149,17 +149,20 @@ impl Servo {
     }
 }
 
-/// True when a stop signal arrived or is pending for this process, waiting up to 1 s for one
+/// The stop signal that arrived or is pending for this process, waiting up to 1 s for one
 /// (off the loop's fast path: only after the hwserver shut down, the motors already off).
 /// The starter forwards a stop to the controller before the hwserver, so its signal is
 /// normally pending by then; the wait covers two signals sent at once (the kernel's
 /// parent-death signal), whose handler may run late on a loaded machine.
-fn stop_arrives(stop: &AtomicBool) -> bool {
+fn stop_arrives(stop: &AtomicBool) -> Option<i32> {
     for _ in 0..1_000 {
-        if stop.load(Ordering::Relaxed) || qmarc_timer::stop::arrived_or_pending() {
-            return true;
+        if let Some(signal) = qmarc_timer::stop::arrived_or_pending() {
+            return Some(signal);
+        }
+        if stop.load(Ordering::Relaxed) {
+            return Some(qmarc_timer::stop::signal().unwrap_or(0));
         }
         std::thread::sleep(std::time::Duration::from_millis(1));
     }
-    stop.load(Ordering::Relaxed)
+    stop.load(Ordering::Relaxed).then(|| qmarc_timer::stop::signal().unwrap_or(0))
 }
