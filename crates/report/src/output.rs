@@ -269,14 +269,15 @@ fn retire_current_set(dir: &Path) -> std::io::Result<()> {
 /// no data to write (its controller died), which must neither sit beside an earlier run's
 /// data nor destroy them.
 pub fn write_summary_set(dir: &Path, summary: &Summary) -> Result<PathBuf, WriteError> {
-    let json = |w: &mut dyn Write| {
-        serde_json::to_writer_pretty(&mut *w, summary).map_err(std::io::Error::other)?;
-        writeln!(w)
-    };
-    std::fs::create_dir_all(dir)
-        .map_err(|reason| WriteError { file: dir.to_path_buf(), reason })?;
+    let json = |w: &mut dyn Write| write_json(summary, w);
     let mut done = write_set(dir, &[("summary.json", &json)])?;
     Ok(done.remove(0))
+}
+
+/// `summary` as `summary.json` holds it.
+fn write_json(summary: &Summary, w: &mut dyn Write) -> std::io::Result<()> {
+    serde_json::to_writer_pretty(&mut *w, summary).map_err(std::io::Error::other)?;
+    writeln!(w)
 }
 
 /// Writes the move's data files and `summary.json` into `dir` as one set
@@ -293,10 +294,7 @@ pub fn write_results(dir: &Path, servo: &Servo, summary: &mut Summary) -> Result
         let names: &[&str] = if data { &OUTPUT_FILES } else { &OUTPUT_FILES[2..] };
         summary.files = names.iter().map(|f| dir.join(f)).collect();
         let frozen = summary.clone();
-        let json = move |w: &mut dyn Write| {
-            serde_json::to_writer_pretty(&mut *w, &frozen).map_err(std::io::Error::other)?;
-            writeln!(w)
-        };
+        let json = move |w: &mut dyn Write| write_json(&frozen, w);
         let all: [FileWriter<'_>; 3] =
             [("gather.csv", &csv), ("gather.m", &octave), ("summary.json", &json)];
         write_set(dir, if data { &all } else { &all[2..] })

@@ -88,7 +88,6 @@ impl Wiring {
 /// The Sensoray 626 backend.
 pub struct S626 {
     transport: Box<dyn Transport>,
-    device: String,
     w: Wiring,
     read: InsnList,
     write: InsnList,
@@ -123,9 +122,7 @@ impl S626 {
     /// be a 626 as its driver presents it, its subdevices locked for this process.
     pub fn open(s: &Settings, lockstep: bool) -> Result<S626, BackendOpenError> {
         if lockstep {
-            return Err(BackendOpenError::Invalid(
-                "--deterministic runs the simulated robot only: the 626 moves in real time".into(),
-            ));
+            return Err(lockstep_refused());
         }
         let device = s.s626.device.display().to_string();
         if device == FAKE_DEVICE {
@@ -143,7 +140,7 @@ impl S626 {
     /// settings are in the card's counts ([`Settings::s626_counts_problem`]).
     pub fn check(s: &Settings, lockstep: bool) -> Result<(), BackendOpenError> {
         if lockstep {
-            return S626::open(s, lockstep).map(drop);
+            return Err(lockstep_refused());
         }
         Wiring::of(&s.s626, s.n_motors)?;
         let device = s.s626.device.display().to_string();
@@ -204,7 +201,6 @@ impl S626 {
             .map_or([false; MAX_MOTORS], |p| load_homed(p, n_motors, &identity));
         Ok(S626 {
             transport,
-            device: device.to_string(),
             read: read_list(&w),
             write: write_list(&w),
             enables: InsnList::new(&[Insn::bits(SUBDEV_DIO0)]),
@@ -231,11 +227,6 @@ impl S626 {
         self
     }
 
-    /// The comedi device the backend drives.
-    pub fn device(&self) -> &str {
-        &self.device
-    }
-
     /// Runs the read list once (counters and switches): the selftest's unit of work.
     pub fn run_read_list(&mut self) -> Result<(), HwFault> {
         let mut inputs = Inputs::default();
@@ -253,6 +244,13 @@ impl S626 {
     fn oriented(&self, motor: usize, raw: u32) -> u32 {
         if self.w.counter_sign[motor] < 0 { raw.wrapping_neg() & COUNTER_MASK } else { raw }
     }
+}
+
+/// Why `--deterministic` cannot drive the card: lock-step time is the simulator's.
+fn lockstep_refused() -> BackendOpenError {
+    BackendOpenError::Invalid(
+        "--deterministic runs the simulated robot only: the 626 moves in real time".into(),
+    )
 }
 
 /// The read list: every motor's counter, then DIO bank 0 read (mask 0: nothing written).

@@ -274,7 +274,7 @@ impl SimDeltabot {
     /// Nothing is kept when the file cannot be read (a fresh machine) or written.
     pub fn with_state_file(mut self, path: &std::path::Path) -> SimDeltabot {
         let kept = super::state::load_homed(path, self.p.n_motors, SIM_IDENTITY);
-        for (m, _) in kept.iter().enumerate().take(self.p.n_motors).filter(|(_, k)| **k) {
+        for m in (0..self.p.n_motors).filter(|&m| kept[m]) {
             if !self.homed[m] {
                 self.homed[m] = true;
                 self.axes[m].counter_offset = COUNTER_ZERO;

@@ -25,10 +25,9 @@ pub fn load_homed(path: &Path, n_motors: usize, identity: &str) -> [bool; MAX_MO
     if card != Some(identity) {
         return homed;
     }
-    for (m, flag) in flags.into_iter().flat_map(str::split_whitespace).enumerate() {
-        if m < n_motors.min(MAX_MOTORS) {
-            homed[m] = flag == "1";
-        }
+    let flags = flags.into_iter().flat_map(str::split_whitespace);
+    for (h, flag) in homed.iter_mut().zip(flags).take(n_motors) {
+        *h = flag == "1";
     }
     homed
 }
