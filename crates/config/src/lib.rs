@@ -25,6 +25,7 @@ mod general;
 mod homing;
 mod hwserver;
 mod motor;
+mod robot;
 mod run;
 mod s626;
 mod sim;
@@ -38,6 +39,7 @@ pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
 pub use hwserver::{ExplicitTiming, HwServerSettings, TimingDefaults};
 pub use motor::{MotorGains, MotorSafety};
+pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
 pub use s626::{S626_DIO_CHANNELS, S626Settings};
 pub use sim::{DEFAULT_SIM_STATE_FILE, SimSettings};
@@ -108,6 +110,9 @@ pub struct Settings {
     pub sim: SimSettings,
     /// The Sensoray 626.
     pub s626: S626Settings,
+    /// The robot's geometry and joint-count frame (`[robot]`), if the file describes it.
+    #[serde(default)]
+    pub robot: Option<RobotSettings>,
     /// Gains of every `[[motor]]` table (at least `n_motors`, at most [`MAX_MOTORS`]).
     pub motors: Vec<MotorGains>,
     /// Limits and homing of every `[[motor]]` table.
@@ -166,6 +171,8 @@ struct RawFile {
     #[serde(default)]
     s626: s626::RawS626,
     #[serde(default)]
+    robot: Option<Spanned<robot::RawRobot>>,
+    #[serde(default)]
     motor: Vec<Spanned<motor::RawMotor>>,
 }
 
@@ -182,6 +189,10 @@ impl RawFile {
         let hwserver = self.hwserver.check(src, names)?;
         let sim = self.sim.check(src, n_motors)?;
         let s626 = self.s626.check(src, n_motors, hwserver.backend == "s626")?;
+        let robot = match &self.robot {
+            Some(r) => Some(r.get_ref().check(src, r.span())?),
+            None => None,
+        };
         if self.motor.len() > MAX_MOTORS {
             return Err(src.invalid(
                 self.motor[MAX_MOTORS].span(),
@@ -241,6 +252,7 @@ impl RawFile {
             },
             hwserver,
             s626,
+            robot,
             motors,
             safety,
         })
@@ -285,6 +297,13 @@ impl Settings {
     /// True when the gains are rescaled ([`Settings::effective_gains`]).
     pub fn gains_rescaled(&self) -> bool {
         self.gains_period_us != self.period_us
+    }
+
+    /// The robot in its joint-count frame, if `[robot]` describes it and three motors are
+    /// driven (the Delta has three arms).
+    pub fn robot(&self) -> Option<qmarc_kinematics::Robot> {
+        let r = self.robot.filter(|_| self.n_motors == qmarc_kinematics::ARMS)?;
+        Some(r.robot(self.counts_per_rad()))
     }
 
     /// Encoder counts per radian of arm rotation: counts_per_rev · gear_ratio / 2π.

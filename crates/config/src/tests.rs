@@ -95,7 +95,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         "[bogus]\nx = 1\n",
-        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `motor`",
+        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `robot`, `motor`",
     );
     check(
         "[trajectory]\nmethod = \"home\"\n",
@@ -355,4 +355,54 @@ fn the_626_wiring_is_checked_when_it_is_the_backend_issue_12() {
         four_x.s626_counts_problem()
     );
     assert_eq!(parse(&on("")).unwrap().s626_counts_problem(), None);
+}
+
+/// Issue 13: the shipped `[robot]` is the notes' assumed Deltabot, its homed frame at the
+/// work centre; a file without the table has no robot, and one with an empty table takes the
+/// defaults, the home angle computed from the geometry.
+#[test]
+fn the_robot_table_is_the_notes_deltabot_issue_13() {
+    let s = shipped();
+    let robot = s.robot().expect("the shipped file describes the robot");
+    assert_eq!(robot.geometry, qmarc_kinematics::Geometry::ASSUMED);
+    let centre = robot.counts_of(&WORK_CENTRE_M.into()).unwrap();
+    assert!(centre.iter().all(|c| c.abs() < 0.01), "the work centre reads {centre:?} counts");
+    assert_eq!(parse(&MOTOR.repeat(3)).unwrap().robot, None);
+    let empty = parse(&format!("[robot]\n{}", MOTOR.repeat(3))).unwrap();
+    let exact = empty.robot.unwrap().home_rad;
+    assert!(exact.iter().zip(s.robot.unwrap().home_rad).all(|(a, b)| (a - b).abs() < 1e-6));
+    assert_eq!(empty.robot().unwrap().counts_of(&WORK_CENTRE_M.into()).unwrap(), [0.0; 3]);
+    assert!(
+        parse(&format!("[general]\nn_motors = 1\n[robot]\n{MOTOR}")).unwrap().robot().is_none()
+    );
+    let s626 = Settings::load(&shipped_path().with_file_name("s626.toml"), &names()).unwrap();
+    assert_eq!(s626.robot, s.robot, "config/s626.toml: the same robot");
+}
+
+#[test]
+fn robot_errors_name_the_field_issue_13() {
+    let m = MOTOR.repeat(3);
+    check(
+        &format!("[robot]\nrod_length_m = -0.7\n{m}"),
+        "q.toml:2:16: robot.rod_length_m: must be a finite number > 0, found -0.7",
+    );
+    check(
+        &format!("[robot]\narm_azimuth_deg = [0, 120]\n{m}"),
+        "q.toml:2:19: robot.arm_azimuth_deg: one value per arm: 3 numbers, found 2",
+    );
+    check(
+        &format!("[robot]\narm_azimuth_deg = [0, 0.5, 240]\n{m}"),
+        "q.toml:2:19: robot.arm_azimuth_deg: arms 1 and 2 are less than 1° apart",
+    );
+    check(
+        &format!("[robot]\nrod_length_m = 0.1\nhome_angle_deg = [0, 0, 0]\n{m}"),
+        "q.toml:3:18: robot.home_angle_deg: the homed frame is no pose of this robot: no pose \
+         has the arm angles (0.0000°, 0.0000°, 0.0000°): the cables cannot all reach one point",
+    );
+    check(
+        &format!("[robot]\nrod_length_m = 0.1\n{m}"),
+        "q.toml:1:1: robot.home_angle_deg: not set, and its default, the arm angles of the \
+         work centre (0, 0, −600) mm, does not exist: arm 1 cannot reach (0.0, 0.0, -600.0) mm: \
+         the point is out of its reach; set home_angle_deg",
+    );
 }

@@ -326,8 +326,10 @@ pub fn read_line_bounded(
 
 mod offline;
 mod pvt;
+mod waypoints;
 pub use offline::parse_offline;
 pub use pvt::{MIN_PVT_KNOTS, PvtLineParser, parse_pvt};
+pub use waypoints::{Waypoints, parse_waypoints};
 
 #[doc(hidden)]
 pub mod fuzzing;

@@ -1,6 +1,6 @@
 //! What a move leaves behind, written after it: `summary.json` (its schema, [`summary`], and
 //! how it is made from the loop's figures, [`summarize`]), `gather.csv` and `gather.m`
-//! ([`files`]), the output folder's rules ([`output`]: checked, locked, replaced as one set,
+//! ([`files`]), the Cartesian figures ([`effector`]), the output folder's rules ([`output`]: checked, locked, replaced as one set,
 //! a rescue folder) and the table the starter prints ([`table`]).
 //!
 //! ```
@@ -9,6 +9,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod effector;
 pub mod files;
 pub mod output;
 pub mod summarize;

@@ -78,6 +78,14 @@ pub fn summarize(
             ));
         }
     }
+    // The rows of the path (the settle's come after it).
+    let path_rows = || servo.gather().rows().iter().filter(|r| r.cycle < servo.cycles());
+    let gathered = (!servo.gather().rows().is_empty())
+        .then(|| crate::effector::gathered(path_rows(), n, cpr, settings.gather.every));
+    let effector = settings
+        .robot()
+        .filter(|_| gathered.as_ref().is_some_and(|g| g.rows > 0))
+        .map(|robot| crate::effector::effector(&robot, path_rows()));
     let settle = servo.settle_figures().map(|(cycles, errors, last)| SettleSummary {
         cycles,
         seconds: (cycles * u64::from(settings.period_us)) as f64 / 1e6,
@@ -108,6 +116,8 @@ pub fn summarize(
         gathered_rows: servo.gather().rows().len() as u64,
         counts_per_rad: cpr,
         motors,
+        gathered,
+        effector,
         gains_period_us: settings.gains_period_us,
         gains: (0..n).map(|m| settings.effective_gains(m).into()).collect(),
         settle,

@@ -1,6 +1,7 @@
 //! `summary.json`: everything about one move, as the starter, the console and the tests read
 //! it. The schema lives here, apart from the figures the loop keeps (`qmarc_controller::stats`).
 
+use crate::effector::{EffectorSummary, GatheredErrors};
 use qmarc_config::{Mode, MotorGains};
 use qmarc_controller::fault::{Fault, FaultKind};
 use qmarc_controller::stats::{AxisErrors, TimingStats};
@@ -248,6 +249,14 @@ pub struct Summary {
     pub counts_per_rad: f64,
     /// Error figures per motor, over the path (the settle at its end is in `settle`).
     pub motors: Vec<MotorSummary>,
+    /// Per motor, the figures of `motors` over the gathered rows of the path only: the
+    /// thesis summed Table 5-2 over data gathered every 4th cycle.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gathered: Option<GatheredErrors>,
+    /// The end-effector error over the gathered rows of the path (command against actual
+    /// through the forward kinematics), mm, when `[robot]` describes the robot.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub effector: Option<EffectorSummary>,
     /// The servo period the configured gains were tuned at, µs.
     #[serde(default)]
     pub gains_period_us: u32,
@@ -313,6 +322,8 @@ impl Summary {
             gathered_rows: 0,
             counts_per_rad: 0.0,
             motors: Vec::new(),
+            gathered: None,
+            effector: None,
             gains_period_us: 0,
             gains: Vec::new(),
             settle: None,

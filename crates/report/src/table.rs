@@ -2,7 +2,7 @@
 //! thesis 3.4 and 5.2). Columns are as wide as their widest cell, so figures never run
 //! together; times are in µs, ms or s as fits.
 
-use crate::summary::{Pct, Summary};
+use crate::summary::{MotorSummary, Pct, Summary};
 use std::fmt::Write;
 
 /// Renders `s` as a table for the terminal, ending with the data files it wrote that exist.
@@ -42,33 +42,40 @@ pub fn render(s: &Summary) -> String {
         }
     }
     if !s.motors.is_empty() {
-        let _ = writeln!(t, "\n  following error (command − actual)");
-        let mut rows = vec![
-            [
-                "motor",
-                "min cnt",
-                "max cnt",
-                "Σ|e| cnt",
-                "Σe² cnt²",
-                "min rad",
-                "max rad",
-                "Σ|e| rad",
-                "Σe² rad²",
-            ]
-            .map(String::from)
-            .to_vec(),
-        ];
-        for (i, m) in s.motors.iter().enumerate() {
+        let _ = writeln!(t, "\n  following error (command − actual), every cycle of the path");
+        error_table(&mut t, &s.motors, true);
+    }
+    match &s.gathered {
+        Some(g) if g.every > 1 => {
+            let _ = writeln!(
+                t,
+                "\n  the same over the {} gathered rows of the path (every {} cycles, as the thesis summed them)",
+                g.rows, g.every
+            );
+            error_table(&mut t, &g.motors, false);
+        }
+        _ => {}
+    }
+    if let Some(e) = &s.effector {
+        let _ = writeln!(
+            t,
+            "\n  end-effector error (command − actual through the forward kinematics), {} rows{}",
+            e.rows,
+            if e.no_pose_rows > 0 {
+                format!(", {} without a pose left out", e.no_pose_rows)
+            } else {
+                String::new()
+            }
+        );
+        let mut rows =
+            vec![["", "min mm", "max mm", "RMS mm", "max |e| mm"].map(String::from).to_vec()];
+        for (name, a) in [("x", &e.x), ("y", &e.y), ("z", &e.z), ("distance", &e.distance)] {
             rows.push(vec![
-                format!("{}{}", i + 1, if m.followed { "" } else { " DID NOT FOLLOW" }),
-                format!("{:.1}", m.min_error_counts),
-                format!("{:.1}", m.max_error_counts),
-                format!("{:.1}", m.accumulated_abs_error_counts),
-                format!("{:.1}", m.sum_squares_error_counts2),
-                format!("{:.3e}", m.min_error_rad),
-                format!("{:.3e}", m.max_error_rad),
-                format!("{:.4}", m.accumulated_abs_error_rad),
-                format!("{:.4e}", m.sum_squares_error_rad2),
+                name.to_string(),
+                format!("{:.3}", a.min_mm),
+                format!("{:.3}", a.max_mm),
+                format!("{:.3}", a.rms_mm),
+                format!("{:.3}", a.max_abs_mm),
             ]);
         }
         aligned(&mut t, &rows);
@@ -121,6 +128,40 @@ pub fn render(s: &Summary) -> String {
         );
     }
     t
+}
+
+/// The thesis' Table 5-2 columns per motor, in counts and rad; `followed` marks a motor that
+/// did not follow its command.
+fn error_table(t: &mut String, motors: &[MotorSummary], followed: bool) {
+    let mut rows = vec![
+        [
+            "motor",
+            "min cnt",
+            "max cnt",
+            "Σ|e| cnt",
+            "Σe² cnt²",
+            "min rad",
+            "max rad",
+            "Σ|e| rad",
+            "Σe² rad²",
+        ]
+        .map(String::from)
+        .to_vec(),
+    ];
+    for (i, m) in motors.iter().enumerate() {
+        rows.push(vec![
+            format!("{}{}", i + 1, if m.followed || !followed { "" } else { " DID NOT FOLLOW" }),
+            format!("{:.1}", m.min_error_counts),
+            format!("{:.1}", m.max_error_counts),
+            format!("{:.1}", m.accumulated_abs_error_counts),
+            format!("{:.1}", m.sum_squares_error_counts2),
+            format!("{:.3e}", m.min_error_rad),
+            format!("{:.3e}", m.max_error_rad),
+            format!("{:.4}", m.accumulated_abs_error_rad),
+            format!("{:.4e}", m.sum_squares_error_rad2),
+        ]);
+    }
+    aligned(t, &rows);
 }
 
 /// A timing row: the name, then p50/p99/p99.9/max in human units.

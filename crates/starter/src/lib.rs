@@ -13,6 +13,7 @@
 #![deny(missing_docs)]
 
 pub mod cli;
+pub mod path;
 pub mod supervise;
 
 pub use supervise::{Exit, describe_exit};

@@ -6,7 +6,7 @@
 //! moved, 130 interrupted by a stop signal, 64 a bad command line, 1 anything else.
 
 use anyhow::{Context, anyhow};
-use clap::Parser;
+use clap::{Parser, Subcommand};
 use qmarc_config::{RunSpec, Settings};
 use qmarc_controller::fault::FaultKind;
 use qmarc_controller::gather::check_budget;
@@ -18,6 +18,7 @@ use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
 use qmarc_report::Summary;
 use qmarc_report::table;
 use qmarc_starter::cli::{Command, MoveOptions};
+use qmarc_starter::path::PathArgs;
 use qmarc_starter::supervise::{self, Supervised};
 use qmarc_starter::{
     Exit, check_iox_root, default_prefix, describe_exit, names, remove_stale_files, run_file,
@@ -61,7 +62,17 @@ struct StarterArgs {
     #[arg(long, global = true)]
     print_settings: bool,
     #[command(subcommand)]
-    command: Command,
+    command: StarterCommand,
+}
+
+/// A move, or a tool that prepares one.
+#[derive(Debug, Subcommand)]
+enum StarterCommand {
+    #[command(flatten)]
+    Move(Command),
+    /// Make a knot file for `run` from Cartesian waypoints (`t_s x_m y_m z_m` per line)
+    /// through the inverse kinematics of the settings' [robot]; writes it to `--out FILE`.
+    Path(PathArgs),
 }
 
 /// An error and the exit code it ends the run with.
@@ -77,12 +88,12 @@ fn internal<E: Into<anyhow::Error>>(e: E) -> Failure {
     (exit::INTERNAL, e.into())
 }
 
-fn run(args: &StarterArgs) -> Result<ExitCode, Failure> {
+fn run(args: &StarterArgs, command: &Command) -> Result<ExitCode, Failure> {
     // Everything is checked before anything starts.
     let names = names();
     let mut settings = args.opts.load(&names).map_err(refused)?;
-    args.command.apply(&mut settings, &names).map_err(refused)?;
-    let mode = args.command.mode();
+    command.apply(&mut settings, &names).map_err(refused)?;
+    let mode = command.mode();
     let bin_dir = match &args.bin_dir {
         Some(d) => d.clone(),
         None => std::env::current_exe()
@@ -324,7 +335,16 @@ fn controller_lost_message(
 
 fn main() -> ExitCode {
     let args: StarterArgs = qmarc_starter::cli::parse_or_exit();
-    match run(&args) {
+    let result = match &args.command {
+        StarterCommand::Move(command) => run(&args, command),
+        StarterCommand::Path(path) => qmarc_starter::path::make(&args.opts, path)
+            .map(|done| {
+                println!("{done}");
+                ExitCode::SUCCESS
+            })
+            .map_err(refused),
+    };
+    match result {
         Ok(code) => code,
         Err((code, e)) => {
             say!("qmarc-starter: error: {e:#}");

@@ -109,7 +109,7 @@ fn declared_knots(at: &At<'_>, hline: usize, header: &str) -> Result<usize, Knot
 /// Checks a knot's time `t` (token `tok` of line `lno`) against the previous knot's `(time,
 /// line)` — times strictly increase — and the first knot's time — the path lasts at most
 /// `trajectory.max_duration_s`.
-fn check_time(
+pub(super) fn check_time(
     at: &At<'_>,
     (lno, tok): (usize, &Token<'_>),
     t: f64,

@@ -1,0 +1,66 @@
+//! `qmarc-starter path`: a Cartesian waypoint file into a knot file for `run`
+//! ([`qmarc_paths`]), on the robot the settings describe.
+
+use crate::cli::MoveOptions;
+use anyhow::{Context, anyhow, bail};
+use clap::Args;
+use qmarc_paths::KnotFormat;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Options of `path`. The knot file goes to `--out FILE`.
+#[derive(Debug, Clone, PartialEq, Args)]
+pub struct PathArgs {
+    /// Waypoint file: one line per waypoint, `t_s x_m y_m z_m`, times strictly increasing.
+    #[arg(long)]
+    pub waypoints: PathBuf,
+    /// The knot file to make: `spline` (thesis A.2.3.1) or `pvt` (A.2.3.2).
+    #[arg(long)]
+    pub method: String,
+    /// Resample the Cartesian path every T ms (default: a knot at each waypoint).
+    #[arg(long, value_name = "T")]
+    pub every_ms: Option<f64>,
+}
+
+/// Makes the knot file of `args` and writes it to `opts.out` (never over the waypoint file);
+/// returns what it did, for the terminal.
+pub fn make(opts: &MoveOptions, args: &PathArgs) -> anyhow::Result<String> {
+    let out = opts.out.as_deref().context("--out FILE: where to write the knot file")?;
+    let format = KnotFormat::of_method(&args.method).ok_or_else(|| {
+        anyhow!("--method: `{}` has no knot file; use spline or pvt", args.method)
+    })?;
+    if same_file(out, &args.waypoints) {
+        bail!("--out {}: that is the waypoint file; write the knots elsewhere", out.display());
+    }
+    let settings = opts.load(&crate::names())?;
+    let text = qmarc_paths::generate(&settings, &args.waypoints, format, args.every_ms)?;
+    write_atomically(out, text.as_bytes())?;
+    let knots = text.lines().filter(|l| !l.starts_with('#')).count()
+        - usize::from(format == KnotFormat::Spline);
+    Ok(format!("wrote {knots} {} knots to {}", args.method, out.display()))
+}
+
+/// True when `a` and `b` name one existing file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
+}
+
+/// Writes `bytes` to `path` through a temporary file beside it, so a reader never sees half
+/// a knot file and a failure leaves the old one.
+fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let name =
+        path.file_name().with_context(|| format!("--out {}: not a file name", path.display()))?;
+    let tmp =
+        path.with_file_name(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
+    let written = std::fs::File::create(&tmp)
+        .and_then(|mut f| f.write_all(bytes).and_then(|()| f.sync_all()))
+        .and_then(|()| std::fs::rename(&tmp, path));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&tmp);
+        bail!("cannot write {}: {e}", path.display());
+    }
+    Ok(())
+}
