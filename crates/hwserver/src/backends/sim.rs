@@ -12,7 +12,7 @@
 //! with the same requests give identical data).
 
 use crate::backend::{Backend, BackendOpenError, HwFault, Inputs, Outputs};
-use qmarc_config::Settings;
+use qmarc_config::{Settings, SimSettings};
 use qmarc_proto::{COUNTER_MASK, COUNTER_ZERO, DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, Status};
 use qmarc_timer::clock::monotonic_now_ns;
 
@@ -52,19 +52,22 @@ pub struct SimParams {
 }
 
 impl Default for SimParams {
+    /// The plant and switches of the settings' defaults ([`SimSettings::default`], where each
+    /// is defined once), three motors at 400 µs, paced, no fault injected.
     fn default() -> SimParams {
+        let d = SimSettings::default();
         SimParams {
             n_motors: 3,
             period_ns: 400_000,
             lockstep: false,
-            kv_counts_per_s_per_v: 25_000.0,
-            tau_s: 0.004,
-            coast_tau_s: 0.05,
+            kv_counts_per_s_per_v: d.kv,
+            tau_s: d.tau_s,
+            coast_tau_s: d.coast_tau_s,
             start_counts: [0.0; MAX_MOTORS],
-            top_switch_counts: -9_500.0,
-            bottom_switch_counts: 10_500.0,
-            homed: true,
-            counter_offset: 0,
+            top_switch_counts: d.top_switch_counts,
+            bottom_switch_counts: d.bottom_switch_counts,
+            homed: d.homed,
+            counter_offset: d.counter_offset,
             stall_motor: None,
             stuck_top_motor: None,
         }
