@@ -153,7 +153,7 @@ fn the_xz_path_reports_arm_and_effector_errors_issue_13() {
     assert!((3.0..15.0).contains(&e.z.max_abs_mm), "{e:?}");
     assert!(e.y.max_abs_mm < 0.1 * e.x.max_abs_mm, "{e:?}");
     assert!(e.distance.max_mm >= e.x.max_abs_mm && e.distance.rms_mm > 0.0);
-    let table = std::fs::read_to_string(out.join("summary.json")).unwrap();
-    assert!(table.contains("\"effector\""));
+    let json = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(json.contains("\"effector\""), "the contract's key");
     run.assert_clean();
 }

@@ -248,32 +248,23 @@ impl Geometry {
             return Err(KinematicsError::NotFinite);
         }
         let l = self.arm_length_m;
+        // sᵢ: from each elbow to its cable's end on the effector.
+        let s: [Vector3<f64>; ARMS] = std::array::from_fn(|i| {
+            p + self.effector_radius_m * self.u(i) - self.elbow(i, theta[i])
+        });
         let mut rows = Matrix3::zeros();
-        let mut s_norms = 1.0;
-        for i in 0..ARMS {
-            let s = p + self.effector_radius_m * self.u(i) - self.elbow(i, theta[i]);
+        for (i, si) in s.iter().enumerate() {
             let b = l * (-theta[i].sin() * self.u(i) - theta[i].cos() * Vector3::z());
-            let sb = s.dot(&b);
-            if sb.abs() < SINGULAR_COSINE * s.norm() * b.norm() {
+            let sb = si.dot(&b);
+            if sb.abs() < SINGULAR_COSINE * si.norm() * b.norm() {
                 return Err(KinematicsError::Singular { arm: i as u8 + 1, point: (*p).into() });
             }
-            rows.set_row(i, &(s.transpose() / sb));
-            s_norms *= s.norm();
+            rows.set_row(i, &(si.transpose() / sb));
         }
-        // The rows were divided by sᵢ·bᵢ; undo that for the coplanarity test.
-        let det = Matrix3::from_rows(&std::array::from_fn::<_, ARMS, _>(|i| {
-            (p + self.effector_radius_m * self.u(i) - self.elbow(i, theta[i])).transpose()
-        }))
-        .determinant();
-        if det.abs() < COPLANAR_SINE * s_norms {
+        let det = Matrix3::from_columns(&s).determinant();
+        if det.abs() < COPLANAR_SINE * s.iter().map(|si| si.norm()).product::<f64>() {
             return Err(KinematicsError::Coplanar { point: (*p).into() });
         }
         Ok(rows)
-    }
-
-    /// θ̇ for the effector velocity `v` at `p`: the inverse and the Jacobian in one call.
-    pub fn joint_velocity(&self, p: &Point, v: &Vector3<f64>) -> Result<Angles, KinematicsError> {
-        let theta = self.inverse(p)?;
-        Ok(self.jacobian(p, &theta)? * v)
     }
 }

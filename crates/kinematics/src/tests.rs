@@ -85,8 +85,8 @@ fn the_workspace_is_well_conditioned_as_the_notes_say() {
 
 #[test]
 fn points_out_of_reach_are_refused_naming_the_arm() {
-    // 0.5 m out along arm 1's azimuth: beyond L + l from arm 1's motor? No: beyond arms 2 and
-    // 3's reach, which lie behind the base centre.
+    // 0.9 m out along arm 1's azimuth: within arm 1's reach, beyond that of arms 2 and 3,
+    // whose motors sit on the other side of the base.
     let e = G.inverse(&Point::new(0.9, 0.0, -0.3)).unwrap_err();
     assert!(matches!(e, KinematicsError::Unreachable { .. }), "{e:?}");
     let text = e.to_string();

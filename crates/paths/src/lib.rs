@@ -213,15 +213,24 @@ pub fn render(knots: &[JointKnot], format: KnotFormat, header: &str) -> String {
     t
 }
 
-/// `qmarc-starter path`: the knot file (its text) of the waypoint file `waypoints` for
-/// `format`, on the robot of `settings`, knots every `every_ms` or at the waypoints. The text
-/// is read back by the generator's own parser before it is returned.
+/// A knot file made by [`generate`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct KnotFile {
+    /// Its text.
+    pub text: String,
+    /// The knots it holds.
+    pub knots: usize,
+}
+
+/// `qmarc-starter path`: the knot file of the waypoint file `waypoints` for `format`, on the
+/// robot of `settings`, knots every `every_ms` or at the waypoints. The text is read back by
+/// the generator's own parser before it is returned.
 pub fn generate(
     settings: &Settings,
     waypoints: &Path,
     format: KnotFormat,
     every_ms: Option<f64>,
-) -> Result<String, PathError> {
+) -> Result<KnotFile, PathError> {
     let robot = settings
         .robot()
         .ok_or_else(|| PathError::NoRobot(settings.source.display().to_string()))?;
@@ -243,6 +252,6 @@ pub fn generate(
     };
     match check {
         Some(e) => Err(PathError::Unreadable(e)),
-        None => Ok(text),
+        None => Ok(KnotFile { text, knots: knots.len() }),
     }
 }

@@ -5,7 +5,7 @@
 
 use crate::summary::MotorSummary;
 use qmarc_controller::gather::GatherRow;
-use qmarc_controller::stats::AxisErrors;
+use qmarc_controller::stats::{AxisErrors, ErrorStats};
 use qmarc_kinematics::{ARMS, Robot};
 use serde::{Deserialize, Serialize};
 
@@ -93,17 +93,15 @@ pub fn gathered<'a>(
     counts_per_rad: f64,
     every: u32,
 ) -> GatheredErrors {
-    let mut axes = vec![AxisErrors::default(); n_motors];
-    let mut count = 0;
+    // The loop's own accumulator, over the gathered rows.
+    let mut errors = ErrorStats::default();
     for r in rows {
-        count += 1;
-        for (m, a) in axes.iter_mut().enumerate() {
-            a.add(r.cmd[m] - r.act[m]);
-        }
+        errors.add(n_motors, &r.cmd, &r.act);
     }
+    let axes = &errors.axes[..n_motors];
     GatheredErrors {
         every,
-        rows: count,
+        rows: axes.first().map_or(0, |a| a.count),
         motors: axes.iter().map(|a| MotorSummary::new(a, counts_per_rad)).collect(),
     }
 }

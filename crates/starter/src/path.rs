@@ -33,11 +33,9 @@ pub fn make(opts: &MoveOptions, args: &PathArgs) -> anyhow::Result<String> {
         bail!("--out {}: that is the waypoint file; write the knots elsewhere", out.display());
     }
     let settings = opts.load(&crate::names())?;
-    let text = qmarc_paths::generate(&settings, &args.waypoints, format, args.every_ms)?;
-    write_atomically(out, text.as_bytes())?;
-    let knots = text.lines().filter(|l| !l.starts_with('#')).count()
-        - usize::from(format == KnotFormat::Spline);
-    Ok(format!("wrote {knots} {} knots to {}", args.method, out.display()))
+    let made = qmarc_paths::generate(&settings, &args.waypoints, format, args.every_ms)?;
+    write_atomically(out, made.text.as_bytes())?;
+    Ok(format!("wrote {} {} knots to {}", made.knots, args.method, out.display()))
 }
 
 /// True when `a` and `b` name one existing file.
