@@ -29,7 +29,8 @@ pub struct MoveOptions {
     /// Settings file.
     #[arg(long, global = true, default_value = "config/qmarc.toml")]
     pub config: PathBuf,
-    /// Directory for gather.csv, gather.m and summary.json (default: `gather.out_dir`).
+    /// Directory for gather.csv, gather.m and summary.json (default: `gather.out_dir`); for
+    /// `path`, the knot file to write.
     #[arg(long, global = true)]
     pub out: Option<PathBuf>,
     /// Gather every N-th servo cycle (default: `gather.every`).
