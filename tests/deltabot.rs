@@ -126,15 +126,22 @@ fn the_xz_path_reports_arm_and_effector_errors_issue_13() {
     let run = TestRun::new("xzreport");
     let out = run.out("out");
     let config = starting_at_the_path(&run, "xz-pick-place-spline.txt");
-    run.starter_ok(&[
+    let r = run.starter_ok(&[
         &format!("--config={}", config.display()),
         &format!("--out={}", out.display()),
         "--deterministic",
         "--gather-every=4",
+        "--plots",
         "run",
         "--method=spline",
         &format!("--knots={}", knots("xz-pick-place-spline.txt").display()),
     ]);
+    // `--plots`: every PNG, named on the last line (the plots crate's tests look inside).
+    for png in qmarc_report::output::PLOT_FILES {
+        let bytes = std::fs::read(out.join(png)).unwrap_or_else(|e| panic!("{png}: {e}"));
+        assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n") && bytes.len() > 20_000, "{png}");
+        assert!(r.stdout.contains(&out.join(png).display().to_string()), "{}", r.stdout);
+    }
     let s = read_summary(&out);
     assert!(s.ok, "{s:?}");
     let g = s.gathered.as_ref().expect("figures over the gathered rows");
@@ -155,5 +162,73 @@ fn the_xz_path_reports_arm_and_effector_errors_issue_13() {
     assert!(e.distance.max_mm >= e.x.max_abs_mm && e.distance.rms_mm > 0.0);
     let json = std::fs::read_to_string(out.join("summary.json")).unwrap();
     assert!(json.contains("\"effector\""), "the contract's key");
+    run.assert_clean();
+}
+
+/// `trials --n 3`: one process set per trial, each trial's data in its folder, one row per
+/// trial in trials.csv equal to that trial's summary, its two plots and the spread table.
+/// Deterministic trials of the same path give the same figures.
+#[test]
+fn trials_repeat_a_move_and_tabulate_it_issue_13() {
+    let run = TestRun::new("trials");
+    let out = run.out("out");
+    let config = starting_at_the_path(&run, "xz-pick-place-spline.txt");
+    let r = run.starter_ok(&[
+        &format!("--config={}", config.display()),
+        &format!("--out={}", out.display()),
+        "--deterministic",
+        "--gather-every=4",
+        "trials",
+        "--n=3",
+        "run",
+        "--method=spline",
+        &format!("--knots={}", knots("xz-pick-place-spline.txt").display()),
+    ]);
+    assert!(
+        r.stdout.starts_with("QMARC trials of run (spline): 3 of 3 ran, 3 ok\n"),
+        "{}",
+        r.stdout
+    );
+    let csv = std::fs::read_to_string(out.join("trials.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(
+        lines[0],
+        "trial,abs_rad1,abs_rad2,abs_rad3,sq_rad1,sq_rad2,sq_rad3,periods_off_40us,missed_periods,fault"
+    );
+    assert_eq!(lines.len(), 4, "{csv}");
+    for k in 1..=3 {
+        let s = read_summary(&out.join(format!("trial-{k:03}")));
+        let g = s.gathered.expect("gathered figures");
+        let fields: Vec<&str> = lines[k].split(',').collect();
+        assert_eq!(fields[0], k.to_string());
+        for m in 0..3 {
+            let abs: f64 = fields[1 + m].parse().unwrap();
+            assert_eq!(abs, g.motors[m].accumulated_abs_error_rad, "trial {k} arm {}", m + 1);
+        }
+        assert_eq!(fields[9], "", "no fault");
+        // The same figures each time (the timing columns are the host's).
+        let first: Vec<&str> = lines[1].split(',').collect();
+        assert_eq!(fields[1..7], first[1..7], "trial {k}");
+    }
+    for png in qmarc_plots::TRIAL_PLOT_FILES {
+        let bytes = std::fs::read(out.join(png)).unwrap_or_else(|e| panic!("{png}: {e}"));
+        assert!(bytes.starts_with(b"\x89PNG"), "{png}");
+    }
+    run.assert_clean();
+}
+
+/// Step trials go back and forth: on hardware each starts where the last ended.
+#[test]
+fn step_trials_alternate_the_step_issue_13() {
+    let run = TestRun::new("steptrials");
+    let out = run.out("out");
+    let r = run.step_ok(&out, &["--deterministic", "trials", "--n=2", "step", "--duration=0.1"]);
+    assert!(r.stdout.contains("2 of 2 ran, 2 ok"), "{}", r.stdout);
+    let last_cmd = |k: u32| {
+        let (header, rows) = qmarc_tests::read_gather(&out.join(format!("trial-{k:03}")));
+        let c = header.iter().position(|h| h == "cmd1").unwrap();
+        rows.last().unwrap()[c]
+    };
+    assert_eq!((last_cmd(1), last_cmd(2)), (1000.0, -1000.0));
     run.assert_clean();
 }

@@ -69,6 +69,7 @@ const LAYERS: &[&str] = &[
     "plugins",
     "paths",
     "report",
+    "plots",
     "runner",
     "starter",
     "console-tui",

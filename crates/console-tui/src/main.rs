@@ -76,6 +76,8 @@ fn run_console(args: &Args) -> anyhow::Result<Option<Quit>> {
         anyhow::bail!("the console needs a terminal; without one, use `qmarc home|step|run …`");
     }
     let mut app = App::new(form, args.starter.clone().unwrap_or_else(starter_next_to_me), workdir);
+    // Every move's PNG plots, which the charts page names.
+    app.starter_args.push("--plots".to_string());
     app.starter_args.extend(args.iox_prefix.iter().map(|p| format!("--iox-prefix={p}")));
     app.starter_args.extend(args.iox_root.iter().map(|r| format!("--iox-root={r}")));
     app.starter_args.extend(args.backend.iter().map(|b| format!("--backend={b}")));

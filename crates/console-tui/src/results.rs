@@ -2,85 +2,8 @@
 //! `gather.csv`, and the history of the session's moves.
 
 use qmarc_report::Summary;
+pub use qmarc_report::series::Series;
 use std::path::Path;
-
-/// The series of one move, per motor, from `gather.csv`.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Series {
-    /// Time of each gathered row, s (from `time_s`, or cycle × period without it).
-    pub t: Vec<f64>,
-    /// Command per motor, counts (empty if not gathered).
-    pub cmd: Vec<Vec<f64>>,
-    /// Actual position per motor, counts (empty if not gathered).
-    pub act: Vec<Vec<f64>>,
-    /// Interval between consecutive gathered rows divided by the rows' cycle distance, µs:
-    /// the servo period as it was (only with `time_s`).
-    pub period_us: Vec<(f64, f64)>,
-}
-
-impl Series {
-    /// Parses `gather.csv` text; `period_s` turns cycles into time when `time_s` is missing.
-    pub fn parse(csv: &str, period_s: f64) -> Result<Series, String> {
-        let mut lines = csv.lines();
-        let header: Vec<&str> = lines.next().ok_or("gather.csv is empty")?.split(',').collect();
-        let col = |name: &str| header.iter().position(|h| *h == name);
-        let has =
-            |m: usize| ["cmd", "act", "dac"].iter().any(|n| col(&format!("{n}{m}")).is_some());
-        let n_motors = (1..=qmarc_proto::MAX_MOTORS).take_while(|&m| has(m)).count();
-        let mut rows: Vec<Vec<f64>> = Vec::new();
-        for (i, l) in lines.enumerate() {
-            let r: Vec<f64> = l
-                .split(',')
-                .map(str::parse::<f64>)
-                .collect::<Result<_, _>>()
-                .map_err(|e| format!("gather.csv line {}: {e}", i + 2))?;
-            if r.len() != header.len() {
-                return Err(format!(
-                    "gather.csv line {}: {} fields, the header has {}",
-                    i + 2,
-                    r.len(),
-                    header.len()
-                ));
-            }
-            rows.push(r);
-        }
-        let cycle = col("cycle").ok_or("gather.csv has no cycle column")?;
-        let time = col("time_s");
-        let t: Vec<f64> = rows.iter().map(|r| time.map_or(r[cycle] * period_s, |c| r[c])).collect();
-        let per_motor = |name: &str| -> Vec<Vec<f64>> {
-            (1..=n_motors)
-                .map_while(|m| col(&format!("{name}{m}")))
-                .map(|c| rows.iter().map(|r| r[c]).collect())
-                .collect()
-        };
-        let mut period_us = Vec::new();
-        if time.is_some() {
-            for w in rows.windows(2) {
-                let cycles = w[1][cycle] - w[0][cycle];
-                if cycles > 0.0 {
-                    let (t0, t1) = (time.map_or(0.0, |c| w[0][c]), time.map_or(0.0, |c| w[1][c]));
-                    period_us.push((t1, (t1 - t0) / cycles * 1e6));
-                }
-            }
-        }
-        Ok(Series { t, cmd: per_motor("cmd"), act: per_motor("act"), period_us })
-    }
-
-    /// Following error (command − actual) of motor `m` over time.
-    pub fn error(&self, m: usize) -> Vec<(f64, f64)> {
-        match (self.cmd.get(m), self.act.get(m)) {
-            (Some(c), Some(a)) => {
-                self.t.iter().zip(c.iter().zip(a)).map(|(&t, (c, a))| (t, c - a)).collect()
-            }
-            _ => Vec::new(),
-        }
-    }
-
-    /// `values` against time.
-    pub fn points(&self, values: Option<&Vec<f64>>) -> Vec<(f64, f64)> {
-        values.map_or_else(Vec::new, |v| self.t.iter().copied().zip(v.iter().copied()).collect())
-    }
-}
 
 /// Keeps at most about `n` points of `pts` (charts need no more than their width): of each
 /// run of k points, the one furthest from the run's first — so a single late period or an
@@ -105,6 +28,8 @@ pub struct MoveResult {
     pub series: Option<Series>,
     /// When `summary.json` was written.
     pub written: Option<std::time::SystemTime>,
+    /// The move's PNG plots beside its data (the starter's `--plots`).
+    pub plots: Vec<std::path::PathBuf>,
 }
 
 impl MoveResult {
@@ -120,7 +45,12 @@ impl MoveResult {
             .ok()
             .and_then(|c| Series::parse(&c, period_s).ok());
         let written = std::fs::metadata(&path).and_then(|m| m.modified()).ok();
-        Ok(MoveResult { summary, series, written })
+        let plots = qmarc_report::output::PLOT_FILES
+            .iter()
+            .map(|f| out.join(f))
+            .filter(|p| p.is_file())
+            .collect();
+        Ok(MoveResult { summary, series, written, plots })
     }
 
     /// The work of one servo cycle of this move, µs: two exchanges with the hwserver (the
@@ -182,28 +112,6 @@ pub struct HistoryEntry {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn series_come_from_the_gathered_columns() {
-        let csv = "cycle,time_s,cmd1,act1,dac1,cmd2,act2,dac2\n0,0,0,0,0,0,0,0\n1,0.0004,1000,3,8191,-5,-1,-30\n3,0.0012,1000,40,100,-5,-4,-2\n";
-        let s = Series::parse(csv, 0.0004).unwrap();
-        assert_eq!(s.t, [0.0, 0.0004, 0.0012]);
-        assert_eq!(s.cmd.len(), 2);
-        assert_eq!(s.error(0), [(0.0, 0.0), (0.0004, 997.0), (0.0012, 960.0)]);
-        assert_eq!(s.error(1)[2], (0.0012, -1.0));
-        assert_eq!(s.period_us.len(), 2);
-        assert!((s.period_us[0].1 - 400.0).abs() < 1e-9 && (s.period_us[1].1 - 400.0).abs() < 1e-9);
-        // Without time_s: cycles × period; without cmd: no error series.
-        let s = Series::parse("cycle,act1\n0,5\n2,7\n", 0.0004).unwrap();
-        assert_eq!(s.t, [0.0, 0.0008]);
-        assert!(s.error(0).is_empty() && s.period_us.is_empty());
-        // A cut-off row, an empty file, a header alone: an error or empty series, no panic.
-        let e = Series::parse("cycle,time_s,cmd1,act1\n0,0,0,0\n1,0.0004\n", 0.0004).unwrap_err();
-        assert_eq!(e, "gather.csv line 3: 2 fields, the header has 4");
-        assert!(Series::parse("", 0.0004).is_err());
-        let s = Series::parse("cycle,time_s,cmd1,act1\n", 0.0004).unwrap();
-        assert!(s.t.is_empty() && s.error(0).is_empty() && s.period_us.is_empty());
-    }
 
     #[test]
     fn thinning_keeps_every_kth_point() {

@@ -444,7 +444,26 @@ fn chart<'a>(title: impl Into<Line<'a>>, sets: Vec<Trace<'a>>) -> Chart<'a> {
 }
 
 fn draw_charts(f: &mut Frame, app: &App, area: Rect) {
-    let Some(series) = app.last.as_ref().and_then(|r| r.series.as_ref()) else {
+    let Some(last) = app.last.as_ref() else {
+        f.render_widget(
+            Paragraph::new("No gathered data yet.").block(Block::bordered().title(" Charts ")),
+            area,
+        );
+        return;
+    };
+    // The PNG plots of the same move, on the last line.
+    let [area, files] = Layout::vertical([Constraint::Min(6), Constraint::Length(2)]).areas(area);
+    let names: Vec<String> = last.plots.iter().map(|p| p.display().to_string()).collect();
+    f.render_widget(
+        Paragraph::new(if names.is_empty() {
+            "PNG plots: none for this move".to_string()
+        } else {
+            format!("PNG plots: {}", names.join("  "))
+        })
+        .wrap(Wrap { trim: true }),
+        files,
+    );
+    let Some(series) = last.series.as_ref() else {
         f.render_widget(
             Paragraph::new("No gathered data yet.").block(Block::bordered().title(" Charts ")),
             area,

@@ -1,7 +1,7 @@
 //! What a move leaves behind, written after it: `summary.json` (its schema, [`summary`], and
 //! how it is made from the loop's figures, [`summarize`]), `gather.csv` and `gather.m`
-//! ([`files`]), the Cartesian figures ([`effector`]), the output folder's rules ([`output`]: checked, locked, replaced as one set,
-//! a rescue folder) and the table the starter prints ([`table`]).
+//! ([`files`]) and read back ([`series`]), the Cartesian figures ([`effector`]), the output folder's rules ([`output`]: checked, locked, replaced as one set,
+//! a rescue folder), the table the starter prints ([`table`]) and the rows of repeated trials ([`trials`]).
 //!
 //! ```
 //! use qmarc_report::table::human_us;
@@ -12,8 +12,10 @@
 pub mod effector;
 pub mod files;
 pub mod output;
+pub mod series;
 pub mod summarize;
 pub mod summary;
 pub mod table;
+pub mod trials;
 
 pub use summary::Summary;

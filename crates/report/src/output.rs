@@ -238,6 +238,11 @@ pub fn write_set(dir: &Path, files: &[FileWriter<'_>]) -> Result<Vec<PathBuf>, W
 /// (`summary.json` last: once it is there, the set is complete).
 pub const OUTPUT_FILES: [&str; 3] = ["gather.csv", "gather.m", "summary.json"];
 
+/// The PNG plots `qmarc-starter --plots` draws from a set (crate `qmarc-plots`): they belong
+/// to the set beside them, so a new set retires them with it.
+pub const PLOT_FILES: [&str; 6] =
+    ["arms.png", "error.png", "velocity.png", "period.png", "effector-3d.png", "effector-xz.png"];
+
 /// The folder inside an output folder that keeps the last complete set a newer one replaced.
 pub const PREVIOUS_DIR: &str = "previous";
 
@@ -245,7 +250,8 @@ pub const PREVIOUS_DIR: &str = "previous";
 /// `dir/previous/`, replacing the set that was there; the files of an incomplete one (a
 /// summary without its data) are removed, so `previous/` keeps the last complete results.
 fn retire_current_set(dir: &Path) -> std::io::Result<()> {
-    let present: Vec<&str> = OUTPUT_FILES.into_iter().filter(|f| dir.join(f).exists()).collect();
+    let present: Vec<&str> =
+        OUTPUT_FILES.into_iter().chain(PLOT_FILES).filter(|f| dir.join(f).exists()).collect();
     let complete = present.contains(&"gather.csv") && present.contains(&"summary.json");
     if complete {
         let previous = dir.join(PREVIOUS_DIR);
@@ -378,10 +384,14 @@ mod tests {
             Some("summary 1"),
             "an incomplete set never replaces the last complete one"
         );
+        // Set 4's plots go with it: none is left beside set 5, whose plots they are not.
+        std::fs::write(dir.join("error.png"), "plot 4").unwrap();
         let (csv5, m5, json5) = (text("data 5"), text("octave 5"), text("summary 5"));
         write_set(&dir, &[("gather.csv", &csv5), ("gather.m", &m5), ("summary.json", &json5)])
             .unwrap();
         assert_eq!(read("previous/gather.csv").as_deref(), Some("data 4"));
+        assert_eq!(read("previous/error.png").as_deref(), Some("plot 4"));
+        assert_eq!(read("error.png"), None);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

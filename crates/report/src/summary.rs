@@ -283,6 +283,13 @@ pub struct Summary {
 }
 
 impl Summary {
+    /// Reads `summary.json` in `dir`; the error names the file.
+    pub fn read(dir: &std::path::Path) -> Result<Summary, String> {
+        let path = dir.join("summary.json");
+        let text = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
     /// What the move was in words: `step`, `home`, `run (spline)`.
     pub fn what(&self) -> String {
         if self.trajectory.is_empty() || self.trajectory == self.mode.to_string() {

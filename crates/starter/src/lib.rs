@@ -15,6 +15,7 @@
 pub mod cli;
 pub mod path;
 pub mod supervise;
+pub mod trials;
 
 pub use supervise::{Exit, describe_exit};
 

@@ -20,6 +20,7 @@ use qmarc_report::table;
 use qmarc_starter::cli::{Command, MoveOptions};
 use qmarc_starter::path::PathArgs;
 use qmarc_starter::supervise::{self, Supervised};
+use qmarc_starter::trials::{TrialsArgs, TrialsCsv};
 use qmarc_starter::{
     Exit, check_iox_root, default_prefix, describe_exit, names, remove_stale_files, run_file,
 };
@@ -61,6 +62,10 @@ struct StarterArgs {
     /// `qmarc-hwserver --settings FILE` and `qmarc-controller --settings FILE` by hand.
     #[arg(long, global = true)]
     print_settings: bool,
+    /// After the move, draw its PNG plots next to gather.csv: arms, error, velocity and
+    /// acceleration, servo period and, with a [robot], the end-effector path.
+    #[arg(long, global = true)]
+    plots: bool,
     #[command(subcommand)]
     command: StarterCommand,
 }
@@ -73,6 +78,9 @@ enum StarterCommand {
     /// Make a knot file for `run` from Cartesian waypoints (`t_s x_m y_m z_m` per line)
     /// through the inverse kinematics of the settings' [robot]; writes it to `--out FILE`.
     Path(PathArgs),
+    /// Run a move N times, one process set per trial, as a user pressing the button would;
+    /// writes trials.csv and its plots in `--out`, each trial's data in `trial-NNN/`.
+    Trials(TrialsArgs),
 }
 
 /// An error and the exit code it ends the run with.
@@ -88,11 +96,26 @@ fn internal<E: Into<anyhow::Error>>(e: E) -> Failure {
     (exit::INTERNAL, e.into())
 }
 
-fn run(args: &StarterArgs, command: &Command) -> Result<ExitCode, Failure> {
+/// How a move ended: its exit code, its summary and the folder it is in.
+struct Outcome {
+    code: u8,
+    summary: Option<(Summary, PathBuf)>,
+}
+
+/// One move: `out` overrides the output folder; `quiet` prints no table (a trial's).
+fn one_move(
+    args: &StarterArgs,
+    command: &Command,
+    out: Option<&Path>,
+    quiet: bool,
+) -> Result<Outcome, Failure> {
     // Everything is checked before anything starts.
     let names = names();
     let mut settings = args.opts.load(&names).map_err(refused)?;
     command.apply(&mut settings, &names).map_err(refused)?;
+    if let Some(out) = out {
+        settings.gather.out_dir = out.to_path_buf();
+    }
     let mode = command.mode();
     let bin_dir = match &args.bin_dir {
         Some(d) => d.clone(),
@@ -152,7 +175,7 @@ fn run(args: &StarterArgs, command: &Command) -> Result<ExitCode, Failure> {
     .map_err(refused)?;
     if args.print_settings {
         println!("{}", spec.to_json());
-        return Ok(ExitCode::SUCCESS);
+        return Ok(Outcome { code: exit::OK, summary: None });
     }
     let _lock = qmarc_report::output::lock(&out_dir).map_err(refused)?;
 
@@ -206,7 +229,10 @@ fn run(args: &StarterArgs, command: &Command) -> Result<ExitCode, Failure> {
         children.len() == 2 && children.iter().all(|s| s.exit.is_some_and(|e| e.success()));
     let controller = children.iter().find(|s| s.name == "qmarc-controller").and_then(|s| s.exit);
     let hwserver = children[0].exit;
-    let mut summary = read_own_summary(&out_dir);
+    let (mut summary, mut summary_dir) = match read_own_summary(&out_dir) {
+        Some((s, d)) => (Some(s), d),
+        None => (None, out_dir.clone()),
+    };
     // A controller that died — killed, or failed once its move had begun (a panic, data it
     // could not write anywhere) — wrote nothing: say what is known, and what the hwserver
     // did. One that refused before anything moved has said why.
@@ -227,8 +253,10 @@ fn run(args: &StarterArgs, command: &Command) -> Result<ExitCode, Failure> {
             say!("qmarc-starter: {e}");
         }
         summary = Some(lost);
+        summary_dir = out_dir.clone();
     }
     match &summary {
+        Some(_) if quiet => {}
         Some(s) => {
             let _ = write!(std::io::stdout(), "{}", table::render(s));
         }
@@ -259,19 +287,129 @@ fn run(args: &StarterArgs, command: &Command) -> Result<ExitCode, Failure> {
         _ if stop.load(std::sync::atomic::Ordering::Relaxed) => exit::INTERRUPTED,
         _ => exit::INTERNAL,
     };
-    Ok(ExitCode::from(code))
+    Ok(Outcome { code, summary: summary.map(|s| (s, summary_dir)) })
 }
 
-/// The summary this run's controller wrote: `summary.json` in `out_dir` if this starter's
-/// (an older run's is not this run's result), else the one in the rescue folder.
-fn read_own_summary(out_dir: &Path) -> Option<Summary> {
+/// A move, and its plots with `--plots`.
+fn run(args: &StarterArgs, command: &Command) -> Result<ExitCode, Failure> {
+    let outcome = one_move(args, command, None, false)?;
+    if args.plots
+        && let Some((summary, dir)) = &outcome.summary
+    {
+        plot_move(args, command, summary, dir);
+    }
+    Ok(ExitCode::from(outcome.code))
+}
+
+/// Draws the plots of the move in `dir` and names them; a failure is said, not fatal (the
+/// move's data are written).
+fn plot_move(args: &StarterArgs, command: &Command, summary: &Summary, dir: &Path) {
+    if !dir.join("gather.csv").exists() {
+        return say!("qmarc-starter: no plots: the move wrote no data");
+    }
+    let robot = args.opts.load(&names()).ok().and_then(|mut s| {
+        command.apply(&mut s, &names()).ok()?;
+        s.robot()
+    });
+    match qmarc_plots::move_plots(dir, summary, robot.as_ref()) {
+        Ok(done) => {
+            let names: Vec<String> = done.iter().map(|p| p.display().to_string()).collect();
+            println!("  plots: {}", names.join(", "));
+        }
+        Err(e) => say!("qmarc-starter: {e}"),
+    }
+}
+
+/// `trials`: the move `t.command` made `t.n` times, each by its own process set.
+fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
+    let names = names();
+    let mut settings = args.opts.load(&names).map_err(refused)?;
+    t.command.apply(&mut settings, &names).map_err(refused)?;
+    let base = settings.gather.out_dir.clone();
+    qmarc_report::output::check(&base, 0).map_err(refused)?;
+    let _lock = qmarc_report::output::lock(&base).map_err(refused)?;
+    let mut csv = TrialsCsv::create(&base, settings.n_motors)
+        .with_context(|| format!("cannot write {}", base.join("trials.csv").display()))
+        .map_err(refused)?;
+    let bar = indicatif::ProgressBar::new(u64::from(t.n));
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "trial {pos}/{len} [{bar:30}] {elapsed} · ETA {eta} · {msg}",
+        )
+        .map_err(internal)?
+        .progress_chars("=> "),
+    );
+    let mut what = String::new();
+    let mut stopped = None;
+    for k in 1..=t.n {
+        let command = qmarc_starter::trials::command_of(&t.command, k, settings.step.size);
+        let dir = qmarc_starter::trials::trial_dir(&base, k);
+        let outcome = match one_move(args, &command, Some(&dir), true) {
+            Ok(o) => o,
+            Err(e) if k == 1 => return Err(e),
+            Err((_, e)) => {
+                stopped = Some((exit::INTERNAL, format!("trial {k} could not start: {e:#}")));
+                break;
+            }
+        };
+        if let Some((summary, dir)) = &outcome.summary {
+            what = summary.what();
+            let row = qmarc_report::trials::TrialRow::of(k, summary);
+            bar.set_message(format!("last Σ|e| {:.3e} rad (arm 1)", row.abs_rad[0]));
+            csv.push(row).map_err(internal)?;
+            if args.plots {
+                bar.suspend(|| plot_move(args, &command, summary, dir));
+            }
+        }
+        bar.inc(1);
+        match outcome.code {
+            exit::OK | exit::FAULT => {}
+            exit::INTERRUPTED => {
+                stopped = Some((exit::INTERRUPTED, format!("interrupted during trial {k}")));
+                break;
+            }
+            c => {
+                stopped =
+                    Some((c, format!("trial {k} ended with exit code {c}: the series stops")));
+                break;
+            }
+        }
+    }
+    bar.finish_and_clear();
+    print!("{}", qmarc_starter::trials::render(&what, t.n, csv.rows()));
+    let mut files = vec![csv.path().to_path_buf()];
+    if !csv.rows().is_empty() {
+        match qmarc_plots::trial_plots(&base, &what, csv.rows()) {
+            Ok(done) => files.extend(done),
+            Err(e) => say!("qmarc-starter: {e}"),
+        }
+    }
+    let names: Vec<String> = files.iter().map(|p| p.display().to_string()).collect();
+    println!(
+        "\n  files: {}; each trial's data in {}",
+        names.join(", "),
+        base.join("trial-NNN").display()
+    );
+    if let Some((_, why)) = &stopped {
+        say!("qmarc-starter: {why}");
+    }
+    Ok(ExitCode::from(match stopped {
+        Some((code, _)) => code,
+        None if csv.rows().iter().any(|r| !r.fault.is_empty()) => exit::FAULT,
+        None => exit::OK,
+    }))
+}
+
+/// The summary this run's controller wrote and its folder: `summary.json` in `out_dir` if
+/// this starter's (an older run's is not this run's result), else the one in the rescue
+/// folder.
+fn read_own_summary(out_dir: &Path) -> Option<(Summary, PathBuf)> {
     let me = std::process::id();
     let rescue = qmarc_report::output::rescue_dir(me);
-    [out_dir, rescue.as_path()]
-        .iter()
-        .filter_map(|d| std::fs::read(d.join("summary.json")).ok())
-        .filter_map(|b| serde_json::from_slice::<Summary>(&b).ok())
-        .find(|s| s.starter_pid == me)
+    [out_dir.to_path_buf(), rescue]
+        .into_iter()
+        .filter_map(|d| Summary::read(&d).ok().map(|s| (s, d)))
+        .find(|(s, _)| s.starter_pid == me)
 }
 
 /// Homing shown as it happens on a terminal: one status line on standard error, rewritten
@@ -343,6 +481,7 @@ fn main() -> ExitCode {
                 ExitCode::SUCCESS
             })
             .map_err(refused),
+        StarterCommand::Trials(t) => trials(&args, t),
     };
     match result {
         Ok(code) => code,

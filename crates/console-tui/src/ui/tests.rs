@@ -152,7 +152,12 @@ fn result(fault: bool) -> MoveResult {
     summary.ok = !fault;
     let csv =
         "cycle,time_s,cmd1,act1,dac1\n0,0,0,0,0\n1,0.0004,1000,3,8191\n2,0.0008,1000,20,500\n";
-    MoveResult { summary, series: Some(Series::parse(csv, 0.0004).unwrap()), written: None }
+    MoveResult {
+        summary,
+        series: Some(Series::parse(csv, 0.0004).unwrap()),
+        written: None,
+        plots: vec!["out/arms.png".into(), "out/error.png".into()],
+    }
 }
 
 #[test]
@@ -169,6 +174,10 @@ fn results_show_a_fault_in_red_and_the_charts_draw() {
     for want in ["command vs actual", "following error", "servo period"] {
         assert!(s.contains(want), "{s}");
     }
+    // Issue 13: the charts page names the move's PNG plots.
+    assert!(s.contains("PNG plots: out/arms.png  out/error.png"), "{s}");
+    app.last.as_mut().unwrap().plots.clear();
+    assert!(text(&render(&app, 80, 24)).contains("PNG plots: none for this move"));
 }
 
 #[test]

@@ -1,0 +1,164 @@
+//! The drawing every plot shares: a figure of stacked panels written atomically, a line
+//! panel with its units and legend, the ranges, the colours.
+
+use crate::PlotError;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::{Path, PathBuf};
+use std::sync::Once;
+
+/// The family every text is drawn in; registered once from the embedded DejaVu Sans.
+pub(crate) const FONT: &str = "sans-serif";
+
+/// One panel of a figure.
+pub(crate) type Panel<'a, 'b> = DrawingArea<BitMapBackend<'a>, Shift>;
+
+/// A drawing failure, as text (plotters' errors carry the backend's type).
+pub(crate) type Drawn = Result<(), String>;
+
+/// Turns any plotters error into text.
+pub(crate) fn text<T, E: std::fmt::Display>(r: Result<T, E>) -> Result<T, String> {
+    r.map_err(|e| e.to_string())
+}
+
+/// Colour of motor/arm `m` (0-based): four that tell apart on paper and screen.
+pub(crate) fn motor_colour(m: usize) -> RGBColor {
+    [RGBColor(31, 119, 180), RGBColor(214, 39, 40), RGBColor(44, 160, 44), RGBColor(148, 103, 189)]
+        [m % 4]
+}
+
+/// The command's colour when drawn against an actual.
+pub(crate) const COMMAND: RGBColor = RGBColor(40, 40, 40);
+
+/// One line of a panel.
+pub(crate) struct Trace<'p> {
+    /// Legend text.
+    pub name: String,
+    /// Colour.
+    pub colour: RGBColor,
+    /// Dashed-looking thin line (a command, a bound) rather than a thick one.
+    pub thin: bool,
+    /// The points (x, y).
+    pub pts: &'p [(f64, f64)],
+}
+
+/// What a panel shows.
+pub(crate) struct PanelSpec<'p> {
+    /// Caption above it.
+    pub title: String,
+    /// x axis label, with its unit.
+    pub x: &'static str,
+    /// y axis label, with its unit.
+    pub y: String,
+    /// The lines.
+    pub traces: Vec<Trace<'p>>,
+}
+
+/// `lo..hi` covering `values`, padded by 5 % (a flat series gets ±1 around its value).
+pub(crate) fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    if lo > hi {
+        return 0.0..1.0;
+    }
+    let pad = if hi > lo { 0.05 * (hi - lo) } else { lo.abs().max(1.0) * 0.05 };
+    (lo - pad)..(hi + pad)
+}
+
+/// Tick labels for an axis spanning `r`: as many decimals as its tick spacing needs, no more
+/// ("3000", "0.25", "0.0015"). The spacing is about a tenth of the span rounded up to 1, 2 or
+/// 5 × 10ᵏ, as the axis draws it.
+pub(crate) fn ticks(r: &std::ops::Range<f64>) -> impl Fn(&f64) -> String + use<> {
+    let raw = (r.end - r.start).abs() / 10.0;
+    let decimals = if raw > 0.0 && raw.is_finite() {
+        let p = 10f64.powf(raw.log10().floor());
+        let nice = p * [1.0, 2.0, 5.0, 10.0].into_iter().find(|&m| raw / p <= m).unwrap_or(10.0);
+        (-nice.log10() - 1e-9).ceil().clamp(0.0, 8.0) as usize
+    } else {
+        0
+    };
+    move |v: &f64| format!("{v:.decimals$}")
+}
+
+/// Draws a figure of `panels` stacked panels, `title` on top, into `path`: drawn under a
+/// temporary name beside it and renamed into place.
+pub(crate) fn figure(
+    path: &Path,
+    height_per_panel: u32,
+    panels: usize,
+    title: &str,
+    draw: impl FnOnce(&[Panel<'_, '_>]) -> Drawn,
+) -> Result<PathBuf, PlotError> {
+    static FONT_ONCE: Once = Once::new();
+    FONT_ONCE.call_once(|| {
+        // The embedded font is valid: a failure here is a broken build, and would show as
+        // a drawing error naming the font below.
+        let _ = plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular());
+    });
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    // The backend picks the format from the extension: the temporary name keeps `.png`.
+    let tmp = path.with_file_name(format!(".{}.{}.png", name, std::process::id()));
+    let fail = |why: String| {
+        let _ = std::fs::remove_file(&tmp);
+        PlotError::Draw { path: path.to_path_buf(), why }
+    };
+    let height = 60 + height_per_panel * panels.max(1) as u32;
+    let result = (|| -> Drawn {
+        let root = BitMapBackend::new(&tmp, (1200, height)).into_drawing_area();
+        text(root.fill(&WHITE))?;
+        let body = text(root.titled(title, (FONT, 26)))?;
+        let areas = body.split_evenly((panels.max(1), 1));
+        draw(&areas)?;
+        text(root.present())
+    })();
+    result.map_err(fail)?;
+    std::fs::rename(&tmp, path).map_err(|e| fail(e.to_string()))?;
+    Ok(path.to_path_buf())
+}
+
+/// Draws a line panel: its caption, labelled axes, the traces and a legend.
+pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
+    let xs = range(spec.traces.iter().flat_map(|t| t.pts.iter().map(|p| p.0)));
+    let ys = range(spec.traces.iter().flat_map(|t| t.pts.iter().map(|p| p.1)));
+    let (fx, fy) = (ticks(&xs), ticks(&ys));
+    let mut chart = text(
+        ChartBuilder::on(area)
+            .caption(&spec.title, (FONT, 20))
+            .margin(10)
+            .x_label_area_size(45)
+            .y_label_area_size(95)
+            .build_cartesian_2d(xs, ys),
+    )?;
+    text(
+        chart
+            .configure_mesh()
+            .x_label_formatter(&fx)
+            .y_label_formatter(&fy)
+            .x_desc(spec.x)
+            .y_desc(spec.y.as_str())
+            .label_style((FONT, 15))
+            .axis_desc_style((FONT, 16))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw(),
+    )?;
+    for t in &spec.traces {
+        let style = t.colour.stroke_width(if t.thin { 1 } else { 2 });
+        let drawn = text(chart.draw_series(LineSeries::new(t.pts.iter().copied(), style)))?;
+        // A nameless trace (the second line of a band) has no legend entry of its own.
+        if !t.name.is_empty() {
+            drawn
+                .label(t.name.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+        }
+    }
+    text(
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(160, 160, 160))
+            .label_font((FONT, 15))
+            .draw(),
+    )
+}

@@ -1,0 +1,330 @@
+//! The plots of one move, from its `gather.csv` and `summary.json`.
+
+use crate::PlotError;
+use crate::chart::{
+    COMMAND, Drawn, FONT, Panel, PanelSpec, Trace, figure, line_panel, motor_colour, range, text,
+    ticks,
+};
+use plotters::prelude::*;
+use qmarc_kinematics::{ARMS, Robot};
+use qmarc_report::Summary;
+use qmarc_report::output::PLOT_FILES;
+use qmarc_report::series::Series;
+use std::path::{Path, PathBuf};
+
+const TIME: &str = "time, s";
+
+/// Draws the plots of the move whose files are in `dir` (its `summary`; `robot` for the
+/// end-effector plots, which need three arms) into `dir`, and returns their paths: the
+/// names of [`PLOT_FILES`], those the gathered columns allow.
+pub fn move_plots(
+    dir: &Path,
+    summary: &Summary,
+    robot: Option<&Robot>,
+) -> Result<Vec<PathBuf>, PlotError> {
+    let period_s = f64::from(summary.period_us) * 1e-6;
+    let s = Series::read(dir, period_s).map_err(PlotError::Data)?;
+    if s.t.len() < 3 {
+        return Err(PlotError::Data(format!(
+            "{}: gather.csv has {} rows, too few to plot",
+            dir.display(),
+            s.t.len()
+        )));
+    }
+    let title = format!("QMARC {}", summary.what());
+    let [arms_png, error_png, velocity_png, period_png, e3d_png, exz_png] =
+        PLOT_FILES.map(|f| dir.join(f));
+    let mut done = Vec::new();
+    let n = s.n_motors();
+    if n > 0 {
+        done.push(figure(&arms_png, 260, n, &title, |p| arms(p, &s))?);
+        done.push(figure(&error_png, 420, 1, &title, |p| error(&p[0], &s, summary))?);
+        let nominal: Vec<f64> = s.cycle.iter().map(|c| c * period_s).collect();
+        done.push(figure(&velocity_png, 360, 2, &title, |p| velocity(p, &s, &nominal))?);
+    }
+    if !s.period_us.is_empty() || !s.dac.is_empty() {
+        done.push(figure(&period_png, 360, 2, &title, |p| period(p, &s, summary))?);
+    }
+    if let Some(robot) = robot.filter(|_| n == ARMS) {
+        let path = EffectorPath::of(robot, &s);
+        if path.cmd.len() >= 2 {
+            done.push(figure(&e3d_png, 760, 1, &title, |p| effector_3d(&p[0], &path))?);
+            done.push(figure(&exz_png, 400, 2, &title, |p| effector_xz(p, &path))?);
+        }
+    }
+    Ok(done)
+}
+
+/// One panel per motor: command and actual position, counts.
+fn arms(panels: &[Panel<'_, '_>], s: &Series) -> Drawn {
+    for (m, area) in panels.iter().enumerate() {
+        let (cmd, act) = (s.points(s.cmd.get(m)), s.points(s.act.get(m)));
+        line_panel(
+            area,
+            &PanelSpec {
+                title: format!("motor {}: command and actual position", m + 1),
+                x: TIME,
+                y: "position, counts".into(),
+                traces: vec![
+                    Trace { name: "command".into(), colour: COMMAND, thin: true, pts: &cmd },
+                    Trace {
+                        name: "actual".into(),
+                        colour: motor_colour(m),
+                        thin: false,
+                        pts: &act,
+                    },
+                ],
+            },
+        )?;
+    }
+    Ok(())
+}
+
+/// Every motor's following error, counts (with its size in rad at the arm in the caption).
+fn error(area: &Panel<'_, '_>, s: &Series, summary: &Summary) -> Drawn {
+    let errors: Vec<Vec<(f64, f64)>> = (0..s.n_motors()).map(|m| s.error(m)).collect();
+    let per_rad = summary.counts_per_rad;
+    line_panel(
+        area,
+        &PanelSpec {
+            title: if per_rad > 0.0 {
+                format!("following error, command − actual (1 count = {:.3e} rad)", 1.0 / per_rad)
+            } else {
+                "following error, command − actual".into()
+            },
+            x: TIME,
+            y: "error, counts".into(),
+            traces: errors
+                .iter()
+                .enumerate()
+                .map(|(m, e)| Trace {
+                    name: format!("motor {}", m + 1),
+                    colour: motor_colour(m),
+                    thin: false,
+                    pts: e,
+                })
+                .collect(),
+        },
+    )
+}
+
+/// d y / d x at each interior point (central differences; `x` may be unevenly spaced).
+pub(crate) fn derivative(x: &[f64], y: &[f64]) -> Vec<(f64, f64)> {
+    x.windows(3)
+        .zip(y.windows(3))
+        .filter(|(x, _)| x[2] > x[0])
+        .map(|(x, y)| (x[1], (y[2] - y[0]) / (x[2] - x[0])))
+        .collect()
+}
+
+/// d² y / d x² at each interior point.
+pub(crate) fn second_derivative(x: &[f64], y: &[f64]) -> Vec<(f64, f64)> {
+    x.windows(3)
+        .zip(y.windows(3))
+        .filter(|(x, _)| x[2] > x[1] && x[1] > x[0])
+        .map(|(x, y)| {
+            let (h1, h2) = (x[1] - x[0], x[2] - x[1]);
+            (x[1], 2.0 * ((y[2] - y[1]) / h2 - (y[1] - y[0]) / h1) / (h1 + h2))
+        })
+        .collect()
+}
+
+/// The command's velocity and acceleration per motor, from the gathered command on the
+/// nominal clock (cycle × period: the command advances by cycles, whatever the wake times).
+fn velocity(panels: &[Panel<'_, '_>], s: &Series, nominal: &[f64]) -> Drawn {
+    let n = s.n_motors();
+    let v: Vec<_> = (0..n).map(|m| derivative(nominal, &s.cmd[m])).collect();
+    let a: Vec<_> = (0..n).map(|m| second_derivative(nominal, &s.cmd[m])).collect();
+    for (area, (what, unit, series)) in
+        panels.iter().zip([("velocity", "counts/s", &v), ("acceleration", "counts/s²", &a)])
+    {
+        line_panel(
+            area,
+            &PanelSpec {
+                title: format!("command {what}"),
+                x: TIME,
+                y: format!("{what}, {unit}"),
+                traces: series
+                    .iter()
+                    .enumerate()
+                    .map(|(m, pts)| Trace {
+                        name: format!("motor {}", m + 1),
+                        colour: motor_colour(m),
+                        thin: false,
+                        pts,
+                    })
+                    .collect(),
+            },
+        )?;
+    }
+    Ok(())
+}
+
+/// The servo period over the move with the ±40 µs band (thesis Fig. 5-1), and the DAC
+/// output that goes with it.
+fn period(panels: &[Panel<'_, '_>], s: &Series, summary: &Summary) -> Drawn {
+    let nominal = f64::from(summary.period_us);
+    let (t0, t1) = (s.t[0], s.t[s.t.len() - 1]);
+    let lo = [(t0, nominal - 40.0), (t1, nominal - 40.0)];
+    let hi = [(t0, nominal + 40.0), (t1, nominal + 40.0)];
+    let band = RGBColor(150, 150, 150);
+    let every = summary.gather_every.max(1);
+    line_panel(
+        &panels[0],
+        &PanelSpec {
+            title: if every > 1 {
+                format!("servo period (mean over each {every} cycles between gathered rows)")
+            } else {
+                "servo period".into()
+            },
+            x: TIME,
+            y: "period, µs".into(),
+            traces: vec![
+                Trace {
+                    name: "period".into(),
+                    colour: motor_colour(2),
+                    thin: false,
+                    pts: &s.period_us,
+                },
+                Trace { name: format!("{nominal} ± 40 µs"), colour: band, thin: true, pts: &lo },
+                Trace { name: String::new(), colour: band, thin: true, pts: &hi },
+            ],
+        },
+    )?;
+    let dac: Vec<_> = s.dac.iter().map(|d| s.points(Some(d))).collect();
+    line_panel(
+        &panels[1],
+        &PanelSpec {
+            title: "DAC output (±8191 = ±10 V)".into(),
+            x: TIME,
+            y: "DAC, codes".into(),
+            traces: dac
+                .iter()
+                .enumerate()
+                .map(|(m, pts)| Trace {
+                    name: format!("motor {}", m + 1),
+                    colour: motor_colour(m),
+                    thin: false,
+                    pts,
+                })
+                .collect(),
+        },
+    )
+}
+
+/// The end-effector path through the forward kinematics, mm: rows whose command or actual
+/// has no pose are left out.
+struct EffectorPath {
+    t: Vec<f64>,
+    cmd: Vec<[f64; 3]>,
+    act: Vec<[f64; 3]>,
+}
+
+impl EffectorPath {
+    fn of(robot: &Robot, s: &Series) -> EffectorPath {
+        let mut p = EffectorPath { t: Vec::new(), cmd: Vec::new(), act: Vec::new() };
+        for (i, &t) in s.t.iter().enumerate() {
+            let at = |v: &[Vec<f64>]| -> [f64; ARMS] { std::array::from_fn(|m| v[m][i]) };
+            if let (Ok(c), Ok(a)) = (robot.point_of(&at(&s.cmd)), robot.point_of(&at(&s.act))) {
+                p.t.push(t);
+                p.cmd.push([c.x * 1e3, c.y * 1e3, c.z * 1e3]);
+                p.act.push([a.x * 1e3, a.y * 1e3, a.z * 1e3]);
+            }
+        }
+        p
+    }
+}
+
+/// The path in 3-D, command and actual (plotters' vertical axis is its y: z goes there).
+fn effector_3d(area: &Panel<'_, '_>, p: &EffectorPath) -> Drawn {
+    let both = || p.cmd.iter().chain(&p.act);
+    let mut r = [0, 1, 2].map(|k| range(both().map(|q| q[k])));
+    // Each axis spans at least a quarter of the widest, about its middle: a path flat in y
+    // is drawn flat, not its tenth of a millimetre blown up to the box's depth.
+    let widest = r.iter().map(|r| r.end - r.start).fold(0.0, f64::max);
+    for r in &mut r {
+        let (mid, half) = ((r.start + r.end) / 2.0, (r.end - r.start).max(widest / 4.0) / 2.0);
+        *r = (mid - half)..(mid + half);
+    }
+    let [xs, ys, zs] = r;
+    let (fx, fy, fz) = (ticks(&xs), ticks(&ys), ticks(&zs));
+    let mut chart = text(
+        ChartBuilder::on(area)
+            .caption("end-effector path, mm (x, y across; z up)", (FONT, 20))
+            .margin(20)
+            .build_cartesian_3d(xs, zs, ys),
+    )?;
+    chart.with_projection(|mut pb| {
+        pb.yaw = 0.6;
+        pb.pitch = 0.35;
+        pb.scale = 0.8;
+        pb.into_matrix()
+    });
+    text(
+        chart
+            .configure_axes()
+            .x_formatter(&fx)
+            .y_formatter(&fz)
+            .z_formatter(&fy)
+            .label_style((FONT, 14))
+            .light_grid_style(RGBColor(225, 225, 225))
+            .max_light_lines(4)
+            .draw(),
+    )?;
+    for (name, pts, colour, width) in
+        [("command", &p.cmd, COMMAND, 1), ("actual", &p.act, motor_colour(0), 2)]
+    {
+        let style = colour.stroke_width(width);
+        text(chart.draw_series(LineSeries::new(pts.iter().map(|q| (q[0], q[2], q[1])), style)))?
+            .label(name)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+    }
+    text(
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(160, 160, 160))
+            .label_font((FONT, 15))
+            .draw(),
+    )
+}
+
+/// The X-Z projection, command and actual (thesis Fig. 5-4), and the distance between them.
+fn effector_xz(panels: &[Panel<'_, '_>], p: &EffectorPath) -> Drawn {
+    let xz = |v: &[[f64; 3]]| -> Vec<(f64, f64)> { v.iter().map(|q| (q[0], q[2])).collect() };
+    let (cmd, act) = (xz(&p.cmd), xz(&p.act));
+    line_panel(
+        &panels[0],
+        &PanelSpec {
+            title: "end-effector path, X-Z projection".into(),
+            x: "x, mm",
+            y: "z, mm".into(),
+            traces: vec![
+                Trace { name: "command".into(), colour: COMMAND, thin: true, pts: &cmd },
+                Trace { name: "actual".into(), colour: motor_colour(0), thin: false, pts: &act },
+            ],
+        },
+    )?;
+    let dist: Vec<(f64, f64)> =
+        p.t.iter()
+            .zip(p.cmd.iter().zip(&p.act))
+            .map(|(&t, (c, a))| {
+                (t, ((c[0] - a[0]).powi(2) + (c[1] - a[1]).powi(2) + (c[2] - a[2]).powi(2)).sqrt())
+            })
+            .collect();
+    line_panel(
+        &panels[1],
+        &PanelSpec {
+            title: "end-effector error, |command − actual|".into(),
+            x: TIME,
+            y: "distance, mm".into(),
+            traces: vec![Trace {
+                name: "distance".into(),
+                colour: motor_colour(1),
+                thin: false,
+                pts: &dist,
+            }],
+        },
+    )
+}
