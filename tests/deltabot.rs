@@ -94,6 +94,19 @@ fn starting_at_the_path(run: &TestRun, name: &str) -> std::path::PathBuf {
     run.config_with(&[("start_counts", &format!("[{}]", start.join(", ")))])
 }
 
+/// Runs the shipped X-Z spline path from its start, deterministic and gathered every 4th
+/// cycle as the thesis did, into `out`; `before` goes before `run` (`--plots`, `trials --n 3`).
+fn run_xz(run: &TestRun, out: &std::path::Path, before: &[&str]) -> qmarc_tests::Finished {
+    let config = starting_at_the_path(run, "xz-pick-place-spline.txt");
+    let (config, out) =
+        (format!("--config={}", config.display()), format!("--out={}", out.display()));
+    let knots = format!("--knots={}", knots("xz-pick-place-spline.txt").display());
+    let mut args = vec![config.as_str(), out.as_str(), "--deterministic", "--gather-every=4"];
+    args.extend_from_slice(before);
+    args.extend(["run", "--method=spline", knots.as_str()]);
+    run.starter_ok(&args)
+}
+
 /// Every shipped thesis path runs to its end on the simulated robot with the thesis' gains.
 #[test]
 fn every_thesis_path_runs_without_a_fault_issue_13() {
@@ -125,17 +138,7 @@ fn every_thesis_path_runs_without_a_fault_issue_13() {
 fn the_xz_path_reports_arm_and_effector_errors_issue_13() {
     let run = TestRun::new("xzreport");
     let out = run.out("out");
-    let config = starting_at_the_path(&run, "xz-pick-place-spline.txt");
-    let r = run.starter_ok(&[
-        &format!("--config={}", config.display()),
-        &format!("--out={}", out.display()),
-        "--deterministic",
-        "--gather-every=4",
-        "--plots",
-        "run",
-        "--method=spline",
-        &format!("--knots={}", knots("xz-pick-place-spline.txt").display()),
-    ]);
+    let r = run_xz(&run, &out, &["--plots"]);
     // `--plots`: every PNG, named on the last line (the plots crate's tests look inside).
     for png in qmarc_report::output::PLOT_FILES {
         let bytes = std::fs::read(out.join(png)).unwrap_or_else(|e| panic!("{png}: {e}"));
@@ -172,18 +175,7 @@ fn the_xz_path_reports_arm_and_effector_errors_issue_13() {
 fn trials_repeat_a_move_and_tabulate_it_issue_13() {
     let run = TestRun::new("trials");
     let out = run.out("out");
-    let config = starting_at_the_path(&run, "xz-pick-place-spline.txt");
-    let r = run.starter_ok(&[
-        &format!("--config={}", config.display()),
-        &format!("--out={}", out.display()),
-        "--deterministic",
-        "--gather-every=4",
-        "trials",
-        "--n=3",
-        "run",
-        "--method=spline",
-        &format!("--knots={}", knots("xz-pick-place-spline.txt").display()),
-    ]);
+    let r = run_xz(&run, &out, &["trials", "--n=3"]);
     assert!(
         r.stdout.starts_with("QMARC trials of run (spline): 3 of 3 ran, 3 ok\n"),
         "{}",

@@ -2,7 +2,7 @@
 //! panel with its units and legend, the ranges, the colours.
 
 use crate::PlotError;
-use plotters::coord::Shift;
+use plotters::coord::{CoordTranslate, Shift};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::Once;
@@ -40,6 +40,20 @@ pub(crate) struct Trace<'p> {
     pub thin: bool,
     /// The points (x, y).
     pub pts: &'p [(f64, f64)],
+}
+
+/// One thick trace per motor, named `motor 1`, `motor 2`, …
+pub(crate) fn per_motor<'p>(label: &str, series: &'p [Vec<(f64, f64)>]) -> Vec<Trace<'p>> {
+    series
+        .iter()
+        .enumerate()
+        .map(|(m, pts)| Trace {
+            name: format!("{label} {}", m + 1),
+            colour: motor_colour(m),
+            thin: false,
+            pts,
+        })
+        .collect()
 }
 
 /// What a panel shows.
@@ -152,6 +166,13 @@ pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
         }
     }
+    legend(&mut chart)
+}
+
+/// The legend of a chart (2-D or 3-D), top right.
+pub(crate) fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+) -> Drawn {
     text(
         chart
             .configure_series_labels()

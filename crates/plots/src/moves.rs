@@ -2,8 +2,8 @@
 
 use crate::PlotError;
 use crate::chart::{
-    COMMAND, Drawn, FONT, Panel, PanelSpec, Trace, figure, line_panel, motor_colour, range, text,
-    ticks,
+    COMMAND, Drawn, FONT, Panel, PanelSpec, Trace, figure, legend, line_panel, motor_colour,
+    per_motor, range, text, ticks,
 };
 use plotters::prelude::*;
 use qmarc_kinematics::{ARMS, Robot};
@@ -94,16 +94,7 @@ fn error(area: &Panel<'_, '_>, s: &Series, summary: &Summary) -> Drawn {
             },
             x: TIME,
             y: "error, counts".into(),
-            traces: errors
-                .iter()
-                .enumerate()
-                .map(|(m, e)| Trace {
-                    name: format!("motor {}", m + 1),
-                    colour: motor_colour(m),
-                    thin: false,
-                    pts: e,
-                })
-                .collect(),
+            traces: per_motor("motor", &errors),
         },
     )
 }
@@ -144,16 +135,7 @@ fn velocity(panels: &[Panel<'_, '_>], s: &Series, nominal: &[f64]) -> Drawn {
                 title: format!("command {what}"),
                 x: TIME,
                 y: format!("{what}, {unit}"),
-                traces: series
-                    .iter()
-                    .enumerate()
-                    .map(|(m, pts)| Trace {
-                        name: format!("motor {}", m + 1),
-                        colour: motor_colour(m),
-                        thin: false,
-                        pts,
-                    })
-                    .collect(),
+                traces: per_motor("motor", &series),
             },
         )?;
     }
@@ -198,16 +180,7 @@ fn period(panels: &[Panel<'_, '_>], s: &Series, summary: &Summary) -> Drawn {
             title: "DAC output (±8191 = ±10 V)".into(),
             x: TIME,
             y: "DAC, codes".into(),
-            traces: dac
-                .iter()
-                .enumerate()
-                .map(|(m, pts)| Trace {
-                    name: format!("motor {}", m + 1),
-                    colour: motor_colour(m),
-                    thin: false,
-                    pts,
-                })
-                .collect(),
+            traces: per_motor("motor", &dac),
         },
     )
 }
@@ -279,15 +252,7 @@ fn effector_3d(area: &Panel<'_, '_>, p: &EffectorPath) -> Drawn {
             .label(name)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
     }
-    text(
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .label_font((FONT, 15))
-            .draw(),
-    )
+    legend(&mut chart)
 }
 
 /// The X-Z projection, command and actual (thesis Fig. 5-4), and the distance between them.

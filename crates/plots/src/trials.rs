@@ -1,7 +1,7 @@
 //! The plots of repeated trials (`qmarc-starter trials`): thesis Fig. 5-17 and 5-18.
 
 use crate::PlotError;
-use crate::chart::{PanelSpec, Trace, figure, line_panel, motor_colour};
+use crate::chart::{PanelSpec, Trace, figure, line_panel, motor_colour, per_motor};
 use qmarc_report::trials::TrialRow;
 use std::path::{Path, PathBuf};
 
@@ -33,16 +33,7 @@ pub fn trial_plots(dir: &Path, what: &str, rows: &[TrialRow]) -> Result<Vec<Path
                 title: "accumulated absolute following error per trial".into(),
                 x: "trial",
                 y: "Σ|error|, rad".into(),
-                traces: per_arm
-                    .iter()
-                    .enumerate()
-                    .map(|(m, pts)| Trace {
-                        name: format!("arm {}", m + 1),
-                        colour: motor_colour(m),
-                        thin: false,
-                        pts,
-                    })
-                    .collect(),
+                traces: per_motor("arm", &per_arm),
             },
         )
     })?;
