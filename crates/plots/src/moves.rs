@@ -135,7 +135,7 @@ fn velocity(panels: &[Panel<'_, '_>], s: &Series, nominal: &[f64]) -> Drawn {
                 title: format!("command {what}"),
                 x: TIME,
                 y: format!("{what}, {unit}"),
-                traces: per_motor("motor", &series),
+                traces: per_motor("motor", series),
             },
         )?;
     }
