@@ -26,22 +26,23 @@ fn step_of_1000_counts_settles() {
     assert_eq!(header[..5], ["cycle", "time_s", "cmd1", "act1", "dac1"]);
     assert_eq!(rows.len(), 7501 + 500);
     let last = rows.last().unwrap();
-    // With Table 5-1's gains one DAC code is Kp/2²¹ ≈ 0.087 codes per count of error, so the
-    // loop rests anywhere within half a code of zero output: ±5.8 counts (+1 for the counter).
-    let band = 0.5 / (183_000.0 / 2f64.powi(21)) + 1.0;
+    // With Table 5-1's gains and fe_scale 96 one count of error is 96·Kp/2²¹ ≈ 8.3 DAC codes:
+    // at rest the loop holds the command to the count, hunting by at most one count (the
+    // counter's quantum) with a DAC output of a few codes (millivolts).
     let last_half_second = &rows[rows.len() - 1250..];
     for m in 0..3 {
-        let (cmd, act, dac) = (last[2 + 3 * m], last[3 + 3 * m], last[4 + 3 * m]);
+        let (cmd, act) = (last[2 + 3 * m], last[3 + 3 * m]);
         assert_eq!(cmd, 1000.0);
-        assert!((cmd - act).abs() <= band, "motor {} rests at {act}, outside ±{band}", m + 1);
-        assert!(dac.abs() <= 1.0, "motor {} still driven: {dac}", m + 1);
-        assert!(
-            last_half_second.iter().all(|r| r[3 + 3 * m] == act),
-            "motor {} still moving",
-            m + 1
-        );
+        assert!((cmd - act).abs() <= 1.0, "motor {} rests at {act}", m + 1);
+        for r in last_half_second {
+            let (act, dac) = (r[3 + 3 * m], r[4 + 3 * m]);
+            assert!((act - cmd).abs() <= 1.0, "motor {} still moving: {act}", m + 1);
+            assert!(dac.abs() <= 2.0 * 8.4, "motor {} still driven: {dac}", m + 1);
+        }
+        // The thesis' gains were tuned by Ziegler–Nichols on this step: it overshoots and
+        // rings (thesis Fig. 5-1; the deltabot tests time the ringing), about 40 %.
         let overshoot = rows.iter().map(|r| r[3 + 3 * m] - 1000.0).fold(f64::MIN, f64::max);
-        assert!(overshoot <= band, "motor {} overshot by {overshoot}", m + 1);
+        assert!((300.0..500.0).contains(&overshoot), "motor {} overshot by {overshoot}", m + 1);
     }
     run.assert_clean();
 }
@@ -96,8 +97,8 @@ fn summary_figures_equal_the_ones_recomputed_from_gather_csv() {
         assert_eq!(fig.max_error_counts, max);
         assert_eq!(fig.accumulated_abs_error_counts, sum_abs);
         assert_eq!(fig.sum_squares_error_counts2, sum_sq);
-        assert_eq!(fig.max_error_counts, 0.0, "a negative step: command below actual");
-        assert_eq!(fig.min_error_counts, -700.0);
+        assert_eq!(fig.min_error_counts, -700.0, "a negative step: command below actual");
+        assert!(fig.max_error_counts > 0.0, "then it overshoots (thesis Fig. 5-1)");
         let cpr = s.counts_per_rad;
         assert_eq!(fig.accumulated_abs_error_rad, sum_abs / cpr);
         assert_eq!(fig.sum_squares_error_rad2, sum_sq / (cpr * cpr));

@@ -12,6 +12,7 @@ pub(crate) struct General {
     pub period_us: u32,
     pub gains_period_us: u32,
     pub law: String,
+    pub fe_scale: f64,
     pub counts_per_rev: f64,
     pub gear_ratio: f64,
 }
@@ -23,6 +24,7 @@ impl Default for General {
             period_us: 400,
             gains_period_us: 400,
             law: "pidff".to_string(),
+            fe_scale: 96.0,
             counts_per_rev: 4096.0,
             gear_ratio: 12.0,
         }
@@ -36,6 +38,7 @@ pub(crate) struct RawGeneral {
     period_us: S<i64>,
     gains_period_us: S<i64>,
     law: S<String>,
+    fe_scale: S<f64>,
     counts_per_rev: S<f64>,
     gear_ratio: S<f64>,
 }
@@ -84,6 +87,7 @@ impl RawGeneral {
                 d.law,
                 one_of(if names.any_plugin { &[] } else { &names.laws }, "servo law"),
             )?,
+            fe_scale: src.take(&self.fe_scale, "general.fe_scale", d.fe_scale, positive)?,
             counts_per_rev: src.take(
                 &self.counts_per_rev,
                 "general.counts_per_rev",

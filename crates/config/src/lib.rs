@@ -88,6 +88,10 @@ pub struct Settings {
     pub gains_period_us: u32,
     /// Registered name of the servo law.
     pub law: String,
+    /// The `pidff` law's scale of the following-error and integral terms of eq. 3-1: PMAC's
+    /// Ix08 = 96, kept on them as the thesis' gains need (docs/deltabot.md); 1 reads eq. 3-1
+    /// literally.
+    pub fe_scale: f64,
     /// Encoder counts per motor revolution (post-quadrature).
     pub counts_per_rev: f64,
     /// Motor revolutions per arm revolution.
@@ -237,6 +241,7 @@ impl RawFile {
             period_us: general.period_us,
             gains_period_us: general.gains_period_us,
             law: general.law,
+            fe_scale: general.fe_scale,
             counts_per_rev: general.counts_per_rev,
             gear_ratio: general.gear_ratio,
             timer,

@@ -16,8 +16,14 @@ pub const DEFAULT_SIM_STATE_FILE: &str = "/dev/shm/qmarc-sim.state";
 pub struct SimSettings {
     /// Amplifier gain, counts/s per volt.
     pub kv: f64,
-    /// Velocity lag of an enabled amplifier, s.
+    /// Velocity lag of an enabled amplifier, s (a first-order loop: when
+    /// `velocity_loop_hz` is 0).
     pub tau_s: f64,
+    /// Natural frequency of the amplifier's velocity loop, Hz (second order); 0: the
+    /// first-order lag `tau_s` instead.
+    pub velocity_loop_hz: f64,
+    /// Damping ratio of that velocity loop (underdamped: 0.05‥0.99).
+    pub velocity_loop_zeta: f64,
     /// Coasting time constant of a disabled motor, s.
     pub coast_tau_s: f64,
     /// Start position per motor, counts (motors beyond the list start at 0).
@@ -43,8 +49,10 @@ pub struct SimSettings {
 impl Default for SimSettings {
     fn default() -> SimSettings {
         SimSettings {
-            kv: 25_000.0,
+            kv: 23_650.0,
             tau_s: 0.004,
+            velocity_loop_hz: 61.6,
+            velocity_loop_zeta: 0.48,
             coast_tau_s: 0.05,
             start_counts: Vec::new(),
             top_switch_counts: -9_500.0,
@@ -64,6 +72,8 @@ impl Default for SimSettings {
 pub(crate) struct RawSim {
     kv: S<f64>,
     tau_s: S<f64>,
+    velocity_loop_hz: S<f64>,
+    velocity_loop_zeta: S<f64>,
     coast_tau_s: S<f64>,
     start_counts: S<Vec<f64>>,
     top_switch_counts: S<f64>,
@@ -100,6 +110,30 @@ impl RawSim {
         let sim = SimSettings {
             kv: src.take(&self.kv, "sim.kv", d.kv, positive)?,
             tau_s: src.take(&self.tau_s, "sim.tau_s", d.tau_s, positive)?,
+            velocity_loop_hz: src.take(
+                &self.velocity_loop_hz,
+                "sim.velocity_loop_hz",
+                d.velocity_loop_hz,
+                |v| {
+                    if v.is_finite() && (*v == 0.0 || (1.0..=1000.0).contains(v)) {
+                        Ok(())
+                    } else {
+                        Err(format!("must be 0 (a first-order lag) or 1‥1000 Hz, found {v}"))
+                    }
+                },
+            )?,
+            velocity_loop_zeta: src.take(
+                &self.velocity_loop_zeta,
+                "sim.velocity_loop_zeta",
+                d.velocity_loop_zeta,
+                |v| {
+                    if v.is_finite() && (0.05..=0.99).contains(v) {
+                        Ok(())
+                    } else {
+                        Err(format!("must be 0.05‥0.99 (a velocity loop that rings), found {v}"))
+                    }
+                },
+            )?,
             coast_tau_s: src.take(&self.coast_tau_s, "sim.coast_tau_s", d.coast_tau_s, positive)?,
             start_counts: src.take(
                 &self.start_counts,

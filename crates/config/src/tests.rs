@@ -255,6 +255,7 @@ fn the_shipped_file_states_the_defaults_issue_11() {
         (s.n_motors, s.period_us, s.gains_period_us, &s.law, s.counts_per_rev, s.gear_ratio),
         (d.n_motors, d.period_us, d.gains_period_us, &d.law, d.counts_per_rev, d.gear_ratio)
     );
+    assert_eq!((s.fe_scale, d.fe_scale), (96.0, 96.0), "fe_scale: PMAC's Ix08 on the error terms");
     assert_eq!((s.timer, &s.gather, s.step), (d.timer, &d.gather, d.step));
     assert_eq!(
         TrajectorySettings { knots: None, ..s.trajectory.clone() },
@@ -405,4 +406,25 @@ fn robot_errors_name_the_field_issue_13() {
          work centre (0, 0, −600) mm, does not exist: arm 1 cannot reach (0.0, 0.0, -600.0) mm: \
          the point is out of its reach; set home_angle_deg",
     );
+}
+
+/// Issue 13: the calibration's keys are checked and named like every other.
+#[test]
+fn plant_and_law_scale_errors_name_the_field_issue_13() {
+    let m = MOTOR.repeat(3);
+    check(
+        &format!("[general]\nfe_scale = 0\n{m}"),
+        "q.toml:2:12: general.fe_scale: must be a finite number > 0, found 0",
+    );
+    check(
+        &format!("[sim]\nvelocity_loop_hz = 0.5\n{m}"),
+        "q.toml:2:20: sim.velocity_loop_hz: must be 0 (a first-order lag) or 1‥1000 Hz, found 0.5",
+    );
+    check(
+        &format!("[sim]\nvelocity_loop_zeta = 1.0\n{m}"),
+        "q.toml:2:22: sim.velocity_loop_zeta: must be 0.05‥0.99 (a velocity loop that rings), \
+         found 1",
+    );
+    let s = parse(&format!("[sim]\nvelocity_loop_hz = 0\n{m}")).unwrap();
+    assert_eq!(s.sim.velocity_loop_hz, 0.0, "0: the first-order lag tau_s");
 }

@@ -63,11 +63,16 @@ const TWO_POW_M19: f64 = 1.0 / 524_288.0;
 /// 2²³, the PMAC integrator scale.
 const TWO_POW_23: f64 = 8_388_608.0;
 
-/// PID with velocity and acceleration feed-forward, PMAC form (thesis eq. 3-1, PMAC
-/// `Ix08 = Ix09 = 1`), divided by 4 for the 626's 14-bit DAC, then the notch of eq. 3-2, then
-/// clamped to ±8191 and rounded to a DAC code:
+/// PID with velocity and acceleration feed-forward, PMAC form (thesis eq. 3-1), divided by 4
+/// for the 626's 14-bit DAC, then the notch of eq. 3-2, then clamped to ±8191 and rounded to a
+/// DAC code:
 ///
-/// DAC(n) = 2⁻¹⁹·Kp·(FE + (Kvff·CV + Kaff·CA)/128 + Ki·IE/2²³ − Kd·AV/128) / 4
+/// DAC(n) = 2⁻¹⁹·Kp·(s·FE + (Kvff·CV + Kaff·CA)/128 + s·Ki·IE/2²³ − Kd·AV/128) / 4
+///
+/// where s is `general.fe_scale`: 96 (PMAC's Ix08 kept on the error terms, not on the
+/// feed-forward nor on Kd) is the reading under which the thesis' Table 5-1 gains give its
+/// step (Fig. 5-1) and its path errors (Table 5-2) on one plant; s = 1 is eq. 3-1 read
+/// literally (docs/deltabot.md, "Which eq. 3-1").
 ///
 /// with FE = CP(n) − AP(n), CV = CP(n) − CP(n−1), CA = CV(n) − CV(n−1),
 /// AV = AP(n) − AP(n−1) and IE(n) = Σ_{j<n} FE(j), all in counts per servo period.
@@ -81,13 +86,21 @@ const TWO_POW_23: f64 = 8_388_608.0;
 #[doc(alias = "PIDffCtrl")]
 pub struct PidFf {
     n_motors: usize,
+    fe_scale: f64,
     gains: [MotorGains; MAX_MOTORS],
     state: [AxisState; MAX_MOTORS],
 }
 
 impl PidFf {
-    /// The law for the first `gains.len()` motors (at most [`MAX_MOTORS`]).
+    /// The law for the first `gains.len()` motors (at most [`MAX_MOTORS`]), eq. 3-1 read
+    /// literally (`fe_scale` 1: see [`PidFf::with_fe_scale`]).
     pub fn new(gains: &[MotorGains]) -> PidFf {
+        PidFf::with_fe_scale(gains, 1.0)
+    }
+
+    /// The law with the following-error and integral terms scaled by `fe_scale`
+    /// (`general.fe_scale`: 96, PMAC's Ix08, for the thesis' gains).
+    pub fn with_fe_scale(gains: &[MotorGains], fe_scale: f64) -> PidFf {
         let n_motors = gains.len().min(MAX_MOTORS);
         let mut g = [MotorGains::default(); MAX_MOTORS];
         g[..n_motors].copy_from_slice(&gains[..n_motors]);
@@ -95,7 +108,7 @@ impl PidFf {
         for (s, gains) in state.iter_mut().zip(&g) {
             s.notch = Notch::new(gains.notch);
         }
-        PidFf { n_motors, gains: g, state }
+        PidFf { n_motors, fe_scale, gains: g, state }
     }
 
     /// The law with the gains of the motors in use, rescaled to the servo period
@@ -103,10 +116,11 @@ impl PidFf {
     pub fn from_settings(settings: &Settings) -> PidFf {
         let gains: Vec<MotorGains> =
             (0..settings.n_motors).map(|m| settings.effective_gains(m)).collect();
-        PidFf::new(&gains)
+        PidFf::with_fe_scale(&gains, settings.fe_scale)
     }
 
-    /// The output of eq. 3-1 / 4 for one motor, before the notch (DAC codes, unclamped).
+    /// The output of eq. 3-1 / 4 for one motor, before the notch (DAC codes, unclamped),
+    /// the following error `fe` and integrated error `ie` already scaled by `fe_scale`.
     #[inline]
     pub fn pmac_output(g: &MotorGains, fe: f64, cv: f64, ca: f64, ie: f64, av: f64) -> f64 {
         TWO_POW_M19
@@ -150,7 +164,7 @@ impl ServoLaw for PidFf {
             let ca_span = (k + s.prev_elapsed.max(1)) as f64 / 2.0;
             let ca = (cv - s.prev_cv) / ca_span;
             let av = (ap - s.prev_act) / span;
-            let u = PidFf::pmac_output(g, fe, cv, ca, s.ie, av);
+            let u = PidFf::pmac_output(g, self.fe_scale * fe, cv, ca, self.fe_scale * s.ie, av);
             s.prev_fe = fe;
             s.prev_cmd = cp;
             s.prev_cv = cv;
@@ -214,6 +228,20 @@ mod tests {
         assert_eq!(run(&mut law, 15.0, 5.0), 398);
         let g = thesis_motor_1();
         assert_eq!(PidFf::pmac_output(&g, 10.0, 5.0, -5.0, 8.0, 3.0), u2);
+    }
+
+    /// `fe_scale` multiplies the following error and the integral, nothing else: the same
+    /// cycle 2 as above with s = 96: inner = 96·10 + 4644.53125 + 96·100·8/2²³ − 70.3125.
+    #[test]
+    fn fe_scale_multiplies_the_error_terms_only_issue_13() {
+        let mut law = PidFf::with_fe_scale(&[thesis_motor_1()], 96.0);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        let inner1: f64 = 96.0 * 8.0 + 9_304.687_5 - 46.875;
+        assert_eq!(run(&mut law, 10.0, 2.0), (182_000.0 * inner1 / 524_288.0 / 4.0).round() as i32);
+        let inner2: f64 = 960.0 + 4_644.531_25 + 96.0 * 800.0 / 8_388_608.0 - 70.312_5;
+        let u2 = 182_000.0 * inner2 / 524_288.0 / 4.0;
+        assert!((u2 - 480.284).abs() < 1e-3, "{u2}");
+        assert_eq!(run(&mut law, 15.0, 5.0), 480);
     }
 
     #[test]

@@ -1,8 +1,9 @@
 //! [`SimDeltabot`]: a simulated Deltabot, the default backend and what tests and CI run on.
 //!
 //! Per motor (`../shared/notes/deltabot.md`): a velocity-mode servo amplifier turns the DAC
-//! code into a velocity command `Kv · code · 10 V / 8191` that the motor follows with a
-//! first-order lag τ; a disabled amplifier drives nothing and the motor coasts to rest with
+//! code into a velocity command `Kv · code · 10 V / 8191` that the motor follows through the
+//! amplifier's velocity loop — second order (ωn, ζ) by default, or a first-order lag τ
+//! ([`plant`]); a disabled amplifier drives nothing and the motor coasts to rest with
 //! its own time constant. The position, in counts, is quantised by a 24-bit quadrature counter
 //! that wraps and whose "zero" is [`COUNTER_ZERO`], as on the 626. Top and bottom limit
 //! switches are active beyond their positions.
@@ -16,6 +17,9 @@ use qmarc_config::{Settings, SimSettings};
 use qmarc_proto::{COUNTER_MASK, COUNTER_ZERO, DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, Status};
 use qmarc_timer::clock::monotonic_now_ns;
 
+pub mod plant;
+use plant::{AxisState, VelocityLoop};
+
 /// Parameters of the simulated robot. Every constant of the model is here; the defaults are
 /// the values of `../shared/notes/deltabot.md` (an assumption, not measured data).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -28,8 +32,13 @@ pub struct SimParams {
     pub lockstep: bool,
     /// Amplifier gain: motor velocity in counts/s per volt of command.
     pub kv_counts_per_s_per_v: f64,
-    /// Velocity-loop lag of the enabled amplifier, s.
+    /// Velocity-loop lag of the enabled amplifier, s (when `velocity_loop_hz` is 0).
     pub tau_s: f64,
+    /// Natural frequency of the amplifier's second-order velocity loop, Hz; 0: the
+    /// first-order lag `tau_s`.
+    pub velocity_loop_hz: f64,
+    /// Damping ratio of the second-order velocity loop.
+    pub velocity_loop_zeta: f64,
     /// Time constant of a disabled motor coasting to rest, s.
     pub coast_tau_s: f64,
     /// Position of each motor at start, counts in the homed frame.
@@ -62,6 +71,8 @@ impl Default for SimParams {
             lockstep: false,
             kv_counts_per_s_per_v: d.kv,
             tau_s: d.tau_s,
+            velocity_loop_hz: d.velocity_loop_hz,
+            velocity_loop_zeta: d.velocity_loop_zeta,
             coast_tau_s: d.coast_tau_s,
             start_counts: [0.0; MAX_MOTORS],
             top_switch_counts: d.top_switch_counts,
@@ -105,6 +116,8 @@ impl SimParams {
             lockstep,
             kv_counts_per_s_per_v: sim.kv,
             tau_s: sim.tau_s,
+            velocity_loop_hz: sim.velocity_loop_hz,
+            velocity_loop_zeta: sim.velocity_loop_zeta,
             coast_tau_s: sim.coast_tau_s,
             start_counts,
             top_switch_counts: sim.top_switch_counts,
@@ -137,6 +150,14 @@ impl SimParams {
                 return bad(name, v, "finite and > 0");
             }
         }
+        if !(self.velocity_loop_hz.is_finite() && self.velocity_loop_hz >= 0.0) {
+            return bad("velocity_loop_hz", self.velocity_loop_hz, "finite and ≥ 0");
+        }
+        if self.velocity_loop_hz > 0.0
+            && !(self.velocity_loop_zeta > 0.0 && self.velocity_loop_zeta < 1.0)
+        {
+            return bad("velocity_loop_zeta", self.velocity_loop_zeta, "between 0 and 1");
+        }
         for v in [self.top_switch_counts, self.bottom_switch_counts] {
             if !v.is_finite() {
                 return bad("switch position", v, "finite");
@@ -167,6 +188,8 @@ struct Axis {
     x: f64,
     /// Velocity, counts/s.
     v: f64,
+    /// Rate of the velocity, counts/s² (the second-order velocity loop's state).
+    a: f64,
     /// DAC code in effect.
     dac: i32,
     /// Amplifier enabled.
@@ -204,6 +227,8 @@ pub const SIM_EVENT_CAPACITY: usize = 4096;
 pub struct SimDeltabot {
     p: SimParams,
     axes: [Axis; MAX_MOTORS],
+    /// The enabled amplifiers' velocity loop.
+    velocity_loop: VelocityLoop,
     /// Switch states at the last read, to log their edges.
     switches: Status,
     /// Stuck switch has tripped.
@@ -243,6 +268,7 @@ impl SimDeltabot {
         Ok(SimDeltabot {
             p,
             axes,
+            velocity_loop: VelocityLoop::new(p.velocity_loop_hz, p.velocity_loop_zeta, p.tau_s),
             switches: Status::OK,
             stuck: false,
             events: Vec::with_capacity(SIM_EVENT_CAPACITY),
@@ -338,10 +364,9 @@ impl SimDeltabot {
         self.axes[motor].dac
     }
 
-    /// Advances the plant by `dt_ns` with the DACs and enables as they are (zero-order hold).
-    ///
-    /// Exact for the first-order lag: with ω* the commanded velocity and a = e^(−dt/τ),
-    /// ω ← ω* + (ω − ω*)·a and x ← x + ω*·dt + (ω − ω*)·τ·(1 − a).
+    /// Advances the plant by `dt_ns` with the DACs and enables as they are (zero-order hold),
+    /// exactly ([`plant`]): an enabled motor through the amplifier's velocity loop, a
+    /// disabled one coasting to rest with `coast_tau_s`.
     pub fn advance(&mut self, dt_ns: u64) {
         if dt_ns == 0 {
             return;
@@ -351,18 +376,17 @@ impl SimDeltabot {
         let volts_per_code = DAC_FULL_SCALE_V / f64::from(DAC_MAX);
         for (m, axis) in self.axes[..n].iter_mut().enumerate() {
             if self.p.stall_motor == Some(m) {
-                axis.v = 0.0;
+                (axis.v, axis.a) = (0.0, 0.0);
                 continue;
             }
-            let (target, tau) = if axis.enabled {
-                (self.p.kv_counts_per_s_per_v * volts_per_code * f64::from(axis.dac), self.p.tau_s)
+            let mut s = AxisState { x: axis.x, v: axis.v, a: axis.a };
+            if axis.enabled {
+                let target = self.p.kv_counts_per_s_per_v * volts_per_code * f64::from(axis.dac);
+                self.velocity_loop.advance(&mut s, target, dt);
             } else {
-                (0.0, self.p.coast_tau_s)
-            };
-            let a = (-dt / tau).exp();
-            let dv = axis.v - target;
-            axis.x += target * dt + dv * tau * (1.0 - a);
-            axis.v = target + dv * a;
+                plant::first_order(&mut s, 0.0, self.p.coast_tau_s, dt);
+            }
+            (axis.x, axis.v, axis.a) = (s.x, s.v, s.a);
         }
         self.t_ns += dt_ns;
     }

@@ -8,7 +8,15 @@ fn lockstep(n_motors: usize) -> SimDeltabot {
 
 #[test]
 fn enabled_axis_approaches_kv_times_volts_with_lag_tau() {
-    let mut sim = lockstep(1);
+    // The first-order velocity loop (velocity_loop_hz 0).
+    let p = SimParams {
+        n_motors: 1,
+        lockstep: true,
+        kv_counts_per_s_per_v: 25_000.0,
+        velocity_loop_hz: 0.0,
+        ..SimParams::default()
+    };
+    let mut sim = SimDeltabot::new(p).unwrap();
     sim.set_amp_enable(0, true).unwrap();
     sim.write_dacs(&[8191, 0, 0, 0]).unwrap();
     // One τ (4 ms = 10 periods): 1 − 1/e of the commanded 250 000 counts/s.
@@ -23,6 +31,27 @@ fn enabled_axis_approaches_kv_times_volts_with_lag_tau() {
     let expected_x = target * (0.004 - 0.004 * (1.0 - (-1.0f64).exp()));
     assert!((sim.position(0) - expected_x).abs() < 1e-6, "{}", sim.position(0));
     assert_eq!(inputs.counters[0], COUNTER_ZERO + expected_x.floor() as u32);
+}
+
+/// The default plant, the second-order velocity loop: full scale settles at Kv × 10 V after
+/// overshooting it (ζ 0.48), and the position is the velocity's integral.
+#[test]
+fn the_default_velocity_loop_is_second_order_issue_13() {
+    let mut sim = lockstep(1);
+    sim.set_amp_enable(0, true).unwrap();
+    sim.write_dacs(&[8191, 0, 0, 0]).unwrap();
+    let target = SimParams::default().kv_counts_per_s_per_v * 10.0;
+    let mut inputs = Inputs::default();
+    let mut peak = 0.0f64;
+    for _ in 0..250 {
+        sim.read_inputs(&mut inputs).unwrap();
+        peak = peak.max(sim.velocity(0));
+    }
+    assert!((sim.velocity(0) - target).abs() < 1e-3 * target, "{}", sim.velocity(0));
+    assert!((1.15..1.2).contains(&(peak / target)), "overshoot {}", peak / target);
+    // 0.1 s at full scale, less what the loop lagged: about 1/(2ζωn)·target behind.
+    let lag = 2.0 * 0.48 / (std::f64::consts::TAU * 61.6);
+    assert!((sim.position(0) - target * (0.1 - lag)).abs() < 1.0, "{}", sim.position(0));
 }
 
 #[test]
