@@ -208,6 +208,12 @@ fn trials_repeat_a_move_and_tabulate_it_issue_13() {
         let first: Vec<&str> = lines[1].split(',').collect();
         assert_eq!(fields[1..7], first[1..7], "trial {k}");
     }
+    // The processes' messages (the spline's "ends moving" warning) are in trials.log, per
+    // trial, not over the progress bar.
+    let log = std::fs::read_to_string(out.join("trials.log")).unwrap();
+    assert_eq!(log.matches("warning: the path ends moving").count(), 3, "{log}");
+    assert!(log.starts_with("== trial 1 ("), "{log}");
+    assert!(!r.stderr.contains("ends moving"), "{}", r.stderr);
     for png in qmarc_plots::TRIAL_PLOT_FILES {
         let bytes = std::fs::read(out.join(png)).unwrap_or_else(|e| panic!("{png}: {e}"));
         assert!(bytes.starts_with(b"\x89PNG"), "{png}");

@@ -102,13 +102,18 @@ struct Outcome {
     summary: Option<(Summary, PathBuf)>,
 }
 
-/// One move: `out` overrides the output folder; `quiet` prints no table (a trial's).
-fn one_move(
-    args: &StarterArgs,
-    command: &Command,
-    out: Option<&Path>,
-    quiet: bool,
-) -> Result<Outcome, Failure> {
+/// How a trial's move differs from a move by hand.
+#[derive(Default)]
+struct TrialIo<'a> {
+    /// The output folder instead of the settings'.
+    out: Option<&'a Path>,
+    /// The children's standard error goes here; no table is printed.
+    log: Option<&'a std::fs::File>,
+}
+
+/// One move (`trial` set: a trial's, quiet).
+fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result<Outcome, Failure> {
+    let (out, quiet) = (trial.out, trial.log.is_some());
     // Everything is checked before anything starts.
     let names = names();
     let mut settings = args.opts.load(&names).map_err(refused)?;
@@ -190,7 +195,7 @@ fn one_move(
     spec.write(&run).map_err(internal)?;
     let child_args = [format!("--settings={}", run.display())];
 
-    let hwserver = supervise::spawn(&hwserver_bin, &child_args)
+    let hwserver = supervise::spawn_logged(&hwserver_bin, &child_args, trial.log)
         .with_context(|| format!("cannot start {}", hwserver_bin.display()))
         .map_err(|e| {
             location.remove_files();
@@ -201,7 +206,7 @@ fn one_move(
     // SIGTERM (which it answers within a second, writing or not) 10 s.
     let secs = Duration::from_secs;
     let mut children = vec![Supervised::new("qmarc-hwserver", hwserver, secs(3), secs(2))];
-    match supervise::spawn(&controller_bin, &child_args) {
+    match supervise::spawn_logged(&controller_bin, &child_args, trial.log) {
         Ok(c) => children.push(Supervised::new("qmarc-controller", c, secs(120), secs(10))),
         Err(e) => {
             say!("qmarc-starter: cannot start {}: {e}", controller_bin.display());
@@ -292,7 +297,7 @@ fn one_move(
 
 /// A move, and its plots with `--plots`.
 fn run(args: &StarterArgs, command: &Command) -> Result<ExitCode, Failure> {
-    let outcome = one_move(args, command, None, false)?;
+    let outcome = one_move(args, command, TrialIo::default())?;
     if args.plots
         && let Some((summary, dir)) = &outcome.summary
     {
@@ -331,10 +336,15 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
     let mut csv = TrialsCsv::create(&base, settings.n_motors)
         .with_context(|| format!("cannot write {}", base.join("trials.csv").display()))
         .map_err(refused)?;
+    // The trials' processes say what they say here, not over the progress bar.
+    let log_path = base.join("trials.log");
+    let log = std::fs::File::create(&log_path)
+        .with_context(|| format!("cannot write {}", log_path.display()))
+        .map_err(refused)?;
     let bar = indicatif::ProgressBar::new(u64::from(t.n));
     bar.set_style(
         indicatif::ProgressStyle::with_template(
-            "trial {pos}/{len} [{bar:30}] {elapsed} · ETA {eta} · {msg}",
+            "{pos}/{len} trials done [{bar:30}] {elapsed} · ETA {eta} · {msg}",
         )
         .map_err(internal)?
         .progress_chars("=> "),
@@ -344,7 +354,8 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
     for k in 1..=t.n {
         let command = qmarc_starter::trials::command_of(&t.command, k, settings.step.size);
         let dir = qmarc_starter::trials::trial_dir(&base, k);
-        let outcome = match one_move(args, &command, Some(&dir), true) {
+        let _ = writeln!(&log, "== trial {k} ({})", dir.display());
+        let outcome = match one_move(args, &command, TrialIo { out: Some(&dir), log: Some(&log) }) {
             Ok(o) => o,
             Err(e) if k == 1 => return Err(e),
             Err((_, e)) => {
@@ -377,7 +388,7 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
     }
     bar.finish_and_clear();
     print!("{}", qmarc_starter::trials::render(&what, t.n, csv.rows()));
-    let mut files = vec![csv.path().to_path_buf()];
+    let mut files = vec![csv.path().to_path_buf(), log_path];
     if !csv.rows().is_empty() {
         match qmarc_plots::trial_plots(&base, &what, csv.rows()) {
             Ok(done) => files.extend(done),

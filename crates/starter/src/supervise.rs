@@ -45,8 +45,21 @@ pub fn describe_exit(name: &str, exit: Exit) -> String {
 /// Spawns `program` with `args`. The child gets SIGTERM when the starter dies
 /// (`PR_SET_PDEATHSIG`), and ends itself at once if the starter is already gone.
 pub fn spawn(program: &Path, args: &[String]) -> std::io::Result<Child> {
+    spawn_logged(program, args, None)
+}
+
+/// [`spawn`], the child's standard error going to `log` (appended) instead of ours: the
+/// messages of a trial's processes, kept apart from the trials' progress bar and table.
+pub fn spawn_logged(
+    program: &Path,
+    args: &[String],
+    log: Option<&std::fs::File>,
+) -> std::io::Result<Child> {
     let mut cmd = Command::new(program);
     cmd.args(args);
+    if let Some(log) = log {
+        cmd.stderr(log.try_clone()?);
+    }
     with_parent_death_signal(&mut cmd);
     cmd.spawn()
 }
