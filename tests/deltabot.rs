@@ -262,3 +262,40 @@ fn the_step_rings_as_thesis_fig_5_1_issue_13() {
     }
     run.assert_clean();
 }
+
+/// The way to the X-Z path's start (`knots/xz-pick-place-approach.txt`, made by `path` from
+/// its waypoints, byte for byte) runs from the work centre, where the simulated robot starts,
+/// ends at rest, and leaves every motor within the path's start tolerance of its first knot.
+#[test]
+fn the_approach_brings_the_robot_to_the_xz_start_issue_13() {
+    let run = TestRun::new("approach");
+    let made = run.out("approach.txt");
+    run.starter_ok(&[
+        "--config=config/qmarc.toml",
+        "path",
+        "--waypoints=knots/xz-pick-place-approach-waypoints.txt",
+        "--method=spline",
+        &format!("--out={}", made.display()),
+    ]);
+    let shipped = knots("xz-pick-place-approach.txt");
+    assert_eq!(std::fs::read_to_string(&made).unwrap(), std::fs::read_to_string(&shipped).unwrap());
+    let out = run.out("out");
+    run.step_ok(
+        &out,
+        &["--deterministic", "run", "--method=spline", &format!("--knots={}", shipped.display())],
+    );
+    let s = read_summary(&out);
+    assert!(s.warnings.iter().all(|w| !w.contains("ends moving")), "{:?}", s.warnings);
+    let (header, rows) = qmarc_tests::read_gather(&out);
+    let start = [3054.0, -952.0, -952.0];
+    for (m, want) in start.iter().enumerate() {
+        let act = header.iter().position(|h| *h == format!("act{}", m + 1)).unwrap();
+        let at = rows.last().unwrap()[act];
+        assert!(
+            (at - want).abs() <= 100.0,
+            "motor {} ends at {at}, the path starts at {want}",
+            m + 1
+        );
+    }
+    run.assert_clean();
+}

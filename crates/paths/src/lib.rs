@@ -180,13 +180,16 @@ pub fn render(knots: &[JointKnot], format: KnotFormat, header: &str) -> String {
     for line in header.lines() {
         let _ = writeln!(t, "# {}", line.trim_start_matches('#').trim_start());
     }
+    // Whole counts, and a velocity that prints as zero, never read "-0".
+    let no_negative_zero = |v: f64, below: f64| if v.abs() < below { 0.0 } else { v };
+    let whole = |c: f64| no_negative_zero(c.round(), 0.5);
     match format {
         KnotFormat::Spline => {
             let _ = writeln!(t, "{}", knots.len());
             for k in knots {
                 let _ = write!(t, "{:.6}", k.t_s);
                 for c in k.counts {
-                    let _ = write!(t, "\t{}", c.round());
+                    let _ = write!(t, "\t{}", whole(c));
                 }
                 let _ = writeln!(t);
             }
@@ -201,8 +204,8 @@ pub fn render(knots: &[JointKnot], format: KnotFormat, header: &str) -> String {
                         format!(
                             "{}\t{}\t{:.3}\t{dt_ms:.5}",
                             ["X", "Y", "Z"][m],
-                            k.counts[m].round(),
-                            k.counts_per_s[m]
+                            whole(k.counts[m]),
+                            no_negative_zero(k.counts_per_s[m], 0.0005)
                         )
                     })
                     .collect();
