@@ -73,6 +73,7 @@ const LAYERS: &[&str] = &[
     "runner",
     "starter",
     "console-tui",
+    "bench",
 ];
 
 /// The `qmarc-*` crates in the `[dependencies]` table of `crates/<name>/Cargo.toml`.

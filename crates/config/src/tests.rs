@@ -91,7 +91,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         "[timer]\nmethod = \"posix\"\n",
-        "q.toml:2:10: timer.method: must be \"timerfd\" or \"nanosleep\", found \"posix\"",
+        "q.toml:2:10: timer.method: must be \"timerfd\", \"nanosleep\" or \"timerfd-periodic\", found \"posix\"",
     );
     check(
         "[bogus]\nx = 1\n",

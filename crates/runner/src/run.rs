@@ -167,17 +167,22 @@ fn build_servo(spec: &RunSpec, location: &IpcLocation) -> Result<Servo, RunError
 
 /// Starts the servo thread: SCHED_FIFO as the settings ask, the link, the move, the homing
 /// preset, the hwserver's exit.
+/// The ticker of `timer.method` (the benchmark's bare loop takes the same).
+pub fn ticker_kind(method: qmarc_config::TimerMethod) -> TickerKind {
+    match method {
+        qmarc_config::TimerMethod::Timerfd => TickerKind::TimerFd,
+        qmarc_config::TimerMethod::Nanosleep => TickerKind::Nanosleep,
+        qmarc_config::TimerMethod::TimerfdPeriodic => TickerKind::TimerFdPeriodic,
+    }
+}
+
 fn spawn_servo(
     settings: &Settings,
     deterministic: bool,
     location: IpcLocation,
     mut servo: Servo,
 ) -> Result<std::thread::JoinHandle<Moved>, RunError> {
-    let method = match settings.timer.method {
-        qmarc_config::TimerMethod::Timerfd => TickerKind::TimerFd,
-        qmarc_config::TimerMethod::Nanosleep => TickerKind::Nanosleep,
-    };
-    let mut ticker = method.build(settings.period_ns());
+    let mut ticker = ticker_kind(settings.timer.method).build(settings.period_ns());
     let period = settings.period_ns();
     // In lock-step the hwserver is lost only when its process is gone: a host stall is not
     // the simulated robot's time. The liveness check still runs every deadline.

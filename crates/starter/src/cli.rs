@@ -55,6 +55,10 @@ pub struct MoveOptions {
     /// The Sensoray 626's comedi device (default: `s626.device`, /dev/comedi0).
     #[arg(long, global = true)]
     pub device: Option<PathBuf>,
+    /// How the servo thread waits for its period (default: `timer.method`): `timerfd`,
+    /// `nanosleep` or `timerfd-periodic`.
+    #[arg(long, global = true)]
+    pub timer: Option<qmarc_config::TimerMethod>,
 }
 
 impl MoveOptions {
@@ -78,6 +82,9 @@ impl MoveOptions {
         }
         if let Some(d) = &self.device {
             s.set_device(d)?;
+        }
+        if let Some(t) = self.timer {
+            s.timer.method = t;
         }
         Ok(s)
     }

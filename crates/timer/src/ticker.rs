@@ -63,11 +63,14 @@ pub trait Ticker: Send {
 /// How the real-time ticker waits (config `[timer] method`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum TickerKind {
-    /// A periodic absolute timerfd: the design's choice.
+    /// A one-shot absolute timerfd re-armed for each period after the work: the design's
+    /// choice.
     #[default]
     TimerFd,
     /// `clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME)`.
     Nanosleep,
+    /// A periodic absolute timerfd (the kernel re-arms it inside `read()`, on the wake's path).
+    TimerFdPeriodic,
 }
 
 impl TickerKind {
@@ -76,14 +79,20 @@ impl TickerKind {
         match self {
             TickerKind::TimerFd => "timerfd",
             TickerKind::Nanosleep => "nanosleep",
+            TickerKind::TimerFdPeriodic => "timerfd-periodic",
         }
     }
+
+    /// Every kind, for benchmarks that measure them all.
+    pub const ALL: [TickerKind; 3] =
+        [TickerKind::TimerFd, TickerKind::Nanosleep, TickerKind::TimerFdPeriodic];
 
     /// Parses the config spelling.
     pub fn from_name(name: &str) -> Option<TickerKind> {
         match name {
             "timerfd" => Some(TickerKind::TimerFd),
             "nanosleep" => Some(TickerKind::Nanosleep),
+            "timerfd-periodic" => Some(TickerKind::TimerFdPeriodic),
             _ => None,
         }
     }
@@ -93,6 +102,7 @@ impl TickerKind {
         match self {
             TickerKind::TimerFd => Box::new(TimerFdTicker::new(period_ns)),
             TickerKind::Nanosleep => Box::new(NanosleepTicker::new(period_ns)),
+            TickerKind::TimerFdPeriodic => Box::new(TimerFdTicker::periodic(period_ns)),
         }
     }
 }
@@ -133,21 +143,31 @@ impl Schedule {
     }
 }
 
-/// A periodic absolute timerfd on `CLOCK_MONOTONIC` (the design's choice).
+/// An absolute timerfd on `CLOCK_MONOTONIC` (the design's choice).
 ///
-/// `read` returns how many expirations happened since the last read; more than one means
-/// missed periods.
+/// One-shot (the default): each `wait` arms it for the tick due next and reads it — the
+/// timer is programmed after the work, as `clock_nanosleep` does, not inside the wake's
+/// `read()` as a periodic timerfd is (`hrtimer_forward_now` + `hrtimer_restart` in
+/// `timerfd_read_iter`: in a VM guest a VM exit on every wake). Overruns are counted against
+/// the schedule. Periodic ([`TimerFdTicker::periodic`]): armed once; `read` returns the
+/// expirations since the last read, more than one meaning missed periods.
 #[derive(Debug)]
 pub struct TimerFdTicker {
     period_ns: u64,
+    periodic: bool,
     fd: Option<TimerFd>,
     schedule: Option<Schedule>,
 }
 
 impl TimerFdTicker {
-    /// A ticker with period `period_ns`; nothing is armed until [`Ticker::start`].
+    /// A one-shot ticker with period `period_ns`; nothing is armed until [`Ticker::start`].
     pub fn new(period_ns: u64) -> TimerFdTicker {
-        TimerFdTicker { period_ns, fd: None, schedule: None }
+        TimerFdTicker { period_ns, periodic: false, fd: None, schedule: None }
+    }
+
+    /// A periodic ticker with period `period_ns`.
+    pub fn periodic(period_ns: u64) -> TimerFdTicker {
+        TimerFdTicker { periodic: true, ..TimerFdTicker::new(period_ns) }
     }
 }
 
@@ -161,8 +181,10 @@ impl Ticker for TimerFdTicker {
         let fd = TimerFd::new(ClockId::CLOCK_MONOTONIC, TimerFlags::TFD_CLOEXEC).map_err(arm)?;
         let schedule = Schedule::starting(self.period_ns, monotonic_now_ns());
         let t0_ns = schedule.t0_ns;
-        let periodic = Expiration::IntervalDelayed(timespec(t0_ns), timespec(self.period_ns));
-        fd.set(periodic, TimerSetTimeFlags::TFD_TIMER_ABSTIME).map_err(arm)?;
+        if self.periodic {
+            let periodic = Expiration::IntervalDelayed(timespec(t0_ns), timespec(self.period_ns));
+            fd.set(periodic, TimerSetTimeFlags::TFD_TIMER_ABSTIME).map_err(arm)?;
+        }
         self.fd = Some(fd);
         self.schedule = Some(schedule);
         Ok(t0_ns)
@@ -172,6 +194,13 @@ impl Ticker for TimerFdTicker {
         let (Some(fd), Some(schedule)) = (&self.fd, &mut self.schedule) else {
             return Err(TickerError::NotStarted);
         };
+        let due_ns = schedule.due_ns(schedule.next_index);
+        if !self.periodic {
+            // A due time already past expires at once: the read then returns without sleeping.
+            let once = Expiration::OneShot(timespec(due_ns));
+            fd.set(once, TimerSetTimeFlags::TFD_TIMER_ABSTIME)
+                .map_err(|e| TickerError::Arm(e as i32))?;
+        }
         // The expirations since the last read, a native-endian u64 (timerfd_create(2)).
         let mut expirations = [0u8; 8];
         loop {
@@ -182,7 +211,13 @@ impl Ticker for TimerFdTicker {
                 Err(e) => return Err(TickerError::Wait(e as i32)),
             }
         }
-        Ok(schedule.service(monotonic_now_ns(), u64::from_ne_bytes(expirations)))
+        let woke_ns = monotonic_now_ns();
+        let expired = if self.periodic {
+            u64::from_ne_bytes(expirations)
+        } else {
+            1 + woke_ns.saturating_sub(due_ns) / schedule.period_ns
+        };
+        Ok(schedule.service(woke_ns, expired))
     }
 }
 
@@ -329,7 +364,7 @@ mod tests {
 
     #[test]
     fn kinds_parse_their_names() {
-        for k in [TickerKind::TimerFd, TickerKind::Nanosleep] {
+        for k in TickerKind::ALL {
             assert_eq!(TickerKind::from_name(k.name()), Some(k));
         }
         assert_eq!(TickerKind::from_name("posix"), None);

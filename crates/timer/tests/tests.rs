@@ -37,6 +37,26 @@ fn nanosleep_ticks_are_reported_against_their_expiry() {
 }
 
 #[test]
+fn periodic_timerfd_ticks_are_reported_against_their_expiry_issue_14() {
+    check_ticks(TickerKind::TimerFdPeriodic);
+}
+
+/// Issue 14: the one-shot timerfd counts a stall longer than a period as missed ticks,
+/// measured against the first unserviced one, as the periodic one does.
+#[test]
+fn a_stall_is_counted_by_every_kind_issue_14() {
+    for kind in TickerKind::ALL {
+        let mut t = kind.build(1_000_000);
+        t.start().unwrap();
+        t.wait().unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(3));
+        let tick = t.wait().unwrap();
+        assert!(tick.missed >= 2, "{kind:?}: {tick:?}");
+        assert!(tick.latency_ns() >= 2_000_000, "{kind:?}: {tick:?}");
+    }
+}
+
+#[test]
 fn fifo_is_granted_or_reported_as_degraded() {
     // A short SCHED_FIFO thread that only sleeps: it cannot starve the other tests.
     let req = RtRequest { priority: Some(10), lock_memory: false, prefault_stack_bytes: 32 * 1024 };

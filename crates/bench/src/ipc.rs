@@ -1,0 +1,318 @@
+//! `qmarc-bench ipc`: the controller ⇄ hwserver exchange (the controller's `IoxLink` against
+//! the real `qmarc-hwserver` binary, both blocking on iceoryx2 event listeners) beside two raw
+//! baselines measured in the same run — a futex ping-pong and a spin ping-pong between two
+//! threads sharing one word of memory — and what the benchmarks need of the machine: where the
+//! binaries are, what the machine is, and cyclictest as an outside reference.
+
+use crate::stats::percentiles_us;
+use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
+use qmarc_proto::HwMsg;
+use qmarc_proto::service::IpcLocation;
+use qmarc_report::summary::Pct;
+use qmarc_timer::clock::monotonic_now_ns;
+use qmarc_timer::rt::RtRequest;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::Duration;
+
+/// Options of `ipc`.
+#[derive(Debug, clap::Args)]
+pub struct IpcArgs {
+    /// Round trips per row.
+    #[arg(long, default_value_t = 20_000)]
+    pub samples: usize,
+    /// Directory holding qmarc-hwserver (default: next to this program).
+    #[arg(long)]
+    pub bin_dir: Option<PathBuf>,
+}
+
+/// The directory this program is in (where `cargo build` puts its siblings).
+pub fn next_to_me() -> anyhow::Result<PathBuf> {
+    let me = std::env::current_exe()?;
+    Ok(me.parent().ok_or_else(|| anyhow::anyhow!("no directory for this program"))?.to_path_buf())
+}
+
+/// What the figures were measured on.
+#[derive(Debug, Clone, Serialize)]
+pub struct Machine {
+    /// `uname -r`.
+    pub kernel: String,
+    /// Online CPUs.
+    pub cpus: usize,
+    /// The CPU model, from /proc/cpuinfo.
+    pub cpu: String,
+    /// Running as root (SCHED_FIFO and mlockall granted).
+    pub root: bool,
+}
+
+impl Machine {
+    /// This machine.
+    pub fn here() -> Machine {
+        let uts = nix_uname();
+        let cpu = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|c| c.lines().find(|l| l.starts_with("model name")).map(str::to_string))
+            .and_then(|l| l.split_once(':').map(|(_, m)| m.trim().to_string()))
+            .unwrap_or_default();
+        Machine {
+            kernel: uts,
+            cpus: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            cpu,
+            // SAFETY: geteuid has no preconditions.
+            root: unsafe { libc::geteuid() } == 0,
+        }
+    }
+}
+
+fn nix_uname() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/osrelease")
+        .map(|s| s.trim().to_string())
+        .unwrap_or_default()
+}
+
+/// cyclictest's figures, run before and after the rounds.
+#[derive(Debug, Clone, Serialize)]
+pub struct Cyclictest {
+    /// p99 wake latency before the rounds, µs.
+    pub before_p99_us: f64,
+    /// And after.
+    pub after_p99_us: f64,
+    /// Max before and after, µs.
+    pub max_us: f64,
+}
+
+/// Runs cyclictest for `seconds` at `period_us` (one SCHED_FIFO thread, memory locked, a
+/// histogram up to two periods) when it is installed and we are root; its p99 and max.
+pub fn cyclictest(period_us: u32, seconds: f64, priority: Option<i32>) -> Option<(f64, f64)> {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        return None;
+    }
+    let out = std::process::Command::new("cyclictest")
+        .args(["-m", "-q", "-t1", "--policy=fifo"])
+        .arg(format!("-p{}", priority.unwrap_or(80)))
+        .arg(format!("-i{period_us}"))
+        .arg(format!("-h{}", 2 * period_us))
+        .arg(format!("-D{}", seconds.ceil() as u64))
+        .output()
+        .ok()?;
+    parse_cyclictest(&String::from_utf8_lossy(&out.stdout))
+}
+
+/// The p99 (nearest rank over its histogram) and max of cyclictest's `-h` output.
+pub fn parse_cyclictest(text: &str) -> Option<(f64, f64)> {
+    let mut bins: Vec<(u64, u64)> = Vec::new();
+    let mut max = None;
+    for line in text.lines() {
+        if let Some(rest) = line.strip_prefix("# Max Latencies:") {
+            max = rest.split_whitespace().next().and_then(|v| v.parse::<f64>().ok());
+        } else if !line.starts_with('#') {
+            let mut f = line.split_whitespace();
+            if let (Some(us), Some(n)) = (f.next(), f.next())
+                && let (Ok(us), Ok(n)) = (us.parse::<u64>(), n.parse::<u64>())
+            {
+                bins.push((us, n));
+            }
+        }
+    }
+    let total: u64 = bins.iter().map(|b| b.1).sum();
+    if total == 0 {
+        return None;
+    }
+    let rank = (0.99 * total as f64).ceil() as u64;
+    let mut seen = 0;
+    let p99 = bins.iter().find(|b| {
+        seen += b.1;
+        seen >= rank
+    })?;
+    Some((p99.0 as f64, max.unwrap_or(p99.0 as f64)))
+}
+
+/// cyclictest after the rounds, paired with the run before.
+pub fn cyclictest_pair(
+    before: Option<(f64, f64)>,
+    period_us: u32,
+    seconds: f64,
+    priority: Option<i32>,
+) -> Option<Cyclictest> {
+    let (b99, bmax) = before?;
+    let (a99, amax) = cyclictest(period_us, seconds, priority)?;
+    Some(Cyclictest { before_p99_us: b99, after_p99_us: a99, max_us: bmax.max(amax) })
+}
+
+/// One line on the outside reference.
+pub fn describe_cyclictest(c: Option<&Cyclictest>) -> String {
+    match c {
+        Some(c) => format!(
+            "cyclictest (outside reference): p99 {:.0} µs before, {:.0} µs after; max {:.0} µs",
+            c.before_p99_us, c.after_p99_us, c.max_us
+        ),
+        None => "cyclictest: not run (needs root and `cyclictest` on PATH: apt-get install \
+                 rt-tests) — the bare loop is the reference"
+            .to_string(),
+    }
+}
+
+/// The futex(2) call on `word`.
+fn futex(word: &AtomicU32, op: i32, val: u32) {
+    // SAFETY: `word` is a live, aligned u32 for the call's duration; FUTEX_WAIT and
+    // FUTEX_WAKE read it and queue/wake on its address only; no timeout pointer.
+    unsafe {
+        libc::syscall(libc::SYS_futex, word.as_ptr(), op, val, std::ptr::null::<libc::timespec>());
+    }
+}
+
+const PING: u32 = 1;
+const PONG: u32 = 2;
+const STOP: u32 = 3;
+
+/// A ping-pong between two threads over one shared word: `block` waits in futex(2) (the
+/// shared, not private, form, as between processes over shared memory), else spins. Each
+/// side at the priority the hwserver and controller run at when `fifo`.
+fn ping_pong(samples: usize, block: bool, fifo: bool) -> anyhow::Result<Pct> {
+    let word = Arc::new(AtomicU32::new(0));
+    let wait_while = move |w: &AtomicU32, not: u32| {
+        let deadline = monotonic_now_ns() + 2_000_000_000;
+        loop {
+            let v = w.load(Ordering::Acquire);
+            if v != not || monotonic_now_ns() > deadline {
+                return v;
+            }
+            if block {
+                futex(w, libc::FUTEX_WAIT, v);
+            } else {
+                std::hint::spin_loop();
+            }
+        }
+    };
+    let req = |p: i32| RtRequest {
+        priority: fifo.then_some(p),
+        lock_memory: false,
+        prefault_stack_bytes: 64 * 1024,
+    };
+    let server_word = Arc::clone(&word);
+    let server = qmarc_timer::rt::spawn("bench-pong", req(85), move |_| {
+        loop {
+            // Wait for a ping (the word leaves PONG or 0), answer it.
+            let mut v = server_word.load(Ordering::Acquire);
+            while v != PING && v != STOP {
+                v = wait_while(&server_word, v);
+            }
+            if v == STOP {
+                return;
+            }
+            server_word.store(PONG, Ordering::Release);
+            if block {
+                futex(&server_word, libc::FUTEX_WAKE, 1);
+            }
+        }
+    })?;
+    let client = qmarc_timer::rt::spawn("bench-ping", req(80), move |_| {
+        let mut rtt = Vec::with_capacity(samples);
+        for _ in 0..samples {
+            let t0 = monotonic_now_ns();
+            word.store(PING, Ordering::Release);
+            if block {
+                futex(&word, libc::FUTEX_WAKE, 1);
+            }
+            while wait_while(&word, PING) != PONG {}
+            rtt.push(monotonic_now_ns() - t0);
+        }
+        word.store(STOP, Ordering::Release);
+        futex(&word, libc::FUTEX_WAKE, 1);
+        rtt
+    })?;
+    let mut rtt = client.join().map_err(|_| anyhow::anyhow!("ping thread panicked"))?;
+    server.join().map_err(|_| anyhow::anyhow!("pong thread panicked"))?;
+    Ok(percentiles_us(&mut rtt))
+}
+
+/// Back-to-back read exchanges with a real `qmarc-hwserver` (lock-step simulated robot),
+/// the client at the servo thread's priority.
+fn exchange(samples: usize, bin_dir: &std::path::Path) -> anyhow::Result<Pct> {
+    let pid = std::process::id();
+    let dir = std::env::temp_dir().join(format!("qmarc-bench-ipc-{pid}"));
+    std::fs::create_dir_all(&dir)?;
+    let location = IpcLocation::new(&format!("qbi{pid}_"), &format!("{}/", dir.display()));
+    let spec = qmarc_hwserver::backends::standalone_run(
+        "[hwserver]\nwatchdog_periods = 2500\n[sim]\nstate_file = \"\"\n",
+        &location,
+        true,
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let run_file = dir.join("run.json");
+    spec.write(&run_file)?;
+    let mut server = std::process::Command::new(bin_dir.join("qmarc-hwserver"))
+        .arg(format!("--settings={}", run_file.display()))
+        .spawn()?;
+    let loc = location.clone();
+    let req = RtRequest { priority: Some(80), lock_memory: false, prefault_stack_bytes: 64 * 1024 };
+    let client =
+        qmarc_timer::rt::spawn("bench-exchange", req, move |_| -> anyhow::Result<Vec<u64>> {
+            let timeouts = LinkTimeouts { deadline_ns: 2_000_000, give_up_ns: 2_000_000_000 };
+            let mut link = IoxLink::connect(&loc, timeouts, Duration::from_secs(10), None)?;
+            let read = HwMsg::read_all_encoders();
+            let mut rtt = Vec::with_capacity(samples);
+            for _ in 0..samples / 10 {
+                link.exchange(&read)?;
+            }
+            for _ in 0..samples {
+                let t0 = monotonic_now_ns();
+                link.exchange(&read)?;
+                rtt.push(monotonic_now_ns() - t0);
+            }
+            let _ = link.exchange(&HwMsg::request(qmarc_proto::MsgType::Exit));
+            Ok(rtt)
+        })?;
+    let result = client.join().map_err(|_| anyhow::anyhow!("exchange thread panicked"))?;
+    let _ = server.wait();
+    location.remove_files();
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(percentiles_us(&mut result?))
+}
+
+/// Runs `ipc`.
+pub fn run(a: &IpcArgs) -> anyhow::Result<()> {
+    let bin_dir = a.bin_dir.clone().map_or_else(next_to_me, Ok)?;
+    let n = a.samples.max(100);
+    let rows = [
+        ("controller ⇄ hwserver exchange (iceoryx2, blocking)", exchange(n, &bin_dir)?),
+        ("raw futex ping-pong, 2 threads, SCHED_FIFO", ping_pong(n, true, true)?),
+        ("raw spin ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, false, false)?),
+    ];
+    println!("qmarc-bench ipc: {n} round trips per row, µs");
+    println!("  {:<52} {:>8} {:>8} {:>8} {:>9}", "", "p50", "p99", "p99.9", "max");
+    for (name, p) in &rows {
+        println!("  {name:<52} {:>8.2} {:>8.2} {:>8.2} {:>9.1}", p.p50, p.p99, p.p999, p.max);
+    }
+    let (x, f, s) = (rows[0].1.p50, rows[1].1.p50, rows[2].1.p50);
+    println!(
+        "  exchange p50 = {:.1}× the futex ping-pong's, {:.0}× the spin ping-pong's",
+        x / f.max(1e-3),
+        x / s.max(1e-3)
+    );
+    println!("  (a spin-waiting hwserver, the exchange's spin mode, is not built yet)");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cyclictest_histograms_give_p99_and_max() {
+        let text = "# /dev/cpu_dma_latency set to 0us\n000010 000050\n000011 000049\n000012 000001\n# Total: 000000100\n# Max Latencies: 00012\n";
+        assert_eq!(parse_cyclictest(text), Some((11.0, 12.0)));
+        assert_eq!(parse_cyclictest("# nothing\n"), None);
+    }
+
+    #[test]
+    fn both_ping_pongs_complete() {
+        for block in [true, false] {
+            let p = ping_pong(200, block, false).unwrap();
+            assert!(p.p50 > 0.0 && p.max >= p.p99, "{p:?}");
+        }
+    }
+}

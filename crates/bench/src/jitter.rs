@@ -1,0 +1,394 @@
+//! `qmarc-bench jitter`: the servo pipeline's timing against a bare timer loop's, in
+//! interleaved rounds inside one run (`../shared/notes/realtime-linux.md`: back-to-back runs of
+//! identical code differ by up to 3.5× at p99.9, so only same-run ratios mean anything).
+//!
+//! - The bare loop: a thread with the servo thread's real-time request (SCHED_FIFO priority,
+//!   `mlockall`, pre-faulted stack, `/dev/cpu_dma_latency` = 0) waiting on the controller's
+//!   own [`Ticker`](qmarc_timer::Ticker), recording each wake with the loop's own
+//!   [`TimingStats`] — cyclictest's algorithm, no IPC, no math.
+//! - The servo pipeline: `qmarc-starter step` on the simulated robot (starter, hwserver and
+//!   controller processes over iceoryx2) for the same time; its `summary.json` has the same
+//!   figures, plus the output latency (tick → DAC write acknowledged).
+
+use crate::stats::{cv, median};
+use anyhow::{Context, bail};
+use qmarc_config::TimerMethod;
+use qmarc_controller::stats::TimingStats;
+use qmarc_report::Summary;
+use qmarc_report::summary::Pct;
+use qmarc_timer::TickerKind;
+use qmarc_timer::rt::{DmaLatencyGuard, RtRequest};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Options of `jitter`.
+#[derive(Debug, clap::Args)]
+pub struct JitterArgs {
+    /// Servo period, µs.
+    #[arg(long, default_value_t = 400)]
+    pub period_us: u32,
+    /// Interleaved rounds (each one bare and one servo segment).
+    #[arg(long, default_value_t = 5)]
+    pub rounds: u32,
+    /// Length of each segment, s.
+    #[arg(long, default_value_t = 10.0)]
+    pub segment_s: f64,
+    /// The timer: `timerfd`, `nanosleep`, `timerfd-periodic`, `both` (timerfd and nanosleep)
+    /// or `all` (default: the settings' `timer.method`).
+    #[arg(long)]
+    pub timer: Option<String>,
+    /// Write the figures as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Settings file of the servo segments (and the bare loop's priority and memory lock).
+    #[arg(long, default_value = "config/qmarc.toml")]
+    pub config: PathBuf,
+    /// Directory holding qmarc-starter and its children (default: next to this program).
+    #[arg(long)]
+    pub bin_dir: Option<PathBuf>,
+    /// Bare loop run and discarded before the rounds, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub warmup_s: f64,
+}
+
+/// One loop's figures in one segment (µs).
+#[derive(Debug, Clone, Serialize)]
+pub struct LoopFigures {
+    /// Cycles run.
+    pub cycles: u64,
+    /// Wake latency against the intended expiry.
+    pub wake_us: Pct,
+    /// |interval between wakes − period|.
+    pub period_error_us: Pct,
+    /// Periods that expired without a cycle.
+    pub missed: u64,
+    /// Wakes more than 40 µs off the period.
+    pub outside_40us: u64,
+    /// Tick → DAC write acknowledged (the servo pipeline only).
+    pub output_us: Option<Pct>,
+    /// A fault that ended the servo segment, if any.
+    pub fault: Option<String>,
+}
+
+/// One round.
+#[derive(Debug, Clone, Serialize)]
+pub struct Round {
+    /// 1-based.
+    pub round: u32,
+    /// Which segment ran first: `bare` or `servo`.
+    pub first: &'static str,
+    /// The bare loop.
+    pub bare: LoopFigures,
+    /// The servo pipeline.
+    pub servo: LoopFigures,
+    /// servo wake p99 ÷ bare wake p99.
+    pub p99_ratio: f64,
+    /// servo wake p99 − bare wake p99, µs.
+    pub p99_diff_us: f64,
+}
+
+/// The rounds of one timer and what they say.
+#[derive(Debug, Clone, Serialize)]
+pub struct TimerResult {
+    /// `timerfd`, `nanosleep`, `timerfd-periodic`.
+    pub timer: String,
+    /// Every round.
+    pub rounds: Vec<Round>,
+    /// Median over rounds of the p99 ratio.
+    pub p99_ratio_median: f64,
+    /// Smallest round ratio.
+    pub p99_ratio_min: f64,
+    /// Largest round ratio.
+    pub p99_ratio_max: f64,
+    /// Median over rounds of servo p99 − bare p99, µs.
+    pub p99_diff_us_median: f64,
+    /// The host was too noisy for the ratio to mean anything.
+    pub noisy_host: bool,
+    /// Why (empty when quiet).
+    pub noisy_reasons: Vec<String>,
+    /// Periods the servo missed in all rounds, and the bare loop.
+    pub missed_servo: u64,
+    /// Periods the bare loop missed in all rounds.
+    pub missed_bare: u64,
+}
+
+/// The JSON `--json` writes: the first timer's verdict at the top, every timer's in `timers`.
+#[derive(Debug, Serialize)]
+struct Report<'a> {
+    period_us: u32,
+    rounds: u32,
+    segment_s: f64,
+    machine: crate::ipc::Machine,
+    p99_ratio_median: f64,
+    p99_ratio_min: f64,
+    p99_ratio_max: f64,
+    p99_diff_us_median: f64,
+    noisy_host: bool,
+    timers: &'a [TimerResult],
+    cyclictest: Option<crate::ipc::Cyclictest>,
+}
+
+/// The timers `--timer` names (`None`: the settings').
+fn timers(choice: Option<&str>, configured: TimerMethod) -> anyhow::Result<Vec<TimerMethod>> {
+    Ok(match choice {
+        None => vec![configured],
+        Some("both") => vec![TimerMethod::Timerfd, TimerMethod::Nanosleep],
+        Some("all") => {
+            vec![TimerMethod::Timerfd, TimerMethod::Nanosleep, TimerMethod::TimerfdPeriodic]
+        }
+        Some(one) => vec![one.parse::<TimerMethod>().map_err(anyhow::Error::msg)?],
+    })
+}
+
+/// The bare loop for `seconds` with `kind`, at the servo thread's real-time request.
+fn bare(
+    kind: TickerKind,
+    period_ns: u64,
+    seconds: f64,
+    req: RtRequest,
+) -> anyhow::Result<LoopFigures> {
+    let n = ((seconds * 1e9) / period_ns as f64).max(1.0) as u64;
+    let handle = qmarc_timer::rt::spawn("qmarc-bare", req, move |_rt| {
+        let _dma = DmaLatencyGuard::request_zero();
+        let mut ticker = kind.build(period_ns);
+        let mut stats = TimingStats::new(period_ns);
+        ticker.start()?;
+        let mut cycles = 0;
+        while cycles < n {
+            let tick = ticker.wait()?;
+            stats.record_tick(&tick);
+            cycles += 1 + tick.missed;
+        }
+        Ok::<_, qmarc_timer::TickerError>((stats, cycles))
+    })?;
+    let (stats, cycles) =
+        handle.join().map_err(|_| anyhow::anyhow!("the bare loop panicked"))??;
+    Ok(LoopFigures {
+        cycles,
+        wake_us: stats.wake_latency.percentiles().into(),
+        period_error_us: stats.period_error.percentiles().into(),
+        missed: stats.missed,
+        outside_40us: stats.outside_40us,
+        output_us: None,
+        fault: None,
+    })
+}
+
+/// One servo segment: `qmarc-starter step` for `seconds` with `timer`, its figures from its
+/// summary.json.
+fn servo(
+    a: &JitterArgs,
+    starter: &Path,
+    timer: TimerMethod,
+    out: &Path,
+) -> anyhow::Result<LoopFigures> {
+    let status = Command::new(starter)
+        .arg(format!("--config={}", a.config.display()))
+        .arg(format!("--out={}", out.display()))
+        .arg(format!("--period-us={}", a.period_us))
+        .arg(format!("--timer={timer}"))
+        .args(["--gather-every=100", "step", "--size=1000"])
+        .arg(format!("--duration={}", a.segment_s))
+        .stdout(std::process::Stdio::null())
+        .status()
+        .with_context(|| format!("cannot run {}", starter.display()))?;
+    let s = Summary::read(out).map_err(anyhow::Error::msg).with_context(|| {
+        format!("the servo segment ({status}) left no summary in {}", out.display())
+    })?;
+    let t = &s.timing;
+    Ok(LoopFigures {
+        cycles: s.cycles,
+        wake_us: t.wake_latency_us,
+        period_error_us: t.period_error_us,
+        missed: t.missed_periods,
+        outside_40us: t.outside_40us,
+        output_us: Some(t.output_latency_us),
+        fault: s.fault.map(|f| format!("{}: {}", f.kind, f.message)),
+    })
+}
+
+/// The rounds of one timer.
+fn rounds_of(
+    a: &JitterArgs,
+    timer: TimerMethod,
+    req: RtRequest,
+    scratch: &Path,
+) -> anyhow::Result<TimerResult> {
+    let starter = a.bin_dir.clone().map_or_else(crate::ipc::next_to_me, Ok)?.join("qmarc-starter");
+    let period_ns = u64::from(a.period_us) * 1_000;
+    let kind = qmarc_runner::run::ticker_kind(timer);
+    bare(kind, period_ns, a.warmup_s, req)?;
+    let mut rounds = Vec::new();
+    for r in 1..=a.rounds {
+        let out = scratch.join(format!("{timer}-{r}"));
+        let bare_first = r % 2 == 1;
+        let (b, s) = if bare_first {
+            let b = bare(kind, period_ns, a.segment_s, req)?;
+            (b, servo(a, &starter, timer, &out)?)
+        } else {
+            let s = servo(a, &starter, timer, &out)?;
+            (bare(kind, period_ns, a.segment_s, req)?, s)
+        };
+        let ratio = if b.wake_us.p99 > 0.0 { s.wake_us.p99 / b.wake_us.p99 } else { f64::NAN };
+        let diff = s.wake_us.p99 - b.wake_us.p99;
+        eprintln!(
+            "  {timer} round {r}/{}: bare p99 {:.0} µs, servo p99 {:.0} µs, ratio {ratio:.2}",
+            a.rounds, b.wake_us.p99, s.wake_us.p99
+        );
+        rounds.push(Round {
+            round: r,
+            first: if bare_first { "bare" } else { "servo" },
+            bare: b,
+            servo: s,
+            p99_ratio: ratio,
+            p99_diff_us: diff,
+        });
+    }
+    Ok(verdict(timer.to_string(), rounds, a.period_us))
+}
+
+/// The ratios over the rounds and the noisy-host flag: the bare loop's p99.9 varying by more
+/// than 30 % across rounds, or a bare-loop stall longer than a period.
+pub fn verdict(timer: String, rounds: Vec<Round>, period_us: u32) -> TimerResult {
+    let ratios: Vec<f64> = rounds.iter().map(|r| r.p99_ratio).collect();
+    let diffs: Vec<f64> = rounds.iter().map(|r| r.p99_diff_us).collect();
+    let p999: Vec<f64> = rounds.iter().map(|r| r.bare.wake_us.p999).collect();
+    let mut noisy = Vec::new();
+    let spread = cv(&p999);
+    if spread > 0.30 {
+        noisy
+            .push(format!("the bare loop's p99.9 varies by {:.0} % across rounds", spread * 100.0));
+    }
+    let stall = rounds.iter().map(|r| r.bare.wake_us.max).fold(0.0, f64::max);
+    if stall > f64::from(period_us) {
+        noisy.push(format!("the bare loop stalled {stall:.0} µs, longer than a period"));
+    }
+    let finite = || ratios.iter().copied().filter(|r| r.is_finite());
+    TimerResult {
+        timer,
+        p99_ratio_median: median(&ratios),
+        p99_ratio_min: finite().fold(f64::INFINITY, f64::min),
+        p99_ratio_max: finite().fold(f64::NEG_INFINITY, f64::max),
+        p99_diff_us_median: median(&diffs),
+        noisy_host: !noisy.is_empty(),
+        noisy_reasons: noisy,
+        missed_servo: rounds.iter().map(|r| r.servo.missed).sum(),
+        missed_bare: rounds.iter().map(|r| r.bare.missed).sum(),
+        rounds,
+    }
+}
+
+/// Runs `jitter`.
+pub fn run(a: &JitterArgs) -> anyhow::Result<()> {
+    let bad_segment = a.segment_s.is_nan() || a.segment_s <= 0.0;
+    if a.rounds == 0 || bad_segment || !(100..=100_000).contains(&a.period_us) {
+        bail!("--rounds must be ≥ 1, --segment-s > 0 and --period-us 100‥100000");
+    }
+    let settings = qmarc_config::Settings::load(&a.config, &crate::cycle::names())
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let req = RtRequest {
+        priority: (settings.timer.servo_priority > 0).then_some(settings.timer.servo_priority),
+        lock_memory: settings.timer.lock_memory,
+        prefault_stack_bytes: 128 * 1024,
+    };
+    let scratch = std::env::temp_dir().join(format!("qmarc-bench-jitter-{}", std::process::id()));
+    std::fs::create_dir_all(&scratch)?;
+    let cyclic_before = crate::ipc::cyclictest(a.period_us, a.segment_s, req.priority);
+    let mut results = Vec::new();
+    for timer in timers(a.timer.as_deref(), settings.timer.method)? {
+        let r = rounds_of(a, timer, req, &scratch);
+        if r.is_err() {
+            let _ = std::fs::remove_dir_all(&scratch);
+        }
+        results.push(r?);
+    }
+    let cyclic = crate::ipc::cyclictest_pair(cyclic_before, a.period_us, a.segment_s, req.priority);
+    let _ = std::fs::remove_dir_all(&scratch);
+    print!("{}", render(a, &results, cyclic.as_ref()));
+    if let Some(path) = &a.json {
+        let first = &results[0];
+        let report = Report {
+            period_us: a.period_us,
+            rounds: a.rounds,
+            segment_s: a.segment_s,
+            machine: crate::ipc::Machine::here(),
+            p99_ratio_median: first.p99_ratio_median,
+            p99_ratio_min: first.p99_ratio_min,
+            p99_ratio_max: first.p99_ratio_max,
+            p99_diff_us_median: first.p99_diff_us_median,
+            noisy_host: first.noisy_host,
+            timers: &results,
+            cyclictest: cyclic,
+        };
+        let text = serde_json::to_string_pretty(&report)?;
+        std::fs::write(path, text + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        println!("  JSON: {}", path.display());
+    }
+    Ok(())
+}
+
+/// The table `jitter` prints.
+pub fn render(
+    a: &JitterArgs,
+    results: &[TimerResult],
+    cyclic: Option<&crate::ipc::Cyclictest>,
+) -> String {
+    use std::fmt::Write;
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "qmarc-bench jitter: {} µs, {} interleaved rounds of {} s per loop",
+        a.period_us, a.rounds, a.segment_s
+    );
+    for r in results {
+        let _ = writeln!(
+            t,
+            "\n  timer {}: wake latency µs (against the intended expiry)\n  round first  loop    p50    p99  p99.9      max  missed  >±40µs  out p99",
+            r.timer
+        );
+        for round in &r.rounds {
+            for (name, f) in [("bare", &round.bare), ("servo", &round.servo)] {
+                let out = f.output_us.map_or("—".to_string(), |o| format!("{:.0}", o.p99));
+                let _ = writeln!(
+                    t,
+                    "  {:>5} {:<6} {name:<5} {:>6.0} {:>6.0} {:>6.0} {:>8.0} {:>7} {:>7} {:>8}{}",
+                    if name == "bare" { round.round.to_string() } else { String::new() },
+                    if name == "bare" { round.first } else { "" },
+                    f.wake_us.p50,
+                    f.wake_us.p99,
+                    f.wake_us.p999,
+                    f.wake_us.max,
+                    f.missed,
+                    f.outside_40us,
+                    out,
+                    f.fault.as_ref().map_or(String::new(), |x| format!("  FAULT {x}")),
+                );
+            }
+        }
+        let _ = writeln!(
+            t,
+            "  p99 ratio servo/bare: median {:.2} (min {:.2}, max {:.2}); p99 difference median {:+.0} µs; missed periods servo {} / bare {}",
+            r.p99_ratio_median,
+            r.p99_ratio_min,
+            r.p99_ratio_max,
+            r.p99_diff_us_median,
+            r.missed_servo,
+            r.missed_bare
+        );
+        let _ = writeln!(
+            t,
+            "  {}",
+            if r.noisy_host {
+                format!("host too noisy — ratio not meaningful: {}", r.noisy_reasons.join("; "))
+            } else if r.p99_ratio_median <= 1.3 {
+                "quiet host: median ratio ≤ 1.3 (the goal)".to_string()
+            } else {
+                "quiet host: median ratio above the 1.3 goal".to_string()
+            }
+        );
+    }
+    let _ = writeln!(t, "\n  {}", crate::ipc::describe_cyclictest(cyclic));
+    t
+}

@@ -1,0 +1,72 @@
+//! `qmarc-bench`: proves with one command how close the controller comes to this machine's
+//! limit (`../shared/notes/realtime-linux.md`, "Benchmark"):
+//!
+//! - `jitter`: interleaved rounds of a bare timer loop (the controller's own timer code,
+//!   cyclictest's algorithm, nothing else) and the full servo pipeline (three real processes
+//!   over real iceoryx2, through `qmarc-starter step`); the servo's wake-latency p99 over the
+//!   bare loop's, per round, with the noisy-host flag.
+//! - `ipc`: the controller ⇄ hwserver exchange beside a raw futex and a raw spin ping-pong.
+//! - `cycle`: the per-cycle compute of every registered generator × law for 1–4 motors.
+//!
+//! Figures are printed (and written as JSON with `--json`), never asserted: the machine decides.
+
+mod cycle;
+mod ipc;
+mod jitter;
+mod stats;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Command line of `qmarc-bench`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "qmarc-bench",
+    version,
+    about = "Benchmarks of the QMARC servo loop against this machine's limit"
+)]
+struct Args {
+    #[command(subcommand)]
+    command: BenchCommand,
+}
+
+#[derive(Debug, Subcommand)]
+enum BenchCommand {
+    /// Interleaved rounds of the bare timer loop and the servo pipeline: wake latency, period
+    /// error, missed periods, periods off by more than 40 µs, output latency; the p99 ratio.
+    Jitter(jitter::JitterArgs),
+    /// Round trips of the controller ⇄ hwserver exchange beside raw futex and spin ping-pongs.
+    Ipc(ipc::IpcArgs),
+    /// Per-cycle compute (trajectory sample + law step) of every generator × law, 1–4 motors.
+    Cycle(cycle::CycleArgs),
+}
+
+fn main() -> ExitCode {
+    let args: Args = qmarc_starter_like_parse();
+    let result = match &args.command {
+        BenchCommand::Jitter(a) => jitter::run(a),
+        BenchCommand::Ipc(a) => ipc::run(a),
+        BenchCommand::Cycle(a) => cycle::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("qmarc-bench: error: {e:#}");
+            ExitCode::from(qmarc_proto::exit::INTERNAL)
+        }
+    }
+}
+
+/// Parses the command line; a wrong one exits with the usage code (64), as every QMARC
+/// program does.
+fn qmarc_starter_like_parse() -> Args {
+    match Args::try_parse() {
+        Ok(a) => a,
+        Err(e) => {
+            let code =
+                if e.use_stderr() { qmarc_proto::exit::USAGE } else { qmarc_proto::exit::OK };
+            let _ = e.print();
+            std::process::exit(i32::from(code));
+        }
+    }
+}

@@ -1,0 +1,119 @@
+//! `qmarc-bench` run as a user runs it, briefly: every subcommand completes, prints its table
+//! and (jitter) writes the JSON the issue names; bad options are refused with a message. The
+//! figures themselves are the machine's, never asserted.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bench() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_qmarc-bench"))
+}
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("qmarc-bench-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(bench()).args(args).current_dir(workspace()).output().unwrap()
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+/// The shipped settings with the simulated robot's state kept nowhere (tests never share
+/// /dev/shm/qmarc-sim.state).
+fn config(dir: &Path) -> PathBuf {
+    let shipped = std::fs::read_to_string(workspace().join("config/qmarc.toml")).unwrap();
+    let own: String = shipped
+        .lines()
+        .map(|l| if l.starts_with("state_file = ") { "state_file = \"\"" } else { l })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let path = dir.join("qmarc.toml");
+    std::fs::write(&path, own + "\n").unwrap();
+    path
+}
+
+#[test]
+fn jitter_runs_both_loops_and_writes_the_ratio_issue_14() {
+    let starter = bench().with_file_name("qmarc-starter");
+    assert!(starter.is_file(), "{} missing: build the workspace", starter.display());
+    let dir = scratch("jitter");
+    let json = dir.join("j.json");
+    let cfg = config(&dir);
+    let out = run(&[
+        "jitter",
+        "--rounds=2",
+        "--segment-s=0.3",
+        "--warmup-s=0.1",
+        &format!("--config={}", cfg.display()),
+        &format!("--json={}", json.display()),
+    ]);
+    let t = text(&out);
+    assert!(out.status.success(), "{t}");
+    assert!(t.contains("p99 ratio servo/bare: median"), "{t}");
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for key in ["p99_ratio_median", "p99_ratio_min", "p99_ratio_max", "p99_diff_us_median"] {
+        assert!(j[key].as_f64().is_some_and(f64::is_finite), "{key}: {j}");
+    }
+    assert!(j["noisy_host"].is_boolean());
+    let rounds = j["timers"][0]["rounds"].as_array().unwrap();
+    assert_eq!(rounds.len(), 2);
+    assert_eq!(
+        (rounds[0]["first"].as_str(), rounds[1]["first"].as_str()),
+        (Some("bare"), Some("servo"))
+    );
+    for r in rounds {
+        assert!(r["bare"]["cycles"].as_u64().unwrap() >= 700, "{r}");
+        assert!(
+            r["bare"]["output_us"].is_null() && r["servo"]["output_us"]["p99"].is_number(),
+            "{r}"
+        );
+        assert!(r["servo"]["wake_us"]["p99"].as_f64().unwrap() > 0.0, "{r}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn ipc_prints_the_exchange_beside_both_baselines_issue_14() {
+    let out = run(&["ipc", "--samples=300"]);
+    let t = text(&out);
+    assert!(out.status.success(), "{t}");
+    for row in ["controller ⇄ hwserver exchange", "raw futex ping-pong", "raw spin ping-pong"] {
+        assert!(t.contains(row), "{row}: {t}");
+    }
+    assert!(t.contains("exchange p50 ="), "{t}");
+}
+
+#[test]
+fn cycle_times_every_generator_and_law_for_1_to_4_motors_issue_14() {
+    let out = run(&["cycle", "--cycles=2000"]);
+    let t = text(&out);
+    assert!(out.status.success(), "{t}");
+    for name in qmarc_plugins::registry::GENERATORS.iter().map(|g| g.name) {
+        let row = t.lines().find(|l| l.split_whitespace().nth(1) == Some(name));
+        let row = row.unwrap_or_else(|| panic!("no row for {name}: {t}"));
+        assert_eq!(row.split_whitespace().count(), 2 + 2 * 4, "{row}");
+    }
+}
+
+#[test]
+fn bad_options_are_refused_with_a_message_issue_14() {
+    let out = run(&["jitter", "--rounds=0"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(text(&out).contains("--rounds must be ≥ 1"), "{}", text(&out));
+    let out = run(&["jitter", "--timer=posix", "--segment-s=0.1"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(text(&out).contains("\"posix\""), "{}", text(&out));
+    let out = run(&["jitter", "--period-us=abc"]);
+    assert_eq!(out.status.code(), Some(64), "a usage error");
+}
