@@ -299,3 +299,30 @@ fn the_approach_brings_the_robot_to_the_xz_start_issue_13() {
     }
     run.assert_clean();
 }
+
+/// `trials` checks everything before it touches a file: a path from standard input (every
+/// trial would read it again), a missing knot file and --print-settings are refused, and an
+/// earlier series in the folder is left as it was.
+#[test]
+fn trials_refuse_before_touching_an_earlier_series_issue_13() {
+    let run = TestRun::new("trialsno");
+    let out = run.out("out");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("trials.csv"), "an earlier series\n").unwrap();
+    let cfg = format!("--config={}", qmarc_tests::default_config().display());
+    let out_arg = format!("--out={}", out.display());
+    for (args, says) in [
+        (vec!["trials", "--n=2", "run", "--knots=-"], "cannot read the path from standard input"),
+        (vec!["trials", "--n=2", "run", "--knots=/nonexistent/k.txt"], "/nonexistent/k.txt"),
+        (vec!["--print-settings", "trials", "--n=2", "step"], "trials makes moves"),
+    ] {
+        let mut all = vec![cfg.as_str(), out_arg.as_str()];
+        all.extend(args);
+        let r = run.starter(&all, Duration::from_secs(60));
+        assert_eq!(r.code, Some(3), "{all:?}: {}", r.stderr);
+        assert!(r.stderr.contains(says), "{all:?}: {}", r.stderr);
+        assert_eq!(std::fs::read_to_string(out.join("trials.csv")).unwrap(), "an earlier series\n");
+        assert!(!out.join("trial-001").exists() && !out.join("previous-trials").exists());
+    }
+    run.assert_clean();
+}

@@ -24,7 +24,9 @@ impl Default for General {
             period_us: 400,
             gains_period_us: 400,
             law: "pidff".to_string(),
-            fe_scale: 96.0,
+            // Left out, eq. 3-1 as written: a settings file from before the key keeps the
+            // loop it was tuned with. The shipped files set 96 (docs/deltabot.md).
+            fe_scale: 1.0,
             counts_per_rev: 4096.0,
             gear_ratio: 12.0,
         }

@@ -159,6 +159,8 @@ pub struct Servo {
     /// Cycles of the settle at the end of the path (their errors go to `settle_errors`).
     settle_executed: u64,
     settling: bool,
+    /// The sample index the settle began at (the path's rows are the ones before it).
+    settle_from: Option<u64>,
     settle_errors: ErrorStats,
     phase: Phase,
     /// Σ (command − actual) per motor over the move.
@@ -197,6 +199,7 @@ impl Servo {
             holding: false,
             settle_executed: 0,
             settling: false,
+            settle_from: None,
             settle_errors: ErrorStats::default(),
             phase: Phase::Idle,
             integrated_error: [0.0; MAX_MOTORS],
@@ -281,6 +284,12 @@ impl Servo {
         self.executed - self.settle_executed
     }
 
+    /// Whether the gathered row of sample `cycle` belongs to the path (not to the settle after
+    /// it). By sample index, not by cycles executed: missed periods skip samples.
+    pub fn is_path_sample(&self, cycle: u64) -> bool {
+        self.settle_from.is_none_or(|from| cycle < from)
+    }
+
     /// Command − actual of every motor in the last cycle.
     pub fn last_error(&self) -> [f64; MAX_MOTORS] {
         let mut e = [0.0; MAX_MOTORS];
@@ -352,6 +361,7 @@ impl Servo {
         self.fault = None;
         self.executed = 0;
         self.settle_executed = 0;
+        self.settle_from = None;
         self.integrated_error = [0.0; MAX_MOTORS];
         for m in 0..self.plan.n_motors {
             if let Err(e) = Servo::request(link, HwMsg::for_motor(MsgType::EnableMotor, m as u32)) {
@@ -505,6 +515,7 @@ impl Servo {
         if self.settling {
             self.settle_errors.add(self.plan.n_motors, &self.cmd, &self.act);
             self.settle_executed += 1;
+            self.settle_from.get_or_insert(n);
         } else {
             self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
         }

@@ -611,3 +611,29 @@ fn the_626_backends_cycle_allocates_nothing_issue_12() {
     assert_eq!(allocations() - before, 0, "allocations in 2000 cycles over the 626 backend");
     assert!(link.0.position(0) > 100, "the fake card's motor followed the step");
 }
+
+/// Issue 13 (review): the path's gathered rows are told from the settle's by sample index.
+/// Missed periods skip samples, so counting executed cycles would drop the path's last rows.
+#[test]
+fn the_path_rows_end_where_the_settle_begins_after_missed_periods_issue_13() {
+    let mut s = settings();
+    s.step.duration_s = 0.02; // samples 0..=50
+    let plan = MovePlan { settle_cycles: 10, ..plan(3) };
+    let mut servo = Servo::new(
+        plan,
+        (GENERATORS[0].build)(&s).unwrap(),
+        (LAWS[0].build)(&s),
+        Box::new(MockClock::new(0)),
+    );
+    let mut link = CoreLink::new(lockstep());
+    let mut ticker = ManualTicker::new(400_000);
+    ticker.inject_delay(0, 3); // the first wake finds three periods missed
+    servo.run(&mut link, &mut ticker, &AtomicBool::new(false)).unwrap();
+    let rows = servo.gather().rows();
+    let path: Vec<u64> =
+        rows.iter().map(|r| r.cycle).filter(|&c| servo.is_path_sample(c)).collect();
+    assert_eq!(path.len() as u64, servo.cycles(), "every executed path cycle is a path row");
+    assert_eq!(path.last(), Some(&50), "the path's last sample is among them");
+    let settle = rows.iter().filter(|r| !servo.is_path_sample(r.cycle)).count() as u64;
+    assert_eq!(settle, servo.settle_figures().unwrap().0);
+}

@@ -30,14 +30,34 @@ pub(crate) fn motor_colour(m: usize) -> RGBColor {
 /// The command's colour when drawn against an actual.
 pub(crate) const COMMAND: RGBColor = RGBColor(40, 40, 40);
 
+/// At most about `2·buckets` of `pts`: of each run of consecutive points its lowest and its
+/// highest, in their order — every peak and every stall stays, and a dense series draws fast.
+pub(crate) fn decimate(pts: &[(f64, f64)], buckets: usize) -> Vec<(f64, f64)> {
+    let run = pts.len().div_ceil(buckets.max(1)).max(1);
+    if run <= 2 {
+        return pts.to_vec();
+    }
+    let mut out = Vec::with_capacity(2 * buckets + 2);
+    for c in pts.chunks(run) {
+        let lo = c.iter().enumerate().min_by(|a, b| a.1.1.total_cmp(&b.1.1)).map(|(i, _)| i);
+        let hi = c.iter().enumerate().max_by(|a, b| a.1.1.total_cmp(&b.1.1)).map(|(i, _)| i);
+        let (Some(lo), Some(hi)) = (lo, hi) else { continue };
+        out.push(c[lo.min(hi)]);
+        if lo != hi {
+            out.push(c[lo.max(hi)]);
+        }
+    }
+    out
+}
+
 /// One line of a panel.
 pub(crate) struct Trace<'p> {
     /// Legend text.
     pub name: String,
     /// Colour.
     pub colour: RGBColor,
-    /// Dashed-looking thin line (a command, a bound) rather than a thick one.
-    pub thin: bool,
+    /// A marker at each point too (few points: trials).
+    pub points: bool,
     /// The points (x, y).
     pub pts: &'p [(f64, f64)],
 }
@@ -50,7 +70,7 @@ pub(crate) fn per_motor<'p>(label: &str, series: &'p [Vec<(f64, f64)>]) -> Vec<T
         .map(|(m, pts)| Trace {
             name: format!("{label} {}", m + 1),
             colour: motor_colour(m),
-            thin: false,
+            points: false,
             pts,
         })
         .collect()
@@ -66,6 +86,11 @@ pub(crate) struct PanelSpec<'p> {
     pub y: String,
     /// The lines.
     pub traces: Vec<Trace<'p>>,
+    /// Each axis spans at least this much (x, y), about its data's middle: a path that
+    /// hardly moves in one direction is not blown up to fill the panel. 0: the data's span.
+    pub min_span: (f64, f64),
+    /// The x axis counts whole things (trials): only whole numbers are labelled.
+    pub integer_x: bool,
 }
 
 /// `lo..hi` covering `values`, padded by 5 % (a flat series gets ±1 around its value).
@@ -92,7 +117,11 @@ pub(crate) fn ticks(r: &std::ops::Range<f64>) -> impl Fn(&f64) -> String + use<>
     } else {
         0
     };
-    move |v: &f64| format!("{v:.decimals$}")
+    // Large figures (accelerations in counts/s²) in powers of ten, so they fit their axis.
+    let big = r.start.abs().max(r.end.abs()) >= 1e5;
+    move |v: &f64| {
+        if big && *v != 0.0 { format!("{v:.1e}") } else { format!("{v:.decimals$}") }
+    }
 }
 
 /// Draws a figure of `panels` stacked panels, `title` on top, into `path`: drawn under a
@@ -133,9 +162,18 @@ pub(crate) fn figure(
 
 /// Draws a line panel: its caption, labelled axes, the traces and a legend.
 pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
-    let xs = range(spec.traces.iter().flat_map(|t| t.pts.iter().map(|p| p.0)));
-    let ys = range(spec.traces.iter().flat_map(|t| t.pts.iter().map(|p| p.1)));
+    let widen = |r: std::ops::Range<f64>, min: f64| {
+        let (mid, half) = ((r.start + r.end) / 2.0, (r.end - r.start).max(min) / 2.0);
+        (mid - half)..(mid + half)
+    };
+    let xs =
+        widen(range(spec.traces.iter().flat_map(|t| t.pts.iter().map(|p| p.0))), spec.min_span.0);
+    let ys =
+        widen(range(spec.traces.iter().flat_map(|t| t.pts.iter().map(|p| p.1))), spec.min_span.1);
     let (fx, fy) = (ticks(&xs), ticks(&ys));
+    let whole =
+        |v: &f64| if (v - v.round()).abs() < 1e-9 { format!("{v:.0}") } else { String::new() };
+    let fx: &dyn Fn(&f64) -> String = if spec.integer_x { &whole } else { &fx };
     let mut chart = text(
         ChartBuilder::on(area)
             .caption(&spec.title, (FONT, 20))
@@ -147,7 +185,7 @@ pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
     text(
         chart
             .configure_mesh()
-            .x_label_formatter(&fx)
+            .x_label_formatter(fx)
             .y_label_formatter(&fy)
             .x_desc(spec.x)
             .y_desc(spec.y.as_str())
@@ -157,8 +195,16 @@ pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
             .draw(),
     )?;
     for t in &spec.traces {
-        let style = t.colour.stroke_width(if t.thin { 1 } else { 2 });
-        let drawn = text(chart.draw_series(LineSeries::new(t.pts.iter().copied(), style)))?;
+        // One pixel wide: a thicker line's joins spike past the data on dense, noisy series.
+        let style = t.colour.stroke_width(1);
+        let pts: Vec<(f64, f64)> = decimate(t.pts, 1_500)
+            .into_iter()
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+            .collect();
+        if t.points {
+            text(chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, t.colour.filled()))))?;
+        }
+        let drawn = text(chart.draw_series(LineSeries::new(pts.iter().copied(), style)))?;
         // A nameless trace (the second line of a band) has no legend entry of its own.
         if !t.name.is_empty() {
             drawn

@@ -62,15 +62,17 @@ fn arms(panels: &[Panel<'_, '_>], s: &Series) -> Drawn {
         line_panel(
             area,
             &PanelSpec {
+                min_span: (0.0, 0.0),
+                integer_x: false,
                 title: format!("motor {}: command and actual position", m + 1),
                 x: TIME,
                 y: "position, counts".into(),
                 traces: vec![
-                    Trace { name: "command".into(), colour: COMMAND, thin: true, pts: &cmd },
+                    Trace { name: "command".into(), colour: COMMAND, points: false, pts: &cmd },
                     Trace {
                         name: "actual".into(),
                         colour: motor_colour(m),
-                        thin: false,
+                        points: false,
                         pts: &act,
                     },
                 ],
@@ -87,6 +89,8 @@ fn error(area: &Panel<'_, '_>, s: &Series, summary: &Summary) -> Drawn {
     line_panel(
         area,
         &PanelSpec {
+            min_span: (0.0, 0.0),
+            integer_x: false,
             title: if per_rad > 0.0 {
                 format!("following error, command − actual (1 count = {:.3e} rad)", 1.0 / per_rad)
             } else {
@@ -132,6 +136,8 @@ fn velocity(panels: &[Panel<'_, '_>], s: &Series, nominal: &[f64]) -> Drawn {
         line_panel(
             area,
             &PanelSpec {
+                min_span: (0.0, 0.0),
+                integer_x: false,
                 title: format!("command {what}"),
                 x: TIME,
                 y: format!("{what}, {unit}"),
@@ -151,13 +157,22 @@ fn period(panels: &[Panel<'_, '_>], s: &Series, summary: &Summary) -> Drawn {
     let hi = [(t0, nominal + 40.0), (t1, nominal + 40.0)];
     let band = RGBColor(150, 150, 150);
     let every = summary.gather_every.max(1);
+    let t = &summary.timing;
+    let counted = format!(
+        "the loop counted {} periods off by > 40 µs, {} missed",
+        t.outside_40us, t.missed_periods
+    );
     line_panel(
         &panels[0],
         &PanelSpec {
-            title: if every > 1 {
-                format!("servo period (mean over each {every} cycles between gathered rows)")
+            min_span: (0.0, 100.0),
+            integer_x: false,
+            title: if summary.deterministic {
+                "servo period: simulated time (--deterministic), exact by construction".into()
+            } else if every > 1 {
+                format!("servo period, mean over each {every} gathered cycles ({counted})")
             } else {
-                "servo period".into()
+                format!("servo period ({counted})")
             },
             x: TIME,
             y: "period, µs".into(),
@@ -165,11 +180,13 @@ fn period(panels: &[Panel<'_, '_>], s: &Series, summary: &Summary) -> Drawn {
                 Trace {
                     name: "period".into(),
                     colour: motor_colour(2),
-                    thin: false,
+                    points: false,
                     pts: &s.period_us,
                 },
-                Trace { name: format!("{nominal} ± 40 µs"), colour: band, thin: true, pts: &lo },
-                Trace { name: String::new(), colour: band, thin: true, pts: &hi },
+                Trace {
+                    name: format!("{nominal} ± 40 µs"), colour: band, points: false, pts: &lo
+                },
+                Trace { name: String::new(), colour: band, points: false, pts: &hi },
             ],
         },
     )?;
@@ -177,6 +194,8 @@ fn period(panels: &[Panel<'_, '_>], s: &Series, summary: &Summary) -> Drawn {
     line_panel(
         &panels[1],
         &PanelSpec {
+            min_span: (0.0, 0.0),
+            integer_x: false,
             title: "DAC output (±8191 = ±10 V)".into(),
             x: TIME,
             y: "DAC, codes".into(),
@@ -262,12 +281,16 @@ fn effector_xz(panels: &[Panel<'_, '_>], p: &EffectorPath) -> Drawn {
     line_panel(
         &panels[0],
         &PanelSpec {
+            // At least 10 mm each way: millimetres of command stay millimetres, encoder
+            // counts (38 µm at the arm tip) do not fill the panel.
+            min_span: (10.0, 10.0),
+            integer_x: false,
             title: "end-effector path, X-Z projection".into(),
             x: "x, mm",
             y: "z, mm".into(),
             traces: vec![
-                Trace { name: "command".into(), colour: COMMAND, thin: true, pts: &cmd },
-                Trace { name: "actual".into(), colour: motor_colour(0), thin: false, pts: &act },
+                Trace { name: "command".into(), colour: COMMAND, points: false, pts: &cmd },
+                Trace { name: "actual".into(), colour: motor_colour(0), points: false, pts: &act },
             ],
         },
     )?;
@@ -281,13 +304,15 @@ fn effector_xz(panels: &[Panel<'_, '_>], p: &EffectorPath) -> Drawn {
     line_panel(
         &panels[1],
         &PanelSpec {
+            min_span: (0.0, 0.0),
+            integer_x: false,
             title: "end-effector error, |command − actual|".into(),
             x: TIME,
             y: "distance, mm".into(),
             traces: vec![Trace {
                 name: "distance".into(),
                 colour: motor_colour(1),
-                thin: false,
+                points: false,
                 pts: &dist,
             }],
         },

@@ -30,6 +30,8 @@ pub fn trial_plots(dir: &Path, what: &str, rows: &[TrialRow]) -> Result<Vec<Path
         line_panel(
             &p[0],
             &PanelSpec {
+                min_span: (0.0, 0.0),
+                integer_x: true,
                 title: "accumulated absolute following error per trial".into(),
                 x: "trial",
                 y: "Σ|error|, rad".into(),
@@ -41,6 +43,8 @@ pub fn trial_plots(dir: &Path, what: &str, rows: &[TrialRow]) -> Result<Vec<Path
         line_panel(
             &p[0],
             &PanelSpec {
+                min_span: (0.0, 0.0),
+                integer_x: true,
                 title: "servo periods more than 40 µs off, and missed, per trial".into(),
                 x: "trial",
                 y: "periods".into(),
@@ -48,13 +52,13 @@ pub fn trial_plots(dir: &Path, what: &str, rows: &[TrialRow]) -> Result<Vec<Path
                     Trace {
                         name: "off by > 40 µs".into(),
                         colour: motor_colour(0),
-                        thin: false,
+                        points: true,
                         pts: &off,
                     },
                     Trace {
                         name: "missed".into(),
                         colour: motor_colour(1),
-                        thin: false,
+                        points: true,
                         pts: &missed,
                     },
                 ],

@@ -16,8 +16,9 @@ pub struct Series {
     pub act: Vec<Vec<f64>>,
     /// DAC code per motor (±8191 = ±10 V; empty if not gathered).
     pub dac: Vec<Vec<f64>>,
-    /// Interval between consecutive gathered rows divided by the rows' cycle distance, µs:
-    /// the servo period as it was (only with `time_s`).
+    /// Interval between consecutive gathered rows divided by the gathering's spacing (the
+    /// smallest cycle distance between rows), µs: the servo period as it was, a mean over the
+    /// spacing, and a stall that skipped periods shows whole (only with `time_s`).
     pub period_us: Vec<(f64, f64)>,
 }
 
@@ -66,12 +67,14 @@ impl Series {
                 .collect()
         };
         let mut period_us = Vec::new();
-        if let Some(tc) = time {
-            for w in rows.windows(2) {
-                let cycles = w[1][cycle] - w[0][cycle];
-                if cycles > 0.0 {
-                    period_us.push((w[1][tc], (w[1][tc] - w[0][tc]) / cycles * 1e6));
-                }
+        let spacing = rows
+            .windows(2)
+            .map(|w| w[1][cycle] - w[0][cycle])
+            .filter(|&c| c > 0.0)
+            .fold(f64::INFINITY, f64::min);
+        if let Some(tc) = time.filter(|_| spacing.is_finite()) {
+            for w in rows.windows(2).filter(|w| w[1][cycle] > w[0][cycle]) {
+                period_us.push((w[1][tc], (w[1][tc] - w[0][tc]) / spacing * 1e6));
             }
         }
         Ok(Series {
@@ -118,7 +121,8 @@ mod tests {
         assert_eq!(s.error(0), [(0.0, 0.0), (0.0004, 997.0), (0.0012, 960.0)]);
         assert_eq!(s.error(1)[2], (0.0012, -1.0));
         assert_eq!(s.period_us.len(), 2);
-        assert!((s.period_us[0].1 - 400.0).abs() < 1e-9 && (s.period_us[1].1 - 400.0).abs() < 1e-9);
+        // Cycle 2 was missed: the interval to cycle 3 is two periods, and shows so.
+        assert!((s.period_us[0].1 - 400.0).abs() < 1e-9 && (s.period_us[1].1 - 800.0).abs() < 1e-9);
         // Without time_s: cycles × period; without cmd: no error series.
         let s = Series::parse("cycle,act1\n0,5\n2,7\n", 0.0004).unwrap();
         assert_eq!(s.t, [0.0, 0.0008]);

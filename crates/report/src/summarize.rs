@@ -79,7 +79,7 @@ pub fn summarize(
         }
     }
     // The rows of the path (the settle's come after it).
-    let path_rows = || servo.gather().rows().iter().filter(|r| r.cycle < servo.cycles());
+    let path_rows = || servo.gather().rows().iter().filter(|r| servo.is_path_sample(r.cycle));
     let gathered = (!servo.gather().rows().is_empty())
         .then(|| crate::effector::gathered(path_rows(), n, cpr, settings.gather.every));
     let effector = settings

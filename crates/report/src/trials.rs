@@ -23,13 +23,17 @@ pub struct TrialRow {
 }
 
 impl TrialRow {
-    /// The row of trial `trial` from its summary.
-    pub fn of(trial: u32, s: &Summary) -> TrialRow {
+    /// The row of trial `trial` from its summary, for `n_motors` arms: an arm the summary has
+    /// no figures for (its controller died) gets NaN, written as an empty cell.
+    pub fn of(trial: u32, s: &Summary, n_motors: usize) -> TrialRow {
         let motors = s.gathered.as_ref().map_or(&s.motors, |g| &g.motors);
+        let per_arm = |f: fn(&crate::summary::MotorSummary) -> f64| -> Vec<f64> {
+            (0..n_motors).map(|m| motors.get(m).map_or(f64::NAN, f)).collect()
+        };
         TrialRow {
             trial,
-            abs_rad: motors.iter().map(|m| m.accumulated_abs_error_rad).collect(),
-            sq_rad: motors.iter().map(|m| m.sum_squares_error_rad2).collect(),
+            abs_rad: per_arm(|m| m.accumulated_abs_error_rad),
+            sq_rad: per_arm(|m| m.sum_squares_error_rad2),
             periods_off_40us: s.timing.outside_40us,
             missed_periods: s.timing.missed_periods,
             fault: s.fault.as_ref().map(|f| f.kind.to_string()).unwrap_or_default(),
@@ -46,11 +50,16 @@ pub fn header(n_motors: usize) -> String {
     c.join(",")
 }
 
-/// Writes one row of `trials.csv` (the shortest text that reads back as the same figure).
+/// Writes one row of `trials.csv` (the shortest text that reads back as the same figure;
+/// an empty cell for a figure the trial does not have).
 pub fn write_row(r: &TrialRow, w: &mut impl Write) -> io::Result<()> {
     write!(w, "{}", r.trial)?;
     for v in r.abs_rad.iter().chain(&r.sq_rad) {
-        write!(w, ",{v}")?;
+        if v.is_finite() {
+            write!(w, ",{v}")?;
+        } else {
+            write!(w, ",")?;
+        }
     }
     writeln!(w, ",{},{},{}", r.periods_off_40us, r.missed_periods, r.fault)
 }
@@ -76,5 +85,19 @@ mod tests {
             "trial,abs_rad1,abs_rad2,sq_rad1,sq_rad2,periods_off_40us,missed_periods,fault"
         );
         assert_eq!(String::from_utf8(out).unwrap(), "7,0.5,0.25,0.002,0.001,3,1,following-error\n");
+    }
+
+    /// A trial whose controller died has a summary without motors: its row keeps the header's
+    /// width, the missing figures empty.
+    #[test]
+    fn a_trial_without_figures_keeps_the_columns() {
+        let lost =
+            Summary::controller_lost((qmarc_config::Mode::Step, false), 2, 400, 10, "x".into());
+        let r = TrialRow::of(3, &lost, 2);
+        let mut out = Vec::new();
+        write_row(&r, &mut out).unwrap();
+        let line = String::from_utf8(out).unwrap();
+        assert_eq!(line.trim_end().split(',').count(), header(2).split(',').count(), "{line}");
+        assert!(line.starts_with("3,,,,,"), "{line}");
     }
 }

@@ -109,6 +109,8 @@ struct TrialIo<'a> {
     out: Option<&'a Path>,
     /// The children's standard error goes here; no table is printed.
     log: Option<&'a std::fs::File>,
+    /// Check everything, as `--print-settings` does, and start nothing.
+    check_only: bool,
 }
 
 /// One move (`trial` set: a trial's, quiet).
@@ -178,8 +180,10 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
         qmarc_report::output::estimate_bytes(rows, settings.n_motors),
     )
     .map_err(refused)?;
-    if args.print_settings {
-        println!("{}", spec.to_json());
+    if args.print_settings || trial.check_only {
+        if args.print_settings {
+            println!("{}", spec.to_json());
+        }
         return Ok(Outcome { code: exit::OK, summary: None });
     }
     let _lock = qmarc_report::output::lock(&out_dir).map_err(refused)?;
@@ -330,9 +334,27 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
     let names = names();
     let mut settings = args.opts.load(&names).map_err(refused)?;
     t.command.apply(&mut settings, &names).map_err(refused)?;
+    if args.print_settings {
+        return Err(refused(anyhow!(
+            "trials makes moves: check the move with `qmarc-starter --print-settings run|step|home …`"
+        )));
+    }
+    if settings.trajectory.knots.as_deref() == Some(Path::new("-")) {
+        return Err(refused(anyhow!(
+            "trials cannot read the path from standard input: every trial reads it again; give \
+             a knot file"
+        )));
+    }
     let base = settings.gather.out_dir.clone();
     qmarc_report::output::check(&base, 0).map_err(refused)?;
     let _lock = qmarc_report::output::lock(&base).map_err(refused)?;
+    // Every check of the move before anything of an earlier series is touched; then that
+    // series goes, whole, into previous-trials/.
+    let check = TrialIo { out: Some(&base), log: None, check_only: true };
+    one_move(args, &t.command, check)?;
+    qmarc_starter::trials::retire_series(&base)
+        .with_context(|| format!("cannot keep the earlier series of {}", base.display()))
+        .map_err(refused)?;
     let mut csv = TrialsCsv::create(&base, settings.n_motors)
         .with_context(|| format!("cannot write {}", base.join("trials.csv").display()))
         .map_err(refused)?;
@@ -355,7 +377,8 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
         let command = qmarc_starter::trials::command_of(&t.command, k, settings.step.size);
         let dir = qmarc_starter::trials::trial_dir(&base, k);
         let _ = writeln!(&log, "== trial {k} ({})", dir.display());
-        let outcome = match one_move(args, &command, TrialIo { out: Some(&dir), log: Some(&log) }) {
+        let io = TrialIo { out: Some(&dir), log: Some(&log), check_only: false };
+        let outcome = match one_move(args, &command, io) {
             Ok(o) => o,
             Err(e) if k == 1 => return Err(e),
             Err((_, e)) => {
@@ -365,8 +388,10 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
         };
         if let Some((summary, dir)) = &outcome.summary {
             what = summary.what();
-            let row = qmarc_report::trials::TrialRow::of(k, summary);
-            bar.set_message(format!("last Σ|e| {:.3e} rad (arm 1)", row.abs_rad[0]));
+            let row = qmarc_report::trials::TrialRow::of(k, summary, settings.n_motors);
+            if let Some(e) = row.abs_rad.first().filter(|e| e.is_finite()) {
+                bar.set_message(format!("last Σ|e| {e:.3e} rad (arm 1)"));
+            }
             csv.push(row).map_err(internal)?;
             if args.plots {
                 bar.suspend(|| plot_move(args, &command, summary, dir));
@@ -387,6 +412,9 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
         }
     }
     bar.finish_and_clear();
+    if what.is_empty() {
+        what = t.command.mode().to_string();
+    }
     print!("{}", qmarc_starter::trials::render(&what, t.n, csv.rows()));
     let mut files = vec![csv.path().to_path_buf(), log_path];
     if !csv.rows().is_empty() {

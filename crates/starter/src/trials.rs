@@ -46,14 +46,46 @@ pub struct TrialsCsv {
     rows: Vec<TrialRow>,
 }
 
+/// Where an earlier series in the same folder goes when a new one begins.
+pub const PREVIOUS_SERIES: &str = "previous-trials";
+
+/// Whether `name` is a file of a series: `trials.csv`, `trials.log`, its plots, `trial-NNN`.
+fn of_a_series(name: &str) -> bool {
+    matches!(name, "trials.csv" | "trials.log")
+        || qmarc_plots::TRIAL_PLOT_FILES.contains(&name)
+        || name
+            .strip_prefix("trial-")
+            .is_some_and(|n| n.len() >= 3 && n.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Moves an earlier series in `base` — all of it — into `base/previous-trials/`, replacing
+/// the one kept there: a folder never mixes two series, and the last one is not lost.
+pub fn retire_series(base: &Path) -> std::io::Result<()> {
+    let mut names: Vec<std::ffi::OsString> = std::fs::read_dir(base)?
+        .filter_map(Result::ok)
+        .map(|e| e.file_name())
+        .filter(|n| n.to_str().is_some_and(of_a_series))
+        .collect();
+    if names.is_empty() {
+        return Ok(());
+    }
+    names.sort();
+    let previous = base.join(PREVIOUS_SERIES);
+    match std::fs::remove_dir_all(&previous) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
+        _ => {}
+    }
+    std::fs::create_dir(&previous)?;
+    for n in names {
+        std::fs::rename(base.join(&n), previous.join(&n))?;
+    }
+    Ok(())
+}
+
 impl TrialsCsv {
-    /// Starts `base/trials.csv` for `n_motors` arms; one there already is kept as
-    /// `trials.previous.csv`.
+    /// Starts `base/trials.csv` for `n_motors` arms.
     pub fn create(base: &Path, n_motors: usize) -> std::io::Result<TrialsCsv> {
         let path = base.join("trials.csv");
-        if path.exists() {
-            std::fs::rename(&path, base.join("trials.previous.csv"))?;
-        }
         let mut file = std::fs::File::create(&path)?;
         writeln!(file, "{}", header(n_motors))?;
         Ok(TrialsCsv { path, file, rows: Vec::new() })
@@ -78,7 +110,7 @@ impl TrialsCsv {
     }
 }
 
-/// Mean, smallest, largest and standard deviation of `v`.
+/// Mean, smallest, largest and standard deviation (population) of `v`.
 fn spread(v: &[f64]) -> (f64, f64, f64, f64) {
     let n = v.len().max(1) as f64;
     let mean = v.iter().sum::<f64>() / n;
@@ -100,22 +132,30 @@ pub fn render(what: &str, planned: u32, rows: &[TrialRow]) -> String {
         if faults.is_empty() { String::new() } else { format!(", {} faulted", faults.len()) }
     );
     let n = rows.iter().map(|r| r.abs_rad.len()).max().unwrap_or(0);
-    if n > 0 && !rows.is_empty() {
+    // The error figures of whole trials only: a faulted trial's are of part of the path.
+    let whole: Vec<&TrialRow> = rows.iter().filter(|r| r.fault.is_empty()).collect();
+    if n > 0 && !whole.is_empty() {
         let _ = writeln!(
             t,
-            "\n  per trial            {:>10} {:>10} {:>10} {:>10}",
-            "mean", "min", "max", "std"
+            "\n  per trial, over the {} that ran to their end{:>5} {:>10} {:>10} {:>10}",
+            whole.len(),
+            "mean",
+            "min",
+            "max",
+            "std"
         );
         for (what, pick) in [
             ("Σ|e| rad", (|r: &TrialRow, m: usize| r.abs_rad.get(m).copied()) as fn(_, _) -> _),
             ("Σe² rad²", |r: &TrialRow, m: usize| r.sq_rad.get(m).copied()),
         ] {
             for m in 0..n {
-                let v: Vec<f64> = rows.iter().filter_map(|r| pick(r, m)).collect();
+                let v: Vec<f64> =
+                    whole.iter().filter_map(|r| pick(r, m)).filter(|v| v.is_finite()).collect();
                 let (mean, lo, hi, sd) = spread(&v);
+                let sd = if v.len() < 2 { "—".to_string() } else { format!("{sd:.2e}") };
                 let _ = writeln!(
                     t,
-                    "  arm {} {what:<14} {mean:>10.4e} {lo:>10.4e} {hi:>10.4e} {sd:>10.2e}",
+                    "  arm {} {what:<14} {mean:>10.4e} {lo:>10.4e} {hi:>10.4e} {sd:>10}",
                     m + 1
                 );
             }
@@ -174,20 +214,33 @@ mod tests {
             t.starts_with("QMARC trials of run (spline): 3 of 5 ran, 2 ok, 1 faulted\n"),
             "{t}"
         );
+        // The spread is over the two whole trials; the faulted one's figures are of part of it.
+        assert!(t.contains("over the 2 that ran to their end"), "{t}");
         assert!(
-            t.contains("  arm 1 Σ|e| rad        6.0000e-1  5.0000e-1  7.0000e-1    8.16e-2\n"),
+            t.contains("  arm 1 Σ|e| rad        5.5000e-1  5.0000e-1  6.0000e-1    5.00e-2\n"),
             "{t}"
         );
+        let one = render("step", 1, &rows[..1]);
+        assert!(one.contains("5.0000e-1  5.0000e-1  5.0000e-1          —\n"), "std of one: {one}");
         assert!(t.contains("mean 2.0, min 1, max 3; missed periods in all: 3"), "{t}");
         assert!(t.ends_with("  trial 2: fault following-error\n"), "{t}");
     }
 
     #[test]
-    fn rows_are_on_disk_as_they_come_and_an_old_file_is_kept() {
+    fn rows_are_on_disk_as_they_come_and_an_old_series_is_kept_whole() {
         let dir = std::env::temp_dir().join(format!("qmarc-trials-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(dir.join("trials.csv"), "old\n").unwrap();
+        std::fs::create_dir_all(dir.join("trial-001")).unwrap();
+        std::fs::create_dir_all(dir.join("trial-002")).unwrap();
+        for f in ["trials.csv", "trials.log", "trials-error.png", "notes.txt"] {
+            std::fs::write(dir.join(f), "old\n").unwrap();
+        }
+        retire_series(&dir).unwrap();
+        let kept = dir.join(PREVIOUS_SERIES);
+        for f in ["trials.csv", "trials.log", "trials-error.png", "trial-001", "trial-002"] {
+            assert!(kept.join(f).exists() && !dir.join(f).exists(), "{f}");
+        }
+        assert!(dir.join("notes.txt").exists(), "not a series' file: left alone");
         let mut csv = TrialsCsv::create(&dir, 2).unwrap();
         csv.push(row(1, 0.5, "")).unwrap();
         let text = std::fs::read_to_string(csv.path()).unwrap();
@@ -196,8 +249,10 @@ mod tests {
             "trial,abs_rad1,abs_rad2,sq_rad1,sq_rad2,periods_off_40us,missed_periods,fault\n\
              1,0.5,1,0.25,0,1,1,\n"
         );
-        assert_eq!(std::fs::read_to_string(dir.join("trials.previous.csv")).unwrap(), "old\n");
         assert_eq!(csv.rows().len(), 1);
+        // The next series replaces the kept one with this one.
+        retire_series(&dir).unwrap();
+        assert!(!kept.join("trial-001").exists() && kept.join("trials.csv").exists());
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
