@@ -24,14 +24,9 @@ pub struct CycleArgs {
     pub config: PathBuf,
 }
 
-/// The names the registries accept.
+/// The names the registries accept (the starter's).
 pub fn names() -> Names {
-    Names {
-        laws: qmarc_plugins::registry::law_names(),
-        methods: qmarc_plugins::registry::path_generator_names(),
-        backends: qmarc_hwserver::backends::names(),
-        any_plugin: false,
-    }
+    qmarc_starter::names()
 }
 
 /// Writes knot files for `n` motors long enough for `cycles` samples at 400 µs: a slow sine

@@ -42,7 +42,7 @@ enum BenchCommand {
 }
 
 fn main() -> ExitCode {
-    let args: Args = qmarc_starter_like_parse();
+    let args: Args = qmarc_starter::cli::parse_or_exit();
     let result = match &args.command {
         BenchCommand::Jitter(a) => jitter::run(a),
         BenchCommand::Ipc(a) => ipc::run(a),
@@ -53,20 +53,6 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("qmarc-bench: error: {e:#}");
             ExitCode::from(qmarc_proto::exit::INTERNAL)
-        }
-    }
-}
-
-/// Parses the command line; a wrong one exits with the usage code (64), as every QMARC
-/// program does.
-fn qmarc_starter_like_parse() -> Args {
-    match Args::try_parse() {
-        Ok(a) => a,
-        Err(e) => {
-            let code =
-                if e.use_stderr() { qmarc_proto::exit::USAGE } else { qmarc_proto::exit::OK };
-            let _ = e.print();
-            std::process::exit(i32::from(code));
         }
     }
 }
