@@ -375,3 +375,31 @@ fn a_starter_whose_output_is_closed_still_runs_and_cleans_up() {
     assert_eq!(status.code(), Some(0), "{status:?}");
     run.assert_clean();
 }
+
+/// Issue 14: with the hwserver spinning for requests and the controller polling for its
+/// responses, a deterministic move writes the same data as with both blocking — the wait
+/// mode changes how fast the exchange is, never what it carries.
+#[test]
+fn spin_mode_moves_exactly_as_blocking_mode_issue_14() {
+    let run = TestRun::new("spinmode");
+    let moved = |name: &str, edits: &[(&str, &str)]| {
+        let out = run.out(name);
+        let cfg = run.config_with(edits);
+        let r = run.starter(
+            &[
+                &format!("--config={}", cfg.display()),
+                &format!("--out={}", out.display()),
+                "--deterministic",
+                "step",
+                "--duration=0.3",
+            ],
+            TIMEOUT,
+        );
+        assert_eq!(r.code, Some(0), "{name}: {}", r.stderr);
+        std::fs::read_to_string(out.join("gather.csv")).unwrap()
+    };
+    let blocking = moved("block", &[]);
+    let spinning = moved("spin", &[("wait", "\"spin\""), ("response_spin_us", "400")]);
+    assert_eq!(blocking, spinning);
+    run.assert_clean();
+}

@@ -50,6 +50,38 @@ pub struct JitterArgs {
     /// Bare loop run and discarded before the rounds, s.
     #[arg(long, default_value_t = 2.0)]
     pub warmup_s: f64,
+    /// The servo segments' hwserver busy-polls for requests and the controller polls for
+    /// each response up to one period before blocking (`hwserver.wait = "spin"`,
+    /// `hwserver.response_spin_us`): for a machine with a CPU to spare.
+    #[arg(long)]
+    pub spin: bool,
+    /// Pin the servo thread and the bare loop to CPU 0 and the hwserver to CPU 1
+    /// (`timer.servo_cpu`, `timer.hwserver_cpu`).
+    #[arg(long)]
+    pub pin: bool,
+}
+
+/// The settings the servo segments run with: `--config`, with `--spin` and `--pin` applied
+/// to a copy in `scratch`.
+fn segment_config(a: &JitterArgs, scratch: &Path) -> anyhow::Result<PathBuf> {
+    if !a.spin && !a.pin {
+        return Ok(a.config.clone());
+    }
+    let text = std::fs::read_to_string(&a.config)
+        .with_context(|| format!("cannot read {}", a.config.display()))?;
+    let mut doc: toml_edit::DocumentMut =
+        text.parse().with_context(|| format!("{}", a.config.display()))?;
+    if a.spin {
+        doc["hwserver"]["wait"] = toml_edit::value("spin");
+        doc["hwserver"]["response_spin_us"] = toml_edit::value(i64::from(a.period_us));
+    }
+    if a.pin {
+        doc["timer"]["servo_cpu"] = toml_edit::value(0);
+        doc["timer"]["hwserver_cpu"] = toml_edit::value(1);
+    }
+    let path = scratch.join("qmarc.toml");
+    std::fs::write(&path, doc.to_string())?;
+    Ok(path)
 }
 
 /// One loop's figures in one segment (µs).
@@ -119,6 +151,8 @@ struct Report<'a> {
     period_us: u32,
     rounds: u32,
     segment_s: f64,
+    spin: bool,
+    pin: bool,
     machine: crate::ipc::Machine,
     p99_ratio_median: f64,
     p99_ratio_min: f64,
@@ -179,12 +213,12 @@ fn bare(
 /// summary.json.
 fn servo(
     a: &JitterArgs,
-    starter: &Path,
+    (starter, config): (&Path, &Path),
     timer: TimerMethod,
     out: &Path,
 ) -> anyhow::Result<LoopFigures> {
     let status = Command::new(starter)
-        .arg(format!("--config={}", a.config.display()))
+        .arg(format!("--config={}", config.display()))
         .arg(format!("--out={}", out.display()))
         .arg(format!("--period-us={}", a.period_us))
         .arg(format!("--timer={timer}"))
@@ -216,6 +250,8 @@ fn rounds_of(
     scratch: &Path,
 ) -> anyhow::Result<TimerResult> {
     let starter = a.bin_dir.clone().map_or_else(crate::ipc::next_to_me, Ok)?.join("qmarc-starter");
+    let config = segment_config(a, scratch)?;
+    let starter = (starter.as_path(), config.as_path());
     let period_ns = u64::from(a.period_us) * 1_000;
     let kind = qmarc_runner::run::ticker_kind(timer);
     bare(kind, period_ns, a.warmup_s, req)?;
@@ -225,9 +261,9 @@ fn rounds_of(
         let bare_first = r % 2 == 1;
         let (b, s) = if bare_first {
             let b = bare(kind, period_ns, a.segment_s, req)?;
-            (b, servo(a, &starter, timer, &out)?)
+            (b, servo(a, starter, timer, &out)?)
         } else {
-            let s = servo(a, &starter, timer, &out)?;
+            let s = servo(a, starter, timer, &out)?;
             (bare(kind, period_ns, a.segment_s, req)?, s)
         };
         let ratio = if b.wake_us.p99 > 0.0 { s.wake_us.p99 / b.wake_us.p99 } else { f64::NAN };
@@ -291,6 +327,7 @@ pub fn run(a: &JitterArgs) -> anyhow::Result<()> {
         priority: (settings.timer.servo_priority > 0).then_some(settings.timer.servo_priority),
         lock_memory: settings.timer.lock_memory,
         prefault_stack_bytes: 128 * 1024,
+        cpu: if a.pin { Some(0) } else { settings.timer.servo_cpu },
     };
     let scratch = std::env::temp_dir().join(format!("qmarc-bench-jitter-{}", std::process::id()));
     std::fs::create_dir_all(&scratch)?;
@@ -312,6 +349,8 @@ pub fn run(a: &JitterArgs) -> anyhow::Result<()> {
             period_us: a.period_us,
             rounds: a.rounds,
             segment_s: a.segment_s,
+            spin: a.spin,
+            pin: a.pin,
             machine: crate::ipc::Machine::here(),
             p99_ratio_median: first.p99_ratio_median,
             p99_ratio_min: first.p99_ratio_min,
@@ -339,8 +378,12 @@ pub fn render(
     let mut t = String::new();
     let _ = writeln!(
         t,
-        "qmarc-bench jitter: {} µs, {} interleaved rounds of {} s per loop",
-        a.period_us, a.rounds, a.segment_s
+        "qmarc-bench jitter: {} µs, {} interleaved rounds of {} s per loop{}{}",
+        a.period_us,
+        a.rounds,
+        a.segment_s,
+        if a.spin { ", hwserver spinning" } else { "" },
+        if a.pin { ", servo and bare loop on CPU 0, hwserver on CPU 1" } else { "" }
     );
     for r in results {
         let _ = writeln!(

@@ -117,3 +117,34 @@ fn bad_options_are_refused_with_a_message_issue_14() {
     let out = run(&["jitter", "--period-us=abc"]);
     assert_eq!(out.status.code(), Some(64), "a usage error");
 }
+
+/// `--spin --pin`: the servo segments run with a spinning hwserver on CPU 1 and a polling
+/// controller; the settings copy says so and the pipeline still reports every figure.
+#[test]
+fn jitter_runs_with_a_spinning_hwserver_issue_14() {
+    let dir = scratch("spin");
+    let json = dir.join("j.json");
+    let cfg = config(&dir);
+    let out = run(&[
+        "jitter",
+        "--rounds=1",
+        "--segment-s=0.2",
+        "--warmup-s=0.1",
+        "--spin",
+        "--pin",
+        &format!("--config={}", cfg.display()),
+        &format!("--json={}", json.display()),
+    ]);
+    let t = text(&out);
+    assert!(out.status.success(), "{t}");
+    assert!(
+        t.contains("hwserver spinning, servo and bare loop on CPU 0, hwserver on CPU 1"),
+        "{t}"
+    );
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!((j["spin"].as_bool(), j["pin"].as_bool()), (Some(true), Some(true)));
+    let servo = &j["timers"][0]["rounds"][0]["servo"];
+    assert!(servo["output_us"]["p99"].as_f64().unwrap() > 0.0, "{servo}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -19,6 +19,22 @@ pub struct HwServerSettings {
     pub response_timeout_periods: u32,
     /// Fastest an encoder can physically count, counts/s; a larger jump is an encoder fault.
     pub max_counts_per_s: f64,
+    /// How the hwserver waits for a request: block on its event listener (the default), or
+    /// busy-poll (a CPU of its own: pin it with `timer.hwserver_cpu`).
+    pub wait: HwWait,
+    /// The controller polls for each response this long before it blocks, µs (0: at once).
+    pub response_spin_us: u32,
+}
+
+/// How the hwserver waits for the controller's requests.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HwWait {
+    /// Block on the request event (no CPU used while waiting).
+    #[default]
+    Block,
+    /// Busy-poll the request port: no wake-up to pay, a whole CPU used.
+    Spin,
 }
 
 impl Default for HwServerSettings {
@@ -29,6 +45,8 @@ impl Default for HwServerSettings {
             deadline_periods: 5,
             response_timeout_periods: 250,
             max_counts_per_s: 500_000.0,
+            wait: HwWait::Block,
+            response_spin_us: 0,
         }
     }
 }
@@ -77,6 +95,8 @@ pub(crate) struct RawHwServer {
     deadline_periods: S<i64>,
     response_timeout_periods: S<i64>,
     max_counts_per_s: S<f64>,
+    wait: S<String>,
+    response_spin_us: S<i64>,
 }
 
 #[derive(Deserialize, Default)]
@@ -129,6 +149,23 @@ impl RawHwServer {
                 d.max_counts_per_s,
                 positive,
             )?,
+            wait: match src
+                .take(&self.wait, "hwserver.wait", "block".to_string(), |v| match v.as_str() {
+                    "block" | "spin" => Ok(()),
+                    other => Err(format!("must be \"block\" or \"spin\", found \"{other}\"")),
+                })?
+                .as_str()
+            {
+                "spin" => HwWait::Spin,
+                _ => HwWait::Block,
+            },
+            response_spin_us: src.int(
+                &self.response_spin_us,
+                "hwserver.response_spin_us",
+                d.response_spin_us.into(),
+                0,
+                100_000,
+            )? as u32,
             backend,
         })
     }

@@ -37,7 +37,7 @@ mod trajectory;
 pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
-pub use hwserver::{ExplicitTiming, HwServerSettings, TimingDefaults};
+pub use hwserver::{ExplicitTiming, HwServerSettings, HwWait, TimingDefaults};
 pub use motor::{MotorGains, MotorSafety};
 pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};

@@ -211,6 +211,8 @@ fn every_field_round_trips_to_the_children_issue_11() {
                 };
             }
             serde_json::Value::Bool(b) => *b = !*b,
+            // Enums: another of their values.
+            serde_json::Value::String(s) if s == "block" => *s = "spin".into(),
             serde_json::Value::String(s) if !matches!(s.as_str(), "timerfd" | "run") => {
                 *n += 1;
                 s.push_str(&n.to_string());
@@ -429,4 +431,28 @@ fn plant_and_law_scale_errors_name_the_field_issue_13() {
     );
     let s = parse(&format!("[sim]\nvelocity_loop_hz = 0\n{m}")).unwrap();
     assert_eq!(s.sim.velocity_loop_hz, 0.0, "0: the first-order lag tau_s");
+}
+
+/// Issue 14: the wait mode, the response spin and the CPUs are checked and named like every
+/// other key; blocking, no spin and no pinning are the defaults.
+#[test]
+fn wait_mode_and_cpus_are_checked_issue_14() {
+    let m = MOTOR.repeat(3);
+    let d = parse(&m).unwrap();
+    assert_eq!((d.hwserver.wait, d.hwserver.response_spin_us), (HwWait::Block, 0));
+    assert_eq!((d.timer.servo_cpu, d.timer.hwserver_cpu), (None, None));
+    let s = parse(&format!(
+        "[timer]\nservo_cpu = 0\nhwserver_cpu = 1\n[hwserver]\nwait = \"spin\"\nresponse_spin_us = 400\n{m}"
+    ))
+    .unwrap();
+    assert_eq!((s.timer.servo_cpu, s.timer.hwserver_cpu), (Some(0), Some(1)));
+    assert_eq!((s.hwserver.wait, s.hwserver.response_spin_us), (HwWait::Spin, 400));
+    check(
+        &format!("[hwserver]\nwait = \"poll\"\n{m}"),
+        "q.toml:2:8: hwserver.wait: must be \"block\" or \"spin\", found \"poll\"",
+    );
+    check(
+        &format!("[timer]\nservo_cpu = -2\n{m}"),
+        "q.toml:2:13: timer.servo_cpu: must be -1‥1023, found -2",
+    );
 }

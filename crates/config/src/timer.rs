@@ -55,6 +55,10 @@ pub struct TimerSettings {
     pub hwserver_priority: i32,
     /// Lock all memory of both processes.
     pub lock_memory: bool,
+    /// Pin the servo thread to this CPU; `None`: no pinning.
+    pub servo_cpu: Option<usize>,
+    /// Pin the hwserver to this CPU; `None`: no pinning.
+    pub hwserver_cpu: Option<usize>,
 }
 
 impl Default for TimerSettings {
@@ -64,6 +68,8 @@ impl Default for TimerSettings {
             servo_priority: 80,
             hwserver_priority: 85,
             lock_memory: true,
+            servo_cpu: None,
+            hwserver_cpu: None,
         }
     }
 }
@@ -75,6 +81,14 @@ pub(crate) struct RawTimer {
     servo_priority: S<i64>,
     hwserver_priority: S<i64>,
     lock_memory: S<bool>,
+    servo_cpu: S<i64>,
+    hwserver_cpu: S<i64>,
+}
+
+/// A CPU to pin to: −1 (the default) is none.
+fn cpu(src: &Source<'_>, v: &S<i64>, field: &str) -> Result<Option<usize>, ConfigLoadError> {
+    let cpu = src.int(v, field, -1, -1, 1023)?;
+    Ok(usize::try_from(cpu).ok())
 }
 
 impl RawTimer {
@@ -108,6 +122,8 @@ impl RawTimer {
             hwserver_priority: hwserver_priority as i32,
             lock_memory: src
                 .take(&self.lock_memory, "timer.lock_memory", d.lock_memory, |_| Ok(()))?,
+            servo_cpu: cpu(src, &self.servo_cpu, "timer.servo_cpu")?,
+            hwserver_cpu: cpu(src, &self.hwserver_cpu, "timer.hwserver_cpu")?,
         })
     }
 }

@@ -93,6 +93,9 @@ pub struct LinkTimeouts {
     /// After this long without a response the server is lost, alive or not (`u64::MAX`:
     /// never, only its death ends the wait — lock-step runs, whose time is simulated).
     pub give_up_ns: u64,
+    /// Poll for the response this long before blocking on its event (0: block at once):
+    /// with a spinning hwserver the response comes in microseconds, and a wake-up costs more.
+    pub spin_ns: u64,
 }
 
 /// The controller's end of the iceoryx2 link (client port + two event ports).
@@ -198,6 +201,14 @@ impl HwLink for IoxLink {
                     waited_ns: waited,
                     server_alive: self.server_alive(),
                 });
+            }
+            if waited < self.timeouts.spin_ns {
+                // Consume the response's wake-up as it comes, so the event count stays small.
+                self.listener
+                    .try_wait(|_| {})
+                    .map_err(|_| LinkError::Ipc { op: "response try_wait" })?;
+                std::hint::spin_loop();
+                continue;
             }
             if waited >= next_check {
                 if !self.server_alive() {

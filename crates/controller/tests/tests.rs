@@ -140,7 +140,8 @@ fn over_iceoryx2_each_cycle_allocates_only_the_two_request_loans() {
         serve(&mut core, &server_location, &opts, &AtomicBool::new(false))
     });
     // Deadlines far beyond any stall: a missed one would allocate (the liveness check).
-    let timeouts = LinkTimeouts { deadline_ns: 1_000_000_000, give_up_ns: 5_000_000_000 };
+    let timeouts =
+        LinkTimeouts { deadline_ns: 1_000_000_000, give_up_ns: 5_000_000_000, spin_ns: 0 };
     let mut link = IoxLink::connect(&location, timeouts, Duration::from_secs(5), None).unwrap();
     let s = settings();
     let mut servo = step_servo(&s);

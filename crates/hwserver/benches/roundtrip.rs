@@ -51,7 +51,8 @@ fn main() {
         "bench-client",
         RtRequest { priority: Some(80), ..RtRequest::default() },
         move |rt| {
-            let timeouts = LinkTimeouts { deadline_ns: 5 * PERIOD_NS, give_up_ns: 1_000_000_000 };
+            let timeouts =
+                LinkTimeouts { deadline_ns: 5 * PERIOD_NS, give_up_ns: 1_000_000_000, spin_ns: 0 };
             let mut link =
                 IoxLink::connect(&loc, timeouts, Duration::from_secs(10), None).expect("connect");
             let read = HwMsg::read_all_encoders();

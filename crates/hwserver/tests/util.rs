@@ -54,7 +54,8 @@ impl Server {
 
     /// Connects the controller's end of the link.
     pub fn connect(&self) -> IoxLink {
-        let timeouts = LinkTimeouts { deadline_ns: 100_000_000, give_up_ns: 2_000_000_000 };
+        let timeouts =
+            LinkTimeouts { deadline_ns: 100_000_000, give_up_ns: 2_000_000_000, spin_ns: 0 };
         IoxLink::connect(&self.location, timeouts, Duration::from_secs(10), None).expect("connect")
     }
 

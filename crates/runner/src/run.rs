@@ -193,11 +193,13 @@ fn spawn_servo(
         } else {
             u64::from(settings.hwserver.response_timeout_periods) * period
         },
+        spin_ns: u64::from(settings.hwserver.response_spin_us) * 1_000,
     };
     let req = RtRequest {
         priority: (settings.timer.servo_priority > 0).then_some(settings.timer.servo_priority),
         lock_memory: settings.timer.lock_memory,
         prefault_stack_bytes: 128 * 1024,
+        cpu: settings.timer.servo_cpu,
     };
     let n_motors = settings.n_motors;
     qmarc_timer::rt::spawn("qmarc-servo", req, move |rt: RtStatus| {

@@ -17,11 +17,18 @@ pub struct RtRequest {
     pub lock_memory: bool,
     /// Bytes of stack to touch before the loop so that it never page-faults.
     pub prefault_stack_bytes: usize,
+    /// Pin the thread to this CPU (`sched_setaffinity`); `None`: wherever the scheduler puts it.
+    pub cpu: Option<usize>,
 }
 
 impl Default for RtRequest {
     fn default() -> RtRequest {
-        RtRequest { priority: Some(80), lock_memory: true, prefault_stack_bytes: 64 * 1024 }
+        RtRequest {
+            priority: Some(80),
+            lock_memory: true,
+            prefault_stack_bytes: 64 * 1024,
+            cpu: None,
+        }
     }
 }
 
@@ -136,8 +143,31 @@ pub fn apply_to_current_thread(req: &RtRequest) -> RtStatus {
     } else {
         set_timer_slack_ns(1);
     }
+    if let Some(cpu) = req.cpu {
+        let mut set = nix::sched::CpuSet::new();
+        let result = set
+            .set(cpu)
+            .and_then(|()| nix::sched::sched_setaffinity(nix::unistd::Pid::from_raw(0), &set));
+        if let Err(e) = result {
+            status.warnings.push(format!(
+                "cannot pin the thread to CPU {cpu} ({e}): it runs where the scheduler puts it"
+            ));
+        }
+    }
     prefault_stack(req.prefault_stack_bytes);
     status
+}
+
+/// RT throttling as the kernel has it: `Some((runtime_us, period_us))` when real-time tasks
+/// may run only `runtime_us` of every `period_us` (Linux's default: 950 000 of 1 000 000), so a
+/// SCHED_FIFO thread that never sleeps is stopped for the rest of each period; `None` when it
+/// is off (`kernel.sched_rt_runtime_us = -1`) or cannot be read.
+pub fn rt_throttling() -> Option<(i64, i64)> {
+    let read = |f: &str| -> Option<i64> {
+        std::fs::read_to_string(format!("/proc/sys/kernel/{f}")).ok()?.trim().parse().ok()
+    };
+    let runtime = read("sched_rt_runtime_us")?;
+    (runtime >= 0).then_some((runtime, read("sched_rt_period_us")?))
 }
 
 /// Spawns a thread named `name` with a stack large enough for `req`, applies `req` in it and
@@ -227,7 +257,8 @@ mod tests {
             unsafe { libc::sched_getscheduler(0) }
         };
         // As root the spawning thread really is SCHED_FIFO; elsewhere both are SCHED_OTHER.
-        let req = RtRequest { priority: Some(1), lock_memory: false, prefault_stack_bytes: 0 };
+        let req =
+            RtRequest { priority: Some(1), lock_memory: false, prefault_stack_bytes: 0, cpu: None };
         let (parent, child) = spawn("rt-parent", req, move |_| {
             let helper = spawn_normal("helper", policy).unwrap().join().unwrap();
             (policy(), helper)
@@ -241,8 +272,12 @@ mod tests {
     #[test]
     fn spawned_thread_reports_what_it_got() {
         // SCHED_OTHER on purpose: a unit test must not take the CPU from the other tests.
-        let req =
-            RtRequest { priority: None, lock_memory: false, prefault_stack_bytes: 128 * 1024 };
+        let req = RtRequest {
+            priority: None,
+            lock_memory: false,
+            prefault_stack_bytes: 128 * 1024,
+            cpu: None,
+        };
         let status = spawn("rt-test", req, |s| s).unwrap().join().unwrap();
         assert_eq!(status.fifo_priority, None);
         assert!(!status.degraded());

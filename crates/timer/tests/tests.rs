@@ -59,7 +59,12 @@ fn a_stall_is_counted_by_every_kind_issue_14() {
 #[test]
 fn fifo_is_granted_or_reported_as_degraded() {
     // A short SCHED_FIFO thread that only sleeps: it cannot starve the other tests.
-    let req = RtRequest { priority: Some(10), lock_memory: false, prefault_stack_bytes: 32 * 1024 };
+    let req = RtRequest {
+        priority: Some(10),
+        lock_memory: false,
+        prefault_stack_bytes: 32 * 1024,
+        cpu: None,
+    };
     let status = spawn("fifo-probe", req, |s| {
         let mut t = TickerKind::Nanosleep.build(500_000);
         t.start().unwrap();

@@ -89,6 +89,7 @@ fn run(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
         priority: (priority > 0).then_some(priority),
         lock_memory: s.timer.lock_memory,
         prefault_stack_bytes: 64 * 1024,
+        cpu: s.timer.hwserver_cpu,
     });
     for w in &rt.warnings {
         eprintln!("qmarc-hwserver: warning: {w}");
@@ -96,10 +97,23 @@ fn run(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
     let mut core = HwCore::new(backend).with_encoder_limit(s.hwserver.max_counts_per_s);
     let opts = ServeOptions {
         watchdog_ns: u64::from(s.hwserver.watchdog_periods) * s.period_ns(),
-        spin: args.spin,
+        spin: args.spin || s.hwserver.wait == qmarc_config::HwWait::Spin,
         shutdown_grace_ns: 1_000_000_000,
         lockstep: spec.deterministic,
     };
+    if opts.spin
+        && rt.fifo_priority.is_some()
+        && let Some((runtime, period)) = qmarc_timer::rt::rt_throttling()
+    {
+        eprintln!(
+            "qmarc-hwserver: warning: spinning at SCHED_FIFO under RT throttling \
+             (kernel.sched_rt_runtime_us = {runtime} of {period}): the kernel stops this process \
+             for {} ms of every {} ms and the servo loop misses its periods then; on the \
+             hwserver's own isolated core, `sysctl kernel.sched_rt_runtime_us=-1`",
+            (period - runtime) / 1000,
+            period / 1000
+        );
+    }
     let end = serve(&mut core, &location, &opts, stop);
     core.finish().context("the backend's files").map_err(internal)?;
     let end = end.map_err(|e| internal(e.into()))?;
