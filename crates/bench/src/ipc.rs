@@ -242,8 +242,11 @@ fn exchange(samples: usize, bin_dir: &std::path::Path, spin: bool) -> anyhow::Re
     let dir = std::env::temp_dir().join(format!("qmarc-bench-ipc-{pid}"));
     std::fs::create_dir_all(&dir)?;
     let location = IpcLocation::new(&format!("qbi{pid}_"), &format!("{}/", dir.display()));
+    let wait = if spin { "spin" } else { "block" };
     let spec = qmarc_hwserver::backends::standalone_run(
-        "[hwserver]\nwatchdog_periods = 2500\n[sim]\nstate_file = \"\"\n",
+        &format!(
+            "[hwserver]\nwatchdog_periods = 2500\nwait = \"{wait}\"\n[sim]\nstate_file = \"\"\n"
+        ),
         &location,
         true,
     )
@@ -252,7 +255,6 @@ fn exchange(samples: usize, bin_dir: &std::path::Path, spin: bool) -> anyhow::Re
     spec.write(&run_file)?;
     let mut server = std::process::Command::new(bin_dir.join("qmarc-hwserver"))
         .arg(format!("--settings={}", run_file.display()))
-        .args(spin.then_some("--spin"))
         .spawn()?;
     let loc = location.clone();
     let req = RtRequest {
@@ -266,7 +268,8 @@ fn exchange(samples: usize, bin_dir: &std::path::Path, spin: bool) -> anyhow::Re
             let spin_ns = if spin { 1_000_000 } else { 0 };
             let timeouts =
                 LinkTimeouts { deadline_ns: 2_000_000, give_up_ns: 2_000_000_000, spin_ns };
-            let mut link = IoxLink::connect(&loc, timeouts, Duration::from_secs(10), None)?;
+            let link = IoxLink::connect(&loc, timeouts, Duration::from_secs(10), None)?;
+            let mut link = if spin { link.to_spinning_server() } else { link };
             let read = HwMsg::read_all_encoders();
             let mut rtt = Vec::with_capacity(samples);
             for _ in 0..samples / 10 {

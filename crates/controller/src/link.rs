@@ -110,6 +110,9 @@ pub struct IoxLink {
     timeouts: LinkTimeouts,
     seq: u32,
     stop: Option<&'static AtomicBool>,
+    /// Notify the request event after each request (false: the hwserver busy-polls and needs
+    /// no wake-up — one system call less per exchange).
+    notify_requests: bool,
 }
 
 fn port_err(port: &'static str, e: impl std::fmt::Debug) -> LinkConnectError {
@@ -164,7 +167,24 @@ impl IoxLink {
             .listener_builder()
             .create()
             .map_err(|e| port_err("listener", e))?;
-        Ok(IoxLink { node, services, client, notifier, listener, timeouts, seq: 0, stop })
+        Ok(IoxLink {
+            node,
+            services,
+            client,
+            notifier,
+            listener,
+            timeouts,
+            seq: 0,
+            stop,
+            notify_requests: true,
+        })
+    }
+
+    /// The link to a hwserver that busy-polls for requests (`hwserver.wait = "spin"`): no
+    /// request is notified, as nothing waits on the event.
+    pub fn to_spinning_server(mut self) -> IoxLink {
+        self.notify_requests = false;
+        self
     }
 
     /// True while the hwserver's node is alive: dead nodes are cleaned up first (liveness is
@@ -183,7 +203,9 @@ impl HwLink for IoxLink {
         let started = monotonic_now_ns();
         let pending =
             self.client.send_copy(msg).map_err(|_| LinkError::Ipc { op: "request send" })?;
-        self.notifier.notify().map_err(|_| LinkError::Ipc { op: "request notify" })?;
+        if self.notify_requests {
+            self.notifier.notify().map_err(|_| LinkError::Ipc { op: "request notify" })?;
+        }
         let mut next_check = self.timeouts.deadline_ns;
         loop {
             if let Some(resp) =

@@ -202,6 +202,7 @@ fn spawn_servo(
         cpu: settings.timer.servo_cpu,
     };
     let n_motors = settings.n_motors;
+    let spinning_server = settings.hwserver.wait == qmarc_config::HwWait::Spin;
     qmarc_timer::rt::spawn("qmarc-servo", req, move |rt: RtStatus| {
         let _dma = DmaLatencyGuard::request_zero();
         let mut homed_read = None;
@@ -209,6 +210,7 @@ fn spawn_servo(
             let stop = qmarc_timer::stop::flag();
             let mut link = match IoxLink::connect(&location, timeouts, CONNECT_WAIT, Some(stop)) {
                 Err(LinkConnectError::Stopped) => return Err(interrupted()),
+                Ok(link) if spinning_server => link.to_spinning_server(),
                 link => link?,
             };
             let moved = servo.run(&mut link, ticker.as_mut(), stop);
