@@ -28,12 +28,6 @@ pub struct IpcArgs {
     pub bin_dir: Option<PathBuf>,
 }
 
-/// The directory this program is in (where `cargo build` puts its siblings).
-pub fn next_to_me() -> anyhow::Result<PathBuf> {
-    let me = std::env::current_exe()?;
-    Ok(me.parent().ok_or_else(|| anyhow::anyhow!("no directory for this program"))?.to_path_buf())
-}
-
 /// What the figures were measured on.
 #[derive(Debug, Clone, Serialize)]
 pub struct Machine {
@@ -292,7 +286,7 @@ fn exchange(samples: usize, bin_dir: &std::path::Path, spin: bool) -> anyhow::Re
 
 /// Runs `ipc`.
 pub fn run(a: &IpcArgs) -> anyhow::Result<()> {
-    let bin_dir = a.bin_dir.clone().map_or_else(next_to_me, Ok)?;
+    let bin_dir = qmarc_starter::bin_dir(a.bin_dir.as_deref())?;
     let n = a.samples.max(100);
     let rows = [
         ("controller ⇄ hwserver exchange (iceoryx2, blocking)", exchange(n, &bin_dir, false)?),

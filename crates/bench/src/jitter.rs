@@ -249,7 +249,7 @@ fn rounds_of(
     req: RtRequest,
     scratch: &Path,
 ) -> anyhow::Result<TimerResult> {
-    let starter = a.bin_dir.clone().map_or_else(crate::ipc::next_to_me, Ok)?.join("qmarc-starter");
+    let starter = qmarc_starter::bin_dir(a.bin_dir.as_deref())?.join("qmarc-starter");
     let config = segment_config(a, scratch)?;
     let starter = (starter.as_path(), config.as_path());
     let period_ns = u64::from(a.period_us) * 1_000;

@@ -31,6 +31,18 @@ pub fn default_prefix() -> String {
     format!("{PREFIX_STEM}{}_", std::process::id())
 }
 
+/// The directory holding the QMARC binaries: `explicit` (`--bin-dir`), else the one this
+/// program is in (where `cargo build` puts them all).
+pub fn bin_dir(explicit: Option<&std::path::Path>) -> std::io::Result<std::path::PathBuf> {
+    if let Some(d) = explicit {
+        return Ok(d.to_path_buf());
+    }
+    let me = std::env::current_exe()?;
+    me.parent().map(std::path::Path::to_path_buf).ok_or_else(|| {
+        std::io::Error::new(std::io::ErrorKind::NotFound, "no directory for this program")
+    })
+}
+
 /// The names the settings accept: the plug-ins' laws and path generators, the hwserver's
 /// backends. The settings crate knows none of them; they are handed to it from here.
 pub fn names() -> Names {

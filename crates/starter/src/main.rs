@@ -124,15 +124,7 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
         settings.gather.out_dir = out.to_path_buf();
     }
     let mode = command.mode();
-    let bin_dir = match &args.bin_dir {
-        Some(d) => d.clone(),
-        None => std::env::current_exe()
-            .map_err(internal)?
-            .parent()
-            .context("no directory for this program")
-            .map_err(internal)?
-            .to_path_buf(),
-    };
+    let bin_dir = qmarc_starter::bin_dir(args.bin_dir.as_deref()).map_err(internal)?;
     let hwserver_bin = bin_dir.join("qmarc-hwserver");
     let controller_bin = bin_dir.join("qmarc-controller");
     for b in [&hwserver_bin, &controller_bin] {
