@@ -96,10 +96,12 @@ fn internal<E: Into<anyhow::Error>>(e: E) -> Failure {
     (exit::INTERNAL, e.into())
 }
 
-/// How a move ended: its exit code, its summary and the folder it is in.
+/// How a move ended: its exit code, its summary and the folder it is in, and the robot of
+/// its settings (for the end-effector plots).
 struct Outcome {
     code: u8,
     summary: Option<(Summary, PathBuf)>,
+    robot: Option<qmarc_kinematics::Robot>,
 }
 
 /// How a trial's move differs from a move by hand.
@@ -176,7 +178,7 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
         if args.print_settings {
             println!("{}", spec.to_json());
         }
-        return Ok(Outcome { code: exit::OK, summary: None });
+        return Ok(Outcome { code: exit::OK, summary: None, robot: None });
     }
     let _lock = qmarc_report::output::lock(&out_dir).map_err(refused)?;
 
@@ -288,7 +290,7 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
         _ if stop.load(std::sync::atomic::Ordering::Relaxed) => exit::INTERRUPTED,
         _ => exit::INTERNAL,
     };
-    Ok(Outcome { code, summary: summary.map(|s| (s, summary_dir)) })
+    Ok(Outcome { code, summary: summary.map(|s| (s, summary_dir)), robot: settings.robot() })
 }
 
 /// A move, and its plots with `--plots`.
@@ -297,22 +299,18 @@ fn run(args: &StarterArgs, command: &Command) -> Result<ExitCode, Failure> {
     if args.plots
         && let Some((summary, dir)) = &outcome.summary
     {
-        plot_move(args, command, summary, dir);
+        plot_move(summary, dir, outcome.robot.as_ref());
     }
     Ok(ExitCode::from(outcome.code))
 }
 
-/// Draws the plots of the move in `dir` and names them; a failure is said, not fatal (the
-/// move's data are written).
-fn plot_move(args: &StarterArgs, command: &Command, summary: &Summary, dir: &Path) {
+/// Draws the plots of the move in `dir` (`robot`: its settings', for the end-effector) and
+/// names them; a failure is said, not fatal (the move's data are written).
+fn plot_move(summary: &Summary, dir: &Path, robot: Option<&qmarc_kinematics::Robot>) {
     if !dir.join("gather.csv").exists() {
         return say!("qmarc-starter: no plots: the move wrote no data");
     }
-    let robot = args.opts.load(&names()).ok().and_then(|mut s| {
-        command.apply(&mut s, &names()).ok()?;
-        s.robot()
-    });
-    match qmarc_plots::move_plots(dir, summary, robot.as_ref()) {
+    match qmarc_plots::move_plots(dir, summary, robot) {
         Ok(done) => {
             let names: Vec<String> = done.iter().map(|p| p.display().to_string()).collect();
             println!("  plots: {}", names.join(", "));
@@ -386,7 +384,7 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
             }
             csv.push(row).map_err(internal)?;
             if args.plots {
-                bar.suspend(|| plot_move(args, &command, summary, dir));
+                bar.suspend(|| plot_move(summary, dir, outcome.robot.as_ref()));
             }
         }
         bar.inc(1);
