@@ -105,6 +105,12 @@ pub(crate) fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     (lo - pad)..(hi + pad)
 }
 
+/// `r` widened about its middle to span at least `min`.
+pub(crate) fn widen(r: std::ops::Range<f64>, min: f64) -> std::ops::Range<f64> {
+    let (mid, half) = ((r.start + r.end) / 2.0, (r.end - r.start).max(min) / 2.0);
+    (mid - half)..(mid + half)
+}
+
 /// Tick labels for an axis spanning `r`: as many decimals as its tick spacing needs, no more
 /// ("3000", "0.25", "0.0015"). The spacing is about a tenth of the span rounded up to 1, 2 or
 /// 5 × 10ᵏ, as the axis draws it.
@@ -162,10 +168,6 @@ pub(crate) fn figure(
 
 /// Draws a line panel: its caption, labelled axes, the traces and a legend.
 pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
-    let widen = |r: std::ops::Range<f64>, min: f64| {
-        let (mid, half) = ((r.start + r.end) / 2.0, (r.end - r.start).max(min) / 2.0);
-        (mid - half)..(mid + half)
-    };
     let xs =
         widen(range(spec.traces.iter().flat_map(|t| t.pts.iter().map(|p| p.0))), spec.min_span.0);
     let ys =

@@ -3,7 +3,7 @@
 use crate::PlotError;
 use crate::chart::{
     COMMAND, Drawn, FONT, Panel, PanelSpec, Trace, figure, legend, line_panel, motor_colour,
-    per_motor, range, text, ticks,
+    per_motor, range, text, ticks, widen,
 };
 use plotters::prelude::*;
 use qmarc_kinematics::{ARMS, Robot};
@@ -230,15 +230,11 @@ impl EffectorPath {
 /// The path in 3-D, command and actual (plotters' vertical axis is its y: z goes there).
 fn effector_3d(area: &Panel<'_, '_>, p: &EffectorPath) -> Drawn {
     let both = || p.cmd.iter().chain(&p.act);
-    let mut r = [0, 1, 2].map(|k| range(both().map(|q| q[k])));
+    let r = [0, 1, 2].map(|k| range(both().map(|q| q[k])));
     // Each axis spans at least a quarter of the widest, about its middle: a path flat in y
     // is drawn flat, not its tenth of a millimetre blown up to the box's depth.
     let widest = r.iter().map(|r| r.end - r.start).fold(0.0, f64::max);
-    for r in &mut r {
-        let (mid, half) = ((r.start + r.end) / 2.0, (r.end - r.start).max(widest / 4.0) / 2.0);
-        *r = (mid - half)..(mid + half);
-    }
-    let [xs, ys, zs] = r;
+    let [xs, ys, zs] = r.map(|r| widen(r, widest / 4.0));
     let (fx, fy, fz) = (ticks(&xs), ticks(&ys), ticks(&zs));
     let mut chart = text(
         ChartBuilder::on(area)
