@@ -37,6 +37,26 @@ pub enum HwWait {
     Spin,
 }
 
+impl std::fmt::Display for HwWait {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            HwWait::Block => "block",
+            HwWait::Spin => "spin",
+        })
+    }
+}
+
+impl std::str::FromStr for HwWait {
+    type Err = String;
+    fn from_str(s: &str) -> Result<HwWait, String> {
+        match s {
+            "block" => Ok(HwWait::Block),
+            "spin" => Ok(HwWait::Spin),
+            other => Err(format!("must be \"block\" or \"spin\", found \"{other}\"")),
+        }
+    }
+}
+
 impl Default for HwServerSettings {
     fn default() -> HwServerSettings {
         HwServerSettings {
@@ -149,16 +169,12 @@ impl RawHwServer {
                 d.max_counts_per_s,
                 positive,
             )?,
-            wait: match src
-                .take(&self.wait, "hwserver.wait", "block".to_string(), |v| match v.as_str() {
-                    "block" | "spin" => Ok(()),
-                    other => Err(format!("must be \"block\" or \"spin\", found \"{other}\"")),
+            wait: src
+                .take(&self.wait, "hwserver.wait", d.wait.to_string(), |v| {
+                    v.parse::<HwWait>().map(|_| ())
                 })?
-                .as_str()
-            {
-                "spin" => HwWait::Spin,
-                _ => HwWait::Block,
-            },
+                .parse()
+                .unwrap_or_default(),
             response_spin_us: src.int(
                 &self.response_spin_us,
                 "hwserver.response_spin_us",
