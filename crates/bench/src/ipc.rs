@@ -47,7 +47,7 @@ pub struct Machine {
 impl Machine {
     /// This machine.
     pub fn here() -> Machine {
-        let uts = nix_uname();
+        let uts = kernel_release();
         let cpu = std::fs::read_to_string("/proc/cpuinfo")
             .ok()
             .and_then(|c| c.lines().find(|l| l.starts_with("model name")).map(str::to_string))
@@ -64,7 +64,7 @@ impl Machine {
     }
 }
 
-fn nix_uname() -> String {
+fn kernel_release() -> String {
     std::fs::read_to_string("/proc/sys/kernel/osrelease")
         .map(|s| s.trim().to_string())
         .unwrap_or_default()
