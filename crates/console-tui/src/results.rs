@@ -35,16 +35,9 @@ pub struct MoveResult {
 impl MoveResult {
     /// Reads `summary.json` and `gather.csv` from `out`.
     pub fn load(out: &Path) -> Result<MoveResult, String> {
-        let path = out.join("summary.json");
-        let text =
-            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let summary: Summary =
-            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
-        let period_s = f64::from(summary.period_us) * 1e-6;
-        let series = std::fs::read_to_string(out.join("gather.csv"))
-            .ok()
-            .and_then(|c| Series::parse(&c, period_s).ok());
-        let written = std::fs::metadata(&path).and_then(|m| m.modified()).ok();
+        let summary = Summary::read(out)?;
+        let series = Series::read(out, f64::from(summary.period_us) * 1e-6).ok();
+        let written = std::fs::metadata(out.join("summary.json")).and_then(|m| m.modified()).ok();
         let plots = qmarc_report::output::PLOT_FILES
             .iter()
             .map(|f| out.join(f))
