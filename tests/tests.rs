@@ -9,3 +9,4 @@ mod hardware;
 mod safety;
 mod tidy;
 mod trajectories;
+mod tune;

@@ -71,6 +71,7 @@ const LAYERS: &[&str] = &[
     "report",
     "plots",
     "runner",
+    "tune",
     "starter",
     "console-tui",
     "bench",

@@ -33,6 +33,7 @@ mod source;
 mod step;
 mod timer;
 mod trajectory;
+mod tune;
 
 pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};
@@ -46,6 +47,7 @@ pub use sim::{DEFAULT_SIM_STATE_FILE, SimSettings};
 pub use step::{MAX_STEP_COUNTS, StepSettings};
 pub use timer::{TimerMethod, TimerSettings};
 pub use trajectory::{DEFAULT_MAX_DURATION_S, TrajectorySettings};
+pub use tune::{TUNE_OBJECTIVES, TUNE_PARAMS, TuneSettings, check_objective, check_params};
 
 use qmarc_proto::MAX_MOTORS;
 use serde::{Deserialize, Serialize};
@@ -117,6 +119,8 @@ pub struct Settings {
     /// The robot's geometry and joint-count frame (`[robot]`), if the file describes it.
     #[serde(default)]
     pub robot: Option<RobotSettings>,
+    /// `[tune]`: `qmarc-starter tune`.
+    pub tune: TuneSettings,
     /// Gains of every `[[motor]]` table (at least `n_motors`, at most [`MAX_MOTORS`]).
     pub motors: Vec<MotorGains>,
     /// Limits and homing of every `[[motor]]` table.
@@ -175,6 +179,8 @@ struct RawFile {
     #[serde(default)]
     s626: s626::RawS626,
     #[serde(default)]
+    tune: tune::RawTune,
+    #[serde(default)]
     robot: Option<Spanned<robot::RawRobot>>,
     #[serde(default)]
     motor: Vec<Spanned<motor::RawMotor>>,
@@ -222,6 +228,7 @@ impl RawFile {
             safety.push(s);
         }
         let homing = self.homing.check(src)?;
+        let tune = self.tune.check(src)?;
         let longest: f64 = safety.iter().map(|s| homing.longest_s(s.home_offset_counts)).sum();
         if longest > trajectory.max_duration_s {
             return Err(src.invalid(
@@ -258,6 +265,7 @@ impl RawFile {
             hwserver,
             s626,
             robot,
+            tune,
             motors,
             safety,
         })

@@ -53,6 +53,11 @@ pub struct RunSpec {
     pub mode: Mode,
     /// Lock-step simulated time.
     pub deterministic: bool,
+    /// Lock-step and not paced by the timer (`--unpaced`): each cycle follows the last at
+    /// once, so a move takes what its computing takes; the data are those of the paced
+    /// lock-step run. Only on the simulated robot.
+    #[serde(default)]
+    pub unpaced: bool,
     /// Move in a frame that may not be homed (software limits off).
     pub unhomed: bool,
     /// Prefix of the run's iceoryx2 files.

@@ -95,7 +95,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         "[bogus]\nx = 1\n",
-        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `robot`, `motor`",
+        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `robot`, `motor`",
     );
     check(
         "[trajectory]\nmethod = \"home\"\n",
@@ -194,6 +194,7 @@ fn every_field_round_trips_to_the_children_issue_11() {
         settings: shipped(),
         mode: Mode::Run,
         deterministic: true,
+        unpaced: false,
         unhomed: false,
         iox_prefix: "qmarc_7_".into(),
         iox_root: "/tmp/iceoryx2/".into(),
@@ -454,5 +455,35 @@ fn wait_mode_and_cpus_are_checked_issue_14() {
     check(
         &format!("[timer]\nservo_cpu = -2\n{m}"),
         "q.toml:2:13: timer.servo_cpu: must be -1‥1023, found -2",
+    );
+}
+
+/// `[tune]`: the shipped file states the defaults; gains, objective and bounds are checked
+/// with the file, line and field named.
+#[test]
+fn tune_settings_are_checked_issue_15() {
+    let m = MOTOR.repeat(3);
+    assert_eq!(parse(&m).unwrap().tune, crate::TuneSettings::default());
+    assert_eq!(shipped().tune, crate::TuneSettings::default());
+    let s = parse(&format!("[tune]\nparams = [\"kvff\"]\nkaff_bounds = [1.0, 5.0]\n{m}")).unwrap();
+    assert_eq!(
+        (s.tune.params.clone(), s.tune.bounds_of("kaff")),
+        (vec!["kvff".into()], Some([1.0, 5.0]))
+    );
+    check(
+        &format!("[tune]\nparams = [\"kq\"]\n{m}"),
+        "q.toml:2:10: tune.params: unknown gain `kq`: one of kp, ki, kd, kvff, kaff",
+    );
+    check(
+        &format!("[tune]\nobjective = \"rms\"\n{m}"),
+        "q.toml:2:13: tune.objective: unknown objective `rms`: one of abs, sse, max",
+    );
+    check(
+        &format!("[tune]\nkp_bounds = [5.0, 1.0]\n{m}"),
+        "q.toml:2:13: tune.kp_bounds: must be [min, max] with 0 ≤ min < max, found [5.0, 1.0]",
+    );
+    check(
+        &format!("[tune]\nmargin = 0.5\n{m}"),
+        "q.toml:2:10: tune.margin: must be 1‥10 ×, found 0.5",
     );
 }

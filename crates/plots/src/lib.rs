@@ -7,6 +7,7 @@
 //!   end-effector path in 3-D and its X-Z projection (Fig. 5-2, 5-4), command vs actual.
 //! - [`trial_plots`]: the accumulated error per trial and arm (Fig. 5-17) and the periods
 //!   more than 40 µs off per trial (Fig. 5-18).
+//! - [`convergence_plot`]: `qmarc-starter tune`'s best objective per evaluation and motor.
 //!
 //! Every axis is labelled with its unit. Text is drawn with an embedded font (DejaVu Sans),
 //! so the plots look the same on every machine and need no font installed. A PNG is drawn
@@ -26,9 +27,11 @@
 mod chart;
 mod moves;
 mod trials;
+mod tuning;
 
 pub use moves::move_plots;
 pub use trials::{TRIAL_PLOT_FILES, trial_plots};
+pub use tuning::{CONVERGENCE_PLOT_FILE, convergence_plot};
 
 use std::path::PathBuf;
 

@@ -21,7 +21,7 @@ use qmarc_report::output::{WriteError, write_results};
 use qmarc_report::summarize::summarize;
 use qmarc_report::summary::{AfterHoming, HomingReport, MotorHome};
 use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
-use qmarc_timer::{MonotonicClock, TickerKind};
+use qmarc_timer::{MonotonicClock, Ticker, TickerKind, UnpacedTicker};
 use std::time::{Duration, Instant};
 
 /// How long the servo thread may take to end after a stop signal before the controller
@@ -116,8 +116,9 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     let settings = &spec.settings;
     let location =
         IpcLocation::checked(&spec.iox_prefix, &spec.iox_root).map_err(RunError::Location)?;
-    let servo = build_servo(spec, &location)?;
-    let handle = spawn_servo(settings, spec.deterministic, location, servo)?;
+    let progress = Progress::open(&Progress::path(&location.prefix)).ok();
+    let servo = build_servo(spec, progress)?;
+    let handle = spawn_servo(spec, location, servo)?;
     // The servo thread ends by itself on a stop signal, motors disabled first. Should it be
     // blocked outside the loop (nothing enabled), the controller does not wait for it.
     let mut stopped_at: Option<Instant> = None;
@@ -146,8 +147,9 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     Ok(summary)
 }
 
-/// The move: its generator and law from the registry, its plan, its progress file.
-fn build_servo(spec: &RunSpec, location: &IpcLocation) -> Result<Servo, RunError> {
+/// The move of `spec`: its generator and law from the registry, its plan, and the progress
+/// block it reports to (the starter's, for a move of the process set).
+pub fn build_servo(spec: &RunSpec, progress: Option<Progress>) -> Result<Servo, RunError> {
     let settings = &spec.settings;
     let name = generator_name(spec.mode, settings);
     let generator =
@@ -155,7 +157,6 @@ fn build_servo(spec: &RunSpec, location: &IpcLocation) -> Result<Servo, RunError
     let law =
         registry::law(&settings.law).ok_or_else(|| RunError::Unregistered(settings.law.clone()))?;
     let plan = plan_for(settings, spec.mode, spec.deterministic, spec.unhomed);
-    let progress = Progress::open(&Progress::path(&location.prefix)).ok();
     Ok(Servo::new(
         plan,
         (generator.build)(settings)?,
@@ -165,8 +166,6 @@ fn build_servo(spec: &RunSpec, location: &IpcLocation) -> Result<Servo, RunError
     .with_progress(progress))
 }
 
-/// Starts the servo thread: SCHED_FIFO as the settings ask, the link, the move, the homing
-/// preset, the hwserver's exit.
 /// The ticker of `timer.method` (the benchmark's bare loop takes the same).
 pub fn ticker_kind(method: qmarc_config::TimerMethod) -> TickerKind {
     match method {
@@ -176,14 +175,20 @@ pub fn ticker_kind(method: qmarc_config::TimerMethod) -> TickerKind {
     }
 }
 
+/// Starts the servo thread: SCHED_FIFO as the settings ask, the link, the move (paced by
+/// `timer.method`, or not at all with `--unpaced`), the homing preset, the hwserver's exit.
 fn spawn_servo(
-    settings: &Settings,
-    deterministic: bool,
+    spec: &RunSpec,
     location: IpcLocation,
     mut servo: Servo,
 ) -> Result<std::thread::JoinHandle<Moved>, RunError> {
-    let mut ticker = ticker_kind(settings.timer.method).build(settings.period_ns());
+    let (settings, deterministic) = (&spec.settings, spec.deterministic);
     let period = settings.period_ns();
+    let mut ticker: Box<dyn Ticker> = if spec.unpaced {
+        Box::new(UnpacedTicker::new(period))
+    } else {
+        ticker_kind(settings.timer.method).build(period)
+    };
     // In lock-step the hwserver is lost only when its process is gone: a host stall is not
     // the simulated robot's time. The liveness check still runs every deadline.
     let timeouts = LinkTimeouts {

@@ -45,6 +45,11 @@ pub struct MoveOptions {
     /// Lock-step simulated clock: two runs produce byte-identical data files.
     #[arg(long, global = true)]
     pub deterministic: bool,
+    /// Lock-step (implies --deterministic) and not paced by the timer: each cycle follows the
+    /// last at once, so a move takes only its computing time, with the data of the paced
+    /// lock-step run. Only on the simulated robot.
+    #[arg(long, global = true)]
+    pub unpaced: bool,
     /// Move although the frame is not homed; software position limits are then off.
     #[arg(long, global = true)]
     pub unhomed: bool,
@@ -62,6 +67,11 @@ pub struct MoveOptions {
 }
 
 impl MoveOptions {
+    /// Lock-step simulated time: `--deterministic`, or implied by `--unpaced`.
+    pub fn lockstep(&self) -> bool {
+        self.deterministic || self.unpaced
+    }
+
     /// Loads the settings file and applies the overrides, the names it accepts from `names`.
     pub fn load(&self, names: &Names) -> Result<Settings, ConfigLoadError> {
         let mut s = Settings::load(&self.config, names)?;

@@ -16,6 +16,7 @@ pub mod cli;
 pub mod path;
 pub mod supervise;
 pub mod trials;
+pub mod tune;
 
 pub use supervise::{Exit, describe_exit};
 

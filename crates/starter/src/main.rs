@@ -21,6 +21,7 @@ use qmarc_starter::cli::{Command, MoveOptions};
 use qmarc_starter::path::PathArgs;
 use qmarc_starter::supervise::{self, Supervised};
 use qmarc_starter::trials::{TrialsArgs, TrialsCsv};
+use qmarc_starter::tune::TuneArgs;
 use qmarc_starter::{
     Exit, check_iox_root, default_prefix, describe_exit, names, remove_stale_files, run_file,
 };
@@ -28,6 +29,8 @@ use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
+
+mod tuning;
 
 /// A line on standard error that cannot fail: if whoever reads it went away (a closed pipe),
 /// the starter still stops its children and removes its files.
@@ -81,6 +84,10 @@ enum StarterCommand {
     /// Run a move N times, one process set per trial, as a user pressing the button would;
     /// writes trials.csv and its plots in `--out`, each trial's data in `trial-NNN/`.
     Trials(TrialsArgs),
+    /// Tune the gains on a path (argmin's Nelder–Mead per motor): in lock-step simulation on
+    /// the simulated robot, by real moves on hardware (or with --paced); writes tune.csv,
+    /// tuned-gains.toml and convergence.png in `--out` (default `<gather.out_dir>/tune`).
+    Tune(TuneArgs),
 }
 
 /// An error and the exit code it ends the run with.
@@ -113,6 +120,8 @@ struct TrialIo<'a> {
     log: Option<&'a std::fs::File>,
     /// Check everything, as `--print-settings` does, and start nothing.
     check_only: bool,
+    /// These settings instead of the file's with the command line's (a tuning's candidate).
+    settings: Option<&'a Settings>,
 }
 
 /// One move (`trial` set: a trial's, quiet).
@@ -120,8 +129,14 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
     let (out, quiet) = (trial.out, trial.log.is_some());
     // Everything is checked before anything starts.
     let names = names();
-    let mut settings = args.opts.load(&names).map_err(refused)?;
-    command.apply(&mut settings, &names).map_err(refused)?;
+    let mut settings = match trial.settings {
+        Some(s) => s.clone(),
+        None => {
+            let mut s = args.opts.load(&names).map_err(refused)?;
+            command.apply(&mut s, &names).map_err(refused)?;
+            s
+        }
+    };
     if let Some(out) = out {
         settings.gather.out_dir = out.to_path_buf();
     }
@@ -145,12 +160,20 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
     let spec = RunSpec {
         settings,
         mode,
-        deterministic: args.opts.deterministic,
+        deterministic: args.opts.lockstep(),
+        unpaced: args.opts.unpaced,
         unhomed: args.opts.unhomed,
         iox_prefix: location.prefix.clone(),
         iox_root: location.root.clone(),
     };
     let settings = &spec.settings;
+    if spec.unpaced && settings.hwserver.backend != "sim" {
+        return Err(refused(anyhow!(
+            "--unpaced runs only on the simulated robot (`--backend sim`), not on `{}`: real \
+             hardware moves in real time",
+            settings.hwserver.backend
+        )));
+    }
     // The hardware: there, usable and as the settings describe it (a missing device fails
     // here, at once, naming it).
     qmarc_hwserver::backends::check(settings, spec.deterministic).map_err(refused)?;
@@ -340,7 +363,7 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
     let _lock = qmarc_report::output::lock(&base).map_err(refused)?;
     // Every check of the move before anything of an earlier series is touched; then that
     // series goes, whole, into previous-trials/.
-    let check = TrialIo { out: Some(&base), log: None, check_only: true };
+    let check = TrialIo { out: Some(&base), check_only: true, ..TrialIo::default() };
     one_move(args, &t.command, check)?;
     qmarc_starter::trials::retire_series(&base)
         .with_context(|| format!("cannot keep the earlier series of {}", base.display()))
@@ -367,7 +390,7 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
         let command = qmarc_starter::trials::command_of(&t.command, k, settings.step.size);
         let dir = qmarc_starter::trials::trial_dir(&base, k);
         let _ = writeln!(&log, "== trial {k} ({})", dir.display());
-        let io = TrialIo { out: Some(&dir), log: Some(&log), check_only: false };
+        let io = TrialIo { out: Some(&dir), log: Some(&log), ..TrialIo::default() };
         let outcome = match one_move(args, &command, io) {
             Ok(o) => o,
             Err(e) if k == 1 => return Err(e),
@@ -511,6 +534,7 @@ fn main() -> ExitCode {
             })
             .map_err(refused),
         StarterCommand::Trials(t) => trials(&args, t),
+        StarterCommand::Tune(t) => tuning::tune(&args, t),
     };
     match result {
         Ok(code) => code,

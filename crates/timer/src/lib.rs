@@ -35,6 +35,7 @@ pub use clock::{Clock, MockClock, MonotonicClock};
 pub use histogram::{Histogram, Percentiles};
 pub use ticker::{
     ManualTicker, NanosleepTicker, Tick, Ticker, TickerError, TickerKind, TimerFdTicker,
+    UnpacedTicker,
 };
 
 /// Nanoseconds per microsecond.

@@ -328,9 +328,58 @@ impl Ticker for ManualTicker {
     }
 }
 
+/// A ticker that never waits: each tick is due the moment it is asked for (late by nothing,
+/// missing nothing). Only for lock-step runs on the simulated robot (`--unpaced`), whose
+/// time is the simulator's: a move then takes as long as its computing does.
+#[derive(Debug)]
+pub struct UnpacedTicker {
+    period_ns: u64,
+    schedule: Option<Schedule>,
+}
+
+impl UnpacedTicker {
+    /// An unpaced ticker; `period_ns` is what it reports as its period.
+    pub fn new(period_ns: u64) -> UnpacedTicker {
+        UnpacedTicker { period_ns, schedule: None }
+    }
+}
+
+impl Ticker for UnpacedTicker {
+    fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    fn start(&mut self) -> Result<u64, TickerError> {
+        let now = monotonic_now_ns();
+        self.schedule = Some(Schedule { period_ns: self.period_ns, t0_ns: now, next_index: 0 });
+        Ok(now)
+    }
+
+    fn wait(&mut self) -> Result<Tick, TickerError> {
+        let Some(schedule) = &mut self.schedule else {
+            return Err(TickerError::NotStarted);
+        };
+        let now = monotonic_now_ns();
+        let tick = Tick { index: schedule.next_index, intended_ns: now, woke_ns: now, missed: 0 };
+        schedule.next_index += 1;
+        Ok(tick)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_unpaced_ticker_ticks_at_once_and_misses_nothing() {
+        let mut t = UnpacedTicker::new(400_000);
+        assert_eq!(t.wait(), Err(TickerError::NotStarted));
+        t.start().unwrap();
+        for i in 0..10_000 {
+            let tick = t.wait().unwrap();
+            assert_eq!((tick.index, tick.missed, tick.latency_ns()), (i, 0, 0));
+        }
+    }
 
     #[test]
     fn schedule_counts_skipped_ticks_and_measures_against_the_first() {

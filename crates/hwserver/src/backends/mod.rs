@@ -94,6 +94,7 @@ pub fn standalone_run(
         settings: Settings::parse("standalone.toml".as_ref(), &text, &names)?,
         mode: Mode::Step,
         deterministic: lockstep,
+        unpaced: false,
         unhomed: false,
         iox_prefix: location.prefix.clone(),
         iox_root: location.root.clone(),

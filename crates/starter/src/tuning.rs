@@ -1,0 +1,160 @@
+//! `qmarc-starter tune`: picks how candidates are evaluated — lock-step inside this process
+//! on the simulated robot, real moves through [`one_move`] otherwise — shows the progress and
+//! prints the before/after table and the tuned gains ([`qmarc_starter::tune`] does the rest).
+
+use crate::{Failure, StarterArgs, TrialIo, internal, one_move, refused};
+use anyhow::anyhow;
+use qmarc_config::{Mode, RunSpec, Settings};
+use qmarc_proto::exit;
+use qmarc_starter::cli::{Command, RunArgs, StepArgs};
+use qmarc_starter::names;
+use qmarc_starter::tune::TuneArgs;
+use qmarc_tune::eval::{EvalError, SimEvaluator};
+use qmarc_tune::optimise::Record;
+use qmarc_tune::real::RealEvaluator;
+use qmarc_tune::report;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// `tune`: better gains on the path of `t`.
+pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure> {
+    let names = names();
+    let mut settings = args.opts.load(&names).map_err(refused)?;
+    Command::Run(t.run_args().clone()).apply(&mut settings, &names).map_err(refused)?;
+    t.apply(&mut settings).map_err(refused)?;
+    if args.print_settings {
+        return Err(refused(anyhow!(
+            "tune makes moves: check the path with `qmarc-starter --print-settings run …`"
+        )));
+    }
+    let real = t.paced || settings.hwserver.backend != "sim";
+    if real && args.opts.unpaced {
+        return Err(refused(anyhow!(
+            "--unpaced is the simulated robot's lock-step: tuning with --paced or on `{}` \
+             makes real moves in real time",
+            settings.hwserver.backend
+        )));
+    }
+    let (first, last) = qmarc_tune::local::path_ends(&settings).map_err(|e| refused(anyhow!(e)))?;
+    if let Some(w) = &t.write {
+        report::check_copy(&settings.source, w).map_err(refused)?;
+    }
+    let out = args.opts.out.clone().unwrap_or_else(|| settings.gather.out_dir.join("tune"));
+    std::fs::create_dir_all(&out)
+        .map_err(|e| refused(anyhow!("cannot create {}: {e}", out.display())))?;
+    let stop = qmarc_timer::stop::install().map_err(internal)?;
+    let bar = progress_bar(&settings)?;
+    let mut on_record = |r: &Record| {
+        bar.set_position(
+            u64::from(r.motor as u32 * settings.tune.budget) + u64::from(r.evaluation),
+        );
+        if r.best.is_finite() {
+            bar.set_message(format!(
+                "motor {}: best {} {:.5}",
+                r.motor + 1,
+                settings.tune.objective,
+                r.best
+            ));
+        }
+    };
+    let outcome = if real {
+        let far = (0..settings.n_motors)
+            .find(|&m| (first[m] - last[m]).abs() > settings.trajectory.start_tolerance_counts);
+        if let Some(m) = far {
+            return Err(refused(anyhow!(
+                "real moves run the path back to back, so it must end where it starts: motor {} \
+                 starts at {:.0} and ends at {:.0} counts",
+                m + 1,
+                first[m],
+                last[m]
+            )));
+        }
+        let log = std::fs::File::create(out.join("tune.log")).map_err(internal)?;
+        let moves = out.join("moves");
+        let mut mover =
+            |mode: Mode, s: &Settings| -> Result<(qmarc_report::Summary, PathBuf), String> {
+                let command = match mode {
+                    Mode::Step => Command::Step(StepArgs::default()),
+                    _ => Command::Run(RunArgs::default()),
+                };
+                let io = TrialIo {
+                    out: Some(&moves),
+                    log: Some(&log),
+                    check_only: false,
+                    settings: Some(s),
+                };
+                let o = one_move(args, &command, io).map_err(|(_, e)| format!("{e:#}"))?;
+                o.summary.ok_or_else(|| format!("no move was made (exit code {})", o.code))
+            };
+        let mut eval = RealEvaluator::new(&settings, &mut mover, stop);
+        qmarc_starter::tune::run(&settings, &mut eval, &out, None, &mut on_record)
+    } else {
+        let settings =
+            qmarc_tune::local::on_the_path(&settings).map_err(|e| refused(anyhow!(e)))?;
+        let spec = RunSpec {
+            settings: settings.clone(),
+            mode: Mode::Run,
+            deterministic: true,
+            unpaced: true,
+            unhomed: false,
+            iox_prefix: String::new(),
+            iox_root: String::new(),
+        };
+        let mut eval = SimEvaluator::new(&spec, stop);
+        qmarc_starter::tune::run(&settings, &mut eval, &out, Some(&spec), &mut on_record)
+    }
+    .map_err(internal)?;
+    bar.finish_and_clear();
+    print_outcome(&settings, &outcome, real);
+    if let Some(w) = &t.write {
+        report::write_copy(
+            &settings.source,
+            w,
+            &outcome.after,
+            &qmarc_starter::tune::provenance(&settings),
+        )
+        .map_err(internal)?;
+        println!("  settings with the tuned gains: {}", w.display());
+    }
+    // The move budget is an end like the optimiser's own; a stop or a fault is not.
+    Ok(ExitCode::from(match &outcome.tuned.aborted {
+        None | Some(EvalError::MoveBudget(_)) => exit::OK,
+        Some(EvalError::Interrupted) => exit::INTERRUPTED,
+        Some(_) => exit::FAULT,
+    }))
+}
+
+/// The bar: per motor `tune.budget` steps (the evaluations, roughly), the best so far.
+fn progress_bar(settings: &Settings) -> Result<indicatif::ProgressBar, Failure> {
+    let n = settings.n_motors as u64 * u64::from(settings.tune.budget);
+    let bar = indicatif::ProgressBar::new(n);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("tuning [{bar:30}] {elapsed} · {msg}")
+            .map_err(internal)?
+            .progress_chars("=> "),
+    );
+    Ok(bar)
+}
+
+/// The before/after table, the files and the gains.
+fn print_outcome(settings: &Settings, o: &qmarc_starter::tune::TuneOutcome, real: bool) {
+    let evaluations = o.tuned.records.len();
+    println!(
+        "tuned {} on {} by {} ({} candidates, objective {})",
+        settings.tune.params.join(","),
+        settings.trajectory.knots.as_ref().map_or(String::new(), |k| k.display().to_string()),
+        if real { "real moves" } else { "lock-step simulation (the motors are independent there)" },
+        evaluations,
+        settings.tune.objective,
+    );
+    if let Some(why) = &o.tuned.aborted {
+        println!("  ended early: {why}; the gains below are the last safe ones");
+    }
+    if let Some(after) = &o.after_run {
+        print!("{}", report::table(&o.tuned.before_run, after));
+    }
+    for f in &o.files {
+        println!("  {}", f.display());
+    }
+    print!("{}", report::fragment(&o.after, "tuned gains (tuned-gains.toml)"));
+}

@@ -1,0 +1,190 @@
+//! What a tuning says and writes: the before/after table of the four thesis error figures per
+//! motor, every candidate in `tune.csv`, the tuned gains as a TOML fragment, and a copy of
+//! the settings file with them (never the file itself).
+
+use crate::eval::{Figures, PathRun};
+use crate::optimise::{Record, Verdict};
+use qmarc_config::{MotorGains, TUNE_PARAMS};
+use std::fmt::Write as _;
+use std::path::Path;
+use toml_edit::{DocumentMut, Item, Value};
+
+/// The before/after table: per motor Σ|e|, Σe², max and min error (rad, thesis Table 5-2),
+/// before → after and after ÷ before, and the saturated share after.
+pub fn table(before: &PathRun, after: &PathRun) -> String {
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "  motor  Σ|e| rad (before → after, ratio)      Σe² rad²                     max e rad            min e rad             DAC saturated"
+    );
+    let cell = |b: f64, a: f64| format!("{b:.4} → {a:.4}");
+    for (m, (b, a)) in before.motors.iter().zip(&after.motors).enumerate() {
+        let ratio = |x: fn(&Figures) -> f64| {
+            if x(b) != 0.0 { format!("×{:.2}", x(a) / x(b)) } else { "–".into() }
+        };
+        let _ = writeln!(
+            t,
+            "  {:<5}  {:<20} {:<10} {:<28} {:<20} {:<20}  {:.2} %",
+            m + 1,
+            cell(b.abs_rad, a.abs_rad),
+            ratio(|f| f.abs_rad),
+            format!("{:.3e} → {:.3e} {}", b.sse_rad2, a.sse_rad2, ratio(|f| f.sse_rad2)),
+            format!("{:.5} → {:.5}", b.max_rad, a.max_rad),
+            format!("{:.5} → {:.5}", b.min_rad, a.min_rad),
+            a.saturated * 100.0,
+        );
+    }
+    t
+}
+
+/// The gains of `gains` as `[[motor]]` tables (only the gains: paste them over the file's),
+/// headed by `comment` lines.
+pub fn fragment(gains: &[MotorGains], comment: &str) -> String {
+    let mut t = String::new();
+    for line in comment.lines() {
+        let _ = writeln!(t, "# {line}");
+    }
+    for g in gains {
+        let _ = writeln!(t, "\n[[motor]]");
+        for (name, v) in TUNE_PARAMS.iter().zip([g.kp, g.ki, g.kd, g.kvff, g.kaff]) {
+            let _ = writeln!(t, "{name} = {}", gain_text(v));
+        }
+    }
+    t
+}
+
+/// A gain as the settings file writes it: 4 significant digits after the point is plenty
+/// (the objective does not see less), always with a decimal point (TOML float).
+fn gain_text(v: f64) -> String {
+    let r = (v * 1e3).round() / 1e3;
+    if r.fract() == 0.0 { format!("{r:.1}") } else { format!("{r}") }
+}
+
+/// The gains rounded as [`fragment`] and [`write_copy`] write them: what a user's file gets.
+pub fn rounded(g: &MotorGains) -> MotorGains {
+    let r = |v: f64| gain_text(v).parse().unwrap_or(v);
+    MotorGains { kp: r(g.kp), ki: r(g.ki), kd: r(g.kd), kvff: r(g.kvff), kaff: r(g.kaff), ..*g }
+}
+
+/// Every candidate as CSV: motor, evaluation, the five gains, objective, best so far,
+/// verdict, moves so far.
+pub fn csv(records: &[Record]) -> String {
+    let mut t =
+        format!("motor,evaluation,{},objective,best,verdict,moves\n", TUNE_PARAMS.join(","));
+    for r in records {
+        let g = &r.gains;
+        let objective = r.objective.map_or(String::new(), |v| v.to_string());
+        let best = if r.best.is_finite() { r.best.to_string() } else { String::new() };
+        let _ = writeln!(
+            t,
+            "{},{},{},{},{},{},{},{},{},{},{}",
+            r.motor + 1,
+            r.evaluation,
+            g.kp,
+            g.ki,
+            g.kd,
+            g.kvff,
+            g.kaff,
+            objective,
+            best,
+            r.verdict.word(),
+            r.moves
+        );
+    }
+    t
+}
+
+/// Per motor, the best feasible objective after each evaluation (from the first feasible
+/// one): the convergence plot's series.
+pub fn convergence(records: &[Record], n_motors: usize) -> Vec<Vec<(f64, f64)>> {
+    let mut series = vec![Vec::new(); n_motors];
+    for r in records {
+        let best = match (&r.verdict, r.objective) {
+            (Verdict::Feasible { best: true }, Some(v)) => v,
+            _ => r.best,
+        };
+        if best.is_finite()
+            && let Some(s) = series.get_mut(r.motor)
+        {
+            s.push((f64::from(r.evaluation), best));
+        }
+    }
+    series
+}
+
+/// The copy could not be written.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum WriteCopyError {
+    /// `--write` names the settings file itself, or a file that exists.
+    #[error("{0}: {1}")]
+    Refused(String, &'static str),
+    /// The settings file could not be read or parsed, or the copy written.
+    #[error("{0}")]
+    Io(String),
+}
+
+/// Refuses `dest` when it is the settings file `source` or any file that exists: a copy
+/// never replaces anything.
+pub fn check_copy(source: &Path, dest: &Path) -> Result<(), WriteCopyError> {
+    let name = || dest.display().to_string();
+    let same = match (source.canonicalize(), dest.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if same {
+        return Err(WriteCopyError::Refused(
+            name(),
+            "is the settings file itself: --write writes a copy (name a new file)",
+        ));
+    }
+    if dest.exists() {
+        return Err(WriteCopyError::Refused(
+            name(),
+            "exists: --write never replaces a file (remove it or name a new one)",
+        ));
+    }
+    Ok(())
+}
+
+/// Writes to `dest` a copy of the settings file `source` with each `[[motor]]` table's gains
+/// replaced by `gains` (its comments, order and formatting kept). Refused as
+/// [`check_copy`] refuses.
+pub fn write_copy(
+    source: &Path,
+    dest: &Path,
+    gains: &[MotorGains],
+    comment: &str,
+) -> Result<(), WriteCopyError> {
+    check_copy(source, dest)?;
+    let io = |e: &dyn std::fmt::Display| WriteCopyError::Io(e.to_string());
+    let text =
+        std::fs::read_to_string(source).map_err(|e| io(&format!("{}: {e}", source.display())))?;
+    let mut doc: DocumentMut =
+        text.parse().map_err(|e| io(&format!("{}: {e}", source.display())))?;
+    let tables = doc
+        .get_mut("motor")
+        .and_then(Item::as_array_of_tables_mut)
+        .ok_or_else(|| io(&format!("{}: no [[motor]] tables", source.display())))?;
+    for (table, g) in tables.iter_mut().zip(gains) {
+        for (name, v) in TUNE_PARAMS.iter().zip([g.kp, g.ki, g.kd, g.kvff, g.kaff]) {
+            let value: f64 = gain_text(v).parse().unwrap_or(v);
+            match table.get_mut(name).and_then(Item::as_value_mut) {
+                Some(old) => {
+                    let decor = old.decor().clone();
+                    *old = Value::from(value);
+                    *old.decor_mut() = decor;
+                }
+                None => {
+                    table.insert(name, toml_edit::value(value));
+                }
+            }
+        }
+    }
+    let mut out = String::new();
+    for line in comment.lines() {
+        let _ = writeln!(out, "# {line}");
+    }
+    out.push_str(&doc.to_string());
+    std::fs::write(dest, out).map_err(|e| io(&format!("{}: {e}", dest.display())))
+}

@@ -1,0 +1,82 @@
+//! The tuner's constraints and its in-process moves, on the shipped settings and the X-Z path.
+
+use qmarc_config::{Mode, MotorGains, Names, RunSpec, Settings};
+use qmarc_tune::eval::{Evaluator, Objective, Param, SimEvaluator};
+use qmarc_tune::optimise::{Plan, Verdict, judge};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+fn workspace() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The shipped settings on the X-Z path, the simulated robot at its start.
+fn xz_spec() -> RunSpec {
+    let names = Names {
+        laws: vec!["pidff"],
+        methods: vec!["spline", "pvt"],
+        backends: vec!["sim", "s626"],
+        any_plugin: false,
+    };
+    let mut s = Settings::load(&workspace().join("config/qmarc.toml"), &names).unwrap();
+    s.set_knots(&workspace().join("knots/xz-pick-place-spline.txt"));
+    let s = qmarc_tune::local::on_the_path(&s).unwrap();
+    RunSpec {
+        settings: s,
+        mode: Mode::Run,
+        deterministic: true,
+        unpaced: true,
+        unhomed: false,
+        iox_prefix: String::new(),
+        iox_root: String::new(),
+    }
+}
+
+fn all_params() -> Vec<Param> {
+    qmarc_config::TUNE_PARAMS.iter().filter_map(|p| Param::named(p)).collect()
+}
+
+/// The constraints: the thesis' gains are feasible; a gain set that drives the DAC into its
+/// limit is refused for saturating; one that rings is refused by the stability step; one
+/// outside the bounds is not even run.
+#[test]
+fn the_constraints_refuse_saturating_ringing_and_out_of_bounds_gains() {
+    let spec = xz_spec();
+    let stop = AtomicBool::new(false);
+    let mut eval = SimEvaluator::new(&spec, &stop);
+    let s = &spec.settings;
+    let params = all_params();
+    let plan = Plan { tune: &s.tune, params: &params, objective: Objective::Abs, budget: 1 };
+    let best = &s.motors[..3];
+    let verdict =
+        |eval: &mut SimEvaluator<'_>, g: MotorGains| judge(&plan, best, 0, &g, eval).unwrap().1;
+    assert_eq!(verdict(&mut eval, best[0]), Verdict::Feasible { best: true });
+    let moves = eval.moves();
+    let saturating = MotorGains { kp: best[0].kp * 2.0, ..best[0] };
+    assert!(matches!(verdict(&mut eval, saturating), Verdict::Saturates(f) if f > 0.01));
+    // Without Kd and with 40 % more Kp the loop rings: the step does not settle.
+    let ringing = MotorGains { kd: 0.0, kp: best[0].kp * 1.4, ..best[0] };
+    let v = verdict(&mut eval, ringing);
+    assert!(matches!(v, Verdict::Unsettled { margin: false, .. }), "{v:?}");
+    // With 20 % more Kp and 30× Ki it settles, but not with the margin's 25 % more.
+    let marginal = MotorGains { kd: 0.0, kp: best[0].kp * 1.2, ki: best[0].ki * 30.0, ..best[0] };
+    let v = verdict(&mut eval, marginal);
+    assert!(matches!(v, Verdict::Unsettled { margin: true, .. }), "{v:?}");
+    let outside = MotorGains { kp: s.tune.bounds[0][1] * 2.0, ..best[0] };
+    let before = eval.moves();
+    assert_eq!(verdict(&mut eval, outside), Verdict::OutOfBounds);
+    assert_eq!(eval.moves(), before, "not run");
+    assert!(before > moves);
+}
+
+/// An in-process move is deterministic: the same gains give the same figures, bit for bit.
+#[test]
+fn in_process_moves_repeat_bit_for_bit() {
+    let spec = xz_spec();
+    let stop = AtomicBool::new(false);
+    let mut eval = SimEvaluator::new(&spec, &stop);
+    let gains = &spec.settings.motors[..3];
+    let (a, b) = (eval.path(gains).unwrap(), eval.path(gains).unwrap());
+    assert_eq!(a, b);
+    assert!(a.fault.is_none() && a.motors.iter().all(|m| m.abs_rad > 0.1));
+}
