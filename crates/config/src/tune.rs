@@ -49,7 +49,7 @@ impl Default for TuneSettings {
             max_saturated_fraction: 0.01,
             step_s: 0.5,
             settle_counts: 5.0,
-            margin: 1.25,
+            margin: 1.2,
             max_change: 0.2,
             max_moves: 300,
         }

@@ -12,7 +12,7 @@ use crate::cli::RunArgs;
 use anyhow::{Context, anyhow};
 use clap::{Args, Subcommand};
 use qmarc_config::{Mode, RunSpec, Settings};
-use qmarc_tune::eval::{Evaluator, Objective, Param, PathRun};
+use qmarc_tune::eval::{EvalError, Evaluator, Objective, Param, PathRun};
 use qmarc_tune::optimise::{Plan, Record, Tuned, tune};
 use qmarc_tune::report;
 use std::path::{Path, PathBuf};
@@ -81,8 +81,8 @@ pub struct TuneOutcome {
     pub tuned: Tuned,
     /// The gains after, as written (rounded).
     pub after: Vec<qmarc_config::MotorGains>,
-    /// The path with them (`None` when the tuning ended early on real moves: the robot is
-    /// not known to be at the path's start).
+    /// The path with them (`None` when a stop or a fault ended the tuning: the robot is not
+    /// known to be at the path's start).
     pub after_run: Option<PathRun>,
     /// The files written.
     pub files: Vec<PathBuf>,
@@ -103,12 +103,8 @@ pub fn run(
     let plan =
         Plan { tune: &settings.tune, params: &params, objective, budget: settings.tune.budget };
     let before = &settings.motors[..settings.n_motors];
-    let tuned = tune(&plan, before, eval, on_record).map_err(|e| anyhow!("tuning: {e}"))?;
+    let tuned = tune(&plan, before, eval, on_record)?;
     let after: Vec<_> = tuned.after.iter().map(report::rounded).collect();
-    let after_run = match tuned.aborted {
-        Some(_) if eval.real() => None,
-        _ => Some(eval.path(&after).map_err(|e| anyhow!("the path with the tuned gains: {e}"))?),
-    };
     let mut files = Vec::new();
     let csv = out.join("tune.csv");
     std::fs::write(&csv, report::csv(&tuned.records))
@@ -134,6 +130,13 @@ pub fn run(
             files.push(write_local(spec, gains, &out.join(name))?);
         }
     }
+    // The path with the tuned gains, for the table: one move beyond the move budget, not
+    // after a stop or a fault (the robot is then not known to be at the path's start).
+    eval.final_move();
+    let after_run = match tuned.aborted {
+        None | Some(EvalError::MoveBudget(_)) => eval.path(&after).ok(),
+        Some(_) => None,
+    };
     Ok(TuneOutcome { tuned, after, after_run, files })
 }
 

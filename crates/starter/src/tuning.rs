@@ -4,7 +4,7 @@
 
 use crate::{Failure, StarterArgs, TrialIo, internal, one_move, refused};
 use anyhow::anyhow;
-use qmarc_config::{Mode, RunSpec, Settings};
+use qmarc_config::{Mode, Settings};
 use qmarc_proto::exit;
 use qmarc_starter::cli::{Command, RunArgs, StepArgs};
 use qmarc_starter::names;
@@ -35,6 +35,19 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
             settings.hwserver.backend
         )));
     }
+    if real && args.opts.unhomed {
+        return Err(refused(anyhow!(
+            "--unhomed turns the software limits off: real moves tune only in a homed frame"
+        )));
+    }
+    if real && settings.tune.margin > 1.0 + settings.tune.max_change {
+        return Err(refused(anyhow!(
+            "tune.margin = {} would run the stability step with the feedback gains more than \
+             tune.max_change = {} beyond the best ones: on real moves keep margin ≤ 1 + max_change",
+            settings.tune.margin,
+            settings.tune.max_change
+        )));
+    }
     let (first, last) = qmarc_tune::local::path_ends(&settings).map_err(|e| refused(anyhow!(e)))?;
     if let Some(w) = &t.write {
         report::check_copy(&settings.source, w).map_err(refused)?;
@@ -45,17 +58,15 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
     let stop = qmarc_timer::stop::install().map_err(internal)?;
     let bar = progress_bar(&settings)?;
     let mut on_record = |r: &Record| {
-        bar.set_position(
-            u64::from(r.motor as u32 * settings.tune.budget) + u64::from(r.evaluation),
-        );
-        if r.best.is_finite() {
-            bar.set_message(format!(
-                "motor {}: best {} {:.5}",
-                r.motor + 1,
-                settings.tune.objective,
-                r.best
-            ));
-        }
+        bar.set_position(r.motor as u64);
+        bar.set_message(format!(
+            "motor {}, candidate {}, {} moves · best {} {}",
+            r.motor + 1,
+            r.evaluation,
+            r.moves,
+            settings.tune.objective,
+            if r.best.is_finite() { format!("{:.5}", r.best) } else { "–".into() }
+        ));
     };
     let outcome = if real {
         let far = (0..settings.n_motors)
@@ -91,19 +102,19 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
     } else {
         let settings =
             qmarc_tune::local::on_the_path(&settings).map_err(|e| refused(anyhow!(e)))?;
-        let spec = RunSpec {
-            settings: settings.clone(),
-            mode: Mode::Run,
-            deterministic: true,
-            unpaced: true,
-            unhomed: false,
-            iox_prefix: String::new(),
-            iox_root: String::new(),
-        };
+        let spec = qmarc_tune::local::local_spec(settings.clone(), Mode::Run);
         let mut eval = SimEvaluator::new(&spec, stop);
         qmarc_starter::tune::run(&settings, &mut eval, &out, Some(&spec), &mut on_record)
     }
-    .map_err(internal)?;
+    .map_err(|e| {
+        let code = match e.downcast_ref::<EvalError>() {
+            Some(EvalError::Interrupted) => exit::INTERRUPTED,
+            Some(EvalError::Faulted(_)) => exit::FAULT,
+            Some(_) => exit::REFUSED,
+            None => exit::INTERNAL,
+        };
+        (code, e.context("tuning"))
+    })?;
     bar.finish_and_clear();
     print_outcome(&settings, &outcome, real);
     if let Some(w) = &t.write {
@@ -124,14 +135,12 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
     }))
 }
 
-/// The bar: per motor `tune.budget` steps (the evaluations, roughly), the best so far.
+/// The bar: the motors done, the candidate, the moves and the best objective so far.
 fn progress_bar(settings: &Settings) -> Result<indicatif::ProgressBar, Failure> {
-    let n = settings.n_motors as u64 * u64::from(settings.tune.budget);
-    let bar = indicatif::ProgressBar::new(n);
+    let bar = indicatif::ProgressBar::new(settings.n_motors as u64);
     bar.set_style(
-        indicatif::ProgressStyle::with_template("tuning [{bar:30}] {elapsed} · {msg}")
-            .map_err(internal)?
-            .progress_chars("=> "),
+        indicatif::ProgressStyle::with_template("tuning {pos}/{len} motors done {elapsed} · {msg}")
+            .map_err(internal)?,
     );
     Ok(bar)
 }

@@ -166,12 +166,16 @@ pub enum EvalError {
 pub trait Evaluator {
     /// Runs the path with `gains` (every motor's).
     fn path(&mut self, gains: &[MotorGains]) -> Result<PathRun, EvalError>;
-    /// Runs a step of `step.size` held `tune.step_s` with `gains`.
-    fn step(&mut self, gains: &[MotorGains]) -> Result<StepRun, EvalError>;
+    /// Runs a step of `step.size` held `tune.step_s` with `gains`; on real moves the step back
+    /// follows, made with `safe` (gains known to settle).
+    fn step(&mut self, gains: &[MotorGains], safe: &[MotorGains]) -> Result<StepRun, EvalError>;
     /// Moves made so far.
     fn moves(&self) -> u32;
     /// Real moves (hardware, paced): `tune.max_change` bounds each candidate.
     fn real(&self) -> bool;
+    /// Allows one move beyond the move budget: the path with the tuned gains, for the
+    /// before/after table, once the search is over.
+    fn final_move(&mut self) {}
 }
 
 /// The largest |cmd − act| of each of `n` motors over the last fifth of `rows`.
@@ -258,7 +262,7 @@ impl Evaluator for SimEvaluator<'_> {
         Ok(PathRun { motors, fault: fault_of(&done.summary) })
     }
 
-    fn step(&mut self, gains: &[MotorGains]) -> Result<StepRun, EvalError> {
+    fn step(&mut self, gains: &[MotorGains], _: &[MotorGains]) -> Result<StepRun, EvalError> {
         let settings = step_settings(&self.step.settings, gains);
         let n = settings.n_motors;
         let done = self.run(Mode::Step, settings)?;

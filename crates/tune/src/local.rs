@@ -64,6 +64,19 @@ pub enum LocalError {
     Finish(std::io::Error),
 }
 
+/// The run of a local move of `mode` with `settings`: lock-step, unpaced, no iceoryx2.
+pub fn local_spec(settings: qmarc_config::Settings, mode: Mode) -> RunSpec {
+    RunSpec {
+        settings,
+        mode,
+        deterministic: true,
+        unpaced: true,
+        unhomed: false,
+        iox_prefix: String::new(),
+        iox_root: String::new(),
+    }
+}
+
 /// A move made by [`run_local`]: the loop with its gathered data, and its summary.
 pub struct LocalMove {
     /// The servo after the move (its gather buffer, its error figures).

@@ -141,7 +141,7 @@ impl Search<'_> {
         self.params.iter().any(|p| {
             let [lo, hi] = self.tune.bounds[p.index()];
             let best = p.get(&self.best[motor]);
-            let room = self.tune.max_change * best.abs().max(0.01 * (hi - lo));
+            let room = self.tune.max_change * scale_of(best, [lo, hi]);
             (p.get(g) - best).abs() > room * (1.0 + 1e-9)
         })
     }
@@ -204,6 +204,9 @@ impl Search<'_> {
         }
         let fig = run.motors[motor];
         let value = fig.objective(self.objective);
+        if !value.is_finite() {
+            return Ok((None, Verdict::Fault(format!("objective {value}"))));
+        }
         if fig.saturated > self.tune.max_saturated_fraction {
             return Ok((Some(value), Verdict::Saturates(fig.saturated)));
         }
@@ -232,10 +235,11 @@ impl Search<'_> {
             let mut gains = all.to_vec();
             if margin {
                 for p in [0, 1, 2].map(Param::at) {
-                    p.set(&mut gains[motor], p.get(&all[motor]) * self.tune.margin);
+                    let [lo, hi] = self.tune.bounds[p.index()];
+                    p.set(&mut gains[motor], (p.get(&all[motor]) * self.tune.margin).clamp(lo, hi));
                 }
             }
-            let step = self.eval.step(&gains)?;
+            let step = self.eval.step(&gains, &self.best)?;
             if let Some(f) = step.fault {
                 if self.eval.real() {
                     return Err(EvalError::Faulted(f));
@@ -249,6 +253,12 @@ impl Search<'_> {
         }
         Ok(None)
     }
+}
+
+/// The unit a gain is searched in, and the unit of `tune.max_change`: the gain itself, or 5 %
+/// of its bounds' span for a gain near zero (a change relative to zero means nothing).
+pub fn scale_of(gain: f64, [lo, hi]: [f64; 2]) -> f64 {
+    gain.abs().max(0.05 * (hi - lo))
 }
 
 impl Param {
@@ -322,6 +332,15 @@ pub fn tune(
     on_record: &mut dyn FnMut(&Record),
 ) -> Result<Tuned, EvalError> {
     let before_run = eval.path(before)?;
+    if let Some(f) = &before_run.fault {
+        return Err(if eval.real() {
+            EvalError::Faulted(format!("the path with the gains before: {f}"))
+        } else {
+            EvalError::Move(format!(
+                "the path faults with the gains before: {f}; make it run first (tuning starts from them)"
+            ))
+        });
+    }
     let n = before.len();
     let first = before_run.motors.iter().map(|f| f.objective(plan.objective));
     let worst = first.clone().fold(0.0, f64::max);
@@ -371,10 +390,7 @@ fn search_motor(
         s.scale = plan
             .params
             .iter()
-            .map(|p| {
-                let [lo, hi] = plan.tune.bounds[p.index()];
-                p.get(&s.best[motor]).abs().max(0.05 * (hi - lo))
-            })
+            .map(|p| scale_of(p.get(&s.best[motor]), plan.tune.bounds[p.index()]))
             .collect();
     }
     // On real moves the simplex stays within half the allowed change.

@@ -28,12 +28,22 @@ pub struct RealEvaluator<'a> {
     mover: &'a mut Mover<'a>,
     stop: &'a AtomicBool,
     moves: u32,
+    /// Moves allowed beyond `tune.max_moves` ([`Evaluator::final_move`]).
+    reserve: u32,
 }
 
 impl<'a> RealEvaluator<'a> {
     /// Moves with `base` (the path's settings) through `mover`; `stop` ends it between moves.
     pub fn new(base: &Settings, mover: &'a mut Mover<'a>, stop: &'a AtomicBool) -> Self {
-        RealEvaluator { base: base.clone(), mover, stop, moves: 0 }
+        RealEvaluator { base: base.clone(), mover, stop, moves: 0, reserve: 0 }
+    }
+
+    /// Refuses when fewer than `n` moves are left of the budget.
+    fn budget_for(&self, n: u32) -> Result<(), EvalError> {
+        if self.moves + n > self.base.tune.max_moves + self.reserve {
+            return Err(EvalError::MoveBudget(self.moves));
+        }
+        Ok(())
     }
 
     /// One move, within the move budget and unless stopped.
@@ -41,9 +51,7 @@ impl<'a> RealEvaluator<'a> {
         if self.stop.load(Ordering::Relaxed) {
             return Err(EvalError::Interrupted);
         }
-        if self.moves >= self.base.tune.max_moves {
-            return Err(EvalError::MoveBudget(self.moves));
-        }
+        self.budget_for(1)?;
         self.moves += 1;
         let (summary, dir) = (self.mover)(mode, s).map_err(EvalError::Move)?;
         if summary
@@ -88,7 +96,9 @@ impl Evaluator for RealEvaluator<'_> {
         Ok(PathRun { motors, fault: fault_of(&summary) })
     }
 
-    fn step(&mut self, gains: &[MotorGains]) -> Result<StepRun, EvalError> {
+    fn step(&mut self, gains: &[MotorGains], safe: &[MotorGains]) -> Result<StepRun, EvalError> {
+        // The step and the step back, or neither: the robot ends at the path's start.
+        self.budget_for(2)?;
         let s = step_settings(&self.base, gains);
         let (summary, series) = self.make(Mode::Step, &s)?;
         let run = StepRun {
@@ -96,8 +106,8 @@ impl Evaluator for RealEvaluator<'_> {
             fault: fault_of(&summary),
         };
         if run.fault.is_none() {
-            // Back to the path's start, with the gains that just settled.
-            let mut back = s.clone();
+            // Back to the path's start, with gains known to settle.
+            let mut back = step_settings(&self.base, safe);
             back.step.size = -s.step.size;
             let (summary, _) = self.make(Mode::Step, &back)?;
             if let Some(f) = fault_of(&summary) {
@@ -113,5 +123,9 @@ impl Evaluator for RealEvaluator<'_> {
 
     fn real(&self) -> bool {
         true
+    }
+
+    fn final_move(&mut self) {
+        self.reserve = 1;
     }
 }

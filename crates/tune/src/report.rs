@@ -138,7 +138,7 @@ pub fn check_copy(source: &Path, dest: &Path) -> Result<(), WriteCopyError> {
             "is the settings file itself: --write writes a copy (name a new file)",
         ));
     }
-    if dest.exists() {
+    if dest.symlink_metadata().is_ok() {
         return Err(WriteCopyError::Refused(
             name(),
             "exists: --write never replaces a file (remove it or name a new one)",
@@ -186,5 +186,15 @@ pub fn write_copy(
         let _ = writeln!(out, "# {line}");
     }
     out.push_str(&doc.to_string());
-    std::fs::write(dest, out).map_err(|e| io(&format!("{}: {e}", dest.display())))
+    // Created new or not at all: no file that appeared meanwhile (or a dangling link) is
+    // written through.
+    let write = || -> std::io::Result<()> {
+        use std::io::Write;
+        std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(dest)?
+            .write_all(out.as_bytes())
+    };
+    write().map_err(|e| io(&format!("{}: {e}", dest.display())))
 }

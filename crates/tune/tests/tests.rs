@@ -21,15 +21,7 @@ fn xz_spec() -> RunSpec {
     let mut s = Settings::load(&workspace().join("config/qmarc.toml"), &names).unwrap();
     s.set_knots(&workspace().join("knots/xz-pick-place-spline.txt"));
     let s = qmarc_tune::local::on_the_path(&s).unwrap();
-    RunSpec {
-        settings: s,
-        mode: Mode::Run,
-        deterministic: true,
-        unpaced: true,
-        unhomed: false,
-        iox_prefix: String::new(),
-        iox_root: String::new(),
-    }
+    qmarc_tune::local::local_spec(s, Mode::Run)
 }
 
 fn all_params() -> Vec<Param> {
