@@ -88,10 +88,22 @@ fn path_refuses_bad_waypoints_before_writing_anything_issue_13() {
 
 /// Settings whose simulated robot starts at the first knot of the spline file `name`.
 fn starting_at_the_path(run: &TestRun, name: &str) -> std::path::PathBuf {
+    starting_at_the_path_with(run, name, &[])
+}
+
+/// [`starting_at_the_path`] with `edits` on top ([`TestRun::config_with`]).
+pub(crate) fn starting_at_the_path_with(
+    run: &TestRun,
+    name: &str,
+    edits: &[(&str, &str)],
+) -> std::path::PathBuf {
     let text = std::fs::read_to_string(knots(name)).unwrap();
     let first = text.lines().find(|l| l.starts_with("0.000000")).unwrap();
     let start: Vec<&str> = first.split_whitespace().skip(1).collect();
-    run.config_with(&[("start_counts", &format!("[{}]", start.join(", ")))])
+    let start = format!("[{}]", start.join(", "));
+    let mut all = vec![("start_counts", start.as_str())];
+    all.extend_from_slice(edits);
+    run.config_with(&all)
 }
 
 /// Runs the shipped X-Z spline path from its start, deterministic and gathered every 4th

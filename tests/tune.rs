@@ -10,13 +10,9 @@ const XZ: &str = "xz-pick-place-spline.txt";
 /// Settings with the simulated robot standing at the X-Z path's start and no kept frame;
 /// `edits` on top.
 fn at_the_xz_start(run: &TestRun, edits: &[(&str, &str)]) -> PathBuf {
-    let text = std::fs::read_to_string(knots(XZ)).unwrap();
-    let first = text.lines().find(|l| l.starts_with("0.000000")).unwrap();
-    let start: Vec<&str> = first.split_whitespace().skip(1).collect();
-    let start = format!("[{}]", start.join(", "));
-    let mut all = vec![("start_counts", start.as_str()), ("state_file", "\"\"")];
+    let mut all = vec![("state_file", "\"\"")];
     all.extend_from_slice(edits);
-    run.config_with(&all)
+    crate::deltabot::starting_at_the_path_with(run, XZ, &all)
 }
 
 /// `qmarc-starter --config=C --out=O tune ARGS… run --knots=X-Z`.

@@ -52,6 +52,11 @@ impl Param {
         TUNE_PARAMS.iter().position(|p| *p == name).map(Param)
     }
 
+    /// The gain at `index` of [`TUNE_PARAMS`].
+    pub(crate) fn at(index: usize) -> Param {
+        Param(index)
+    }
+
     /// Its name.
     pub fn name(self) -> &'static str {
         TUNE_PARAMS[self.0]

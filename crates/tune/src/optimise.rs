@@ -114,7 +114,33 @@ struct Search<'a> {
     round_calls: u32,
 }
 
-impl Search<'_> {
+impl<'a> Search<'a> {
+    /// A search of `plan` from the gains `best`, nothing feasible known yet; an infeasible
+    /// candidate costs `penalty`.
+    fn new(
+        plan: &Plan<'a>,
+        best: &[MotorGains],
+        eval: &'a mut dyn Evaluator,
+        on_record: &'a mut dyn FnMut(&Record),
+        penalty: f64,
+    ) -> Search<'a> {
+        Search {
+            eval,
+            tune: plan.tune,
+            objective: plan.objective,
+            params: plan.params,
+            scale: Vec::new(),
+            best: best.to_vec(),
+            best_value: vec![f64::INFINITY; best.len()],
+            penalty,
+            records: Vec::new(),
+            on_record,
+            aborted: None,
+            calls: 0,
+            round_calls: 0,
+        }
+    }
+
     /// The gains of `motor` at `x`.
     fn gains_at(&self, motor: usize, x: &[f64]) -> MotorGains {
         let mut g = self.best[motor];
@@ -261,13 +287,6 @@ pub fn scale_of(gain: f64, [lo, hi]: [f64; 2]) -> f64 {
     gain.abs().max(0.05 * (hi - lo))
 }
 
-impl Param {
-    /// The parameter at `index` of [`qmarc_config::TUNE_PARAMS`].
-    fn at(index: usize) -> Param {
-        Param::named(qmarc_config::TUNE_PARAMS[index]).unwrap_or_else(|| unreachable!())
-    }
-}
-
 /// argmin's view of one motor's search.
 struct MotorProblem<'s, 'a> {
     search: &'s RefCell<Search<'a>>,
@@ -306,22 +325,7 @@ pub fn judge(
     eval: &mut dyn Evaluator,
 ) -> Result<(Option<f64>, Verdict), EvalError> {
     let mut ignore = |_: &Record| {};
-    let mut search = Search {
-        eval,
-        tune: plan.tune,
-        objective: plan.objective,
-        params: plan.params,
-        scale: Vec::new(),
-        best: best.to_vec(),
-        best_value: vec![f64::INFINITY; best.len()],
-        penalty: 0.0,
-        records: Vec::new(),
-        on_record: &mut ignore,
-        aborted: None,
-        calls: 0,
-        round_calls: 0,
-    };
-    search.judge(motor, candidate)
+    Search::new(plan, best, eval, &mut ignore, 0.0).judge(motor, candidate)
 }
 
 /// Tunes every motor of `before` in turn on `eval`'s path; `on_record` sees each candidate.
@@ -342,23 +346,8 @@ pub fn tune(
         });
     }
     let n = before.len();
-    let first = before_run.motors.iter().map(|f| f.objective(plan.objective));
-    let worst = first.clone().fold(0.0, f64::max);
-    let search = RefCell::new(Search {
-        eval,
-        tune: plan.tune,
-        objective: plan.objective,
-        params: plan.params,
-        scale: Vec::new(),
-        best: before.to_vec(),
-        best_value: vec![f64::INFINITY; n],
-        penalty: 1e3 * (1.0 + worst),
-        records: Vec::new(),
-        on_record,
-        aborted: None,
-        calls: 0,
-        round_calls: 0,
-    });
+    let worst = before_run.motors.iter().map(|f| f.objective(plan.objective)).fold(0.0, f64::max);
+    let search = RefCell::new(Search::new(plan, before, eval, on_record, 1e3 * (1.0 + worst)));
     for motor in 0..n {
         if search.borrow().aborted.is_some() {
             break;
