@@ -80,7 +80,8 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
                 last[m]
             )));
         }
-        let log = std::fs::File::create(out.join("tune.log")).map_err(internal)?;
+        let log_path = out.join("tune.log");
+        let log = std::fs::File::create(&log_path).map_err(internal)?;
         let moves = out.join("moves");
         let mut mover =
             |mode: Mode, s: &Settings| -> Result<(qmarc_report::Summary, PathBuf), String> {
@@ -95,7 +96,13 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
                     settings: Some(s),
                 };
                 let o = one_move(args, &command, io).map_err(|(_, e)| format!("{e:#}"))?;
-                o.summary.ok_or_else(|| format!("no move was made (exit code {})", o.code))
+                o.summary.ok_or_else(|| {
+                    format!(
+                        "no move was made (exit code {}): the processes say why in {}",
+                        o.code,
+                        log_path.display()
+                    )
+                })
             };
         let mut eval = RealEvaluator::new(&settings, &mut mover, stop);
         qmarc_starter::tune::run(&settings, &mut eval, &out, None, &mut on_record)
