@@ -501,3 +501,61 @@ fn console_pages_are_usable_and_one_move_runs_at_a_time_issue_10() {
     drop(tmux);
     run.assert_clean();
 }
+
+/// Issue 15's Tune action: Ctrl-T tunes the gains on the settings' path (the starter's
+/// `tune run`), the progress comes as lines in the log, the results page shows the before →
+/// after figures and gains, and Ctrl-A puts the tuned gains in the form, which F10 saves.
+#[test]
+fn console_tunes_the_gains_on_the_path_and_takes_them_issue_15() {
+    let run = TestRun::new("constune");
+    let xz = knots("xz-pick-place-spline.txt");
+    let config = run.config_with(&[
+        ("knots", &format!("{:?}", xz.display().to_string())),
+        ("tune.budget", "6"),
+    ]);
+    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
+    tmux.wait_for("the setup screen", Duration::from_secs(30), setup_drawn);
+    let shipped_kp = kp_row(&tmux.screen());
+    tmux.keys(&["C-t"]);
+    let s = tmux.wait_for("the tuning's results", Duration::from_secs(300), |s| {
+        s.contains("Results of the last tuning") && s.contains("DAC sat.")
+    });
+    assert!(s.contains("tune done") && s.contains("candidates"), "{s}");
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run.out("out").join("tune/tune-summary.json")).expect("summary"),
+    )
+    .expect("tune-summary.json");
+    let abs = |m: usize, when: &str| summary["motors"][m][when]["abs_rad"].as_f64().expect("Σ|e|");
+    for m in 0..3 {
+        assert!(abs(m, "after") < abs(m, "before"), "motor {} not better: {summary}", m + 1);
+    }
+    // Σ|e| of motor 1 before → after, as the page shows it.
+    let cell = format!("{:.3}→{:.3}", abs(0, "before"), abs(0, "after"));
+    assert!(s.contains(&cell), "{cell} not shown:\n{s}");
+
+    // The log has the starter's progress lines, the first at its top.
+    tmux.keys(&["F3", "Home"]);
+    tmux.wait_for("the progress lines", Duration::from_secs(10), |s| {
+        s.contains("tune progress: motor 1/3, candidate 1,")
+    });
+
+    // Ctrl-A: the tuned gains in the form (shown on the setup page), then saved by F10.
+    tmux.keys(&["C-a", "F1"]);
+    tmux.wait_for("the tuned gains in the form", Duration::from_secs(10), |s| {
+        setup_drawn(s) && kp_row(s) != shipped_kp
+    });
+    tmux.keys(&["F10"]);
+    let (status, s) = tmux.wait_exit(Duration::from_secs(20));
+    assert_eq!(status, 0, "{s}");
+    let saved: toml::Table =
+        toml::from_str(&std::fs::read_to_string(&config).expect("settings")).expect("TOML");
+    for m in 0..3 {
+        for (k, key) in ["kp", "ki", "kd", "kvff", "kaff"].iter().enumerate() {
+            let want = summary["motors"][m]["gains_after"][k].as_f64().unwrap();
+            let got = saved["motor"][m][key].as_float().unwrap();
+            assert_eq!(got, want, "motor {} {key} saved", m + 1);
+        }
+    }
+    drop(tmux);
+    run.assert_clean();
+}

@@ -63,6 +63,8 @@ pub struct App {
     pub running: Option<Running>,
     /// The last move's outcome.
     pub last: Option<MoveResult>,
+    /// The last tuning's outcome (Ctrl-T).
+    pub tuned: Option<crate::tuning::TuneResult>,
     /// The session's moves.
     pub history: Vec<HistoryEntry>,
     /// The motor the charts show (0-based).
@@ -93,6 +95,7 @@ impl App {
             iox_root: qmarc_proto::service::DEFAULT_ROOT.to_string(),
             running: None,
             last: None,
+            tuned: None,
             history: Vec::new(),
             chart_motor: 0,
             quit: None,
@@ -111,7 +114,7 @@ impl App {
         app
     }
 
-    fn say(&mut self, msg: impl Into<String>, error: bool) {
+    pub(crate) fn say(&mut self, msg: impl Into<String>, error: bool) {
         self.status = (msg.into(), error);
         self.said = true;
     }
@@ -198,7 +201,7 @@ impl App {
         self.hint();
     }
 
-    fn commit_edit(&mut self) {
+    pub(crate) fn commit_edit(&mut self) {
         if self.editing.take().is_some() {
             self.form.validate();
         }
@@ -275,6 +278,8 @@ impl App {
             Mode::Home => Action::Home,
             Mode::Run => Action::Run,
             Mode::Step => Action::Step,
+            // It runs the path.
+            Mode::Tune => Action::Run,
         };
         if let Some((field, e)) = self.form.blocking(action) {
             if let Some(i) = field {
@@ -354,14 +359,20 @@ impl App {
     /// Takes the starter's output; when the move has ended, loads its results.
     pub fn poll(&mut self) {
         let Some(r) = &mut self.running else { return };
-        self.log.extend(r.drain());
-        let Some(status) = r.finished() else {
-            self.trim_log();
-            return;
-        };
-        // Its last lines (why it failed, often) may still be on their way from the children.
-        self.log.extend(r.drain_to_end(std::time::Duration::from_secs(2)));
+        let mut fresh = r.drain();
+        let ended = r.finished();
+        if ended.is_some() {
+            // Its last lines (why it failed, often) may still be on their way from the
+            // children.
+            fresh.extend(r.drain_to_end(std::time::Duration::from_secs(2)));
+        }
+        let tuning = r.mode == Mode::Tune;
+        if tuning {
+            self.tune_progress(&fresh);
+        }
+        self.log.extend(fresh);
         self.trim_log();
+        let Some(status) = ended else { return };
         let Some(r) = self.running.take() else { return };
         if r.killed {
             // Its children stop on their parent-death signal; what it could not remove goes
@@ -369,8 +380,14 @@ impl App {
             std::thread::sleep(std::time::Duration::from_millis(200));
             qmarc_starter::remove_stale_files(&self.iox_root);
         }
+        if tuning {
+            return self.tune_ended(&r, status);
+        }
         match MoveResult::load_for(&r.out_dir, r.pid()) {
             Ok(result) => {
+                if let Some(t) = &mut self.tuned {
+                    t.latest = false;
+                }
                 self.record(r.gains.clone(), &result);
                 let fault = result
                     .summary
@@ -446,6 +463,8 @@ impl App {
             KeyCode::F(5) => self.start(Mode::Run),
             KeyCode::F(6) => self.start(Mode::Step),
             KeyCode::F(9) => self.abort_key(),
+            KeyCode::Char('t') if ctrl => self.start(Mode::Tune),
+            KeyCode::Char('a') if ctrl => self.apply_tuned(),
             KeyCode::F(10) => {
                 if self.running.is_some() {
                     return self.say("a move is running: F9 aborts it first", true);
@@ -488,7 +507,7 @@ impl App {
     }
 
     /// Shows `page` from its top.
-    fn show(&mut self, page: Page) {
+    pub(crate) fn show(&mut self, page: Page) {
         if page != self.page {
             self.page_scroll = 0;
         }

@@ -3,7 +3,8 @@
 //! It edits the five sections of the settings file the starter reads ([`form`]), runs moves
 //! by spawning `qmarc-starter` and streaming its output ([`runner`]), and shows each move's
 //! error figures, timing, fault and charts right after it, with a history of the session's
-//! moves ([`results`]). [`app`] holds the state and the keys, [`ui`] draws it; both work on
+//! moves ([`results`]); Ctrl-T tunes the gains on the path and Ctrl-A takes the tuned ones
+//! ([`tuning`]). [`app`] holds the state and the keys, [`ui`] draws it; both work on
 //! ratatui's test backend, which is how the screens are tested.
 //!
 //! ```
@@ -30,4 +31,5 @@ pub mod app;
 pub mod form;
 pub mod results;
 pub mod runner;
+pub mod tuning;
 pub mod ui;

@@ -25,15 +25,28 @@ pub enum Mode {
     Run,
     /// `step`.
     Step,
+    /// `tune run`: the gains tuned on the settings' path.
+    Tune,
 }
 
 impl Mode {
-    /// The starter's subcommand.
+    /// The starter's subcommand, as the console names it.
     pub fn arg(self) -> &'static str {
         match self {
             Mode::Home => "home",
             Mode::Run => "run",
             Mode::Step => "step",
+            Mode::Tune => "tune",
+        }
+    }
+
+    /// The starter's arguments after `--config`.
+    pub fn args(self) -> &'static [&'static str] {
+        match self {
+            Mode::Home => &["home"],
+            Mode::Run => &["run"],
+            Mode::Step => &["step"],
+            Mode::Tune => &["tune", "run"],
         }
     }
 }
@@ -106,7 +119,7 @@ fn tail(mut file: File, done: Arc<AtomicBool>, tx: Sender<String>) {
 }
 
 impl Running {
-    /// Spawns `starter EXTRA… --config=CONFIG MODE` in `cwd` (relative paths of the settings
+    /// Spawns `starter EXTRA… --config=CONFIG MODE…` in `cwd` (relative paths of the settings
     /// are relative to it, as for the starter run by hand). The starter gets a process group
     /// of its own, so signals of the terminal reach only the console, which decides what
     /// stops the move; and SIGTERM if the console dies, so no move outlives it.
@@ -123,7 +136,7 @@ impl Running {
         let mut cmd = Command::new(starter);
         cmd.args(extra)
             .arg(config_arg)
-            .arg(mode.arg())
+            .args(mode.args())
             .current_dir(cwd)
             .stdin(Stdio::null())
             .stdout(Stdio::from(writer.try_clone()?))

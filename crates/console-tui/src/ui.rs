@@ -59,7 +59,7 @@ pub fn draw(f: &mut Frame, app: &App) {
     let style = if *err { Style::new().fg(Color::Red).bold() } else { Style::new() };
     f.render_widget(Line::styled(format!(" {msg}"), style), status);
     f.render_widget(
-        Line::from(" F2 Home  F5 Run  F6 Step  F9 Abort  F10 Exit (save)  F12 Cancel")
+        Line::from(" F2 Home  F5 Run  F6 Step  ^T Tune  F9 Abort  F10 Exit (save)  F12 Cancel")
             .style(Style::new().dim()),
         keys,
     );
@@ -176,7 +176,11 @@ fn draw_gains(f: &mut Frame, app: &App, area: Rect) {
         lines.push(Line::from(spans));
     }
     f.render_widget(
-        Paragraph::new(lines).block(Block::bordered().title(" Gains (one column per motor) ")),
+        Paragraph::new(lines).block(
+            Block::bordered()
+                .title(" Gains (one column per motor) ")
+                .title_bottom(" ^T tune on the path · ^A take tuned "),
+        ),
         area,
     );
 }
@@ -274,14 +278,39 @@ fn draw_log(f: &mut Frame, app: &App, area: Rect) {
 }
 
 fn draw_results(f: &mut Frame, app: &App, area: Rect) {
-    let Some(r) = &app.last else {
-        f.render_widget(
-            Paragraph::new("No move yet: F6 steps, F5 runs the trajectory, F2 homes.")
-                .block(Block::bordered().title(" Results ")),
-            area,
-        );
-        return;
+    let tuned = app.tuned.as_ref().filter(|t| t.latest);
+    let mut lines = tuned.map(crate::tuning::lines).unwrap_or_default();
+    let title = match (tuned, &app.last) {
+        (None, None) => {
+            f.render_widget(
+                Paragraph::new("No move yet: F6 steps, F5 runs the trajectory, F2 homes.")
+                    .block(Block::bordered().title(" Results ")),
+                area,
+            );
+            return;
+        }
+        (Some(_), last) => {
+            if last.is_some() {
+                lines.push(Line::styled("The path with the tuned gains:", Style::new().bold()));
+            }
+            " Results of the last tuning ".to_string()
+        }
+        (None, Some(r)) => match r.age(std::time::SystemTime::now()) {
+            Some(age) => format!(" Results of the last move ({age}) "),
+            None => " Results of the last move ".to_string(),
+        },
     };
+    if let Some(r) = &app.last {
+        lines.extend(move_lines(r));
+    }
+    // Wrapped, so a long fault message is read whole at 80 columns; scrolled (↑↓ PgUp PgDn),
+    // so a long report is read whole at 80×24.
+    let p = scrolled(lines, app.page_scroll, area);
+    f.render_widget(p.block(Block::bordered().title(title)), area);
+}
+
+/// The summary of the move `r`: its outcome, error figures, settling and timing.
+fn move_lines(r: &crate::results::MoveResult) -> Vec<Line<'static>> {
     let s = &r.summary;
     let mut lines = Vec::new();
     let what = s.what();
@@ -382,14 +411,7 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
     for w in &s.warnings {
         lines.push(Line::styled(format!("warning: {w}"), Style::new().fg(Color::Yellow)));
     }
-    // Wrapped, so a long fault message is read whole at 80 columns; scrolled (↑↓ PgUp PgDn),
-    // so a long report is read whole at 80×24.
-    let p = scrolled(lines, app.page_scroll, area);
-    let title = match r.age(std::time::SystemTime::now()) {
-        Some(age) => format!(" Results of the last move ({age}) "),
-        None => " Results of the last move ".to_string(),
-    };
-    f.render_widget(p.block(Block::bordered().title(title)), area);
+    lines
 }
 
 fn bounds(pts: &[&[(f64, f64)]]) -> ([f64; 2], [f64; 2]) {

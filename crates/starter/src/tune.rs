@@ -5,8 +5,9 @@
 //! `--paced`, every candidate is a real move through the process set, within `tune.max_change`
 //! of the best gains and at most `tune.max_moves` moves. Writes into `--out` (default
 //! `<gather.out_dir>/tune`): `tune.csv` (every candidate), `tuned-gains.toml`,
-//! `convergence.png` and, on the simulated robot, `before/` and `after/` (the path's data
-//! with the gains before and after).
+//! `convergence.png`, `tune-summary.json` (the before/after figures and gains, for the
+//! console) and, on the simulated robot, `before/` and `after/` (the path's data with the
+//! gains before and after).
 
 use crate::cli::RunArgs;
 use anyhow::{Context, anyhow};
@@ -137,6 +138,8 @@ pub fn run(
         None | Some(EvalError::MoveBudget(_)) => eval.path(&after).ok(),
         Some(_) => None,
     };
+    let summary = report::TuneSummary::new(settings, &tuned, &after, after_run.as_ref());
+    files.push(summary.write(out).with_context(|| format!("cannot write into {}", out.display()))?);
     Ok(TuneOutcome { tuned, after, after_run, files })
 }
 

@@ -15,6 +15,10 @@ use qmarc_tune::real::RealEvaluator;
 use qmarc_tune::report;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// How often a line of progress is printed when no terminal shows the bar.
+const PROGRESS_EVERY: Duration = Duration::from_millis(250);
 
 /// `tune`: better gains on the path of `t`.
 pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure> {
@@ -57,16 +61,19 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
         .map_err(|e| refused(anyhow!("cannot create {}: {e}", out.display())))?;
     let stop = qmarc_timer::stop::install().map_err(internal)?;
     let bar = progress_bar(&settings)?;
+    // Without a terminal (the console, a log file) the bar is not drawn: a line of progress
+    // instead, at each motor's first candidate and then every PROGRESS_EVERY.
+    let mut last_line: Option<(usize, Instant)> = None;
     let mut on_record = |r: &Record| {
+        let line = report::progress_line(r, settings.n_motors, &settings.tune.objective);
         bar.set_position(r.motor as u64);
-        bar.set_message(format!(
-            "motor {}, candidate {}, {} moves · best {} {}",
-            r.motor + 1,
-            r.evaluation,
-            r.moves,
-            settings.tune.objective,
-            if r.best.is_finite() { format!("{:.5}", r.best) } else { "–".into() }
-        ));
+        bar.set_message(line.trim_start_matches(report::PROGRESS_PREFIX).to_string());
+        if bar.is_hidden()
+            && last_line.is_none_or(|(m, at)| m != r.motor || at.elapsed() >= PROGRESS_EVERY)
+        {
+            println!("{line}");
+            last_line = Some((r.motor, Instant::now()));
+        }
     };
     let outcome = if real {
         let far = (0..settings.n_motors)

@@ -84,7 +84,7 @@ impl Param {
 }
 
 /// The error figures of one motor over the path (thesis Table 5-2), and its DAC saturation.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Figures {
     /// Σ|e|, rad.
     pub abs_rad: f64,

@@ -3,7 +3,7 @@
 //! the settings file with them (never the file itself).
 
 use crate::eval::{Figures, PathRun};
-use crate::optimise::{Record, Verdict};
+use crate::optimise::{Record, Tuned, Verdict};
 use qmarc_config::{MotorGains, TUNE_PARAMS};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -55,7 +55,7 @@ pub fn fragment(gains: &[MotorGains], comment: &str) -> String {
 
 /// A gain as the settings file writes it: 4 significant digits after the point is plenty
 /// (the objective does not see less), always with a decimal point (TOML float).
-fn gain_text(v: f64) -> String {
+pub fn gain_text(v: f64) -> String {
     let r = (v * 1e3).round() / 1e3;
     if r.fract() == 0.0 { format!("{r:.1}") } else { format!("{r}") }
 }
@@ -197,4 +197,107 @@ pub fn write_copy(
             .write_all(out.as_bytes())
     };
     write().map_err(|e| io(&format!("{}: {e}", dest.display())))
+}
+
+/// What a tuning writes for programs that show it (the console): `tune-summary.json` in its
+/// output folder.
+pub const SUMMARY_FILE: &str = "tune-summary.json";
+
+/// How the lines of progress printed when no terminal shows the bar begin.
+pub const PROGRESS_PREFIX: &str = "tune progress: ";
+
+/// A line of progress: the motor, the candidate, the moves and the best objective so far.
+pub fn progress_line(r: &Record, n_motors: usize, objective: &str) -> String {
+    format!(
+        "{PROGRESS_PREFIX}motor {}/{n_motors}, candidate {}, {} moves, best {objective} {}",
+        r.motor + 1,
+        r.evaluation,
+        r.moves,
+        if r.best.is_finite() { format!("{:.5}", r.best) } else { "–".into() }
+    )
+}
+
+/// One motor in [`TuneSummary`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MotorOutcome {
+    /// The path's figures with the gains before.
+    pub before: Figures,
+    /// With the gains after (`None` when a stop or a fault ended the tuning).
+    pub after: Option<Figures>,
+    /// Kp, Ki, Kd, Kvff, Kaff before.
+    pub gains_before: [f64; 5],
+    /// Kp, Ki, Kd, Kvff, Kaff after, rounded as the settings file gets them.
+    pub gains_after: [f64; 5],
+}
+
+/// What a tuning found, as `tune-summary.json` says it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TuneSummary {
+    /// The `qmarc-starter` that tuned (a reader tells its own tuning from an earlier one).
+    pub starter_pid: u32,
+    /// The knot file of the path.
+    pub knots: String,
+    /// The trajectory generator.
+    pub method: String,
+    /// The objective (`abs`, `sse`, `max`).
+    pub objective: String,
+    /// The gains tuned (`kp` … `kaff`).
+    pub params: Vec<String>,
+    /// Candidates evaluated.
+    pub candidates: usize,
+    /// Moves made (of the path and of steps; in-process lock-step moves on the simulated
+    /// robot).
+    pub moves: u32,
+    /// Why it ended early, if it did: the gains after are then the last safe ones.
+    pub ended_early: Option<String>,
+    /// Per motor.
+    pub motors: Vec<MotorOutcome>,
+}
+
+impl TuneSummary {
+    /// The summary of tuning `settings`' path: `tuned`, the gains after as written
+    /// (`after`) and the path with them (`after_run`).
+    pub fn new(
+        settings: &qmarc_config::Settings,
+        tuned: &Tuned,
+        after: &[MotorGains],
+        after_run: Option<&PathRun>,
+    ) -> TuneSummary {
+        let five = |g: &MotorGains| [g.kp, g.ki, g.kd, g.kvff, g.kaff];
+        let knots = settings.trajectory.knots.as_ref();
+        TuneSummary {
+            starter_pid: std::process::id(),
+            knots: knots.map_or(String::new(), |k| k.display().to_string()),
+            method: settings.trajectory.method.clone(),
+            objective: settings.tune.objective.clone(),
+            params: settings.tune.params.clone(),
+            candidates: tuned.records.len(),
+            moves: tuned.records.last().map_or(0, |r| r.moves),
+            ended_early: tuned.aborted.as_ref().map(ToString::to_string),
+            motors: (0..after.len())
+                .map(|m| MotorOutcome {
+                    before: tuned.before_run.motors.get(m).copied().unwrap_or_default(),
+                    after: after_run.and_then(|r| r.motors.get(m).copied()),
+                    gains_before: five(&tuned.before[m]),
+                    gains_after: five(&after[m]),
+                })
+                .collect(),
+        }
+    }
+
+    /// Writes it as [`SUMMARY_FILE`] into `dir`.
+    pub fn write(&self, dir: &Path) -> std::io::Result<std::path::PathBuf> {
+        let path = dir.join(SUMMARY_FILE);
+        let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
+        std::fs::write(&path, text + "\n")?;
+        Ok(path)
+    }
+
+    /// Reads [`SUMMARY_FILE`] from `dir`.
+    pub fn read(dir: &Path) -> Result<TuneSummary, String> {
+        let path = dir.join(SUMMARY_FILE);
+        let text =
+            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
 }

@@ -320,3 +320,60 @@ fn the_actions_fit_their_box_at_any_size_issue_10() {
     let s = text(&render(&app, 80, 18));
     assert!(s.contains("ready: F2 F5 F6 F10 F12"), "compact at 80×18:\n{s}");
 }
+
+/// A tuning's results page fits 80 columns (three motors' before → after cells side by side)
+/// and Ctrl-A puts exactly the tuned gains into the form, unsaved.
+#[test]
+fn a_tuning_is_shown_before_after_and_ctrl_a_takes_its_gains_issue_15() {
+    use crate::tuning::TuneResult;
+    use qmarc_tune::eval::Figures;
+    use qmarc_tune::report::{MotorOutcome, TuneSummary};
+    let (_scratch, mut app) = app();
+    let fig = |abs: f64| Figures {
+        abs_rad: abs,
+        sse_rad2: abs * 1e-3,
+        max_rad: 0.01,
+        min_rad: -0.01,
+        saturated: 0.0,
+    };
+    let motor = |m: f64| MotorOutcome {
+        before: fig(2.0 + m),
+        after: Some(fig(0.5 + m * 0.1)),
+        gains_before: [182_000.0, 0.0, 2_800.0, 180_000.0, 100.0],
+        gains_after: [190_000.5 + m, 0.0, 2_900.0, 200_000.0, 1_000_000.0],
+    };
+    app.tuned = Some(TuneResult {
+        summary: TuneSummary {
+            starter_pid: 1,
+            knots: "knots/xz-pick-place-spline.txt".into(),
+            method: "spline".into(),
+            objective: "abs".into(),
+            params: vec!["kp".into(), "kvff".into(), "kaff".into()],
+            candidates: 898,
+            moves: 0,
+            ended_early: None,
+            motors: (0..3).map(|m| motor(f64::from(m))).collect(),
+        },
+        dir: "out/tune".into(),
+        latest: true,
+    });
+    app.page = Page::Results;
+    let s = text(&render(&app, 80, 24));
+    for want in ["Results of the last tuning", "898 candidates", "2.000→0.500 ×0.25", "kaff"] {
+        assert!(s.contains(want), "{want} missing:\n{s}");
+    }
+    // Each motor's cell starts in its own column: M3's is whole within 80 columns.
+    assert!(s.contains("4.000→0.700 ×0.17"), "motor 3 cut:\n{s}");
+    use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+    let text_at = |app: &App, m: usize, key: &'static str| {
+        app.form.fields[app.form.index(Place::Motor(m, key)).unwrap()].text.clone()
+    };
+    let kd = text_at(&app, 0, "kd");
+    app.on_key(KeyEvent::new(KeyCode::Char('a'), KeyModifiers::CONTROL));
+    assert_eq!(text_at(&app, 2, "kp"), "190002.5");
+    assert_eq!(text_at(&app, 0, "kaff"), "1000000.0");
+    // Kd was not tuned: left as it was (not the summary's value).
+    assert_eq!(text_at(&app, 0, "kd"), kd);
+    assert!(app.form.dirty(), "taken into the form, not saved");
+    assert!(app.status.0.contains("tuned gains in the form"), "{:?}", app.status);
+}
