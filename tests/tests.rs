@@ -7,6 +7,7 @@ mod e2e;
 mod first_hour;
 mod hardware;
 mod safety;
+mod telemetry;
 mod tidy;
 mod trajectories;
 mod tune;

@@ -65,6 +65,7 @@ const LAYERS: &[&str] = &[
     "timer",
     "config",
     "controller",
+    "telemetry",
     "hwserver",
     "plugins",
     "paths",

@@ -31,6 +31,7 @@ mod s626;
 mod sim;
 mod source;
 mod step;
+mod telemetry;
 mod timer;
 mod trajectory;
 mod tune;
@@ -45,6 +46,7 @@ pub use run::{Mode, RunSpec, RunSpecError};
 pub use s626::{S626_DIO_CHANNELS, S626Settings};
 pub use sim::{DEFAULT_SIM_STATE_FILE, SimSettings};
 pub use step::{MAX_STEP_COUNTS, StepSettings};
+pub use telemetry::{MAX_TELEMETRY_EVERY, TelemetrySettings};
 pub use timer::{TimerMethod, TimerSettings};
 pub use trajectory::{DEFAULT_MAX_DURATION_S, TrajectorySettings};
 pub use tune::{TUNE_OBJECTIVES, TUNE_PARAMS, TuneSettings, check_objective, check_params};
@@ -121,6 +123,9 @@ pub struct Settings {
     pub robot: Option<RobotSettings>,
     /// `[tune]`: `qmarc-starter tune`.
     pub tune: TuneSettings,
+    /// `[telemetry]`: the live samples of the loop.
+    #[serde(default)]
+    pub telemetry: TelemetrySettings,
     /// Gains of every `[[motor]]` table (at least `n_motors`, at most [`MAX_MOTORS`]).
     pub motors: Vec<MotorGains>,
     /// Limits and homing of every `[[motor]]` table.
@@ -181,6 +186,8 @@ struct RawFile {
     #[serde(default)]
     tune: tune::RawTune,
     #[serde(default)]
+    telemetry: telemetry::RawTelemetry,
+    #[serde(default)]
     robot: Option<Spanned<robot::RawRobot>>,
     #[serde(default)]
     motor: Vec<Spanned<motor::RawMotor>>,
@@ -229,6 +236,7 @@ impl RawFile {
         }
         let homing = self.homing.check(src)?;
         let tune = self.tune.check(src)?;
+        let telemetry = self.telemetry.check(src)?;
         let longest: f64 = safety.iter().map(|s| homing.longest_s(s.home_offset_counts)).sum();
         if longest > trajectory.max_duration_s {
             return Err(src.invalid(
@@ -266,6 +274,7 @@ impl RawFile {
             s626,
             robot,
             tune,
+            telemetry,
             motors,
             safety,
         })

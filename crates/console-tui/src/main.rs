@@ -1,6 +1,6 @@
 //! `qmarc`: the console. `qmarc [--config FILE]` opens it; `qmarc home|step|run …` does the
 //! same as `qmarc-starter home|step|run …` without it, for scripts (same options, same exit
-//! codes).
+//! codes); `qmarc scope …` shows or records a running move's live telemetry.
 
 use anyhow::Context;
 use clap::{Args as _, CommandFactory, Parser};
@@ -24,7 +24,8 @@ use std::time::Duration;
     version,
     about = "QMARC console: set up, home, step, run and tune the robot",
     after_help = "Without the console: qmarc [qmarc-starter options] home|step|run [options] \
-                  runs qmarc-starter with the same arguments."
+                  runs qmarc-starter with the same arguments; qmarc scope [--help] shows a \
+                  running move's live telemetry."
 )]
 struct Args {
     /// Settings file (the one qmarc-starter reads).
@@ -182,6 +183,10 @@ fn plain_subcommand(raw: &[OsString]) -> Option<(Option<PathBuf>, Vec<OsString>)
 fn main() -> ExitCode {
     // `qmarc home|step|run …`: the starter's command line, run in place of this process.
     let raw: Vec<OsString> = std::env::args_os().skip(1).collect();
+    // `qmarc scope …`: a running move's live telemetry.
+    if raw.first().is_some_and(|a| a == "scope") {
+        return qmarc_telemetry::scope::main(&raw[1..]);
+    }
     if let Some((starter, pass)) = plain_subcommand(&raw) {
         let starter = starter.unwrap_or_else(starter_next_to_me);
         // Named `qmarc` for the starter's usage lines (`qmarc step --help`).

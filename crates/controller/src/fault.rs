@@ -42,6 +42,35 @@ pub enum FaultKind {
 }
 
 impl FaultKind {
+    /// Every kind, in the order of their codes ([`FaultKind::code`]).
+    pub const ALL: [FaultKind; 15] = [
+        FaultKind::LimitSwitch,
+        FaultKind::HwserverLost,
+        FaultKind::HwserverShutdown,
+        FaultKind::Watchdog,
+        FaultKind::HardwareFault,
+        FaultKind::EncoderFault,
+        FaultKind::ProtocolError,
+        FaultKind::Aborted,
+        FaultKind::TrajectoryStarved,
+        FaultKind::TrajectoryError,
+        FaultKind::FollowingError,
+        FaultKind::SoftwareLimit,
+        FaultKind::Overrun,
+        FaultKind::HomingFailed,
+        FaultKind::ControllerLost,
+    ];
+
+    /// Its number in a telemetry sample (`fault` there is this + 1; 0 is no fault).
+    pub fn code(self) -> u32 {
+        FaultKind::ALL.iter().position(|&k| k == self).unwrap_or(0) as u32
+    }
+
+    /// The kind of `code`.
+    pub fn from_code(code: u32) -> Option<FaultKind> {
+        FaultKind::ALL.get(code as usize).copied()
+    }
+
     /// The `kind` string of `summary.json`.
     pub fn name(self) -> &'static str {
         match self {

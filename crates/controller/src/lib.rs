@@ -62,4 +62,5 @@ pub mod plan;
 pub mod progress;
 pub mod servo;
 pub mod stats;
+pub mod telemetry;
 pub mod traj;

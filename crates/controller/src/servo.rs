@@ -16,6 +16,7 @@ use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_timer::{Clock, Tick, TickerError};
 
+mod live;
 mod run;
 
 /// Where a move is. `run` goes Idle → Preparing → Moving (or Homing) → Settling → Done, or to
@@ -167,6 +168,10 @@ pub struct Servo {
     integrated_error: [f64; MAX_MOTORS],
     /// Where the move's progress is published, if anywhere.
     progress: Option<crate::progress::Progress>,
+    /// Where the live samples go, if anywhere (until the move ends).
+    telemetry: Option<crate::telemetry::Telemetry>,
+    /// Live samples dropped because their ring was full (known once the move ended).
+    telemetry_dropped: u32,
 }
 
 impl Servo {
@@ -204,7 +209,20 @@ impl Servo {
             phase: Phase::Idle,
             integrated_error: [0.0; MAX_MOTORS],
             progress: None,
+            telemetry: None,
+            telemetry_dropped: 0,
         }
+    }
+
+    /// Hands a live sample to `telemetry` every few cycles ([`crate::telemetry`]).
+    pub fn with_telemetry(mut self, telemetry: Option<crate::telemetry::Telemetry>) -> Servo {
+        self.telemetry = telemetry;
+        self
+    }
+
+    /// Live samples the loop dropped because their ring was full.
+    pub fn telemetry_dropped(&self) -> u32 {
+        self.telemetry.as_ref().map_or(self.telemetry_dropped, |t| t.dropped())
     }
 
     /// Publishes the move's phase and cycles in `progress` as it goes.
@@ -426,6 +444,7 @@ impl Servo {
         // 5. Gather.
         self.timing.record_cycle(tick, read_start, read_done, computed, written);
         self.record(n, tick);
+        self.publish(n, tick, written, resp.status);
         self.executed += 1;
         if let Some(p) = &self.progress {
             p.set_cycle(self.executed, self.generator.progress());
@@ -521,12 +540,7 @@ impl Servo {
         }
         if self.gather.due(n) {
             // Integer ns divided once: the correctly rounded decimal, no accumulated noise.
-            let time_ns = if self.plan.deterministic {
-                n * self.plan.period_ns
-            } else {
-                tick.woke_ns.saturating_sub(self.t0_ns)
-            };
-            let time_s = time_ns as f64 / 1e9;
+            let time_s = self.sample_time_ns(n, tick) as f64 / 1e9;
             self.gather.push(GatherRow {
                 cycle: n,
                 time_s,
@@ -534,6 +548,17 @@ impl Servo {
                 act: self.act,
                 dac: self.dac,
             });
+        }
+    }
+
+    /// The gathered time of sample `n`, ns since tick 0: simulated in lock-step runs, else
+    /// when the thread woke.
+    #[inline]
+    fn sample_time_ns(&self, n: u64, tick: &Tick) -> u64 {
+        if self.plan.deterministic {
+            n * self.plan.period_ns
+        } else {
+            tick.woke_ns.saturating_sub(self.t0_ns)
         }
     }
 

@@ -51,8 +51,11 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
         s.trajectory.knots = Some(knots(example));
         for l in LAWS {
             let generator = (g.build)(&s).unwrap();
+            // With live telemetry, a sample every cycle into a ring nobody empties.
+            let (telemetry, _ring) = qmarc_controller::telemetry::ring(1);
             let mut servo =
-                Servo::new(plan(3), generator, (l.build)(&s), Box::new(MockClock::new(0)));
+                Servo::new(plan(3), generator, (l.build)(&s), Box::new(MockClock::new(0)))
+                    .with_telemetry(Some(telemetry));
             let mut link = CoreLink::new(lockstep());
             let mut ticker = ManualTicker::new(400_000);
             servo.prepare(&mut link).unwrap();
@@ -212,12 +215,14 @@ fn servo_cycle_makes_no_system_call_under_seccomp_strict_mode() {
             let mut s = settings();
             let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
             s.trajectory.knots = Some(knots(example));
+            let (telemetry, ring) = qmarc_controller::telemetry::ring(1);
             let mut servo = Servo::new(
                 plan(3),
                 (g.build)(&s).unwrap(),
                 (l.build)(&s),
                 Box::new(MockClock::new(0)),
-            );
+            )
+            .with_telemetry(Some(telemetry));
             let mut link = CoreLink::new(lockstep());
             let mut ticker = ManualTicker::new(400_000);
             servo.prepare(&mut link).unwrap();
@@ -297,6 +302,8 @@ fn servo_cycle_makes_no_system_call_under_seccomp_strict_mode() {
                 g.name,
                 l.name
             );
+            // Every cycle handed its live sample over, without a system call.
+            assert_eq!(ring.slots(), 3_010, "{} + {}: telemetry samples", g.name, l.name);
             println!(
                 "{} + {}: strict mode: 3000 cycles, {} reads, {} writes",
                 g.name,
@@ -637,4 +644,53 @@ fn the_path_rows_end_where_the_settle_begins_after_missed_periods_issue_13() {
     assert_eq!(path.last(), Some(&50), "the path's last sample is among them");
     let settle = rows.iter().filter(|r| !servo.is_path_sample(r.cycle)).count() as u64;
     assert_eq!(settle, servo.settle_figures().unwrap().0);
+}
+
+/// The loop hands its samples to a ring (no allocation: the tests above); the publishing
+/// thread's iceoryx2 publish allocates exactly one block per sample (the loan's `Rc`,
+/// eclipse-iceoryx/iceoryx2#101), with a reader attached. And every sample put into the ring
+/// reaches the reader, in order, through the real relay thread.
+#[test]
+fn a_telemetry_publish_allocates_exactly_its_loan_and_the_relay_delivers_every_sample() {
+    use qmarc_proto::telemetry::TelemetrySample;
+    use qmarc_telemetry::reader::TelemetryReader;
+    use qmarc_telemetry::relay::{TelemetryPublisher, spawn};
+    let ipc = util::IpcDir::new("telemetry");
+    {
+        let publisher = TelemetryPublisher::open(&ipc.location).unwrap();
+        let reader = TelemetryReader::open(&ipc.location).unwrap();
+        assert!(publisher.publish(TelemetrySample::default()), "the first, connecting");
+        let before = allocations();
+        for k in 0..500 {
+            assert!(publisher.publish(TelemetrySample { cycle: k, ..TelemetrySample::default() }));
+        }
+        assert_eq!(allocations() - before, 500, "one allocation per publish");
+        let mut got = 0;
+        while reader.receive().unwrap().is_some() {
+            got += 1;
+        }
+        assert_eq!(got, 501);
+    }
+    // Through the relay: the loop's end of the ring, let go when the move ends.
+    let reader = {
+        let (mut tx, rx) = qmarc_controller::telemetry::ring(1);
+        let relay = spawn(ipc.location.clone(), rx).unwrap();
+        let reader = (0..200)
+            .find_map(|_| {
+                std::thread::sleep(Duration::from_millis(10));
+                TelemetryReader::open(&ipc.location).ok()
+            })
+            .expect("the relay's service");
+        for k in 0..1_000 {
+            tx.offer(TelemetrySample { cycle: k, ..TelemetrySample::default() });
+        }
+        drop(tx);
+        let report = relay.join();
+        assert_eq!((report.published, report.refused, report.error), (1_000, 0, None));
+        reader
+    };
+    let cycles: Vec<u64> =
+        std::iter::from_fn(|| reader.receive().unwrap()).map(|s| s.cycle).collect();
+    assert_eq!(cycles, (0..1_000).collect::<Vec<_>>(), "every sample, in order");
+    assert_eq!(reader.publishers(), 0, "the relay let go of the service");
 }

@@ -4,7 +4,8 @@
 //! form of the thesis' `ClientMessageT` (section 3.3.1): a message type, a per-motor `f64` data
 //! array, a per-motor `i32` auxiliary array and a status word. The twelve message types of
 //! thesis section 3.6 are [`MsgType`]; what went wrong is named by the bits of [`Status`].
-//! [`service`] opens the iceoryx2 services both sides use, with identical QoS.
+//! [`service`] opens the iceoryx2 services both sides use, with identical QoS; [`telemetry`]
+//! is the live sample a move publishes for its readers.
 //!
 //! ```
 //! use qmarc_proto::{HwMsg, MsgType, Status};
@@ -23,6 +24,7 @@ pub mod exit;
 pub mod msg;
 pub mod service;
 pub mod status;
+pub mod telemetry;
 
 pub use msg::{HwMsg, MotorFlags, MsgType, UnknownMsgType};
 pub use status::Status;

@@ -110,7 +110,7 @@ pub struct ServiceError {
 }
 
 impl ServiceError {
-    fn new(what: &str, name: &str, reason: impl std::fmt::Debug) -> ServiceError {
+    pub(crate) fn new(what: &str, name: &str, reason: impl std::fmt::Debug) -> ServiceError {
         ServiceError { what: format!("{what} `{name}`"), reason: format!("{reason:?}") }
     }
 }
@@ -164,6 +164,13 @@ pub fn open_hw_services(node: &Node<ipc::Service>) -> Result<HwServices, Service
 
 /// Directory of POSIX shared memory, where iceoryx2 puts its segments.
 pub const SHM_DIR: &str = "/dev/shm";
+
+/// The run file of the run with iceoryx2 prefix `prefix` (the settings both children get,
+/// written by the starter): next to its shared memory, so that it goes with the run's other
+/// files, and so that readers of a run (`qmarc scope`) find it.
+pub fn run_file(prefix: &str) -> std::path::PathBuf {
+    std::path::Path::new(SHM_DIR).join(format!("{prefix}run.json"))
+}
 
 impl IpcLocation {
     /// Every file of this prefix that exists now: shared-memory segments in [`SHM_DIR`] and

@@ -117,7 +117,8 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     let location =
         IpcLocation::checked(&spec.iox_prefix, &spec.iox_root).map_err(RunError::Location)?;
     let progress = Progress::open(&Progress::path(&location.prefix)).ok();
-    let servo = build_servo(spec, progress)?;
+    let (telemetry, relay) = telemetry_for(settings, &location);
+    let servo = build_servo(spec, progress)?.with_telemetry(telemetry);
     let handle = spawn_servo(spec, location, servo)?;
     // The servo thread ends by itself on a stop signal, motors disabled first. Should it be
     // blocked outside the loop (nothing enabled), the controller does not wait for it.
@@ -130,8 +131,12 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
         }
         std::thread::sleep(Duration::from_millis(10));
     }
-    let (servo, rt, result, homed_read) =
+    let (mut servo, rt, result, homed_read) =
         handle.join().map_err(|_| RunError::Thread("panicked".into()))?;
+    // The loop lets go of its ring (a move that never began did not): the relay publishes
+    // what is left and ends.
+    servo.end_telemetry();
+    let relayed = relay.map(qmarc_telemetry::relay::Relay::join);
     result?;
 
     let mut summary = summarize(settings, &servo, &rt, spec.mode, spec.deterministic);
@@ -143,8 +148,37 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
             "--unhomed: the frame may not be homed; software position limits were off".into(),
         );
     }
+    if let Some(why) = relayed.and_then(|r| r.error) {
+        summary.warnings.push(format!("no live telemetry: {why}"));
+    }
+    if servo.telemetry_dropped() > 0 {
+        summary.warnings.push(format!(
+            "live telemetry: {} samples dropped (its publishing thread fell behind)",
+            servo.telemetry_dropped()
+        ));
+    }
     write_results(&settings.gather.out_dir, &servo, &mut summary)?;
     Ok(summary)
+}
+
+/// The loop's end of the telemetry ring and the thread publishing it, when
+/// `telemetry.enabled`. A thread that cannot start leaves the loop without telemetry, never
+/// without its move.
+fn telemetry_for(
+    settings: &Settings,
+    location: &IpcLocation,
+) -> (Option<qmarc_controller::telemetry::Telemetry>, Option<qmarc_telemetry::relay::Relay>) {
+    if !settings.telemetry.enabled {
+        return (None, None);
+    }
+    let (tx, rx) = qmarc_controller::telemetry::ring(settings.telemetry.every);
+    match qmarc_telemetry::relay::spawn(location.clone(), rx) {
+        Ok(relay) => (Some(tx), Some(relay)),
+        Err(e) => {
+            eprintln!("qmarc-controller: no live telemetry: {e}");
+            (None, None)
+        }
+    }
 }
 
 /// The move of `spec`: its generator and law from the registry, its plan, and the progress

@@ -55,11 +55,7 @@ pub fn names() -> Names {
     }
 }
 
-/// Where the run file of the run with iceoryx2 prefix `prefix` goes: next to its shared
-/// memory, so that it goes with the run's other files.
-pub fn run_file(prefix: &str) -> std::path::PathBuf {
-    std::path::Path::new(qmarc_proto::service::SHM_DIR).join(format!("{prefix}run.json"))
-}
+pub use qmarc_proto::service::run_file;
 
 /// True if a process other than this one whose command line mentions `needle` is running
 /// (the children of a starter carry its prefix in their arguments).

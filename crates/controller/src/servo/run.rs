@@ -145,6 +145,7 @@ impl Servo {
         if self.fault.is_none() {
             self.enter(Phase::Done);
         }
+        self.end_telemetry();
         Ok(())
     }
 }

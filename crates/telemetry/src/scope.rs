@@ -1,0 +1,289 @@
+//! `qmarc scope [--every N] [--csv FILE] [--duration S] [--iox-prefix P] [--iox-root R]`:
+//! attaches to a running move's telemetry (the run of `--iox-prefix`, or the newest run
+//! found), prints a compact live line per motor or records every sample into a CSV file, and
+//! detaches when the move ends, after `--duration` seconds or on Ctrl-C. Started before a
+//! move, it says that none runs and waits for one.
+
+use crate::reader::{TelemetryReader, location_of, runs};
+use anyhow::Context;
+use clap::Parser;
+use qmarc_controller::fault::FaultKind;
+use qmarc_controller::servo::Phase;
+use qmarc_proto::exit;
+use qmarc_proto::service::IpcLocation;
+use qmarc_proto::telemetry::{TelemetryOpenError, TelemetrySample};
+use std::ffi::OsString;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// Options of `qmarc scope`.
+#[derive(Debug, Clone, PartialEq, Parser)]
+#[command(
+    name = "qmarc scope",
+    about = "Live telemetry of a running move: a line per motor, or every sample into a CSV file"
+)]
+pub struct ScopeArgs {
+    /// Keep every N-th sample received (the move publishes every `telemetry.every`-th cycle).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub every: u32,
+    /// Record the samples into FILE (CSV: the columns of gather.csv and the timing) instead
+    /// of printing them.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Detach after S seconds (waiting for a move included); default: when the move ends.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// The run's iceoryx2 prefix (default: the newest run found in /dev/shm).
+    #[arg(long)]
+    pub iox_prefix: Option<String>,
+    /// The run's iceoryx2 root (default: the one its run file names).
+    #[arg(long)]
+    pub iox_root: Option<String>,
+}
+
+/// How long the scope sleeps between looks.
+const POLL: Duration = Duration::from_millis(10);
+
+/// `qmarc scope ARGS…`; the exit code: 0 when it detached (the move ended, or the duration
+/// passed), 1 on an error, 130 on Ctrl-C, 64 on bad options.
+pub fn main(args: &[OsString]) -> ExitCode {
+    let all = std::iter::once(OsString::from("qmarc scope")).chain(args.iter().cloned());
+    let args = match ScopeArgs::try_parse_from(all) {
+        Ok(a) => a,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { exit::USAGE } else { exit::OK });
+        }
+    };
+    match run(&args) {
+        Ok(code) => ExitCode::from(code),
+        Err(e) => {
+            eprintln!("qmarc scope: error: {e:#}");
+            ExitCode::from(exit::INTERNAL)
+        }
+    }
+}
+
+/// Where the samples go.
+enum Sink {
+    /// A live block of lines on standard output, redrawn in place on a terminal.
+    Live { terminal: bool, shown: usize, last: Option<Instant>, every: Duration },
+    /// Every sample into a CSV file.
+    Csv { file: std::io::BufWriter<std::fs::File>, path: PathBuf, header: bool },
+}
+
+/// Runs the scope; the exit code.
+pub fn run(args: &ScopeArgs) -> anyhow::Result<u8> {
+    if args.duration.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
+        anyhow::bail!("--duration must be a number of seconds > 0");
+    }
+    let stop = qmarc_timer::stop::install().context("signal handlers")?;
+    let start = Instant::now();
+    let deadline = args.duration.map(|d| start + Duration::from_secs_f64(d));
+    let over = || deadline.is_some_and(|d| Instant::now() >= d);
+    let stopped = || stop.load(std::sync::atomic::Ordering::Relaxed);
+    let mut said = false;
+    let (reader, location) = loop {
+        if stopped() {
+            return Ok(exit::INTERRUPTED);
+        }
+        if let Some(found) = attach(args)? {
+            break found;
+        }
+        if over() {
+            println!("qmarc scope: no move ran within {} s", args.duration.unwrap_or(0.0));
+            return Ok(exit::OK);
+        }
+        if !said {
+            let which = args.iox_prefix.as_ref().map_or(String::new(), |p| format!(" under {p}"));
+            println!("qmarc scope: no move is running{which}; waiting for one (Ctrl-C leaves)");
+            said = true;
+        }
+        std::thread::sleep(POLL * 5);
+    };
+    println!("qmarc scope: attached to the move of {} ({})", location.prefix, location.root);
+    let mut sink = match &args.csv {
+        Some(path) => Sink::Csv {
+            file: std::io::BufWriter::new(
+                std::fs::File::create(path)
+                    .with_context(|| format!("cannot create {}", path.display()))?,
+            ),
+            path: path.clone(),
+            header: false,
+        },
+        None => {
+            let terminal = std::io::IsTerminal::is_terminal(&std::io::stdout());
+            let every = Duration::from_millis(if terminal { 100 } else { 1000 });
+            Sink::Live { terminal, shown: 0, last: None, every }
+        }
+    };
+    let (mut received, mut kept, mut lost) = (0u64, 0u64, 0u64);
+    let (mut last_seq, mut end, mut publisher_seen) = (None::<u64>, None, false);
+    let why = loop {
+        while let Some(s) = reader.receive().map_err(anyhow::Error::msg)? {
+            if let Some(l) = last_seq {
+                lost += s.seq.saturating_sub(l + 1);
+            }
+            last_seq = Some(s.seq);
+            received += 1;
+            let last = matches!(Phase::from_code(s.phase), Some(Phase::Done | Phase::Fault));
+            if (received - 1).is_multiple_of(u64::from(args.every)) || last {
+                sink.take(&s, last)?;
+                kept += 1;
+            }
+            if last {
+                end = Some(s);
+            }
+        }
+        publisher_seen |= reader.publishers() > 0;
+        if let Some(s) = end {
+            break ended(&s);
+        }
+        if publisher_seen && reader.publishers() == 0 {
+            break "the move's controller went away without saying how it ended".to_string();
+        }
+        if stopped() {
+            break "stopped (Ctrl-C)".to_string();
+        }
+        if over() {
+            break format!("{} s passed", args.duration.unwrap_or(0.0));
+        }
+        std::thread::sleep(POLL);
+    };
+    drop(reader);
+    let written = match sink {
+        Sink::Csv { mut file, path, .. } => {
+            file.flush().with_context(|| format!("cannot write {}", path.display()))?;
+            format!(", {kept} written to {}", path.display())
+        }
+        Sink::Live { .. } => String::new(),
+    };
+    println!("qmarc scope: detached: {why}; {received} samples received, {lost} lost{written}");
+    Ok(if stopped() { exit::INTERRUPTED } else { exit::OK })
+}
+
+/// The reader of the move `args` name (or of the newest run found), if one runs now.
+fn attach(args: &ScopeArgs) -> anyhow::Result<Option<(TelemetryReader, IpcLocation)>> {
+    let candidates = match &args.iox_prefix {
+        Some(p) => vec![location_of(p, args.iox_root.as_deref())],
+        None => runs(),
+    };
+    for location in candidates {
+        match TelemetryReader::open(&location) {
+            Ok(r) => return Ok(Some((r, location))),
+            Err(TelemetryOpenError::NoMove) => {}
+            Err(TelemetryOpenError::Failed(e)) if args.iox_prefix.is_some() => {
+                return Err(anyhow::Error::msg(e.to_string()));
+            }
+            // A run found by looking may be one that is ending: the next one, then.
+            Err(TelemetryOpenError::Failed(_)) => {}
+        }
+    }
+    Ok(None)
+}
+
+/// How the move of its last sample `s` ended.
+fn ended(s: &TelemetrySample) -> String {
+    match s.fault.checked_sub(1).and_then(FaultKind::from_code) {
+        Some(kind) => format!("the move ended with the fault {}", kind.name()),
+        None => "the move is done".to_string(),
+    }
+}
+
+/// The phase's name in a sample.
+fn phase_name(code: u32) -> &'static str {
+    Phase::from_code(code).map_or("?", Phase::name)
+}
+
+impl Sink {
+    /// Takes a sample: a CSV row, or (at most every `every`, and always the last) the live
+    /// lines.
+    fn take(&mut self, s: &TelemetrySample, last: bool) -> anyhow::Result<()> {
+        match self {
+            Sink::Csv { file, path, header } => {
+                let n = s.n_motors as usize;
+                if !*header {
+                    writeln!(file, "{}", csv_header(n))?;
+                    *header = true;
+                }
+                writeln!(file, "{}", csv_row(s, n))
+                    .with_context(|| format!("cannot write {}", path.display()))
+            }
+            Sink::Live { terminal, shown, last: at, every } => {
+                if !last && at.is_some_and(|t| t.elapsed() < *every) {
+                    return Ok(());
+                }
+                *at = Some(Instant::now());
+                let lines = live_lines(s);
+                let mut out = std::io::stdout().lock();
+                if *terminal && *shown > 0 {
+                    // Back over the block shown before: redrawn in place.
+                    write!(out, "\x1b[{}A", *shown)?;
+                }
+                for l in &lines {
+                    writeln!(out, "{l}\x1b[K")?;
+                }
+                *shown = lines.len();
+                Ok(())
+            }
+        }
+    }
+}
+
+/// The live block of `s`: the cycle's line, then a line per motor.
+pub fn live_lines(s: &TelemetrySample) -> Vec<String> {
+    let us = |ns: u32| f64::from(ns) / 1e3;
+    let mut lines = vec![format!(
+        "t {:9.4} s  cycle {:>8}  {:<12} period {:7.1} µs  wake {:6.1} µs  tick→DAC {:6.1} µs",
+        s.time_ns as f64 / 1e9,
+        s.cycle,
+        phase_name(s.phase),
+        us(s.period_ns),
+        us(s.wake_latency_ns),
+        us(s.output_latency_ns),
+    )];
+    for m in 0..(s.n_motors as usize).min(s.cmd.len()) {
+        lines.push(format!(
+            "  M{}  cmd {:11.1}  act {:11.1}  error {:8.1}  dac {:6}",
+            m + 1,
+            s.cmd[m],
+            s.act[m],
+            s.following_error[m],
+            s.dac[m]
+        ));
+    }
+    lines
+}
+
+/// The CSV header for `n` motors.
+pub fn csv_header(n: usize) -> String {
+    let mut h = String::from(
+        "seq,cycle,time_s,phase,fault,status,wake_latency_us,output_latency_us,period_us",
+    );
+    for m in 1..=n {
+        h.push_str(&format!(",cmd{m},act{m},dac{m},fe{m}"));
+    }
+    h
+}
+
+/// The CSV row of `s` (cmd, act and dac written as gather.csv writes them).
+pub fn csv_row(s: &TelemetrySample, n: usize) -> String {
+    let fault = s.fault.checked_sub(1).and_then(FaultKind::from_code).map_or("", FaultKind::name);
+    let mut r = format!(
+        "{},{},{},{},{fault},{},{},{},{}",
+        s.seq,
+        s.cycle,
+        s.time_ns as f64 / 1e9,
+        phase_name(s.phase),
+        s.status,
+        f64::from(s.wake_latency_ns) / 1e3,
+        f64::from(s.output_latency_ns) / 1e3,
+        f64::from(s.period_ns) / 1e3
+    );
+    for m in 0..n.min(s.cmd.len()) {
+        r.push_str(&format!(",{},{},{},{}", s.cmd[m], s.act[m], s.dac[m], s.following_error[m]));
+    }
+    r
+}
