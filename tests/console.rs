@@ -559,3 +559,39 @@ fn console_tunes_the_gains_on_the_path_and_takes_them_issue_15() {
     drop(tmux);
     run.assert_clean();
 }
+
+/// Issue 16: while a move runs, the charts page draws its live telemetry — command and
+/// actual, following error, servo period — redrawn as samples come (the count on its line
+/// grows between two looks); when the move ends the page is the finished move's again.
+#[test]
+fn console_charts_a_running_move_live_then_its_results_issue_16() {
+    let run = TestRun::new("conslive");
+    let tmux = console_running_a_long_move(&run);
+    tmux.keys(&["F7"]);
+    let samples = |s: &str| -> u64 {
+        let line = s.lines().find(|l| l.contains("LIVE: the last")).unwrap_or_default();
+        line.split(" · ").nth(1).and_then(|p| p.split(' ').next()?.parse().ok()).unwrap_or(0)
+    };
+    let s = tmux.wait_for("the live charts", Duration::from_secs(30), |s| {
+        samples(s) > 0
+            && ["command vs actual", "following error", "servo period"]
+                .iter()
+                .all(|t| s.contains(t))
+    });
+    let first = samples(&s);
+    assert!(s.chars().any(|c| ('\u{2801}'..='\u{28ff}').contains(&c)), "no plotted points:\n{s}");
+    // Redrawn as the move goes: more samples a moment later.
+    tmux.wait_for("the live charts to move on", Duration::from_secs(30), |s| samples(s) > first);
+    tmux.keys(&["F9"]);
+    tmux.wait_for("the results", Duration::from_secs(60), results_drawn);
+    tmux.keys(&["F7"]);
+    let s = tmux.wait_for("the finished move's charts", Duration::from_secs(10), |s| {
+        s.contains("servo period") && s.contains("PNG plots")
+    });
+    assert!(!s.contains("LIVE:"), "live charts after the move:\n{s}");
+    tmux.keys(&["F12"]);
+    let (status, s) = tmux.wait_exit(Duration::from_secs(20));
+    assert_eq!(status, 0, "{s}");
+    drop(tmux);
+    run.assert_clean();
+}

@@ -65,6 +65,8 @@ pub struct App {
     pub last: Option<MoveResult>,
     /// The last tuning's outcome (Ctrl-T).
     pub tuned: Option<crate::tuning::TuneResult>,
+    /// The running move's live telemetry (the charts page while it runs).
+    pub live: Option<crate::live::Live>,
     /// The session's moves.
     pub history: Vec<HistoryEntry>,
     /// The motor the charts show (0-based).
@@ -96,6 +98,7 @@ impl App {
             running: None,
             last: None,
             tuned: None,
+            live: None,
             history: Vec::new(),
             chart_motor: 0,
             quit: None,
@@ -302,6 +305,11 @@ impl App {
                 // What the move runs with, taken now: the form stays editable meanwhile.
                 r.out_dir = self.out_dir();
                 r.gains = self.gains();
+                if mode != Mode::Tune {
+                    let live =
+                        crate::live::Live::for_move(&self.starter_args, &self.iox_root, r.pid());
+                    self.live = Some(live);
+                }
                 self.log.push(format!("── {} ──", mode.arg()));
                 self.running = Some(r);
                 self.page = Page::Log;
@@ -358,6 +366,9 @@ impl App {
 
     /// Takes the starter's output; when the move has ended, loads its results.
     pub fn poll(&mut self) {
+        if let Some(l) = &mut self.live {
+            l.poll();
+        }
         let Some(r) = &mut self.running else { return };
         let mut fresh = r.drain();
         let ended = r.finished();
@@ -374,6 +385,7 @@ impl App {
         self.trim_log();
         let Some(status) = ended else { return };
         let Some(r) = self.running.take() else { return };
+        self.live = None;
         if r.killed {
             // Its children stop on their parent-death signal; what it could not remove goes
             // now (or with the next run) — only prefixes no live process uses.

@@ -29,6 +29,7 @@
 
 pub mod app;
 pub mod form;
+pub mod live;
 pub mod results;
 pub mod runner;
 pub mod tuning;

@@ -53,7 +53,7 @@ pub fn draw(f: &mut Frame, app: &App) {
         Page::Log => draw_log(f, app, body),
         Page::Results => draw_results(f, app, body),
         Page::Charts => draw_charts(f, app, body),
-        Page::History => draw_history(f, app, body),
+        Page::History => history::draw_history(f, app, body),
     }
     let (msg, err) = &app.status;
     let style = if *err { Style::new().fg(Color::Red).bold() } else { Style::new() };
@@ -466,6 +466,15 @@ fn chart<'a>(title: impl Into<Line<'a>>, sets: Vec<Trace<'a>>) -> Chart<'a> {
 }
 
 fn draw_charts(f: &mut Frame, app: &App, area: Rect) {
+    // While a move runs: its live telemetry, the newest seconds.
+    if let Some(live) =
+        app.live.as_ref().filter(|l| app.running.is_some() && !l.series.t.is_empty())
+    {
+        let [area, note] =
+            Layout::vertical([Constraint::Min(6), Constraint::Length(1)]).areas(area);
+        f.render_widget(Line::styled(live.title(), Style::new().bold()), note);
+        return draw_series(f, app, &live.series, area);
+    }
     let Some(last) = app.last.as_ref() else {
         f.render_widget(
             Paragraph::new("No gathered data yet.").block(Block::bordered().title(" Charts ")),
@@ -492,6 +501,12 @@ fn draw_charts(f: &mut Frame, app: &App, area: Rect) {
         );
         return;
     };
+    draw_series(f, app, series, area);
+}
+
+/// The three charts of `series`: command vs actual of the charted motor, its following
+/// error, and the servo period.
+fn draw_series(f: &mut Frame, app: &App, series: &crate::results::Series, area: Rect) {
     let m = app.chart_motor;
     let width = usize::from(area.width) * 2;
     let cmd = thin(&series.points(series.cmd.get(m)), width);
@@ -518,57 +533,6 @@ fn draw_charts(f: &mut Frame, app: &App, area: Rect) {
     f.render_widget(chart(" servo period, µs ", vec![("period", Color::Green, &period)]), c);
 }
 
-fn draw_history(f: &mut Frame, app: &App, area: Rect) {
-    let mut lines = vec![Line::styled(
-        format!("{:<4}{:<16}{:<18}{}", "#", "move", "outcome", "Σ|error| per motor, counts"),
-        Style::new().bold(),
-    )];
-    if app.history.is_empty() {
-        lines.push(Line::from("No move yet this session."));
-    }
-    for (i, h) in app.history.iter().enumerate() {
-        // The trend compares whole moves of the same kind: a move a fault cut short has a
-        // smaller sum without being better.
-        let prev = app.history[..i]
-            .iter()
-            .rev()
-            .find(|p| p.what == h.what && p.fault.is_none())
-            .filter(|_| h.fault.is_none())
-            .map(|p| &p.accumulated);
-        let outcome = h.fault.map_or("ok".to_string(), |k| k.to_string());
-        let acc: Vec<String> = h
-            .accumulated
-            .iter()
-            .enumerate()
-            .map(|(m, a)| {
-                let trend = match prev.and_then(|p| p.get(m)) {
-                    Some(p) if a < p => " ↓",
-                    Some(p) if a > p => " ↑",
-                    _ => "",
-                };
-                format!("{a:.0}{trend}")
-            })
-            .collect();
-        let gains: Vec<String> =
-            h.gains.iter().map(|(kp, kd, kvff)| format!("{kp:.0}/{kd:.0}/{kvff:.0}")).collect();
-        let style = if h.fault.is_some() { Style::new().fg(Color::Red) } else { Style::new() };
-        lines.push(Line::styled(
-            format!("{:<4}{:<16}{:<18}{}", h.n, h.what, outcome, acc.join("  ")),
-            style,
-        ));
-        lines
-            .push(Line::styled(format!("    Kp/Kd/Kvff {}", gains.join("  ")), Style::new().dim()));
-    }
-    let p = scrolled(lines, app.page_scroll, area);
-    f.render_widget(
-        p.block(
-            Block::bordered()
-                .title(" History (↓ ↑: Σ|e| against the last whole move of its kind) "),
-        ),
-        area,
-    );
-}
-
 /// `lines` wrapped to `area` and scrolled down by `scroll` rows, never past the last page.
 fn scrolled<'a>(lines: Vec<Line<'a>>, scroll: usize, area: Rect) -> Paragraph<'a> {
     let width = usize::from(area.width.saturating_sub(2)).max(1);
@@ -580,5 +544,6 @@ fn scrolled<'a>(lines: Vec<Line<'a>>, scroll: usize, area: Rect) -> Paragraph<'a
         .scroll((u16::try_from(top).unwrap_or(u16::MAX), 0))
 }
 
+mod history;
 #[cfg(test)]
 mod tests;

@@ -1,0 +1,147 @@
+//! The live charts of a running move: the console subscribes to the move's telemetry
+//! (`qmarc/telemetry` of the run's prefix, [`qmarc_telemetry::reader`]) and keeps the last
+//! [`WINDOW_S`] seconds as a [`Series`], which the charts page draws as it draws a finished
+//! move's `gather.csv` — command and actual, following error and the servo period — redrawn
+//! with every turn of the console's loop (≥ 10 Hz). It lets go of the move on its last
+//! sample, when its publisher goes, or when the move ends.
+
+use crate::results::Series;
+use qmarc_controller::servo::Phase;
+use qmarc_proto::service::IpcLocation;
+use qmarc_telemetry::reader::TelemetryReader;
+use std::time::{Duration, Instant};
+
+/// Seconds of the move the live charts show (the newest).
+pub const WINDOW_S: f64 = 4.0;
+
+/// How often a reader is tried until the move's telemetry is there.
+const RETRY: Duration = Duration::from_millis(100);
+
+/// The live view of one move.
+pub struct Live {
+    location: IpcLocation,
+    reader: Option<TelemetryReader>,
+    tried: Option<Instant>,
+    publisher_seen: bool,
+    /// The move said it ended, or its publisher went: nothing more comes.
+    pub ended: bool,
+    /// The last [`WINDOW_S`] seconds.
+    pub series: Series,
+    /// Samples received.
+    pub samples: u64,
+    /// Samples lost (gaps in their numbers).
+    pub lost: u64,
+    last_seq: Option<u64>,
+}
+
+impl std::fmt::Debug for Live {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Live")
+            .field("location", &self.location)
+            .field("attached", &self.reader.is_some())
+            .field("samples", &self.samples)
+            .finish()
+    }
+}
+
+impl Live {
+    /// The live view of the move whose iceoryx2 files are at `location` (not attached yet).
+    pub fn new(location: IpcLocation) -> Live {
+        // The terminal is the console's: iceoryx2 says nothing on it.
+        iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Fatal);
+        Live {
+            location,
+            reader: None,
+            tried: None,
+            publisher_seen: false,
+            ended: false,
+            series: Series::default(),
+            samples: 0,
+            lost: 0,
+            last_seq: None,
+        }
+    }
+
+    /// The live view of the move the starter `starter_pid` runs with `starter_args` (its
+    /// `--iox-prefix`, or its own default `qmarc_<pid>_`) under `iox_root`.
+    pub fn for_move(starter_args: &[String], iox_root: &str, starter_pid: u32) -> Live {
+        let prefix = starter_args.iter().find_map(|a| a.strip_prefix("--iox-prefix=")).map_or_else(
+            || format!("{}{starter_pid}_", qmarc_starter::PREFIX_STEM),
+            str::to_string,
+        );
+        Live::new(IpcLocation::new(&prefix, iox_root))
+    }
+
+    /// The charts page's line about it.
+    pub fn title(&self) -> String {
+        format!(
+            "LIVE: the last {WINDOW_S} s · {} samples, {} lost · the move's results when it ends",
+            self.samples, self.lost
+        )
+    }
+
+    /// Attaches when the move's telemetry is there, takes what arrived, lets go at the end.
+    pub fn poll(&mut self) {
+        if self.ended {
+            return;
+        }
+        if self.reader.is_none() {
+            if self.tried.is_some_and(|t| t.elapsed() < RETRY) {
+                return;
+            }
+            self.tried = Some(Instant::now());
+            self.reader = TelemetryReader::open(&self.location).ok();
+        }
+        let Some(reader) = &self.reader else { return };
+        let got: Vec<_> = std::iter::from_fn(|| reader.receive().ok().flatten()).collect();
+        self.publisher_seen |= reader.publishers() > 0;
+        let gone = self.publisher_seen && reader.publishers() == 0;
+        let mut last = false;
+        for s in got {
+            if let Some(l) = self.last_seq {
+                self.lost += s.seq.saturating_sub(l + 1);
+            }
+            self.last_seq = Some(s.seq);
+            self.samples += 1;
+            last |= matches!(Phase::from_code(s.phase), Some(Phase::Done | Phase::Fault));
+            if !last {
+                self.push(&s);
+            }
+        }
+        if last || gone {
+            self.ended = true;
+            self.reader = None;
+        }
+    }
+
+    /// Adds sample `s` and drops what is older than the window.
+    fn push(&mut self, s: &qmarc_proto::telemetry::TelemetrySample) {
+        let n = (s.n_motors as usize).min(s.cmd.len());
+        let series = &mut self.series;
+        series.cmd.resize_with(n, Vec::new);
+        series.act.resize_with(n, Vec::new);
+        series.dac.resize_with(n, Vec::new);
+        let t = s.time_ns as f64 / 1e9;
+        series.cycle.push(s.cycle as f64);
+        series.t.push(t);
+        for m in 0..n {
+            series.cmd[m].push(s.cmd[m]);
+            series.act[m].push(s.act[m]);
+            series.dac[m].push(f64::from(s.dac[m]));
+        }
+        if s.period_ns > 0 {
+            series.period_us.push((t, f64::from(s.period_ns) / 1e3));
+        }
+        let old = series.t.partition_point(|&x| x < t - WINDOW_S);
+        if old > series.t.len() / 2 {
+            // Trimmed in bulk: a window's worth at a time, not a shift per sample.
+            series.cycle.drain(..old);
+            series.t.drain(..old);
+            for v in series.cmd.iter_mut().chain(&mut series.act).chain(&mut series.dac) {
+                v.drain(..old.min(v.len()));
+            }
+            let p = series.period_us.partition_point(|&(x, _)| x < t - WINDOW_S);
+            series.period_us.drain(..p);
+        }
+    }
+}
