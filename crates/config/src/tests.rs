@@ -95,7 +95,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         "[bogus]\nx = 1\n",
-        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `robot`, `motor`",
+        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `robot`, `motor`",
     );
     check(
         "[trajectory]\nmethod = \"home\"\n",
@@ -486,4 +486,17 @@ fn tune_settings_are_checked_issue_15() {
         &format!("[tune]\nmargin = 0.5\n{m}"),
         "q.toml:2:10: tune.margin: must be 1‥10 ×, found 0.5",
     );
+}
+
+#[test]
+fn telemetry_settings_are_checked_issue_16() {
+    let m = MOTOR.repeat(3);
+    assert_eq!(parse(&m).unwrap().telemetry, crate::TelemetrySettings::default());
+    assert_eq!(shipped().telemetry, crate::TelemetrySettings { enabled: true, every: 4 });
+    let s = parse(&format!("[telemetry]\nenabled = false\nevery = 10\n{m}")).unwrap();
+    assert_eq!(s.telemetry, crate::TelemetrySettings { enabled: false, every: 10 });
+    let e = parse(&format!("[telemetry]\nevery = 0\n{m}")).unwrap_err().to_string();
+    assert!(e.starts_with("q.toml:2:9: telemetry.every: "), "{e}");
+    let e = parse(&format!("[telemetry]\nenabled = 1\n{m}")).unwrap_err().to_string();
+    assert!(e.starts_with("q.toml:2:11: telemetry.enabled: "), "{e}");
 }
