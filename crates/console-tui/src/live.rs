@@ -6,9 +6,8 @@
 //! sample, when its publisher goes, or when the move ends.
 
 use crate::results::Series;
-use qmarc_controller::servo::Phase;
 use qmarc_proto::service::IpcLocation;
-use qmarc_telemetry::reader::TelemetryReader;
+use qmarc_telemetry::reader::{TelemetryReader, is_last};
 use std::time::{Duration, Instant};
 
 /// Seconds of the move the live charts show (the newest).
@@ -22,7 +21,6 @@ pub struct Live {
     location: IpcLocation,
     reader: Option<TelemetryReader>,
     tried: Option<Instant>,
-    publisher_seen: bool,
     /// The move said it ended, or its publisher went: nothing more comes.
     pub ended: bool,
     /// The last [`WINDOW_S`] seconds.
@@ -31,7 +29,6 @@ pub struct Live {
     pub samples: u64,
     /// Samples lost (gaps in their numbers).
     pub lost: u64,
-    last_seq: Option<u64>,
 }
 
 impl std::fmt::Debug for Live {
@@ -53,12 +50,10 @@ impl Live {
             location,
             reader: None,
             tried: None,
-            publisher_seen: false,
             ended: false,
             series: Series::default(),
             samples: 0,
             lost: 0,
-            last_seq: None,
         }
     }
 
@@ -92,23 +87,14 @@ impl Live {
             self.tried = Some(Instant::now());
             self.reader = TelemetryReader::open(&self.location).ok();
         }
-        let Some(reader) = &self.reader else { return };
+        let Some(reader) = &mut self.reader else { return };
         let got: Vec<_> = std::iter::from_fn(|| reader.receive().ok().flatten()).collect();
-        self.publisher_seen |= reader.publishers() > 0;
-        let gone = self.publisher_seen && reader.publishers() == 0;
-        let mut last = false;
-        for s in got {
-            if let Some(l) = self.last_seq {
-                self.lost += s.seq.saturating_sub(l + 1);
-            }
-            self.last_seq = Some(s.seq);
-            self.samples += 1;
-            last |= matches!(Phase::from_code(s.phase), Some(Phase::Done | Phase::Fault));
-            if !last {
-                self.push(&s);
-            }
+        let ended = reader.end().is_some();
+        (self.samples, self.lost) = (reader.received(), reader.lost());
+        for s in got.iter().filter(|s| !is_last(s)) {
+            self.push(s);
         }
-        if last || gone {
+        if ended {
             self.ended = true;
             self.reader = None;
         }

@@ -658,7 +658,7 @@ fn a_telemetry_publish_allocates_exactly_its_loan_and_the_relay_delivers_every_s
     let ipc = util::IpcDir::new("telemetry");
     {
         let publisher = TelemetryPublisher::open(&ipc.location).unwrap();
-        let reader = TelemetryReader::open(&ipc.location).unwrap();
+        let mut reader = TelemetryReader::open(&ipc.location).unwrap();
         assert!(publisher.publish(TelemetrySample::default()), "the first, connecting");
         let before = allocations();
         for k in 0..500 {
@@ -672,7 +672,7 @@ fn a_telemetry_publish_allocates_exactly_its_loan_and_the_relay_delivers_every_s
         assert_eq!(got, 501);
     }
     // Through the relay: the loop's end of the ring, let go when the move ends.
-    let reader = {
+    let mut reader = {
         let (mut tx, rx) = qmarc_controller::telemetry::ring(1);
         let relay = spawn(ipc.location.clone(), rx).unwrap();
         let reader = (0..200)

@@ -110,7 +110,8 @@ pub struct ServiceError {
 }
 
 impl ServiceError {
-    pub(crate) fn new(what: &str, name: &str, reason: impl std::fmt::Debug) -> ServiceError {
+    /// `what` named `name` could not be opened, for iceoryx2's `reason`.
+    pub fn new(what: &str, name: &str, reason: impl std::fmt::Debug) -> ServiceError {
         ServiceError { what: format!("{what} `{name}`"), reason: format!("{reason:?}") }
     }
 }

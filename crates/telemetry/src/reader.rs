@@ -4,19 +4,42 @@
 
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{PortFactory, ipc};
-use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation, create_node, run_file};
+use qmarc_controller::servo::Phase;
+use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation, ServiceError, create_node, run_file};
 use qmarc_proto::telemetry::{
-    TELEMETRY_BUFFER, TelemetryOpenError, TelemetrySample, TelemetryService, open_telemetry_service,
+    TELEMETRY_BUFFER, TELEMETRY_SERVICE, TelemetryOpenError, TelemetrySample, TelemetryService,
+    open_telemetry_service,
 };
 
 /// Node name of a reader.
 pub const READER_NODE: &str = "qmarc-scope";
 
-/// A subscriber of one run's telemetry, with its node and service (dropped in that order).
+/// A subscriber of one run's telemetry, with its node and service (dropped in that order),
+/// and what it saw: samples received, samples lost (gaps in their numbers), the move's last
+/// sample, whether its publisher was ever there.
 pub struct TelemetryReader {
     subscriber: Subscriber<ipc::Service, TelemetrySample, ()>,
     service: TelemetryService,
     _node: iceoryx2::node::Node<ipc::Service>,
+    last_seq: Option<u64>,
+    received: u64,
+    lost: u64,
+    last: Option<TelemetrySample>,
+    publisher_seen: bool,
+}
+
+/// How a move's telemetry ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum End {
+    /// With the move's last sample (phase done or fault).
+    Last(TelemetrySample),
+    /// Its publisher went without one (the controller died).
+    Gone,
+}
+
+/// Whether `s` is a move's last sample: its phase is done or fault.
+pub fn is_last(s: &TelemetrySample) -> bool {
+    matches!(Phase::from_code(s.phase), Some(Phase::Done | Phase::Fault))
 }
 
 impl TelemetryReader {
@@ -27,20 +50,58 @@ impl TelemetryReader {
         let service = open_telemetry_service(&node, false)?;
         let subscriber =
             service.subscriber_builder().buffer_size(TELEMETRY_BUFFER).create().map_err(|e| {
-                TelemetryOpenError::Failed(qmarc_proto::service::ServiceError {
-                    what: "a subscriber of qmarc/telemetry".into(),
-                    reason: format!("{e:?}"),
-                })
+                TelemetryOpenError::Failed(ServiceError::new("subscriber", TELEMETRY_SERVICE, e))
             })?;
-        Ok(TelemetryReader { subscriber, service, _node: node })
+        Ok(TelemetryReader {
+            subscriber,
+            service,
+            _node: node,
+            last_seq: None,
+            received: 0,
+            lost: 0,
+            last: None,
+            publisher_seen: false,
+        })
     }
 
-    /// The next sample queued for this reader, if any.
-    pub fn receive(&self) -> Result<Option<TelemetrySample>, String> {
-        match self.subscriber.receive() {
-            Ok(s) => Ok(s.map(|s| *s.payload())),
-            Err(e) => Err(format!("cannot read qmarc/telemetry: {e:?}")),
+    /// The next sample queued for this reader, if any; counted, and a gap in the numbers
+    /// counted as lost.
+    pub fn receive(&mut self) -> Result<Option<TelemetrySample>, String> {
+        let s = match self.subscriber.receive() {
+            Ok(Some(s)) => *s.payload(),
+            Ok(None) => return Ok(None),
+            Err(e) => return Err(format!("cannot read qmarc/telemetry: {e:?}")),
+        };
+        if let Some(l) = self.last_seq {
+            self.lost += s.seq.saturating_sub(l + 1);
         }
+        self.last_seq = Some(s.seq);
+        self.received += 1;
+        if is_last(&s) {
+            self.last = Some(s);
+        }
+        Ok(Some(s))
+    }
+
+    /// Samples received so far.
+    pub fn received(&self) -> u64 {
+        self.received
+    }
+
+    /// Samples lost so far (before this reader's first one not counted).
+    pub fn lost(&self) -> u64 {
+        self.lost
+    }
+
+    /// How the move ended, once it did: its last sample was received, or its publisher,
+    /// once there, is gone.
+    pub fn end(&mut self) -> Option<End> {
+        if let Some(s) = self.last {
+            return Some(End::Last(s));
+        }
+        let publishers = self.publishers();
+        self.publisher_seen |= publishers > 0;
+        (self.publisher_seen && publishers == 0).then_some(End::Gone)
     }
 
     /// Publishers of the service now (0 once the move's controller let go of it).

@@ -4,7 +4,7 @@
 //! detaches when the move ends, after `--duration` seconds or on Ctrl-C. Started before a
 //! move, it says that none runs and waits for one.
 
-use crate::reader::{TelemetryReader, location_of, runs};
+use crate::reader::{End, TelemetryReader, is_last, location_of, runs};
 use anyhow::Context;
 use clap::Parser;
 use qmarc_controller::fault::FaultKind;
@@ -85,7 +85,7 @@ pub fn run(args: &ScopeArgs) -> anyhow::Result<u8> {
     let over = || deadline.is_some_and(|d| Instant::now() >= d);
     let stopped = || stop.load(std::sync::atomic::Ordering::Relaxed);
     let mut said = false;
-    let (reader, location) = loop {
+    let (mut reader, location) = loop {
         if stopped() {
             return Ok(exit::INTERRUPTED);
         }
@@ -119,30 +119,21 @@ pub fn run(args: &ScopeArgs) -> anyhow::Result<u8> {
             Sink::Live { terminal, shown: 0, last: None, every }
         }
     };
-    let (mut received, mut kept, mut lost) = (0u64, 0u64, 0u64);
-    let (mut last_seq, mut end, mut publisher_seen) = (None::<u64>, None, false);
+    let mut kept = 0u64;
     let why = loop {
         while let Some(s) = reader.receive().map_err(anyhow::Error::msg)? {
-            if let Some(l) = last_seq {
-                lost += s.seq.saturating_sub(l + 1);
-            }
-            last_seq = Some(s.seq);
-            received += 1;
-            let last = matches!(Phase::from_code(s.phase), Some(Phase::Done | Phase::Fault));
-            if (received - 1).is_multiple_of(u64::from(args.every)) || last {
+            let last = is_last(&s);
+            if (reader.received() - 1).is_multiple_of(u64::from(args.every)) || last {
                 sink.take(&s, last)?;
                 kept += 1;
             }
-            if last {
-                end = Some(s);
+        }
+        match reader.end() {
+            Some(End::Last(s)) => break ended(&s),
+            Some(End::Gone) => {
+                break "the move's controller went away without saying how it ended".to_string();
             }
-        }
-        publisher_seen |= reader.publishers() > 0;
-        if let Some(s) = end {
-            break ended(&s);
-        }
-        if publisher_seen && reader.publishers() == 0 {
-            break "the move's controller went away without saying how it ended".to_string();
+            None => {}
         }
         if stopped() {
             break "stopped (Ctrl-C)".to_string();
@@ -152,6 +143,7 @@ pub fn run(args: &ScopeArgs) -> anyhow::Result<u8> {
         }
         std::thread::sleep(POLL);
     };
+    let (received, lost) = (reader.received(), reader.lost());
     drop(reader);
     let written = match sink {
         Sink::Csv { mut file, path, .. } => {

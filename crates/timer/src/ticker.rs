@@ -334,13 +334,14 @@ impl Ticker for ManualTicker {
 #[derive(Debug)]
 pub struct UnpacedTicker {
     period_ns: u64,
-    schedule: Option<Schedule>,
+    /// The index of the next tick, once started.
+    next_index: Option<u64>,
 }
 
 impl UnpacedTicker {
     /// An unpaced ticker; `period_ns` is what it reports as its period.
     pub fn new(period_ns: u64) -> UnpacedTicker {
-        UnpacedTicker { period_ns, schedule: None }
+        UnpacedTicker { period_ns, next_index: None }
     }
 }
 
@@ -350,18 +351,17 @@ impl Ticker for UnpacedTicker {
     }
 
     fn start(&mut self) -> Result<u64, TickerError> {
-        let now = monotonic_now_ns();
-        self.schedule = Some(Schedule { period_ns: self.period_ns, t0_ns: now, next_index: 0 });
-        Ok(now)
+        self.next_index = Some(0);
+        Ok(monotonic_now_ns())
     }
 
     fn wait(&mut self) -> Result<Tick, TickerError> {
-        let Some(schedule) = &mut self.schedule else {
+        let Some(index) = &mut self.next_index else {
             return Err(TickerError::NotStarted);
         };
         let now = monotonic_now_ns();
-        let tick = Tick { index: schedule.next_index, intended_ns: now, woke_ns: now, missed: 0 };
-        schedule.next_index += 1;
+        let tick = Tick { index: *index, intended_ns: now, woke_ns: now, missed: 0 };
+        *index += 1;
         Ok(tick)
     }
 }

@@ -2,7 +2,6 @@
 //! ring when due, and the last one when the move ends.
 
 use super::Servo;
-use qmarc_proto::MAX_MOTORS;
 use qmarc_proto::telemetry::TelemetrySample;
 use qmarc_timer::Tick;
 
@@ -31,17 +30,13 @@ impl Servo {
         status: u32,
         period_ns: u32,
     ) -> TelemetrySample {
-        let mut fe = [0.0; MAX_MOTORS];
-        for (e, (c, a)) in fe.iter_mut().zip(self.cmd.iter().zip(&self.act)) {
-            *e = c - a;
-        }
         let ns = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
         TelemetrySample {
             cycle: n,
             time_ns: self.sample_time_ns(n, tick),
             cmd: self.cmd,
             act: self.act,
-            following_error: fe,
+            following_error: self.last_error(),
             dac: self.dac,
             wake_latency_ns: ns(tick.latency_ns()),
             output_latency_ns: ns(written_ns.saturating_sub(tick.intended_ns)),
