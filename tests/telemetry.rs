@@ -158,3 +158,24 @@ fn a_reader_that_never_reads_or_is_killed_changes_nothing_of_the_move_issue_16()
     }
     run.assert_clean();
 }
+
+/// `qmarc scope --duration S` where no move runs: it says so, waits the S seconds, says no
+/// move ran, exits 0 and leaves no file of its waiting (it looks every 50 ms with a node of
+/// its own) under the run's prefix.
+#[test]
+fn a_scope_with_a_duration_and_no_move_says_so_and_leaves_nothing_issue_16() {
+    let run = TestRun::new("idlescope");
+    let started = std::time::Instant::now();
+    let idle = wait_with_timeout(scope(&run, &["--duration", "0.6"]), Duration::from_secs(30));
+    let waited = started.elapsed();
+    assert_eq!(idle.code, Some(0), "{}{}", idle.stdout, idle.stderr);
+    let prefix = &run.prefix;
+    assert!(
+        idle.stdout.contains(&format!("no move is running under {prefix}; waiting for one")),
+        "{}",
+        idle.stdout
+    );
+    assert!(idle.stdout.contains("no move ran within 0.6 s"), "{}", idle.stdout);
+    assert!(waited >= Duration::from_millis(600), "it left after {waited:?}");
+    run.assert_clean();
+}

@@ -4,6 +4,7 @@
 //! threads sharing one word of memory — and what the benchmarks need of the machine: where the
 //! binaries are, what the machine is, and cyclictest as an outside reference.
 
+use crate::baselines::{iox_ports, ping_pong};
 use crate::stats::percentiles_us;
 use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
 use qmarc_proto::HwMsg;
@@ -13,8 +14,6 @@ use qmarc_timer::clock::monotonic_now_ns;
 use qmarc_timer::rt::RtRequest;
 use serde::Serialize;
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
 /// Options of `ipc`.
@@ -26,6 +25,9 @@ pub struct IpcArgs {
     /// Directory holding qmarc-hwserver (default: next to this program).
     #[arg(long)]
     pub bin_dir: Option<PathBuf>,
+    /// Write the figures as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
 }
 
 /// What the figures were measured on.
@@ -153,93 +155,25 @@ pub fn describe_cyclictest(c: Option<&Cyclictest>) -> String {
     }
 }
 
-/// The futex(2) call on `word`.
-fn futex(word: &AtomicU32, op: i32, val: u32) {
-    // SAFETY: `word` is a live, aligned u32 for the call's duration; FUTEX_WAIT and
-    // FUTEX_WAKE read it and queue/wake on its address only; no timeout pointer.
-    unsafe {
-        libc::syscall(libc::SYS_futex, word.as_ptr(), op, val, std::ptr::null::<libc::timespec>());
-    }
-}
-
-const PING: u32 = 1;
-const PONG: u32 = 2;
-const STOP: u32 = 3;
-
-/// A ping-pong between two threads over one shared word: `block` waits in futex(2) (the
-/// shared, not private, form, as between processes over shared memory), else spins. Each
-/// side at the priority the hwserver and controller run at when `fifo`.
-fn ping_pong(samples: usize, block: bool, fifo: bool) -> anyhow::Result<Pct> {
-    let word = Arc::new(AtomicU32::new(0));
-    let wait_while = move |w: &AtomicU32, not: u32| {
-        let deadline = monotonic_now_ns() + 2_000_000_000;
-        loop {
-            let v = w.load(Ordering::Acquire);
-            if v != not || monotonic_now_ns() > deadline {
-                return v;
-            }
-            if block {
-                futex(w, libc::FUTEX_WAIT, v);
-            } else {
-                std::hint::spin_loop();
-            }
-        }
-    };
-    let req = |p: i32| RtRequest {
-        priority: fifo.then_some(p),
-        lock_memory: false,
-        prefault_stack_bytes: 64 * 1024,
-        cpu: None,
-    };
-    let server_word = Arc::clone(&word);
-    let server = qmarc_timer::rt::spawn("bench-pong", req(85), move |_| {
-        loop {
-            // Wait for a ping (the word leaves PONG or 0), answer it.
-            let mut v = server_word.load(Ordering::Acquire);
-            while v != PING && v != STOP {
-                v = wait_while(&server_word, v);
-            }
-            if v == STOP {
-                return;
-            }
-            server_word.store(PONG, Ordering::Release);
-            if block {
-                futex(&server_word, libc::FUTEX_WAKE, 1);
-            }
-        }
-    })?;
-    let client = qmarc_timer::rt::spawn("bench-ping", req(80), move |_| {
-        let mut rtt = Vec::with_capacity(samples);
-        for _ in 0..samples {
-            let t0 = monotonic_now_ns();
-            word.store(PING, Ordering::Release);
-            if block {
-                futex(&word, libc::FUTEX_WAKE, 1);
-            }
-            while wait_while(&word, PING) != PONG {}
-            rtt.push(monotonic_now_ns() - t0);
-        }
-        word.store(STOP, Ordering::Release);
-        futex(&word, libc::FUTEX_WAKE, 1);
-        rtt
-    })?;
-    let mut rtt = client.join().map_err(|_| anyhow::anyhow!("ping thread panicked"))?;
-    server.join().map_err(|_| anyhow::anyhow!("pong thread panicked"))?;
-    Ok(percentiles_us(&mut rtt))
-}
-
 /// Back-to-back read exchanges with a real `qmarc-hwserver` (lock-step simulated robot),
 /// the client at the servo thread's priority; `spin`: the hwserver busy-polls (`--spin`) and
-/// the client polls for each response before it would block.
-fn exchange(samples: usize, bin_dir: &std::path::Path, spin: bool) -> anyhow::Result<Pct> {
+/// the client polls for each response before it would block; `cpu`: both pinned to it.
+fn exchange(
+    samples: usize,
+    bin_dir: &std::path::Path,
+    spin: bool,
+    cpu: Option<usize>,
+) -> anyhow::Result<Pct> {
     let pid = std::process::id();
     let dir = std::env::temp_dir().join(format!("qmarc-bench-ipc-{pid}"));
     std::fs::create_dir_all(&dir)?;
     let location = IpcLocation::new(&format!("qbi{pid}_"), &format!("{}/", dir.display()));
     let wait = if spin { "spin" } else { "block" };
+    let pin = cpu.map_or(-1, |c| c as i64);
     let spec = qmarc_hwserver::backends::standalone_run(
         &format!(
-            "[hwserver]\nwatchdog_periods = 2500\nwait = \"{wait}\"\n[sim]\nstate_file = \"\"\n"
+            "[timer]\nhwserver_cpu = {pin}\n[hwserver]\nwatchdog_periods = 2500\nwait = \"{wait}\"\n\
+             [sim]\nstate_file = \"\"\n"
         ),
         &location,
         true,
@@ -251,12 +185,8 @@ fn exchange(samples: usize, bin_dir: &std::path::Path, spin: bool) -> anyhow::Re
         .arg(format!("--settings={}", run_file.display()))
         .spawn()?;
     let loc = location.clone();
-    let req = RtRequest {
-        priority: Some(80),
-        lock_memory: false,
-        prefault_stack_bytes: 64 * 1024,
-        cpu: None,
-    };
+    let req =
+        RtRequest { priority: Some(80), lock_memory: false, prefault_stack_bytes: 64 * 1024, cpu };
     let client =
         qmarc_timer::rt::spawn("bench-exchange", req, move |_| -> anyhow::Result<Vec<u64>> {
             let spin_ns = if spin { 1_000_000 } else { 0 };
@@ -284,29 +214,74 @@ fn exchange(samples: usize, bin_dir: &std::path::Path, spin: bool) -> anyhow::Re
     Ok(percentiles_us(&mut result?))
 }
 
+/// One row of `ipc`.
+#[derive(Debug, Serialize)]
+struct Row {
+    name: &'static str,
+    #[serde(flatten)]
+    us: Pct,
+}
+
+/// The JSON `--json` writes.
+#[derive(Debug, Serialize)]
+struct Report<'a> {
+    samples: usize,
+    machine: Machine,
+    rows: &'a [Row],
+    blocking_over_futex: f64,
+    one_cpu_over_futex: f64,
+    spinning_over_spin: f64,
+    ports_over_spin: f64,
+}
+
 /// Runs `ipc`.
 pub fn run(a: &IpcArgs) -> anyhow::Result<()> {
     let bin_dir = qmarc_starter::bin_dir(a.bin_dir.as_deref())?;
     let n = a.samples.max(100);
+    let row = |name, us| Row { name, us };
     let rows = [
-        ("controller ⇄ hwserver exchange (iceoryx2, blocking)", exchange(n, &bin_dir, false)?),
-        ("the same, hwserver spinning, controller polling", exchange(n, &bin_dir, true)?),
-        ("raw futex ping-pong, 2 threads, SCHED_FIFO", ping_pong(n, true, true)?),
-        ("raw futex ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, true, false)?),
-        ("raw spin ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, false, false)?),
+        row(
+            "controller ⇄ hwserver exchange (iceoryx2, blocking)",
+            exchange(n, &bin_dir, false, None)?,
+        ),
+        row("the same, both pinned to CPU 0", exchange(n, &bin_dir, false, Some(0))?),
+        row("the same, hwserver spinning, controller polling", exchange(n, &bin_dir, true, None)?),
+        row("iceoryx2 request/response ports alone, both polling", iox_ports(n)?),
+        row("raw futex ping-pong, 2 threads, SCHED_FIFO", ping_pong(n, true, true, None)?),
+        row("the same, both pinned to CPU 0", ping_pong(n, true, true, Some(0))?),
+        row("raw futex ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, true, false, None)?),
+        row("raw spin ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, false, false, None)?),
     ];
     println!("qmarc-bench ipc: {n} round trips per row, µs");
-    println!("  {:<52} {:>8} {:>8} {:>8} {:>9}", "", "p50", "p99", "p99.9", "max");
-    for (name, p) in &rows {
-        println!("  {name:<52} {:>8.2} {:>8.2} {:>8.2} {:>9.1}", p.p50, p.p99, p.p999, p.max);
+    println!("  {:<55} {:>8} {:>8} {:>8} {:>9}", "", "p50", "p99", "p99.9", "max");
+    for Row { name, us: p } in &rows {
+        println!("  {name:<55} {:>8.2} {:>8.2} {:>8.2} {:>9.1}", p.p50, p.p99, p.p999, p.max);
     }
-    let (x, xs, f, s) = (rows[0].1.p50, rows[1].1.p50, rows[2].1.p50, rows[4].1.p50);
+    let p50 = |i: usize| rows[i].us.p50.max(1e-3);
+    let report = Report {
+        samples: n,
+        machine: Machine::here(),
+        rows: &rows,
+        blocking_over_futex: p50(0) / p50(4),
+        one_cpu_over_futex: p50(1) / p50(5),
+        spinning_over_spin: p50(2) / p50(7),
+        ports_over_spin: p50(3) / p50(7),
+    };
     println!(
-        "  blocking exchange p50 = {:.1}× the futex ping-pong's at the same policy; spinning \
-         exchange p50 = {:.1}× the spin ping-pong's",
-        x / f.max(1e-3),
-        xs / s.max(1e-3)
+        "  blocking exchange p50 = {:.1}× the futex ping-pong's at the same policy ({:.1}× with \
+         both on one CPU); spinning exchange p50 = {:.1}× the spin ping-pong's, of which \
+         iceoryx2's ports alone are {:.1}×",
+        report.blocking_over_futex,
+        report.one_cpu_over_futex,
+        report.spinning_over_spin,
+        report.ports_over_spin
     );
+    if let Some(path) = &a.json {
+        let text = serde_json::to_string_pretty(&report)?;
+        std::fs::write(path, text + "\n")
+            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
+        println!("  JSON: {}", path.display());
+    }
     Ok(())
 }
 
@@ -319,13 +294,5 @@ mod tests {
         let text = "# /dev/cpu_dma_latency set to 0us\n000010 000050\n000011 000049\n000012 000001\n# Total: 000000100\n# Max Latencies: 00012\n";
         assert_eq!(parse_cyclictest(text), Some((11.0, 12.0)));
         assert_eq!(parse_cyclictest("# nothing\n"), None);
-    }
-
-    #[test]
-    fn both_ping_pongs_complete() {
-        for block in [true, false] {
-            let p = ping_pong(200, block, false).unwrap();
-            assert!(p.p50 > 0.0 && p.max >= p.p99, "{p:?}");
-        }
     }
 }

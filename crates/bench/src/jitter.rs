@@ -55,16 +55,45 @@ pub struct JitterArgs {
     /// `hwserver.response_spin_us`): for a machine with a CPU to spare.
     #[arg(long)]
     pub spin: bool,
-    /// Pin the servo thread and the bare loop to CPU 0 and the hwserver to CPU 1
-    /// (`timer.servo_cpu`, `timer.hwserver_cpu`).
-    #[arg(long)]
-    pub pin: bool,
+    /// Pin the servo thread and the bare loop to CPU 0 and the hwserver to CPU 1 (`--pin`,
+    /// `split`) or to CPU 0 as well (`--pin=same`: one CPU shared by the blocking pair, whose
+    /// exchange is then a local hand-over) (`timer.servo_cpu`, `timer.hwserver_cpu`).
+    #[arg(long, num_args = 0..=1, default_missing_value = "split", value_enum)]
+    pub pin: Option<Pin>,
+}
+
+/// Where `--pin` puts the hwserver.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Pin {
+    /// The hwserver on CPU 1, the servo thread on CPU 0.
+    Split,
+    /// Both on CPU 0.
+    Same,
+}
+
+impl Pin {
+    /// The hwserver's CPU (the servo thread's is 0).
+    fn hwserver_cpu(self) -> i64 {
+        match self {
+            Pin::Split => 1,
+            Pin::Same => 0,
+        }
+    }
+
+    /// What the table's heading says.
+    fn describe(self) -> &'static str {
+        match self {
+            Pin::Split => ", servo and bare loop on CPU 0, hwserver on CPU 1",
+            Pin::Same => ", servo, hwserver and bare loop on CPU 0",
+        }
+    }
 }
 
 /// The settings the servo segments run with: `--config`, with `--spin` and `--pin` applied
 /// to a copy in `scratch`.
 fn segment_config(a: &JitterArgs, scratch: &Path) -> anyhow::Result<PathBuf> {
-    if !a.spin && !a.pin {
+    if !a.spin && a.pin.is_none() {
         return Ok(a.config.clone());
     }
     let text = std::fs::read_to_string(&a.config)
@@ -75,9 +104,9 @@ fn segment_config(a: &JitterArgs, scratch: &Path) -> anyhow::Result<PathBuf> {
         doc["hwserver"]["wait"] = toml_edit::value("spin");
         doc["hwserver"]["response_spin_us"] = toml_edit::value(i64::from(a.period_us));
     }
-    if a.pin {
+    if let Some(pin) = a.pin {
         doc["timer"]["servo_cpu"] = toml_edit::value(0);
-        doc["timer"]["hwserver_cpu"] = toml_edit::value(1);
+        doc["timer"]["hwserver_cpu"] = toml_edit::value(pin.hwserver_cpu());
     }
     let path = scratch.join("qmarc.toml");
     std::fs::write(&path, doc.to_string())?;
@@ -95,12 +124,22 @@ pub struct LoopFigures {
     pub period_error_us: Pct,
     /// Periods that expired without a cycle.
     pub missed: u64,
+    /// Of those, the ones lost in host stalls (a wake ≥ 1 ms late, which no cycle of ours
+    /// causes: the bare loop meets them too, at other times).
+    pub missed_in_stalls: u64,
     /// Wakes more than 40 µs off the period.
     pub outside_40us: u64,
     /// Tick → DAC write acknowledged (the servo pipeline only).
     pub output_us: Option<Pct>,
     /// A fault that ended the servo segment, if any.
     pub fault: Option<String>,
+}
+
+impl LoopFigures {
+    /// Missed periods outside host stalls.
+    fn outside_stalls(&self) -> u64 {
+        self.missed - self.missed_in_stalls.min(self.missed)
+    }
 }
 
 /// One round.
@@ -143,6 +182,10 @@ pub struct TimerResult {
     pub missed_servo: u64,
     /// Periods the bare loop missed in all rounds.
     pub missed_bare: u64,
+    /// Periods the servo missed outside host stalls (a wake ≥ 1 ms late), in all rounds.
+    pub missed_servo_outside_stalls: u64,
+    /// And the bare loop.
+    pub missed_bare_outside_stalls: u64,
 }
 
 /// The JSON `--json` writes: the first timer's verdict at the top, every timer's in `timers`.
@@ -152,7 +195,7 @@ struct Report<'a> {
     rounds: u32,
     segment_s: f64,
     spin: bool,
-    pin: bool,
+    pin: Option<Pin>,
     machine: crate::ipc::Machine,
     p99_ratio_median: f64,
     p99_ratio_min: f64,
@@ -203,6 +246,7 @@ fn bare(
         wake_us: stats.wake_latency.percentiles().into(),
         period_error_us: stats.period_error.percentiles().into(),
         missed: stats.missed,
+        missed_in_stalls: stats.missed_in_stalls,
         outside_40us: stats.outside_40us,
         output_us: None,
         fault: None,
@@ -236,6 +280,7 @@ fn servo(
         wake_us: t.wake_latency_us,
         period_error_us: t.period_error_us,
         missed: t.missed_periods,
+        missed_in_stalls: t.missed_in_stalls,
         outside_40us: t.outside_40us,
         output_us: Some(t.output_latency_us),
         fault: s.fault.map(|f| format!("{}: {}", f.kind, f.message)),
@@ -311,6 +356,8 @@ pub fn verdict(timer: String, rounds: Vec<Round>, period_us: u32) -> TimerResult
         noisy_reasons: noisy,
         missed_servo: rounds.iter().map(|r| r.servo.missed).sum(),
         missed_bare: rounds.iter().map(|r| r.bare.missed).sum(),
+        missed_servo_outside_stalls: rounds.iter().map(|r| r.servo.outside_stalls()).sum(),
+        missed_bare_outside_stalls: rounds.iter().map(|r| r.bare.outside_stalls()).sum(),
         rounds,
     }
 }
@@ -321,13 +368,16 @@ pub fn run(a: &JitterArgs) -> anyhow::Result<()> {
     if a.rounds == 0 || bad_segment || !(100..=100_000).contains(&a.period_us) {
         bail!("--rounds must be ≥ 1, --segment-s > 0 and --period-us 100‥100000");
     }
+    if a.spin && a.pin == Some(Pin::Same) {
+        bail!("--spin needs the hwserver on a CPU of its own: --pin (split), not --pin=same");
+    }
     let settings = qmarc_config::Settings::load(&a.config, &crate::cycle::names())
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let req = RtRequest {
         priority: (settings.timer.servo_priority > 0).then_some(settings.timer.servo_priority),
         lock_memory: settings.timer.lock_memory,
         prefault_stack_bytes: 128 * 1024,
-        cpu: if a.pin { Some(0) } else { settings.timer.servo_cpu },
+        cpu: if a.pin.is_some() { Some(0) } else { settings.timer.servo_cpu },
     };
     let scratch = std::env::temp_dir().join(format!("qmarc-bench-jitter-{}", std::process::id()));
     std::fs::create_dir_all(&scratch)?;
@@ -383,12 +433,12 @@ pub fn render(
         a.rounds,
         a.segment_s,
         if a.spin { ", hwserver spinning" } else { "" },
-        if a.pin { ", servo and bare loop on CPU 0, hwserver on CPU 1" } else { "" }
+        a.pin.map_or("", Pin::describe)
     );
     for r in results {
         let _ = writeln!(
             t,
-            "\n  timer {}: wake latency µs (against the intended expiry)\n  round first  loop    p50    p99  p99.9      max  missed  >±40µs  out p99",
+            "\n  timer {}: wake latency µs (against the intended expiry)\n  round first  loop    p50    p99  p99.9      max  missed (in stalls)  >±40µs  out p99",
             r.timer
         );
         for round in &r.rounds {
@@ -396,7 +446,7 @@ pub fn render(
                 let out = f.output_us.map_or("—".to_string(), |o| format!("{:.0}", o.p99));
                 let _ = writeln!(
                     t,
-                    "  {:>5} {:<6} {name:<5} {:>6.0} {:>6.0} {:>6.0} {:>8.0} {:>7} {:>7} {:>8}{}",
+                    "  {:>5} {:<6} {name:<5} {:>6.0} {:>6.0} {:>6.0} {:>8.0} {:>7} {:>10} {:>7} {:>8}{}",
                     if name == "bare" { round.round.to_string() } else { String::new() },
                     if name == "bare" { round.first } else { "" },
                     f.wake_us.p50,
@@ -404,6 +454,7 @@ pub fn render(
                     f.wake_us.p999,
                     f.wake_us.max,
                     f.missed,
+                    format!("({})", f.missed_in_stalls),
                     f.outside_40us,
                     out,
                     f.fault.as_ref().map_or(String::new(), |x| format!("  FAULT {x}")),
@@ -412,13 +463,16 @@ pub fn render(
         }
         let _ = writeln!(
             t,
-            "  p99 ratio servo/bare: median {:.2} (min {:.2}, max {:.2}); p99 difference median {:+.0} µs; missed periods servo {} / bare {}",
+            "  p99 ratio servo/bare: median {:.2} (min {:.2}, max {:.2}); p99 difference median {:+.0} µs\n  \
+             missed periods servo {} / bare {}; outside host stalls (a wake ≥ 1 ms late) servo {} / bare {}",
             r.p99_ratio_median,
             r.p99_ratio_min,
             r.p99_ratio_max,
             r.p99_diff_us_median,
             r.missed_servo,
-            r.missed_bare
+            r.missed_bare,
+            r.missed_servo_outside_stalls,
+            r.missed_bare_outside_stalls
         );
         let _ = writeln!(
             t,

@@ -10,6 +10,7 @@
 //!
 //! Figures are printed (and written as JSON with `--json`), never asserted: the machine decides.
 
+mod baselines;
 mod cycle;
 mod ipc;
 mod jitter;

@@ -1,8 +1,8 @@
 //! `[hwserver]` and `[safety]`: the link to the hardware server, its watchdog, and the timing
 //! bounds whose defaults depend on the backend.
 
-use crate::source::{S, Source, one_of, positive};
-use crate::{ConfigLoadError, Names};
+use crate::source::{S, Source, one_of, positive, span_of};
+use crate::{ConfigLoadError, Names, TimerSettings};
 use serde::{Deserialize, Serialize};
 
 /// The link to the hardware server.
@@ -184,6 +184,29 @@ impl RawHwServer {
             )? as u32,
             backend,
         })
+    }
+
+    /// A spinning hwserver needs a CPU of its own: pinned to the servo thread's CPU, at its
+    /// higher priority, it would never let the servo thread run.
+    pub(crate) fn check_spin_cpu(
+        &self,
+        src: &Source<'_>,
+        hw: &HwServerSettings,
+        timer: &TimerSettings,
+    ) -> Result<(), ConfigLoadError> {
+        match (hw.wait, timer.servo_cpu) {
+            (HwWait::Spin, Some(cpu)) if timer.hwserver_cpu == Some(cpu) => Err(src.invalid(
+                span_of(&self.wait),
+                "hwserver.wait",
+                format!(
+                    "\"spin\" needs a CPU of its own, but timer.servo_cpu and \
+                     timer.hwserver_cpu are both {cpu}: the spinning hwserver would starve the \
+                     servo thread; pin them to different CPUs, or wait = \"block\" (one CPU \
+                     shared by both is fast when they block: BENCHMARKS.md)"
+                ),
+            )),
+            _ => Ok(()),
+        }
     }
 
     /// Whether the file sets the watchdog.

@@ -204,6 +204,7 @@ impl RawFile {
         let trajectory = self.trajectory.check(src, names)?;
         let step = self.step.check(src, trajectory.max_duration_s)?;
         let hwserver = self.hwserver.check(src, names)?;
+        self.hwserver.check_spin_cpu(src, &hwserver, &timer)?;
         let sim = self.sim.check(src, n_motors)?;
         let s626 = self.s626.check(src, n_motors, hwserver.backend == "s626")?;
         let robot = match &self.robot {

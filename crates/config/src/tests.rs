@@ -456,6 +456,17 @@ fn wait_mode_and_cpus_are_checked_issue_14() {
         &format!("[timer]\nservo_cpu = -2\n{m}"),
         "q.toml:2:13: timer.servo_cpu: must be -1‥1023, found -2",
     );
+    // One CPU for both: fine when the hwserver blocks, refused when it spins.
+    let one = "[timer]\nservo_cpu = 1\nhwserver_cpu = 1\n[hwserver]\nwait = ";
+    let s = parse(&format!("{one}\"block\"\n{m}")).unwrap();
+    assert_eq!((s.timer.servo_cpu, s.timer.hwserver_cpu), (Some(1), Some(1)));
+    check(
+        &format!("{one}\"spin\"\n{m}"),
+        "q.toml:5:8: hwserver.wait: \"spin\" needs a CPU of its own, but timer.servo_cpu and \
+         timer.hwserver_cpu are both 1: the spinning hwserver would starve the servo thread; pin \
+         them to different CPUs, or wait = \"block\" (one CPU shared by both is fast when they \
+         block: BENCHMARKS.md)",
+    );
 }
 
 /// `[tune]`: the shipped file states the defaults; gains, objective and bounds are checked

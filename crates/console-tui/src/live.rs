@@ -85,7 +85,7 @@ impl Live {
                 return;
             }
             self.tried = Some(Instant::now());
-            self.reader = TelemetryReader::open(&self.location).ok();
+            self.reader = TelemetryReader::open_run(&self.location).ok();
         }
         let Some(reader) = &mut self.reader else { return };
         let got: Vec<_> = std::iter::from_fn(|| reader.receive().ok().flatten()).collect();

@@ -225,10 +225,10 @@ impl HwLink for IoxLink {
                 });
             }
             if waited < self.timeouts.spin_ns {
-                // Consume the response's wake-up as it comes, so the event count stays small.
-                self.listener
-                    .try_wait(|_| {})
-                    .map_err(|_| LinkError::Ipc { op: "response try_wait" })?;
+                // Polling reads no wake-up: iceoryx2 0.10 sends one only when the last was
+                // read (`iceoryx2-cal` event `notify`: a pending one makes the next a compare-
+                // exchange), so the server's notifications cost no system call while we poll.
+                // A wait that blocks later reads the stale one and waits again.
                 std::hint::spin_loop();
                 continue;
             }

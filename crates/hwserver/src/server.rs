@@ -119,7 +119,6 @@ fn serve_inner(
     // Once stopping: since when, and how it will be reported. The server goes on answering
     // (every response says why) until the controller exits or falls silent for the grace time.
     let mut ending: Option<(u64, ServeEnd)> = None;
-    let mut spins = 0u64;
     loop {
         let now = monotonic_now_ns();
         if ending.is_none() && stop.load(Ordering::Relaxed) {
@@ -143,8 +142,7 @@ fn serve_inner(
             return Ok(end);
         }
 
-        spins = spins.wrapping_add(1);
-        wait_for_request(&listener, opts, (core.any_enabled(), silent_ns), spins)?;
+        wait_for_request(&listener, opts, (core.any_enabled(), silent_ns))?;
 
         while let Some(active) = server.receive().map_err(|e| port_err("server receive")(&e))? {
             last_request_ns = monotonic_now_ns();
@@ -161,19 +159,16 @@ fn serve_inner(
 
 /// Waits for the controller's request event: blocks until it comes, at most until the
 /// watchdog could expire (50 ms while no motor is enabled, so a stop is noticed); with
-/// `opts.spin`, only consumes the wake-ups so the event counter stays small.
+/// `opts.spin`, returns at once without reading the event: a controller that knows the server
+/// spins notifies nothing, and one that does not sends a single wake-up that stays unread
+/// (iceoryx2 0.10 sends the next only once the last was read: an unread one makes every
+/// further notification a compare-exchange, no system call).
 fn wait_for_request(
     listener: &iceoryx2::port::listener::Listener<iceoryx2::prelude::ipc::Service>,
     opts: &ServeOptions,
     (enabled, silent_ns): (bool, u64),
-    spins: u64,
 ) -> Result<(), ServeError> {
     if opts.spin {
-        // A controller that knows the server spins notifies nothing; one that does not is
-        // drained now and then, so its event count stays small — no system call per spin.
-        if spins.is_multiple_of(4096) {
-            listener.try_wait(|_| {}).map_err(|e| port_err("listener try_wait")(&e))?;
-        }
         std::hint::spin_loop();
         return Ok(());
     }

@@ -28,6 +28,22 @@ fn unknown_message_types_get_a_status_bit_and_the_server_carries_on() {
     assert_eq!(code, Some(0));
 }
 
+/// Issue 14: a controller that polls for its responses, with a hwserver that spins for its
+/// requests: no wake-up is notified or read on either side while they poll, yet every
+/// request of thousands in a row is answered, in order, and the server still ends on Exit.
+#[test]
+fn a_polling_controller_and_a_spinning_hwserver_answer_every_request_issue_14() {
+    let mut server = Server::start("polled", "[hwserver]\nwait = \"spin\"\n");
+    let mut link = server.connect_polling();
+    for i in 0..5_000 {
+        let resp = link.exchange(&HwMsg::read_all_encoders());
+        assert!(resp.as_ref().is_ok_and(|r| r.status().is_ok()), "exchange {i}: {resp:?}");
+    }
+    assert!(link.exchange(&HwMsg::request(MsgType::Exit)).unwrap().status().is_ok());
+    let (code, err) = server.wait(Duration::from_secs(10));
+    assert_eq!(code, Some(0), "{err}");
+}
+
 #[test]
 fn all_twelve_messages_are_served() {
     let mut server =

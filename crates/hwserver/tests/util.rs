@@ -59,6 +59,19 @@ impl Server {
         IoxLink::connect(&self.location, timeouts, Duration::from_secs(10), None).expect("connect")
     }
 
+    /// Connects a link that polls for each response up to 1 s before it blocks, to a server
+    /// that spins (`hwserver.wait = "spin"`): no request is notified.
+    pub fn connect_polling(&self) -> IoxLink {
+        let timeouts = LinkTimeouts {
+            deadline_ns: 100_000_000,
+            give_up_ns: 2_000_000_000,
+            spin_ns: 1_000_000_000,
+        };
+        IoxLink::connect(&self.location, timeouts, Duration::from_secs(10), None)
+            .expect("connect")
+            .to_spinning_server()
+    }
+
     /// Waits up to `timeout` for the process to end; its exit code and stderr.
     pub fn wait(&mut self, timeout: Duration) -> (Option<i32>, String) {
         let started = Instant::now();

@@ -192,6 +192,9 @@ pub struct TimingSummary {
     pub outside_40us: u64,
     /// Periods that expired without a cycle.
     pub missed_periods: u64,
+    /// Of those, the ones lost in host stalls (a wake at least 1 ms late).
+    #[serde(default)]
+    pub missed_in_stalls: u64,
     /// Read round trip, µs.
     pub read_us: Pct,
     /// Trajectory + law, µs.
@@ -210,6 +213,7 @@ impl TimingSummary {
             period_error_us: t.period_error.percentiles().into(),
             outside_40us: t.outside_40us,
             missed_periods: t.missed,
+            missed_in_stalls: t.missed_in_stalls,
             read_us: t.read.percentiles().into(),
             compute_us: t.compute.percentiles().into(),
             output_latency_us: t.output_latency.percentiles().into(),

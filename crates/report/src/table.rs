@@ -105,11 +105,15 @@ pub fn render(s: &Summary) -> String {
             rows.push(pct_row(name, p));
         }
         aligned(&mut t, &rows);
-        let _ = writeln!(
+        let _ = write!(
             t,
             "  periods off by > 40 µs: {}   missed periods: {}",
             tm.outside_40us, tm.missed_periods
         );
+        let _ = match tm.missed_in_stalls {
+            0 => writeln!(t),
+            n => writeln!(t, " ({n} of them in host stalls of ≥ 1 ms)"),
+        };
     }
     for w in &s.warnings {
         let _ = writeln!(t, "  warning: {w}");

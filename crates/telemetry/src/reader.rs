@@ -64,6 +64,17 @@ impl TelemetryReader {
         })
     }
 
+    /// [`open`](Self::open) for a run of the starter's: [`TelemetryOpenError::NoMove`],
+    /// without a node, while the run's file is absent — no run of that prefix is alive then,
+    /// and a node made now would leave iceoryx2's management file of the prefix behind with
+    /// nobody to remove it (the starter removes a run's files when the run ends).
+    pub fn open_run(location: &IpcLocation) -> Result<TelemetryReader, TelemetryOpenError> {
+        if !run_file(&location.prefix).exists() {
+            return Err(TelemetryOpenError::NoMove);
+        }
+        TelemetryReader::open(location)
+    }
+
     /// The next sample queued for this reader, if any; counted, and a gap in the numbers
     /// counted as lost.
     pub fn receive(&mut self) -> Result<Option<TelemetrySample>, String> {

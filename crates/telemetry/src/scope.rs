@@ -163,7 +163,7 @@ fn attach(args: &ScopeArgs) -> anyhow::Result<Option<(TelemetryReader, IpcLocati
         None => runs(),
     };
     for location in candidates {
-        match TelemetryReader::open(&location) {
+        match TelemetryReader::open_run(&location) {
             Ok(r) => return Ok(Some((r, location))),
             Err(TelemetryOpenError::NoMove) => {}
             Err(TelemetryOpenError::Failed(e)) if args.iox_prefix.is_some() => {

@@ -1,0 +1,194 @@
+//! The raw baselines `ipc` measures beside the controller ⇄ hwserver exchange, in the same
+//! run: a futex ping-pong and a spin ping-pong between two threads sharing one word of memory
+//! (the floors of a blocking and of a spinning exchange), and iceoryx2's request/response
+//! ports alone, busy-polled by two threads (what the library costs before our hwserver, its
+//! event notifications and its handling are added).
+
+use crate::stats::percentiles_us;
+use anyhow::anyhow;
+use qmarc_proto::HwMsg;
+use qmarc_proto::service::{IpcLocation, create_node, open_hw_services};
+use qmarc_report::summary::Pct;
+use qmarc_timer::clock::monotonic_now_ns;
+use qmarc_timer::rt::RtRequest;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::{Arc, Barrier};
+
+/// The futex(2) call on `word`.
+fn futex(word: &AtomicU32, op: i32, val: u32) {
+    // SAFETY: `word` is a live, aligned u32 for the call's duration; FUTEX_WAIT and
+    // FUTEX_WAKE read it and queue/wake on its address only; no timeout pointer.
+    unsafe {
+        libc::syscall(libc::SYS_futex, word.as_ptr(), op, val, std::ptr::null::<libc::timespec>());
+    }
+}
+
+const PING: u32 = 1;
+const PONG: u32 = 2;
+const STOP: u32 = 3;
+
+/// A ping-pong between two threads over one shared word: `block` waits in futex(2) (the
+/// shared, not private, form, as between processes over shared memory), else spins. Each
+/// side at the priority the hwserver and controller run at when `fifo`; both on `cpu` when
+/// given.
+pub fn ping_pong(
+    samples: usize,
+    block: bool,
+    fifo: bool,
+    cpu: Option<usize>,
+) -> anyhow::Result<Pct> {
+    let word = Arc::new(AtomicU32::new(0));
+    let wait_while = move |w: &AtomicU32, not: u32| {
+        let deadline = monotonic_now_ns() + 2_000_000_000;
+        loop {
+            let v = w.load(Ordering::Acquire);
+            if v != not || monotonic_now_ns() > deadline {
+                return v;
+            }
+            if block {
+                futex(w, libc::FUTEX_WAIT, v);
+            } else {
+                std::hint::spin_loop();
+            }
+        }
+    };
+    let req = |p: i32| RtRequest {
+        priority: fifo.then_some(p),
+        lock_memory: false,
+        prefault_stack_bytes: 64 * 1024,
+        cpu,
+    };
+    let server_word = Arc::clone(&word);
+    let server = qmarc_timer::rt::spawn("bench-pong", req(85), move |_| {
+        loop {
+            // Wait for a ping (the word leaves PONG or 0), answer it.
+            let mut v = server_word.load(Ordering::Acquire);
+            while v != PING && v != STOP {
+                v = wait_while(&server_word, v);
+            }
+            if v == STOP {
+                return;
+            }
+            server_word.store(PONG, Ordering::Release);
+            if block {
+                futex(&server_word, libc::FUTEX_WAKE, 1);
+            }
+        }
+    })?;
+    let client = qmarc_timer::rt::spawn("bench-ping", req(80), move |_| {
+        let mut rtt = Vec::with_capacity(samples);
+        for _ in 0..samples {
+            let t0 = monotonic_now_ns();
+            word.store(PING, Ordering::Release);
+            if block {
+                futex(&word, libc::FUTEX_WAKE, 1);
+            }
+            while wait_while(&word, PING) != PONG {}
+            rtt.push(monotonic_now_ns() - t0);
+        }
+        word.store(STOP, Ordering::Release);
+        futex(&word, libc::FUTEX_WAKE, 1);
+        rtt
+    })?;
+    let mut rtt = client.join().map_err(|_| anyhow::anyhow!("ping thread panicked"))?;
+    server.join().map_err(|_| anyhow::anyhow!("pong thread panicked"))?;
+    Ok(percentiles_us(&mut rtt))
+}
+
+/// Round trips through iceoryx2's request/response ports (the hwserver's service, its QoS
+/// and its 72-byte message) between two threads of this process that both busy-poll: no
+/// event, no hwserver, the request echoed back.
+pub fn iox_ports(samples: usize) -> anyhow::Result<Pct> {
+    let pid = std::process::id();
+    let dir = std::env::temp_dir().join(format!("qmarc-bench-ports-{pid}"));
+    std::fs::create_dir_all(&dir)?;
+    let location = IpcLocation::new(&format!("qbp{pid}_"), &format!("{}/", dir.display()));
+    let result = iox_ports_at(samples, &location);
+    location.remove_files();
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
+
+fn iox_ports_at(samples: usize, location: &IpcLocation) -> anyhow::Result<Pct> {
+    // The services exist before either port: each thread opens them.
+    let node = create_node("qmarc-bench", location)?;
+    let _services = open_hw_services(&node)?;
+    let ready = Arc::new(Barrier::new(2));
+    let done = Arc::new(AtomicBool::new(false));
+    let req = RtRequest { priority: None, lock_memory: false, prefault_stack_bytes: 0, cpu: None };
+    let (loc, go, stop) = (location.clone(), Arc::clone(&ready), Arc::clone(&done));
+    // Each side meets the other at the barrier whether or not its port came up, so that
+    // neither waits for ever on a failed partner.
+    let server = qmarc_timer::rt::spawn("bench-iox-server", req, move |_| -> anyhow::Result<()> {
+        let port = || -> anyhow::Result<_> {
+            let node = create_node("qmarc-bench-server", &loc)?;
+            let services = open_hw_services(&node)?;
+            let server = services.hw.server_builder().create().map_err(|e| anyhow!("{e:?}"))?;
+            Ok((node, server))
+        };
+        let port = port();
+        go.wait();
+        let (_node, server) = port?;
+        while !stop.load(Ordering::Relaxed) {
+            while let Some(active) = server.receive().map_err(|e| anyhow!("{e:?}"))? {
+                let echo = *active.payload();
+                active.send_copy(echo).map_err(|e| anyhow!("{e:?}"))?;
+            }
+            std::hint::spin_loop();
+        }
+        Ok(())
+    })?;
+    let loc = location.clone();
+    let client = qmarc_timer::rt::spawn("bench-iox-client", req, move |_| {
+        let run = || -> anyhow::Result<Vec<u64>> {
+            let port = || -> anyhow::Result<_> {
+                let node = create_node("qmarc-bench-client", &loc)?;
+                let services = open_hw_services(&node)?;
+                let client = services.hw.client_builder().create().map_err(|e| anyhow!("{e:?}"))?;
+                Ok((node, client))
+            };
+            let port = port();
+            ready.wait();
+            let (_node, client) = port?;
+            let mut rtt = Vec::with_capacity(samples);
+            for i in 0..samples + samples / 10 {
+                let t0 = monotonic_now_ns();
+                let pending = client
+                    .send_copy(HwMsg::read_all_encoders())
+                    .map_err(|e| anyhow!("request send: {e:?}"))?;
+                let deadline = t0 + 2_000_000_000;
+                while pending.receive().map_err(|e| anyhow!("{e:?}"))?.is_none() {
+                    if monotonic_now_ns() > deadline {
+                        return Err(anyhow!("no response from the echo server in 2 s"));
+                    }
+                    std::hint::spin_loop();
+                }
+                if i >= samples / 10 {
+                    rtt.push(monotonic_now_ns() - t0);
+                }
+            }
+            Ok(rtt)
+        };
+        let r = run();
+        done.store(true, Ordering::Relaxed);
+        r
+    })?;
+    let rtt = client.join().map_err(|_| anyhow!("client thread panicked"))?;
+    server.join().map_err(|_| anyhow!("server thread panicked"))??;
+    Ok(percentiles_us(&mut rtt?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_ping_pongs_and_the_ports_complete() {
+        for block in [true, false] {
+            let p = ping_pong(200, block, false, None).unwrap();
+            assert!(p.p50 > 0.0 && p.max >= p.p99, "{p:?}");
+        }
+        let p = iox_ports(200).unwrap();
+        assert!(p.p50 > 0.0 && p.max >= p.p99, "{p:?}");
+    }
+}
