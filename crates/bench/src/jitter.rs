@@ -118,6 +118,9 @@ fn segment_config(a: &JitterArgs, scratch: &Path) -> anyhow::Result<PathBuf> {
 pub struct LoopFigures {
     /// Cycles run.
     pub cycles: u64,
+    /// Periods the segment covered: its cycles (the servo's settle included) and the missed
+    /// ones. A servo segment that a fault ended covers fewer than the bare loop's.
+    pub periods: u64,
     /// Wake latency against the intended expiry.
     pub wake_us: Pct,
     /// |interval between wakes − period|.
@@ -186,6 +189,25 @@ pub struct TimerResult {
     pub missed_servo_outside_stalls: u64,
     /// And the bare loop.
     pub missed_bare_outside_stalls: u64,
+    /// Periods the servo segments covered, all rounds.
+    pub periods_servo: u64,
+    /// And the bare loop's.
+    pub periods_bare: u64,
+}
+
+impl TimerResult {
+    /// Missed periods per 100 000 (servo, bare): `outside_stalls` only, or all.
+    pub fn missed_rates(&self, outside_stalls: bool) -> (f64, f64) {
+        let rate = |n: u64, of: u64| n as f64 * 1e5 / of.max(1) as f64;
+        if outside_stalls {
+            (
+                rate(self.missed_servo_outside_stalls, self.periods_servo),
+                rate(self.missed_bare_outside_stalls, self.periods_bare),
+            )
+        } else {
+            (rate(self.missed_servo, self.periods_servo), rate(self.missed_bare, self.periods_bare))
+        }
+    }
 }
 
 /// The JSON `--json` writes: the first timer's verdict at the top, every timer's in `timers`.
@@ -243,6 +265,7 @@ fn bare(
         handle.join().map_err(|_| anyhow::anyhow!("the bare loop panicked"))??;
     Ok(LoopFigures {
         cycles,
+        periods: cycles,
         wake_us: stats.wake_latency.percentiles().into(),
         period_error_us: stats.period_error.percentiles().into(),
         missed: stats.missed,
@@ -277,6 +300,7 @@ fn servo(
     let t = &s.timing;
     Ok(LoopFigures {
         cycles: s.cycles,
+        periods: s.cycles + s.settle.as_ref().map_or(0, |x| x.cycles) + t.missed_periods,
         wake_us: t.wake_latency_us,
         period_error_us: t.period_error_us,
         missed: t.missed_periods,
@@ -358,6 +382,8 @@ pub fn verdict(timer: String, rounds: Vec<Round>, period_us: u32) -> TimerResult
         missed_bare: rounds.iter().map(|r| r.bare.missed).sum(),
         missed_servo_outside_stalls: rounds.iter().map(|r| r.servo.outside_stalls()).sum(),
         missed_bare_outside_stalls: rounds.iter().map(|r| r.bare.outside_stalls()).sum(),
+        periods_servo: rounds.iter().map(|r| r.servo.periods).sum(),
+        periods_bare: rounds.iter().map(|r| r.bare.periods).sum(),
         rounds,
     }
 }
@@ -463,12 +489,14 @@ pub fn render(
         }
         let _ = writeln!(
             t,
-            "  p99 ratio servo/bare: median {:.2} (min {:.2}, max {:.2}); p99 difference median {:+.0} µs\n  \
-             missed periods servo {} / bare {}; outside host stalls (a wake ≥ 1 ms late) servo {} / bare {}",
-            r.p99_ratio_median,
-            r.p99_ratio_min,
-            r.p99_ratio_max,
-            r.p99_diff_us_median,
+            "  p99 ratio servo/bare: median {:.2} (min {:.2}, max {:.2}); p99 difference median {:+.0} µs",
+            r.p99_ratio_median, r.p99_ratio_min, r.p99_ratio_max, r.p99_diff_us_median,
+        );
+        let ((all_s, all_b), (out_s, out_b)) = (r.missed_rates(false), r.missed_rates(true));
+        let _ = writeln!(
+            t,
+            "  missed periods servo {} / bare {} (per 100 000 periods {all_s:.0} / {all_b:.0}); \
+             outside host stalls (a wake ≥ 1 ms late) servo {} / bare {} ({out_s:.0} / {out_b:.0})",
             r.missed_servo,
             r.missed_bare,
             r.missed_servo_outside_stalls,

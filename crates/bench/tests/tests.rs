@@ -139,33 +139,38 @@ fn bad_options_are_refused_with_a_message_issue_14() {
     assert!(text(&out).contains("--spin needs the hwserver on a CPU of its own"), "{}", text(&out));
 }
 
+/// One short round of `jitter` with `extra` options on the test's own settings copy in `dir`:
+/// its output and its JSON.
+fn short_jitter(dir: &Path, extra: &[&str]) -> (String, serde_json::Value) {
+    let json = dir.join("j.json");
+    let cfg = config(dir);
+    let (c, j) = (format!("--config={}", cfg.display()), format!("--json={}", json.display()));
+    let mut args = vec!["jitter", "--rounds=1", "--segment-s=0.2", "--warmup-s=0.1", &c, &j];
+    args.extend_from_slice(extra);
+    let out = run(&args);
+    let t = text(&out);
+    assert!(out.status.success(), "{t}");
+    (t, serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap())
+}
+
 /// `--pin=same`: the blocking pair shares CPU 0 with the bare loop (the 10 kHz recipe of
 /// BENCHMARKS.md); the settings copy pins both and the missed periods outside host stalls are
 /// reported for both loops.
 #[test]
 fn jitter_runs_with_both_processes_on_one_cpu_issue_14() {
     let dir = scratch("same");
-    let json = dir.join("j.json");
-    let cfg = config(&dir);
-    let out = run(&[
-        "jitter",
-        "--rounds=1",
-        "--segment-s=0.2",
-        "--warmup-s=0.1",
-        "--period-us=200",
-        "--pin=same",
-        &format!("--config={}", cfg.display()),
-        &format!("--json={}", json.display()),
-    ]);
-    let t = text(&out);
-    assert!(out.status.success(), "{t}");
+    let (t, j) = short_jitter(&dir, &["--period-us=200", "--pin=same"]);
     assert!(t.contains("servo, hwserver and bare loop on CPU 0"), "{t}");
     assert!(t.contains("outside host stalls (a wake ≥ 1 ms late) servo"), "{t}");
-    let j: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(t.contains("per 100 000 periods"), "{t}");
     assert_eq!((j["spin"].as_bool(), j["pin"].as_str()), (Some(false), Some("same")));
     let timer = &j["timers"][0];
-    for key in ["missed_servo_outside_stalls", "missed_bare_outside_stalls"] {
+    for key in [
+        "missed_servo_outside_stalls",
+        "missed_bare_outside_stalls",
+        "periods_servo",
+        "periods_bare",
+    ] {
         assert!(timer[key].as_u64().is_some(), "{key}: {timer}");
     }
     let servo = &timer["rounds"][0]["servo"];
@@ -179,26 +184,11 @@ fn jitter_runs_with_both_processes_on_one_cpu_issue_14() {
 #[test]
 fn jitter_runs_with_a_spinning_hwserver_issue_14() {
     let dir = scratch("spin");
-    let json = dir.join("j.json");
-    let cfg = config(&dir);
-    let out = run(&[
-        "jitter",
-        "--rounds=1",
-        "--segment-s=0.2",
-        "--warmup-s=0.1",
-        "--spin",
-        "--pin",
-        &format!("--config={}", cfg.display()),
-        &format!("--json={}", json.display()),
-    ]);
-    let t = text(&out);
-    assert!(out.status.success(), "{t}");
+    let (t, j) = short_jitter(&dir, &["--spin", "--pin"]);
     assert!(
         t.contains("hwserver spinning, servo and bare loop on CPU 0, hwserver on CPU 1"),
         "{t}"
     );
-    let j: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!((j["spin"].as_bool(), j["pin"].as_str()), (Some(true), Some("split")));
     let servo = &j["timers"][0]["rounds"][0]["servo"];
     assert!(servo["output_us"]["p99"].as_f64().unwrap() > 0.0, "{servo}");
