@@ -11,6 +11,7 @@ use qmarc_proto::service::{IpcLocation, create_node, open_hw_services};
 use qmarc_report::summary::Pct;
 use qmarc_timer::clock::monotonic_now_ns;
 use qmarc_timer::rt::RtRequest;
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Barrier};
 
@@ -99,11 +100,21 @@ pub fn ping_pong(
 /// and its 72-byte message) between two threads of this process that both busy-poll: no
 /// event, no hwserver, the request echoed back.
 pub fn iox_ports(samples: usize) -> anyhow::Result<Pct> {
+    in_scratch_location("ports", |_, location| iox_ports_at(samples, location))
+}
+
+/// Runs `f` with a scratch directory and an iceoryx2 location of its own (prefix
+/// `qb<tag><pid>_`, root in that directory), then removes both, whatever `f` returned. Only
+/// for `f` that leaves no process of that prefix running.
+pub fn in_scratch_location<T>(
+    tag: &str,
+    f: impl FnOnce(&Path, &IpcLocation) -> anyhow::Result<T>,
+) -> anyhow::Result<T> {
     let pid = std::process::id();
-    let dir = std::env::temp_dir().join(format!("qmarc-bench-ports-{pid}"));
+    let dir = std::env::temp_dir().join(format!("qmarc-bench-{tag}-{pid}"));
     std::fs::create_dir_all(&dir)?;
-    let location = IpcLocation::new(&format!("qbp{pid}_"), &format!("{}/", dir.display()));
-    let result = iox_ports_at(samples, &location);
+    let location = IpcLocation::new(&format!("qb{tag}{pid}_"), &format!("{}/", dir.display()));
+    let result = f(&dir, &location);
     location.remove_files();
     let _ = std::fs::remove_dir_all(&dir);
     result

@@ -1,10 +1,10 @@
 //! `qmarc-bench ipc`: the controller ⇄ hwserver exchange (the controller's `IoxLink` against
-//! the real `qmarc-hwserver` binary, both blocking on iceoryx2 event listeners) beside two raw
-//! baselines measured in the same run — a futex ping-pong and a spin ping-pong between two
-//! threads sharing one word of memory — and what the benchmarks need of the machine: where the
-//! binaries are, what the machine is, and cyclictest as an outside reference.
+//! the real `qmarc-hwserver` binary: blocking, blocking with both on one CPU, spinning) beside
+//! the baselines of [`crate::baselines`] measured in the same run — and what the benchmarks
+//! need of the machine: where the binaries are, what the machine is, and cyclictest as an
+//! outside reference.
 
-use crate::baselines::{iox_ports, ping_pong};
+use crate::baselines::{in_scratch_location, iox_ports, ping_pong};
 use crate::stats::percentiles_us;
 use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
 use qmarc_proto::HwMsg;
@@ -164,10 +164,18 @@ fn exchange(
     spin: bool,
     cpu: Option<usize>,
 ) -> anyhow::Result<Pct> {
-    let pid = std::process::id();
-    let dir = std::env::temp_dir().join(format!("qmarc-bench-ipc-{pid}"));
-    std::fs::create_dir_all(&dir)?;
-    let location = IpcLocation::new(&format!("qbi{pid}_"), &format!("{}/", dir.display()));
+    in_scratch_location("ipc", |dir, location| {
+        exchange_at(samples, bin_dir, (spin, cpu), dir, location)
+    })
+}
+
+fn exchange_at(
+    samples: usize,
+    bin_dir: &std::path::Path,
+    (spin, cpu): (bool, Option<usize>),
+    dir: &std::path::Path,
+    location: &IpcLocation,
+) -> anyhow::Result<Pct> {
     let wait = if spin { "spin" } else { "block" };
     let pin = cpu.map_or(-1, |c| c as i64);
     let spec = qmarc_hwserver::backends::standalone_run(
@@ -175,7 +183,7 @@ fn exchange(
             "[timer]\nhwserver_cpu = {pin}\n[hwserver]\nwatchdog_periods = 2500\nwait = \"{wait}\"\n\
              [sim]\nstate_file = \"\"\n"
         ),
-        &location,
+        location,
         true,
     )
     .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -207,10 +215,12 @@ fn exchange(
             let _ = link.exchange(&HwMsg::request(qmarc_proto::MsgType::Exit));
             Ok(rtt)
         })?;
-    let result = client.join().map_err(|_| anyhow::anyhow!("exchange thread panicked"))?;
+    let result = client.join().map_err(|_| anyhow::anyhow!("exchange thread panicked"));
+    if !matches!(result, Ok(Ok(_))) {
+        let _ = server.kill(); // no Exit was sent: it would wait for one for ever
+    }
     let _ = server.wait();
-    location.remove_files();
-    let _ = std::fs::remove_dir_all(&dir);
+    let result = result?;
     Ok(percentiles_us(&mut result?))
 }
 

@@ -141,7 +141,7 @@ pub struct LoopFigures {
 impl LoopFigures {
     /// Missed periods outside host stalls.
     fn outside_stalls(&self) -> u64 {
-        self.missed - self.missed_in_stalls.min(self.missed)
+        self.missed.saturating_sub(self.missed_in_stalls)
     }
 }
 
@@ -405,11 +405,13 @@ pub fn run(a: &JitterArgs) -> anyhow::Result<()> {
         prefault_stack_bytes: 128 * 1024,
         cpu: if a.pin.is_some() { Some(0) } else { settings.timer.servo_cpu },
     };
+    // Checked before the scratch directory exists: a bad --timer must not leave it behind.
+    let timers = timers(a.timer.as_deref(), settings.timer.method)?;
     let scratch = std::env::temp_dir().join(format!("qmarc-bench-jitter-{}", std::process::id()));
     std::fs::create_dir_all(&scratch)?;
     let cyclic_before = crate::ipc::cyclictest(a.period_us, a.segment_s, req.priority);
     let mut results = Vec::new();
-    for timer in timers(a.timer.as_deref(), settings.timer.method)? {
+    for timer in timers {
         let r = rounds_of(a, timer, req, &scratch);
         if r.is_err() {
             let _ = std::fs::remove_dir_all(&scratch);

@@ -129,9 +129,18 @@ fn bad_options_are_refused_with_a_message_issue_14() {
     let out = run(&["jitter", "--rounds=0"]);
     assert_eq!(out.status.code(), Some(1));
     assert!(text(&out).contains("--rounds must be ≥ 1"), "{}", text(&out));
-    let out = run(&["jitter", "--timer=posix", "--segment-s=0.1"]);
+    let child = Command::new(bench())
+        .args(["jitter", "--timer=posix", "--segment-s=0.1"])
+        .current_dir(workspace())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let scratch = std::env::temp_dir().join(format!("qmarc-bench-jitter-{}", child.id()));
+    let out = child.wait_with_output().unwrap();
     assert_eq!(out.status.code(), Some(1));
     assert!(text(&out).contains("\"posix\""), "{}", text(&out));
+    assert!(!scratch.exists(), "{} left behind", scratch.display());
     let out = run(&["jitter", "--period-us=abc"]);
     assert_eq!(out.status.code(), Some(64), "a usage error");
     let out = run(&["jitter", "--spin", "--pin=same", "--segment-s=0.1"]);
