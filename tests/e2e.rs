@@ -403,3 +403,79 @@ fn spin_mode_moves_exactly_as_blocking_mode_issue_14() {
     assert_eq!(blocking, spinning);
     run.assert_clean();
 }
+
+/// CPUs in a `Cpus_allowed_list` ("1", "0-3", "0,2-3").
+fn cpu_list(text: &str) -> Vec<usize> {
+    text.trim()
+        .split(',')
+        .flat_map(|part| {
+            let (a, b) = part.split_once('-').unwrap_or((part, part));
+            a.parse::<usize>().unwrap()..=b.parse::<usize>().unwrap()
+        })
+        .collect()
+}
+
+/// (thread name, allowed CPUs) of every thread of process `pid`.
+fn thread_cpus(pid: u32) -> Vec<(String, Vec<usize>)> {
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).into_iter().flatten().flatten();
+    tasks
+        .filter_map(|t| std::fs::read_to_string(t.path().join("status")).ok())
+        .map(|s| {
+            let field = |k: &str| s.lines().find_map(|l| l.strip_prefix(k)).unwrap_or("").trim();
+            (field("Name:").to_string(), cpu_list(field("Cpus_allowed_list:")))
+        })
+        .collect()
+}
+
+/// Issue 14: with the servo thread and the hwserver pinned to one CPU, everything else of
+/// ours — the starter, the controller's main, telemetry and knot threads — runs on the other
+/// CPUs, where the machine has any: their system calls never hold up the real-time pair's
+/// wake. The knot thread is spawned by the pinned servo thread and must not inherit its CPU.
+#[test]
+fn threads_that_are_not_real_time_keep_off_the_pinned_cpu_issue_14() {
+    let run = TestRun::new("keepoff");
+    let cfg = run.config_with(&[("servo_cpu", "0"), ("hwserver_cpu", "0")]);
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    let mine = cpu_list(
+        status.lines().find_map(|l| l.strip_prefix("Cpus_allowed_list:")).expect("our CPUs"),
+    );
+    let others: Vec<usize> = mine.iter().copied().filter(|&c| c != 0).collect();
+    // On a one-CPU machine there is nowhere else to go: nothing changes.
+    let rest = if others.is_empty() { mine.clone() } else { others };
+    let out = run.out("out");
+    // A 2 s PVT path streamed on standard input, kept open: its knot thread stays alive.
+    let mut child = run.spawn_starter(&[
+        &format!("--config={}", cfg.display()),
+        &format!("--out={}", out.display()),
+        "--deterministic",
+        "run",
+        "--method=pvt",
+        "--knots=-",
+    ]);
+    let mut stdin = child.stdin.take().unwrap();
+    for i in 0..=40 {
+        let s = f64::from(i) / 40.0;
+        let p = (2_000.0 * (3.0 * s * s - 2.0 * s * s * s)).round();
+        let v = 2_000.0 / 2.0 * (6.0 * s - 6.0 * s * s);
+        let line = format!("X {p} {v:.3} 50 Y 0 0 50 Z 0 0 50\n");
+        std::io::Write::write_all(&mut stdin, line.as_bytes()).unwrap();
+    }
+    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    let mut seen = Vec::new();
+    for (pid, cmd) in run.processes() {
+        for (name, cpus) in thread_cpus(pid) {
+            let pinned = cmd.contains("qmarc-hwserver") || name == "qmarc-servo";
+            let want = if pinned { &vec![0] } else { &rest };
+            assert_eq!(&cpus, want, "{name} of {cmd}");
+            seen.push(name);
+        }
+    }
+    drop(stdin);
+    let r = qmarc_tests::wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    for name in ["qmarc-starter", "qmarc-hwserver", "qmarc-servo", "qmarc-knots", "qmarc-telemetry"]
+    {
+        assert!(seen.iter().any(|n| n == name), "no thread {name} among {seen:?}");
+    }
+    run.assert_clean();
+}

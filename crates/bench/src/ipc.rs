@@ -1,5 +1,6 @@
 //! `qmarc-bench ipc`: the controller ⇄ hwserver exchange (the controller's `IoxLink` against
-//! the real `qmarc-hwserver` binary: blocking, blocking with both on one CPU, spinning) beside
+//! the real `qmarc-hwserver` binary: blocking, blocking with both on one CPU, spinning, and
+//! blocking once per servo period, as the loop makes it, with both ends asleep between) beside
 //! the baselines of [`crate::baselines`] measured in the same run — and what the benchmarks
 //! need of the machine: where the binaries are, what the machine is, and cyclictest as an
 //! outside reference.
@@ -10,8 +11,9 @@ use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
 use qmarc_proto::HwMsg;
 use qmarc_proto::service::IpcLocation;
 use qmarc_report::summary::Pct;
+use qmarc_timer::TickerKind;
 use qmarc_timer::clock::monotonic_now_ns;
-use qmarc_timer::rt::RtRequest;
+use qmarc_timer::rt::{DmaLatencyGuard, RtRequest};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -155,24 +157,29 @@ pub fn describe_cyclictest(c: Option<&Cyclictest>) -> String {
     }
 }
 
-/// Back-to-back read exchanges with a real `qmarc-hwserver` (lock-step simulated robot),
-/// the client at the servo thread's priority; `spin`: the hwserver busy-polls (`--spin`) and
-/// the client polls for each response before it would block; `cpu`: both pinned to it.
-fn exchange(
-    samples: usize,
-    bin_dir: &std::path::Path,
+/// How an exchange row runs.
+#[derive(Debug, Clone, Copy, Default)]
+struct Mode {
+    /// The hwserver busy-polls (`--spin`) and the client polls for each response before it
+    /// would block.
     spin: bool,
+    /// Both pinned to this CPU.
     cpu: Option<usize>,
-) -> anyhow::Result<Pct> {
-    in_scratch_location("ipc", |dir, location| {
-        exchange_at(samples, bin_dir, (spin, cpu), dir, location)
-    })
+    /// One exchange per tick of the controller's timerfd at this period, as the servo loop
+    /// makes them (both ends asleep in between); `None`: back to back.
+    paced_ns: Option<u64>,
+}
+
+/// Read exchanges with a real `qmarc-hwserver` (lock-step simulated robot), the client at the
+/// servo thread's priority, as `mode` says.
+fn exchange(samples: usize, bin_dir: &std::path::Path, mode: Mode) -> anyhow::Result<Pct> {
+    in_scratch_location("ipc", |dir, location| exchange_at(samples, bin_dir, mode, dir, location))
 }
 
 fn exchange_at(
     samples: usize,
     bin_dir: &std::path::Path,
-    (spin, cpu): (bool, Option<usize>),
+    Mode { spin, cpu, paced_ns }: Mode,
     dir: &std::path::Path,
     location: &IpcLocation,
 ) -> anyhow::Result<Pct> {
@@ -207,7 +214,14 @@ fn exchange_at(
             for _ in 0..samples / 10 {
                 link.exchange(&read)?;
             }
+            let mut ticker = paced_ns.map(|p| TickerKind::TimerFd.build(p));
+            if let Some(t) = &mut ticker {
+                t.start()?;
+            }
             for _ in 0..samples {
+                if let Some(t) = &mut ticker {
+                    t.wait()?;
+                }
                 let t0 = monotonic_now_ns();
                 link.exchange(&read)?;
                 rtt.push(monotonic_now_ns() - t0);
@@ -242,25 +256,45 @@ struct Report<'a> {
     one_cpu_over_futex: f64,
     spinning_over_spin: f64,
     ports_over_spin: f64,
+    paced_over_back_to_back: f64,
 }
+
+/// The paced rows' period: the servo loop's default 2.5 kHz.
+const PACED_NS: u64 = 400_000;
+/// The paced rows' round trips at most (2 s each).
+const PACED_SAMPLES: usize = 5_000;
 
 /// Runs `ipc`.
 pub fn run(a: &IpcArgs) -> anyhow::Result<()> {
     let bin_dir = qmarc_starter::bin_dir(a.bin_dir.as_deref())?;
+    // As the servo thread holds it during a move: no CPU of ours sleeps deeply between
+    // exchanges (a deep idle state's exit would be in the paced rows).
+    let _dma = DmaLatencyGuard::request_zero();
     let n = a.samples.max(100);
     let row = |name, us| Row { name, us };
+    let x = |mode| exchange(n, &bin_dir, mode);
+    let paced = Mode { paced_ns: Some(PACED_NS), ..Mode::default() };
+    let n_paced = n.min(PACED_SAMPLES);
     let rows = [
+        row("controller ⇄ hwserver exchange (iceoryx2, blocking)", x(Mode::default())?),
+        row("the same, both pinned to CPU 0", x(Mode { cpu: Some(0), ..Mode::default() })?),
         row(
-            "controller ⇄ hwserver exchange (iceoryx2, blocking)",
-            exchange(n, &bin_dir, false, None)?,
+            "the same, hwserver spinning, controller polling",
+            x(Mode { spin: true, ..Mode::default() })?,
         ),
-        row("the same, both pinned to CPU 0", exchange(n, &bin_dir, false, Some(0))?),
-        row("the same, hwserver spinning, controller polling", exchange(n, &bin_dir, true, None)?),
         row("iceoryx2 request/response ports alone, both polling", iox_ports(n)?),
         row("raw futex ping-pong, 2 threads, SCHED_FIFO", ping_pong(n, true, true, None)?),
         row("the same, both pinned to CPU 0", ping_pong(n, true, true, Some(0))?),
         row("raw futex ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, true, false, None)?),
         row("raw spin ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, false, false, None)?),
+        row(
+            "blocking, one exchange per 400 µs tick (asleep between)",
+            exchange(n_paced, &bin_dir, paced)?,
+        ),
+        row(
+            "the same, both pinned to CPU 0",
+            exchange(n_paced, &bin_dir, Mode { cpu: Some(0), ..paced })?,
+        ),
     ];
     println!("qmarc-bench ipc: {n} round trips per row, µs");
     println!("  {:<55} {:>8} {:>8} {:>8} {:>9}", "", "p50", "p99", "p99.9", "max");
@@ -276,15 +310,18 @@ pub fn run(a: &IpcArgs) -> anyhow::Result<()> {
         one_cpu_over_futex: p50(1) / p50(5),
         spinning_over_spin: p50(2) / p50(7),
         ports_over_spin: p50(3) / p50(7),
+        paced_over_back_to_back: p50(8) / p50(0),
     };
     println!(
         "  blocking exchange p50 = {:.1}× the futex ping-pong's at the same policy ({:.1}× with \
          both on one CPU); spinning exchange p50 = {:.1}× the spin ping-pong's, of which \
-         iceoryx2's ports alone are {:.1}×",
+         iceoryx2's ports alone are {:.1}×; paced once per 400 µs the blocking exchange p50 is \
+         {:.1}× its back-to-back one (both ends asleep between, as in the servo loop)",
         report.blocking_over_futex,
         report.one_cpu_over_futex,
         report.spinning_over_spin,
-        report.ports_over_spin
+        report.ports_over_spin,
+        report.paced_over_back_to_back
     );
     if let Some(path) = &a.json {
         let text = serde_json::to_string_pretty(&report)?;

@@ -6,6 +6,9 @@
 //!   `mlockall`, pre-faulted stack, `/dev/cpu_dma_latency` = 0) waiting on the controller's
 //!   own [`Ticker`](qmarc_timer::Ticker), recording each wake with the loop's own
 //!   [`TimingStats`] — cyclictest's algorithm, no IPC, no math.
+//! - With `--bare-work-us W`, the same loop kept busy W µs after each wake: a VM's vCPU is
+//!   taken away more often while it computes than while it sleeps, so a loop that works
+//!   misses periods a sleeping one does not, whatever the work is.
 //! - The servo pipeline: `qmarc-starter step` on the simulated robot (starter, hwserver and
 //!   controller processes over iceoryx2) for the same time; its `summary.json` has the same
 //!   figures, plus the output latency (tick → DAC write acknowledged).
@@ -17,6 +20,7 @@ use qmarc_controller::stats::TimingStats;
 use qmarc_report::Summary;
 use qmarc_report::summary::Pct;
 use qmarc_timer::TickerKind;
+use qmarc_timer::clock::monotonic_now_ns;
 use qmarc_timer::rt::{DmaLatencyGuard, RtRequest};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -60,6 +64,11 @@ pub struct JitterArgs {
     /// exchange is then a local hand-over) (`timer.servo_cpu`, `timer.hwserver_cpu`).
     #[arg(long, num_args = 0..=1, default_missing_value = "split", value_enum)]
     pub pin: Option<Pin>,
+    /// Also run, in each round, the bare loop kept busy this many µs after each wake (a
+    /// servo cycle's length: its tick → DAC written p50 less its wake p50): the missed periods
+    /// this machine allows a loop that works as long as ours does, IPC and math apart.
+    #[arg(long)]
+    pub bare_work_us: Option<u32>,
 }
 
 /// Where `--pin` puts the hwserver.
@@ -85,7 +94,7 @@ impl Pin {
     fn describe(self) -> &'static str {
         match self {
             Pin::Split => ", servo and bare loop on CPU 0, hwserver on CPU 1",
-            Pin::Same => ", servo, hwserver and bare loop on CPU 0",
+            Pin::Same => ", servo, hwserver and bare loop on CPU 0, the rest of ours off it",
         }
     }
 }
@@ -154,6 +163,8 @@ pub struct Round {
     pub first: &'static str,
     /// The bare loop.
     pub bare: LoopFigures,
+    /// The bare loop busy `--bare-work-us` after each wake (run between the other two).
+    pub worked: Option<LoopFigures>,
     /// The servo pipeline.
     pub servo: LoopFigures,
     /// servo wake p99 ÷ bare wake p99.
@@ -193,6 +204,12 @@ pub struct TimerResult {
     pub periods_servo: u64,
     /// And the bare loop's.
     pub periods_bare: u64,
+    /// With `--bare-work-us`: the busy bare loop's missed periods, all rounds.
+    pub missed_worked: Option<u64>,
+    /// And outside host stalls.
+    pub missed_worked_outside_stalls: Option<u64>,
+    /// And the periods it covered.
+    pub periods_worked: Option<u64>,
 }
 
 impl TimerResult {
@@ -207,6 +224,15 @@ impl TimerResult {
         } else {
             (rate(self.missed_servo, self.periods_servo), rate(self.missed_bare, self.periods_bare))
         }
+    }
+
+    /// The busy bare loop's missed periods per 100 000, (all, outside host stalls).
+    pub fn worked_rates(&self) -> Option<(f64, f64)> {
+        let of = self.periods_worked?.max(1) as f64;
+        Some((
+            self.missed_worked? as f64 * 1e5 / of,
+            self.missed_worked_outside_stalls? as f64 * 1e5 / of,
+        ))
     }
 }
 
@@ -240,12 +266,14 @@ fn timers(choice: Option<&str>, configured: TimerMethod) -> anyhow::Result<Vec<T
     })
 }
 
-/// The bare loop for `seconds` with `kind`, at the servo thread's real-time request.
+/// The bare loop for `seconds` with `kind`, at the servo thread's real-time request, busy
+/// for `work_ns` after each wake (0: none, cyclictest's loop).
 fn bare(
     kind: TickerKind,
     period_ns: u64,
     seconds: f64,
     req: RtRequest,
+    work_ns: u64,
 ) -> anyhow::Result<LoopFigures> {
     let n = ((seconds * 1e9) / period_ns as f64).max(1.0) as u64;
     let handle = qmarc_timer::rt::spawn("qmarc-bare", req, move |_rt| {
@@ -258,6 +286,9 @@ fn bare(
             let tick = ticker.wait()?;
             stats.record_tick(&tick);
             cycles += 1 + tick.missed;
+            while monotonic_now_ns() < tick.woke_ns + work_ns {
+                std::hint::spin_loop();
+            }
         }
         Ok::<_, qmarc_timer::TickerError>((stats, cycles))
     })?;
@@ -323,17 +354,20 @@ fn rounds_of(
     let starter = (starter.as_path(), config.as_path());
     let period_ns = u64::from(a.period_us) * 1_000;
     let kind = qmarc_runner::run::ticker_kind(timer);
-    bare(kind, period_ns, a.warmup_s, req)?;
+    bare(kind, period_ns, a.warmup_s, req, 0)?;
+    let bare_for =
+        |work_us: u32| bare(kind, period_ns, a.segment_s, req, u64::from(work_us) * 1_000);
+    let worked = || a.bare_work_us.map(bare_for).transpose();
     let mut rounds = Vec::new();
     for r in 1..=a.rounds {
         let out = scratch.join(format!("{timer}-{r}"));
         let bare_first = r % 2 == 1;
-        let (b, s) = if bare_first {
-            let b = bare(kind, period_ns, a.segment_s, req)?;
-            (b, servo(a, starter, timer, &out)?)
+        let (b, w, s) = if bare_first {
+            let (b, w) = (bare_for(0)?, worked()?);
+            (b, w, servo(a, starter, timer, &out)?)
         } else {
-            let s = servo(a, starter, timer, &out)?;
-            (bare(kind, period_ns, a.segment_s, req)?, s)
+            let (s, w) = (servo(a, starter, timer, &out)?, worked()?);
+            (bare_for(0)?, w, s)
         };
         let ratio = if b.wake_us.p99 > 0.0 { s.wake_us.p99 / b.wake_us.p99 } else { f64::NAN };
         let diff = s.wake_us.p99 - b.wake_us.p99;
@@ -345,6 +379,7 @@ fn rounds_of(
             round: r,
             first: if bare_first { "bare" } else { "servo" },
             bare: b,
+            worked: w,
             servo: s,
             p99_ratio: ratio,
             p99_diff_us: diff,
@@ -384,8 +419,16 @@ pub fn verdict(timer: String, rounds: Vec<Round>, period_us: u32) -> TimerResult
         missed_bare_outside_stalls: rounds.iter().map(|r| r.bare.outside_stalls()).sum(),
         periods_servo: rounds.iter().map(|r| r.servo.periods).sum(),
         periods_bare: rounds.iter().map(|r| r.bare.periods).sum(),
+        missed_worked: worked_sum(&rounds, |w| w.missed),
+        missed_worked_outside_stalls: worked_sum(&rounds, LoopFigures::outside_stalls),
+        periods_worked: worked_sum(&rounds, |w| w.periods),
         rounds,
     }
+}
+
+/// The sum of `f` over the rounds' busy bare loops, when they ran.
+fn worked_sum(rounds: &[Round], f: impl Fn(&LoopFigures) -> u64) -> Option<u64> {
+    rounds.iter().map(|r| r.worked.as_ref().map(&f)).sum()
 }
 
 /// Runs `jitter`.
@@ -407,6 +450,11 @@ pub fn run(a: &JitterArgs) -> anyhow::Result<()> {
     };
     // Checked before the scratch directory exists: a bad --timer must not leave it behind.
     let timers = timers(a.timer.as_deref(), settings.timer.method)?;
+    // As the starter does for the servo segments: the benchmark's own threads keep off the
+    // loops' CPU when one is left (`--pin=same`), so both segments see the same neighbours.
+    if let Some(pin) = a.pin {
+        qmarc_timer::cpus::keep_off(&[0, pin.hwserver_cpu() as usize])?;
+    }
     let scratch = std::env::temp_dir().join(format!("qmarc-bench-jitter-{}", std::process::id()));
     std::fs::create_dir_all(&scratch)?;
     let cyclic_before = crate::ipc::cyclictest(a.period_us, a.segment_s, req.priority);
@@ -470,7 +518,8 @@ pub fn render(
             r.timer
         );
         for round in &r.rounds {
-            for (name, f) in [("bare", &round.bare), ("servo", &round.servo)] {
+            let rows = [Some(("bare", &round.bare)), round.worked.as_ref().map(|w| ("busy", w))];
+            for (name, f) in rows.into_iter().flatten().chain([("servo", &round.servo)]) {
                 let out = f.output_us.map_or("—".to_string(), |o| format!("{:.0}", o.p99));
                 let _ = writeln!(
                     t,
@@ -504,6 +553,16 @@ pub fn render(
             r.missed_servo_outside_stalls,
             r.missed_bare_outside_stalls
         );
+        if let (Some(work), Some(n), Some(out), Some((all, out_rate))) =
+            (a.bare_work_us, r.missed_worked, r.missed_worked_outside_stalls, r.worked_rates())
+        {
+            let _ = writeln!(
+                t,
+                "  the bare loop busy {work} µs after each wake (\"busy\"): missed {n} ({all:.0} per \
+                 100 000), outside host stalls {out} ({out_rate:.0}) — the machine's own figure \
+                 for a loop that works as long as ours"
+            );
+        }
         let _ = writeln!(
             t,
             "  {}",

@@ -54,12 +54,14 @@ fn jitter_runs_both_loops_and_writes_the_ratio_issue_14() {
         "--rounds=2",
         "--segment-s=0.3",
         "--warmup-s=0.1",
+        "--bare-work-us=10",
         &format!("--config={}", cfg.display()),
         &format!("--json={}", json.display()),
     ]);
     let t = text(&out);
     assert!(out.status.success(), "{t}");
     assert!(t.contains("p99 ratio servo/bare: median"), "{t}");
+    assert!(t.contains("the bare loop busy 10 µs after each wake"), "{t}");
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     for key in ["p99_ratio_median", "p99_ratio_min", "p99_ratio_max", "p99_diff_us_median"] {
@@ -72,8 +74,10 @@ fn jitter_runs_both_loops_and_writes_the_ratio_issue_14() {
         (rounds[0]["first"].as_str(), rounds[1]["first"].as_str()),
         (Some("bare"), Some("servo"))
     );
+    assert!(j["timers"][0]["missed_worked"].is_u64(), "{j}");
     for r in rounds {
         assert!(r["bare"]["cycles"].as_u64().unwrap() >= 700, "{r}");
+        assert!(r["worked"]["periods"].as_u64().unwrap() >= 700, "{r}");
         assert!(
             r["bare"]["output_us"].is_null() && r["servo"]["output_us"]["p99"].is_number(),
             "{r}"
@@ -96,16 +100,21 @@ fn ipc_prints_the_exchange_beside_both_baselines_issue_14() {
         "iceoryx2 request/response ports alone",
         "raw futex ping-pong",
         "raw spin ping-pong",
+        "blocking, one exchange per 400 µs tick",
     ] {
         assert!(t.contains(row), "{row}: {t}");
     }
     assert!(t.contains("exchange p50 ="), "{t}");
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-    assert_eq!(j["rows"].as_array().map(Vec::len), Some(8), "{j}");
-    for key in
-        ["blocking_over_futex", "one_cpu_over_futex", "spinning_over_spin", "ports_over_spin"]
-    {
+    assert_eq!(j["rows"].as_array().map(Vec::len), Some(10), "{j}");
+    for key in [
+        "blocking_over_futex",
+        "one_cpu_over_futex",
+        "spinning_over_spin",
+        "ports_over_spin",
+        "paced_over_back_to_back",
+    ] {
         assert!(j[key].as_f64().is_some_and(|r| r.is_finite() && r > 0.0), "{key}: {j}");
     }
     assert!(j["rows"][0]["p99"].as_f64().unwrap() > 0.0, "{j}");

@@ -55,10 +55,19 @@ pub struct TimerSettings {
     pub hwserver_priority: i32,
     /// Lock all memory of both processes.
     pub lock_memory: bool,
-    /// Pin the servo thread to this CPU; `None`: no pinning.
+    /// Pin the servo thread to this CPU; `None`: no pinning. Our other threads and processes
+    /// then keep off it, where another CPU exists.
     pub servo_cpu: Option<usize>,
-    /// Pin the hwserver to this CPU; `None`: no pinning.
+    /// Pin the hwserver to this CPU; `None`: no pinning (our other threads keep off it too).
     pub hwserver_cpu: Option<usize>,
+}
+
+impl TimerSettings {
+    /// The CPUs the real-time threads are pinned to (servo thread, hwserver): the others of
+    /// ours keep off them where another CPU exists (`qmarc_timer::cpus::keep_off`).
+    pub fn rt_cpus(&self) -> Vec<usize> {
+        self.servo_cpu.into_iter().chain(self.hwserver_cpu).collect()
+    }
 }
 
 impl Default for TimerSettings {

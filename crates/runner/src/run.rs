@@ -116,6 +116,11 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     let settings = &spec.settings;
     let location =
         IpcLocation::checked(&spec.iox_prefix, &spec.iox_root).map_err(RunError::Location)?;
+    // Before any thread starts: they inherit the main thread's CPUs (the servo thread then
+    // pins itself), and helpers the servo thread spawns return to them.
+    if let Err(e) = qmarc_timer::cpus::keep_off(&settings.timer.rt_cpus()) {
+        eprintln!("qmarc-controller: warning: cannot keep off the real-time CPUs ({e})");
+    }
     let progress = Progress::open(&Progress::path(&location.prefix)).ok();
     let (telemetry, relay) = telemetry_for(settings, &location);
     let servo = build_servo(spec, progress)?.with_telemetry(telemetry);

@@ -215,6 +215,10 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
     let run = run_file(&location.prefix);
     spec.write(&run).map_err(internal)?;
     let child_args = [format!("--settings={}", run.display())];
+    // The children inherit this mask; the hwserver and the servo thread then pin themselves.
+    if let Err(e) = qmarc_timer::cpus::keep_off(&settings.timer.rt_cpus()) {
+        say!("qmarc-starter: warning: cannot keep off the real-time CPUs ({e})");
+    }
 
     let hwserver = supervise::spawn_logged(&hwserver_bin, &child_args, trial.log)
         .with_context(|| format!("cannot start {}", hwserver_bin.display()))

@@ -26,6 +26,7 @@
 #![deny(missing_docs)]
 
 pub mod clock;
+pub mod cpus;
 pub mod histogram;
 pub mod rt;
 pub mod stop;

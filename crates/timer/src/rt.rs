@@ -196,9 +196,10 @@ pub fn set_current_thread_normal() -> Result<(), i32> {
     if rc == 0 { Ok(()) } else { Err(rc) }
 }
 
-/// Spawns a helper thread named `name` with normal scheduling. Linux threads inherit their
-/// creator's policy, so a helper spawned by the SCHED_FIFO servo thread (a knot reader) would
-/// otherwise compete with it at real-time priority; only the servo thread runs real time.
+/// Spawns a helper thread named `name` with normal scheduling, on the housekeeping CPUs
+/// ([`crate::cpus::keep_off`]). Linux threads inherit their creator's policy and CPU, so a
+/// helper spawned by the SCHED_FIFO servo thread (a knot reader) would otherwise compete with
+/// it at real-time priority, on its CPU; only the servo thread runs real time.
 pub fn spawn_normal<F, T>(name: &str, f: F) -> std::io::Result<std::thread::JoinHandle<T>>
 where
     F: FnOnce() -> T + Send + 'static,
@@ -207,6 +208,7 @@ where
     std::thread::Builder::new().name(name.to_string()).spawn(move || {
         // Refused only for a thread that is not ours to change: it then keeps what it had.
         let _ = set_current_thread_normal();
+        crate::cpus::to_housekeeping();
         f()
     })
 }
