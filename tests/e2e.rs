@@ -1,7 +1,9 @@
 //! The step move through the real process split: qmarc-starter → qmarc-hwserver ⇄
 //! qmarc-controller over iceoryx2.
 
-use qmarc_tests::{TestRun, default_config, read_gather, read_summary};
+use qmarc_tests::{
+    TestRun, default_config, read_gather, read_summary, status_field, thread_statuses,
+};
 use std::time::Duration;
 
 const TIMEOUT: Duration = Duration::from_secs(60);
@@ -417,13 +419,10 @@ fn cpu_list(text: &str) -> Vec<usize> {
 
 /// (thread name, allowed CPUs) of every thread of process `pid`.
 fn thread_cpus(pid: u32) -> Vec<(String, Vec<usize>)> {
-    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).into_iter().flatten().flatten();
-    tasks
-        .filter_map(|t| std::fs::read_to_string(t.path().join("status")).ok())
-        .map(|s| {
-            let field = |k: &str| s.lines().find_map(|l| l.strip_prefix(k)).unwrap_or("").trim();
-            (field("Name:").to_string(), cpu_list(field("Cpus_allowed_list:")))
-        })
+    let field = |s: &str, k: &str| status_field(s, k).unwrap_or("").to_string();
+    thread_statuses(pid)
+        .iter()
+        .map(|s| (field(s, "Name"), cpu_list(&field(s, "Cpus_allowed_list"))))
         .collect()
 }
 
@@ -436,9 +435,7 @@ fn threads_that_are_not_real_time_keep_off_the_pinned_cpu_issue_14() {
     let run = TestRun::new("keepoff");
     let cfg = run.config_with(&[("servo_cpu", "0"), ("hwserver_cpu", "0")]);
     let status = std::fs::read_to_string("/proc/self/status").unwrap();
-    let mine = cpu_list(
-        status.lines().find_map(|l| l.strip_prefix("Cpus_allowed_list:")).expect("our CPUs"),
-    );
+    let mine = cpu_list(status_field(&status, "Cpus_allowed_list").expect("our CPUs"));
     let others: Vec<usize> = mine.iter().copied().filter(|&c| c != 0).collect();
     // On a one-CPU machine there is nowhere else to go: nothing changes.
     let rest = if others.is_empty() { mine.clone() } else { others };

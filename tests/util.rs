@@ -268,16 +268,21 @@ pub fn wait_until_moving(prefix: &str, timeout: Duration) {
 
 /// Voluntary context switches of all threads of `pid` (0 if it is gone).
 fn voluntary_switches(pid: u32) -> u64 {
-    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else { return 0 };
-    tasks
-        .flatten()
-        .filter_map(|t| std::fs::read_to_string(t.path().join("status")).ok())
-        .filter_map(|s| {
-            s.lines()
-                .find_map(|l| l.strip_prefix("voluntary_ctxt_switches:"))
-                .and_then(|v| v.trim().parse::<u64>().ok())
-        })
+    thread_statuses(pid)
+        .iter()
+        .filter_map(|s| status_field(s, "voluntary_ctxt_switches")?.parse::<u64>().ok())
         .sum()
+}
+
+/// `/proc/<pid>/task/*/status` of every thread of `pid` (none if it is gone).
+pub fn thread_statuses(pid: u32) -> Vec<String> {
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).into_iter().flatten().flatten();
+    tasks.filter_map(|t| std::fs::read_to_string(t.path().join("status")).ok()).collect()
+}
+
+/// The value of `key` in a `/proc` status text, trimmed.
+pub fn status_field<'a>(status: &'a str, key: &str) -> Option<&'a str> {
+    status.lines().find_map(|l| l.strip_prefix(key)?.strip_prefix(':')).map(str::trim)
 }
 
 /// Processes (pid, command line) whose command line contains `needle`, except this one.

@@ -215,25 +215,29 @@ pub struct TimerResult {
 impl TimerResult {
     /// Missed periods per 100 000 (servo, bare): `outside_stalls` only, or all.
     pub fn missed_rates(&self, outside_stalls: bool) -> (f64, f64) {
-        let rate = |n: u64, of: u64| n as f64 * 1e5 / of.max(1) as f64;
         if outside_stalls {
             (
-                rate(self.missed_servo_outside_stalls, self.periods_servo),
-                rate(self.missed_bare_outside_stalls, self.periods_bare),
+                per_100k(self.missed_servo_outside_stalls, self.periods_servo),
+                per_100k(self.missed_bare_outside_stalls, self.periods_bare),
             )
         } else {
-            (rate(self.missed_servo, self.periods_servo), rate(self.missed_bare, self.periods_bare))
+            (
+                per_100k(self.missed_servo, self.periods_servo),
+                per_100k(self.missed_bare, self.periods_bare),
+            )
         }
     }
 
     /// The busy bare loop's missed periods per 100 000, (all, outside host stalls).
     pub fn worked_rates(&self) -> Option<(f64, f64)> {
-        let of = self.periods_worked?.max(1) as f64;
-        Some((
-            self.missed_worked? as f64 * 1e5 / of,
-            self.missed_worked_outside_stalls? as f64 * 1e5 / of,
-        ))
+        let of = self.periods_worked?;
+        Some((per_100k(self.missed_worked?, of), per_100k(self.missed_worked_outside_stalls?, of)))
     }
+}
+
+/// `n` of `of` periods, per 100 000.
+fn per_100k(n: u64, of: u64) -> f64 {
+    n as f64 * 1e5 / of.max(1) as f64
 }
 
 /// The JSON `--json` writes: the first timer's verdict at the top, every timer's in `timers`.

@@ -31,8 +31,7 @@ pub fn housekeeping(allowed: &CpuSet, rt: &[usize]) -> Option<CpuSet> {
             rest.unset(cpu).ok()?;
         }
     }
-    let left = list(&rest).len();
-    (left > 0 && left < list(allowed).len()).then_some(rest)
+    (rest != *allowed && !list(&rest).is_empty()).then_some(rest)
 }
 
 /// Keeps the calling thread — and every thread and process it creates from now on, which
