@@ -28,6 +28,70 @@ const PING: u32 = 1;
 const PONG: u32 = 2;
 const STOP: u32 = 3;
 
+/// Waits while `w` holds `not`: in futex(2) when `block`, else spinning; gives up after 2 s
+/// (a partner that died). Returns the value that ended the wait.
+fn wait_while(w: &AtomicU32, not: u32, block: bool) -> u32 {
+    let deadline = monotonic_now_ns() + 2_000_000_000;
+    loop {
+        let v = w.load(Ordering::Acquire);
+        if v != not || monotonic_now_ns() > deadline {
+            return v;
+        }
+        if block {
+            futex(w, libc::FUTEX_WAIT, v);
+        } else {
+            std::hint::spin_loop();
+        }
+    }
+}
+
+/// The answering side: turns every ping into a pong until told to stop. Only atomics, the
+/// vDSO clock and futex(2): safe in a child forked from a threaded process.
+fn pong(word: &AtomicU32, block: bool) {
+    loop {
+        // Wait for a ping (the word leaves PONG or 0), answer it.
+        let mut v = word.load(Ordering::Acquire);
+        while v != PING && v != STOP {
+            v = wait_while(word, v, block);
+        }
+        if v == STOP {
+            return;
+        }
+        word.store(PONG, Ordering::Release);
+        if block {
+            futex(word, libc::FUTEX_WAKE, 1);
+        }
+    }
+}
+
+/// The asking side: `samples` round trips, then tells the other side to stop.
+fn ping(word: &AtomicU32, block: bool, samples: usize) -> Vec<u64> {
+    let mut rtt = Vec::with_capacity(samples);
+    for _ in 0..samples {
+        let t0 = monotonic_now_ns();
+        word.store(PING, Ordering::Release);
+        if block {
+            futex(word, libc::FUTEX_WAKE, 1);
+        }
+        while wait_while(word, PING, block) != PONG {}
+        rtt.push(monotonic_now_ns() - t0);
+    }
+    word.store(STOP, Ordering::Release);
+    futex(word, libc::FUTEX_WAKE, 1);
+    rtt
+}
+
+/// The request for one side of a ping-pong: the priority the controller (80) or the hwserver
+/// (85) runs at when `fifo`; on `cpu` when given.
+fn side(priority: i32, fifo: bool, cpu: Option<usize>) -> RtRequest {
+    RtRequest {
+        priority: fifo.then_some(priority),
+        lock_memory: false,
+        prefault_stack_bytes: 64 * 1024,
+        cpu,
+    }
+}
+
 /// A ping-pong between two threads over one shared word: `block` waits in futex(2) (the
 /// shared, not private, form, as between processes over shared memory), else spins. Each
 /// side at the priority the hwserver and controller run at when `fifo`; both on `cpu` when
@@ -39,61 +103,72 @@ pub fn ping_pong(
     cpu: Option<usize>,
 ) -> anyhow::Result<Pct> {
     let word = Arc::new(AtomicU32::new(0));
-    let wait_while = move |w: &AtomicU32, not: u32| {
-        let deadline = monotonic_now_ns() + 2_000_000_000;
-        loop {
-            let v = w.load(Ordering::Acquire);
-            if v != not || monotonic_now_ns() > deadline {
-                return v;
-            }
-            if block {
-                futex(w, libc::FUTEX_WAIT, v);
-            } else {
-                std::hint::spin_loop();
-            }
-        }
-    };
-    let req = |p: i32| RtRequest {
-        priority: fifo.then_some(p),
-        lock_memory: false,
-        prefault_stack_bytes: 64 * 1024,
-        cpu,
-    };
     let server_word = Arc::clone(&word);
-    let server = qmarc_timer::rt::spawn("bench-pong", req(85), move |_| {
-        loop {
-            // Wait for a ping (the word leaves PONG or 0), answer it.
-            let mut v = server_word.load(Ordering::Acquire);
-            while v != PING && v != STOP {
-                v = wait_while(&server_word, v);
-            }
-            if v == STOP {
-                return;
-            }
-            server_word.store(PONG, Ordering::Release);
-            if block {
-                futex(&server_word, libc::FUTEX_WAKE, 1);
-            }
-        }
+    let server = qmarc_timer::rt::spawn("bench-pong", side(85, fifo, cpu), move |_| {
+        pong(&server_word, block)
     })?;
-    let client = qmarc_timer::rt::spawn("bench-ping", req(80), move |_| {
-        let mut rtt = Vec::with_capacity(samples);
-        for _ in 0..samples {
-            let t0 = monotonic_now_ns();
-            word.store(PING, Ordering::Release);
-            if block {
-                futex(&word, libc::FUTEX_WAKE, 1);
-            }
-            while wait_while(&word, PING) != PONG {}
-            rtt.push(monotonic_now_ns() - t0);
-        }
-        word.store(STOP, Ordering::Release);
-        futex(&word, libc::FUTEX_WAKE, 1);
-        rtt
+    let client = qmarc_timer::rt::spawn("bench-ping", side(80, fifo, cpu), move |_| {
+        ping(&word, block, samples)
     })?;
     let mut rtt = client.join().map_err(|_| anyhow::anyhow!("ping thread panicked"))?;
     server.join().map_err(|_| anyhow::anyhow!("pong thread panicked"))?;
     Ok(percentiles_us(&mut rtt))
+}
+
+/// The futex ping-pong between two processes, as controller and hwserver are: the word in a
+/// shared anonymous mapping, the pong side a child forked from this (then single-threaded)
+/// process, both SCHED_FIFO; both on `cpu` when given. Beside [`ping_pong`] it shows what a
+/// hand-over costs more when each side has its own address space.
+pub fn futex_ping_pong_processes(samples: usize, cpu: Option<usize>) -> anyhow::Result<Pct> {
+    use nix::sys::mman::{MapFlags, ProtFlags, mmap_anonymous, munmap};
+    use nix::unistd::{ForkResult, fork};
+    let len = std::num::NonZeroUsize::new(4096).expect("non-zero");
+    let prot = ProtFlags::PROT_READ | ProtFlags::PROT_WRITE;
+    // SAFETY: a fresh anonymous mapping, unmapped below after both sides are done with it.
+    let page = unsafe { mmap_anonymous(None, len, prot, MapFlags::MAP_SHARED)? };
+    // SAFETY: the page is zeroed, page-aligned and mapped until the munmap below.
+    let word: &'static AtomicU32 = unsafe { page.cast::<AtomicU32>().as_ref() };
+    let result = (|| -> anyhow::Result<Pct> {
+        // SAFETY: the child only makes raw system calls and touches atomics before _exit.
+        match unsafe { fork()? } {
+            ForkResult::Child => {
+                // Gone with the parent, whatever ends it.
+                let _ = nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGKILL);
+                let _ = qmarc_timer::rt::set_current_thread_fifo(85);
+                if let Some(c) = cpu {
+                    pin_to(c);
+                }
+                pong(word, true);
+                // SAFETY: ends the child without running the parent's exit handlers.
+                unsafe { libc::_exit(0) }
+            }
+            ForkResult::Parent { child } => {
+                let client = qmarc_timer::rt::spawn("bench-ping", side(80, true, cpu), move |_| {
+                    ping(word, true, samples)
+                });
+                let rtt = client.map(|c| c.join());
+                // Whatever became of the ping side, the child stops and is reaped.
+                word.store(STOP, Ordering::Release);
+                futex(word, libc::FUTEX_WAKE, 1);
+                let _ = nix::sys::wait::waitpid(child, None);
+                let mut rtt = rtt?.map_err(|_| anyhow::anyhow!("ping thread panicked"))?;
+                Ok(percentiles_us(&mut rtt))
+            }
+        }
+    })();
+    // SAFETY: the child is reaped and the ping thread joined: nobody uses the page now.
+    let _ = unsafe { munmap(page, len.get()) };
+    result
+}
+
+/// Pins the calling thread to `cpu` with sched_setaffinity(2) on a stack `cpu_set_t`.
+fn pin_to(cpu: usize) {
+    // SAFETY: a zeroed cpu_set_t is an empty set; CPU_SET and sched_setaffinity only touch it.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        libc::CPU_SET(cpu, &mut set);
+        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
+    }
 }
 
 /// Round trips through iceoryx2's request/response ports (the hwserver's service, its QoS
@@ -199,6 +274,8 @@ mod tests {
             let p = ping_pong(200, block, false, None).unwrap();
             assert!(p.p50 > 0.0 && p.max >= p.p99, "{p:?}");
         }
+        let p = futex_ping_pong_processes(200, None).unwrap();
+        assert!(p.p50 > 0.0 && p.max >= p.p99, "{p:?}");
         let p = iox_ports(200).unwrap();
         assert!(p.p50 > 0.0 && p.max >= p.p99, "{p:?}");
     }

@@ -5,7 +5,7 @@
 //! need of the machine: where the binaries are, what the machine is, and cyclictest as an
 //! outside reference.
 
-use crate::baselines::{in_scratch_location, iox_ports, ping_pong};
+use crate::baselines::{futex_ping_pong_processes, in_scratch_location, iox_ports, ping_pong};
 use crate::stats::percentiles_us;
 use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
 use qmarc_proto::HwMsg;
@@ -254,6 +254,8 @@ struct Report<'a> {
     rows: &'a [Row],
     blocking_over_futex: f64,
     one_cpu_over_futex: f64,
+    blocking_over_process_futex: f64,
+    one_cpu_over_process_futex: f64,
     spinning_over_spin: f64,
     ports_over_spin: f64,
     paced_over_back_to_back: f64,
@@ -285,6 +287,8 @@ pub fn run(a: &IpcArgs) -> anyhow::Result<()> {
         row("iceoryx2 request/response ports alone, both polling", iox_ports(n)?),
         row("raw futex ping-pong, 2 threads, SCHED_FIFO", ping_pong(n, true, true, None)?),
         row("the same, both pinned to CPU 0", ping_pong(n, true, true, Some(0))?),
+        row("raw futex ping-pong, 2 processes, SCHED_FIFO", futex_ping_pong_processes(n, None)?),
+        row("the same, both pinned to CPU 0", futex_ping_pong_processes(n, Some(0))?),
         row("raw futex ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, true, false, None)?),
         row("raw spin ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, false, false, None)?),
         row(
@@ -308,17 +312,21 @@ pub fn run(a: &IpcArgs) -> anyhow::Result<()> {
         rows: &rows,
         blocking_over_futex: p50(0) / p50(4),
         one_cpu_over_futex: p50(1) / p50(5),
-        spinning_over_spin: p50(2) / p50(7),
-        ports_over_spin: p50(3) / p50(7),
-        paced_over_back_to_back: p50(8) / p50(0),
+        blocking_over_process_futex: p50(0) / p50(6),
+        one_cpu_over_process_futex: p50(1) / p50(7),
+        spinning_over_spin: p50(2) / p50(9),
+        ports_over_spin: p50(3) / p50(9),
+        paced_over_back_to_back: p50(10) / p50(0),
     };
     println!(
-        "  blocking exchange p50 = {:.1}× the futex ping-pong's at the same policy ({:.1}× with \
-         both on one CPU); spinning exchange p50 = {:.1}× the spin ping-pong's, of which \
+        "  blocking exchange p50 = {:.2}× the futex ping-pong's at the same policy ({:.2}× with \
+         both on one CPU), {:.2}× the ping-pong between processes ({:.2}× on one CPU); spinning exchange p50 = {:.1}× the spin ping-pong's, of which \
          iceoryx2's ports alone are {:.1}×; paced once per 400 µs the blocking exchange p50 is \
          {:.1}× its back-to-back one (both ends asleep between, as in the servo loop)",
         report.blocking_over_futex,
         report.one_cpu_over_futex,
+        report.blocking_over_process_futex,
+        report.one_cpu_over_process_futex,
         report.spinning_over_spin,
         report.ports_over_spin,
         report.paced_over_back_to_back

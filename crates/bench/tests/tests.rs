@@ -98,7 +98,8 @@ fn ipc_prints_the_exchange_beside_both_baselines_issue_14() {
         "controller ⇄ hwserver exchange",
         "the same, both pinned to CPU 0",
         "iceoryx2 request/response ports alone",
-        "raw futex ping-pong",
+        "raw futex ping-pong, 2 threads",
+        "raw futex ping-pong, 2 processes",
         "raw spin ping-pong",
         "blocking, one exchange per 400 µs tick",
     ] {
@@ -107,10 +108,12 @@ fn ipc_prints_the_exchange_beside_both_baselines_issue_14() {
     assert!(t.contains("exchange p50 ="), "{t}");
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-    assert_eq!(j["rows"].as_array().map(Vec::len), Some(10), "{j}");
+    assert_eq!(j["rows"].as_array().map(Vec::len), Some(12), "{j}");
     for key in [
         "blocking_over_futex",
         "one_cpu_over_futex",
+        "blocking_over_process_futex",
+        "one_cpu_over_process_futex",
         "spinning_over_spin",
         "ports_over_spin",
         "paced_over_back_to_back",

@@ -7,7 +7,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use qmarc_proto::HwMsg;
 use qmarc_proto::service::{
-    CONTROLLER_NODE, HwServices, IpcLocation, ServiceError, create_node, open_hw_services,
+    CONTROLLER_NODE, HwServices, IpcLocation, Link, ServiceError, create_node, open_hw_services,
 };
 use qmarc_timer::clock::monotonic_now_ns;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -102,11 +102,11 @@ pub struct LinkTimeouts {
 ///
 /// `!Send` (iceoryx2 ipc ports): create it in the thread that runs the loop.
 pub struct IoxLink {
-    node: Node<ipc::Service>,
+    node: Node<Link>,
     services: HwServices,
-    client: Client<ipc::Service, HwMsg, (), HwMsg, ()>,
-    notifier: Notifier<ipc::Service>,
-    listener: Listener<ipc::Service>,
+    client: Client<Link, HwMsg, (), HwMsg, ()>,
+    notifier: Notifier<Link>,
+    listener: Listener<Link>,
     timeouts: LinkTimeouts,
     seq: u32,
     stop: Option<&'static AtomicBool>,

@@ -164,7 +164,7 @@ fn serve_inner(
 /// (iceoryx2 0.10 sends the next only once the last was read: an unread one makes every
 /// further notification a compare-exchange, no system call).
 fn wait_for_request(
-    listener: &iceoryx2::port::listener::Listener<iceoryx2::prelude::ipc::Service>,
+    listener: &iceoryx2::port::listener::Listener<qmarc_proto::service::Link>,
     opts: &ServeOptions,
     (enabled, silent_ns): (bool, u64),
 ) -> Result<(), ServeError> {

@@ -25,6 +25,7 @@ pub mod msg;
 pub mod service;
 pub mod status;
 pub mod telemetry;
+pub mod wake;
 
 pub use msg::{HwMsg, MotorFlags, MsgType, UnknownMsgType};
 pub use status::Status;

@@ -25,10 +25,13 @@ pub const CONTROLLER_NODE: &str = "qmarc-controller";
 /// Default iceoryx2 root directory (iceoryx2's own default).
 pub const DEFAULT_ROOT: &str = "/tmp/iceoryx2/";
 
+/// The service type of the link: iceoryx2's `ipc` with a futex wake-up ([`crate::wake`]).
+pub use crate::wake::Link;
+
 /// The request/response service.
-pub type HwService = request_response::PortFactory<ipc::Service, HwMsg, (), HwMsg, ()>;
+pub type HwService = request_response::PortFactory<Link, HwMsg, (), HwMsg, ()>;
 /// An event service.
-pub type EventService = event::PortFactory<ipc::Service>;
+pub type EventService = event::PortFactory<Link>;
 
 /// The three services of one controller ⇄ hwserver link.
 pub struct HwServices {
@@ -124,22 +127,26 @@ impl std::fmt::Display for ServiceError {
 
 impl std::error::Error for ServiceError {}
 
-/// Creates a node named `name` at `location`. iceoryx2's own signal handling is off: each
-/// process installs its own handlers.
-pub fn create_node(name: &str, location: &IpcLocation) -> Result<Node<ipc::Service>, ServiceError> {
+/// Creates a node of service type `S` (the link's [`Link`], or `ipc::Service` for the rest)
+/// named `name` at `location`. iceoryx2's own signal handling is off: each process installs
+/// its own handlers.
+pub fn create_node<S: iceoryx2::service::Service>(
+    name: &str,
+    location: &IpcLocation,
+) -> Result<Node<S>, ServiceError> {
     let cfg = location.config()?;
     let node_name = NodeName::new(name).map_err(|e| ServiceError::new("node name", name, e))?;
     NodeBuilder::new()
         .name(&node_name)
         .config(&cfg)
         .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
+        .create::<S>()
         .map_err(|e| ServiceError::new("node", name, e))
 }
 
 /// Opens (or creates) the three services with the QoS both sides require: one client, one
 /// server, at most two requests in flight.
-pub fn open_hw_services(node: &Node<ipc::Service>) -> Result<HwServices, ServiceError> {
+pub fn open_hw_services(node: &Node<Link>) -> Result<HwServices, ServiceError> {
     let name = |s: &str| ServiceName::new(s).map_err(|e| ServiceError::new("service name", s, e));
     let hw = node
         .service_builder(&name(HW_SERVICE)?)
@@ -153,6 +160,9 @@ pub fn open_hw_services(node: &Node<ipc::Service>) -> Result<HwServices, Service
     let event = |s: &str| -> Result<EventService, ServiceError> {
         node.service_builder(&name(s)?)
             .event()
+            // One event id (0, the notifier's default): every wait drains the listener's
+            // counter per id with an atomic swap, 256 of them at iceoryx2's default.
+            .event_id_max_value(0)
             .open_or_create()
             .map_err(|e| ServiceError::new("service", s, e))
     };

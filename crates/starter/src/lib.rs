@@ -121,7 +121,7 @@ fn remove_dead_nodes(location: &IpcLocation) {
     use iceoryx2::node::NodeView;
     use iceoryx2::prelude::*;
     let Ok(cfg) = location.config() else { return };
-    let _ = Node::<ipc::Service>::list(&cfg, |state| {
+    let _ = Node::<qmarc_proto::service::Link>::list(&cfg, |state| {
         // Without its details iceoryx2 would clean up with its global configuration (which
         // reads ./config/iceoryx2.toml): the files of such a node go by prefix below.
         if let NodeState::Dead(view) = state
