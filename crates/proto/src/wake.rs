@@ -6,9 +6,9 @@
 //! semaphore trigger is a futex, but its timed wait polls (`UnnamedSemaphore::timed_wait` on a
 //! monotonic clock is an adaptive yield-then-sleep loop), and both our waits have a deadline.
 //!
-//! [`FutexTrigger`] plugs into iceoryx2-cal's generic event (`EventImpl`: the counting bit set of
-//! event ids, the notification state, the shared-memory storage and its clean-up stay
-//! iceoryx2's) as the part that puts a listener to sleep and wakes it:
+//! [`FutexHandle`] and [`FutexWaiter`] plug into iceoryx2-cal's generic event (`EventImpl`: the
+//! counting bit set of event ids, the notification state, the shared-memory storage and its
+//! clean-up stay iceoryx2's) as the part that puts a listener to sleep and wakes it:
 //! - the storage's management record holds a `signalled` word and a `sleepers` count;
 //! - `notify` sets `signalled` and calls `FUTEX_WAKE` only when somebody sleeps on it, so a
 //!   notification nobody waits for costs no system call;
