@@ -136,7 +136,7 @@ pub fn futex_ping_pong_processes(samples: usize, cpu: Option<usize>) -> anyhow::
                 let _ = nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGKILL);
                 let _ = qmarc_timer::rt::set_current_thread_fifo(85);
                 if let Some(c) = cpu {
-                    pin_to(c);
+                    let _ = qmarc_timer::rt::pin_current_thread(c);
                 }
                 pong(word, true);
                 // SAFETY: ends the child without running the parent's exit handlers.
@@ -159,16 +159,6 @@ pub fn futex_ping_pong_processes(samples: usize, cpu: Option<usize>) -> anyhow::
     // SAFETY: the child is reaped and the ping thread joined: nobody uses the page now.
     let _ = unsafe { munmap(page, len.get()) };
     result
-}
-
-/// Pins the calling thread to `cpu` with sched_setaffinity(2) on a stack `cpu_set_t`.
-fn pin_to(cpu: usize) {
-    // SAFETY: a zeroed cpu_set_t is an empty set; CPU_SET and sched_setaffinity only touch it.
-    unsafe {
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        libc::CPU_SET(cpu, &mut set);
-        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
-    }
 }
 
 /// Round trips through iceoryx2's request/response ports (the hwserver's service, its QoS

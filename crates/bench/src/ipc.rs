@@ -320,8 +320,9 @@ pub fn run(a: &IpcArgs) -> anyhow::Result<()> {
     };
     println!(
         "  blocking exchange p50 = {:.2}× the futex ping-pong's at the same policy ({:.2}× with \
-         both on one CPU), {:.2}× the ping-pong between processes ({:.2}× on one CPU); spinning exchange p50 = {:.1}× the spin ping-pong's, of which \
-         iceoryx2's ports alone are {:.1}×; paced once per 400 µs the blocking exchange p50 is \
+         both on one CPU), {:.2}× the ping-pong between processes ({:.2}× on one CPU); \
+         spinning exchange p50 = {:.1}× the spin ping-pong's, of which iceoryx2's ports alone \
+         are {:.1}×; paced once per 400 µs the blocking exchange p50 is \
          {:.1}× its back-to-back one (both ends asleep between, as in the servo loop)",
         report.blocking_over_futex,
         report.one_cpu_over_futex,

@@ -147,9 +147,8 @@ pub fn create_node<S: iceoryx2::service::Service>(
 /// Opens (or creates) the three services with the QoS both sides require: one client, one
 /// server, at most two requests in flight.
 pub fn open_hw_services(node: &Node<Link>) -> Result<HwServices, ServiceError> {
-    let name = |s: &str| ServiceName::new(s).map_err(|e| ServiceError::new("service name", s, e));
     let hw = node
-        .service_builder(&name(HW_SERVICE)?)
+        .service_builder(&service_name(HW_SERVICE)?)
         .request_response::<HwMsg, HwMsg>()
         .max_clients(1)
         .max_servers(1)
@@ -157,20 +156,27 @@ pub fn open_hw_services(node: &Node<Link>) -> Result<HwServices, ServiceError> {
         .max_response_buffer_size(2)
         .open_or_create()
         .map_err(|e| ServiceError::new("service", HW_SERVICE, e))?;
-    let event = |s: &str| -> Result<EventService, ServiceError> {
-        node.service_builder(&name(s)?)
-            .event()
-            // One event id (0, the notifier's default): every wait drains the listener's
-            // counter per id with an atomic swap, 256 of them at iceoryx2's default.
-            .event_id_max_value(0)
-            .open_or_create()
-            .map_err(|e| ServiceError::new("service", s, e))
-    };
     Ok(HwServices {
         hw,
-        request_event: event(REQUEST_EVENT)?,
-        response_event: event(RESPONSE_EVENT)?,
+        request_event: open_event_service(node, REQUEST_EVENT)?,
+        response_event: open_event_service(node, RESPONSE_EVENT)?,
     })
+}
+
+/// `name` as an iceoryx2 service name.
+fn service_name(name: &str) -> Result<ServiceName, ServiceError> {
+    ServiceName::new(name).map_err(|e| ServiceError::new("service name", name, e))
+}
+
+/// Opens (or creates) one wake-up event service of the link named `name`.
+pub fn open_event_service(node: &Node<Link>, name: &str) -> Result<EventService, ServiceError> {
+    node.service_builder(&service_name(name)?)
+        .event()
+        // One event id (0, the notifier's default): every wait drains the listener's counter
+        // per id with an atomic swap, 256 of them at iceoryx2's default.
+        .event_id_max_value(0)
+        .open_or_create()
+        .map_err(|e| ServiceError::new("service", name, e))
 }
 
 /// Directory of POSIX shared memory, where iceoryx2 puts its segments.

@@ -305,7 +305,7 @@ impl iceoryx2::service::internal::ServiceInternal<Link> for Link {}
 
 #[cfg(test)]
 mod tests {
-    use crate::service::{IpcLocation, create_node};
+    use crate::service::{IpcLocation, create_node, open_event_service};
     use iceoryx2::prelude::*;
     use std::time::{Duration, Instant};
 
@@ -323,15 +323,8 @@ mod tests {
         assert!(loc.files().is_empty());
     }
 
-    fn event(
-        node: &Node<super::Link>,
-        name: &str,
-    ) -> iceoryx2::service::port_factory::event::PortFactory<super::Link> {
-        node.service_builder(&ServiceName::new(name).unwrap())
-            .event()
-            .event_id_max_value(0)
-            .open_or_create()
-            .unwrap()
+    fn event(node: &Node<super::Link>, name: &str) -> crate::service::EventService {
+        open_event_service(node, name).unwrap()
     }
 
     #[test]

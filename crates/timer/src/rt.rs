@@ -109,6 +109,14 @@ pub fn prefault_stack(bytes: usize) {
     }
 }
 
+/// Pins the calling thread to `cpu` (`sched_setaffinity` on a stack `CpuSet`: no allocation,
+/// so a child forked from a threaded process may call it too).
+pub fn pin_current_thread(cpu: usize) -> nix::Result<()> {
+    let mut set = nix::sched::CpuSet::new();
+    set.set(cpu)?;
+    nix::sched::sched_setaffinity(nix::unistd::Pid::from_raw(0), &set)
+}
+
 /// Applies `req` to the calling thread (and `mlockall` to the process) and reports what was
 /// granted. Never fails: refusals become warnings and a degraded status.
 pub fn apply_to_current_thread(req: &RtRequest) -> RtStatus {
@@ -143,16 +151,12 @@ pub fn apply_to_current_thread(req: &RtRequest) -> RtStatus {
     } else {
         set_timer_slack_ns(1);
     }
-    if let Some(cpu) = req.cpu {
-        let mut set = nix::sched::CpuSet::new();
-        let result = set
-            .set(cpu)
-            .and_then(|()| nix::sched::sched_setaffinity(nix::unistd::Pid::from_raw(0), &set));
-        if let Err(e) = result {
-            status.warnings.push(format!(
-                "cannot pin the thread to CPU {cpu} ({e}): it runs where the scheduler puts it"
-            ));
-        }
+    if let Some(cpu) = req.cpu
+        && let Err(e) = pin_current_thread(cpu)
+    {
+        status.warnings.push(format!(
+            "cannot pin the thread to CPU {cpu} ({e}): it runs where the scheduler puts it"
+        ));
     }
     prefault_stack(req.prefault_stack_bytes);
     status
