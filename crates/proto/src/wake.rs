@@ -309,7 +309,17 @@ mod tests {
     use iceoryx2::prelude::*;
     use std::time::{Duration, Instant};
 
-    /// Two event services on the link's service type in a location of this test's own.
+    /// A test's location, removed when the test ends, passed or failed.
+    struct Scratch(IpcLocation, std::path::PathBuf);
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            self.0.remove_files();
+            let _ = std::fs::remove_dir_all(&self.1);
+        }
+    }
+
+    /// Runs `f` in an iceoryx2 location of this test's own, then checks nothing is left.
     fn with_events(tag: &str, f: impl FnOnce(&IpcLocation)) {
         let dir = std::env::temp_dir().join(format!("qmarc-wake-{tag}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
@@ -317,9 +327,9 @@ mod tests {
             &format!("qw{tag}{}_", std::process::id()),
             &dir.display().to_string(),
         );
+        let scratch = Scratch(loc.clone(), dir);
         f(&loc);
-        loc.remove_files();
-        let _ = std::fs::remove_dir_all(&dir);
+        drop(scratch);
         assert!(loc.files().is_empty());
     }
 
