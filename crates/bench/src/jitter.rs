@@ -12,6 +12,8 @@
 //! - The servo pipeline: `qmarc-starter step` on the simulated robot (starter, hwserver and
 //!   controller processes over iceoryx2) for the same time; its `summary.json` has the same
 //!   figures, plus the output latency (tick → DAC write acknowledged).
+//! - With several timers (`--timer both|all`), each round runs every timer's segments in
+//!   turn, so the timers meet the same hour of the host, whose stalls decide the totals.
 
 use crate::stats::{cv, median};
 use anyhow::{Context, bail};
@@ -26,6 +28,8 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+mod table;
+
 /// Options of `jitter`.
 #[derive(Debug, clap::Args)]
 pub struct JitterArgs {
@@ -39,7 +43,7 @@ pub struct JitterArgs {
     #[arg(long, default_value_t = 10.0)]
     pub segment_s: f64,
     /// The timer: `timerfd`, `nanosleep`, `timerfd-periodic`, `both` (timerfd and nanosleep)
-    /// or `all` (default: the settings' `timer.method`).
+    /// or `all` (default: the settings' `timer.method`); several take turns within each round.
     #[arg(long)]
     pub timer: Option<String>,
     /// Write the figures as JSON here.
@@ -161,6 +165,8 @@ pub struct Round {
     pub round: u32,
     /// Which segment ran first: `bare` or `servo`.
     pub first: &'static str,
+    /// When the round's first segment started, s after the rounds began.
+    pub started_s: f64,
     /// The bare loop.
     pub bare: LoopFigures,
     /// The bare loop busy `--bare-work-us` after each wake (run between the other two).
@@ -346,50 +352,75 @@ fn servo(
     })
 }
 
-/// The rounds of one timer.
-fn rounds_of(
+/// Every round of every timer: in each round, each timer's segments in turn, the timers'
+/// order turning round by round, so that every timer meets the same hour of the host
+/// (its stalls decide the missed periods' totals).
+fn all_rounds(
     a: &JitterArgs,
-    timer: TimerMethod,
+    timers: &[TimerMethod],
     req: RtRequest,
     scratch: &Path,
-) -> anyhow::Result<TimerResult> {
+) -> anyhow::Result<Vec<TimerResult>> {
     let starter = qmarc_starter::bin_dir(a.bin_dir.as_deref())?.join("qmarc-starter");
     let config = segment_config(a, scratch)?;
     let starter = (starter.as_path(), config.as_path());
     let period_ns = u64::from(a.period_us) * 1_000;
+    let first = qmarc_runner::run::ticker_kind(timers[0]);
+    bare(first, period_ns, a.warmup_s, req, 0)?;
+    let mut rounds: Vec<Vec<Round>> = vec![Vec::new(); timers.len()];
+    let began = std::time::Instant::now();
+    for r in 1..=a.rounds {
+        for k in 0..timers.len() {
+            let i = (k + r as usize - 1) % timers.len();
+            let started_s = began.elapsed().as_secs_f64();
+            let round = round_of(a, timers[i], r, req, starter, scratch)?;
+            rounds[i].push(Round { started_s, ..round });
+        }
+    }
+    let results = timers.iter().zip(rounds);
+    Ok(results.map(|(timer, rs)| verdict(timer.to_string(), rs, a.period_us)).collect())
+}
+
+/// Round `r` of `timer`: the bare loop, the busy one (with `--bare-work-us`) and the servo
+/// pipeline, the bare loop first in odd rounds.
+fn round_of(
+    a: &JitterArgs,
+    timer: TimerMethod,
+    r: u32,
+    req: RtRequest,
+    starter: (&Path, &Path),
+    scratch: &Path,
+) -> anyhow::Result<Round> {
+    let period_ns = u64::from(a.period_us) * 1_000;
     let kind = qmarc_runner::run::ticker_kind(timer);
-    bare(kind, period_ns, a.warmup_s, req, 0)?;
     let bare_for =
         |work_us: u32| bare(kind, period_ns, a.segment_s, req, u64::from(work_us) * 1_000);
     let worked = || a.bare_work_us.map(bare_for).transpose();
-    let mut rounds = Vec::new();
-    for r in 1..=a.rounds {
-        let out = scratch.join(format!("{timer}-{r}"));
-        let bare_first = r % 2 == 1;
-        let (b, w, s) = if bare_first {
-            let (b, w) = (bare_for(0)?, worked()?);
-            (b, w, servo(a, starter, timer, &out)?)
-        } else {
-            let (s, w) = (servo(a, starter, timer, &out)?, worked()?);
-            (bare_for(0)?, w, s)
-        };
-        let ratio = if b.wake_us.p99 > 0.0 { s.wake_us.p99 / b.wake_us.p99 } else { f64::NAN };
-        let diff = s.wake_us.p99 - b.wake_us.p99;
-        eprintln!(
-            "  {timer} round {r}/{}: bare p99 {:.0} µs, servo p99 {:.0} µs, ratio {ratio:.2}",
-            a.rounds, b.wake_us.p99, s.wake_us.p99
-        );
-        rounds.push(Round {
-            round: r,
-            first: if bare_first { "bare" } else { "servo" },
-            bare: b,
-            worked: w,
-            servo: s,
-            p99_ratio: ratio,
-            p99_diff_us: diff,
-        });
-    }
-    Ok(verdict(timer.to_string(), rounds, a.period_us))
+    let out = scratch.join(format!("{timer}-{r}"));
+    let bare_first = r % 2 == 1;
+    let (b, w, s) = if bare_first {
+        let (b, w) = (bare_for(0)?, worked()?);
+        (b, w, servo(a, starter, timer, &out)?)
+    } else {
+        let (s, w) = (servo(a, starter, timer, &out)?, worked()?);
+        (bare_for(0)?, w, s)
+    };
+    let ratio = if b.wake_us.p99 > 0.0 { s.wake_us.p99 / b.wake_us.p99 } else { f64::NAN };
+    let diff = s.wake_us.p99 - b.wake_us.p99;
+    eprintln!(
+        "  {timer} round {r}/{}: bare p99 {:.0} µs, servo p99 {:.0} µs, ratio {ratio:.2}",
+        a.rounds, b.wake_us.p99, s.wake_us.p99
+    );
+    Ok(Round {
+        round: r,
+        first: if bare_first { "bare" } else { "servo" },
+        started_s: 0.0,
+        bare: b,
+        worked: w,
+        servo: s,
+        p99_ratio: ratio,
+        p99_diff_us: diff,
+    })
 }
 
 /// The ratios over the rounds and the noisy-host flag: the bare loop's p99.9 varying by more
@@ -462,17 +493,14 @@ pub fn run(a: &JitterArgs) -> anyhow::Result<()> {
     let scratch = std::env::temp_dir().join(format!("qmarc-bench-jitter-{}", std::process::id()));
     std::fs::create_dir_all(&scratch)?;
     let cyclic_before = crate::ipc::cyclictest(a.period_us, a.segment_s, req.priority);
-    let mut results = Vec::new();
-    for timer in timers {
-        let r = rounds_of(a, timer, req, &scratch);
-        if r.is_err() {
-            let _ = std::fs::remove_dir_all(&scratch);
-        }
-        results.push(r?);
+    let results = all_rounds(a, &timers, req, &scratch);
+    if results.is_err() {
+        let _ = std::fs::remove_dir_all(&scratch);
     }
+    let results = results?;
     let cyclic = crate::ipc::cyclictest_pair(cyclic_before, a.period_us, a.segment_s, req.priority);
     let _ = std::fs::remove_dir_all(&scratch);
-    print!("{}", render(a, &results, cyclic.as_ref()));
+    print!("{}", table::render(a, &results, cyclic.as_ref()));
     if let Some(path) = &a.json {
         let first = &results[0];
         let report = Report {
@@ -496,89 +524,4 @@ pub fn run(a: &JitterArgs) -> anyhow::Result<()> {
         println!("  JSON: {}", path.display());
     }
     Ok(())
-}
-
-/// The table `jitter` prints.
-pub fn render(
-    a: &JitterArgs,
-    results: &[TimerResult],
-    cyclic: Option<&crate::ipc::Cyclictest>,
-) -> String {
-    use std::fmt::Write;
-    let mut t = String::new();
-    let _ = writeln!(
-        t,
-        "qmarc-bench jitter: {} µs, {} interleaved rounds of {} s per loop{}{}",
-        a.period_us,
-        a.rounds,
-        a.segment_s,
-        if a.spin { ", hwserver spinning" } else { "" },
-        a.pin.map_or("", Pin::describe)
-    );
-    for r in results {
-        let _ = writeln!(
-            t,
-            "\n  timer {}: wake latency µs (against the intended expiry)\n  round first  loop    p50    p99  p99.9      max  missed (in stalls)  >±40µs  out p99",
-            r.timer
-        );
-        for round in &r.rounds {
-            let rows = [Some(("bare", &round.bare)), round.worked.as_ref().map(|w| ("busy", w))];
-            for (name, f) in rows.into_iter().flatten().chain([("servo", &round.servo)]) {
-                let out = f.output_us.map_or("—".to_string(), |o| format!("{:.0}", o.p99));
-                let _ = writeln!(
-                    t,
-                    "  {:>5} {:<6} {name:<5} {:>6.0} {:>6.0} {:>6.0} {:>8.0} {:>7} {:>10} {:>7} {:>8}{}",
-                    if name == "bare" { round.round.to_string() } else { String::new() },
-                    if name == "bare" { round.first } else { "" },
-                    f.wake_us.p50,
-                    f.wake_us.p99,
-                    f.wake_us.p999,
-                    f.wake_us.max,
-                    f.missed,
-                    format!("({})", f.missed_in_stalls),
-                    f.outside_40us,
-                    out,
-                    f.fault.as_ref().map_or(String::new(), |x| format!("  FAULT {x}")),
-                );
-            }
-        }
-        let _ = writeln!(
-            t,
-            "  p99 ratio servo/bare: median {:.2} (min {:.2}, max {:.2}); p99 difference median {:+.0} µs",
-            r.p99_ratio_median, r.p99_ratio_min, r.p99_ratio_max, r.p99_diff_us_median,
-        );
-        let ((all_s, all_b), (out_s, out_b)) = (r.missed_rates(false), r.missed_rates(true));
-        let _ = writeln!(
-            t,
-            "  missed periods servo {} / bare {} (per 100 000 periods {all_s:.0} / {all_b:.0}); \
-             outside host stalls (a wake ≥ 1 ms late) servo {} / bare {} ({out_s:.0} / {out_b:.0})",
-            r.missed_servo,
-            r.missed_bare,
-            r.missed_servo_outside_stalls,
-            r.missed_bare_outside_stalls
-        );
-        if let (Some(work), Some(n), Some(out), Some((all, out_rate))) =
-            (a.bare_work_us, r.missed_worked, r.missed_worked_outside_stalls, r.worked_rates())
-        {
-            let _ = writeln!(
-                t,
-                "  the bare loop busy {work} µs after each wake (\"busy\"): missed {n} ({all:.0} per \
-                 100 000), outside host stalls {out} ({out_rate:.0}) — the machine's own figure \
-                 for a loop that works as long as ours"
-            );
-        }
-        let _ = writeln!(
-            t,
-            "  {}",
-            if r.noisy_host {
-                format!("host too noisy — ratio not meaningful: {}", r.noisy_reasons.join("; "))
-            } else if r.p99_ratio_median <= 1.3 {
-                "quiet host: median ratio ≤ 1.3 (the goal)".to_string()
-            } else {
-                "quiet host: median ratio above the 1.3 goal".to_string()
-            }
-        );
-    }
-    let _ = writeln!(t, "\n  {}", crate::ipc::describe_cyclictest(cyclic));
-    t
 }

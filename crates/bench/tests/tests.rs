@@ -160,13 +160,14 @@ fn bad_options_are_refused_with_a_message_issue_14() {
     assert!(text(&out).contains("--spin needs the hwserver on a CPU of its own"), "{}", text(&out));
 }
 
-/// One short round of `jitter` with `extra` options on the test's own settings copy in `dir`:
-/// its output and its JSON.
-fn short_jitter(dir: &Path, extra: &[&str]) -> (String, serde_json::Value) {
+/// `rounds` short rounds of `jitter` with `extra` options on the test's own settings copy in
+/// `dir`: its output and its JSON.
+fn short_jitter(dir: &Path, rounds: u32, extra: &[&str]) -> (String, serde_json::Value) {
     let json = dir.join("j.json");
     let cfg = config(dir);
     let (c, j) = (format!("--config={}", cfg.display()), format!("--json={}", json.display()));
-    let mut args = vec!["jitter", "--rounds=1", "--segment-s=0.2", "--warmup-s=0.1", &c, &j];
+    let r = format!("--rounds={rounds}");
+    let mut args = vec!["jitter", &r, "--segment-s=0.2", "--warmup-s=0.1", &c, &j];
     args.extend_from_slice(extra);
     let out = run(&args);
     let t = text(&out);
@@ -180,7 +181,7 @@ fn short_jitter(dir: &Path, extra: &[&str]) -> (String, serde_json::Value) {
 #[test]
 fn jitter_runs_with_both_processes_on_one_cpu_issue_14() {
     let dir = scratch("same");
-    let (t, j) = short_jitter(&dir, &["--period-us=200", "--pin=same"]);
+    let (t, j) = short_jitter(&dir, 1, &["--period-us=200", "--pin=same"]);
     assert!(t.contains("servo, hwserver and bare loop on CPU 0"), "{t}");
     assert!(t.contains("outside host stalls (a wake ≥ 1 ms late) servo"), "{t}");
     assert!(t.contains("per 100 000 periods"), "{t}");
@@ -205,7 +206,7 @@ fn jitter_runs_with_both_processes_on_one_cpu_issue_14() {
 #[test]
 fn jitter_runs_with_a_spinning_hwserver_issue_14() {
     let dir = scratch("spin");
-    let (t, j) = short_jitter(&dir, &["--spin", "--pin"]);
+    let (t, j) = short_jitter(&dir, 1, &["--spin", "--pin"]);
     assert!(
         t.contains("hwserver spinning, servo and bare loop on CPU 0, hwserver on CPU 1"),
         "{t}"
@@ -213,5 +214,23 @@ fn jitter_runs_with_a_spinning_hwserver_issue_14() {
     assert_eq!((j["spin"].as_bool(), j["pin"].as_str()), (Some(true), Some("split")));
     let servo = &j["timers"][0]["rounds"][0]["servo"];
     assert!(servo["output_us"]["p99"].as_f64().unwrap() > 0.0, "{servo}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `--timer both`: the timers take turns within each round, the first one turning round by
+/// round, so both meet the same hour of the host; each round says when it started.
+#[test]
+fn jitter_timers_take_turns_within_each_round_issue_14() {
+    let dir = scratch("turns");
+    let (t, j) = short_jitter(&dir, 2, &["--timer=both", "--period-us=500"]);
+    assert!(t.contains("the timers taking turns within each round"), "{t}");
+    let start = |timer: usize, round: usize| {
+        let r = &j["timers"][timer]["rounds"][round];
+        r["started_s"].as_f64().unwrap_or_else(|| panic!("no started_s: {r}"))
+    };
+    assert_eq!(j["timers"][1]["timer"].as_str(), Some("nanosleep"), "{j}");
+    assert!(start(0, 0) < start(1, 0), "round 1: timerfd, then nanosleep: {j}");
+    assert!(start(1, 0) < start(1, 1), "round 2 after round 1: {j}");
+    assert!(start(1, 1) < start(0, 1), "round 2: nanosleep, then timerfd: {j}");
     let _ = std::fs::remove_dir_all(&dir);
 }
