@@ -145,11 +145,14 @@ fn serve_inner(
         wait_for_request(&listener, opts, (core.any_enabled(), silent_ns))?;
 
         while let Some(active) = server.receive().map_err(|e| port_err("server receive")(&e))? {
-            last_request_ns = monotonic_now_ns();
             let response = core.handle(active.payload());
             active.send_copy(response).map_err(|e| port_err("response send")(&e))?;
-            drop(active);
+            // The controller is woken first: the rest is off its path (releasing the request
+            // takes two locks of iceoryx2's port state, and the channel it closes is compared
+            // by request id, so a next request on the same slot is not touched).
             notifier.notify().map_err(|e| port_err("response notify")(&e))?;
+            drop(active);
+            last_request_ns = monotonic_now_ns();
             if core.exit_requested() {
                 return Ok(ending.map_or(ServeEnd::Exit, |(_, end)| end));
             }
