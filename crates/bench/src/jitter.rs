@@ -219,18 +219,15 @@ pub struct TimerResult {
 }
 
 impl TimerResult {
-    /// Missed periods per 100 000 (servo, bare): `outside_stalls` only, or all.
-    pub fn missed_rates(&self, outside_stalls: bool) -> (f64, f64) {
-        if outside_stalls {
-            (
-                per_100k(self.missed_servo_outside_stalls, self.periods_servo),
-                per_100k(self.missed_bare_outside_stalls, self.periods_bare),
-            )
-        } else {
-            (
-                per_100k(self.missed_servo, self.periods_servo),
-                per_100k(self.missed_bare, self.periods_bare),
-            )
+    /// The missed periods of this timer's rounds.
+    pub fn missed(&self) -> Missed {
+        Missed {
+            servo: self.missed_servo,
+            bare: self.missed_bare,
+            servo_outside_stalls: self.missed_servo_outside_stalls,
+            bare_outside_stalls: self.missed_bare_outside_stalls,
+            periods_servo: self.periods_servo,
+            periods_bare: self.periods_bare,
         }
     }
 
@@ -238,6 +235,50 @@ impl TimerResult {
     pub fn worked_rates(&self) -> Option<(f64, f64)> {
         let of = self.periods_worked?;
         Some((per_100k(self.missed_worked?, of), per_100k(self.missed_worked_outside_stalls?, of)))
+    }
+}
+
+/// Missed periods of the servo pipeline and the bare loop, over one timer's rounds or over
+/// every timer of the run (`--timer both|all`: the same-run comparison over all segments).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct Missed {
+    /// The servo pipeline's missed periods.
+    pub servo: u64,
+    /// The bare loop's.
+    pub bare: u64,
+    /// The servo's outside host stalls (a wake ≥ 1 ms late).
+    pub servo_outside_stalls: u64,
+    /// The bare loop's outside host stalls.
+    pub bare_outside_stalls: u64,
+    /// Periods the servo segments covered.
+    pub periods_servo: u64,
+    /// Periods the bare loop's segments covered.
+    pub periods_bare: u64,
+}
+
+impl Missed {
+    /// The sum over every timer of the run, when it ran more than one.
+    pub fn of_all(results: &[TimerResult]) -> Option<Missed> {
+        (results.len() > 1).then(|| {
+            results.iter().map(TimerResult::missed).fold(Missed::default(), |t, m| Missed {
+                servo: t.servo + m.servo,
+                bare: t.bare + m.bare,
+                servo_outside_stalls: t.servo_outside_stalls + m.servo_outside_stalls,
+                bare_outside_stalls: t.bare_outside_stalls + m.bare_outside_stalls,
+                periods_servo: t.periods_servo + m.periods_servo,
+                periods_bare: t.periods_bare + m.periods_bare,
+            })
+        })
+    }
+
+    /// Per 100 000 periods (servo, bare): `outside_stalls` only, or all.
+    pub fn rates(&self, outside_stalls: bool) -> (f64, f64) {
+        let (s, b) = if outside_stalls {
+            (self.servo_outside_stalls, self.bare_outside_stalls)
+        } else {
+            (self.servo, self.bare)
+        };
+        (per_100k(s, self.periods_servo), per_100k(b, self.periods_bare))
     }
 }
 
@@ -261,6 +302,8 @@ struct Report<'a> {
     p99_diff_us_median: f64,
     noisy_host: bool,
     timers: &'a [TimerResult],
+    /// With several timers: their missed periods together.
+    missed_all_timers: Option<Missed>,
     cyclictest: Option<crate::ipc::Cyclictest>,
 }
 
@@ -516,6 +559,7 @@ pub fn run(a: &JitterArgs) -> anyhow::Result<()> {
             p99_diff_us_median: first.p99_diff_us_median,
             noisy_host: first.noisy_host,
             timers: &results,
+            missed_all_timers: Missed::of_all(&results),
             cyclictest: cyclic,
         };
         let text = serde_json::to_string_pretty(&report)?;

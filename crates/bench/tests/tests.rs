@@ -68,6 +68,7 @@ fn jitter_runs_both_loops_and_writes_the_ratio_issue_14() {
         assert!(j[key].as_f64().is_some_and(f64::is_finite), "{key}: {j}");
     }
     assert!(j["noisy_host"].is_boolean());
+    assert!(j["missed_all_timers"].is_null(), "one timer: {j}");
     let rounds = j["timers"][0]["rounds"].as_array().unwrap();
     assert_eq!(rounds.len(), 2);
     assert_eq!(
@@ -218,7 +219,8 @@ fn jitter_runs_with_a_spinning_hwserver_issue_14() {
 }
 
 /// `--timer both`: the timers take turns within each round, the first one turning round by
-/// round, so both meet the same hour of the host; each round says when it started.
+/// round, so both meet the same hour of the host; each round says when it started, and the
+/// missed periods of both timers are also given together.
 #[test]
 fn jitter_timers_take_turns_within_each_round_issue_14() {
     let dir = scratch("turns");
@@ -232,5 +234,13 @@ fn jitter_timers_take_turns_within_each_round_issue_14() {
     assert!(start(0, 0) < start(1, 0), "round 1: timerfd, then nanosleep: {j}");
     assert!(start(1, 0) < start(1, 1), "round 2 after round 1: {j}");
     assert!(start(1, 1) < start(0, 1), "round 2: nanosleep, then timerfd: {j}");
+    assert!(t.contains("all timers together: missed periods servo"), "{t}");
+    let together = &j["missed_all_timers"];
+    for (key, of) in
+        [("servo", "missed_servo"), ("bare_outside_stalls", "missed_bare_outside_stalls")]
+    {
+        let sum: u64 = (0..2).map(|i| j["timers"][i][of].as_u64().unwrap()).sum();
+        assert_eq!(together[key].as_u64(), Some(sum), "{key}: {j}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

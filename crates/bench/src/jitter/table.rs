@@ -1,7 +1,7 @@
 //! The table `qmarc-bench jitter` prints: per timer, each round's loops, the p99 ratio, the
 //! missed periods and the noisy-host verdict, then cyclictest's figures.
 
-use super::{JitterArgs, Pin, TimerResult};
+use super::{JitterArgs, Missed, Pin, TimerResult};
 
 /// The table `jitter` prints.
 pub fn render(
@@ -53,16 +53,7 @@ pub fn render(
             "  p99 ratio servo/bare: median {:.2} (min {:.2}, max {:.2}); p99 difference median {:+.0} µs",
             r.p99_ratio_median, r.p99_ratio_min, r.p99_ratio_max, r.p99_diff_us_median,
         );
-        let ((all_s, all_b), (out_s, out_b)) = (r.missed_rates(false), r.missed_rates(true));
-        let _ = writeln!(
-            t,
-            "  missed periods servo {} / bare {} (per 100 000 periods {all_s:.0} / {all_b:.0}); \
-             outside host stalls (a wake ≥ 1 ms late) servo {} / bare {} ({out_s:.0} / {out_b:.0})",
-            r.missed_servo,
-            r.missed_bare,
-            r.missed_servo_outside_stalls,
-            r.missed_bare_outside_stalls
-        );
+        let _ = writeln!(t, "  {}", missed_line(&r.missed()));
         if let (Some(work), Some(n), Some(out), Some((all, out_rate))) =
             (a.bare_work_us, r.missed_worked, r.missed_worked_outside_stalls, r.worked_rates())
         {
@@ -85,6 +76,19 @@ pub fn render(
             }
         );
     }
+    if let Some(m) = Missed::of_all(results) {
+        let _ = writeln!(t, "\n  all timers together: {}", missed_line(&m));
+    }
     let _ = writeln!(t, "\n  {}", crate::ipc::describe_cyclictest(cyclic));
     t
+}
+
+/// "missed periods servo … / bare … (per 100 000 …); outside host stalls …".
+fn missed_line(m: &Missed) -> String {
+    let ((all_s, all_b), (out_s, out_b)) = (m.rates(false), m.rates(true));
+    format!(
+        "missed periods servo {} / bare {} (per 100 000 periods {all_s:.0} / {all_b:.0}); \
+         outside host stalls (a wake ≥ 1 ms late) servo {} / bare {} ({out_s:.0} / {out_b:.0})",
+        m.servo, m.bare, m.servo_outside_stalls, m.bare_outside_stalls
+    )
 }
