@@ -416,20 +416,18 @@ fn all_rounds(
         for k in 0..timers.len() {
             let i = (k + r as usize - 1) % timers.len();
             let started_s = began.elapsed().as_secs_f64();
-            let round = round_of(a, timers[i], r, req, starter, scratch)?;
-            rounds[i].push(Round { started_s, ..round });
+            rounds[i].push(round_of(a, (timers[i], r, started_s), req, starter, scratch)?);
         }
     }
     let results = timers.iter().zip(rounds);
     Ok(results.map(|(timer, rs)| verdict(timer.to_string(), rs, a.period_us)).collect())
 }
 
-/// Round `r` of `timer`: the bare loop, the busy one (with `--bare-work-us`) and the servo
-/// pipeline, the bare loop first in odd rounds.
+/// Round `r` of `timer`, begun `started_s` after the rounds: the bare loop, the busy one (with
+/// `--bare-work-us`) and the servo pipeline, the bare loop first in odd rounds.
 fn round_of(
     a: &JitterArgs,
-    timer: TimerMethod,
-    r: u32,
+    (timer, r, started_s): (TimerMethod, u32, f64),
     req: RtRequest,
     starter: (&Path, &Path),
     scratch: &Path,
@@ -457,7 +455,7 @@ fn round_of(
     Ok(Round {
         round: r,
         first: if bare_first { "bare" } else { "servo" },
-        started_s: 0.0,
+        started_s,
         bare: b,
         worked: w,
         servo: s,

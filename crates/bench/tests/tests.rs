@@ -68,7 +68,7 @@ fn jitter_runs_both_loops_and_writes_the_ratio_issue_14() {
         assert!(j[key].as_f64().is_some_and(f64::is_finite), "{key}: {j}");
     }
     assert!(j["noisy_host"].is_boolean());
-    assert!(j["missed_all_timers"].is_null(), "one timer: {j}");
+    assert!(j.get("missed_all_timers").is_some_and(serde_json::Value::is_null), "one timer: {j}");
     let rounds = j["timers"][0]["rounds"].as_array().unwrap();
     assert_eq!(rounds.len(), 2);
     assert_eq!(
@@ -232,7 +232,6 @@ fn jitter_timers_take_turns_within_each_round_issue_14() {
     };
     assert_eq!(j["timers"][1]["timer"].as_str(), Some("nanosleep"), "{j}");
     assert!(start(0, 0) < start(1, 0), "round 1: timerfd, then nanosleep: {j}");
-    assert!(start(1, 0) < start(1, 1), "round 2 after round 1: {j}");
     assert!(start(1, 1) < start(0, 1), "round 2: nanosleep, then timerfd: {j}");
     assert!(t.contains("all timers together: missed periods servo"), "{t}");
     let together = &j["missed_all_timers"];
