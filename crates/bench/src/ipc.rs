@@ -277,46 +277,50 @@ pub fn run(a: &IpcArgs) -> anyhow::Result<()> {
     let x = |mode| exchange(n, &bin_dir, mode);
     let paced = Mode { paced_ns: Some(PACED_NS), ..Mode::default() };
     let n_paced = n.min(PACED_SAMPLES);
+    // Measured in this order, one after the other; the ratios below name what they divide.
+    let blocking = x(Mode::default())?;
+    let blocking_one_cpu = x(Mode { cpu: Some(0), ..Mode::default() })?;
+    let spinning = x(Mode { spin: true, ..Mode::default() })?;
+    let ports = iox_ports(n)?;
+    let futex = ping_pong(n, true, true, None)?;
+    let futex_one_cpu = ping_pong(n, true, true, Some(0))?;
+    let process_futex = futex_ping_pong_processes(n, None)?;
+    let process_futex_one_cpu = futex_ping_pong_processes(n, Some(0))?;
+    let futex_other = ping_pong(n, true, false, None)?;
+    let spin = ping_pong(n, false, false, None)?;
+    let paced_blocking = exchange(n_paced, &bin_dir, paced)?;
+    let paced_one_cpu = exchange(n_paced, &bin_dir, Mode { cpu: Some(0), ..paced })?;
     let rows = [
-        row("controller ⇄ hwserver exchange (iceoryx2, blocking)", x(Mode::default())?),
-        row("the same, both pinned to CPU 0", x(Mode { cpu: Some(0), ..Mode::default() })?),
-        row(
-            "the same, hwserver spinning, controller polling",
-            x(Mode { spin: true, ..Mode::default() })?,
-        ),
-        row("iceoryx2 request/response ports alone, both polling", iox_ports(n)?),
-        row("raw futex ping-pong, 2 threads, SCHED_FIFO", ping_pong(n, true, true, None)?),
-        row("the same, both pinned to CPU 0", ping_pong(n, true, true, Some(0))?),
-        row("raw futex ping-pong, 2 processes, SCHED_FIFO", futex_ping_pong_processes(n, None)?),
-        row("the same, both pinned to CPU 0", futex_ping_pong_processes(n, Some(0))?),
-        row("raw futex ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, true, false, None)?),
-        row("raw spin ping-pong, 2 threads, SCHED_OTHER", ping_pong(n, false, false, None)?),
-        row(
-            "blocking, one exchange per 400 µs tick (asleep between)",
-            exchange(n_paced, &bin_dir, paced)?,
-        ),
-        row(
-            "the same, both pinned to CPU 0",
-            exchange(n_paced, &bin_dir, Mode { cpu: Some(0), ..paced })?,
-        ),
+        row("controller ⇄ hwserver exchange (iceoryx2, blocking)", blocking),
+        row("the same, both pinned to CPU 0", blocking_one_cpu),
+        row("the same, hwserver spinning, controller polling", spinning),
+        row("iceoryx2 request/response ports alone, both polling", ports),
+        row("raw futex ping-pong, 2 threads, SCHED_FIFO", futex),
+        row("the same, both pinned to CPU 0", futex_one_cpu),
+        row("raw futex ping-pong, 2 processes, SCHED_FIFO", process_futex),
+        row("the same, both pinned to CPU 0", process_futex_one_cpu),
+        row("raw futex ping-pong, 2 threads, SCHED_OTHER", futex_other),
+        row("raw spin ping-pong, 2 threads, SCHED_OTHER", spin),
+        row("blocking, one exchange per 400 µs tick (asleep between)", paced_blocking),
+        row("the same, both pinned to CPU 0", paced_one_cpu),
     ];
     println!("qmarc-bench ipc: {n} round trips per row, µs");
     println!("  {:<55} {:>8} {:>8} {:>8} {:>9}", "", "p50", "p99", "p99.9", "max");
     for Row { name, us: p } in &rows {
         println!("  {name:<55} {:>8.2} {:>8.2} {:>8.2} {:>9.1}", p.p50, p.p99, p.p999, p.max);
     }
-    let p50 = |i: usize| rows[i].us.p50.max(1e-3);
+    let over = |a: Pct, b: Pct| a.p50.max(1e-3) / b.p50.max(1e-3);
     let report = Report {
         samples: n,
         machine: Machine::here(),
         rows: &rows,
-        blocking_over_futex: p50(0) / p50(4),
-        one_cpu_over_futex: p50(1) / p50(5),
-        blocking_over_process_futex: p50(0) / p50(6),
-        one_cpu_over_process_futex: p50(1) / p50(7),
-        spinning_over_spin: p50(2) / p50(9),
-        ports_over_spin: p50(3) / p50(9),
-        paced_over_back_to_back: p50(10) / p50(0),
+        blocking_over_futex: over(blocking, futex),
+        one_cpu_over_futex: over(blocking_one_cpu, futex_one_cpu),
+        blocking_over_process_futex: over(blocking, process_futex),
+        one_cpu_over_process_futex: over(blocking_one_cpu, process_futex_one_cpu),
+        spinning_over_spin: over(spinning, spin),
+        ports_over_spin: over(ports, spin),
+        paced_over_back_to_back: over(paced_blocking, blocking),
     };
     println!(
         "  blocking exchange p50 = {:.2}× the futex ping-pong's at the same policy ({:.2}× with \
