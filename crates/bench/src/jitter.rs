@@ -257,18 +257,21 @@ pub struct Missed {
 }
 
 impl Missed {
+    /// One round's: its servo segment's and its bare loop's.
+    fn of_round(r: &Round) -> Missed {
+        Missed {
+            servo: r.servo.missed,
+            bare: r.bare.missed,
+            servo_outside_stalls: r.servo.outside_stalls(),
+            bare_outside_stalls: r.bare.outside_stalls(),
+            periods_servo: r.servo.periods,
+            periods_bare: r.bare.periods,
+        }
+    }
+
     /// The sum over every timer of the run, when it ran more than one.
     pub fn of_all(results: &[TimerResult]) -> Option<Missed> {
-        (results.len() > 1).then(|| {
-            results.iter().map(TimerResult::missed).fold(Missed::default(), |t, m| Missed {
-                servo: t.servo + m.servo,
-                bare: t.bare + m.bare,
-                servo_outside_stalls: t.servo_outside_stalls + m.servo_outside_stalls,
-                bare_outside_stalls: t.bare_outside_stalls + m.bare_outside_stalls,
-                periods_servo: t.periods_servo + m.periods_servo,
-                periods_bare: t.periods_bare + m.periods_bare,
-            })
-        })
+        (results.len() > 1).then(|| results.iter().map(TimerResult::missed).sum())
     }
 
     /// Per 100 000 periods (servo, bare): `outside_stalls` only, or all.
@@ -279,6 +282,20 @@ impl Missed {
             (self.servo, self.bare)
         };
         (per_100k(s, self.periods_servo), per_100k(b, self.periods_bare))
+    }
+}
+
+/// Rounds' or timers' missed periods added up, field by field.
+impl std::iter::Sum for Missed {
+    fn sum<I: Iterator<Item = Missed>>(all: I) -> Missed {
+        all.fold(Missed::default(), |t, m| Missed {
+            servo: t.servo + m.servo,
+            bare: t.bare + m.bare,
+            servo_outside_stalls: t.servo_outside_stalls + m.servo_outside_stalls,
+            bare_outside_stalls: t.bare_outside_stalls + m.bare_outside_stalls,
+            periods_servo: t.periods_servo + m.periods_servo,
+            periods_bare: t.periods_bare + m.periods_bare,
+        })
     }
 }
 
@@ -481,6 +498,7 @@ pub fn verdict(timer: String, rounds: Vec<Round>, period_us: u32) -> TimerResult
         noisy.push(format!("the bare loop stalled {stall:.0} µs, longer than a period"));
     }
     let finite = || ratios.iter().copied().filter(|r| r.is_finite());
+    let missed: Missed = rounds.iter().map(Missed::of_round).sum();
     TimerResult {
         timer,
         p99_ratio_median: median(&ratios),
@@ -489,12 +507,12 @@ pub fn verdict(timer: String, rounds: Vec<Round>, period_us: u32) -> TimerResult
         p99_diff_us_median: median(&diffs),
         noisy_host: !noisy.is_empty(),
         noisy_reasons: noisy,
-        missed_servo: rounds.iter().map(|r| r.servo.missed).sum(),
-        missed_bare: rounds.iter().map(|r| r.bare.missed).sum(),
-        missed_servo_outside_stalls: rounds.iter().map(|r| r.servo.outside_stalls()).sum(),
-        missed_bare_outside_stalls: rounds.iter().map(|r| r.bare.outside_stalls()).sum(),
-        periods_servo: rounds.iter().map(|r| r.servo.periods).sum(),
-        periods_bare: rounds.iter().map(|r| r.bare.periods).sum(),
+        missed_servo: missed.servo,
+        missed_bare: missed.bare,
+        missed_servo_outside_stalls: missed.servo_outside_stalls,
+        missed_bare_outside_stalls: missed.bare_outside_stalls,
+        periods_servo: missed.periods_servo,
+        periods_bare: missed.periods_bare,
         missed_worked: worked_sum(&rounds, |w| w.missed),
         missed_worked_outside_stalls: worked_sum(&rounds, LoopFigures::outside_stalls),
         periods_worked: worked_sum(&rounds, |w| w.periods),
