@@ -109,12 +109,17 @@ fn futex_wake(word: &AtomicU32) -> Result<(), i32> {
     if r < 0 { Err(std::io::Error::last_os_error().raw_os_error().unwrap_or(0)) } else { Ok(()) }
 }
 
+/// `ts` in ns.
+fn ns(ts: &libc::timespec) -> u64 {
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
 /// CLOCK_MONOTONIC now, ns.
 fn monotonic_ns() -> u64 {
     let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: `ts` is a valid out-pointer; CLOCK_MONOTONIC always exists on Linux.
     unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+    ns(&ts)
 }
 
 /// The kernel's tick (1/HZ), ns: the resolution of `CLOCK_MONOTONIC_COARSE`, which advances
@@ -123,8 +128,8 @@ fn kernel_tick_ns() -> u64 {
     let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: `ts` is a valid out-pointer.
     let r = unsafe { libc::clock_getres(libc::CLOCK_MONOTONIC_COARSE, &mut ts) };
-    let ns = ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64;
-    if r == 0 && ns <= 100_000_000 { ns } else { 0 }
+    let tick = ns(&ts);
+    if r == 0 && tick <= 100_000_000 { tick } else { 0 }
 }
 
 /// `FUTEX_WAIT` while `word` is 0, at most until `deadline_ns` on CLOCK_MONOTONIC (`None`: no
