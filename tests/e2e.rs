@@ -450,13 +450,8 @@ fn threads_that_are_not_real_time_keep_off_the_pinned_cpu_issue_14() {
         "--knots=-",
     ]);
     let mut stdin = child.stdin.take().unwrap();
-    for i in 0..=40 {
-        let s = f64::from(i) / 40.0;
-        let p = (2_000.0 * (3.0 * s * s - 2.0 * s * s * s)).round();
-        let v = 2_000.0 / 2.0 * (6.0 * s - 6.0 * s * s);
-        let line = format!("X {p} {v:.3} 50 Y 0 0 50 Z 0 0 50\n");
-        std::io::Write::write_all(&mut stdin, line.as_bytes()).unwrap();
-    }
+    let path = qmarc_tests::smooth_step_pvt(2_000.0, 40);
+    std::io::Write::write_all(&mut stdin, path.as_bytes()).unwrap();
     qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
     let mut seen = Vec::new();
     for (pid, cmd) in run.processes() {

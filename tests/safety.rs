@@ -113,13 +113,7 @@ fn a_stream_that_leaves_the_software_limits_is_stopped_in_the_loop() {
     let run = TestRun::new("softloop");
     let (cfg, events) = with_events(&run, &[]);
     // PVT: motor 1 to −9600 counts in 1 s at rest at both ends, streamed from a FIFO-like pipe.
-    let mut text = String::new();
-    for i in 0..=20 {
-        let s = f64::from(i) / 20.0;
-        let p = (-9_600.0 * (3.0 * s * s - 2.0 * s * s * s)).round();
-        let v = -9_600.0 * (6.0 * s - 6.0 * s * s);
-        text += &format!("X {p} {v:.3} 50 Y 0 0 50 Z 0 0 50\n");
-    }
+    let text = qmarc_tests::smooth_step_pvt(-9_600.0, 20);
     let knots = write(&run, "to-9600.txt", &text);
     let out = run.out("out");
     let mut child = run.spawn_starter(&[

@@ -285,6 +285,20 @@ pub fn status_field<'a>(status: &'a str, key: &str) -> Option<&'a str> {
     status.lines().find_map(|l| l.strip_prefix(key)?.strip_prefix(':')).map(str::trim)
 }
 
+/// A PVT path as knot-file lines, a knot every 50 ms: motor 1 moves `distance` counts in
+/// `segments` segments, at rest at both ends (p = d·(3s² − 2s³), s = t/T); motors 2 and 3 stay.
+pub fn smooth_step_pvt(distance: f64, segments: u32) -> String {
+    let duration_s = f64::from(segments) / 20.0;
+    (0..=segments)
+        .map(|i| {
+            let s = f64::from(i) / f64::from(segments);
+            let p = (distance * (3.0 * s * s - 2.0 * s * s * s)).round();
+            let v = distance / duration_s * (6.0 * s - 6.0 * s * s);
+            format!("X {p} {v:.3} 50 Y 0 0 50 Z 0 0 50\n")
+        })
+        .collect()
+}
+
 /// Processes (pid, command line) whose command line contains `needle`, except this one.
 pub fn processes_matching(needle: &str) -> Vec<(u32, String)> {
     let me = std::process::id();
