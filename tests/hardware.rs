@@ -96,7 +96,7 @@ fn a_step_runs_through_the_626_backend_against_the_fake_card_issue_12() {
     assert!(s.fault.is_none() && s.ok, "{:?}", s.fault);
     assert!(s.motors.iter().all(|m| m.followed), "{:?}", s.motors);
     // 1× counting: errors in rad use the 626's counts per revolution; the loop is the
-    // simulated robot's at 4× (gains × 4, counts ÷ 4), so its errors in rad are alike.
+    // simulated robot's at 4× (Kp × 4, counts ÷ 4), so its errors in rad are alike.
     let cpr = 1024.0 * 12.0 / std::f64::consts::TAU;
     assert!((s.counts_per_rad - cpr).abs() < 1e-9, "{}", s.counts_per_rad);
     // Settings in other counts than the card's are refused, naming what to do.

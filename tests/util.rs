@@ -137,6 +137,12 @@ impl TestRun {
 
     /// [`TestRun::config_with`] on the settings file `base` (`config/s626.toml`, say).
     pub fn config_from(&self, base: &Path, edits: &[(&str, &str)]) -> PathBuf {
+        self.config_as("qmarc.toml", base, edits)
+    }
+
+    /// [`TestRun::config_from`] into the file `name` of this run's directory, for a test that
+    /// keeps several settings files.
+    pub fn config_as(&self, name: &str, base: &Path, edits: &[(&str, &str)]) -> PathBuf {
         let mut text = std::fs::read_to_string(base).expect("test settings");
         let state = format!("{:?}", self.dir.join("sim.state").display().to_string());
         let own_state = [("state_file", state.as_str())];
@@ -168,7 +174,7 @@ impl TestRun {
             }
             assert!(found, "no `{key}` in the settings");
         }
-        let path = self.dir.join("qmarc.toml");
+        let path = self.dir.join(name);
         std::fs::write(&path, text + "\n").expect("write settings");
         path
     }

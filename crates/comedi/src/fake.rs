@@ -14,8 +14,12 @@
 //!   ones) into the output register, turning on the bank's other outputs — and is counted.
 //! - Errors on demand ([`FakeS626::fail_next`]): an errno, or a list cut short.
 //! - A plant, when motors are wired to it ([`FakeS626::wire`]): a velocity-mode amplifier per
-//!   motor, counting `counts_per_s_per_volt` × its DAC's volts while its enable output is on,
-//!   advancing one servo period per list that reads counters.
+//!   motor, whose motor follows `counts_per_s_per_volt` × its DAC's volts while its enable
+//!   output is on — at once, or through a first-order velocity lag — and coasts to rest
+//!   when it is off, advancing one servo period per list that reads counters. The motor has a
+//!   position of its own, in counts; its counter reads the position plus what a preload set,
+//!   so a preload moves the counter's frame, not the motor. Limit switches wired to the plant
+//!   ([`SwitchWire`]) open where the motor passes them, as normally-closed switches do.
 //!
 //! Nothing here allocates after construction.
 
@@ -38,7 +42,39 @@ pub struct Wire {
     pub enable_bit: u32,
     /// Counting speed per volt of command while enabled, counts/s.
     pub counts_per_s_per_volt: f64,
+    /// The amplifier's velocity loop as a first-order lag, s; 0: the motor follows its
+    /// command at once.
+    pub lag_s: f64,
+    /// The motor's top limit switch, if the plant drives it.
+    pub top: Option<SwitchWire>,
+    /// The motor's bottom limit switch, if the plant drives it.
+    pub bottom: Option<SwitchWire>,
 }
+
+/// A limit switch on a motor's travel: closed until the motor reaches `at_counts` going
+/// `toward` (+1: up in counts, −1: down), open beyond, as a normally-closed switch is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SwitchWire {
+    /// Its input, DIO bank 0.
+    pub dio: u32,
+    /// Where it trips, counts of the motor's position.
+    pub at_counts: f64,
+    /// The direction of travel that trips it: +1 or −1.
+    pub toward: f64,
+    /// A closed switch pulls its input to 0 V (wired to ground, reading 1); else it leaves
+    /// it open when closed and pulls it low when tripped.
+    pub closed_low: bool,
+}
+
+impl SwitchWire {
+    /// Whether a motor at `position` holds it open (tripped).
+    pub fn tripped(&self, position: f64) -> bool {
+        (position - self.at_counts) * self.toward >= 0.0
+    }
+}
+
+/// How long a disabled motor of the plant takes to coast to rest, s (its time constant).
+const COAST_TAU_S: f64 = 0.05;
 
 /// A failure the next list meets.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -68,8 +104,11 @@ pub struct FakeS626 {
     dio_out: [u32; 3],
     dio_dir: [u32; 3],
     external_low: [u32; 3],
-    counters: [u32; 6],
-    residual: [f64; 6],
+    /// What each counter adds to its motor's whole counts (a preload sets it).
+    counter_base: [u32; 6],
+    /// Each counter channel's motor: position (counts) and velocity (counts/s).
+    position: [f64; 6],
+    velocity: [f64; 6],
     locked: u32,
     fail: Option<Failure>,
     runs: u64,
@@ -99,8 +138,9 @@ impl FakeS626 {
             dio_out: [0; 3],
             dio_dir: [0xffff; 3],
             external_low: [0; 3],
-            counters: [0; 6],
-            residual: [0.0; 6],
+            counter_base: [0; 6],
+            position: [0.0; 6],
+            velocity: [0.0; 6],
             locked: 0,
             fail: None,
             runs: 0,
@@ -126,10 +166,26 @@ impl FakeS626 {
     }
 
     /// Wires `motor` (0‥3) of the plant; the plant advances `period_s` per list that reads
-    /// counters.
+    /// counters. Its switches are set for where the motor is.
     pub fn wire(&mut self, motor: usize, wire: Wire, period_s: f64) {
         self.plant[motor] = Some(wire);
         self.period_s = period_s;
+        self.update_switches();
+    }
+
+    /// Puts the motor of counter `chan` at `position` counts, at rest, its counter reading
+    /// what it read (the frame moves with it: as if it had been moved with the card off).
+    pub fn place(&mut self, chan: usize, position: f64) {
+        let count = self.counter(chan);
+        self.position[chan] = position;
+        self.velocity[chan] = 0.0;
+        self.set_counter(chan, count);
+        self.update_switches();
+    }
+
+    /// Where the motor of counter `chan` is, counts.
+    pub fn position(&self, chan: usize) -> f64 {
+        self.position[chan]
     }
 
     /// Sets whether something outside pulls DIO `chan` of bank 0 to 0 V (a switch closed to
@@ -139,9 +195,14 @@ impl FakeS626 {
         if low { self.external_low[0] |= bit } else { self.external_low[0] &= !bit }
     }
 
-    /// Sets counter `chan` to `count` (24 bits).
+    /// Sets counter `chan` to `count` (24 bits), wherever its motor is.
     pub fn set_counter(&mut self, chan: usize, count: u32) {
-        self.counters[chan] = count & COUNTER_MASK;
+        self.counter_base[chan] = count.wrapping_sub(self.whole_counts(chan));
+    }
+
+    /// The whole counts of the motor of counter `chan`, as a counter adds them (wrapping).
+    fn whole_counts(&self, chan: usize) -> u32 {
+        self.position[chan].floor() as i64 as u32
     }
 
     /// The next list meets `failure`.
@@ -186,23 +247,43 @@ impl FakeS626 {
 
     /// Counter `chan` now.
     pub fn counter(&self, chan: usize) -> u32 {
-        self.counters[chan]
+        self.counter_base[chan].wrapping_add(self.whole_counts(chan)) & COUNTER_MASK
     }
 
-    /// The plant: one period of every wired motor.
+    /// The plant: one period of every wired motor. Enabled, it follows its amplifier's
+    /// command (through the lag, if any); disabled, it coasts to rest. Both are the exact
+    /// first-order solution for a command held over the period.
     fn advance(&mut self) {
+        let dt = self.period_s;
         for w in self.plant.iter().flatten() {
             let on = (self.dio_out[0] >> w.enable_dio) & 1 == w.enable_bit;
-            if !on {
-                continue;
-            }
+            let (target, tau) = match on {
+                true => (w.counts_per_s_per_volt * dac_volts(self.ao[w.dac as usize]), w.lag_s),
+                false => (0.0, COAST_TAU_S),
+            };
             let c = w.counter as usize;
-            let counts =
-                w.counts_per_s_per_volt * dac_volts(self.ao[w.dac as usize]) * self.period_s
-                    + self.residual[c];
-            let whole = counts.trunc();
-            self.residual[c] = counts - whole;
-            self.counters[c] = self.counters[c].wrapping_add(whole as i64 as u32) & COUNTER_MASK;
+            if tau > 0.0 {
+                // v → target with time constant τ; x gains ∫v over the period.
+                let decay = (-dt / tau).exp();
+                let dv = self.velocity[c] - target;
+                self.position[c] += target * dt + dv * tau * (1.0 - decay);
+                self.velocity[c] = target + dv * decay;
+            } else {
+                self.position[c] += target * dt;
+                self.velocity[c] = target;
+            }
+        }
+        self.update_switches();
+    }
+
+    /// Opens and closes the switches the plant drives, for where their motors are.
+    fn update_switches(&mut self) {
+        for w in self.plant {
+            let Some(w) = w else { continue };
+            for s in [w.top, w.bottom].into_iter().flatten() {
+                let closed = !s.tripped(self.position[w.counter as usize]);
+                self.set_input_low(s.dio, closed == s.closed_low);
+            }
         }
     }
 
@@ -226,11 +307,8 @@ impl FakeS626 {
         match (subdev, insn) {
             (SUBDEV_AO, INSN_WRITE) => self.ao[c] = data[0],
             (SUBDEV_AO, INSN_READ) => data[0] = self.ao[c],
-            (SUBDEV_COUNTER, INSN_READ) => data[0] = self.counters[c],
-            (SUBDEV_COUNTER, INSN_WRITE) => {
-                self.counters[c] = data[0];
-                self.residual[c] = 0.0;
-            }
+            (SUBDEV_COUNTER, INSN_READ) => data[0] = self.counter(c),
+            (SUBDEV_COUNTER, INSN_WRITE) => self.set_counter(c, data[0]),
             (2..=4, INSN_BITS) if data.len() == 2 => {
                 let bank = (subdev - SUBDEV_DIO0) as usize;
                 let mask = data[0] & 0xffff;
@@ -348,6 +426,53 @@ mod tests {
         assert_eq!(list.data(1)[0], 0x00ff_fffb);
         let mut config = InsnList::new(&[Insn::one(INSN_CONFIG, SUBDEV_COUNTER, 1)]);
         assert_eq!(fake.run(&mut config), Err(Errno::EINVAL));
+    }
+
+    /// The plant: an enabled motor follows its DAC (through the lag), a preload moves the
+    /// counter's frame and not the motor, and a switch opens where the motor passes it.
+    #[test]
+    fn a_wired_motor_moves_its_counter_and_opens_its_switch_where_it_passes_issue_27() {
+        let mut fake = FakeS626::new();
+        let top = SwitchWire { dio: 9, at_counts: -100.0, toward: -1.0, closed_low: true };
+        let wire = Wire {
+            dac: 0,
+            counter: 0,
+            enable_dio: 0,
+            enable_bit: 1,
+            counts_per_s_per_volt: 10_000.0,
+            lag_s: 0.004,
+            top: Some(top),
+            bottom: None,
+        };
+        fake.wire(0, wire, 0.001);
+        assert!(fake.pin_low(9), "closed where the motor starts");
+        let mut list = InsnList::new(&[
+            Insn::one(INSN_WRITE, SUBDEV_AO, 0),
+            Insn::bits(SUBDEV_DIO0),
+            Insn::one(INSN_READ, SUBDEV_COUNTER, 0),
+        ]);
+        list.data_mut(0)[0] = crate::s626::dac_sample(-819); // ≈ −1 V: ≈ −10 000 counts/s
+        list.data_mut(1).copy_from_slice(&[1, 1]); // enable
+        fake.run(&mut list).unwrap();
+        assert!(fake.position(0) > -1e-9, "one period of lag: barely moving yet");
+        for _ in 0..20 {
+            fake.run(&mut list).unwrap();
+        }
+        let x = fake.position(0);
+        assert!((-210.0..-100.0).contains(&x), "{x}");
+        assert!(!fake.pin_low(9), "open beyond -100 counts: tripped");
+        assert_eq!(list.data(2)[0], (x.floor() as i64 as u32) & COUNTER_MASK);
+        // A preload sets what the counter reads, not where the motor is.
+        fake.set_counter(0, 5);
+        assert_eq!((fake.position(0), fake.counter(0)), (x, 5));
+        // Disabled, it coasts to rest: the velocity decays, the position settles.
+        list.data_mut(1).copy_from_slice(&[1, 0]);
+        for _ in 0..1000 {
+            fake.run(&mut list).unwrap();
+        }
+        let rest = fake.position(0);
+        fake.run(&mut list).unwrap();
+        assert!((fake.position(0) - rest).abs() < 1e-6, "at rest");
     }
 
     #[test]

@@ -348,8 +348,8 @@ impl Settings {
     }
 
     /// Why the settings' counts are not the 626's, if they are not: every count-valued
-    /// setting (limits, offsets, distances, speeds, steps) and every gain means something else
-    /// on a card that counts `[s626] counts_per_rev` — 4× too far, 4× too strong for the
+    /// setting (limits, offsets, distances, speeds, steps) and Kp means something else
+    /// on a card that counts `[s626] counts_per_rev` — 4× too far, 4× too weak for the
     /// thesis' encoders. Nothing is rescaled silently: a file for the card says its counts.
     /// The 626 backend refuses to move with such settings (its selftest, which moves
     /// nothing, does not mind).

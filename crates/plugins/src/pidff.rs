@@ -353,6 +353,57 @@ mod tests {
         assert_eq!(at(&mut late, 9, 1), at(&mut punctual, 9, 1));
     }
 
+    /// The shipped settings of one robot at both count scales: `config/qmarc.toml` at 4×
+    /// (the thesis' counts) and `config/s626.toml` at the 626's 1×.
+    fn shipped_at_both_scales() -> (Settings, Settings) {
+        let names = qmarc_config::Names {
+            laws: crate::registry::law_names(),
+            methods: crate::registry::path_generator_names(),
+            backends: qmarc_hwserver::backends::names(),
+            any_plugin: false,
+        };
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config");
+        let load = |f: &str| Settings::load(&dir.join(f), &names).expect("shipped settings");
+        (load("qmarc.toml"), load("s626.toml"))
+    }
+
+    proptest::proptest! {
+        /// Issue 27: every term inside eq. 3-1's bracket (FE, CV, CA, IE, AV) is in counts, so
+        /// one physical motion counted 4× and 1× gives the same volts only when Kp alone
+        /// carries the factor of 4. The shipped files' laws, fed the same motion in each
+        /// file's counts (1× = 4× / 4), output the same DAC code every cycle (rounding apart).
+        #[test]
+        fn the_shipped_626_gains_are_the_4x_loop_at_1x_counting_issue_27(
+            motion in proptest::collection::vec((-60.0f64..60.0, -30.0f64..30.0), 2..200),
+        ) {
+            let (at4, at1) = shipped_at_both_scales();
+            proptest::prop_assert_eq!(at1.counts_per_rev * 4.0, at4.counts_per_rev);
+            let (mut law4, mut law1) = (PidFf::from_settings(&at4), PidFf::from_settings(&at1));
+            let zero = [0.0; MAX_MOTORS];
+            law4.reset(&zero, &zero);
+            law1.reset(&zero, &zero);
+            // A path of random velocities (counts/period at 4×) and a following error.
+            let (mut cmd4, mut act4) = ([0.0; MAX_MOTORS], [0.0; MAX_MOTORS]);
+            for (n, (v, fe)) in motion.iter().enumerate() {
+                for m in 0..at4.n_motors {
+                    cmd4[m] += v * (1.0 + m as f64 / 4.0);
+                    act4[m] = cmd4[m] - fe;
+                }
+                let (cmd1, act1) = (cmd4.map(|c| c / 4.0), act4.map(|a| a / 4.0));
+                let (mut dac4, mut dac1) = ([0; MAX_MOTORS], [0; MAX_MOTORS]);
+                let n = n as u64 + 1;
+                law4.step(&ServoInput { n, elapsed: 1, cmd: &cmd4, act: &act4 }, &mut dac4);
+                law1.step(&ServoInput { n, elapsed: 1, cmd: &cmd1, act: &act1 }, &mut dac1);
+                for m in 0..at4.n_motors {
+                    proptest::prop_assert!(
+                        (dac4[m] - dac1[m]).abs() <= 1,
+                        "cycle {n} motor {}: {} at 4×, {} at 1×", m + 1, dac4[m], dac1[m]
+                    );
+                }
+            }
+        }
+    }
+
     /// On an accelerating path, CA after a skip is the acceleration per period², not k
     /// times it: c(n) = n², so CA is 2 counts/period² whatever the spacing of the cycles.
     #[test]

@@ -15,7 +15,6 @@
 
 use crate::backend::{Backend, BackendOpenError, HwFault, Inputs, Outputs};
 use crate::backends::state::{load_homed, save_homed};
-use qmarc_comedi::fake::{FakeS626, Wire};
 use qmarc_comedi::list::{Insn, InsnList};
 use qmarc_comedi::s626::{
     COUNTER_MASK, SUBDEV_AO, SUBDEV_COUNTER, SUBDEV_DIO0, dac_sample, layout_problem,
@@ -23,9 +22,8 @@ use qmarc_comedi::s626::{
 use qmarc_comedi::uapi::{INSN_READ, INSN_WRITE};
 use qmarc_comedi::{Comedi, ComediOpenError, Transport};
 use qmarc_config::{S626Settings, Settings};
-use qmarc_proto::{COUNTER_ZERO, MAX_MOTORS, Status};
+use qmarc_proto::{MAX_MOTORS, Status};
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
 
 /// The `--device` that drives the in-process fake of the card.
 pub const FAKE_DEVICE: &str = "fake";
@@ -334,116 +332,6 @@ fn open_error(e: ComediOpenError) -> BackendOpenError {
     BackendOpenError::Invalid(e.to_string())
 }
 
-/// The fake card of the settings ([`wired_fake`] with the simulated robot's amplifier gain,
-/// `sim.kv`, in the settings' counts).
-pub fn fake_card(s: &Settings) -> FakeS626 {
-    wired_fake(&s.s626, s.n_motors, s.sim.kv, s.period_s())
-}
-
-/// A fake 626 wired as `w` says: a velocity-mode plant of `kv` counts/s per volt per motor
-/// advancing `period_s` per read, switches closed, counters at the homed frame's zero.
-pub fn wired_fake(w: &S626Settings, n_motors: usize, kv: f64, period_s: f64) -> FakeS626 {
-    let mut fake = FakeS626::new();
-    for m in 0..n_motors.min(MAX_MOTORS) {
-        let at = |v: &[u32]| v.get(m).copied().unwrap_or(0);
-        let wire = Wire {
-            dac: at(&w.dac_channels),
-            counter: at(&w.counter_channels),
-            enable_dio: at(&w.enable_dio),
-            enable_bit: w.enable_bit,
-            counts_per_s_per_volt: kv
-                * f64::from(w.dac_sign.get(m).copied().unwrap_or(1))
-                * f64::from(w.counter_sign.get(m).copied().unwrap_or(1)),
-        };
-        fake.wire(m, wire, period_s);
-        fake.set_counter(wire.counter as usize, COUNTER_ZERO);
-        for chan in [at(&w.limit_top_dio), at(&w.limit_bottom_dio)] {
-            fake.set_input_low(chan, w.switch_closed_bit == 1);
-        }
-    }
-    fake
-}
-
-/// A transport over a fake the conformance rig shares, to act on the world around the card.
-struct SharedFake(Arc<Mutex<FakeS626>>);
-
-impl SharedFake {
-    fn card(&self) -> std::sync::MutexGuard<'_, FakeS626> {
-        self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
-    }
-}
-
-impl Transport for SharedFake {
-    fn devinfo(&mut self) -> Result<qmarc_comedi::DevInfo, nix::errno::Errno> {
-        self.card().devinfo()
-    }
-    fn subdinfo(&mut self, n: usize) -> Result<Vec<qmarc_comedi::SubdInfo>, nix::errno::Errno> {
-        self.card().subdinfo(n)
-    }
-    fn lock(&mut self, subdev: u32) -> Result<(), nix::errno::Errno> {
-        self.card().lock(subdev)
-    }
-    fn run(&mut self, list: &mut InsnList) -> Result<usize, nix::errno::Errno> {
-        self.card().run(list)
-    }
-}
-
-/// The 626's rig for the conformance suite: the backend over a fake of the driver wired as
-/// the thesis' robot (`[s626]` defaults), its switches and outputs seen from outside the card.
-#[derive(Default)]
-pub struct FakeRig {
-    fake: Arc<Mutex<FakeS626>>,
-    wiring: S626Settings,
-}
-
-impl FakeRig {
-    fn card(&self) -> std::sync::MutexGuard<'_, FakeS626> {
-        self.fake.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
-    }
-}
-
-impl crate::conformance::Rig for FakeRig {
-    fn backend(&mut self, n_motors: usize, start_counts: f64) -> Box<dyn Backend> {
-        let w = &self.wiring;
-        let mut fake = wired_fake(w, n_motors, 25_000.0 / 4.0, 400e-6);
-        for &chan in &w.counter_channels[..n_motors] {
-            fake.set_counter(chan as usize, COUNTER_ZERO.wrapping_add(start_counts as i64 as u32));
-        }
-        self.fake = Arc::new(Mutex::new(fake));
-        let transport = Box::new(SharedFake(self.fake.clone()));
-        let card = S626::with_transport(transport, FAKE_DEVICE, w, n_motors, None)
-            .expect("the rig's card is a 626");
-        Box::new(card.all_homed())
-    }
-
-    fn trip_switch(&mut self, _core: &mut crate::HwCore, motor: usize, top: bool) {
-        let w = &self.wiring;
-        let chan = if top { w.limit_top_dio[motor] } else { w.limit_bottom_dio[motor] };
-        // A tripped normally-closed switch opens: nothing pulls its input low any more.
-        let closed_low = w.switch_closed_bit == 1;
-        self.card().set_input_low(chan, !closed_low);
-    }
-
-    fn outputs(&mut self, core: &crate::HwCore) -> Option<Outputs> {
-        let card = self.card();
-        let w = &self.wiring;
-        let mut o = Outputs::default();
-        for m in 0..core.n_motors() {
-            let volts = card.dac_volts(w.dac_channels[m] as usize);
-            o.dac[m] = (volts * f64::from(qmarc_comedi::s626::DAC_SPAN) / 10.0).round() as i32
-                * w.dac_sign[m];
-            let written = (card.outputs() >> w.enable_dio[m]) & 1;
-            o.enabled[m] = written == w.enable_bit;
-        }
-        // The DACs of no motor must be at 0 V too.
-        let others = (0..4).filter(|c| !w.dac_channels[..core.n_motors()].contains(c));
-        if others.into_iter().any(|c| card.dac_volts(c as usize) != 0.0) {
-            o.dac = [i32::MAX; MAX_MOTORS];
-        }
-        Some(o)
-    }
-}
-
 impl Backend for S626 {
     fn name(&self) -> &'static str {
         "s626"
@@ -579,6 +467,11 @@ impl Drop for S626 {
         self.safe_state();
     }
 }
+
+mod fake;
+#[cfg(test)]
+use fake::SharedFake;
+pub use fake::{FakePlant, FakeRig, fake_card, wired_fake};
 
 #[cfg(test)]
 mod tests;

@@ -3,15 +3,16 @@
 
 use super::*;
 use crate::HwCore;
-use qmarc_comedi::fake::Failure;
+use qmarc_comedi::fake::{Failure, FakeS626};
 use qmarc_comedi::uapi::INSN_BITS;
-use qmarc_proto::{HwMsg, MsgType};
+use qmarc_proto::{COUNTER_ZERO, HwMsg, MsgType};
 use std::path::Path;
+use std::sync::{Arc, Mutex};
 
 /// The backend over a fake wired as the thesis' robot, and the fake.
 fn card(n_motors: usize) -> (S626, Arc<Mutex<FakeS626>>) {
     let w = S626Settings::default();
-    let fake = Arc::new(Mutex::new(wired_fake(&w, n_motors, 6_250.0, 400e-6)));
+    let fake = Arc::new(Mutex::new(wired_fake(&w, n_motors, &FakePlant::ideal(6_250.0), 400e-6)));
     let transport = Box::new(SharedFake(fake.clone()));
     (S626::with_transport(transport, "fake", &w, n_motors, None).unwrap(), fake)
 }
@@ -183,7 +184,7 @@ fn the_charge_pump_toggles_once_per_write_and_stops_with_the_watchdog() {
 #[test]
 fn a_reversed_counter_presets_and_counts_the_other_way() {
     let w = S626Settings { counter_sign: vec![-1, 1, 1], ..S626Settings::default() };
-    let fake = Arc::new(Mutex::new(wired_fake(&w, 1, 6_250.0, 400e-6)));
+    let fake = Arc::new(Mutex::new(wired_fake(&w, 1, &FakePlant::ideal(6_250.0), 400e-6)));
     let s = S626::with_transport(Box::new(SharedFake(fake.clone())), "fake", &w, 1, None).unwrap();
     let mut core = HwCore::new(Box::new(s));
     let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, 0);

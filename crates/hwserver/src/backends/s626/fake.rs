@@ -1,0 +1,183 @@
+//! The 626 backend without a card: the fake of its driver ([`FakeS626`]) wired as the settings
+//! say and driving the simulated robot's plant ([`FakePlant`]) — `--device fake` — and the
+//! conformance suite's rig over it ([`FakeRig`]).
+
+use super::{FAKE_DEVICE, S626};
+use crate::backend::{Backend, Outputs};
+use qmarc_comedi::Transport;
+use qmarc_comedi::fake::{FakeS626, SwitchWire, Wire};
+use qmarc_comedi::list::InsnList;
+use qmarc_config::{S626Settings, Settings};
+use qmarc_proto::{COUNTER_ZERO, MAX_MOTORS};
+use std::sync::{Arc, Mutex};
+
+/// The plant a fake card drives ([`wired_fake`]): the simulated robot's amplifiers, motors and
+/// switches, in the settings' counts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FakePlant {
+    /// Amplifier gain: counts/s per volt.
+    pub kv: f64,
+    /// The amplifiers' velocity loop as a first-order lag, s (0: none).
+    pub lag_s: f64,
+    /// Where each motor starts, counts of the homed frame (its counter reads it).
+    pub start_counts: [f64; MAX_MOTORS],
+    /// Where the top and bottom switches trip, counts of the homed frame; `None`: the
+    /// switches stay closed and are the caller's to open (the conformance rig's).
+    pub switches: Option<(f64, f64)>,
+}
+
+impl FakePlant {
+    /// The simulated robot of `s` (`[sim]`: `kv`, `tau_s` as the lag, `start_counts`, the
+    /// switches), so `--device fake` moves as the card would on that robot.
+    pub fn of(s: &Settings) -> FakePlant {
+        let mut start_counts = [0.0; MAX_MOTORS];
+        for (c, v) in start_counts.iter_mut().zip(&s.sim.start_counts) {
+            *c = *v;
+        }
+        FakePlant {
+            kv: s.sim.kv,
+            lag_s: s.sim.tau_s,
+            start_counts,
+            switches: Some((s.sim.top_switch_counts, s.sim.bottom_switch_counts)),
+        }
+    }
+
+    /// Amplifiers of `kv` counts/s per volt followed at once, motors at 0, switches closed.
+    pub fn ideal(kv: f64) -> FakePlant {
+        FakePlant { kv, lag_s: 0.0, start_counts: [0.0; MAX_MOTORS], switches: None }
+    }
+}
+
+/// The fake card of the settings: [`wired_fake`] with the simulated robot's plant
+/// ([`FakePlant::of`]).
+pub fn fake_card(s: &Settings) -> FakeS626 {
+    wired_fake(&s.s626, s.n_motors, &FakePlant::of(s), s.period_s())
+}
+
+/// A fake 626 wired as `w` says, driving `plant` (advancing `period_s` per read): each
+/// counter reads its motor's position in the homed frame.
+pub fn wired_fake(w: &S626Settings, n_motors: usize, plant: &FakePlant, period_s: f64) -> FakeS626 {
+    let mut fake = FakeS626::new();
+    let closed_low = w.switch_closed_bit == 1;
+    for m in 0..n_motors.min(MAX_MOTORS) {
+        let at = |v: &[u32]| v.get(m).copied().unwrap_or(0);
+        let switch = |dio: u32, at_counts: f64, toward: f64| {
+            Some(SwitchWire { dio, at_counts, toward, closed_low })
+        };
+        let (top, bottom) = match plant.switches {
+            Some((top, bottom)) => {
+                let toward_top = if top < bottom { -1.0 } else { 1.0 };
+                (
+                    switch(at(&w.limit_top_dio), top, toward_top),
+                    switch(at(&w.limit_bottom_dio), bottom, -toward_top),
+                )
+            }
+            None => (None, None),
+        };
+        let wire = Wire {
+            dac: at(&w.dac_channels),
+            counter: at(&w.counter_channels),
+            enable_dio: at(&w.enable_dio),
+            enable_bit: w.enable_bit,
+            counts_per_s_per_volt: plant.kv
+                * f64::from(w.dac_sign.get(m).copied().unwrap_or(1))
+                * f64::from(w.counter_sign.get(m).copied().unwrap_or(1)),
+            lag_s: plant.lag_s,
+            top,
+            bottom,
+        };
+        let chan = wire.counter as usize;
+        fake.place(chan, plant.start_counts[m]);
+        fake.set_counter(
+            chan,
+            COUNTER_ZERO.wrapping_add(plant.start_counts[m].floor() as i64 as u32),
+        );
+        fake.wire(m, wire, period_s);
+        if plant.switches.is_none() {
+            for chan in [at(&w.limit_top_dio), at(&w.limit_bottom_dio)] {
+                fake.set_input_low(chan, closed_low);
+            }
+        }
+    }
+    fake
+}
+
+/// A transport over a fake the conformance rig shares, to act on the world around the card.
+pub(super) struct SharedFake(pub(super) Arc<Mutex<FakeS626>>);
+
+impl SharedFake {
+    fn card(&self) -> std::sync::MutexGuard<'_, FakeS626> {
+        self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
+
+impl Transport for SharedFake {
+    fn devinfo(&mut self) -> Result<qmarc_comedi::DevInfo, nix::errno::Errno> {
+        self.card().devinfo()
+    }
+    fn subdinfo(&mut self, n: usize) -> Result<Vec<qmarc_comedi::SubdInfo>, nix::errno::Errno> {
+        self.card().subdinfo(n)
+    }
+    fn lock(&mut self, subdev: u32) -> Result<(), nix::errno::Errno> {
+        self.card().lock(subdev)
+    }
+    fn run(&mut self, list: &mut InsnList) -> Result<usize, nix::errno::Errno> {
+        self.card().run(list)
+    }
+}
+
+/// The 626's rig for the conformance suite: the backend over a fake of the driver wired as
+/// the thesis' robot (`[s626]` defaults), its switches and outputs seen from outside the card.
+#[derive(Default)]
+pub struct FakeRig {
+    fake: Arc<Mutex<FakeS626>>,
+    wiring: S626Settings,
+}
+
+impl FakeRig {
+    fn card(&self) -> std::sync::MutexGuard<'_, FakeS626> {
+        self.fake.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
+
+impl crate::conformance::Rig for FakeRig {
+    fn backend(&mut self, n_motors: usize, start_counts: f64) -> Box<dyn Backend> {
+        let w = &self.wiring;
+        let mut fake = wired_fake(w, n_motors, &FakePlant::ideal(25_000.0 / 4.0), 400e-6);
+        for &chan in &w.counter_channels[..n_motors] {
+            fake.set_counter(chan as usize, COUNTER_ZERO.wrapping_add(start_counts as i64 as u32));
+        }
+        self.fake = Arc::new(Mutex::new(fake));
+        let transport = Box::new(SharedFake(self.fake.clone()));
+        let card = S626::with_transport(transport, FAKE_DEVICE, w, n_motors, None)
+            .expect("the rig's card is a 626");
+        Box::new(card.all_homed())
+    }
+
+    fn trip_switch(&mut self, _core: &mut crate::HwCore, motor: usize, top: bool) {
+        let w = &self.wiring;
+        let chan = if top { w.limit_top_dio[motor] } else { w.limit_bottom_dio[motor] };
+        // A tripped normally-closed switch opens: nothing pulls its input low any more.
+        let closed_low = w.switch_closed_bit == 1;
+        self.card().set_input_low(chan, !closed_low);
+    }
+
+    fn outputs(&mut self, core: &crate::HwCore) -> Option<Outputs> {
+        let card = self.card();
+        let w = &self.wiring;
+        let mut o = Outputs::default();
+        for m in 0..core.n_motors() {
+            let volts = card.dac_volts(w.dac_channels[m] as usize);
+            o.dac[m] = (volts * f64::from(qmarc_comedi::s626::DAC_SPAN) / 10.0).round() as i32
+                * w.dac_sign[m];
+            let written = (card.outputs() >> w.enable_dio[m]) & 1;
+            o.enabled[m] = written == w.enable_bit;
+        }
+        // The DACs of no motor must be at 0 V too.
+        let others = (0..4).filter(|c| !w.dac_channels[..core.n_motors()].contains(c));
+        if others.into_iter().any(|c| card.dac_volts(c as usize) != 0.0) {
+            o.dac = [i32::MAX; MAX_MOTORS];
+        }
+        Some(o)
+    }
+}
