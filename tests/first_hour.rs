@@ -86,8 +86,8 @@ fn exit_codes_follow_the_table_issue_10() {
     let internal =
         run.starter(&[&config_arg(), &format!("--bin-dir={}", empty.display()), "step"], TIMEOUT);
     assert_eq!(internal.code, Some(i32::from(exit::INTERNAL)), "{}", internal.stderr);
-    // A fault: motor 1 stalled, with a following-error limit it must break.
-    let cfg = run.config_with(&[("stall_motor", "1"), ("max_following_error_counts", "500.0")]);
+    // A fault: motor 1 stalled, with an integrated following-error limit it must break.
+    let cfg = run.config_with(&[("stall_motor", "1"), ("max_integrated_error_counts", "10000.0")]);
     let fault = run.starter(
         &[&format!("--config={}", cfg.display()), &out_arg(&out), "--deterministic", "step"],
         TIMEOUT,

@@ -249,6 +249,79 @@ fn a_bad_knot_in_a_stream_ends_the_move_naming_line_and_column() {
     run.assert_clean();
 }
 
+/// Issue 27, item 2: a streamed knot that asks a motor more than its limits is refused as it
+/// arrives, before its segment is used: 270 000 counts/s on line 7 ends the move in
+/// `trajectory_error` naming the line, column and motor, the motors disabled.
+#[test]
+fn a_streamed_knot_beyond_the_motion_limits_ends_the_move_before_it_is_used_issue_27() {
+    let run = TestRun::new("fastknot");
+    let out = run.out("out");
+    let mut lines = pvt_lines(12);
+    lines[6] = "X\t742\t270000\t20.000\tY\t-495\t-7624.806\t20.000\tZ\t1178\t13445.245\t20.000"
+        .to_string();
+    let r = run_stream(&run, &out, &[], lines, true);
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    let s = read_summary(&out);
+    let fault = s.fault.expect("a fault");
+    assert_eq!(fault.kind.name(), "trajectory_error");
+    assert!(
+        fault.message.starts_with(
+            "-:7:7: motor 1: the path moves at 270000 counts/s on its way to this knot, faster \
+             than motor 1's max_velocity_counts_per_s = 80000"
+        ),
+        "{}",
+        fault.message
+    );
+    assert!(fault.message.ends_with("all motors disabled"), "{}", fault.message);
+    // The segment to that knot never ran: motor 1 never went past the knot before it, 527.
+    let (_, rows) = read_gather(&out);
+    assert!(rows.iter().all(|r| r[2] <= 527.0 + 1e-6), "a command toward the fast knot");
+    run.assert_clean();
+}
+
+/// Issue 27, item 2: the issue's knot file (a velocity of 1e308 counts/s: its cubic would be
+/// NaN in the loop), a path 270 000 counts/s fast, and gains eq. 3-1 cannot servo with are
+/// refused before anything starts, naming file, line and field.
+#[test]
+fn paths_and_gains_beyond_what_the_law_may_be_asked_are_refused_before_anything_starts_issue_27() {
+    let run = TestRun::new("absurd");
+    let bad = run.dir.join("bad.txt");
+    let knots = |text: &str| {
+        std::fs::write(&bad, text).unwrap();
+        run.starter(
+            &[&config_arg(), "run", "--method=pvt", &format!("--knots={}", bad.display())],
+            TIMEOUT,
+        )
+    };
+    let r = knots(
+        "X 0 1e308 10 Y 0 0 10 Z 0 0 10\nX 0 0 10 Y 0 0 10 Z 0 0 10\nX 0 0 10 Y 0 0 10 Z 0 0 10\n",
+    );
+    assert_eq!(r.code, Some(3), "{}", r.stderr);
+    let expected = format!(
+        "{}:1:5: motor 1: the path moves at 1e308 counts/s on its way to this knot, faster than \
+         motor 1's max_velocity_counts_per_s = 80000",
+        bad.display()
+    );
+    assert!(r.stderr.contains(&expected), "{}\nexpected: {expected}", r.stderr);
+    let r = knots(
+        "X 0 0 10 Y 0 0 10 Z 0 0 10\nX 1350 270000 10 Y 0 0 10 Z 0 0 10\nX 2700 0 10 Y 0 0 10 Z 0 0 10\n",
+    );
+    assert_eq!(r.code, Some(3), "{}", r.stderr);
+    assert!(r.stderr.contains(":2:8: motor 1: the path moves at 270000 counts/s"), "{}", r.stderr);
+    for (kp, expected) in [
+        ("1e308", "motor[1].kp: 1e308 makes one count of following error alone ask"),
+        ("-182000", "motor[1].kp: must be ≥ 0, found -182000"),
+    ] {
+        let config = run.config_with(&[("kp", kp)]);
+        let r = run.starter(&[&format!("--config={}", config.display()), "step"], TIMEOUT);
+        assert_eq!(r.code, Some(3), "{}", r.stderr);
+        assert!(r.stderr.contains(&format!("{}:", config.display())), "{}", r.stderr);
+        assert!(r.stderr.contains(expected), "{}\nexpected: {expected}", r.stderr);
+    }
+    assert!(run.location().files().is_empty(), "nothing was started");
+    run.assert_clean();
+}
+
 #[test]
 fn a_bad_knot_file_is_refused_before_anything_starts() {
     let run = TestRun::new("badknots");

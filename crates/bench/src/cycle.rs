@@ -29,12 +29,13 @@ pub fn names() -> Names {
     qmarc_starter::names()
 }
 
-/// Writes knot files for `n` motors long enough for `cycles` samples at 400 µs: a slow sine
-/// through knots 20 ms apart (spline) and the same as PVT knots.
+/// Writes knot files for `n` motors long enough for `cycles` samples at 400 µs: whole periods
+/// of a slow raised cosine (1 Hz, 2000 counts: from rest to rest, well within the motion
+/// limits) through knots 20 ms apart (spline) and the same as PVT knots.
 fn knot_files(dir: &Path, n: usize, cycles: u64) -> anyhow::Result<(PathBuf, PathBuf)> {
     use std::fmt::Write;
-    let knots = (cycles as f64 * 0.0004 / 0.02).ceil() as usize + 10;
-    let at = |k: usize| (k as f64 * 0.02 * std::f64::consts::TAU).sin() * 1000.0;
+    let knots = ((cycles as f64 * 0.0004 / 0.02).ceil() as usize + 10).div_ceil(50) * 50 + 1;
+    let at = |k: usize| (1.0 - (k as f64 * 0.02 * std::f64::consts::TAU).cos()) * 1000.0;
     let (mut spline, mut pvt) = (format!("{knots}\n"), String::new());
     for k in 0..knots {
         let _ = write!(spline, "{:.2}", k as f64 * 0.02);

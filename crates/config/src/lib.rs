@@ -40,7 +40,7 @@ pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
 pub use hwserver::{ExplicitTiming, HwServerSettings, HwWait, TimingDefaults};
-pub use motor::{MotorGains, MotorSafety};
+pub use motor::{MotorGains, MotorSafety, gains_problem};
 pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
 pub use s626::{S626_DIO_CHANNELS, S626Settings};
@@ -230,12 +230,36 @@ impl RawFile {
         }
         let mut motors = Vec::with_capacity(self.motor.len());
         let mut safety = Vec::with_capacity(self.motor.len());
+        let cx = motor::MotorContext {
+            fe_scale: general.fe_scale,
+            periods_us: (general.gains_period_us, general.period_us),
+            encoder_max_counts_per_s: hwserver.max_counts_per_s,
+        };
         for (i, m) in self.motor.iter().enumerate() {
-            let (g, s) = motor::check_motor(src, m, i + 1)?;
+            let (g, s) = motor::check_motor(src, m, i + 1, cx)?;
             motors.push(g);
             safety.push(s);
         }
         let homing = self.homing.check(src)?;
+        let fastest = homing.velocity_counts_per_s.max(homing.creep_counts_per_s);
+        if let Some((m, s)) = safety
+            .iter()
+            .enumerate()
+            .take(n_motors)
+            .find(|(_, s)| fastest > s.max_velocity_counts_per_s)
+        {
+            return Err(src.invalid(
+                self.homing.velocity_span(),
+                "homing.velocity_counts_per_s",
+                format!(
+                    "homing would move motor {} at {} counts/s, faster than its \
+                     max_velocity_counts_per_s = {}",
+                    m + 1,
+                    source::num(fastest),
+                    source::num(s.max_velocity_counts_per_s)
+                ),
+            ));
+        }
         let tune = self.tune.check(src)?;
         let telemetry = self.telemetry.check(src)?;
         let longest: f64 = safety.iter().map(|s| homing.longest_s(s.home_offset_counts)).sum();
@@ -312,9 +336,7 @@ impl Settings {
     /// `period_us` = T when Kd and Kvff are multiplied by T₀/T, Kaff by (T₀/T)² and Ki by
     /// T/T₀; Kp and the notch (which acts per sample) are kept.
     pub fn effective_gains(&self, motor: usize) -> MotorGains {
-        let g = self.motors[motor];
-        let r = f64::from(self.gains_period_us) / f64::from(self.period_us);
-        MotorGains { ki: g.ki / r, kd: g.kd * r, kvff: g.kvff * r, kaff: g.kaff * r * r, ..g }
+        motor::rescaled(self.motors[motor], (self.gains_period_us, self.period_us))
     }
 
     /// True when the gains are rescaled ([`Settings::effective_gains`]).
@@ -383,8 +405,17 @@ impl Settings {
 
     /// Overrides the servo period (`--period-us`).
     pub fn set_period_us(&mut self, period_us: u32) -> Result<(), ConfigLoadError> {
+        let flag = "--period-us";
         general::check_period(i64::from(period_us))
-            .map_err(|message| ConfigLoadError::Override { flag: "--period-us", message })?;
+            .map_err(|message| ConfigLoadError::Override { flag, message })?;
+        for (m, g) in self.motors.iter().enumerate().take(self.n_motors) {
+            let periods = (self.gains_period_us, period_us);
+            if let Some((key, why)) = motor::effective_gains_problem(g, self.fe_scale, periods) {
+                let file = self.source.display();
+                let message = format!("motor[{}].{key} of {file}: {why}", m + 1);
+                return Err(ConfigLoadError::Override { flag, message });
+            }
+        }
         self.period_us = period_us;
         Ok(())
     }

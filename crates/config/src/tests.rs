@@ -68,7 +68,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         &format!("{MOTOR}{MOTOR}[[motor]]\nkp = 1.0\nkpp = 2\n"),
-        "q.toml:15:1: motor[3].kpp: unknown field `kpp`, expected one of `kp`, `ki`, `kd`, `kvff`, `kaff`, `notch`, `soft_limits`, `max_following_error_counts`, `max_integrated_error_counts`, `home_offset_counts`, `top_direction`",
+        "q.toml:15:1: motor[3].kpp: unknown field `kpp`, expected one of `kp`, `ki`, `kd`, `kvff`, `kaff`, `notch`, `soft_limits`, `max_following_error_counts`, `max_integrated_error_counts`, `home_offset_counts`, `top_direction`, `max_velocity_counts_per_s`, `max_acceleration_counts_per_s2`, `max_jerk_counts_per_s3`",
     );
     check(
         &format!("{MOTOR}{MOTOR}[[motor]]\nkp = \"big\"\n"),
@@ -510,4 +510,104 @@ fn telemetry_settings_are_checked_issue_16() {
     assert!(e.starts_with("q.toml:2:9: telemetry.every: "), "{e}");
     let e = parse(&format!("[telemetry]\nenabled = 1\n{m}")).unwrap_err().to_string();
     assert!(e.starts_with("q.toml:2:11: telemetry.enabled: "), "{e}");
+}
+
+/// Issue 27, item 2: gains are finite, not negative, and none so large that the encoder's
+/// resolution alone asks more than the DAC's full scale (eq. 3-1, `gains_problem`); the motion
+/// limits are positive and below the encoder-fault speed; homing may not outrun them.
+#[test]
+fn gains_and_motion_limits_are_checked_issue_27() {
+    let one = |motor: &str| format!("[general]\nn_motors = 1\nfe_scale = 96.0\n{motor}");
+    let thesis =
+        "[[motor]]\nkp = 182000.0\nki = 100.0\nkd = 3000.0\nkvff = 119000.0\nkaff = 100.0\n";
+    assert!(parse(&one(thesis)).is_ok(), "the thesis' gains");
+    let with = |key: &str, value: &str| {
+        let line = thesis.lines().find(|l| l.starts_with(&format!("{key} ="))).unwrap();
+        one(&thesis.replace(line, &format!("{key} = {value}")))
+    };
+    for (key, value, expected) in [
+        (
+            "kp",
+            "1e308",
+            "q.toml:5:6: motor[1].kp: 1e308 makes one count of following error alone ask 4.578e303 DAC codes (2⁻²¹·Kp·fe_scale, eq. 3-1), more than the full scale 8191: the encoder's resolution would jump the output from end to end; at most 1.789e8 here",
+        ),
+        (
+            "kp",
+            "-182000",
+            "q.toml:5:6: motor[1].kp: must be ≥ 0, found -182000: a negative gain drives the motor away from its command",
+        ),
+        ("kp", "nan", "q.toml:5:6: motor[1].kp: must be a finite number, found NaN"),
+        ("kd", "inf", "q.toml:7:6: motor[1].kd: must be a finite number, found inf"),
+        (
+            "kvff",
+            "1e9",
+            "q.toml:8:8: motor[1].kvff: 1e9 makes one count per period of commanded velocity alone ask 678003 DAC codes (2⁻²¹·Kp·Kvff/128, eq. 3-1), more than the full scale 8191: the encoder's resolution would jump the output from end to end; at most 1.208e7 here",
+        ),
+        (
+            "kaff",
+            "-1",
+            "q.toml:9:8: motor[1].kaff: must be ≥ 0, found -1: a negative gain drives the motor away from its command",
+        ),
+    ] {
+        check(&with(key, value), expected);
+    }
+    // At another period the law runs rescaled gains: they are the ones checked.
+    let mut s = parse(&one(thesis).replace("kaff = 100.0", "kaff = 1000000.0")).unwrap();
+    assert_eq!(
+        s.set_period_us(100).unwrap_err().to_string(),
+        "--period-us: motor[1].kaff of q.toml: rescaled from gains_period_us = 400 to period_us = 100, 1.6e7 makes one count per period² of commanded acceleration alone ask 10848 DAC codes (2⁻²¹·Kp·Kaff/128, eq. 3-1), more than the full scale 8191: the encoder's resolution would jump the output from end to end; at most 1.208e7 here"
+    );
+    assert_eq!(s.period_us, 400, "refused, unchanged");
+    let d = MotorSafety::default();
+    let limits = parse(&one(thesis)).unwrap().safety[0];
+    assert_eq!(
+        (
+            limits.max_velocity_counts_per_s,
+            limits.max_acceleration_counts_per_s2,
+            limits.max_jerk_counts_per_s3
+        ),
+        (d.max_velocity_counts_per_s, d.max_acceleration_counts_per_s2, d.max_jerk_counts_per_s3)
+    );
+    check(
+        &one(&format!("{thesis}max_jerk_counts_per_s3 = 0\n")),
+        "q.toml:10:26: motor[1].max_jerk_counts_per_s3: must be a finite number > 0, found 0",
+    );
+    check(
+        &one(&format!("{thesis}max_velocity_counts_per_s = 600000\n")),
+        "q.toml:10:29: motor[1].max_velocity_counts_per_s: 600000 counts/s is not below hwserver.max_counts_per_s = 500000, the speed at which the hwserver takes an encoder for broken: a motion that fast would fault",
+    );
+    check(
+        &one(&format!("{thesis}max_velocity_counts_per_s = 1500\n")),
+        "q.toml:1:1: homing.velocity_counts_per_s: homing would move motor 1 at 2000 counts/s, faster than its max_velocity_counts_per_s = 1500",
+    );
+    // The shipped files state the defaults at 4×, a quarter of them at 1×.
+    for m in shipped().safety {
+        assert_eq!(
+            (
+                m.max_velocity_counts_per_s,
+                m.max_acceleration_counts_per_s2,
+                m.max_jerk_counts_per_s3
+            ),
+            (
+                d.max_velocity_counts_per_s,
+                d.max_acceleration_counts_per_s2,
+                d.max_jerk_counts_per_s3
+            )
+        );
+    }
+    let s626 = Settings::load(&shipped_path().with_file_name("s626.toml"), &names()).unwrap();
+    for m in s626.safety {
+        assert_eq!(
+            (
+                m.max_velocity_counts_per_s * 4.0,
+                m.max_acceleration_counts_per_s2 * 4.0,
+                m.max_jerk_counts_per_s3 * 4.0
+            ),
+            (
+                d.max_velocity_counts_per_s,
+                d.max_acceleration_counts_per_s2,
+                d.max_jerk_counts_per_s3
+            )
+        );
+    }
 }

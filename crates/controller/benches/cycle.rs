@@ -98,7 +98,7 @@ fn offline_knots(seconds: f64, dt: f64) -> OfflineKnots {
     let n = (seconds / dt).round() as usize + 1;
     let times: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
     let positions = times.iter().map(|&t| [sine(t, 0), sine(t, 1), sine(t, 2), 0.0]).collect();
-    OfflineKnots { times, positions, n_motors: 3 }
+    OfflineKnots { times, positions, n_motors: 3, ..OfflineKnots::default() }
 }
 
 fn pvt_knots(seconds: f64, dt: f64) -> Vec<PvtKnot> {

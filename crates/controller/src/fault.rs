@@ -39,11 +39,15 @@ pub enum FaultKind {
     HomingFailed,
     /// The controller process died (reported by the starter).
     ControllerLost,
+    /// The trajectory commanded a position that is not a finite number.
+    BadCommand,
+    /// The servo law's output was not a finite number (or not a DAC code).
+    BadOutput,
 }
 
 impl FaultKind {
     /// Every kind, in the order of their codes ([`FaultKind::code`]).
-    pub const ALL: [FaultKind; 15] = [
+    pub const ALL: [FaultKind; 17] = [
         FaultKind::LimitSwitch,
         FaultKind::HwserverLost,
         FaultKind::HwserverShutdown,
@@ -59,6 +63,8 @@ impl FaultKind {
         FaultKind::Overrun,
         FaultKind::HomingFailed,
         FaultKind::ControllerLost,
+        FaultKind::BadCommand,
+        FaultKind::BadOutput,
     ];
 
     /// Its number in a telemetry sample (`fault` there is this + 1; 0 is no fault).
@@ -89,6 +95,8 @@ impl FaultKind {
             FaultKind::Overrun => "overrun",
             FaultKind::HomingFailed => "homing_failed",
             FaultKind::ControllerLost => "controller_lost",
+            FaultKind::BadCommand => "bad_command",
+            FaultKind::BadOutput => "bad_output",
         }
     }
 }
@@ -175,6 +183,28 @@ impl Fault {
     /// The message for the terminal and `summary.json`, motors 1-based.
     pub fn message(&self) -> String {
         let what = match self.kind {
+            FaultKind::LimitSwitch
+            | FaultKind::HwserverLost
+            | FaultKind::HwserverShutdown
+            | FaultKind::Watchdog
+            | FaultKind::HardwareFault
+            | FaultKind::EncoderFault
+            | FaultKind::ProtocolError
+            | FaultKind::Aborted => self.what_of_the_hardware(),
+            _ => self.what_of_the_motion(),
+        };
+        let after = if self.disabled {
+            "all motors disabled"
+        } else {
+            "the hwserver did not acknowledge disabling the motors (on hardware the charge-pump \
+             relay drops them when the hwserver stops)"
+        };
+        format!("{what} at cycle {}; {after}", self.cycle)
+    }
+
+    /// What went wrong with the hardware, the hwserver or the run (a stop signal).
+    fn what_of_the_hardware(&self) -> String {
+        match self.kind {
             FaultKind::LimitSwitch => {
                 let m = self.motor.unwrap_or(0);
                 let side =
@@ -210,6 +240,13 @@ impl Fault {
                     qmarc_timer::stop::signal_name(self.signal)
                 }
             ),
+            _ => String::new(),
+        }
+    }
+
+    /// What went wrong with the motion: the path, the law, the limits, the controller.
+    fn what_of_the_motion(&self) -> String {
+        match self.kind {
             FaultKind::TrajectoryStarved => {
                 "the knot stream ran dry before it ended (motors held, then disabled)".to_string()
             }
@@ -234,14 +271,20 @@ impl Fault {
             ),
             FaultKind::HomingFailed => "homing failed".to_string(),
             FaultKind::ControllerLost => "the controller died".to_string(),
-        };
-        let after = if self.disabled {
-            "all motors disabled"
-        } else {
-            "the hwserver did not acknowledge disabling the motors (on hardware the charge-pump \
-             relay drops them when the hwserver stops)"
-        };
-        format!("{what} at cycle {}; {after}", self.cycle)
+            FaultKind::BadCommand => format!(
+                "the trajectory commanded motor {} to {} counts, not a finite number: the \
+                 command never reached the law",
+                self.motor.map_or(0, |m| m + 1),
+                self.value
+            ),
+            FaultKind::BadOutput => format!(
+                "the servo law's output for motor {} was not a finite number or not a DAC code \
+                 (±{}): it never reached the DAC",
+                self.motor.map_or(0, |m| m + 1),
+                qmarc_proto::DAC_MAX
+            ),
+            _ => String::new(),
+        }
     }
 }
 

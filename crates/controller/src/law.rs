@@ -23,8 +23,9 @@ pub struct ServoInput<'a> {
 ///
 /// Real-time contract: construction (from already-validated settings) may allocate and fail;
 /// [`ServoLaw::reset`] runs before the move; [`ServoLaw::step`] runs every cycle, writes
-/// codes clamped to ±[`DAC_MAX`] into the caller's array and never allocates, locks, does
-/// I/O or panics.
+/// codes clamped to ±[`DAC_MAX`] into the caller's array (an output that is not a finite
+/// number as [`NOT_A_CODE`]: the loop then disables every motor, `bad_output`) and never
+/// allocates, locks, does I/O or panics.
 pub trait ServoLaw: Send {
     /// Registered name.
     fn name(&self) -> &'static str;
@@ -37,9 +38,20 @@ pub trait ServoLaw: Send {
     fn step(&mut self, input: &ServoInput<'_>, dac: &mut [i32; MAX_MOTORS]);
 }
 
-/// Rounds and clamps a law output to a DAC code; NaN gives 0.
+/// What [`to_dac_code`] makes of an output that is not a finite number: no DAC code, so the
+/// loop refuses it (`bad_output`) instead of writing a silent 0 V.
+pub const NOT_A_CODE: i32 = i32::MIN;
+
+/// Rounds and clamps a law output to a DAC code; an output that is not finite (NaN, ±∞)
+/// gives [`NOT_A_CODE`].
 #[inline]
 pub fn to_dac_code(u: f64) -> i32 {
     let limit = f64::from(DAC_MAX);
-    if u.is_nan() { 0 } else { u.clamp(-limit, limit).round() as i32 }
+    if u.is_finite() { u.clamp(-limit, limit).round() as i32 } else { NOT_A_CODE }
+}
+
+/// True for a code a DAC can take: within ±[`DAC_MAX`].
+#[inline]
+pub fn is_dac_code(code: i32) -> bool {
+    (-DAC_MAX..=DAC_MAX).contains(&code)
 }

@@ -8,7 +8,7 @@
 
 use crate::fault::{Fault, FaultKind};
 use crate::gather::{Gather, GatherRow};
-use crate::law::{ServoInput, ServoLaw};
+use crate::law::{ServoInput, ServoLaw, is_dac_code};
 use crate::link::{HwLink, LinkError};
 use crate::plan::MovePlan;
 use crate::stats::{ErrorStats, TimingStats};
@@ -16,6 +16,7 @@ use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_timer::{Clock, Tick, TickerError};
 
+mod limits;
 mod live;
 mod run;
 
@@ -366,6 +367,14 @@ impl Servo {
         }
         self.planned_samples = self.generator.samples();
         self.generator.sample(0, &mut self.cmd);
+        if let Some(f) = self.check_command(0) {
+            return Err(MoveError::Trajectory(TrajStartError::OutOfRange {
+                motor: f.motor.map_or(1, |m| m + 1),
+                sample: 0,
+                value: f.value,
+                reason: "not a finite number",
+            }));
+        }
         self.law.reset(&self.cmd, &self.act);
         self.law_sample = 0;
         let samples = self.planned_samples.unwrap_or(self.plan.stream_gather_samples)
@@ -424,7 +433,7 @@ impl Servo {
         {
             return end;
         }
-        if let Some(f) = self.check_limits(n) {
+        if let Some(f) = self.check_command(n).or_else(|| self.check_limits(n)) {
             return CycleEnd::Fault(Fault { hw_time_ns, ..f });
         }
 
@@ -432,6 +441,13 @@ impl Servo {
         let elapsed = n.saturating_sub(self.law_sample).max(1);
         self.law_sample = n;
         self.law.step(&ServoInput { n, elapsed, cmd: &self.cmd, act: &self.act }, &mut self.dac);
+        if let Some(m) = (0..self.plan.n_motors).find(|&m| !is_dac_code(self.dac[m])) {
+            return CycleEnd::Fault(Fault {
+                motor: Some(m),
+                hw_time_ns,
+                ..Fault::new(FaultKind::BadOutput, n)
+            });
+        }
         let computed = self.clock.now_ns();
 
         // 4. Write all DACs.
@@ -453,51 +469,6 @@ impl Servo {
             Some(f) => CycleEnd::Fault(f),
             None => CycleEnd::Continue,
         }
-    }
-
-    /// The software position limits (on the command) and the following-error limits, this
-    /// cycle; `None` when all hold.
-    #[inline]
-    fn check_limits(&mut self, n: u64) -> Option<Fault> {
-        let lim = &self.plan.limits;
-        for m in 0..self.plan.n_motors {
-            let c = self.cmd[m];
-            if let Some(soft) = lim.soft {
-                let (min, max) = soft[m];
-                if c < min || c > max {
-                    let limit = if c < min { min } else { max };
-                    return Some(Fault {
-                        motor: Some(m),
-                        value: c,
-                        limit,
-                        ..Fault::new(FaultKind::SoftwareLimit, n)
-                    });
-                }
-            }
-            let fe = c - self.act[m];
-            if fe.abs() > lim.max_following_error[m] {
-                let limit = lim.max_following_error[m];
-                return Some(Fault {
-                    motor: Some(m),
-                    value: fe,
-                    limit,
-                    ..Fault::new(FaultKind::FollowingError, n)
-                });
-            }
-            self.integrated_error[m] += fe;
-            let ie = self.integrated_error[m];
-            if ie.abs() > lim.max_integrated_error[m] {
-                let limit = lim.max_integrated_error[m];
-                return Some(Fault {
-                    motor: Some(m),
-                    value: ie,
-                    limit,
-                    integrated: true,
-                    ..Fault::new(FaultKind::FollowingError, n)
-                });
-            }
-        }
-        None
     }
 
     /// Step 1 of a cycle: reads every encoder into `act` and shows the generator the

@@ -418,6 +418,10 @@ fn software_limits_refuse_a_known_path_and_stop_an_unknown_one() {
     let plan = MovePlan { limits: limits(), ..plan(3) };
     let mut s_big = s.clone();
     s_big.step.size = 5_000;
+    // (a step beyond the following-error limit is refused when it is built: issue 27)
+    for m in &mut s_big.safety {
+        m.max_following_error_counts = 10_000.0;
+    }
     let (servo, link, r) =
         run_with(plan.clone(), (GENERATORS[0].build)(&s_big).unwrap(), lockstep());
     assert_eq!(
@@ -693,4 +697,79 @@ fn a_telemetry_publish_allocates_exactly_its_loan_and_the_relay_delivers_every_s
         std::iter::from_fn(|| reader.receive().unwrap()).map(|s| s.cycle).collect();
     assert_eq!(cycles, (0..1_000).collect::<Vec<_>>(), "every sample, in order");
     assert_eq!(reader.publishers(), 0, "the relay let go of the service");
+}
+
+/// Issue 27, item 2: a command that is not a finite number (every limit compares false with
+/// NaN) or a law output that is not a DAC code ends the move in that cycle, every motor
+/// disabled, before it reaches the law or the DAC — never a silent 0 V with the amplifiers on.
+#[test]
+fn a_non_finite_command_or_output_is_a_fault_in_that_cycle_issue_27() {
+    use qmarc_controller::law::{NOT_A_CODE, ServoInput, ServoLaw};
+    use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
+
+    /// At rest, then motor 2 commanded to NaN from sample `.0` on.
+    struct GoesNan(u64);
+    impl TrajectoryGenerator for GoesNan {
+        fn name(&self) -> &'static str {
+            "nan"
+        }
+        fn start(&mut self, _: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+            Ok(())
+        }
+        fn samples(&self) -> Option<u64> {
+            Some(1_000)
+        }
+        fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+            *cmd = [0.0; MAX_MOTORS];
+            if n >= self.0 {
+                cmd[1] = f64::NAN;
+            }
+            Sample::Ready
+        }
+    }
+    let (servo, link, r) = run_with(plan(3), Box::new(GoesNan(50)), lockstep());
+    r.unwrap();
+    let f = servo.fault().expect("a fault");
+    assert_eq!((f.kind, f.motor, f.cycle), (FaultKind::BadCommand, Some(1), 50));
+    assert!(f.disabled && !link.0.any_enabled(), "{f:?}");
+    assert_eq!(servo.cycles(), 50, "samples 0‥49 ran, 50 did not");
+    assert!(
+        f.message()
+            .starts_with("the trajectory commanded motor 2 to NaN counts, not a finite number"),
+        "{}",
+        f.message()
+    );
+    assert_eq!(f.kind.name(), "bad_command");
+    // NaN from the first sample: refused before any motor is enabled.
+    let (servo, link, r) = run_with(plan(3), Box::new(GoesNan(0)), lockstep());
+    assert_eq!(
+        r.unwrap_err().to_string(),
+        "motor 2: the path reaches NaN counts at sample 0: not a finite number"
+    );
+    assert!(servo.fault().is_none() && !link.0.any_enabled());
+
+    /// Zero output, then no DAC code for motor 3 from sample 20 on.
+    struct NanLaw;
+    impl ServoLaw for NanLaw {
+        fn name(&self) -> &'static str {
+            "nan"
+        }
+        fn reset(&mut self, _: &[f64; MAX_MOTORS], _: &[f64; MAX_MOTORS]) {}
+        fn step(&mut self, input: &ServoInput<'_>, dac: &mut [i32; MAX_MOTORS]) {
+            *dac = [0; MAX_MOTORS];
+            if input.n >= 20 {
+                dac[2] = NOT_A_CODE;
+            }
+        }
+    }
+    let s = settings();
+    let mut link = CoreLink::new(lockstep());
+    let generator = (GENERATORS[0].build)(&s).unwrap();
+    let mut servo = Servo::new(plan(3), generator, Box::new(NanLaw), Box::new(MockClock::new(0)));
+    servo.run(&mut link, &mut ManualTicker::new(400_000), &AtomicBool::new(false)).unwrap();
+    let f = servo.fault().expect("a fault");
+    assert_eq!((f.kind, f.motor, f.cycle), (FaultKind::BadOutput, Some(2), 20));
+    assert!(f.disabled && !link.0.any_enabled(), "{f:?}");
+    assert!(servo.gather().rows().iter().all(|r| r.dac.iter().all(|&c| c == 0)));
+    assert_eq!(f.kind.name(), "bad_output");
 }

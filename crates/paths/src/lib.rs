@@ -238,7 +238,9 @@ pub fn generate(
         .robot()
         .ok_or_else(|| PathError::NoRobot(settings.source.display().to_string()))?;
     let file = waypoints.display().to_string();
-    let rules = KnotRules { n_motors: ARMS, ..KnotRules::from_settings(settings) };
+    // A conversion, not a move: the motion limits are checked when the path is run.
+    let rules =
+        KnotRules { n_motors: ARMS, ..KnotRules::from_settings(settings) }.without_motion_limits();
     let w = parse_waypoints(&file, &read_knot_file(waypoints)?, &rules)?;
     let knots = joint_knots(&robot, &w, &file, every_ms.map(|ms| ms * 1e-3))?;
     let spacing = every_ms.map_or("at the waypoints".to_string(), |ms| format!("every {ms} ms"));

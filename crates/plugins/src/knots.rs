@@ -77,24 +77,49 @@ pub enum KnotFileError {
     },
 }
 
-/// What the parsers check a file against besides its format.
+/// What the parsers and generators check a path against besides its format.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct KnotRules {
     /// Motors: position columns per knot.
     pub n_motors: usize,
     /// Longest path from the first knot, s (`trajectory.max_duration_s`).
     pub max_duration_s: f64,
+    /// Per motor, the fastest a path may move it, counts/s (`max_velocity_counts_per_s`;
+    /// infinite: unchecked).
+    pub max_velocity: [f64; MAX_MOTORS],
+    /// Per motor, the largest acceleration a path may ask, counts/s²
+    /// (`max_acceleration_counts_per_s2`; infinite: unchecked).
+    pub max_acceleration: [f64; MAX_MOTORS],
 }
 
 impl KnotRules {
-    /// The rules for `n_motors` with the default longest path.
+    /// The rules for `n_motors` with the default longest path and no motion limits.
     pub fn new(n_motors: usize) -> KnotRules {
-        KnotRules { n_motors, max_duration_s: DEFAULT_MAX_DURATION_S }
+        KnotRules {
+            n_motors,
+            max_duration_s: DEFAULT_MAX_DURATION_S,
+            max_velocity: [f64::INFINITY; MAX_MOTORS],
+            max_acceleration: [f64::INFINITY; MAX_MOTORS],
+        }
     }
 
-    /// The rules of `s`: the motors it drives, its longest path.
+    /// The rules of `s`: the motors it drives, its longest path, each motor's motion limits.
     pub fn from_settings(s: &qmarc_config::Settings) -> KnotRules {
-        KnotRules::new(s.n_motors).max_duration_s(s.trajectory.max_duration_s)
+        let mut rules = KnotRules::new(s.n_motors).max_duration_s(s.trajectory.max_duration_s);
+        for (m, limits) in s.safety.iter().enumerate().take(s.n_motors) {
+            rules.max_velocity[m] = limits.max_velocity_counts_per_s;
+            rules.max_acceleration[m] = limits.max_acceleration_counts_per_s2;
+        }
+        rules
+    }
+
+    /// The same rules without motion limits (for a tool that converts paths, not runs them).
+    pub fn without_motion_limits(self) -> KnotRules {
+        KnotRules {
+            max_velocity: [f64::INFINITY; MAX_MOTORS],
+            max_acceleration: [f64::INFINITY; MAX_MOTORS],
+            ..self
+        }
     }
 
     /// The same rules with the longest path `max_duration_s`.
@@ -119,6 +144,10 @@ pub struct OfflineKnots {
     pub positions: Vec<[f64; MAX_MOTORS]>,
     /// Motors in the file.
     pub n_motors: usize,
+    /// The file they came from, for errors found later (the path's dynamics).
+    pub file: String,
+    /// Each knot's line in the file (empty for knots not from a file).
+    pub lines: Vec<usize>,
 }
 
 /// One PVT knot: position and velocity per motor and the time to the next knot.
@@ -324,6 +353,7 @@ pub fn read_line_bounded(
     Ok(true)
 }
 
+pub mod dynamics;
 mod offline;
 mod pvt;
 mod waypoints;

@@ -181,6 +181,7 @@ impl ServoLaw for PidFf {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use qmarc_controller::law::NOT_A_CODE;
 
     fn thesis_motor_1() -> MotorGains {
         MotorGains {
@@ -251,9 +252,15 @@ mod tests {
         assert_eq!(run(&mut law, 1_000.0, 0.0), 8191, "the step's velocity kick saturates");
         law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
         assert_eq!(run(&mut law, -1_000.0, 0.0), -8191);
-        for (u, code) in
-            [(0.49, 0), (0.5, 1), (-0.5, -1), (8190.6, 8191), (1e300, 8191), (f64::NAN, 0)]
-        {
+        for (u, code) in [
+            (0.49, 0),
+            (0.5, 1),
+            (-0.5, -1),
+            (8190.6, 8191),
+            (1e300, 8191),
+            (f64::NAN, NOT_A_CODE),
+            (f64::INFINITY, NOT_A_CODE),
+        ] {
             assert_eq!(to_dac_code(u), code, "{u}");
         }
     }

@@ -6,6 +6,7 @@
 //! between knots j and j+1 the curve is eq. 3-3, y = A·y_j + B·y_{j+1} + C·y″_j + D·y″_{j+1}.
 //! [`CubicSpline`] is the generator: one spline per motor, sampled at t₀ + n·T.
 
+use crate::knots::dynamics::{Excess, check_segment};
 use crate::knots::{
     KnotFileError, KnotRules, MAX_KNOT_FILE_BYTES, OfflineKnots, parse_offline, read_knot_file,
     text_of,
@@ -254,6 +255,7 @@ impl CubicSpline {
             splines
                 .push(NaturalSpline::new(knots.times.clone(), y).map_err(TrajBuildError::Spline)?);
         }
+        self.check_dynamics(knots, &splines)?;
         self.queue = Vec::with_capacity(samples as usize);
         for n in 0..samples {
             let t = t0 + n as f64 * self.period_s;
@@ -265,6 +267,32 @@ impl CubicSpline {
         }
         for (v, s) in self.end_velocity.iter_mut().zip(&mut splines) {
             *v = s.velocity(t_end);
+        }
+        Ok(())
+    }
+
+    /// Refuses a path that asks a motor more than its limits (`rules`): every segment of
+    /// every motor's spline, naming the line of the knot the segment leads to.
+    fn check_dynamics(
+        &self,
+        knots: &OfflineKnots,
+        splines: &[NaturalSpline],
+    ) -> Result<(), TrajBuildError> {
+        let rules = &self.rules;
+        let fail = |i: usize, e: Excess| {
+            TrajBuildError::Knots(KnotFileError::Invalid {
+                file: knots.file.clone(),
+                line: knots.lines.get(i).copied().unwrap_or(0),
+                column: 1,
+                message: e.describe(),
+            })
+        };
+        for (m, s) in splines.iter().enumerate() {
+            let (t, y2) = (s.times(), s.second_derivatives());
+            for j in 0..t.len() - 1 {
+                let seg = (s.velocity_in(j, t[j]), y2[j], y2[j + 1], t[j + 1] - t[j]);
+                check_segment(rules, m, seg).map_err(|e| fail(j + 1, e))?;
+            }
         }
         Ok(())
     }
@@ -395,6 +423,7 @@ mod tests {
             times: vec![1.0, 1.25, 1.5],
             positions: vec![[0.0; 4], [2000.0, -2000.0, 0.0, 0.0], [3000.0, -4500.0, 0.0, 0.0]],
             n_motors: 2,
+            ..OfflineKnots::default()
         };
         let mut g = CubicSpline::from_knots(&knots, 0.0004, 10.0).unwrap();
         assert_eq!(g.samples(), Some(1251));
@@ -414,6 +443,41 @@ mod tests {
             "motor 2 is at 50 counts but the path starts at 0 counts, more than the 10-count start \
              tolerance away: move it there first"
         );
+    }
+
+    /// Issue 27, item 2: a spline that asks a motor more than its limits is refused before
+    /// the move, naming the file, the line of the knot the offending segment leads to, and
+    /// the motor; the same path within its limits, or without limits, runs.
+    #[test]
+    fn a_spline_beyond_the_motion_limits_is_refused_naming_the_knot_issue_27() {
+        let text = "4\n0.0 0 0\n0.5 0 0\n0.75 5000 0\n1.0 5000 0\n";
+        let mut rules = KnotRules::new(2);
+        rules.max_velocity = [80_000.0; MAX_MOTORS];
+        rules.max_acceleration = [5e6; MAX_MOTORS];
+        let build = |text: &str, rules: KnotRules| {
+            let knots = parse_offline("k.txt", text, &rules).unwrap();
+            let mut g = CubicSpline::from_knots(&knots, 400e-6, 10.0).unwrap();
+            g.rules = rules;
+            g.compute(&knots).map(|()| g)
+        };
+        // A natural spline through a step of 5000 counts in 0.25 s: too fast for a motor
+        // limited to 20 000 counts/s, and too hard an acceleration for 10⁵ counts/s².
+        rules.max_velocity[0] = 20_000.0;
+        assert_eq!(
+            build(text, rules).unwrap_err().to_string(),
+            "k.txt:4:1: motor 1: the path moves at 22826 counts/s on its way to this knot, \
+             faster than motor 1's max_velocity_counts_per_s = 20000"
+        );
+        rules.max_velocity[0] = 80_000.0;
+        rules.max_acceleration[0] = 1e5;
+        assert_eq!(
+            build(text, rules).unwrap_err().to_string(),
+            "k.txt:3:1: motor 1: the path accelerates at 104348 counts/s² on its way to this \
+             knot, more than motor 1's max_acceleration_counts_per_s2 = 100000"
+        );
+        rules.max_acceleration[0] = 5e6;
+        assert!(build(text, rules).is_ok(), "within the shipped robot's limits");
+        assert!(build(text, KnotRules::new(2)).is_ok(), "no limits, nothing checked");
     }
 
     /// Strictly increasing times with gaps of 1 ms‥1 s, values within ±10⁵ counts.

@@ -109,6 +109,20 @@ pub enum TrajBuildError {
     /// The knots cannot carry a spline.
     #[error("{0}")]
     Spline(crate::spline::SplineError),
+    /// A step larger than a motor's following-error limit: it would fault at its first cycle.
+    #[error(
+        "a step of {size} counts is more than motor {motor}'s max_following_error_counts = \
+         {limit}: the error right after an ideal step is the step, so it would end in a \
+         following-error fault at once (give a smaller --size)"
+    )]
+    StepTooLarge {
+        /// 1-based motor.
+        motor: usize,
+        /// The step, counts.
+        size: i64,
+        /// Its following-error limit, counts.
+        limit: f64,
+    },
     /// The move is shorter than one servo period.
     #[error("the move lasts {seconds} s, less than one servo period ({period_us} µs)")]
     TooShort {
@@ -137,6 +151,11 @@ pub enum TrajBuildError {
 /// An ideal step of `size` counts on every motor, held for `duration` (thesis 3.8.1.1.4, the
 /// base class' default path): sample 0 is the start position, every later sample the start
 /// plus `size`.
+///
+/// The thesis' tuning move is a step by definition, so no velocity or acceleration limit can
+/// hold for it (its one-period jump is what the step response measures); what bounds it is
+/// the following-error limit, which the error right after the step equals: a step beyond a
+/// motor's `max_following_error_counts` is refused before the move.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Step {
     size: f64,
@@ -163,6 +182,16 @@ impl Step {
                 seconds: s.step.duration_s,
                 period_us: s.period_us,
             });
+        }
+        for (m, safety) in s.safety.iter().enumerate().take(s.n_motors) {
+            let limit = safety.max_following_error_counts;
+            if s.step.size.unsigned_abs() as f64 > limit {
+                return Err(TrajBuildError::StepTooLarge {
+                    motor: m + 1,
+                    size: s.step.size,
+                    limit,
+                });
+            }
         }
         Ok(Step::new(s.step.size, s.step.duration_s, s.period_s(), s.n_motors))
     }

@@ -30,6 +30,8 @@ pub fn parse_offline(
         times: Vec::with_capacity(declared),
         positions: Vec::with_capacity(declared),
         n_motors,
+        file: file.to_string(),
+        lines: Vec::with_capacity(declared),
     };
     let mut prev: Option<(f64, usize)> = None;
     let mut last_line = hline;
@@ -57,6 +59,7 @@ pub fn parse_offline(
         }
         knots.times.push(t);
         knots.positions.push(p);
+        knots.lines.push(lno);
     }
     if knots.times.len() < declared {
         return Err(at.err(

@@ -2,6 +2,7 @@
 //! position in counts, a velocity in counts/s and the time to the next knot in ms, one line
 //! per knot — parsed line by line, so a stream is checked knot by knot as it arrives.
 
+use super::dynamics::{check_segment, hermite_end_accelerations};
 use super::{
     At, KnotFileError, KnotRules, MAX_KNOTS, MAX_LINE_BYTES, PvtKnot, Token, is_blank_or_comment,
     line_too_long, num, tokens,
@@ -17,12 +18,22 @@ pub struct PvtLineParser {
     knots: usize,
     /// Time of the next knot from the first one, s.
     elapsed_s: f64,
+    /// The last knot and its line: the segment to the next one is checked against the motion
+    /// limits when that one arrives.
+    last: Option<(PvtKnot, usize)>,
 }
 
 impl PvtLineParser {
     /// A parser by `rules`; errors name `file`.
     pub fn new(file: &str, rules: &KnotRules) -> PvtLineParser {
-        PvtLineParser { file: file.to_string(), rules: *rules, line: 0, knots: 0, elapsed_s: 0.0 }
+        PvtLineParser {
+            file: file.to_string(),
+            rules: *rules,
+            line: 0,
+            knots: 0,
+            elapsed_s: 0.0,
+            last: None,
+        }
     }
 
     /// Counts a line that could not be read because it was longer than [`MAX_LINE_BYTES`]
@@ -82,9 +93,37 @@ impl PvtLineParser {
                 ),
             ));
         }
+        self.check_dynamics(&at, lno, &toks, &k)?;
         self.elapsed_s += k.dt_s;
         self.knots += 1;
+        self.last = Some((k, lno));
         Ok(Some(k))
+    }
+
+    /// The motion limits, as knot `k` of line `lno` arrives: the segment from the last knot to
+    /// it, its largest velocity and acceleration exactly (the first knot: its velocity). Errors
+    /// point at the motor's velocity.
+    fn check_dynamics(
+        &self,
+        at: &At<'_>,
+        lno: usize,
+        toks: &[Token<'_>],
+        k: &PvtKnot,
+    ) -> Result<(), KnotFileError> {
+        let r = &self.rules;
+        for m in 0..r.n_motors {
+            let segment = match self.last {
+                None => (k.vel[m], 0.0, 0.0, 1.0),
+                Some((p, _)) => {
+                    let (a0, a1) =
+                        hermite_end_accelerations(p.pos[m], p.vel[m], k.pos[m], k.vel[m], p.dt_s);
+                    (p.vel[m], a0, a1, p.dt_s)
+                }
+            };
+            check_segment(r, m, segment)
+                .map_err(|e| at.err(lno, toks[4 * m + 2].column, e.describe()))?;
+        }
+        Ok(())
     }
 
     /// The error for a path that ended with fewer than [`MIN_PVT_KNOTS`] knots.

@@ -265,3 +265,55 @@ fn comments_blank_lines_and_bounded_lines_issue_10() {
     assert_eq!(buf, b"cd");
     assert!(!read_line_bounded(&mut two_lines, &mut buf).unwrap());
 }
+
+/// The shipped robot's motion limits at 4× (80 000 counts/s, 5·10⁶ counts/s²) at 400 µs.
+fn limited(n: usize) -> KnotRules {
+    let mut r = KnotRules::new(n);
+    r.max_velocity = [80_000.0; MAX_MOTORS];
+    r.max_acceleration = [5e6; MAX_MOTORS];
+    r
+}
+
+/// Issue 27, item 2: a PVT path that asks a motor more than its limits is refused before it
+/// is used — a file before the move, a stream knot by knot (the same parser) — naming the
+/// file, the line and column of the motor's velocity, and the setting it breaks.
+#[test]
+fn pvt_knots_beyond_the_motion_limits_are_refused_naming_line_and_motor_issue_27() {
+    let err = |text: &str| parse_pvt("p.txt", text, &limited(3)).unwrap_err().to_string();
+    let rest = "X 0 0 10 Y 0 0 10 Z 0 0 10\n";
+    // The issue's knot: 1e308 counts/s (its cubic would be NaN in the loop).
+    assert_eq!(
+        err(&format!("X 0 1e308 10 Y 0 0 10 Z 0 0 10\n{rest}{rest}")),
+        "p.txt:1:5: motor 1: the path moves at 1e308 counts/s on its way to this knot, faster \
+         than motor 1's max_velocity_counts_per_s = 80000"
+    );
+    // 270 000 counts/s in the middle of a path: the segment to that knot is too fast.
+    assert_eq!(
+        err(
+            "X 0 0 10 Y 0 0 10 Z 0 0 10\nX 0 0 10 Y 0 0 10 Z 1350 270000 10\nX 0 0 10 Y 0 0 10 Z 2700 0 10\n"
+        ),
+        "p.txt:2:26: motor 3: the path moves at 270000 counts/s on its way to this knot, faster \
+         than motor 3's max_velocity_counts_per_s = 80000"
+    );
+    // Slow enough (30 000 counts/s at most), but 200 counts in 10 ms and back: too hard an
+    // acceleration.
+    assert_eq!(
+        err(
+            "X 0 0 10 Y 0 0 10 Z 0 0 10\nX 0 0 10 Y 200 0 10 Z 0 0 10\nX 0 0 10 Y 0 0 10 Z 0 0 10\n"
+        ),
+        "p.txt:2:16: motor 2: the path accelerates at 1.2e7 counts/s² on its way to this knot, \
+         more than motor 2's max_acceleration_counts_per_s2 = 5000000"
+    );
+    // The thesis' own knots (A.2.3.2) are well within the limits, and without limits nothing
+    // is checked.
+    let thesis = "X 0 0 25 Y 0 0 25\nX 309 16000 35 Y 309 16000 35\nX 700 0 35 Y 700 0 35\n";
+    assert!(parse_pvt("p.txt", thesis, &limited(2)).is_ok());
+    assert!(
+        parse_pvt(
+            "p.txt",
+            &format!("X 0 1e308 10 Y 0 0 10 Z 0 0 10\n{rest}{rest}"),
+            &KnotRules::new(3)
+        )
+        .is_ok()
+    );
+}
