@@ -579,3 +579,46 @@ fn killing_the_controller_of_a_lock_step_run_trips_the_watchdog_at_once() {
     assert!(fault.message.contains("the hwserver's watchdog disabled the motors"), "{fault:?}");
     run.assert_clean();
 }
+
+/// Issue 27, item 3: the emergency-stop chain opening mid-move (the simulator's
+/// `sim.estop_open_s`, a button pressed at 0.5 s and released at 0.6 s) disables every motor
+/// in the read that sees it, ends the move in `emergency_stop` named in the table and
+/// summary.json, and stays latched though the chain closed again; a move with the chain open
+/// is refused before anything is enabled; closed again, the next move runs.
+#[test]
+fn the_emergency_stop_disables_every_motor_at_once_and_refuses_moves_while_open_issue_27() {
+    let run = TestRun::new("estop");
+    let (cfg, events) = with_events(&run, &[("sim.estop_open_s", "[0.5, 0.6]")]);
+    let out = run.out("out");
+    let r = run.starter(
+        &[&arg("config", cfg.display()), &arg("out", out.display()), "--deterministic", "step"],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stdout.contains("FAULT emergency_stop: EMERGENCY STOP"), "{}", r.stdout);
+    let fault = qmarc_tests::read_summary(&out).fault.expect("a fault");
+    assert_eq!(fault.kind.name(), "emergency_stop");
+    assert!(fault.message.ends_with("all motors disabled"), "{}", fault.message);
+    // The hwserver's read at 0.5 s saw it: every amplifier off within that period, before the
+    // controller had a say.
+    let opened = 500_000_000;
+    let off = amps_off_after(&qmarc_tests::read_sim_events(&events), opened, 3);
+    assert!(off.iter().all(|&t| t - opened <= 400_000), "{off:?}");
+
+    let (open, _) = with_events(&run, &[("sim.estop_open_s", "[0.0, 1e9]")]);
+    let r = run.starter(
+        &[&arg("config", open.display()), &arg("out", out.display()), "--deterministic", "step"],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stderr.contains("EMERGENCY STOP: the emergency-stop chain is open"), "{}", r.stderr);
+    let events = qmarc_tests::read_sim_events(&events);
+    assert!(events.iter().all(|e| e.1 != "amp_on"), "nothing was enabled: {events:?}");
+    let (closed, _) = with_events(&run, &[]);
+    let r = run.starter(
+        &[&arg("config", closed.display()), &arg("out", out.display()), "--deterministic", "step"],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    run.assert_clean();
+}

@@ -6,6 +6,7 @@ mod counting;
 mod deltabot;
 mod e2e;
 mod first_hour;
+mod first_motion;
 mod hardware;
 mod safety;
 mod telemetry;

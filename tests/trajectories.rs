@@ -73,8 +73,10 @@ fn spline_run_passes_through_every_knot() {
     let s = read_summary(&out);
     assert_eq!(
         (s.mode.to_string(), s.trajectory.as_str(), s.cycles),
-        ("run".into(), "spline", 5001)
+        ("run".into(), "spline", 5501),
+        "2.2 s of knots, 400 µs apart, and the sample at 0"
     );
+    assert!(s.warnings.iter().all(|w| !w.contains("ends moving")), "{:?}", s.warnings);
     let (_, rows) = read_gather(&out);
     assert_passes_through(&rows, &offline_knots("sine-3motors.txt"), 0.0);
     // It tracks: the errors are the law's, not a runaway (thesis gains, sim plant).

@@ -24,6 +24,7 @@ mod gather;
 mod general;
 mod homing;
 mod hwserver;
+mod jog;
 mod motor;
 mod robot;
 mod run;
@@ -40,6 +41,7 @@ pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
 pub use hwserver::{ExplicitTiming, HwServerSettings, HwWait, TimingDefaults};
+pub use jog::{JogSettings, MAX_JOG_COUNTS};
 pub use motor::{MotorGains, MotorSafety, gains_problem};
 pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
@@ -108,6 +110,9 @@ pub struct Settings {
     pub step: StepSettings,
     /// The `run` move.
     pub trajectory: TrajectorySettings,
+    /// `[jog]`: moving one motor by hand.
+    #[serde(default)]
+    pub jog: JogSettings,
     /// Homing.
     pub homing: HomingSettings,
     /// Missed periods in a row that end a move (`overrun`).
@@ -172,6 +177,8 @@ struct RawFile {
     #[serde(default)]
     step: step::RawStep,
     #[serde(default)]
+    jog: jog::RawJog,
+    #[serde(default)]
     trajectory: trajectory::RawTrajectory,
     #[serde(default)]
     homing: homing::RawHoming,
@@ -203,6 +210,7 @@ impl RawFile {
         let gather = self.gather.check(src)?;
         let trajectory = self.trajectory.check(src, names)?;
         let step = self.step.check(src, trajectory.max_duration_s)?;
+        let jog = self.jog.check(src, n_motors)?;
         let hwserver = self.hwserver.check(src, names)?;
         self.hwserver.check_spin_cpu(src, &hwserver, &timer)?;
         let sim = self.sim.check(src, n_motors)?;
@@ -288,6 +296,7 @@ impl RawFile {
             gather,
             step,
             trajectory,
+            jog,
             homing,
             max_missed_in_row: self.safety.check(src, &hwserver.backend)?,
             sim,
@@ -451,6 +460,16 @@ impl Settings {
                 ),
             });
         }
+        if self.jog.motor > n {
+            return Err(ConfigLoadError::Override {
+                flag,
+                message: format!(
+                    "jog.motor = {} in {} is not one of {n} motors",
+                    self.jog.motor,
+                    self.source.display()
+                ),
+            });
+        }
         self.n_motors = n;
         self.check_s626_wiring(flag)
     }
@@ -476,6 +495,21 @@ impl Settings {
             self.max_missed_in_row = d.max_missed_in_row;
         }
         self.check_s626_wiring("--backend")
+    }
+
+    /// Overrides the jog (`--motor`, `--counts`).
+    pub fn set_jog(&mut self, motor: usize, counts: i64) -> Result<(), ConfigLoadError> {
+        if !(1..=self.n_motors).contains(&motor) {
+            return Err(ConfigLoadError::Override {
+                flag: "--motor",
+                message: format!("must be a motor in use, 1‥{}, found {motor}", self.n_motors),
+            });
+        }
+        jog::check_jog_counts(counts)
+            .map_err(|message| ConfigLoadError::Override { flag: "--counts", message })?;
+        self.jog.motor = motor;
+        self.jog.counts = counts;
+        Ok(())
     }
 
     /// Overrides the knot file (`--knots`).

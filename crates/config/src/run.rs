@@ -20,6 +20,8 @@ pub enum Mode {
     Run,
     /// Home on the top switches (thesis 3.10.1.1).
     Home,
+    /// Move one motor by hand, jerk-limited ([jog]).
+    Jog,
 }
 
 impl std::fmt::Display for Mode {
@@ -28,6 +30,7 @@ impl std::fmt::Display for Mode {
             Mode::Step => "step",
             Mode::Run => "run",
             Mode::Home => "home",
+            Mode::Jog => "jog",
         })
     }
 }
@@ -39,7 +42,8 @@ impl std::str::FromStr for Mode {
             "step" => Ok(Mode::Step),
             "run" => Ok(Mode::Run),
             "home" => Ok(Mode::Home),
-            other => Err(format!("unknown mode `{other}`: step, run or home")),
+            "jog" => Ok(Mode::Jog),
+            other => Err(format!("unknown mode `{other}`: step, run, home or jog")),
         }
     }
 }

@@ -36,6 +36,11 @@ pub struct S626Settings {
     /// Output toggled once per servo cycle for an external charge-pump relay in series with
     /// the amplifier enables; `None`: no charge pump.
     pub charge_pump_dio: Option<u32>,
+    /// The emergency-stop chain's input, wired normally closed like the limit switches (it
+    /// reads as `switch_closed_bit` while closed; pressed or broken, every motor goes off at
+    /// once and stays off until it closes again); `None`: none wired.
+    #[serde(default)]
+    pub estop_dio: Option<u32>,
     /// DAC channel per motor.
     pub dac_channels: Vec<u32>,
     /// Counter channel per motor (0‥2 are counters 0A‥2A).
@@ -61,6 +66,7 @@ impl Default for S626Settings {
             switch_closed_bit: 1,
             reserved_dio: vec![2, 8, 14],
             charge_pump_dio: Some(4),
+            estop_dio: None,
             dac_channels: vec![0, 1, 2],
             counter_channels: vec![0, 1, 2],
             dac_sign: vec![1, 1, 1],
@@ -82,6 +88,7 @@ pub(crate) struct RawS626 {
     switch_closed_bit: S<i64>,
     reserved_dio: S<Vec<i64>>,
     charge_pump_dio: S<i64>,
+    estop_dio: S<i64>,
     dac_channels: S<Vec<i64>>,
     counter_channels: S<Vec<i64>>,
     dac_sign: S<Vec<i64>>,
@@ -114,6 +121,7 @@ impl RawS626 {
             "limit_top_dio" => span_of(&self.limit_top_dio),
             "limit_bottom_dio" => span_of(&self.limit_bottom_dio),
             "charge_pump_dio" => span_of(&self.charge_pump_dio),
+            "estop_dio" => span_of(&self.estop_dio),
             "dac_channels" => span_of(&self.dac_channels),
             "counter_channels" => span_of(&self.counter_channels),
             "dac_sign" => span_of(&self.dac_sign),
@@ -150,13 +158,18 @@ impl RawS626 {
         let bit = |v: &S<i64>, key: &str, default: u32| {
             src.int(v, &format!("s626.{key}"), i64::from(default), 0, 1).map(|b| b as u32)
         };
-        let pump = src.int(
-            &self.charge_pump_dio,
-            "s626.charge_pump_dio",
-            d.charge_pump_dio.map_or(-1, i64::from),
-            -1,
-            i64::from(S626_DIO_CHANNELS) - 1,
-        )?;
+        let optional_dio = |v: &S<i64>, key: &str, default: Option<u32>| {
+            let c = src.int(
+                v,
+                &format!("s626.{key}"),
+                default.map_or(-1, i64::from),
+                -1,
+                i64::from(S626_DIO_CHANNELS) - 1,
+            )?;
+            Ok::<_, ConfigLoadError>((c >= 0).then_some(c as u32))
+        };
+        let pump = optional_dio(&self.charge_pump_dio, "charge_pump_dio", d.charge_pump_dio)?;
+        let estop = optional_dio(&self.estop_dio, "estop_dio", d.estop_dio)?;
         let s = S626Settings {
             device: src
                 .take(&self.device, "s626.device", d.device.display().to_string(), |v| {
@@ -184,7 +197,8 @@ impl RawS626 {
                 d.switch_closed_bit,
             )?,
             reserved_dio: ints(&self.reserved_dio, "reserved_dio", &d.reserved_dio, &list(0, 15))?,
-            charge_pump_dio: (pump >= 0).then_some(pump as u32),
+            charge_pump_dio: pump,
+            estop_dio: estop,
             dac_channels: ints(&self.dac_channels, "dac_channels", &d.dac_channels, &list(0, 3))?,
             counter_channels: ints(
                 &self.counter_channels,
@@ -239,6 +253,7 @@ impl S626Settings {
             .iter()
             .map(|&c| (c, "enable_dio"))
             .chain(self.charge_pump_dio.map(|c| (c, "charge_pump_dio")))
+            .chain(self.estop_dio.map(|c| (c, "estop_dio")))
             .chain(self.limit_top_dio[..n_motors].iter().map(|&c| (c, "limit_top_dio")))
             .chain(self.limit_bottom_dio[..n_motors].iter().map(|&c| (c, "limit_bottom_dio")));
         let mut seen: Vec<(u32, &str)> = Vec::new();

@@ -40,6 +40,11 @@ pub struct SimSettings {
     pub stall_motor: Option<usize>,
     /// Fault injection: this motor's (1-based) top switch sticks once tripped.
     pub stuck_top_motor: Option<usize>,
+    /// Fault injection: the emergency-stop chain is open from the first to the second time,
+    /// s of the simulator's clock since the hwserver started (a button pressed, then
+    /// released); `None`: never.
+    #[serde(default)]
+    pub estop_open_s: Option<[f64; 2]>,
     /// Where the simulator writes its event log when it ends.
     pub events_file: Option<PathBuf>,
     /// Where the simulator keeps its homed frame between runs; `None`: nowhere.
@@ -61,6 +66,7 @@ impl Default for SimSettings {
             counter_offset: 0,
             stall_motor: None,
             stuck_top_motor: None,
+            estop_open_s: None,
             events_file: None,
             state_file: Some(PathBuf::from(DEFAULT_SIM_STATE_FILE)),
         }
@@ -82,6 +88,7 @@ pub(crate) struct RawSim {
     counter_offset: S<i64>,
     stall_motor: S<i64>,
     stuck_top_motor: S<i64>,
+    estop_open_s: S<Vec<f64>>,
     events_file: S<String>,
     state_file: S<String>,
 }
@@ -173,6 +180,17 @@ impl RawSim {
             )?,
             stall_motor: motor(&self.stall_motor, "sim.stall_motor")?,
             stuck_top_motor: motor(&self.stuck_top_motor, "sim.stuck_top_motor")?,
+            estop_open_s: src
+                .take(&self.estop_open_s, "sim.estop_open_s", Vec::new(), |v| match v.as_slice() {
+                    [] => Ok(()),
+                    [from, to] if *from >= 0.0 && to > from && to.is_finite() => Ok(()),
+                    _ => Err(format!(
+                        "must be [] (never) or [from_s, to_s] with 0 ≤ from_s < to_s, finite \
+                         (1e9 for ever), found {v:?}"
+                    )),
+                })?
+                .try_into()
+                .ok(),
             events_file: path(&self.events_file, "sim.events_file", d.events_file)?,
             state_file: path(&self.state_file, "sim.state_file", d.state_file)?,
         };

@@ -95,7 +95,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         "[bogus]\nx = 1\n",
-        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `robot`, `motor`",
+        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `jog`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `robot`, `motor`",
     );
     check(
         "[trajectory]\nmethod = \"home\"\n",
@@ -328,6 +328,14 @@ fn the_626_wiring_is_checked_when_it_is_the_backend_issue_12() {
         &on("charge_pump_dio = 9\n"),
         "q.toml:4:19: s626.charge_pump_dio: DIO9 is already s626.limit_top_dio",
     );
+    // Issue 27: the emergency-stop input is one more input of the bank, on a pin of its own.
+    check(
+        &on("estop_dio = 13\n"),
+        "q.toml:4:13: s626.estop_dio: DIO13 is already s626.limit_top_dio",
+    );
+    check(&on("estop_dio = 16\n"), "q.toml:4:13: s626.estop_dio: must be -1‥15, found 16");
+    assert_eq!(parse(&on("estop_dio = 5\n")).unwrap().s626.estop_dio, Some(5));
+    assert_eq!(parse(&on("estop_dio = -1\n")).unwrap().s626.estop_dio, None);
     check(
         &on("dac_channels = [0, 1, 1]\n"),
         "q.toml:4:16: s626.dac_channels: each motor needs a channel of its own, found [0, 1, 1]",

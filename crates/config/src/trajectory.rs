@@ -24,6 +24,18 @@ pub struct TrajectorySettings {
     /// When a path ends (`step` and `run`): hold its last command with the loop closed this
     /// long before disabling, s.
     pub settle_s: f64,
+    /// `run` first moves the motors to the path's start (`--approach`): a jerk-limited move
+    /// from where they are, reported apart from the path.
+    #[serde(default)]
+    pub approach: bool,
+    /// The approach's speed: the motors' limits played this much slower (0 < s ≤ 1: velocity
+    /// × s, acceleration × s², jerk × s³).
+    #[serde(default = "default_approach_speed")]
+    pub approach_speed: f64,
+}
+
+fn default_approach_speed() -> f64 {
+    TrajectorySettings::default().approach_speed
 }
 
 /// Longest wait for a stream's first knots, s: an hour.
@@ -42,6 +54,8 @@ impl Default for TrajectorySettings {
             stream_wait_s: 10.0,
             starve_hold_ms: 50.0,
             settle_s: 0.2,
+            approach: false,
+            approach_speed: 0.25,
         }
     }
 }
@@ -56,6 +70,17 @@ pub(crate) struct RawTrajectory {
     starve_hold_ms: S<f64>,
     settle_s: S<f64>,
     max_duration_s: S<f64>,
+    approach: S<bool>,
+    approach_speed: S<f64>,
+}
+
+/// A speed fraction: 0 < s ≤ 1.
+pub(crate) fn check_speed(v: &f64) -> Result<(), String> {
+    if v.is_finite() && *v > 0.0 && *v <= 1.0 {
+        Ok(())
+    } else {
+        Err(format!("must be > 0 and ≤ 1 (a fraction of the motors' limits), found {v}"))
+    }
 }
 
 impl RawTrajectory {
@@ -109,6 +134,13 @@ impl RawTrajectory {
                 "trajectory.settle_s",
                 d.settle_s,
                 within(0.0, 10.0, "s"),
+            )?,
+            approach: src.take(&self.approach, "trajectory.approach", d.approach, |_| Ok(()))?,
+            approach_speed: src.take(
+                &self.approach_speed,
+                "trajectory.approach_speed",
+                d.approach_speed,
+                check_speed,
             )?,
         })
     }

@@ -44,7 +44,8 @@ impl Mode {
     pub fn args(self) -> &'static [&'static str] {
         match self {
             Mode::Home => &["home"],
-            Mode::Run => &["run"],
+            // The path, from wherever the motors are: an approach to its start first.
+            Mode::Run => &["run", "--approach"],
             Mode::Step => &["step"],
             Mode::Tune => &["tune", "run"],
         }

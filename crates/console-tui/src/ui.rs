@@ -376,6 +376,12 @@ fn move_lines(r: &crate::results::MoveResult) -> Vec<Line<'static>> {
             if e.followed { Style::new().dim() } else { Style::new().fg(Color::Red).bold() },
         ));
     }
+    if let Some(a) = &s.approach {
+        lines.push(Line::from(format!(
+            "approach {:.2} s to the path's start (apart from the figures above)",
+            a.seconds
+        )));
+    }
     if let Some(st) = &s.settle {
         let list = |v: &[f64]| v.iter().map(|e| format!("{e:.1}")).collect::<Vec<_>>().join(" ");
         lines.push(Line::from(format!(

@@ -43,11 +43,13 @@ pub enum FaultKind {
     BadCommand,
     /// The servo law's output was not a finite number (or not a DAC code).
     BadOutput,
+    /// The emergency-stop chain opened (pressed, or a broken wire).
+    EmergencyStop,
 }
 
 impl FaultKind {
     /// Every kind, in the order of their codes ([`FaultKind::code`]).
-    pub const ALL: [FaultKind; 17] = [
+    pub const ALL: [FaultKind; 18] = [
         FaultKind::LimitSwitch,
         FaultKind::HwserverLost,
         FaultKind::HwserverShutdown,
@@ -65,6 +67,7 @@ impl FaultKind {
         FaultKind::ControllerLost,
         FaultKind::BadCommand,
         FaultKind::BadOutput,
+        FaultKind::EmergencyStop,
     ];
 
     /// Its number in a telemetry sample (`fault` there is this + 1; 0 is no fault).
@@ -97,6 +100,7 @@ impl FaultKind {
             FaultKind::ControllerLost => "controller_lost",
             FaultKind::BadCommand => "bad_command",
             FaultKind::BadOutput => "bad_output",
+            FaultKind::EmergencyStop => "emergency_stop",
         }
     }
 }
@@ -160,6 +164,8 @@ impl Fault {
             (FaultKind::HwserverShutdown, None)
         } else if status.contains(Status::HARDWARE_FAULT) {
             (FaultKind::HardwareFault, None)
+        } else if status.contains(Status::ESTOP) {
+            (FaultKind::EmergencyStop, None)
         } else if let Some((m, _)) = status.first_limit() {
             (FaultKind::LimitSwitch, Some(m))
         } else if let Some(m) = status.first_encoder_overflow() {
@@ -190,6 +196,7 @@ impl Fault {
             | FaultKind::HardwareFault
             | FaultKind::EncoderFault
             | FaultKind::ProtocolError
+            | FaultKind::EmergencyStop
             | FaultKind::Aborted => self.what_of_the_hardware(),
             _ => self.what_of_the_motion(),
         };
@@ -227,6 +234,10 @@ impl Fault {
                 host stalls of a few ms can do that: raise the limit)"
                 .to_string(),
             FaultKind::HardwareFault => "the hardware reported an error".to_string(),
+            FaultKind::EmergencyStop => "EMERGENCY STOP: the emergency-stop chain opened \
+                (pressed, or a broken wire) and the hwserver disabled every motor in the read \
+                that saw it; every move is refused until the chain is closed again"
+                .to_string(),
             FaultKind::EncoderFault => format!(
                 "motor {} encoder fault: its count jumped further than the motor can move",
                 self.motor.map_or(0, |m| m + 1)

@@ -91,6 +91,12 @@ pub enum MoveError {
     /// The hwserver reported a problem before any motor was enabled.
     #[error("the hwserver reports {0} before the move: refused to enable the motors")]
     Refused(Status),
+    /// The emergency-stop chain is open: nothing may move until it is closed.
+    #[error(
+        "EMERGENCY STOP: the emergency-stop chain is open (pressed, or a broken wire): release \
+         it or mend the chain, then move again; nothing was enabled"
+    )]
+    EmergencyStop,
     /// The trajectory cannot start from where the robot is.
     #[error(transparent)]
     Trajectory(#[from] TrajStartError),
@@ -167,6 +173,14 @@ pub struct Servo {
     phase: Phase,
     /// Σ (command − actual) per motor over the move.
     integrated_error: [f64; MAX_MOTORS],
+    /// Per motor: its frame is homed (read before the move); the software limits, which hold
+    /// in the homed frame, are checked only there.
+    homed: [bool; MAX_MOTORS],
+    /// Samples before the path proper (an approach to its start), from the generator.
+    lead_in: u64,
+    /// Cycles of the lead-in executed, and their error figures (apart from the path's).
+    lead_executed: u64,
+    lead_errors: ErrorStats,
     /// Where the move's progress is published, if anywhere.
     progress: Option<crate::progress::Progress>,
     /// Where the live samples go, if anywhere (until the move ends).
@@ -209,6 +223,10 @@ impl Servo {
             settle_errors: ErrorStats::default(),
             phase: Phase::Idle,
             integrated_error: [0.0; MAX_MOTORS],
+            homed: [false; MAX_MOTORS],
+            lead_in: 0,
+            lead_executed: 0,
+            lead_errors: ErrorStats::default(),
             progress: None,
             telemetry: None,
             telemetry_dropped: 0,
@@ -298,15 +316,23 @@ impl Servo {
         self.generator.name()
     }
 
-    /// Cycles of the path executed (the error figures' cycles; the settle is apart).
+    /// Cycles of the path executed (the error figures' cycles; the lead-in and the settle
+    /// are apart).
     pub fn cycles(&self) -> u64 {
-        self.executed - self.settle_executed
+        self.executed - self.settle_executed - self.lead_executed
     }
 
-    /// Whether the gathered row of sample `cycle` belongs to the path (not to the settle after
-    /// it). By sample index, not by cycles executed: missed periods skip samples.
+    /// Whether the gathered row of sample `cycle` belongs to the path (not to the approach
+    /// before it nor to the settle after it). By sample index, not by cycles executed: missed
+    /// periods skip samples.
     pub fn is_path_sample(&self, cycle: u64) -> bool {
-        self.settle_from.is_none_or(|from| cycle < from)
+        cycle >= self.lead_in && self.settle_from.is_none_or(|from| cycle < from)
+    }
+
+    /// The lead-in before the path (an approach to its start), if the move had one: its
+    /// samples, the cycles of it that ran and their error figures.
+    pub fn lead_in_figures(&self) -> Option<(u64, u64, &ErrorStats)> {
+        (self.lead_in > 0).then_some((self.lead_in, self.lead_executed, &self.lead_errors))
     }
 
     /// Command − actual of every motor in the last cycle.
@@ -336,7 +362,11 @@ impl Servo {
     fn request(link: &mut dyn HwLink, req: HwMsg) -> Result<HwMsg, MoveError> {
         let resp = link.exchange(&req)?;
         let status = resp.status();
-        if status.is_ok() { Ok(resp) } else { Err(MoveError::Refused(status)) }
+        match status {
+            s if s.is_ok() => Ok(resp),
+            s if s.contains(Status::ESTOP) => Err(MoveError::EmergencyStop),
+            s => Err(MoveError::Refused(s)),
+        }
     }
 
     /// Everything before the first tick, in order: clear and arm the safety monitoring, read
@@ -350,14 +380,18 @@ impl Servo {
         Servo::request(link, HwMsg::request(monitor))?;
         let start = Servo::request(link, HwMsg::read_all_encoders())?;
         self.act = start.data;
+        let flags = start.aux.map(MotorFlags);
+        self.homed = flags.map(MotorFlags::homed);
         if self.plan.require_homed
-            && let Some(m) = (0..self.plan.n_motors).find(|&m| !MotorFlags(start.aux[m]).homed())
+            && let Some(m) = (0..self.plan.n_motors).find(|&m| !self.homed[m])
         {
             return Err(MoveError::NotHomed { motor: m + 1 });
         }
+        self.generator.observe(&self.act, &flags);
         self.generator.start(&self.act)?;
+        self.lead_in = self.generator.lead_in();
         if let (Some(soft), Some(bounds)) = (self.plan.limits.soft, self.generator.path_bounds()) {
-            for m in 0..self.plan.n_motors {
+            for m in (0..self.plan.n_motors).filter(|&m| self.homed[m]) {
                 let ((min, max), (lo, hi)) = (soft[m], bounds[m]);
                 if lo < min || hi > max {
                     let value = if lo < min { lo } else { hi };
@@ -385,9 +419,11 @@ impl Servo {
         self.timing = TimingStats::new(self.plan.period_ns);
         self.errors = ErrorStats::default();
         self.settle_errors = ErrorStats::default();
+        self.lead_errors = ErrorStats::default();
         self.fault = None;
         self.executed = 0;
         self.settle_executed = 0;
+        self.lead_executed = 0;
         self.settle_from = None;
         self.integrated_error = [0.0; MAX_MOTORS];
         for m in 0..self.plan.n_motors {
@@ -506,6 +542,9 @@ impl Servo {
             self.settle_errors.add(self.plan.n_motors, &self.cmd, &self.act);
             self.settle_executed += 1;
             self.settle_from.get_or_insert(n);
+        } else if n < self.lead_in {
+            self.lead_errors.add(self.plan.n_motors, &self.cmd, &self.act);
+            self.lead_executed += 1;
         } else {
             self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
         }

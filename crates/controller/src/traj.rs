@@ -38,7 +38,7 @@ pub enum TrajStartError {
     /// The path starts away from where the robot is.
     #[error(
         "motor {motor} is at {actual} counts but the path starts at {path} counts, more than the \
-         {tolerance}-count start tolerance away: move it there first"
+         {tolerance}-count start tolerance away: move it there first (`run --approach` does)"
     )]
     FarFromStart {
         /// 1-based motor.
@@ -129,8 +129,10 @@ pub trait TrajectoryGenerator: Send {
     }
 
     /// Feedback of this cycle, before [`TrajectoryGenerator::sample`]: the actual positions
-    /// and each motor's switches, enable and homed flags. Generators that react to the robot
-    /// (homing) use it; the default ignores it. Same contract as `sample`.
+    /// and each motor's switches, enable and homed flags — and once before
+    /// [`TrajectoryGenerator::start`], with the positions the path starts from. Generators that
+    /// react to the robot (homing, jog) use it; the default ignores it. Same contract as
+    /// `sample`.
     #[inline]
     fn observe(&mut self, act: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
         let _ = (act, flags);
@@ -167,6 +169,20 @@ pub trait TrajectoryGenerator: Send {
     /// (the report's `homing`). Not called in the loop. Default: none.
     fn homing_report(&self) -> Option<&[MotorHomeReport]> {
         None
+    }
+
+    /// Before [`TrajectoryGenerator::start`]: the command of the path's first sample, where the
+    /// generator can say it before the move (a knot file's first knot; a stream's, read for
+    /// it), so that an approach can move there first. May read and fail like `start`. Default:
+    /// none — the path starts where the robot is.
+    fn first_command(&mut self) -> Result<Option<[f64; MAX_MOTORS]>, TrajStartError> {
+        Ok(None)
+    }
+
+    /// After `start`: the samples at the start of the move that lead to the path (an approach
+    /// to its start), which the loop reports apart from the path's error figures. Default: 0.
+    fn lead_in(&self) -> u64 {
+        0
     }
 }
 

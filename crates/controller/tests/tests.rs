@@ -49,6 +49,7 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
         let mut s = settings();
         let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
         s.trajectory.knots = Some(knots(example));
+        s.jog.counts = 20_000; // a jog longer than the cycles counted
         for l in LAWS {
             let generator = (g.build)(&s).unwrap();
             // With live telemetry, a sample every cycle into a ring nobody empties.
@@ -215,6 +216,7 @@ fn servo_cycle_makes_no_system_call_under_seccomp_strict_mode() {
             let mut s = settings();
             let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
             s.trajectory.knots = Some(knots(example));
+            s.jog.counts = 20_000; // a jog longer than the cycles counted
             let (telemetry, ring) = qmarc_controller::telemetry::ring(1);
             let mut servo = Servo::new(
                 plan(3),

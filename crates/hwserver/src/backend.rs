@@ -10,6 +10,9 @@ pub struct Inputs {
     /// Limit switches that are active now, as [`Status::limit_top`]/[`Status::limit_bottom`]
     /// bits (not latched: the server latches).
     pub limits: Status,
+    /// The emergency-stop chain reads open now (pressed, or a broken wire); false for a
+    /// backend without one.
+    pub estop_open: bool,
 }
 
 /// A hardware operation failed (a short ioctl, a device error). Carries numbers only.

@@ -8,7 +8,8 @@
 //! path) leaves the DACs at 0 V and the amplifiers off; a limit switch is reported by the
 //! first read after it trips; the software position runs on through the 24-bit counter's
 //! wrap; after the watchdog enabling is refused; homing's preset makes the position read what
-//! it asks and the frame homed.
+//! it asks and the frame homed; an open emergency-stop chain disables every motor in the read
+//! that sees it and refuses every enable until it is closed and the status cleared.
 
 use crate::backend::Backend;
 use crate::core::HwCore;
@@ -30,6 +31,13 @@ pub trait Rig {
     fn outputs(&mut self, core: &HwCore) -> Option<crate::backend::Outputs> {
         core.backend().outputs()
     }
+
+    /// Opens (`open`) or closes the emergency-stop chain of the last backend made; false if
+    /// the rig has no chain to open (the check is then skipped, and says so).
+    fn estop(&mut self, open: bool) -> bool {
+        let _ = open;
+        false
+    }
 }
 
 /// One check of the suite.
@@ -49,6 +57,7 @@ pub const CHECKS: &[Check] = &[
     Check { name: "counter_wraps_at_24_bits", run: counter_wraps_at_24_bits },
     Check { name: "watchdog_makes_safe_and_refuses", run: watchdog_makes_safe_and_refuses },
     Check { name: "homing_preset", run: homing_preset },
+    Check { name: "estop_disables_at_once_and_latches", run: estop_disables_at_once_and_latches },
 ];
 
 fn ask(core: &mut HwCore, req: HwMsg) -> HwMsg {
@@ -181,4 +190,44 @@ fn homing_preset(rig: &mut dyn Rig) -> Result<(), String> {
     expect(r.data[..2] == [-37.0, 0.0], || {
         format!("reads {:?} after zeroing motor 2", &r.data[..2])
     })
+}
+
+fn estop_disables_at_once_and_latches(rig: &mut dyn Rig) -> Result<(), String> {
+    let mut core = HwCore::new(rig.backend(2, 0.0));
+    let enable = |core: &mut HwCore| {
+        (0..2).fold(Status::OK, |st, m| {
+            st | ask(core, HwMsg::for_motor(MsgType::EnableMotor, m)).status()
+        })
+    };
+    expect(enable(&mut core).is_ok(), || "enabling with the chain closed".into())?;
+    ask(&mut core, HwMsg::write_all_dacs(&[1000, -1000, 0, 0]));
+    if !rig.estop(true) {
+        eprintln!("the rig has no emergency-stop chain to open: check skipped");
+        return Ok(());
+    }
+    let st = ask(&mut core, HwMsg::read_all_encoders()).status();
+    expect(st.contains(Status::ESTOP), || format!("the read after the chain opened says {st}"))?;
+    let off = |rig: &mut dyn Rig, core: &HwCore, when: &str| {
+        let o = rig.outputs(core).ok_or("the backend cannot read its outputs back")?;
+        expect(o.dac == [0; MAX_MOTORS] && o.enabled == [false; MAX_MOTORS], || {
+            format!("{when}: outputs {o:?}, not 0 V with the amplifiers off")
+        })
+    };
+    off(rig, &core, "in the read that saw the chain open")?;
+    for (open, when) in [(true, "with the chain open"), (false, "closed again but not cleared")] {
+        rig.estop(open);
+        let st = enable(&mut core);
+        ask(&mut core, HwMsg::write_all_dacs(&[1000, -1000, 0, 0]));
+        expect(st.contains(Status::ESTOP), || format!("enabling {when}: {st}"))?;
+        off(rig, &core, when)?;
+        if open {
+            let st = ask(&mut core, HwMsg::request(MsgType::ClearSafetyStatus)).status();
+            expect(st.contains(Status::ESTOP), || format!("cleared {when}: {st}"))?;
+        }
+    }
+    let st = ask(&mut core, HwMsg::request(MsgType::ClearSafetyStatus)).status();
+    expect(st.is_ok(), || format!("clearing with the chain closed: {st}"))?;
+    expect(enable(&mut core).is_ok(), || "enabling after the chain closed and cleared".into())?;
+    ask(&mut core, HwMsg::request(MsgType::DisableAll));
+    Ok(())
 }

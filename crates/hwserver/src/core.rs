@@ -167,9 +167,10 @@ impl HwCore {
         self.latched.intersects(Status::SHUTDOWN | Status::WATCHDOG | Status::HARDWARE_FAULT)
     }
 
-    /// Writes the DAC codes `dacs` holds (all 0 V once the outputs are locked).
+    /// Writes the DAC codes `dacs` holds (all 0 V once the outputs are locked or while the
+    /// emergency stop is latched).
     fn write_dacs(&mut self) -> Status {
-        if self.outputs_locked() {
+        if self.outputs_locked() || self.latched.intersects(Status::ESTOP) {
             self.dacs = [0; MAX_MOTORS];
         }
         if self.backend.write_dacs(&self.dacs).is_err() {
@@ -201,6 +202,12 @@ impl HwCore {
         }
         self.inputs = fresh;
         self.last_read_ns = now;
+        // The emergency stop is watched always, homing or not: the motors go off in this read,
+        // whatever the controller does next.
+        if self.inputs.estop_open && !self.latched.intersects(Status::ESTOP) {
+            self.safe_state();
+            self.latched |= Status::ESTOP;
+        }
         if self.monitoring {
             let tripped = self.inputs.limits & Status::LIMIT_MASK;
             if !tripped.is_ok() {
@@ -219,6 +226,8 @@ impl HwCore {
             Status::HARDWARE_FAULT
         } else if self.outputs_locked() {
             Status::SHUTDOWN
+        } else if self.latched.intersects(Status::ESTOP) {
+            Status::ESTOP
         } else if self.backend.set_amp_enable(motor, true).is_ok() {
             self.enabled[motor] = true;
             Status::OK
@@ -295,8 +304,17 @@ impl HwCore {
             Ok(MsgType::EnableSafety) => self.monitoring = true,
             Ok(MsgType::DisableSafety) => self.monitoring = false,
             Ok(MsgType::ClearSafetyStatus) => {
-                // Limit and encoder bits; a watchdog or shutdown stays for good.
-                self.latched = self.latched & !(Status::LIMIT_MASK | Status::ENCODER_MASK);
+                // Limit and encoder bits; the emergency stop only if its chain reads closed
+                // now (a fresh read, the switches not latched by it); a watchdog or shutdown
+                // stays for good.
+                let monitoring = std::mem::replace(&mut self.monitoring, false);
+                status |= self.read();
+                self.monitoring = monitoring;
+                let mut cleared = Status::LIMIT_MASK | Status::ENCODER_MASK;
+                if !self.inputs.estop_open {
+                    cleared |= Status::ESTOP;
+                }
+                self.latched = self.latched & !cleared;
             }
             Ok(MsgType::Exit) => {
                 self.safe_state();

@@ -33,6 +33,7 @@ fn every_check_has_a_test() {
         "counter_wraps_at_24_bits",
         "watchdog_makes_safe_and_refuses",
         "homing_preset",
+        "estop_disables_at_once_and_latches",
     ];
     let names: Vec<&str> = CHECKS.iter().map(|c| c.name).collect();
     assert_eq!(names, listed, "a check without its test below");
@@ -66,4 +67,9 @@ fn watchdog_makes_safe_and_refuses() {
 #[test]
 fn homing_preset() {
     check("homing_preset");
+}
+
+#[test]
+fn estop_disables_at_once_and_latches() {
+    check("estop_disables_at_once_and_latches");
 }

@@ -1,5 +1,6 @@
 //! The plug-ins of the servo loop: the trajectory generators (the thesis' step, the offline
-//! natural cubic spline, the online PVT, homing), the servo law (PID with feed-forward and a
+//! natural cubic spline, the online PVT, homing, and the jerk-limited moves from rest to rest:
+//! jog and the approach to a path's start), the servo law (PID with feed-forward and a
 //! notch, thesis eq. 3-1 and 3-2), the knot files they read (thesis A.2.3), and the
 //! [`registry`] that names them — the settings file, the command line and the console choose
 //! from it. The traits they implement are the loop's (`qmarc_controller::traj`,
@@ -17,6 +18,7 @@
 pub mod extending {}
 pub mod homing;
 pub mod knots;
+pub mod moveto;
 pub mod pidff;
 pub mod pvt;
 pub mod registry;

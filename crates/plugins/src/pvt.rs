@@ -137,6 +137,8 @@ pub struct Pvt {
     next_knot: usize,
     ended: bool,
     failed: bool,
+    /// The first knots, when `first_command` read them before `start`.
+    first: Vec<PvtKnot>,
 }
 
 /// Pushes `v`, waiting while the queue is full; false if the consumer is gone.
@@ -244,6 +246,7 @@ impl Pvt {
             next_knot: 0,
             ended: false,
             failed: false,
+            first: Vec::new(),
         }
     }
 
@@ -381,8 +384,19 @@ impl TrajectoryGenerator for Pvt {
         "pvt"
     }
 
+    /// The first knot (a stream's first knots are read for it, and kept for `start`).
+    fn first_command(&mut self) -> Result<Option<[f64; MAX_MOTORS]>, TrajStartError> {
+        if self.first.is_empty() {
+            self.first = self.first_knots()?;
+        }
+        Ok(Some(self.first[0].pos))
+    }
+
     fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
-        let first = self.first_knots()?;
+        let first = match std::mem::take(&mut self.first) {
+            read if !read.is_empty() => read,
+            _ => self.first_knots()?,
+        };
         check_start(start, &first[0].pos, self.n_motors, self.start_tolerance)?;
         self.seg_start = 0.0;
         self.seg_len = 0.0;

@@ -3,6 +3,7 @@
 //! choose from these tables (see `docs/extending.md`).
 
 use crate::homing::Homing;
+use crate::moveto::Jog;
 use crate::pidff::PidFf;
 use crate::pvt::Pvt;
 use crate::spline::CubicSpline;
@@ -64,6 +65,12 @@ pub const GENERATORS: &[GeneratorEntry] = &[
         build: |s| Ok(Box::new(Homing::from_settings(s))),
     },
     GeneratorEntry {
+        name: "jog",
+        description: "one motor by [jog] counts, jerk-limited from rest to rest (Ruckig)",
+        needs_knots: false,
+        build: |s| Ok(Box::new(Jog::from_settings(s)?)),
+    },
+    GeneratorEntry {
         name: "pvt",
         description: "online position-velocity-time cubics, from a file or a stream (thesis 3.12.2)",
         needs_knots: true,
@@ -91,7 +98,7 @@ pub fn generator_names() -> Vec<&'static str> {
     GENERATORS.iter().map(|e| e.name).collect()
 }
 
-/// Names of the generators `run` accepts: every one that follows a path (not homing).
+/// Names of the generators `run` accepts: every one that follows a path (not homing, not jog).
 pub fn path_generator_names() -> Vec<&'static str> {
-    GENERATORS.iter().filter(|e| e.name != "home").map(|e| e.name).collect()
+    GENERATORS.iter().filter(|e| !matches!(e.name, "home" | "jog")).map(|e| e.name).collect()
 }

@@ -350,6 +350,14 @@ impl TrajectoryGenerator for CubicSpline {
         check_start(start, &self.queue[0], self.n_motors, self.start_tolerance)
     }
 
+    /// The first knot (a stream's whole file is read for it).
+    fn first_command(&mut self) -> Result<Option<[f64; MAX_MOTORS]>, TrajStartError> {
+        if self.queue.is_empty() {
+            self.read_stream()?;
+        }
+        Ok(Some(self.queue[0]))
+    }
+
     fn samples(&self) -> Option<u64> {
         (!self.queue.is_empty()).then_some(self.queue.len() as u64)
     }
@@ -441,7 +449,7 @@ mod tests {
         assert_eq!(
             e.to_string(),
             "motor 2 is at 50 counts but the path starts at 0 counts, more than the 10-count start \
-             tolerance away: move it there first"
+             tolerance away: move it there first (`run --approach` does)"
         );
     }
 

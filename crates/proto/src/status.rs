@@ -28,6 +28,10 @@ impl Status {
     pub const HARDWARE_FAULT: Status = Status(1 << 19);
     /// The server was asked to stop (SIGTERM/SIGINT): motors are disabled and stay disabled.
     pub const SHUTDOWN: Status = Status(1 << 20);
+    /// The emergency-stop chain opened (the button pressed, or a broken wire): every motor was
+    /// disabled in the read that saw it. Latched until a [`crate::MsgType::ClearSafetyStatus`]
+    /// finds the chain closed again; enabling is refused meanwhile.
+    pub const ESTOP: Status = Status(1 << 21);
 
     /// Bit of motor `motor`'s top limit switch.
     #[inline]
@@ -149,6 +153,7 @@ impl std::fmt::Display for Status {
             (Status::WATCHDOG, "watchdog"),
             (Status::HARDWARE_FAULT, "hardware fault"),
             (Status::SHUTDOWN, "server shutting down"),
+            (Status::ESTOP, "emergency stop"),
         ];
         for (bit, name) in named {
             if self.contains(bit) {
@@ -196,6 +201,7 @@ mod tests {
                 Status::WATCHDOG,
                 Status::HARDWARE_FAULT,
                 Status::SHUTDOWN,
+                Status::ESTOP,
             ]);
         for s in all {
             assert_eq!(s.0.count_ones(), 1);

@@ -2,7 +2,9 @@
 //! with the warnings a user must read (a path that ends moving, rescaled gains, a motor that
 //! did not follow its command).
 
-use crate::summary::{FaultReport, MotorSummary, SettleSummary, Summary, TimingSummary};
+use crate::summary::{
+    ApproachSummary, FaultReport, MotorSummary, SettleSummary, Summary, TimingSummary,
+};
 use qmarc_config::{Mode, Settings};
 use qmarc_controller::servo::Servo;
 use qmarc_timer::rt::RtStatus;
@@ -95,6 +97,16 @@ pub fn summarize(
             .map(|e| e.max.abs().max(e.min.abs()))
             .collect(),
     });
+    let approach = servo.lead_in_figures().map(|(samples, cycles, errors)| ApproachSummary {
+        samples,
+        cycles,
+        seconds: (samples * u64::from(settings.period_us)) as f64 / 1e6,
+        from_counts: servo.gather().rows().first().map_or_else(Vec::new, |r| r.cmd[..n].to_vec()),
+        max_abs_error_counts: errors.axes[..n]
+            .iter()
+            .map(|e| e.max.abs().max(e.min.abs()))
+            .collect(),
+    });
     Summary {
         mode,
         trajectory: servo.generator_name().to_string(),
@@ -121,6 +133,7 @@ pub fn summarize(
         gains_period_us: settings.gains_period_us,
         gains: (0..n).map(|m| settings.effective_gains(m).into()).collect(),
         settle,
+        approach,
         timing: TimingSummary::new(
             servo.timing(),
             &settings.timer.method.to_string(),

@@ -107,6 +107,22 @@ pub struct SettleSummary {
     pub max_abs_error_counts: Vec<f64>,
 }
 
+/// The approach to a path's start (`run --approach`) in `summary.json`: the error figures of
+/// the move leave it out; these are its own.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ApproachSummary {
+    /// Samples of the approach (its planned length).
+    pub samples: u64,
+    /// Cycles of it that ran (fewer if a fault ended it, or missed periods skipped some).
+    pub cycles: u64,
+    /// Its duration, s.
+    pub seconds: f64,
+    /// Per motor: where it started, counts (where the motors were).
+    pub from_counts: Vec<f64>,
+    /// Per motor: the largest |command − actual| during it, counts.
+    pub max_abs_error_counts: Vec<f64>,
+}
+
 /// Percentiles in `summary.json`, µs.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Pct {
@@ -270,6 +286,9 @@ pub struct Summary {
     /// The hold at the end of the path, if it began.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub settle: Option<SettleSummary>,
+    /// The approach to the path's start before it (`run --approach`), if the move had one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub approach: Option<ApproachSummary>,
     /// Timing figures.
     pub timing: TimingSummary,
     /// Warnings of the run (degraded real time, dropped rows).
@@ -338,6 +357,7 @@ impl Summary {
             gains_period_us: 0,
             gains: Vec::new(),
             settle: None,
+            approach: None,
             timing: TimingSummary::default(),
             warnings: Vec::new(),
             starter_pid: std::process::id(),

@@ -80,6 +80,18 @@ pub fn render(s: &Summary) -> String {
         }
         aligned(&mut t, &rows);
     }
+    if let Some(a) = &s.approach {
+        let list = |v: &[f64]| v.iter().map(|e| format!("{e:.1}")).collect::<Vec<_>>().join(" ");
+        let _ = writeln!(
+            t,
+            "\n  approach to the path's start from {} cnt, before the figures above: {} ({} \
+             cycles), largest |e| {} cnt",
+            list(&a.from_counts),
+            human_s(a.seconds),
+            a.cycles,
+            list(&a.max_abs_error_counts),
+        );
+    }
     if let Some(st) = &s.settle {
         let list = |v: &[f64]| v.iter().map(|e| format!("{e:.1}")).collect::<Vec<_>>().join(" ");
         let _ = writeln!(

@@ -83,6 +83,7 @@ impl RunError {
                 | MoveError::NotHomed { .. }
                 | MoveError::OutsideSoftLimits { .. }
                 | MoveError::Refused(_)
+                | MoveError::EmergencyStop
                 | MoveError::Gather(_),
             ) => exit::REFUSED,
             _ => exit::INTERNAL,
@@ -107,6 +108,7 @@ pub fn generator_name(mode: Mode, settings: &Settings) -> &str {
         Mode::Step => "step",
         Mode::Run => &settings.trajectory.method,
         Mode::Home => "home",
+        Mode::Jog => "jog",
     }
 }
 
@@ -196,13 +198,12 @@ pub fn build_servo(spec: &RunSpec, progress: Option<Progress>) -> Result<Servo, 
     let law =
         registry::law(&settings.law).ok_or_else(|| RunError::Unregistered(settings.law.clone()))?;
     let plan = plan_for(settings, spec.mode, spec.deterministic, spec.unhomed);
-    Ok(Servo::new(
-        plan,
-        (generator.build)(settings)?,
-        (law.build)(settings),
-        Box::new(MonotonicClock),
-    )
-    .with_progress(progress))
+    let mut path = (generator.build)(settings)?;
+    if spec.mode == Mode::Run && settings.trajectory.approach {
+        path = Box::new(qmarc_plugins::moveto::Approach::from_settings(path, settings));
+    }
+    Ok(Servo::new(plan, path, (law.build)(settings), Box::new(MonotonicClock))
+        .with_progress(progress))
 }
 
 /// The ticker of `timer.method` (the benchmark's bare loop takes the same).
@@ -307,8 +308,9 @@ pub fn stream_gather_samples(settings: &Settings) -> u64 {
 }
 
 /// The plan of `mode` with `settings`: the limits of the settings, software limits only in a
-/// homed frame (off when homing or with `--unhomed`), homing required unless homing or
-/// `--unhomed`, the hwserver's switch latch off while homing.
+/// homed frame (off when homing or with `--unhomed`; the loop checks them only for homed
+/// motors), homing required unless homing, jogging or `--unhomed`, the hwserver's switch latch
+/// off while homing.
 pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: bool) -> MovePlan {
     let homing = mode == Mode::Home;
     let mut limits = MoveLimits::none();
@@ -335,7 +337,7 @@ pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: b
         },
         stream_gather_samples: stream_gather_samples(settings),
         limits,
-        require_homed: !homing && !unhomed,
+        require_homed: !homing && !unhomed && mode != Mode::Jog,
         monitor_switches: !homing,
         ..MovePlan::new(mode, settings.n_motors, settings.period_ns())
     }

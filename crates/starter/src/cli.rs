@@ -109,6 +109,20 @@ pub enum Command {
     Run(RunArgs),
     /// Home the robot on its top limit switches, one motor at a time (thesis 3.10.1.1).
     Home,
+    /// Move one motor by hand: `--counts` from where it is, jerk-limited and slow (`[jog]`),
+    /// the others held; within the software limits where homed, slower where not.
+    Jog(JogArgs),
+}
+
+/// Options of `jog`.
+#[derive(Debug, Clone, PartialEq, Args, Default)]
+pub struct JogArgs {
+    /// The motor, 1-based (default: `jog.motor`).
+    #[arg(long)]
+    pub motor: Option<usize>,
+    /// How far, counts, either way (default: `jog.counts`).
+    #[arg(long, allow_negative_numbers = true)]
+    pub counts: Option<i64>,
 }
 
 /// Options of `run`.
@@ -121,6 +135,11 @@ pub struct RunArgs {
     /// `trajectory.method`).
     #[arg(long)]
     pub method: Option<String>,
+    /// First move from where the motors are to the path's start: jerk-limited at
+    /// `trajectory.approach_speed` of the motors' limits, reported apart from the path
+    /// (default: `trajectory.approach`).
+    #[arg(long)]
+    pub approach: bool,
 }
 
 /// Options of `step`.
@@ -141,6 +160,7 @@ impl Command {
             Command::Step(_) => Mode::Step,
             Command::Run(_) => Mode::Run,
             Command::Home => Mode::Home,
+            Command::Jog(_) => Mode::Jog,
         }
     }
 
@@ -162,6 +182,10 @@ impl Command {
                 if let Some(m) = &a.method {
                     s.set_method(m, names)?;
                 }
+                s.trajectory.approach |= a.approach;
+            }
+            Command::Jog(a) => {
+                s.set_jog(a.motor.unwrap_or(s.jog.motor), a.counts.unwrap_or(s.jog.counts))?
             }
             Command::Home => {}
         }

@@ -21,7 +21,7 @@ impl Servo {
         let lim = &self.plan.limits;
         for m in 0..self.plan.n_motors {
             let c = self.cmd[m];
-            if let Some(soft) = lim.soft {
+            if let Some(soft) = lim.soft.filter(|_| self.homed[m]) {
                 let (min, max) = soft[m];
                 if c < min || c > max {
                     let limit = if c < min { min } else { max };

@@ -40,7 +40,7 @@ pub const BACKENDS: &[BackendEntry] = &[
         description: "the simulated Deltabot: velocity-mode amplifiers, 24-bit counters, limit switches",
         open: |s, lockstep| Ok(Box::new(sim::SimDeltabot::open(s, lockstep)?)),
         check: |s, lockstep| sim::SimDeltabot::open(s, lockstep).map(drop),
-        rig: || Some(Box::new(sim::SimRig)),
+        rig: || Some(Box::new(sim::SimRig::default())),
     },
     BackendEntry {
         name: "s626",

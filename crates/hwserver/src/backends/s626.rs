@@ -45,6 +45,7 @@ struct Wiring {
     bottom: [u32; MAX_MOTORS],
     closed_bit: u32,
     pump: Option<u32>,
+    estop: Option<u32>,
 }
 
 impl Wiring {
@@ -66,6 +67,7 @@ impl Wiring {
             bottom: pick(&s.limit_bottom_dio),
             closed_bit: s.switch_closed_bit,
             pump: s.charge_pump_dio,
+            estop: s.estop_dio,
         })
     }
 
@@ -361,6 +363,7 @@ impl Backend for S626 {
             }
         }
         inputs.limits = limits;
+        inputs.estop_open = self.w.estop.is_some_and(tripped);
         Ok(())
     }
 

@@ -58,6 +58,10 @@ pub struct SimParams {
     pub stall_motor: Option<usize>,
     /// Fault injection: this motor's (0-based) top switch sticks once it has tripped.
     pub stuck_top_motor: Option<usize>,
+    /// Fault injection: the emergency-stop chain is open from the first to the second time,
+    /// s on the simulator's clock (see [`SimDeltabot::estop_button`] for a button pressed from
+    /// outside).
+    pub estop_open_s: Option<[f64; 2]>,
 }
 
 impl Default for SimParams {
@@ -81,6 +85,7 @@ impl Default for SimParams {
             counter_offset: d.counter_offset,
             stall_motor: None,
             stuck_top_motor: None,
+            estop_open_s: d.estop_open_s,
         }
     }
 }
@@ -128,6 +133,7 @@ impl SimParams {
             // (a hand-written run file) is refused by `validate`, never wrapped around.
             stall_motor: sim.stall_motor.map(|m| m.checked_sub(1).unwrap_or(usize::MAX)),
             stuck_top_motor: sim.stuck_top_motor.map(|m| m.checked_sub(1).unwrap_or(usize::MAX)),
+            estop_open_s: sim.estop_open_s,
         }
     }
 
@@ -249,6 +255,8 @@ pub struct SimDeltabot {
     state_file: Option<std::path::PathBuf>,
     /// Where the event log goes when the server ends ([`Backend::finish`]).
     events_file: Option<std::path::PathBuf>,
+    /// The emergency-stop button, pressed from outside ([`SimDeltabot::estop_button`]).
+    estop_button: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
 /// What the simulated robot's state file says its frame belongs to.
@@ -280,7 +288,21 @@ impl SimDeltabot {
             homed: [p.homed; MAX_MOTORS],
             state_file: None,
             events_file: None,
+            estop_button: std::sync::Arc::default(),
         })
+    }
+
+    /// The emergency-stop button: while it holds true the chain reads open (pressing it is
+    /// one atomic store; the tests and the conformance rig press it).
+    pub fn estop_button(&self) -> std::sync::Arc<std::sync::atomic::AtomicBool> {
+        self.estop_button.clone()
+    }
+
+    /// Whether the emergency-stop chain is open now: the button, or the injected window.
+    fn estop_open(&self) -> bool {
+        let t = self.t_ns as f64 * 1e-9;
+        self.estop_button.load(std::sync::atomic::Ordering::Relaxed)
+            || self.p.estop_open_s.is_some_and(|[from, to]| (from..to).contains(&t))
     }
 
     /// The simulated robot of the settings `s`, its homed frame kept in `sim.state_file` and
@@ -443,6 +465,7 @@ impl Backend for SimDeltabot {
             inputs.counters[m] = self.counter(m);
         }
         inputs.limits = self.limits();
+        inputs.estop_open = self.estop_open();
         let changed = inputs.limits.0 ^ self.switches.0;
         for m in 0..self.p.n_motors {
             for (top, bit) in [(true, Status::limit_top(m)), (false, Status::limit_bottom(m))] {
@@ -555,39 +578,8 @@ impl Backend for SimDeltabot {
     }
 }
 
-/// The simulator's rig for the conformance suite: fresh lock-step robots, switches tripped
-/// by driving the motor into them.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct SimRig;
-
-impl crate::conformance::Rig for SimRig {
-    fn backend(&mut self, n_motors: usize, start_counts: f64) -> Box<dyn Backend> {
-        let p = SimParams {
-            n_motors,
-            lockstep: true,
-            start_counts: [start_counts; MAX_MOTORS],
-            ..SimParams::default()
-        };
-        Box::new(SimDeltabot::new(p).expect("the rig's robot is valid"))
-    }
-
-    fn trip_switch(&mut self, core: &mut crate::HwCore, motor: usize, top: bool) {
-        use qmarc_proto::{HwMsg, MotorFlags, MsgType};
-        core.handle(&HwMsg::request(MsgType::DisableSafety));
-        core.handle(&HwMsg::for_motor(MsgType::EnableMotor, motor as u32));
-        let mut codes = [0; MAX_MOTORS];
-        // The top switch lies toward negative counts on the default robot.
-        codes[motor] = if top { -4000 } else { 4000 };
-        core.handle(&HwMsg::write_all_dacs(&codes));
-        for _ in 0..100_000 {
-            let f = MotorFlags(core.handle(&HwMsg::read_all_encoders()).aux[motor]);
-            if (top && f.top()) || (!top && f.bottom()) {
-                break;
-            }
-        }
-        core.handle(&HwMsg::for_motor(MsgType::DisableMotor, motor as u32));
-    }
-}
+mod rig;
+pub use rig::SimRig;
 
 #[cfg(test)]
 mod tests;

@@ -99,6 +99,10 @@ pub fn wired_fake(w: &S626Settings, n_motors: usize, plant: &FakePlant, period_s
             }
         }
     }
+    // The emergency-stop chain, closed.
+    if let Some(chan) = w.estop_dio {
+        fake.set_input_low(chan, closed_low);
+    }
     fake
 }
 
@@ -127,11 +131,18 @@ impl Transport for SharedFake {
 }
 
 /// The 626's rig for the conformance suite: the backend over a fake of the driver wired as
-/// the thesis' robot (`[s626]` defaults), its switches and outputs seen from outside the card.
-#[derive(Default)]
+/// the thesis' robot (`[s626]` defaults) with an emergency-stop chain on DIO5, its switches,
+/// chain and outputs seen from outside the card.
 pub struct FakeRig {
     fake: Arc<Mutex<FakeS626>>,
     wiring: S626Settings,
+}
+
+impl Default for FakeRig {
+    fn default() -> FakeRig {
+        let wiring = S626Settings { estop_dio: Some(5), ..S626Settings::default() };
+        FakeRig { fake: Arc::default(), wiring }
+    }
 }
 
 impl FakeRig {
@@ -152,6 +163,14 @@ impl crate::conformance::Rig for FakeRig {
         let card = S626::with_transport(transport, FAKE_DEVICE, w, n_motors, None)
             .expect("the rig's card is a 626");
         Box::new(card.all_homed())
+    }
+
+    fn estop(&mut self, open: bool) -> bool {
+        let Some(chan) = self.wiring.estop_dio else { return false };
+        // Closed, the chain pulls its input low (normally closed to ground, as the switches).
+        let closed_low = self.wiring.switch_closed_bit == 1;
+        self.card().set_input_low(chan, closed_low != open);
+        true
     }
 
     fn trip_switch(&mut self, _core: &mut crate::HwCore, motor: usize, top: bool) {

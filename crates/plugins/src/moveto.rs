@@ -1,0 +1,359 @@
+//! Jerk-limited moves from rest to rest: the approach to a path's start ([`Approach`]) and
+//! jog ([`Jog`]). Each is Ruckig's time-synchronised, time-optimal profile (the `rsruckig`
+//! port): every motor starts and arrives together, the slowest one as fast as its velocity,
+//! acceleration and jerk limits allow, the others slower. It is planned before the move and
+//! sampled into the command queue, so the loop only reads the queue.
+
+use crate::step::{QUEUE_BUDGET_BYTES, TrajBuildError};
+use qmarc_config::Settings;
+use qmarc_controller::fault::FaultKind;
+use qmarc_controller::traj::{
+    MotorHomeReport, Sample, TrajStartError, TrajectoryGenerator, bounds_of,
+};
+use qmarc_proto::{MAX_MOTORS, MotorFlags};
+use rsruckig::prelude::{DataArrayOrVec, InputParameter, Ruckig, ThrowErrorHandler, Trajectory};
+
+/// The limits a jerk-limited move keeps, per motor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionLimits {
+    /// Velocity, counts/s.
+    pub velocity: [f64; MAX_MOTORS],
+    /// Acceleration, counts/s².
+    pub acceleration: [f64; MAX_MOTORS],
+    /// Jerk, counts/s³.
+    pub jerk: [f64; MAX_MOTORS],
+}
+
+impl MotionLimits {
+    /// Each motor's `[[motor]]` limits.
+    pub fn of(s: &Settings) -> MotionLimits {
+        let mut l = MotionLimits {
+            velocity: [1.0; MAX_MOTORS],
+            acceleration: [1.0; MAX_MOTORS],
+            jerk: [1.0; MAX_MOTORS],
+        };
+        for (m, safety) in s.safety.iter().enumerate().take(MAX_MOTORS) {
+            l.velocity[m] = safety.max_velocity_counts_per_s;
+            l.acceleration[m] = safety.max_acceleration_counts_per_s2;
+            l.jerk[m] = safety.max_jerk_counts_per_s3;
+        }
+        l
+    }
+
+    /// The limits of the same motions played `speed` times as fast (0 < speed ≤ 1): a time
+    /// scaling, velocity × speed, acceleration × speed², jerk × speed³.
+    pub fn at_speed(self, speed: f64) -> MotionLimits {
+        MotionLimits {
+            velocity: self.velocity.map(|v| v * speed),
+            acceleration: self.acceleration.map(|a| a * speed * speed),
+            jerk: self.jerk.map(|j| j * speed * speed * speed),
+        }
+    }
+}
+
+/// A jerk-limited move could not be planned.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum MoveToError {
+    /// Ruckig found no profile (a limit that is not a positive finite number, or a distance
+    /// beyond what it can compute).
+    #[error("no jerk-limited move from {from:?} to {to:?} counts: {reason}")]
+    NoProfile {
+        /// Where the motors are, counts.
+        from: Vec<f64>,
+        /// Where they are to go, counts.
+        to: Vec<f64>,
+        /// Ruckig's reason.
+        reason: String,
+    },
+    /// The move would last longer than its command queue may.
+    #[error(
+        "the move from {from:?} to {to:?} counts takes {seconds:.1} s at this speed: more \
+         samples than the command queue's memory budget"
+    )]
+    TooLong {
+        /// Where the motors are, counts.
+        from: Vec<f64>,
+        /// Where they are to go, counts.
+        to: Vec<f64>,
+        /// Its duration, s.
+        seconds: f64,
+    },
+}
+
+impl From<MoveToError> for TrajStartError {
+    fn from(e: MoveToError) -> Self {
+        TrajStartError::Generator(Box::new(e))
+    }
+}
+
+/// The shortest rest-to-rest move of `d` counts under `v`, `a`, `j`, s: the double-S profile
+/// in closed form (Biagiotti & Melchiorri, "Trajectory Planning for Automatic Machines",
+/// 3.4): the time to reach `v`, plus a cruise if the distance allows one, else the profile
+/// that turns back before `v` (and before `a`, for short moves).
+pub fn double_s_duration(d: f64, v: f64, a: f64, j: f64) -> f64 {
+    let d = d.abs();
+    if d == 0.0 {
+        return 0.0;
+    }
+    let to_v = if v * j >= a * a { a / j + v / a } else { 2.0 * (v / j).sqrt() };
+    if d >= v * to_v {
+        return d / v + to_v;
+    }
+    let tj = a / j;
+    let ta = (tj + (tj * tj + 4.0 * d / a).sqrt()) / 2.0;
+    if ta >= 2.0 * tj { 2.0 * ta } else { 4.0 * (d / (2.0 * j)).cbrt() }
+}
+
+/// The command queue of the move of the first `n_motors` from `from` to `to`, at rest at both
+/// ends, under `limits`, one sample every `period_s`: sample 0 is `from`, the last is exactly
+/// `to` (a move of no distance is that one sample).
+///
+/// Ruckig plans it in units where the longest distance is 1 and the move lasts about 1 (the
+/// slowest motor's closed-form duration, [`double_s_duration`]): in raw counts and seconds
+/// its root finding failed on about one random move in five of the shipped robot (10⁴ counts,
+/// 10⁹ counts/s³), normalised on none of 25 000.
+pub fn rest_to_rest(
+    from: &[f64; MAX_MOTORS],
+    to: &[f64; MAX_MOTORS],
+    n_motors: usize,
+    limits: &MotionLimits,
+    period_s: f64,
+) -> Result<Vec<[f64; MAX_MOTORS]>, MoveToError> {
+    let n = n_motors.min(MAX_MOTORS);
+    let (from_v, to_v) = (from[..n].to_vec(), to[..n].to_vec());
+    let fail =
+        |reason: String| MoveToError::NoProfile { from: from_v.clone(), to: to_v.clone(), reason };
+    let distance = |m: usize| to[m] - from[m];
+    let length = (0..n).map(|m| distance(m).abs()).fold(0.0, f64::max);
+    let mut queue = vec![*from];
+    if length == 0.0 {
+        return Ok(queue);
+    }
+    let (v, a, j) = (limits.velocity, limits.acceleration, limits.jerk);
+    let tau = (0..n).map(|m| double_s_duration(distance(m), v[m], a[m], j[m])).fold(0.0, f64::max);
+    if !(tau.is_finite() && tau > 0.0) {
+        return Err(fail(format!("limits {v:?}, {a:?}, {j:?} counts/s, /s², /s³")));
+    }
+    let mut input = InputParameter::<MAX_MOTORS>::new(None);
+    for m in 0..MAX_MOTORS {
+        let used = m < n;
+        input.current_position[m] = 0.0;
+        input.target_position[m] = if used { distance(m) / length } else { 0.0 };
+        input.max_velocity[m] = if used { v[m] * tau / length } else { 1.0 };
+        input.max_acceleration[m] = if used { a[m] * tau * tau / length } else { 1.0 };
+        input.max_jerk[m] = if used { j[m] * tau * tau * tau / length } else { 1.0 };
+    }
+    let mut trajectory = Trajectory::<MAX_MOTORS>::new(None);
+    Ruckig::<MAX_MOTORS, ThrowErrorHandler>::new(None, period_s / tau)
+        .calculate(&input, &mut trajectory)
+        .map_err(|e| fail(e.to_string().lines().next().unwrap_or_default().to_string()))?;
+    let seconds = trajectory.get_duration() * tau;
+    let samples = (seconds / period_s).ceil();
+    let bytes = (samples + 1.0) * std::mem::size_of::<[f64; MAX_MOTORS]>() as f64;
+    if !seconds.is_finite() || bytes > QUEUE_BUDGET_BYTES as f64 {
+        return Err(MoveToError::TooLong { from: from_v, to: to_v, seconds });
+    }
+    let mut at = DataArrayOrVec::<f64, MAX_MOTORS>::new(None, 0.0);
+    let mut section = None;
+    queue.reserve(samples as usize);
+    for k in 1..samples as u64 {
+        let t = k as f64 * period_s / tau;
+        trajectory.at_time(t, &mut Some(&mut at), &mut None, &mut None, &mut None, &mut section);
+        let mut cmd = *from;
+        for (m, c) in cmd.iter_mut().enumerate().take(n) {
+            *c = from[m] + at[m] * length;
+        }
+        queue.push(cmd);
+    }
+    let mut last = *from;
+    last[..n].copy_from_slice(&to[..n]);
+    queue.push(last);
+    Ok(queue)
+}
+
+/// Jog (`qmarc-starter jog --motor M --counts N`): motor M moves N counts from where it is,
+/// the others hold, jerk-limited at `[jog] speed` of the motor's limits — or at
+/// `unhomed_speed` when its frame is not homed (then nothing says where its switches are).
+/// The software limits hold where it is homed (the loop checks them).
+#[derive(Debug, Clone)]
+pub struct Jog {
+    motor: usize,
+    counts: f64,
+    n_motors: usize,
+    period_s: f64,
+    limits: MotionLimits,
+    speed: f64,
+    unhomed_speed: f64,
+    homed: bool,
+    queue: Vec<[f64; MAX_MOTORS]>,
+}
+
+impl Jog {
+    /// The jog of the settings' `[jog]`: motor `jog.motor` by `jog.counts`.
+    pub fn from_settings(s: &Settings) -> Result<Jog, TrajBuildError> {
+        Ok(Jog {
+            motor: s.jog.motor - 1,
+            counts: s.jog.counts as f64,
+            n_motors: s.n_motors,
+            period_s: s.period_s(),
+            limits: MotionLimits::of(s),
+            speed: s.jog.speed,
+            unhomed_speed: s.jog.unhomed_speed,
+            homed: false,
+            queue: Vec::new(),
+        })
+    }
+}
+
+impl TrajectoryGenerator for Jog {
+    fn name(&self) -> &'static str {
+        "jog"
+    }
+
+    /// Before `start`: whether the jogged motor's frame is homed (its speed).
+    fn observe(&mut self, _: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
+        self.homed = flags[self.motor].homed();
+    }
+
+    fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+        let mut to = *start;
+        to[self.motor] += self.counts;
+        let speed = if self.homed { self.speed } else { self.unhomed_speed };
+        let limits = self.limits.at_speed(speed);
+        self.queue = rest_to_rest(start, &to, self.n_motors, &limits, self.period_s)?;
+        Ok(())
+    }
+
+    fn samples(&self) -> Option<u64> {
+        Some(self.queue.len() as u64)
+    }
+
+    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
+        Some(bounds_of(&self.queue))
+    }
+
+    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        Some([0.0; MAX_MOTORS])
+    }
+
+    #[inline]
+    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+        match self.queue.get(n as usize) {
+            Some(c) => {
+                *cmd = *c;
+                Sample::Ready
+            }
+            None => Sample::Done,
+        }
+    }
+}
+
+/// A path with the way to its start in front of it (`run --approach`): from where the motors
+/// are, a jerk-limited move at `trajectory.approach_speed` of their limits to the path's first
+/// command, then the path. Its samples before the path are the [`TrajectoryGenerator::lead_in`]
+/// the loop reports apart from the path's error figures.
+pub struct Approach {
+    path: Box<dyn TrajectoryGenerator>,
+    n_motors: usize,
+    period_s: f64,
+    limits: MotionLimits,
+    lead: Vec<[f64; MAX_MOTORS]>,
+}
+
+impl Approach {
+    /// `path`, approached from where the motors are at `speed` of `limits`.
+    pub fn new(
+        path: Box<dyn TrajectoryGenerator>,
+        n_motors: usize,
+        period_s: f64,
+        limits: MotionLimits,
+    ) -> Approach {
+        Approach { path, n_motors, period_s, limits, lead: Vec::new() }
+    }
+
+    /// The approach of the settings (`trajectory.approach_speed`) to `path`.
+    pub fn from_settings(path: Box<dyn TrajectoryGenerator>, s: &Settings) -> Approach {
+        let limits = MotionLimits::of(s).at_speed(s.trajectory.approach_speed);
+        Approach::new(path, s.n_motors, s.period_s(), limits)
+    }
+
+    fn lead_samples(&self) -> u64 {
+        self.lead.len() as u64
+    }
+}
+
+impl TrajectoryGenerator for Approach {
+    fn name(&self) -> &'static str {
+        self.path.name()
+    }
+
+    fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+        let Some(first) = self.path.first_command()? else {
+            self.lead.clear();
+            return self.path.start(start);
+        };
+        let mut way = rest_to_rest(start, &first, self.n_motors, &self.limits, self.period_s)?;
+        way.pop(); // its last sample is the path's first
+        self.lead = way;
+        self.path.start(&first)
+    }
+
+    fn samples(&self) -> Option<u64> {
+        self.path.samples().map(|s| s + self.lead_samples())
+    }
+
+    #[inline]
+    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+        match self.lead.get(n as usize) {
+            Some(c) => {
+                *cmd = *c;
+                Sample::Ready
+            }
+            None => self.path.sample(n - self.lead_samples(), cmd),
+        }
+    }
+
+    fn failure(&self) -> Option<String> {
+        self.path.failure()
+    }
+
+    fn failure_kind(&self) -> FaultKind {
+        self.path.failure_kind()
+    }
+
+    #[inline]
+    fn observe(&mut self, act: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
+        self.path.observe(act, flags);
+    }
+
+    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
+        let path = self.path.path_bounds()?;
+        let lead = bounds_of(&self.lead);
+        Some(std::array::from_fn(|m| (path[m].0.min(lead[m].0), path[m].1.max(lead[m].1))))
+    }
+
+    #[inline]
+    fn progress(&self) -> u32 {
+        self.path.progress()
+    }
+
+    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        self.path.end_velocity()
+    }
+
+    fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
+        self.path.homed_frame()
+    }
+
+    fn homing_report(&self) -> Option<&[MotorHomeReport]> {
+        self.path.homing_report()
+    }
+
+    fn lead_in(&self) -> u64 {
+        self.lead_samples()
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,117 @@
+//! The first motions of a real robot (issue 27, items 3 and 4): jog, and the move to a path's
+//! start before the path, on the simulated robot through the real processes.
+
+use qmarc_tests::{TestRun, knots, read_gather, read_summary};
+use std::time::Duration;
+
+const TIMEOUT: Duration = Duration::from_secs(120);
+
+/// The column of `name` in gather.csv's `header`.
+fn col(header: &[String], name: &str) -> usize {
+    header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no {name} in {header:?}"))
+}
+
+/// `run --approach`: from the work centre, where the simulated robot starts, a jerk-limited
+/// move to the X-Z path's first knot, then the path, at rest at both ends; the approach is
+/// reported apart from the path's figures. Without it the path is refused, saying so.
+#[test]
+fn run_with_the_approach_moves_to_the_paths_start_first_issue_27() {
+    let run = TestRun::new("approach");
+    let config = run.config_with(&[]);
+    let path = knots("xz-pick-place-spline.txt");
+    let args = |out: &std::path::Path, approach: bool| {
+        let mut a = vec![
+            format!("--config={}", config.display()),
+            format!("--out={}", out.display()),
+            "--deterministic".to_string(),
+            "run".to_string(),
+            format!("--knots={}", path.display()),
+        ];
+        if approach {
+            a.push("--approach".to_string());
+        }
+        a
+    };
+    let refused = run.out("refused");
+    let a = args(&refused, false);
+    let r = run.starter(&a.iter().map(String::as_str).collect::<Vec<_>>(), TIMEOUT);
+    assert_eq!(r.code, Some(3), "{}", r.stderr);
+    assert!(r.stderr.contains("move it there first (`run --approach` does)"), "{}", r.stderr);
+
+    let out = run.out("out");
+    let a = args(&out, true);
+    let r = run.starter(&a.iter().map(String::as_str).collect::<Vec<_>>(), TIMEOUT);
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stdout.contains("approach to the path's start from 0.0 0.0 0.0 cnt"), "{}", r.stdout);
+    let s = read_summary(&out);
+    let approach = s.approach.expect("the approach is reported");
+    assert_eq!(approach.from_counts, [0.0; 3]);
+    assert!(approach.samples > 100 && approach.cycles == approach.samples, "{approach:?}");
+    // The path's figures are the path's: its 997 samples, not the approach's.
+    assert_eq!(s.cycles, 997, "the X-Z path alone");
+    let (header, rows) = read_gather(&out);
+    let start = [3054.0, -952.0, -952.0];
+    let lead = approach.samples as usize;
+    for (m, want) in start.iter().enumerate() {
+        let cmd = col(&header, &format!("cmd{}", m + 1));
+        assert_eq!(rows[0][cmd], 0.0, "motor {}: the approach starts where it is", m + 1);
+        assert_eq!(rows[lead][cmd], *want, "motor {}: the path starts at its first knot", m + 1);
+        // The approach moves toward the start and never beyond it.
+        let (lo, hi) = (want.min(0.0), want.max(0.0));
+        assert!(rows[..lead].iter().all(|r| (lo..=hi).contains(&r[cmd])), "motor {}", m + 1);
+    }
+    run.assert_clean();
+}
+
+/// `jog`: one motor moves its counts from where it is, the others hold; where the frame is
+/// homed the software limits hold; where it is not, jog still moves (that is what it is for),
+/// more slowly.
+#[test]
+fn jog_moves_one_motor_within_the_soft_limits_and_slower_unhomed_issue_27() {
+    let run = TestRun::new("jog");
+    let config = run.config_with(&[]);
+    let jog = |config: &std::path::Path, out: &std::path::Path, counts: &str| {
+        run.starter(
+            &[
+                &format!("--config={}", config.display()),
+                &format!("--out={}", out.display()),
+                "--deterministic",
+                "jog",
+                "--motor=2",
+                &format!("--counts={counts}"),
+            ],
+            TIMEOUT,
+        )
+    };
+    let homed = run.out("homed");
+    let r = jog(&config, &homed, "-500");
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    let (header, rows) = read_gather(&homed);
+    let last = rows.last().unwrap();
+    for (m, want) in [0.0, -500.0, 0.0].iter().enumerate() {
+        assert_eq!(last[col(&header, &format!("cmd{}", m + 1))], *want, "motor {}", m + 1);
+        let act = last[col(&header, &format!("act{}", m + 1))];
+        assert!((act - want).abs() <= 2.0, "motor {} at {act}", m + 1);
+    }
+    assert_eq!(read_summary(&homed).mode.to_string(), "jog");
+    // Beyond the software limits (−9000 counts): refused before anything moves.
+    let r = jog(&config, &run.out("far"), "-12000");
+    assert_eq!(r.code, Some(3), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("motor 2: the path reaches -12000.0 counts, outside its software limits"),
+        "{}",
+        r.stderr
+    );
+    // Unhomed: it jogs, at jog.unhomed_speed, so the same jog takes longer.
+    let unhomed = run.config_as(
+        "unhomed.toml",
+        &qmarc_tests::default_config(),
+        &[("homed", "false"), ("state_file", "\"\"")],
+    );
+    let slow = run.out("slow");
+    let r = jog(&unhomed, &slow, "-500");
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    let (s_homed, s_slow) = (read_summary(&homed), read_summary(&slow));
+    assert!(s_slow.cycles > 2 * s_homed.cycles, "{} vs {}", s_slow.cycles, s_homed.cycles);
+    run.assert_clean();
+}
