@@ -599,3 +599,47 @@ fn console_charts_a_running_move_live_then_its_results_issue_16() {
     drop(tmux);
     run.assert_clean();
 }
+
+/// Issue 27, item 3: the jog keys in the console: Ctrl-↓ chooses motor 2, Ctrl-→ jogs it by
+/// `[jog] counts` through the starter, and its results show; nothing else moved.
+#[test]
+fn the_console_jogs_a_motor_with_its_keys_issue_27() {
+    let run = TestRun::new("consjog");
+    run.config_with(&[]);
+    let edit = |key: &str, value: &str| {
+        let text = std::fs::read_to_string(run.dir.join("qmarc.toml")).expect("settings");
+        let text = text
+            .lines()
+            .map(|l| {
+                if l.starts_with(&format!("{key} =")) {
+                    format!("{key} = {value}")
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        std::fs::write(run.dir.join("qmarc.toml"), text + "\n").expect("settings");
+    };
+    edit("out_dir", &format!("{:?}", run.out("out").display().to_string()));
+    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
+    tmux.wait_for("the setup screen", Duration::from_secs(30), setup_drawn);
+    tmux.keys(&["F4"]);
+    tmux.wait_for("the results page", Duration::from_secs(10), |s| s.contains("No move yet"));
+    tmux.keys(&["C-Down"]);
+    tmux.wait_for("motor 2 chosen", Duration::from_secs(10), |s| s.contains("jog: motor 2"));
+    tmux.keys(&["C-Right"]);
+    let s = tmux.wait_for("the jog's results", Duration::from_secs(60), results_drawn);
+    assert!(s.contains("jog"), "{s}");
+    let summary = qmarc_tests::read_summary(&run.out("out"));
+    assert_eq!(summary.mode.to_string(), "jog");
+    let (header, rows) = qmarc_tests::read_gather(&run.out("out"));
+    let last = rows.last().expect("rows");
+    let cmd = |m: usize| last[header.iter().position(|h| *h == format!("cmd{m}")).expect("cmd")];
+    assert_eq!((cmd(1), cmd(2), cmd(3)), (0.0, 100.0, 0.0), "motor 2 by [jog] counts");
+    tmux.keys(&["F12"]);
+    let (status, s) = tmux.wait_exit(Duration::from_secs(20));
+    assert_eq!(status, 0, "{s}");
+    drop(tmux);
+    run.assert_clean();
+}

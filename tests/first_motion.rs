@@ -115,3 +115,74 @@ fn jog_moves_one_motor_within_the_soft_limits_and_slower_unhomed_issue_27() {
     assert!(s_slow.cycles > 2 * s_homed.cycles, "{} vs {}", s_slow.cycles, s_homed.cycles);
     run.assert_clean();
 }
+
+/// `check`: with the loop open, each motor in turn gets `[check] volts`; a robot whose motors
+/// count up as they should passes, on the simulator and through the 626 backend on the fake
+/// card; a motor whose amplifier is wired backwards (`sim.reversed_motor`) fails the check
+/// (exit 2) with what to change, and nothing else moved.
+#[test]
+fn check_finds_a_motor_wired_backwards_and_says_what_to_change_issue_27() {
+    let run = TestRun::new("check");
+    let good = run.config_with(&[]);
+    let out = run.out("good");
+    let r = run.starter(
+        &[
+            &format!("--config={}", good.display()),
+            &format!("--out={}", out.display()),
+            "--deterministic",
+            "check",
+        ],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    let s = read_summary(&out);
+    let check = s.check.expect("the check's report");
+    for m in &check {
+        assert!(m.ok, "{m:?}");
+        // The simulated amplifier is 23 650 counts/s per V; the whole move of a pulse counts.
+        assert!((m.counts_per_volt_second / 23_650.0 - 1.0).abs() < 0.01, "{m:?}");
+        assert_eq!(m.other_moved_counts, 0.0, "{m:?}");
+    }
+    let reversed =
+        run.config_as("rev.toml", &qmarc_tests::default_config(), &[("sim.reversed_motor", "2")]);
+    let out = run.out("reversed");
+    let r = run.starter(
+        &[
+            &format!("--config={}", reversed.display()),
+            &format!("--out={}", out.display()),
+            "--deterministic",
+            "check",
+        ],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stdout.contains("QMARC check: CHECK FAILED"), "{}", r.stdout);
+    assert!(
+        r.stdout.contains("motor 2: counted DOWN")
+            && r.stdout.contains("set motor 2's entry of s626.dac_sign to -1"),
+        "{}",
+        r.stdout
+    );
+    let check = read_summary(&out).check.expect("the check's report");
+    assert_eq!(check.iter().map(|m| m.ok).collect::<Vec<_>>(), [true, false, true]);
+    // Through the 626 backend against the fake card, in its 1× counts: it passes.
+    let card = run.config_as(
+        "card.toml",
+        &qmarc_tests::s626_config(),
+        &[("hwserver.watchdog_periods", "2500"), ("safety.max_missed_in_row", "2500")],
+    );
+    let out = run.out("card");
+    let r = run.starter(
+        &[
+            &format!("--config={}", card.display()),
+            &format!("--out={}", out.display()),
+            "--device=fake",
+            "check",
+        ],
+        TIMEOUT,
+    );
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    let check = read_summary(&out).check.expect("the check's report");
+    assert!(check.iter().all(|m| m.ok && m.moved_counts > 0.0), "{check:?}");
+    run.assert_clean();
+}

@@ -19,6 +19,7 @@
 //! ```
 #![deny(missing_docs)]
 
+mod check;
 mod error;
 mod gather;
 mod general;
@@ -37,6 +38,7 @@ mod timer;
 mod trajectory;
 mod tune;
 
+pub use check::{CheckSettings, MAX_CHECK_PULSE_S, MAX_CHECK_VOLTS};
 pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
@@ -113,6 +115,9 @@ pub struct Settings {
     /// `[jog]`: moving one motor by hand.
     #[serde(default)]
     pub jog: JogSettings,
+    /// `[check]`: the open-loop first motion.
+    #[serde(default)]
+    pub check: CheckSettings,
     /// Homing.
     pub homing: HomingSettings,
     /// Missed periods in a row that end a move (`overrun`).
@@ -179,6 +184,8 @@ struct RawFile {
     #[serde(default)]
     jog: jog::RawJog,
     #[serde(default)]
+    check: check::RawCheck,
+    #[serde(default)]
     trajectory: trajectory::RawTrajectory,
     #[serde(default)]
     homing: homing::RawHoming,
@@ -211,6 +218,7 @@ impl RawFile {
         let trajectory = self.trajectory.check(src, names)?;
         let step = self.step.check(src, trajectory.max_duration_s)?;
         let jog = self.jog.check(src, n_motors)?;
+        let check = self.check.check(src)?;
         let hwserver = self.hwserver.check(src, names)?;
         self.hwserver.check_spin_cpu(src, &hwserver, &timer)?;
         let sim = self.sim.check(src, n_motors)?;
@@ -297,6 +305,7 @@ impl RawFile {
             step,
             trajectory,
             jog,
+            check,
             homing,
             max_missed_in_row: self.safety.check(src, &hwserver.backend)?,
             sim,

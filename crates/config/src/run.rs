@@ -22,6 +22,8 @@ pub enum Mode {
     Home,
     /// Move one motor by hand, jerk-limited ([jog]).
     Jog,
+    /// The open-loop first motion: a small voltage on each motor in turn ([check]).
+    Check,
 }
 
 impl std::fmt::Display for Mode {
@@ -31,6 +33,7 @@ impl std::fmt::Display for Mode {
             Mode::Run => "run",
             Mode::Home => "home",
             Mode::Jog => "jog",
+            Mode::Check => "check",
         })
     }
 }
@@ -43,7 +46,8 @@ impl std::str::FromStr for Mode {
             "run" => Ok(Mode::Run),
             "home" => Ok(Mode::Home),
             "jog" => Ok(Mode::Jog),
-            other => Err(format!("unknown mode `{other}`: step, run, home or jog")),
+            "check" => Ok(Mode::Check),
+            other => Err(format!("unknown mode `{other}`: step, run, home, jog or check")),
         }
     }
 }

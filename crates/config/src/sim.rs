@@ -40,6 +40,10 @@ pub struct SimSettings {
     pub stall_motor: Option<usize>,
     /// Fault injection: this motor's (1-based) top switch sticks once tripped.
     pub stuck_top_motor: Option<usize>,
+    /// Fault injection: this motor (1-based) moves against its command (an amplifier wired
+    /// the other way round; also the plant of `--device fake`).
+    #[serde(default)]
+    pub reversed_motor: Option<usize>,
     /// Fault injection: the emergency-stop chain is open from the first to the second time,
     /// s of the simulator's clock since the hwserver started (a button pressed, then
     /// released); `None`: never.
@@ -66,6 +70,7 @@ impl Default for SimSettings {
             counter_offset: 0,
             stall_motor: None,
             stuck_top_motor: None,
+            reversed_motor: None,
             estop_open_s: None,
             events_file: None,
             state_file: Some(PathBuf::from(DEFAULT_SIM_STATE_FILE)),
@@ -88,6 +93,7 @@ pub(crate) struct RawSim {
     counter_offset: S<i64>,
     stall_motor: S<i64>,
     stuck_top_motor: S<i64>,
+    reversed_motor: S<i64>,
     estop_open_s: S<Vec<f64>>,
     events_file: S<String>,
     state_file: S<String>,
@@ -180,6 +186,7 @@ impl RawSim {
             )?,
             stall_motor: motor(&self.stall_motor, "sim.stall_motor")?,
             stuck_top_motor: motor(&self.stuck_top_motor, "sim.stuck_top_motor")?,
+            reversed_motor: motor(&self.reversed_motor, "sim.reversed_motor")?,
             estop_open_s: src
                 .take(&self.estop_open_s, "sim.estop_open_s", Vec::new(), |v| match v.as_slice() {
                     [] => Ok(()),

@@ -95,7 +95,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         "[bogus]\nx = 1\n",
-        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `jog`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `robot`, `motor`",
+        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `jog`, `check`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `robot`, `motor`",
     );
     check(
         "[trajectory]\nmethod = \"home\"\n",

@@ -7,6 +7,9 @@ use crate::runner::{Mode, Running};
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
 use std::path::PathBuf;
 
+mod hints;
+mod jog;
+
 /// The console's pages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Page {
@@ -71,6 +74,8 @@ pub struct App {
     pub history: Vec<HistoryEntry>,
     /// The motor the charts show (0-based).
     pub chart_motor: usize,
+    /// The motor the jog keys move (1-based).
+    pub jog_motor: usize,
     /// Set when the console should end.
     pub quit: Option<Quit>,
     /// `qmarc-starter`.
@@ -101,6 +106,7 @@ impl App {
             live: None,
             history: Vec::new(),
             chart_motor: 0,
+            jog_motor: 1,
             quit: None,
             starter,
             starter_args: Vec::new(),
@@ -120,46 +126,6 @@ impl App {
     pub(crate) fn say(&mut self, msg: impl Into<String>, error: bool) {
         self.status = (msg.into(), error);
         self.said = true;
-    }
-
-    /// What the message line says when no message is due: the keys of the page shown (on
-    /// the setup page, the focused field's error or keys). A hint never outlives its page.
-    fn hint(&mut self) {
-        let keys = match self.page {
-            Page::Setup => return self.field_hint(),
-            Page::Log => "↑↓ PgUp PgDn scroll · Home: first line · End: follow the output",
-            Page::Charts => "←/→ or 1–4: the motor charted",
-            Page::Results | Page::History => {
-                "↑↓ PgUp PgDn Home End scroll · F7 charts · F8 history"
-            }
-        };
-        self.status = (keys.to_string(), false);
-    }
-
-    /// The focused field's error or the keys, on the message line.
-    fn field_hint(&mut self) {
-        match self.form.fields.get(self.focus).and_then(|f| f.error.clone()) {
-            Some(e) => self.status = (e, true),
-            None => match &self.form.file_error {
-                Some(e) => self.status = (e.clone(), true),
-                None => {
-                    let Some(f) = self.form.fields.get(self.focus) else { return };
-                    let keys = match (f.kind, f.place.motor()) {
-                        (Kind::Choice, _) => "←→ or space chooses · Tab/↑↓ next field".to_string(),
-                        (_, Some(_)) => {
-                            "type a value, Esc undoes · Tab/↑↓ next field · ←→ motor".to_string()
-                        }
-                        (_, None) => "type a value, Esc undoes · Tab/↑↓ next field".to_string(),
-                    };
-                    // A gain cell may be too narrow for its value: the message line has it whole.
-                    let name = match f.place.motor() {
-                        Some(_) => format!("{} = {}", f.name(), f.text),
-                        None => f.name(),
-                    };
-                    self.status = (format!("{name}: {keys}"), false)
-                }
-            },
-        }
     }
 
     /// The output directory of the settings as they stand.
@@ -283,6 +249,8 @@ impl App {
             Mode::Step => Action::Step,
             // It runs the path.
             Mode::Tune => Action::Run,
+            // As homing: the settings, and no knot file.
+            Mode::Jog { .. } => Action::Home,
         };
         if let Some((field, e)) = self.form.blocking(action) {
             if let Some(i) = field {
@@ -315,7 +283,10 @@ impl App {
                 self.page = Page::Log;
                 self.say(format!("{} running · F9 aborts (motors disabled)", mode.arg()), false);
             }
-            Err(e) => self.say(format!("cannot start {}: {e}", self.starter.display()), true),
+            Err(e) => self.say(
+                format!("cannot start {} ({}): {e}", mode.arg(), self.starter.display()),
+                true,
+            ),
         }
     }
 
@@ -476,6 +447,10 @@ impl App {
             KeyCode::F(6) => self.start(Mode::Step),
             KeyCode::F(9) => self.abort_key(),
             KeyCode::Char('t') if ctrl => self.start(Mode::Tune),
+            KeyCode::Left if ctrl => self.jog(-1),
+            KeyCode::Right if ctrl => self.jog(1),
+            KeyCode::Up if ctrl => self.jog_motor_by(-1),
+            KeyCode::Down if ctrl => self.jog_motor_by(1),
             KeyCode::Char('a') if ctrl => self.apply_tuned(),
             KeyCode::F(10) => {
                 if self.running.is_some() {

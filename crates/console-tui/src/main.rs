@@ -170,7 +170,7 @@ fn plain_subcommand(raw: &[OsString]) -> Option<(Option<PathBuf>, Vec<OsString>)
             pass.push(a.clone());
             pass.extend(it.next().cloned());
         } else {
-            mode = matches!(s.as_ref(), "home" | "step" | "run" | "jog");
+            mode = matches!(s.as_ref(), "home" | "step" | "run" | "jog" | "check");
             if !mode && !s.starts_with('-') {
                 return None;
             }
@@ -181,7 +181,8 @@ fn plain_subcommand(raw: &[OsString]) -> Option<(Option<PathBuf>, Vec<OsString>)
 }
 
 fn main() -> ExitCode {
-    // `qmarc home|step|run|jog …`: the starter's command line, run in place of this process.
+    // `qmarc home|step|run|jog|check …`: the starter's command line, run in place of this
+    // process.
     let raw: Vec<OsString> = std::env::args_os().skip(1).collect();
     // `qmarc scope …`: a running move's live telemetry.
     if raw.first().is_some_and(|a| a == "scope") {

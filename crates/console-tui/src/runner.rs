@@ -27,6 +27,13 @@ pub enum Mode {
     Step,
     /// `tune run`: the gains tuned on the settings' path.
     Tune,
+    /// `jog --motor M --counts N`: one motor moved by hand.
+    Jog {
+        /// 1-based motor.
+        motor: usize,
+        /// How far, counts.
+        counts: i64,
+    },
 }
 
 impl Mode {
@@ -37,18 +44,27 @@ impl Mode {
             Mode::Run => "run",
             Mode::Step => "step",
             Mode::Tune => "tune",
+            Mode::Jog { .. } => "jog",
         }
     }
 
     /// The starter's arguments after `--config`.
-    pub fn args(self) -> &'static [&'static str] {
-        match self {
+    pub fn args(self) -> Vec<String> {
+        let fixed: &[&str] = match self {
             Mode::Home => &["home"],
             // The path, from wherever the motors are: an approach to its start first.
             Mode::Run => &["run", "--approach"],
             Mode::Step => &["step"],
             Mode::Tune => &["tune", "run"],
-        }
+            Mode::Jog { motor, counts } => {
+                return vec![
+                    "jog".into(),
+                    format!("--motor={motor}"),
+                    format!("--counts={counts}"),
+                ];
+            }
+        };
+        fixed.iter().map(|a| a.to_string()).collect()
     }
 }
 

@@ -45,11 +45,13 @@ pub enum FaultKind {
     BadOutput,
     /// The emergency-stop chain opened (pressed, or a broken wire).
     EmergencyStop,
+    /// A motor moved further than a move with the loop open allows (`check`).
+    TooMuchTravel,
 }
 
 impl FaultKind {
     /// Every kind, in the order of their codes ([`FaultKind::code`]).
-    pub const ALL: [FaultKind; 18] = [
+    pub const ALL: [FaultKind; 19] = [
         FaultKind::LimitSwitch,
         FaultKind::HwserverLost,
         FaultKind::HwserverShutdown,
@@ -68,6 +70,7 @@ impl FaultKind {
         FaultKind::BadCommand,
         FaultKind::BadOutput,
         FaultKind::EmergencyStop,
+        FaultKind::TooMuchTravel,
     ];
 
     /// Its number in a telemetry sample (`fault` there is this + 1; 0 is no fault).
@@ -101,6 +104,7 @@ impl FaultKind {
             FaultKind::BadCommand => "bad_command",
             FaultKind::BadOutput => "bad_output",
             FaultKind::EmergencyStop => "emergency_stop",
+            FaultKind::TooMuchTravel => "too_much_travel",
         }
     }
 }
@@ -281,6 +285,9 @@ impl Fault {
                 self.value, self.limit
             ),
             FaultKind::HomingFailed => "homing failed".to_string(),
+            FaultKind::TooMuchTravel => {
+                "the open-loop check stopped: a motor moved too far".to_string()
+            }
             FaultKind::ControllerLost => "the controller died".to_string(),
             FaultKind::BadCommand => format!(
                 "the trajectory commanded motor {} to {} counts, not a finite number: the \

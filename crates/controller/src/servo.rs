@@ -14,11 +14,13 @@ use crate::plan::MovePlan;
 use crate::stats::{ErrorStats, TimingStats};
 use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
-use qmarc_timer::{Clock, Tick, TickerError};
+use qmarc_timer::{Clock, Tick};
 
+mod error;
 mod limits;
 mod live;
 mod run;
+pub use error::MoveError;
 
 /// Where a move is. `run` goes Idle → Preparing → Moving (or Homing) → Settling → Done, or to
 /// Fault from Preparing onwards; Holding lies between Moving and Fault when a knot stream runs
@@ -79,57 +81,6 @@ impl Phase {
             Phase::Fault => "fault",
         }
     }
-}
-
-/// The move could not start (nothing was enabled), or its timer failed.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum MoveError {
-    /// The hwserver did not answer during set-up.
-    #[error("hwserver link failed before the move: {0}")]
-    Link(#[from] LinkError),
-    /// The hwserver reported a problem before any motor was enabled.
-    #[error("the hwserver reports {0} before the move: refused to enable the motors")]
-    Refused(Status),
-    /// The emergency-stop chain is open: nothing may move until it is closed.
-    #[error(
-        "EMERGENCY STOP: the emergency-stop chain is open (pressed, or a broken wire): release \
-         it or mend the chain, then move again; nothing was enabled"
-    )]
-    EmergencyStop,
-    /// The trajectory cannot start from where the robot is.
-    #[error(transparent)]
-    Trajectory(#[from] TrajStartError),
-    /// The timer could not be armed or waited on.
-    #[error(transparent)]
-    Timer(#[from] TickerError),
-    /// The gathered data would not fit its memory budget.
-    #[error(transparent)]
-    Gather(#[from] crate::gather::GatherBudgetError),
-    /// A motor's frame is not homed.
-    #[error(
-        "motor {motor} is not homed: run `qmarc-starter home` first, or give --unhomed (software \
-         limits off)"
-    )]
-    NotHomed {
-        /// 1-based motor.
-        motor: usize,
-    },
-    /// The path leaves the software limits.
-    #[error(
-        "motor {motor}: the path reaches {value:.1} counts, outside its software limits \
-         [{min}, {max}]: refused before the move"
-    )]
-    OutsideSoftLimits {
-        /// 1-based motor.
-        motor: usize,
-        /// The extreme command, counts.
-        value: f64,
-        /// Lower limit.
-        min: f64,
-        /// Upper limit.
-        max: f64,
-    },
 }
 
 /// How a cycle ended.
@@ -272,6 +223,11 @@ impl Servo {
         self.generator.homing_report()
     }
 
+    /// What each motor did in an open-loop check, after one.
+    pub fn check_report(&self) -> Option<&[crate::traj::MotorCheckReport]> {
+        self.generator.check_report()
+    }
+
     /// The plan.
     pub fn plan(&self) -> &MovePlan {
         &self.plan
@@ -301,7 +257,9 @@ impl Servo {
     /// (a bad knot in a stream, why homing failed).
     pub fn failure(&self) -> Option<String> {
         match self.fault?.kind {
-            FaultKind::TrajectoryError | FaultKind::HomingFailed => self.generator.failure(),
+            FaultKind::TrajectoryError | FaultKind::HomingFailed | FaultKind::TooMuchTravel => {
+                self.generator.failure()
+            }
             _ => None,
         }
     }

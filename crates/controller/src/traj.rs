@@ -184,6 +184,32 @@ pub trait TrajectoryGenerator: Send {
     fn lead_in(&self) -> u64 {
         0
     }
+
+    /// After an open-loop check: what each motor did for its voltage (the report's `check`).
+    /// Not called in the loop. Default: none.
+    fn check_report(&self) -> Option<&[MotorCheckReport]> {
+        None
+    }
+}
+
+/// What one motor did in the open-loop check (`qmarc-starter check`), counts.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct MotorCheckReport {
+    /// 1-based motor.
+    pub motor: usize,
+    /// The voltage it got, V.
+    pub volts: f64,
+    /// For how long, s.
+    pub seconds: f64,
+    /// How far it moved while driven, counts (positive: up, as a positive voltage should).
+    pub moved_counts: f64,
+    /// How far it went on in the rest after, counts.
+    pub coasted_counts: f64,
+    /// The largest distance another motor moved while this one was driven, and which (1-based;
+    /// 0: none moved): crossed DACs or counters show here.
+    pub others_moved: (usize, f64),
+    /// Its pulse ran to its end.
+    pub done: bool,
 }
 
 /// Where homing found and left one motor, counts in the frame before homing.

@@ -21,6 +21,17 @@ use util::{CoreLink, CountingAllocator, ThreadCounters, allocations, knots, sett
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
+/// Every law the loop runs: the registry's, and the check's open loop (which the runner
+/// picks for `check`, whatever `general.law` says).
+fn all_laws() -> Vec<qmarc_plugins::registry::LawEntry> {
+    let open_loop = qmarc_plugins::registry::LawEntry {
+        name: "open-loop",
+        description: "the check's",
+        build: |s| Box::new(qmarc_plugins::check::OpenLoop::from_settings(s)),
+    };
+    LAWS.iter().copied().chain([open_loop]).collect()
+}
+
 fn plan(n_motors: usize) -> MovePlan {
     MovePlan {
         starve_hold_cycles: 25,
@@ -50,7 +61,8 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
         let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
         s.trajectory.knots = Some(knots(example));
         s.jog.counts = 20_000; // a jog longer than the cycles counted
-        for l in LAWS {
+        s.check.rest_s = 5.0; // a check longer than the cycles counted
+        for l in all_laws() {
             let generator = (g.build)(&s).unwrap();
             // With live telemetry, a sample every cycle into a ring nobody empties.
             let (telemetry, _ring) = qmarc_controller::telemetry::ring(1);
@@ -206,17 +218,18 @@ fn servo_cycle_makes_no_system_call_under_seccomp_strict_mode() {
         );
         assert_eq!(
             stdout.matches("strict mode: 3000 cycles, 0 reads, 0 writes").count(),
-            GENERATORS.len() * LAWS.len(),
+            GENERATORS.len() * all_laws().len(),
             "{stdout}"
         );
         return;
     }
     for g in GENERATORS {
-        for l in LAWS {
+        for l in all_laws() {
             let mut s = settings();
             let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
             s.trajectory.knots = Some(knots(example));
             s.jog.counts = 20_000; // a jog longer than the cycles counted
+            s.check.rest_s = 5.0; // a check longer than the cycles counted
             let (telemetry, ring) = qmarc_controller::telemetry::ring(1);
             let mut servo = Servo::new(
                 plan(3),

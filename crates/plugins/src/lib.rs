@@ -1,6 +1,6 @@
 //! The plug-ins of the servo loop: the trajectory generators (the thesis' step, the offline
-//! natural cubic spline, the online PVT, homing, and the jerk-limited moves from rest to rest:
-//! jog and the approach to a path's start), the servo law (PID with feed-forward and a
+//! natural cubic spline, the online PVT, homing, the jerk-limited moves from rest to rest —
+//! jog and the approach to a path's start — and the open-loop check), the servo law (PID with feed-forward and a
 //! notch, thesis eq. 3-1 and 3-2), the knot files they read (thesis A.2.3), and the
 //! [`registry`] that names them — the settings file, the command line and the console choose
 //! from it. The traits they implement are the loop's (`qmarc_controller::traj`,
@@ -16,6 +16,7 @@
 
 #[doc = include_str!("../../../docs/extending.md")]
 pub mod extending {}
+pub mod check;
 pub mod homing;
 pub mod knots;
 pub mod moveto;

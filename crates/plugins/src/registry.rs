@@ -2,6 +2,7 @@
 //! type plus one line here; the settings file, the command line and the console list and
 //! choose from these tables (see `docs/extending.md`).
 
+use crate::check::Check;
 use crate::homing::Homing;
 use crate::moveto::Jog;
 use crate::pidff::PidFf;
@@ -65,6 +66,12 @@ pub const GENERATORS: &[GeneratorEntry] = &[
         build: |s| Ok(Box::new(Homing::from_settings(s))),
     },
     GeneratorEntry {
+        name: "check",
+        description: "the open-loop first motion: [check] volts on each motor in turn, watched",
+        needs_knots: false,
+        build: |s| Ok(Box::new(Check::from_settings(s))),
+    },
+    GeneratorEntry {
         name: "jog",
         description: "one motor by [jog] counts, jerk-limited from rest to rest (Ruckig)",
         needs_knots: false,
@@ -98,7 +105,12 @@ pub fn generator_names() -> Vec<&'static str> {
     GENERATORS.iter().map(|e| e.name).collect()
 }
 
-/// Names of the generators `run` accepts: every one that follows a path (not homing, not jog).
+/// Names of the generators `run` accepts: every one that follows a path (not homing, jog or
+/// the check).
 pub fn path_generator_names() -> Vec<&'static str> {
-    GENERATORS.iter().filter(|e| !matches!(e.name, "home" | "jog")).map(|e| e.name).collect()
+    GENERATORS
+        .iter()
+        .filter(|e| !matches!(e.name, "home" | "jog" | "check"))
+        .map(|e| e.name)
+        .collect()
 }

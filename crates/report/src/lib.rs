@@ -1,6 +1,7 @@
 //! What a move leaves behind, written after it: `summary.json` (its schema, [`summary`], and
 //! how it is made from the loop's figures, [`summarize`]), `gather.csv` and `gather.m`
-//! ([`files`]) and read back ([`series`]), the Cartesian figures ([`effector`]), the output folder's rules ([`output`]: checked, locked, replaced as one set,
+//! ([`files`]) and read back ([`series`]), the Cartesian figures ([`effector`]), the open-loop
+//! check's ([`check`]), the output folder's rules ([`output`]: checked, locked, replaced as one set,
 //! a rescue folder), the table the starter prints ([`table`]) and the rows of repeated trials ([`trials`]).
 //!
 //! ```
@@ -9,6 +10,8 @@
 //! ```
 #![deny(missing_docs)]
 
+/// The open-loop check's report.
+pub mod check;
 pub mod effector;
 pub mod files;
 pub mod output;

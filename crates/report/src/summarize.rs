@@ -143,5 +143,8 @@ pub fn summarize(
         starter_pid: nix::unistd::getppid().as_raw() as u32,
         files: Vec::new(),
         homing: None,
+        check: servo
+            .check_report()
+            .map(|r| r.iter().map(|m| crate::check::MotorCheck::of(settings, m)).collect()),
     }
 }

@@ -303,6 +303,9 @@ pub struct Summary {
     /// and what the hwserver read right after the counters were preset.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub homing: Option<HomingReport>,
+    /// `check` only: what each motor did for its voltage, and what to change.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub check: Option<Vec<crate::check::MotorCheck>>,
 }
 
 impl Summary {
@@ -363,6 +366,7 @@ impl Summary {
             starter_pid: std::process::id(),
             files: Vec::new(),
             homing: None,
+            check: None,
         }
     }
 }

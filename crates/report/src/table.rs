@@ -5,10 +5,40 @@
 use crate::summary::{MotorSummary, Pct, Summary};
 use std::fmt::Write;
 
+/// The open-loop check: per motor what it did and what it means.
+fn check_lines(t: &mut String, check: &[crate::check::MotorCheck]) {
+    if let Some(first) = check.first() {
+        let _ = writeln!(
+            t,
+            "\n  open-loop check: {:.2} V for {} on each motor in turn, the loop open",
+            first.volts,
+            human_s(first.seconds)
+        );
+    }
+    let mut rows =
+        vec![["motor", "moved cnt", "cnt/s per V", "expected", ""].map(String::from).to_vec()];
+    for m in check {
+        rows.push(vec![
+            m.motor.to_string(),
+            format!("{:.1}", m.moved_counts),
+            format!("{:.0}", m.counts_per_volt_second),
+            format!("{:.0}", m.expected_counts_per_volt_second),
+            if m.ok { "ok".into() } else { "CHANGE".into() },
+        ]);
+    }
+    aligned(t, &rows);
+    for m in check {
+        let _ = writeln!(t, "  {}", m.advice);
+    }
+}
+
 /// Renders `s` as a table for the terminal, ending with the data files it wrote that exist.
 pub fn render(s: &Summary) -> String {
     let mut t = String::new();
+    let check_failed = s.check.as_ref().is_some_and(|c| c.iter().any(|m| !m.ok));
     let verdict = match &s.fault {
+        None if check_failed => "CHECK FAILED: see below what to change".to_string(),
+        None if s.ok && s.check.is_some() => "ok".to_string(),
         None if s.ok && s.motors.iter().all(|m| m.followed) => "ok".to_string(),
         None if s.ok => "done, but a motor did not follow its command (see the warnings)".into(),
         None => "FAILED".to_string(),
@@ -26,6 +56,9 @@ pub fn render(s: &Summary) -> String {
         if s.degraded { " — DEGRADED: not real time" } else { "" },
         if s.deterministic { ", deterministic (simulated time)" } else { "" },
     );
+    if let Some(check) = &s.check {
+        check_lines(&mut t, check);
+    }
     if let Some(homing) = &s.homing {
         let _ = writeln!(t, "\n  homing (counts in the frame before homing)");
         for r in &homing.motors {
@@ -41,7 +74,9 @@ pub fn render(s: &Summary) -> String {
             );
         }
     }
-    if !s.motors.is_empty() {
+    // The check's command is where the motors are: it has no following error to show.
+    let closed_loop = s.check.is_none();
+    if !s.motors.is_empty() && closed_loop {
         let _ = writeln!(t, "\n  following error (command − actual), every cycle of the path");
         error_table(&mut t, &s.motors, true);
     }
@@ -56,7 +91,7 @@ pub fn render(s: &Summary) -> String {
         }
         _ => {}
     }
-    if let Some(e) = &s.effector {
+    if let Some(e) = s.effector.as_ref().filter(|_| closed_loop) {
         let _ = writeln!(
             t,
             "\n  end-effector error (command − actual through the forward kinematics), {} rows{}",

@@ -109,6 +109,7 @@ pub fn generator_name(mode: Mode, settings: &Settings) -> &str {
         Mode::Run => &settings.trajectory.method,
         Mode::Home => "home",
         Mode::Jog => "jog",
+        Mode::Check => "check",
     }
 }
 
@@ -202,8 +203,12 @@ pub fn build_servo(spec: &RunSpec, progress: Option<Progress>) -> Result<Servo, 
     if spec.mode == Mode::Run && settings.trajectory.approach {
         path = Box::new(qmarc_plugins::moveto::Approach::from_settings(path, settings));
     }
-    Ok(Servo::new(plan, path, (law.build)(settings), Box::new(MonotonicClock))
-        .with_progress(progress))
+    // The check runs with the loop open: its own law, whatever general.law says.
+    let law: Box<dyn qmarc_controller::law::ServoLaw> = match spec.mode {
+        Mode::Check => Box::new(qmarc_plugins::check::OpenLoop::from_settings(settings)),
+        _ => (law.build)(settings),
+    };
+    Ok(Servo::new(plan, path, law, Box::new(MonotonicClock)).with_progress(progress))
 }
 
 /// The ticker of `timer.method` (the benchmark's bare loop takes the same).
@@ -308,9 +313,9 @@ pub fn stream_gather_samples(settings: &Settings) -> u64 {
 }
 
 /// The plan of `mode` with `settings`: the limits of the settings, software limits only in a
-/// homed frame (off when homing or with `--unhomed`; the loop checks them only for homed
-/// motors), homing required unless homing, jogging or `--unhomed`, the hwserver's switch latch
-/// off while homing.
+/// homed frame (off when homing, checking or with `--unhomed`; the loop checks them only for
+/// homed motors), homing required unless homing, jogging, checking or `--unhomed`, the
+/// hwserver's switch latch off while homing.
 pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: bool) -> MovePlan {
     let homing = mode == Mode::Home;
     let mut limits = MoveLimits::none();
@@ -320,7 +325,7 @@ pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: b
         limits.max_following_error[m] = s.max_following_error_counts;
         limits.max_integrated_error[m] = s.max_integrated_error_counts;
     }
-    limits.soft = (!homing && !unhomed).then_some(soft);
+    limits.soft = (!homing && !unhomed && mode != Mode::Check).then_some(soft);
     // Lock-step time is simulated: a host stall skips no sample there, so it is no overrun.
     limits.max_missed_in_row = if deterministic { u64::MAX } else { settings.max_missed_in_row };
     MovePlan {
@@ -329,15 +334,15 @@ pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: b
         deterministic,
         starve_hold_cycles: (settings.trajectory.starve_hold_ms * 1e6 / settings.period_ns() as f64)
             .ceil() as u64,
-        // Homing settles every motor at home itself.
-        settle_cycles: if homing {
+        // Homing settles every motor at home itself; the check rests after each pulse.
+        settle_cycles: if homing || mode == Mode::Check {
             0
         } else {
             (settings.trajectory.settle_s / settings.period_s()).round() as u64
         },
         stream_gather_samples: stream_gather_samples(settings),
         limits,
-        require_homed: !homing && !unhomed && mode != Mode::Jog,
+        require_homed: !homing && !unhomed && !matches!(mode, Mode::Jog | Mode::Check),
         monitor_switches: !homing,
         ..MovePlan::new(mode, settings.n_motors, settings.period_ns())
     }

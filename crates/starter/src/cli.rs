@@ -112,6 +112,11 @@ pub enum Command {
     /// Move one motor by hand: `--counts` from where it is, jerk-limited and slow (`[jog]`),
     /// the others held; within the software limits where homed, slower where not.
     Jog(JogArgs),
+    /// The first motion of a new robot: with the loop open, each motor in turn gets a small,
+    /// short voltage (`[check]`) while its counter is watched; says which way it went, how fast
+    /// against the feed-forward, and which of dac_sign / counter_sign to change. Exit 2 when a
+    /// motor fails it.
+    Check,
 }
 
 /// Options of `jog`.
@@ -161,6 +166,7 @@ impl Command {
             Command::Run(_) => Mode::Run,
             Command::Home => Mode::Home,
             Command::Jog(_) => Mode::Jog,
+            Command::Check => Mode::Check,
         }
     }
 
@@ -187,7 +193,7 @@ impl Command {
             Command::Jog(a) => {
                 s.set_jog(a.motor.unwrap_or(s.jog.motor), a.counts.unwrap_or(s.jog.counts))?
             }
-            Command::Home => {}
+            Command::Home | Command::Check => {}
         }
         Ok(())
     }

@@ -300,6 +300,8 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
         ),
     }
     let code = match (&summary, controller) {
+        // The check ran, and found a motor to mend.
+        (Some(s), _) if s.check.as_ref().is_some_and(|c| c.iter().any(|m| !m.ok)) => exit::FAULT,
         (Some(s), _) if s.ok && all_clean => exit::OK,
         (Some(s), _) if s.fault.as_ref().is_some_and(|f| f.kind == FaultKind::Aborted) => {
             exit::INTERRUPTED

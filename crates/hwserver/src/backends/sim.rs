@@ -58,6 +58,9 @@ pub struct SimParams {
     pub stall_motor: Option<usize>,
     /// Fault injection: this motor's (0-based) top switch sticks once it has tripped.
     pub stuck_top_motor: Option<usize>,
+    /// Fault injection: this motor (0-based) moves against its command (an amplifier wired
+    /// the other way round).
+    pub reversed_motor: Option<usize>,
     /// Fault injection: the emergency-stop chain is open from the first to the second time,
     /// s on the simulator's clock (see [`SimDeltabot::estop_button`] for a button pressed from
     /// outside).
@@ -85,6 +88,7 @@ impl Default for SimParams {
             counter_offset: d.counter_offset,
             stall_motor: None,
             stuck_top_motor: None,
+            reversed_motor: None,
             estop_open_s: d.estop_open_s,
         }
     }
@@ -133,6 +137,7 @@ impl SimParams {
             // (a hand-written run file) is refused by `validate`, never wrapped around.
             stall_motor: sim.stall_motor.map(|m| m.checked_sub(1).unwrap_or(usize::MAX)),
             stuck_top_motor: sim.stuck_top_motor.map(|m| m.checked_sub(1).unwrap_or(usize::MAX)),
+            reversed_motor: sim.reversed_motor.map(|m| m.checked_sub(1).unwrap_or(usize::MAX)),
             estop_open_s: sim.estop_open_s,
         }
     }
@@ -172,7 +177,8 @@ impl SimParams {
         if self.top_switch_counts == self.bottom_switch_counts {
             return bad("top_switch", self.top_switch_counts, "different from bottom_switch");
         }
-        for m in [self.stall_motor, self.stuck_top_motor].into_iter().flatten() {
+        for m in [self.stall_motor, self.stuck_top_motor, self.reversed_motor].into_iter().flatten()
+        {
             if m >= self.n_motors {
                 let one_based = if m == usize::MAX { 0.0 } else { m as f64 + 1.0 };
                 return bad("fault-injection motor", one_based, "one of the simulated motors");
@@ -403,7 +409,9 @@ impl SimDeltabot {
             }
             let mut s = AxisState { x: axis.x, v: axis.v, a: axis.a };
             if axis.enabled {
-                let target = self.p.kv_counts_per_s_per_v * volts_per_code * f64::from(axis.dac);
+                let wired = if self.p.reversed_motor == Some(m) { -1.0 } else { 1.0 };
+                let target =
+                    wired * self.p.kv_counts_per_s_per_v * volts_per_code * f64::from(axis.dac);
                 self.velocity_loop.advance(&mut s, target, dt);
             } else {
                 plant::first_order(&mut s, 0.0, self.p.coast_tau_s, dt);

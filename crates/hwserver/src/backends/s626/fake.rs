@@ -24,6 +24,8 @@ pub struct FakePlant {
     /// Where the top and bottom switches trip, counts of the homed frame; `None`: the
     /// switches stay closed and are the caller's to open (the conformance rig's).
     pub switches: Option<(f64, f64)>,
+    /// A motor (0-based) whose amplifier is wired the other way round (`sim.reversed_motor`).
+    pub reversed: Option<usize>,
 }
 
 impl FakePlant {
@@ -39,12 +41,19 @@ impl FakePlant {
             lag_s: s.sim.tau_s,
             start_counts,
             switches: Some((s.sim.top_switch_counts, s.sim.bottom_switch_counts)),
+            reversed: s.sim.reversed_motor.and_then(|m| m.checked_sub(1)),
         }
     }
 
     /// Amplifiers of `kv` counts/s per volt followed at once, motors at 0, switches closed.
     pub fn ideal(kv: f64) -> FakePlant {
-        FakePlant { kv, lag_s: 0.0, start_counts: [0.0; MAX_MOTORS], switches: None }
+        FakePlant {
+            kv,
+            lag_s: 0.0,
+            start_counts: [0.0; MAX_MOTORS],
+            switches: None,
+            reversed: None,
+        }
     }
 }
 
@@ -80,6 +89,7 @@ pub fn wired_fake(w: &S626Settings, n_motors: usize, plant: &FakePlant, period_s
             enable_dio: at(&w.enable_dio),
             enable_bit: w.enable_bit,
             counts_per_s_per_volt: plant.kv
+                * if plant.reversed == Some(m) { -1.0 } else { 1.0 }
                 * f64::from(w.dac_sign.get(m).copied().unwrap_or(1))
                 * f64::from(w.counter_sign.get(m).copied().unwrap_or(1)),
             lag_s: plant.lag_s,
