@@ -2,9 +2,19 @@
 //! start before the path, on the simulated robot through the real processes.
 
 use qmarc_tests::{TestRun, knots, read_gather, read_summary};
+use std::path::Path;
 use std::time::Duration;
 
 const TIMEOUT: Duration = Duration::from_secs(120);
+
+/// Runs `qmarc-starter --config=CONFIG --out=OUT ARGS…` of `run`.
+fn starter(run: &TestRun, config: &Path, out: &Path, args: &[&str]) -> qmarc_tests::Finished {
+    let (config, out) =
+        (format!("--config={}", config.display()), format!("--out={}", out.display()));
+    let mut all = vec![config.as_str(), out.as_str()];
+    all.extend_from_slice(args);
+    run.starter(&all, TIMEOUT)
+}
 
 /// The column of `name` in gather.csv's `header`.
 fn col(header: &[String], name: &str) -> usize {
@@ -60,6 +70,19 @@ fn run_with_the_approach_moves_to_the_paths_start_first_issue_27() {
         let (lo, hi) = (want.min(0.0), want.max(0.0));
         assert!(rows[..lead].iter().all(|r| (lo..=hi).contains(&r[cmd])), "motor {}", m + 1);
     }
+    // The PVT path likewise: its first knots read for the way there, then the path.
+    let pvt = run.out("pvt");
+    let knots = format!("--knots={}", knots("xz-pick-place-pvt.txt").display());
+    let r = starter(
+        &run,
+        &config,
+        &pvt,
+        &["--deterministic", "run", "--method=pvt", &knots, "--approach"],
+    );
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    let s = read_summary(&pvt);
+    assert_eq!(s.approach.map(|a| a.samples), Some(approach.samples), "the same way there");
+    assert_eq!((s.trajectory.as_str(), s.cycles), ("pvt", 997));
     run.assert_clean();
 }
 
@@ -70,18 +93,9 @@ fn run_with_the_approach_moves_to_the_paths_start_first_issue_27() {
 fn jog_moves_one_motor_within_the_soft_limits_and_slower_unhomed_issue_27() {
     let run = TestRun::new("jog");
     let config = run.config_with(&[]);
-    let jog = |config: &std::path::Path, out: &std::path::Path, counts: &str| {
-        run.starter(
-            &[
-                &format!("--config={}", config.display()),
-                &format!("--out={}", out.display()),
-                "--deterministic",
-                "jog",
-                "--motor=2",
-                &format!("--counts={counts}"),
-            ],
-            TIMEOUT,
-        )
+    let jog = |config: &Path, out: &Path, counts: &str| {
+        let counts = format!("--counts={counts}");
+        starter(&run, config, out, &["--deterministic", "jog", "--motor=2", &counts])
     };
     let homed = run.out("homed");
     let r = jog(&config, &homed, "-500");
@@ -113,6 +127,21 @@ fn jog_moves_one_motor_within_the_soft_limits_and_slower_unhomed_issue_27() {
     assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
     let (s_homed, s_slow) = (read_summary(&homed), read_summary(&slow));
     assert!(s_slow.cycles > 2 * s_homed.cycles, "{} vs {}", s_slow.cycles, s_homed.cycles);
+    // A motor resting on its bottom switch (10 500 counts) jogs away from it, not further.
+    let on_switch = run.config_as(
+        "onswitch.toml",
+        &qmarc_tests::default_config(),
+        &[("homed", "false"), ("state_file", "\"\""), ("start_counts", "[0, 10600, 0]")],
+    );
+    let r = jog(&on_switch, &run.out("further"), "500");
+    assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
+    assert!(
+        r.stderr.contains("motor 2 rests on its bottom limit switch: jog it away"),
+        "{}",
+        r.stderr
+    );
+    let r = jog(&on_switch, &run.out("away"), "-500");
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
     run.assert_clean();
 }
 
@@ -125,15 +154,7 @@ fn check_finds_a_motor_wired_backwards_and_says_what_to_change_issue_27() {
     let run = TestRun::new("check");
     let good = run.config_with(&[]);
     let out = run.out("good");
-    let r = run.starter(
-        &[
-            &format!("--config={}", good.display()),
-            &format!("--out={}", out.display()),
-            "--deterministic",
-            "check",
-        ],
-        TIMEOUT,
-    );
+    let r = starter(&run, &good, &out, &["--deterministic", "check"]);
     assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
     let s = read_summary(&out);
     let check = s.check.expect("the check's report");
@@ -146,15 +167,7 @@ fn check_finds_a_motor_wired_backwards_and_says_what_to_change_issue_27() {
     let reversed =
         run.config_as("rev.toml", &qmarc_tests::default_config(), &[("sim.reversed_motor", "2")]);
     let out = run.out("reversed");
-    let r = run.starter(
-        &[
-            &format!("--config={}", reversed.display()),
-            &format!("--out={}", out.display()),
-            "--deterministic",
-            "check",
-        ],
-        TIMEOUT,
-    );
+    let r = starter(&run, &reversed, &out, &["--deterministic", "check"]);
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);
     assert!(r.stdout.contains("QMARC check: CHECK FAILED"), "{}", r.stdout);
     assert!(
@@ -172,15 +185,7 @@ fn check_finds_a_motor_wired_backwards_and_says_what_to_change_issue_27() {
         &[("hwserver.watchdog_periods", "2500"), ("safety.max_missed_in_row", "2500")],
     );
     let out = run.out("card");
-    let r = run.starter(
-        &[
-            &format!("--config={}", card.display()),
-            &format!("--out={}", out.display()),
-            "--device=fake",
-            "check",
-        ],
-        TIMEOUT,
-    );
+    let r = starter(&run, &card, &out, &["--device=fake", "check"]);
     assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
     let check = read_summary(&out).check.expect("the check's report");
     assert!(check.iter().all(|m| m.ok && m.moved_counts > 0.0), "{check:?}");

@@ -582,9 +582,9 @@ fn killing_the_controller_of_a_lock_step_run_trips_the_watchdog_at_once() {
 
 /// Issue 27, item 3: the emergency-stop chain opening mid-move (the simulator's
 /// `sim.estop_open_s`, a button pressed at 0.5 s and released at 0.6 s) disables every motor
-/// in the read that sees it, ends the move in `emergency_stop` named in the table and
-/// summary.json, and stays latched though the chain closed again; a move with the chain open
-/// is refused before anything is enabled; closed again, the next move runs.
+/// in the read that sees it and ends the move in `emergency_stop`, named in the table and
+/// summary.json (the latch while the chain closes again is the conformance suite's check); a
+/// move with the chain open is refused before anything is enabled; closed, the next runs.
 #[test]
 fn the_emergency_stop_disables_every_motor_at_once_and_refuses_moves_while_open_issue_27() {
     let run = TestRun::new("estop");

@@ -44,7 +44,7 @@ pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
 pub use hwserver::{ExplicitTiming, HwServerSettings, HwWait, TimingDefaults};
 pub use jog::{JogSettings, MAX_JOG_COUNTS};
-pub use motor::{MotorGains, MotorSafety, gains_problem};
+pub use motor::{MotorGains, MotorSafety, effective_gains_problem, gains_problem};
 pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
 pub use s626::{S626_DIO_CHANNELS, S626Settings};

@@ -86,12 +86,13 @@ fn short(x: f64) -> String {
 ///
 /// Every gain must be finite and ≥ 0 (a negative one drives the motor away from its
 /// command). And since eq. 3-1 is DAC = 2⁻²¹·Kp·(s·FE + (Kvff·CV + Kaff·CA)/128 +
-/// s·Ki·IE/2²³ − Kd·AV/128), each term's smallest input — one count of following error, one
+/// s·Ki·IE/2²³ − Kd·AV/128), each term's unit input — one count of following error, one
 /// count·period of integrated error, one count per period of velocity, one count per period²
-/// of acceleration: what the encoder resolves — must ask less than the DAC's full scale
-/// (8191 codes) of the output. A gain that breaks this turns single counts into full-scale
-/// jumps: a bang-bang output, not a servo. (The thesis' gains ask 8 codes per count of
-/// following error, 2 for Kd and 81 for Kvff.)
+/// of acceleration: the smallest step of the counts the law works in (what the encoder
+/// resolves, and the steps of a path in whole counts) — must ask less than the DAC's full
+/// scale (8191 codes) of the output. A gain that breaks this turns single counts into
+/// full-scale jumps: a bang-bang output, not a servo. (The thesis' gains ask 8 codes per count
+/// of following error, 2 for Kd and 81 for Kvff.) A sanity bound, not a tuning rule.
 pub fn gains_problem(g: &MotorGains, fe_scale: f64) -> Option<(&'static str, String)> {
     let all = [("kp", g.kp), ("ki", g.ki), ("kd", g.kd), ("kvff", g.kvff), ("kaff", g.kaff)];
     for (key, v) in all {
@@ -225,9 +226,9 @@ pub(crate) fn rescaled(g: MotorGains, (gains_period_us, period_us): (u32, u32)) 
     MotorGains { ki: g.ki / r, kd: g.kd * r, kvff: g.kvff * r, kaff: g.kaff * r * r, ..g }
 }
 
-/// [`gains_problem`] of the gains as the law runs them at the period: with a note of the
-/// rescaling when the period is not the one the gains were tuned at.
-pub(crate) fn effective_gains_problem(
+/// [`gains_problem`] of the gains `g`, tuned at `periods_us.0`, as the law runs them at
+/// `periods_us.1`: with a note of the rescaling when the two differ.
+pub fn effective_gains_problem(
     g: &MotorGains,
     fe_scale: f64,
     periods_us: (u32, u32),

@@ -262,6 +262,7 @@ fn the_shipped_file_states_the_defaults_issue_11() {
     // (from before it) keeps eq. 3-1 as written, the loop its gains were tuned with.
     assert_eq!((s.fe_scale, d.fe_scale), (96.0, 1.0));
     assert_eq!((s.timer, &s.gather, s.step), (d.timer, &d.gather, d.step));
+    assert_eq!((s.jog, s.check), (d.jog, d.check), "[jog], [check]");
     assert_eq!(
         TrajectorySettings { knots: None, ..s.trajectory.clone() },
         d.trajectory,

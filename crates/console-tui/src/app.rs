@@ -447,10 +447,12 @@ impl App {
             KeyCode::F(6) => self.start(Mode::Step),
             KeyCode::F(9) => self.abort_key(),
             KeyCode::Char('t') if ctrl => self.start(Mode::Tune),
-            KeyCode::Left if ctrl => self.jog(-1),
-            KeyCode::Right if ctrl => self.jog(1),
-            KeyCode::Up if ctrl => self.jog_motor_by(-1),
-            KeyCode::Down if ctrl => self.jog_motor_by(1),
+            // Jog keys where no arrow edits or chooses anything: not while a field is typed
+            // (Setup) nor where ←/→ choose the motor charted (Charts).
+            KeyCode::Left if ctrl && self.jog_page() => self.jog(-1),
+            KeyCode::Right if ctrl && self.jog_page() => self.jog(1),
+            KeyCode::Up if ctrl && self.jog_page() => self.jog_motor_by(-1),
+            KeyCode::Down if ctrl && self.jog_page() => self.jog_motor_by(1),
             KeyCode::Char('a') if ctrl => self.apply_tuned(),
             KeyCode::F(10) => {
                 if self.running.is_some() {

@@ -216,6 +216,8 @@ impl Fault {
     /// What went wrong with the hardware, the hwserver or the run (a stop signal).
     fn what_of_the_hardware(&self) -> String {
         match self.kind {
+            // Seen by a generator watching the switches itself (jog): it says which.
+            FaultKind::LimitSwitch if self.status.is_ok() => "a limit switch tripped".to_string(),
             FaultKind::LimitSwitch => {
                 let m = self.motor.unwrap_or(0);
                 let side =

@@ -218,6 +218,12 @@ impl Servo {
         self.generator.homed_frame()
     }
 
+    /// Per motor, whether its frame was homed when the move began (the software limits held
+    /// only for those).
+    pub fn homed(&self) -> [bool; MAX_MOTORS] {
+        self.homed
+    }
+
     /// Where homing found each motor's switch, after a homing.
     pub fn homing_report(&self) -> Option<&[crate::traj::MotorHomeReport]> {
         self.generator.homing_report()
@@ -260,6 +266,8 @@ impl Servo {
             FaultKind::TrajectoryError | FaultKind::HomingFailed | FaultKind::TooMuchTravel => {
                 self.generator.failure()
             }
+            // A switch a generator watched itself (jog), not the hwserver's latch.
+            FaultKind::LimitSwitch if self.fault?.status.is_ok() => self.generator.failure(),
             _ => None,
         }
     }
@@ -384,6 +392,10 @@ impl Servo {
         self.lead_executed = 0;
         self.settle_from = None;
         self.integrated_error = [0.0; MAX_MOTORS];
+        // What may have changed while the path was prepared (a stream awaited, a path
+        // planned): a fresh read, so that an emergency stop or a switch latched meanwhile
+        // refuses the move before anything is enabled.
+        Servo::request(link, HwMsg::read_all_encoders())?;
         for m in 0..self.plan.n_motors {
             if let Err(e) = Servo::request(link, HwMsg::for_motor(MsgType::EnableMotor, m as u32)) {
                 self.disable_all(link);

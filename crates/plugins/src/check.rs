@@ -36,7 +36,8 @@ impl Schedule {
     pub fn from_settings(s: &Settings) -> Schedule {
         let period = s.period_s();
         let pulse = ((s.check.pulse_s / period).round() as u64).max(1);
-        let rest = (s.check.rest_s / period).round() as u64;
+        // At least one read after the pulse: the one that shows its whole move.
+        let rest = ((s.check.rest_s / period).round() as u64).max(1);
         let code = (s.check.volts / DAC_FULL_SCALE_V * f64::from(DAC_MAX)).round() as i32;
         Schedule {
             n_motors: s.n_motors,
@@ -72,6 +73,10 @@ pub struct Check {
     act: [f64; MAX_MOTORS],
     /// Where every motor was when the current slot began.
     slot_start: [f64; MAX_MOTORS],
+    /// The motor whose slot's start is booked.
+    slot: Option<usize>,
+    /// Its pulse's move is booked whole.
+    pulse_booked: bool,
     reports: [MotorCheckReport; MAX_MOTORS],
     /// The motor that went too far, and how far.
     too_far: Option<(usize, f64)>,
@@ -91,14 +96,18 @@ impl Check {
             start: [0.0; MAX_MOTORS],
             act: [0.0; MAX_MOTORS],
             slot_start: [0.0; MAX_MOTORS],
+            slot: None,
+            pulse_booked: false,
             reports: [MotorCheckReport::default(); MAX_MOTORS],
             too_far: None,
         }
     }
 
     /// Books sample `n`'s positions into the motor whose slot it is. A read shows what the
-    /// outputs up to the sample before did: the slot's first read is before its pulse, its
-    /// pulse's effect is complete `pulse` reads later.
+    /// outputs up to the sample before did: the first read of a slot is before its pulse (it
+    /// is where the slot starts), the first read at or after the pulse's end shows its whole
+    /// move, the reads after it the coasting. By the first read seen of each, not by exact
+    /// sample numbers: a missed period moves a boundary by one sample, never loses it.
     #[inline]
     fn book(&mut self, n: u64) {
         let s = self.schedule;
@@ -107,20 +116,23 @@ impl Check {
         if motor >= s.n_motors {
             return;
         }
-        let at = k % s.slot;
-        if at == 0 {
+        if self.slot != Some(motor) {
+            self.slot = Some(motor);
             self.slot_start = self.act;
+            self.pulse_booked = false;
         }
+        let at = k % s.slot;
         let r = &mut self.reports[motor];
-        if at <= s.pulse {
+        if !self.pulse_booked {
             r.moved_counts = self.act[motor] - self.slot_start[motor];
-            r.done = at == s.pulse;
             for other in (0..s.n_motors).filter(|&o| o != motor) {
                 let d = (self.act[other] - self.slot_start[other]).abs();
                 if d > r.others_moved.1 {
                     r.others_moved = (other + 1, d);
                 }
             }
+            self.pulse_booked = at >= s.pulse;
+            r.done = self.pulse_booked;
         } else {
             r.coasted_counts = self.act[motor] - self.slot_start[motor] - r.moved_counts;
         }
@@ -136,6 +148,8 @@ impl TrajectoryGenerator for Check {
         self.start = *start;
         self.act = *start;
         self.slot_start = *start;
+        self.slot = None;
+        self.pulse_booked = false;
         let s = self.schedule;
         for (m, r) in self.reports.iter_mut().enumerate() {
             let seconds = s.pulse as f64 * s.period_s;
@@ -248,7 +262,7 @@ mod tests {
     #[test]
     fn the_check_books_each_motors_move_and_stops_one_that_runs_away() {
         let s = schedule();
-        let run = |gain: [f64; 2], max_travel: f64| {
+        let run = |gain: [f64; 2], max_travel: f64, missed: &[u64]| {
             let mut g = Check::new(s, max_travel);
             g.start(&[10.0, 20.0, 0.0, 0.0]).unwrap();
             let mut act = [10.0, 20.0, 0.0, 0.0];
@@ -261,6 +275,9 @@ mod tests {
                         act[0] += 0.5;
                     }
                 }
+                if missed.contains(&n) {
+                    continue; // a missed period: no read, no sample
+                }
                 g.observe(&act, &flags);
                 match g.sample(n, &mut cmd) {
                     Sample::Ready => assert_eq!(cmd, act, "the command is where it is"),
@@ -269,13 +286,20 @@ mod tests {
             }
             (g, Sample::Ready)
         };
-        let (g, end) = run([4.0, -2.0], 100.0);
+        let (g, end) = run([4.0, -2.0], 100.0, &[]);
         assert_eq!(end, Sample::Done);
         let r = g.check_report().unwrap();
         assert_eq!((r[0].moved_counts, r[0].done, r[0].others_moved), (12.0, true, (0, 0.0)));
         assert_eq!((r[1].moved_counts, r[1].others_moved), (-6.0, (1, 1.5)));
         assert_eq!((r[0].volts, r[0].seconds, r[0].motor, r[1].motor), (0.2, 0.003, 1, 2));
-        let (g, end) = run([40.0, -2.0], 100.0);
+        // Missed periods where motor 1's pulse ends (sample 4) and where motor 2's slot
+        // begins (sample 6): the first reads after them book it, one step late at worst.
+        let (g, end) = run([4.0, -2.0], 100.0, &[4, 6]);
+        assert_eq!(end, Sample::Done);
+        let r = g.check_report().unwrap();
+        assert_eq!((r[0].moved_counts, r[0].done), (12.0, true));
+        assert_eq!((r[1].moved_counts, r[1].done, r[1].others_moved), (-4.0, true, (1, 1.0)));
+        let (g, end) = run([40.0, -2.0], 100.0, &[]);
         assert_eq!(end, Sample::Failed);
         assert_eq!(
             g.failure().unwrap(),

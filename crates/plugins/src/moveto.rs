@@ -4,7 +4,7 @@
 //! acceleration and jerk limits allow, the others slower. It is planned before the move and
 //! sampled into the command queue, so the loop only reads the queue.
 
-use crate::step::{QUEUE_BUDGET_BYTES, TrajBuildError};
+use crate::step::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::Settings;
 use qmarc_controller::fault::FaultKind;
 use qmarc_controller::traj::{
@@ -176,6 +176,11 @@ pub fn rest_to_rest(
 /// the others hold, jerk-limited at `[jog] speed` of the motor's limits — or at
 /// `unhomed_speed` when its frame is not homed (then nothing says where its switches are).
 /// The software limits hold where it is homed (the loop checks them).
+///
+/// It watches the limit switches itself, as homing does (the hwserver's latch would refuse a
+/// motor resting on one): a motor resting on a switch may be jogged away from it, not toward
+/// it, and any switch that becomes active during the jog — or comes back after it cleared —
+/// ends it in `limit_switch`.
 #[derive(Debug, Clone)]
 pub struct Jog {
     motor: usize,
@@ -187,11 +192,22 @@ pub struct Jog {
     unhomed_speed: f64,
     homed: bool,
     queue: Vec<[f64; MAX_MOTORS]>,
+    /// Per motor, the way to its top switch in counts (−1 or +1).
+    top_direction: [f64; MAX_MOTORS],
+    /// Per motor, the switches active since the jog began and continuously since.
+    resting: [MotorFlags; MAX_MOTORS],
+    observed: bool,
+    /// A switch that tripped during the jog: its motor and whether it is the top one.
+    tripped: Option<(usize, bool)>,
 }
 
 impl Jog {
     /// The jog of the settings' `[jog]`: motor `jog.motor` by `jog.counts`.
     pub fn from_settings(s: &Settings) -> Result<Jog, TrajBuildError> {
+        let mut top_direction = [-1.0; MAX_MOTORS];
+        for (t, safety) in top_direction.iter_mut().zip(&s.safety) {
+            *t = safety.top_direction;
+        }
         Ok(Jog {
             motor: s.jog.motor - 1,
             counts: s.jog.counts as f64,
@@ -202,6 +218,10 @@ impl Jog {
             unhomed_speed: s.jog.unhomed_speed,
             homed: false,
             queue: Vec::new(),
+            top_direction,
+            resting: [MotorFlags::default(); MAX_MOTORS],
+            observed: false,
+            tripped: None,
         })
     }
 }
@@ -211,12 +231,39 @@ impl TrajectoryGenerator for Jog {
         "jog"
     }
 
-    /// Before `start`: whether the jogged motor's frame is homed (its speed).
+    /// Before `start`: whether the jogged motor's frame is homed (its speed) and which
+    /// switches the motors rest on; then every cycle, a switch that was not resting tripping.
+    #[inline]
     fn observe(&mut self, _: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
-        self.homed = flags[self.motor].homed();
+        if !self.observed {
+            self.homed = flags[self.motor].homed();
+            self.resting = *flags;
+            self.observed = true;
+            return;
+        }
+        for (k, (r, f)) in self.resting.iter_mut().zip(flags).enumerate().take(self.n_motors) {
+            *r = MotorFlags(r.0 & f.0);
+            if self.tripped.is_none() && (f.top() && !r.top() || f.bottom() && !r.bottom()) {
+                self.tripped = Some((k, f.top() && !r.top()));
+            }
+        }
     }
 
     fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+        let (m, rest) = (self.motor, self.resting[self.motor]);
+        let toward_top = self.counts * self.top_direction[m] > 0.0;
+        if (rest.top() && toward_top) || (rest.bottom() && !toward_top) {
+            return Err(TrajStartError::Generator(
+                format!(
+                    "motor {} rests on its {} limit switch: jog it away from the switch \
+                     (--counts of the other sign)",
+                    m + 1,
+                    if rest.top() { "top" } else { "bottom" }
+                )
+                .into(),
+            ));
+        }
+        self.tripped = None;
         let mut to = *start;
         to[self.motor] += self.counts;
         let speed = if self.homed { self.speed } else { self.unhomed_speed };
@@ -239,13 +286,24 @@ impl TrajectoryGenerator for Jog {
 
     #[inline]
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
-        match self.queue.get(n as usize) {
-            Some(c) => {
-                *cmd = *c;
-                Sample::Ready
-            }
-            None => Sample::Done,
+        if self.tripped.is_some() {
+            return Sample::Failed;
         }
+        sample_queue(&self.queue, n, cmd)
+    }
+
+    fn failure(&self) -> Option<String> {
+        self.tripped.map(|(k, top)| {
+            format!(
+                "jog: motor {}'s {} limit switch tripped (it was not active when the jog began)",
+                k + 1,
+                if top { "top" } else { "bottom" }
+            )
+        })
+    }
+
+    fn failure_kind(&self) -> FaultKind {
+        FaultKind::LimitSwitch
     }
 }
 
@@ -305,12 +363,9 @@ impl TrajectoryGenerator for Approach {
 
     #[inline]
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
-        match self.lead.get(n as usize) {
-            Some(c) => {
-                *cmd = *c;
-                Sample::Ready
-            }
-            None => self.path.sample(n - self.lead_samples(), cmd),
+        match n.checked_sub(self.lead_samples()) {
+            None => sample_queue(&self.lead, n, cmd),
+            Some(k) => self.path.sample(k, cmd),
         }
     }
 
@@ -327,9 +382,11 @@ impl TrajectoryGenerator for Approach {
         self.path.observe(act, flags);
     }
 
+    /// The way there's bounds with the path's; the way there's alone before a stream (whose
+    /// commands the loop checks as they come): the approach never runs unchecked.
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
-        let path = self.path.path_bounds()?;
         let lead = bounds_of(&self.lead);
+        let Some(path) = self.path.path_bounds() else { return Some(lead) };
         Some(std::array::from_fn(|m| (path[m].0.min(lead[m].0), path[m].1.max(lead[m].1))))
     }
 

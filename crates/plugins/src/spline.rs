@@ -11,7 +11,7 @@ use crate::knots::{
     KnotFileError, KnotRules, MAX_KNOT_FILE_BYTES, OfflineKnots, parse_offline, read_knot_file,
     text_of,
 };
-use crate::step::{KnotSource, QUEUE_BUDGET_BYTES, TrajBuildError};
+use crate::step::{KnotSource, QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::Settings;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of, check_start};
 use qmarc_proto::MAX_MOTORS;
@@ -372,13 +372,7 @@ impl TrajectoryGenerator for CubicSpline {
 
     #[inline]
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
-        match self.queue.get(n as usize) {
-            Some(c) => {
-                *cmd = *c;
-                Sample::Ready
-            }
-            None => Sample::Done,
-        }
+        sample_queue(&self.queue, n, cmd)
     }
 }
 

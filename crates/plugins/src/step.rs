@@ -12,6 +12,19 @@ use std::path::{Path, PathBuf};
 /// Most memory a generator's command queue may take, bytes (`mlockall` keeps it resident).
 pub const QUEUE_BUDGET_BYTES: u64 = 256 << 20;
 
+/// Sample `n` of a command queue computed before the move (the spline's, a jog's): its
+/// command into `cmd`, or [`Sample::Done`] past its end.
+#[inline]
+pub fn sample_queue(queue: &[[f64; MAX_MOTORS]], n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+    match queue.get(n as usize) {
+        Some(c) => {
+            *cmd = *c;
+            Sample::Ready
+        }
+        None => Sample::Done,
+    }
+}
+
 /// Where knots come from (`--knots` / `trajectory.knots`).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum KnotSource {

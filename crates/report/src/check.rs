@@ -59,11 +59,17 @@ impl MotorCheck {
         let moved = r.moved_counts + r.coasted_counts;
         let rate = moved / (r.volts * r.seconds);
         let expected = expected_counts_per_volt_second(s, m);
+        // Gains without a velocity feed-forward (Kvff ≤ Kd) expect no speed: judge the
+        // direction and the wiring only.
+        let judged = expected.is_finite() && expected > 0.0;
         let (other, other_moved) = r.others_moved;
         let crossed = other > 0 && other_moved > (0.1 * moved.abs()).max(10.0);
+        let still = if judged { rate.abs() < STILL_SHARE * expected } else { moved.abs() < 2.0 };
+        let scale_ok =
+            !judged || (expected / SCALE_TOLERANCE..=expected * SCALE_TOLERANCE).contains(&rate);
         let advice = if !r.done {
             format!("motor {}: its pulse was cut short: see the fault", r.motor)
-        } else if rate.abs() < STILL_SHARE * expected {
+        } else if still {
             format!(
                 "motor {}: did not move ({moved:.0} counts for {} V over {} s): its amplifier \
                  is off, not wired or not in velocity mode, or the safety chain holds it",
@@ -89,7 +95,13 @@ impl MotorCheck {
                  (s626.dac_channels, s626.counter_channels)",
                 r.motor, r.motor
             )
-        } else if !(expected / SCALE_TOLERANCE..=expected * SCALE_TOLERANCE).contains(&rate) {
+        } else if !judged {
+            format!(
+                "motor {}: counts up at {rate:.0} counts/s per V; its gains have no velocity \
+                 feed-forward to compare with (Kvff ≤ Kd)",
+                r.motor
+            )
+        } else if !scale_ok {
             format!(
                 "motor {}: counts up at {rate:.0} counts/s per V, but the feed-forward expects \
                  {expected:.0}: the amplifier's speed scale and the gains disagree {:.1}×; set \
@@ -106,10 +118,7 @@ impl MotorCheck {
                 rate / expected
             )
         };
-        let ok = r.done
-            && rate >= expected / SCALE_TOLERANCE
-            && rate <= expected * SCALE_TOLERANCE
-            && !crossed;
+        let ok = r.done && !still && rate > 0.0 && scale_ok && !crossed;
         MotorCheck {
             motor: r.motor,
             volts: r.volts,
@@ -122,5 +131,65 @@ impl MotorCheck {
             ok,
             advice,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped() -> Settings {
+        let names = qmarc_config::Names {
+            laws: vec!["pidff"],
+            methods: vec!["step", "spline", "pvt"],
+            backends: vec!["sim", "s626"],
+            any_plugin: false,
+        };
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
+        Settings::load(&path, &names).unwrap()
+    }
+
+    fn report(moved: f64, others: (usize, f64), done: bool) -> MotorCheckReport {
+        MotorCheckReport {
+            motor: 1,
+            volts: 0.2,
+            seconds: 0.1,
+            moved_counts: moved,
+            coasted_counts: 0.0,
+            others_moved: others,
+            done,
+        }
+    }
+
+    /// Issue 27, item 3: the verdicts, from the shipped gains (motor 1 expects 26 037
+    /// counts/s per V of its amplifier: 0.2 V for 0.1 s is 521 counts).
+    #[test]
+    fn the_check_judges_direction_scale_wiring_and_gains_without_feed_forward() {
+        let s = shipped();
+        let expected = expected_counts_per_volt_second(&s, 0);
+        assert!((expected - 26_037.0).abs() < 1.0, "{expected}");
+        let verdict = |r: MotorCheckReport| {
+            let c = MotorCheck::of(&s, &r);
+            (c.ok, c.advice)
+        };
+        let (ok, advice) = verdict(report(473.0, (0, 0.0), true));
+        assert!(ok && advice.contains("0.91× what the feed-forward expects"), "{advice}");
+        let (ok, advice) = verdict(report(-473.0, (0, 0.0), true));
+        assert!(!ok && advice.contains("counted DOWN"), "{advice}");
+        let (ok, advice) = verdict(report(3.0, (0, 0.0), true));
+        assert!(!ok && advice.contains("did not move"), "{advice}");
+        let (ok, advice) = verdict(report(473.0, (2, 200.0), true));
+        assert!(!ok && advice.contains("motor 2 moved 200 counts while motor 1"), "{advice}");
+        let (ok, advice) = verdict(report(100.0, (0, 0.0), true));
+        assert!(!ok && advice.contains("disagree 5.2×"), "{advice}");
+        let (ok, advice) = verdict(report(473.0, (0, 0.0), false));
+        assert!(!ok && advice.contains("cut short"), "{advice}");
+        // Kvff = 0: nothing to compare the speed with; the direction still counts.
+        let mut no_ff = s.clone();
+        no_ff.motors[0].kvff = 0.0;
+        let c = MotorCheck::of(&no_ff, &report(473.0, (0, 0.0), true));
+        assert!(c.ok && c.advice.contains("no velocity feed-forward"), "{c:?}");
+        let c = MotorCheck::of(&no_ff, &report(-473.0, (0, 0.0), true));
+        assert!(!c.ok && c.advice.contains("counted DOWN"), "{c:?}");
     }
 }

@@ -156,6 +156,16 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
             "--unhomed: the frame may not be homed; software position limits were off".into(),
         );
     }
+    let unhomed: Vec<String> = (0..settings.n_motors)
+        .filter(|&m| !servo.homed()[m])
+        .map(|m| (m + 1).to_string())
+        .collect();
+    if matches!(spec.mode, Mode::Jog | Mode::Check) && !unhomed.is_empty() && !spec.unhomed {
+        summary.warnings.push(format!(
+            "motors {} are not homed: the software position limits did not hold for them",
+            unhomed.join(", ")
+        ));
+    }
     if let Some(why) = relayed.and_then(|r| r.error) {
         summary.warnings.push(format!("no live telemetry: {why}"));
     }
@@ -199,6 +209,11 @@ pub fn build_servo(spec: &RunSpec, progress: Option<Progress>) -> Result<Servo, 
     let law =
         registry::law(&settings.law).ok_or_else(|| RunError::Unregistered(settings.law.clone()))?;
     let plan = plan_for(settings, spec.mode, spec.deterministic, spec.unhomed);
+    // `--unhomed` turns the software limits off: a jog then goes at the unhomed speed, homed
+    // frame or not.
+    let mut unhomed_jog = settings.clone();
+    unhomed_jog.jog.speed = settings.jog.unhomed_speed;
+    let settings = if spec.unhomed && spec.mode == Mode::Jog { &unhomed_jog } else { settings };
     let mut path = (generator.build)(settings)?;
     if spec.mode == Mode::Run && settings.trajectory.approach {
         path = Box::new(qmarc_plugins::moveto::Approach::from_settings(path, settings));
@@ -315,7 +330,7 @@ pub fn stream_gather_samples(settings: &Settings) -> u64 {
 /// The plan of `mode` with `settings`: the limits of the settings, software limits only in a
 /// homed frame (off when homing, checking or with `--unhomed`; the loop checks them only for
 /// homed motors), homing required unless homing, jogging, checking or `--unhomed`, the
-/// hwserver's switch latch off while homing.
+/// hwserver's switch latch off while homing or jogging (those generators watch the switches).
 pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: bool) -> MovePlan {
     let homing = mode == Mode::Home;
     let mut limits = MoveLimits::none();
@@ -343,7 +358,8 @@ pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: b
         stream_gather_samples: stream_gather_samples(settings),
         limits,
         require_homed: !homing && !unhomed && !matches!(mode, Mode::Jog | Mode::Check),
-        monitor_switches: !homing,
+        // Homing and jog watch the switches themselves (a motor may rest on one).
+        monitor_switches: !homing && mode != Mode::Jog,
         ..MovePlan::new(mode, settings.n_motors, settings.period_ns())
     }
 }

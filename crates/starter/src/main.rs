@@ -358,6 +358,13 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
             "trials makes moves: check the move with `qmarc-starter --print-settings run|step|home …`"
         )));
     }
+    if matches!(t.command, Command::Jog(_) | Command::Check) {
+        return Err(refused(anyhow!(
+            "trials repeat a move the robot makes the same way each time: step, run or home, not \
+             {} (a repeated jog walks toward a limit)",
+            t.command.mode()
+        )));
+    }
     if settings.trajectory.knots.as_deref() == Some(Path::new("-")) {
         return Err(refused(anyhow!(
             "trials cannot read the path from standard input: every trial reads it again; give \
@@ -417,6 +424,18 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
             }
         }
         bar.inc(1);
+        // An emergency stop ends the series: the next trial must be a person's decision, not
+        // the chain closing again by itself.
+        let estop = outcome
+            .summary
+            .as_ref()
+            .and_then(|(s, _)| s.fault.as_ref())
+            .is_some_and(|f| f.kind == qmarc_controller::fault::FaultKind::EmergencyStop);
+        if estop {
+            stopped =
+                Some((exit::FAULT, format!("an emergency stop ended trial {k}: the series stops")));
+            break;
+        }
         match outcome.code {
             exit::OK | exit::FAULT => {}
             exit::INTERRUPTED => {

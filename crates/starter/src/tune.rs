@@ -101,8 +101,13 @@ pub fn run(
 ) -> anyhow::Result<TuneOutcome> {
     let params: Vec<Param> = settings.tune.params.iter().filter_map(|p| Param::named(p)).collect();
     let objective: Objective = settings.tune.objective.parse().map_err(|e: String| anyhow!(e))?;
-    let plan =
-        Plan { tune: &settings.tune, params: &params, objective, budget: settings.tune.budget };
+    let plan = Plan {
+        tune: &settings.tune,
+        params: &params,
+        objective,
+        budget: settings.tune.budget,
+        law: (settings.fe_scale, (settings.gains_period_us, settings.period_us)),
+    };
     let before = &settings.motors[..settings.n_motors];
     let tuned = tune(&plan, before, eval, on_record)?;
     let after: Vec<_> = tuned.after.iter().map(report::rounded).collect();

@@ -26,7 +26,7 @@ pub enum Verdict {
         /// Whether it became the best.
         best: bool,
     },
-    /// A gain outside `tune` bounds (not run).
+    /// A gain outside `tune` bounds, or one the settings would refuse (not run).
     OutOfBounds,
     /// Beyond `tune.max_change` of the best gains on real moves (not run).
     TooFar,
@@ -97,6 +97,7 @@ pub struct Tuned {
 struct Search<'a> {
     eval: &'a mut dyn Evaluator,
     tune: &'a TuneSettings,
+    law: (f64, (u32, u32)),
     objective: Objective,
     params: &'a [Param],
     /// Per parameter: x = gain / scale.
@@ -127,6 +128,7 @@ impl<'a> Search<'a> {
         Search {
             eval,
             tune: plan.tune,
+            law: plan.law,
             objective: plan.objective,
             params: plan.params,
             scale: Vec::new(),
@@ -213,7 +215,10 @@ impl<'a> Search<'a> {
 
     /// Runs candidate `g` of `motor` as far as needed to judge it.
     fn judge(&mut self, motor: usize, g: &MotorGains) -> Result<(Option<f64>, Verdict), EvalError> {
-        if self.outside(g) > 0.0 {
+        let (fe_scale, periods) = self.law;
+        if self.outside(g) > 0.0
+            || qmarc_config::effective_gains_problem(g, fe_scale, periods).is_some()
+        {
             return Ok((None, Verdict::OutOfBounds));
         }
         if self.eval.real() && self.too_far(motor, g) {
@@ -311,6 +316,9 @@ pub struct Plan<'a> {
     pub objective: Objective,
     /// Optimiser iterations per motor.
     pub budget: u32,
+    /// `general.fe_scale`, and the period the gains are tuned at and the one the law runs
+    /// at: a candidate eq. 3-1 could not servo with (`effective_gains_problem`) is not run.
+    pub law: (f64, (u32, u32)),
 }
 
 /// How [`tune`] judges the gains `all` as a candidate for `motor` when nothing feasible is

@@ -38,7 +38,13 @@ fn the_constraints_refuse_saturating_ringing_and_out_of_bounds_gains() {
     let mut eval = SimEvaluator::new(&spec, &stop);
     let s = &spec.settings;
     let params = all_params();
-    let plan = Plan { tune: &s.tune, params: &params, objective: Objective::Abs, budget: 1 };
+    let plan = Plan {
+        tune: &s.tune,
+        params: &params,
+        objective: Objective::Abs,
+        budget: 1,
+        law: (s.fe_scale, (s.gains_period_us, s.period_us)),
+    };
     let best = &s.motors[..3];
     let verdict =
         |eval: &mut SimEvaluator<'_>, g: MotorGains| judge(&plan, best, 0, &g, eval).unwrap().1;
@@ -57,6 +63,11 @@ fn the_constraints_refuse_saturating_ringing_and_out_of_bounds_gains() {
     let outside = MotorGains { kp: s.tune.bounds[0][1] * 2.0, ..best[0] };
     let before = eval.moves();
     assert_eq!(verdict(&mut eval, outside), Verdict::OutOfBounds);
+    // Within the bounds, but a gain the settings would refuse (eq. 3-1: one count per period
+    // of commanded acceleration asking more than full scale): not run either (issue 27).
+    let insane = MotorGains { kp: s.tune.bounds[0][1], kaff: s.tune.bounds[4][1], ..best[0] };
+    assert!(qmarc_config::effective_gains_problem(&insane, s.fe_scale, (400, 400)).is_some());
+    assert_eq!(verdict(&mut eval, insane), Verdict::OutOfBounds);
     assert_eq!(eval.moves(), before, "not run");
     assert!(before > moves);
 }

@@ -1,10 +1,15 @@
 //! The console's jog keys: Ctrl-↑/↓ choose the motor, Ctrl-←/→ jog it by `[jog] counts`
 //! through the starter's `jog` (README, "Running moves").
 
-use super::App;
+use super::{App, Page};
 use crate::runner::Mode;
 
 impl App {
+    /// Whether the page shown takes the jog keys: the log, the results and the history.
+    pub(super) fn jog_page(&self) -> bool {
+        matches!(self.page, Page::Log | Page::Results | Page::History)
+    }
+
     /// The jog keys' motor count and distance, from the settings as they are (none while they
     /// do not validate).
     fn jog_settings(&self) -> Option<(usize, i64)> {

@@ -119,21 +119,30 @@ fn the_approach_puts_the_path_behind_its_way_there() {
     assert_eq!(a.lead_in(), 0);
 }
 
+/// A jog of motor 2 by `counts`, its top switch toward negative counts.
+fn jog_of(counts: f64) -> Jog {
+    Jog {
+        motor: 1,
+        counts,
+        n_motors: 3,
+        period_s: T,
+        limits: limits(),
+        speed: 0.1,
+        unhomed_speed: 0.025,
+        homed: false,
+        queue: Vec::new(),
+        top_direction: [-1.0; MAX_MOTORS],
+        resting: [MotorFlags::default(); MAX_MOTORS],
+        observed: false,
+        tripped: None,
+    }
+}
+
 /// Jog: the motor moves its counts, the others hold; slower where its frame is not homed.
 #[test]
 fn jog_moves_one_motor_slower_where_unhomed() {
     let jog = |homed: bool| {
-        let mut j = Jog {
-            motor: 1,
-            counts: -400.0,
-            n_motors: 3,
-            period_s: T,
-            limits: limits(),
-            speed: 0.1,
-            unhomed_speed: 0.025,
-            homed: false,
-            queue: Vec::new(),
-        };
+        let mut j = jog_of(-400.0);
         let flags = [MotorFlags(if homed { MotorFlags::HOMED } else { 0 }); MAX_MOTORS];
         j.observe(&[0.0; MAX_MOTORS], &flags);
         j.start(&[10.0, 20.0, 30.0, 0.0]).unwrap();
@@ -146,4 +155,52 @@ fn jog_moves_one_motor_slower_where_unhomed() {
         assert_eq!(j.end_velocity(), Some([0.0; MAX_MOTORS]));
     }
     assert!(unhomed.samples().unwrap() > 2 * homed.samples().unwrap());
+}
+
+/// Jog watches the switches: resting on one, it may leave it, not go further; a switch that
+/// trips during the jog (or comes back after clearing) ends it as a limit switch fault.
+#[test]
+fn jog_leaves_a_switch_it_rests_on_and_stops_on_one_that_trips() {
+    let on = |flags: i32| {
+        let mut f = [MotorFlags::default(); MAX_MOTORS];
+        f[1] = MotorFlags(flags);
+        f
+    };
+    let start = [0.0, 10_600.0, 0.0, 0.0];
+    // Resting on its bottom switch (positive counts: away from the top): not further down.
+    let mut j = jog_of(500.0);
+    j.observe(&start, &on(MotorFlags::BOTTOM));
+    let e = j.start(&start).unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "motor 2 rests on its bottom limit switch: jog it away from the switch (--counts of the other sign)"
+    );
+    // Away from it: it runs, the switch clears, and coming back onto it ends the jog.
+    let mut j = jog_of(-500.0);
+    j.observe(&start, &on(MotorFlags::BOTTOM));
+    j.start(&start).unwrap();
+    let mut cmd = [0.0; MAX_MOTORS];
+    j.observe(&start, &on(MotorFlags::BOTTOM));
+    assert_eq!(j.sample(1, &mut cmd), Sample::Ready);
+    j.observe(&start, &on(0));
+    assert_eq!(j.sample(2, &mut cmd), Sample::Ready);
+    j.observe(&start, &on(MotorFlags::BOTTOM));
+    assert_eq!(j.sample(3, &mut cmd), Sample::Failed);
+    assert_eq!(j.failure_kind(), FaultKind::LimitSwitch);
+    assert_eq!(
+        j.failure().unwrap(),
+        "jog: motor 2's bottom limit switch tripped (it was not active when the jog began)"
+    );
+    // Another motor's switch tripping ends it too.
+    let mut j = jog_of(-500.0);
+    j.observe(&start, &on(0));
+    j.start(&start).unwrap();
+    let mut other = [MotorFlags::default(); MAX_MOTORS];
+    other[2] = MotorFlags(MotorFlags::TOP);
+    j.observe(&start, &other);
+    assert_eq!(j.sample(1, &mut cmd), Sample::Failed);
+    assert_eq!(
+        j.failure().unwrap(),
+        "jog: motor 3's top limit switch tripped (it was not active when the jog began)"
+    );
 }
