@@ -20,9 +20,9 @@ pub enum Mode {
     Run,
     /// Home on the top switches (thesis 3.10.1.1).
     Home,
-    /// Move one motor by hand, jerk-limited ([jog]).
+    /// Move one motor by hand, jerk-limited (`[jog]`).
     Jog,
-    /// The open-loop first motion: a small voltage on each motor in turn ([check]).
+    /// The open-loop first motion: a small voltage on each motor in turn (`[check]`).
     Check,
 }
 

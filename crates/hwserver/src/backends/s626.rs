@@ -10,8 +10,8 @@
 //! `0x1fff`; counters are preset with `INSN_WRITE`. An amplifier is enabled only after a read
 //! and a write have both succeeded. Every way out zeroes all four DACs and drops every enable.
 //!
-//! `--device fake` drives [`FakeS626`] in process: the same lists against a fake of the driver
-//! with a velocity-mode plant, to try the backend without a card.
+//! `--device fake` drives [`qmarc_comedi::fake::FakeS626`] in process: the same lists against
+//! a fake of the driver with a velocity-mode plant, to try the backend without a card.
 
 use crate::backend::{Backend, BackendOpenError, HwFault, Inputs, Outputs};
 use crate::backends::state::{load_homed, save_homed};
