@@ -97,6 +97,16 @@ fn assert_same_loop(what: &str, a: &Agreement) {
     }
 }
 
+/// Settings `name` from `base` with `edits`, the processes not real time: lock-step runs give
+/// the same data at any priority, and an unpaced loop at SCHED_FIFO would hold a CPU from the
+/// other tests for seconds (the fake card's runs, paced, ride out the stalls with their raised
+/// bounds).
+fn lean(run: &TestRun, name: &str, base: &Path, edits: &[(&str, &str)]) -> PathBuf {
+    let mut all = vec![("servo_priority", "0"), ("hwserver_priority", "0")];
+    all.extend_from_slice(edits);
+    run.config_as(name, base, &all)
+}
+
 /// Runs `args` with the settings `config` into `out`, lock-step and unpaced, asserting it ends
 /// ok.
 fn run_ok(run: &TestRun, config: &Path, out: &Path, args: &[&str]) {
@@ -153,8 +163,8 @@ fn xz_path_at_both_scales(run: &TestRun) -> (PathBuf, PathBuf, [i64; 3]) {
 #[test]
 fn one_physical_move_gives_the_same_loop_at_4x_and_1x_counting_issue_27() {
     let run = TestRun::new("counting");
-    let at4 = run.config_as("at4.toml", &shipped_config(), &[]);
-    let at1 = run.config_as("at1.toml", &s626_config(), &[]);
+    let at4 = lean(&run, "at4.toml", &shipped_config(), &[]);
+    let at1 = lean(&run, "at1.toml", &s626_config(), &[]);
 
     // A step: 1000 counts at 4× is 250 at 1× (each file's step.size).
     run_ok(&run, &at4, &run.out("step4"), &["step"]);
@@ -164,12 +174,13 @@ fn one_physical_move_gives_the_same_loop_at_4x_and_1x_counting_issue_27() {
     // The X-Z path, each robot started at its first knot.
     let (knots4, knots1, start1) = xz_path_at_both_scales(&run);
     let start = |k: [i64; 3]| format!("[{}, {}, {}]", k[0], k[1], k[2]);
-    let xz4 = run.config_as(
+    let xz4 = lean(
+        &run,
         "xz4.toml",
         &shipped_config(),
         &[("start_counts", &start(start1.map(|c| c * 4)))],
     );
-    let xz1 = run.config_as("xz1.toml", &s626_config(), &[("start_counts", &start(start1))]);
+    let xz1 = lean(&run, "xz1.toml", &s626_config(), &[("start_counts", &start(start1))]);
     run_ok(&run, &xz4, &run.out("xz4"), &["run", &format!("--knots={}", knots4.display())]);
     run_ok(&run, &xz1, &run.out("xz1"), &["run", &format!("--knots={}", knots1.display())]);
     assert_same_loop("X-Z path", &agreement(&run.out("xz4"), &run.out("xz1"), None));
@@ -180,8 +191,8 @@ fn one_physical_move_gives_the_same_loop_at_4x_and_1x_counting_issue_27() {
     // the same duration.
     let (home4, home1) = (run.out("home4"), run.out("home1"));
     let state = [("state_file", "\"\"")];
-    let h4 = run.config_as("h4.toml", &shipped_config(), &state);
-    let h1 = run.config_as("h1.toml", &s626_config(), &state);
+    let h4 = lean(&run, "h4.toml", &shipped_config(), &state);
+    let h1 = lean(&run, "h1.toml", &s626_config(), &state);
     run_ok(&run, &h4, &home4, &["home"]);
     run_ok(&run, &h1, &home1, &["home"]);
     // Motor 1 reaches its switch 9500 counts (4×) away at 2000 counts/s: 11 875 cycles.
@@ -230,14 +241,15 @@ fn homing_at_1x_passes_over_the_amplifier_gain_range_issue_27() {
     // The plant's Kv 25 % either side of the calibrated 5912.5 counts/s per volt (1×).
     for kv in [0.75 * 5912.5, 1.25 * 5912.5] {
         let kv = kv.to_string();
-        let sim = run.config_as("sim.toml", &s626_config(), &[("kv", &kv)]);
+        let sim = lean(&run, "sim.toml", &s626_config(), &[("kv", &kv)]);
         home_ok(&run, &sim, &run.out(&format!("sim-{kv}")), None);
         // The fake card, in real time: its plant is the settings' (kv, the lag tau_s, the
         // switches) in 1× counts. Its switches are brought nearer than the shipped robot's
         // (the loop is the same, the homing shorter); the card's timing bounds are raised to
         // a second for this VM's stalls under the parallel tests (100 ms seen), which are not
         // the backend's to survive: its plant advances a period per read, whatever the host.
-        let fake = run.config_as(
+        let fake = lean(
+            &run,
             "fake.toml",
             &s626_config(),
             &[

@@ -178,16 +178,27 @@ fn check_finds_a_motor_wired_backwards_and_says_what_to_change_issue_27() {
     );
     let check = read_summary(&out).check.expect("the check's report");
     assert_eq!(check.iter().map(|m| m.ok).collect::<Vec<_>>(), [true, false, true]);
-    // Through the 626 backend against the fake card, in its 1× counts: it passes.
+    // Through the 626 backend against the fake card, in its 1× counts: every motor counts up
+    // and nothing else moves with it. (The fake's plant advances a period per read, not per
+    // period of the clock: under a loaded host's missed periods it moves less than the time
+    // says, so its speed against the feed-forward's is not judged here; on the simulator
+    // above it is.)
     let card = run.config_as(
         "card.toml",
         &qmarc_tests::s626_config(),
-        &[("hwserver.watchdog_periods", "2500"), ("safety.max_missed_in_row", "2500")],
+        &[
+            ("hwserver.watchdog_periods", "2500"),
+            ("safety.max_missed_in_row", "2500"),
+            // Not real time: its stalls are ridden out, and it holds no CPU from the others.
+            ("servo_priority", "0"),
+            ("hwserver_priority", "0"),
+        ],
     );
     let out = run.out("card");
     let r = starter(&run, &card, &out, &["--device=fake", "check"]);
-    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    assert!(matches!(r.code, Some(0 | 2)), "{}\n{}", r.stdout, r.stderr);
     let check = read_summary(&out).check.expect("the check's report");
-    assert!(check.iter().all(|m| m.ok && m.moved_counts > 0.0), "{check:?}");
+    assert!(check.iter().all(|m| m.moved_counts > 0.0 && m.other_moved_counts == 0.0), "{check:?}");
+    assert!(!r.stdout.contains("counted DOWN"), "{}", r.stdout);
     run.assert_clean();
 }
