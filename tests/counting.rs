@@ -100,7 +100,7 @@ fn assert_same_loop(what: &str, a: &Agreement) {
 /// Settings `name` from `base` with `edits`, the processes not real time: lock-step runs give
 /// the same data at any priority, and an unpaced loop at SCHED_FIFO would hold a CPU from the
 /// other tests for seconds (the fake card's runs, paced, ride out the stalls with their raised
-/// bounds).
+/// bounds, in real time).
 fn lean(run: &TestRun, name: &str, base: &Path, edits: &[(&str, &str)]) -> PathBuf {
     let mut all = vec![("servo_priority", "0"), ("hwserver_priority", "0")];
     all.extend_from_slice(edits);
@@ -248,8 +248,7 @@ fn homing_at_1x_passes_over_the_amplifier_gain_range_issue_27() {
         // (the loop is the same, the homing shorter); the card's timing bounds are raised to
         // a second for this VM's stalls under the parallel tests (100 ms seen), which are not
         // the backend's to survive: its plant advances a period per read, whatever the host.
-        let fake = lean(
-            &run,
+        let fake = run.config_as(
             "fake.toml",
             &s626_config(),
             &[
@@ -257,6 +256,7 @@ fn homing_at_1x_passes_over_the_amplifier_gain_range_issue_27() {
                 ("top_switch_counts", "-400"),
                 ("home_offset_counts", "400.0"),
                 ("hwserver.watchdog_periods", "2500"),
+                ("hwserver.response_timeout_periods", "2500"),
                 ("safety.max_missed_in_row", "2500"),
             ],
         );

@@ -188,10 +188,8 @@ fn check_finds_a_motor_wired_backwards_and_says_what_to_change_issue_27() {
         &qmarc_tests::s626_config(),
         &[
             ("hwserver.watchdog_periods", "2500"),
+            ("hwserver.response_timeout_periods", "2500"),
             ("safety.max_missed_in_row", "2500"),
-            // Not real time: its stalls are ridden out, and it holds no CPU from the others.
-            ("servo_priority", "0"),
-            ("hwserver_priority", "0"),
         ],
     );
     let out = run.out("card");

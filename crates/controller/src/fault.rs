@@ -343,6 +343,131 @@ mod tests {
         assert_eq!(f.kind.to_string(), "limit_switch");
     }
 
+    /// Issue 32: a code is a kind's one number both ways, every kind its own (telemetry's
+    /// `fault` is the code + 1), and nothing past the last kind is one.
+    #[test]
+    fn codes_map_both_ways_one_per_kind_issue_32() {
+        for (i, &kind) in FaultKind::ALL.iter().enumerate() {
+            assert_eq!(kind.code(), i as u32, "{kind}");
+            assert_eq!(FaultKind::from_code(kind.code()), Some(kind));
+        }
+        assert_eq!(FaultKind::from_code(FaultKind::ALL.len() as u32), None);
+        assert_eq!(FaultKind::from_code(u32::MAX), None);
+        let names: std::collections::BTreeSet<&str> =
+            FaultKind::ALL.iter().map(|k| k.name()).collect();
+        assert_eq!(names.len(), FaultKind::ALL.len(), "two kinds share a name");
+    }
+
+    /// Issue 32: a stop signal that ended a wait for the hwserver is an abort (exit code
+    /// INTERRUPTED), every other link failure is a lost hwserver, and the link is kept.
+    #[test]
+    fn a_stop_during_a_wait_is_an_abort_and_any_other_link_failure_a_lost_hwserver_issue_32() {
+        let stopped = LinkError::Stopped { waited_ns: 2_000_000 };
+        let f = Fault::from_link(stopped, 11);
+        assert_eq!((f.kind, f.cycle, f.link), (FaultKind::Aborted, 11, Some(stopped)));
+        for e in [
+            LinkError::Lost { waited_ns: 1, server_alive: false },
+            LinkError::Ipc { op: "send" },
+            LinkError::Sequence { expected: 3, got: 4 },
+        ] {
+            let f = Fault::from_link(e, 12);
+            assert_eq!((f.kind, f.cycle, f.link), (FaultKind::HwserverLost, 12, Some(e)));
+        }
+    }
+
+    /// Issue 32: the most severe condition of a status word names the fault — the watchdog,
+    /// a stop, the hardware, the emergency stop, then a switch (the first motor's), then an
+    /// encoder; the word itself is kept.
+    #[test]
+    fn the_most_severe_condition_names_the_fault_issue_32() {
+        let kind = |s: Status| Fault::from_status(s, 0).map(|f| (f.kind, f.motor, f.status));
+        let every = Status::WATCHDOG
+            | Status::SHUTDOWN
+            | Status::HARDWARE_FAULT
+            | Status::ESTOP
+            | Status::limit_top(1)
+            | Status::encoder_overflow(0);
+        let mut s = every;
+        for (dropped, next) in [
+            (Status::WATCHDOG, FaultKind::HwserverShutdown),
+            (Status::SHUTDOWN, FaultKind::HardwareFault),
+            (Status::HARDWARE_FAULT, FaultKind::EmergencyStop),
+            (Status::ESTOP, FaultKind::LimitSwitch),
+            (Status::limit_top(1), FaultKind::EncoderFault),
+        ] {
+            let before = kind(s).unwrap().0;
+            s = s & !dropped;
+            let (k, _, status) = kind(s).unwrap();
+            assert_eq!(k, next, "after dropping {dropped} from a word that gave {before}");
+            assert_eq!(status, s);
+        }
+        assert_eq!(kind(every).unwrap().0, FaultKind::Watchdog);
+        assert_eq!(kind(Status::ESTOP), Some((FaultKind::EmergencyStop, None, Status::ESTOP)));
+        let two = Status::limit_bottom(2) | Status::limit_top(1);
+        assert_eq!(kind(two), Some((FaultKind::LimitSwitch, Some(1), two)));
+        let enc = Status::encoder_overflow(2);
+        assert_eq!(kind(enc), Some((FaultKind::EncoderFault, Some(2), enc)));
+    }
+
+    /// Issue 32: every kind says what happened in words of its own, naming the motor
+    /// (1-based) where it concerns one, and whether the motors were disabled.
+    #[test]
+    fn every_kind_says_what_happened_issue_32() {
+        let mut seen = std::collections::BTreeMap::new();
+        for kind in FaultKind::ALL {
+            let f = Fault {
+                motor: Some(1),
+                value: 1234.5,
+                limit: 1000.0,
+                disabled: true,
+                ..Fault::new(kind, 77)
+            };
+            let m = f.message();
+            assert!(m.ends_with(" at cycle 77; all motors disabled"), "{kind}: {m}");
+            let what = m.trim_end_matches(" at cycle 77; all motors disabled").to_string();
+            assert!(what.len() > 10, "{kind}: {m}");
+            assert!(seen.insert(what.clone(), kind).is_none(), "{kind} and another say {what}");
+        }
+        let says = |f: Fault, what: &str| {
+            let m = f.message();
+            assert!(m.starts_with(what), "{m}");
+        };
+        let on2 =
+            |kind| Fault { motor: Some(1), value: 1234.5, limit: 1000.0, ..Fault::new(kind, 1) };
+        says(
+            on2(FaultKind::FollowingError),
+            "motor 2 instantaneous following error 1234.5 counts passed its limit 1000",
+        );
+        says(
+            Fault { integrated: true, ..on2(FaultKind::FollowingError) },
+            "motor 2 integrated following error",
+        );
+        says(
+            on2(FaultKind::SoftwareLimit),
+            "motor 2 was commanded to 1234.5 counts, past its software limit 1000",
+        );
+        says(on2(FaultKind::BadCommand), "the trajectory commanded motor 2 to 1234.5 counts");
+        says(on2(FaultKind::BadOutput), "the servo law's output for motor 2 was not");
+        says(on2(FaultKind::EncoderFault), "motor 2 encoder fault");
+        says(on2(FaultKind::EmergencyStop), "EMERGENCY STOP: the emergency-stop chain opened");
+        says(
+            Fault::from_status(Status::limit_bottom(2), 1).unwrap(),
+            "motor 3 hit its bottom limit switch",
+        );
+        says(Fault::new(FaultKind::LimitSwitch, 1), "a limit switch tripped");
+        says(Fault { signal: 15, ..Fault::new(FaultKind::Aborted, 1) }, "aborted by SIGTERM");
+        says(Fault::new(FaultKind::Aborted, 1), "aborted by a stop signal");
+        says(
+            Fault::from_link(LinkError::Ipc { op: "send" }, 1),
+            "lost the hwserver: iceoryx2 send failed",
+        );
+        says(Fault::new(FaultKind::HwserverLost, 1), "lost the hwserver at cycle 1");
+        says(
+            Fault::from_status(Status::UNKNOWN_MESSAGE, 1).unwrap(),
+            "the hwserver refused a request: ",
+        );
+    }
+
     /// Issue 9, item 7: a timing fault that a host stall can cause says which setting to
     /// raise; a dead hwserver does not (no setting helps).
     #[test]

@@ -72,19 +72,43 @@ fn expect(ok: bool, what: impl FnOnce() -> String) -> Result<(), String> {
     if ok { Ok(()) } else { Err(what()) }
 }
 
+/// The amplifiers that are on, as the hardware's outputs say (a card's rig: its pins) and
+/// as the server's flags say; an error if the two disagree.
+fn amplifiers(rig: &mut dyn Rig, core: &mut HwCore) -> Result<[bool; MAX_MOTORS], String> {
+    let n = core.n_motors();
+    let flags: Vec<bool> = (0..n).map(|m| enabled(core, m)).collect();
+    let o = rig.outputs(core).ok_or("the backend cannot read its outputs back")?;
+    expect(o.enabled[..n] == flags[..], || {
+        format!("the outputs enable {:?}, the server says {flags:?}", &o.enabled[..n])
+    })?;
+    Ok(o.enabled)
+}
+
 fn enable_and_disable(rig: &mut dyn Rig) -> Result<(), String> {
-    let mut core = HwCore::new(rig.backend(2, 0.0));
-    expect(!enabled(&mut core, 0) && !enabled(&mut core, 1), || "enabled at start".into())?;
-    let st = ask(&mut core, HwMsg::for_motor(MsgType::EnableMotor, 0)).status();
-    expect(st.is_ok(), || format!("enabling motor 1: {st}"))?;
-    expect(enabled(&mut core, 0) && !enabled(&mut core, 1), || "motor 1 alone enabled".into())?;
-    ask(&mut core, HwMsg::for_motor(MsgType::DisableMotor, 0));
-    expect(!enabled(&mut core, 0), || "motor 1 still enabled after DisableMotor".into())?;
-    for m in 0..2 {
+    let mut core = HwCore::new(rig.backend(3, 0.0));
+    let none = [false; MAX_MOTORS];
+    expect(amplifiers(rig, &mut core)? == none, || "enabled at start".into())?;
+    // Each motor alone, on and off: its amplifier and no other.
+    for m in 0..3 {
+        let st = ask(&mut core, HwMsg::for_motor(MsgType::EnableMotor, m as u32)).status();
+        expect(st.is_ok(), || format!("enabling motor {}: {st}", m + 1))?;
+        let on = amplifiers(rig, &mut core)?;
+        expect(on == std::array::from_fn(|k| k == m), || {
+            format!("motor {} alone enabled, the amplifiers on: {on:?}", m + 1)
+        })?;
+        ask(&mut core, HwMsg::for_motor(MsgType::DisableMotor, m as u32));
+        let on = amplifiers(rig, &mut core)?;
+        expect(on == none, || format!("after DisableMotor {}: {on:?}", m + 1))?;
+    }
+    for m in 0..3 {
         ask(&mut core, HwMsg::for_motor(MsgType::EnableMotor, m));
     }
+    let on = amplifiers(rig, &mut core)?;
+    expect(on[..3] == [true; 3], || format!("all enabled: {on:?}"))?;
     ask(&mut core, HwMsg::request(MsgType::DisableAll));
-    expect(!core.any_enabled(), || "a motor enabled after DisableAll".into())
+    expect(!core.any_enabled(), || "a motor enabled after DisableAll".into())?;
+    let on = amplifiers(rig, &mut core)?;
+    expect(on == none, || format!("after DisableAll: {on:?}"))
 }
 
 /// A way out of a move, by name.
@@ -129,17 +153,30 @@ fn dacs_zero_on_every_exit_path(rig: &mut dyn Rig) -> Result<(), String> {
 }
 
 fn limit_switch_within_one_read(rig: &mut dyn Rig) -> Result<(), String> {
-    for (top, bit) in [(true, Status::limit_top(1)), (false, Status::limit_bottom(1))] {
-        let mut core = HwCore::new(rig.backend(2, 0.0));
-        rig.trip_switch(&mut core, 1, top);
-        ask(&mut core, HwMsg::request(MsgType::ClearSafetyStatus));
-        ask(&mut core, HwMsg::request(MsgType::EnableSafety));
-        let st = ask(&mut core, HwMsg::read_all_encoders()).status();
-        expect(st.contains(bit), || {
-            format!("the first read after the switch says {st}, not {bit}")
-        })?;
-        let st = ask(&mut core, HwMsg::write_all_dacs(&[0; MAX_MOTORS])).status();
-        expect(st.contains(bit), || format!("the trip is not latched: {st}"))?;
+    for motor in [0, 2] {
+        for top in [true, false] {
+            let bit = if top { Status::limit_top(motor) } else { Status::limit_bottom(motor) };
+            let mut core = HwCore::new(rig.backend(3, 0.0));
+            ask(&mut core, HwMsg::request(MsgType::EnableSafety));
+            let st = ask(&mut core, HwMsg::read_all_encoders()).status();
+            expect(st.is_ok(), || format!("no switch tripped yet, the read says {st}"))?;
+            rig.trip_switch(&mut core, motor, top);
+            ask(&mut core, HwMsg::request(MsgType::ClearSafetyStatus));
+            ask(&mut core, HwMsg::request(MsgType::EnableSafety));
+            // That switch and no other, in the status word and in each motor's flags.
+            let r = ask(&mut core, HwMsg::read_all_encoders());
+            let st = r.status();
+            expect(st == bit, || format!("the first read after the switch says {st}, not {bit}"))?;
+            for k in 0..3 {
+                let f = MotorFlags(r.aux[k]);
+                let want = if k == motor { (top, !top) } else { (false, false) };
+                expect((f.top(), f.bottom()) == want, || {
+                    format!("motor {}'s flags say top {}, bottom {}", k + 1, f.top(), f.bottom())
+                })?;
+            }
+            let st = ask(&mut core, HwMsg::write_all_dacs(&[0; MAX_MOTORS])).status();
+            expect(st == bit, || format!("the trip is not latched as {bit}: {st}"))?;
+        }
     }
     Ok(())
 }
@@ -206,7 +243,7 @@ fn estop_disables_at_once_and_latches(rig: &mut dyn Rig) -> Result<(), String> {
         return Ok(());
     }
     let st = ask(&mut core, HwMsg::read_all_encoders()).status();
-    expect(st.contains(Status::ESTOP), || format!("the read after the chain opened says {st}"))?;
+    expect(st == Status::ESTOP, || format!("the read after the chain opened says {st}"))?;
     let off = |rig: &mut dyn Rig, core: &HwCore, when: &str| {
         let o = rig.outputs(core).ok_or("the backend cannot read its outputs back")?;
         expect(o.dac == [0; MAX_MOTORS] && o.enabled == [false; MAX_MOTORS], || {

@@ -76,11 +76,6 @@ impl HwCore {
         self.n_motors
     }
 
-    /// The backend's name.
-    pub fn backend_name(&self) -> &'static str {
-        self.backend.name()
-    }
-
     /// The backend.
     pub fn backend(&self) -> &dyn Backend {
         self.backend.as_ref()
@@ -117,11 +112,6 @@ impl HwCore {
     /// True if any amplifier is enabled.
     pub fn any_enabled(&self) -> bool {
         self.enabled[..self.n_motors].iter().any(|&e| e)
-    }
-
-    /// The latched status bits.
-    pub fn latched(&self) -> Status {
-        self.latched
     }
 
     /// Software position of `motor` in counts.
@@ -347,6 +337,33 @@ mod tests {
         resp
     }
 
+    /// Issue 32: when the server ends, what the backend keeps is written (the simulator's
+    /// event log, which the fault tests read), and a failure to write it is an error naming
+    /// the file.
+    #[test]
+    fn finishing_writes_what_the_backend_keeps_issue_32() {
+        let dir = std::env::temp_dir().join(format!("qmarc-finish-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let core_logging_to = |events: &std::path::Path| {
+            let names = qmarc_config::Names::backends_only(crate::backends::names());
+            let text = format!("[sim]\nevents_file = \"{}\"\n", events.display())
+                + &"[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n".repeat(3);
+            let s = qmarc_config::Settings::parse(std::path::Path::new("q.toml"), &text, &names)
+                .unwrap();
+            HwCore::new(Box::new(SimDeltabot::open(&s, true).unwrap()))
+        };
+        let events = dir.join("events.csv");
+        let mut core = core_logging_to(&events);
+        send(&mut core, HwMsg::for_motor(MsgType::EnableMotor, 0));
+        send(&mut core, HwMsg::request(MsgType::DisableAll));
+        core.finish().unwrap();
+        assert!(std::fs::metadata(&events).unwrap().len() > 0, "the event log written");
+        let nowhere = dir.join("no-such-dir/events.csv");
+        let e = core_logging_to(&nowhere).finish().unwrap_err().to_string();
+        assert!(e.starts_with(&nowhere.display().to_string()), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn unknown_message_types_get_a_status_bit() {
         let mut c = core(3);
@@ -368,6 +385,26 @@ mod tests {
             assert_eq!(resp.status(), Status::BAD_MOTOR, "{t:?}");
         }
         assert!(!c.any_enabled());
+        // Issue 32: a preset of a motor that is not there (and not "all") presets nothing.
+        let before: Vec<i64> = (0..3).map(|m| c.position(m)).collect();
+        let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, 3);
+        preset.data = [1234.0; MAX_MOTORS];
+        assert_eq!(send(&mut c, preset).status(), Status::BAD_MOTOR);
+        send(&mut c, HwMsg::read_all_encoders());
+        assert_eq!((0..3).map(|m| c.position(m)).collect::<Vec<_>>(), before);
+        // And a motor that is there is read and written as asked.
+        for m in 0..3u32 {
+            assert_eq!(
+                send(&mut c, HwMsg::for_motor(MsgType::ReadEncoder, m)).status(),
+                Status::OK
+            );
+        }
+        for (code, written) in [(100, 100), (-100, -100), (-9_000, -DAC_MAX), (9_000, DAC_MAX)] {
+            let mut w = HwMsg::for_motor(MsgType::WriteDac, 2);
+            w.aux[2] = code;
+            assert_eq!(send(&mut c, w).status(), Status::OK);
+            assert_eq!(c.dacs[2], written, "WriteDac {code}");
+        }
     }
 
     #[test]
@@ -438,6 +475,18 @@ mod tests {
         assert_eq!(send(&mut c, HwMsg::read_all_encoders()).status(), Status::encoder_overflow(1));
         send(&mut c, HwMsg::request(MsgType::ClearSafetyStatus));
         assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
+        // Issue 32: a jump of the bound exactly is believed, one count more is not (the bound
+        // as the core computes it from the lock-step period, 400 000 ns).
+        let bound = (250_000.0 * (400_000.0 * 1e-9f64)).ceil() as i64 + ENCODER_SLACK_COUNTS;
+        let jump = |c: &mut HwCore, by: i64| {
+            let raw = c.inputs.counters[1].wrapping_add(by as u32) & qmarc_proto::COUNTER_MASK;
+            c.backend.load_counter(1, raw).unwrap();
+            send(c, HwMsg::read_all_encoders()).status()
+        };
+        let before = c.position(1);
+        assert_eq!(jump(&mut c, bound), Status::OK);
+        assert_eq!(c.position(1), before + bound);
+        assert_eq!(jump(&mut c, -bound - 1), Status::encoder_overflow(1));
     }
 
     #[test]

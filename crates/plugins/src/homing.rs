@@ -190,9 +190,12 @@ impl Homing {
         let m = self.motor;
         let dir = self.motors[m].top_direction;
         let step = self.settings.velocity_counts_per_s * self.period_s;
+        // Its first sample (counted here: `begin` of the next motor runs within a sample).
+        let first = self.samples_on_motor == 0;
+        self.samples_on_motor += 1;
         match self.phase {
             Phase::LeaveSwitch => self.leave_switch(m, dir, step)?,
-            Phase::Approach if self.flags[m].top() && self.samples_on_motor == 0 => {
+            Phase::Approach if first && self.flags[m].top() => {
                 self.reports[m].started_on_switch = true;
                 self.phase = Phase::LeaveSwitch;
             }
@@ -327,7 +330,6 @@ impl TrajectoryGenerator for Homing {
         if let Err(why) = self.advance() {
             return self.fail(why);
         }
-        self.samples_on_motor += 1;
         *cmd = self.cmd;
         Sample::Ready
     }
@@ -366,7 +368,7 @@ impl TrajectoryGenerator for Homing {
         if self.phase == Phase::Done || !self.observed {
             return 0;
         }
-        ((self.motor as u32 + 1) << 8) | (self.phase as u32 + 1)
+        ((self.motor as u32 + 1) << 8) + (self.phase as u32 + 1)
     }
 
     fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
@@ -383,169 +385,4 @@ impl TrajectoryGenerator for Homing {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn settings() -> HomingSettings {
-        HomingSettings {
-            velocity_counts_per_s: 2_500.0,
-            creep_counts_per_s: 250.0,
-            clear_within_counts: 10.0,
-            max_travel_counts: 1_000.0,
-            settle_s: 0.004,
-        }
-    }
-
-    fn safety(offset: f64) -> [MotorSafety; MAX_MOTORS] {
-        [MotorSafety { home_offset_counts: offset, top_direction: -1.0, ..MotorSafety::default() };
-            MAX_MOTORS]
-    }
-
-    /// Drives the homing against an ideal robot (actual = command) whose top switch is active
-    /// at or below `switch`, until it ends; the commands of motor 1.
-    fn drive(h: &mut Homing, switch: f64, stuck: bool) -> (Sample, Vec<f64>) {
-        let mut act = [0.0; MAX_MOTORS];
-        let mut cmd = [0.0; MAX_MOTORS];
-        h.start(&act).unwrap();
-        let mut seen = Vec::new();
-        let mut tripped = false;
-        for n in 0..100_000 {
-            let mut flags = [MotorFlags::default(); MAX_MOTORS];
-            tripped |= act[0] <= switch;
-            if act[0] <= switch || (stuck && tripped) {
-                flags[0] = MotorFlags(MotorFlags::TOP);
-            }
-            h.observe(&act, &flags);
-            match h.sample(n, &mut cmd) {
-                Sample::Ready => seen.push(cmd[0]),
-                other => return (other, seen),
-            }
-            act = cmd;
-        }
-        panic!("homing did not end");
-    }
-
-    #[test]
-    fn finds_the_switch_backs_off_and_goes_to_the_offset() {
-        let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
-        let (end, cmds) = drive(&mut h, -200.0, false);
-        assert_eq!(end, Sample::Done);
-        let r = h.reports()[0];
-        assert_eq!(r.switch_found_counts, -200.0, "1 count per sample at 2500 counts/s");
-        assert!(r.switch_cleared_counts > -200.0 && r.switch_cleared_counts < -199.0, "{r:?}");
-        assert_eq!(r.home_counts, r.switch_cleared_counts + 300.0);
-        assert!((r.ended_counts - r.home_counts).abs() < 1e-9, "{r:?}");
-        assert_eq!(h.homed_frame().unwrap()[0], r.home_counts);
-        assert!(!r.started_on_switch);
-        assert!(cmds.iter().all(|&c| c >= -200.0), "never past the switch");
-    }
-
-    #[test]
-    fn starting_deep_on_the_switch_leaves_it_and_comes_back_to_its_edge() {
-        let mut h = Homing::new(1, 0.0004, settings(), safety(50.0));
-        // The switch is active at and below +40: the robot starts 40 counts into it.
-        let (end, _) = drive(&mut h, 40.0, false);
-        assert_eq!(end, Sample::Done);
-        let r = h.reports()[0];
-        assert!(r.started_on_switch);
-        assert_eq!(r.switch_found_counts, 40.0, "found again at its edge");
-    }
-
-    #[test]
-    fn a_stuck_switch_fails_within_ten_counts() {
-        let mut h = Homing::new(1, 0.0004, settings(), safety(50.0));
-        let (end, cmds) = drive(&mut h, -100.0, true);
-        assert_eq!(end, Sample::Failed);
-        assert_eq!(h.failure_kind(), FaultKind::HomingFailed);
-        let msg = h.failure().unwrap();
-        assert!(msg.starts_with("homing motor 1: its top switch was still active 10."), "{msg}");
-        assert!(cmds.last().unwrap() - -100.0 <= 10.0 + 0.1);
-    }
-
-    #[test]
-    fn no_switch_within_the_travel_fails() {
-        let mut h = Homing::new(1, 0.0004, settings(), safety(50.0));
-        let (end, _) = drive(&mut h, -5_000.0, false);
-        assert_eq!(end, Sample::Failed);
-        assert!(
-            h.failure().unwrap().starts_with("homing motor 1: no top switch within 1001 counts"),
-            "{:?}",
-            h.failure()
-        );
-    }
-
-    /// Issue 9, item 3: while motor 1 homes, a switch of motor 2 (not yet homed) that trips
-    /// ends the homing naming motor and side; one that motor 2 rested on from the start is
-    /// its own homing's business, until it clears.
-    #[test]
-    fn another_motors_switch_ends_homing_issue_9() {
-        let run = |start_on_top: bool, trip_bottom_at: Option<u64>| -> (Sample, Option<String>) {
-            let mut h = Homing::new(2, 0.0004, settings(), safety(300.0));
-            let mut act = [0.0; MAX_MOTORS];
-            let mut cmd = [0.0; MAX_MOTORS];
-            h.start(&act).unwrap();
-            for n in 0..100_000 {
-                let mut flags = [MotorFlags::default(); MAX_MOTORS];
-                if act[0] <= -200.0 {
-                    flags[0] = MotorFlags(MotorFlags::TOP);
-                }
-                if start_on_top && h.motor == 0 {
-                    flags[1] = MotorFlags(MotorFlags::TOP);
-                }
-                if trip_bottom_at.is_some_and(|at| n >= at) {
-                    flags[1] = MotorFlags(flags[1].0 | MotorFlags::BOTTOM);
-                }
-                h.observe(&act, &flags);
-                match h.sample(n, &mut cmd) {
-                    Sample::Ready => act = cmd,
-                    end => return (end, h.failure()),
-                }
-                if h.motor == 1 {
-                    return (Sample::Ready, None); // motor 1 is home
-                }
-            }
-            panic!("homing did not end");
-        };
-        let (end, why) = run(false, Some(50));
-        assert_eq!(end, Sample::Failed);
-        assert_eq!(why.unwrap(), "homing motor 1: motor 2's bottom limit switch tripped");
-        assert_eq!(run(true, None), (Sample::Ready, None), "resting on its top switch");
-        let (end, why) = run(true, Some(100));
-        assert_eq!(end, Sample::Failed);
-        assert_eq!(why.unwrap(), "homing motor 1: motor 2's bottom limit switch tripped");
-    }
-
-    /// Issue 9, item 3: a motor homed already is watched too — its switch tripping while a
-    /// later motor homes (a cable caught, the arm pushed) ends the homing.
-    #[test]
-    fn a_homed_motors_switch_ends_the_homing_of_the_next_issue_9() {
-        let mut h = Homing::new(2, 0.0004, settings(), safety(300.0));
-        let mut act = [0.0; MAX_MOTORS];
-        let mut cmd = [0.0; MAX_MOTORS];
-        h.start(&act).unwrap();
-        for n in 0..200_000 {
-            let mut flags = [MotorFlags::default(); MAX_MOTORS];
-            for (f, &a) in flags.iter_mut().zip(&act).take(2) {
-                if a <= -200.0 {
-                    *f = MotorFlags(MotorFlags::TOP); // each motor's top switch
-                }
-            }
-            if h.motor == 1 && n % 1_000 == 999 {
-                flags[0] = MotorFlags(MotorFlags::TOP); // motor 1, home, bumped into its switch
-            }
-            h.observe(&act, &flags);
-            match h.sample(n, &mut cmd) {
-                Sample::Ready => act = cmd,
-                end => {
-                    assert_eq!(end, Sample::Failed);
-                    assert_eq!(
-                        h.failure().unwrap(),
-                        "homing motor 2: motor 1's top limit switch tripped"
-                    );
-                    return;
-                }
-            }
-        }
-        panic!("motor 1's switch went unnoticed while motor 2 homed");
-    }
-}
+mod tests;

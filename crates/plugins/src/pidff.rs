@@ -360,6 +360,67 @@ mod tests {
         assert_eq!(at(&mut late, 9, 1), at(&mut punctual, 9, 1));
     }
 
+    /// Issue 32: `reset` is where a move starts — at the robot's position, wherever that is.
+    /// A law reset there and held there outputs nothing: no feed-forward or derivative kick
+    /// from a previous position, no integral, no notch state left from the last move.
+    #[test]
+    fn a_law_reset_away_from_zero_starts_without_a_kick_issue_32() {
+        let notched = MotorGains { notch: [0.0, 0.0, -0.5, 0.0], ki: 1e6, ..thesis_motor_1() };
+        let mut law = PidFf::new(&[notched, thesis_motor_1(), thesis_motor_1()]);
+        assert_eq!(law.name(), "pidff", "the name settings and results know it by");
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        // A previous move that ended with an error: integral and notch state built up.
+        let (mut c, mut a) = ([0.0; MAX_MOTORS], [0.0; MAX_MOTORS]);
+        let mut dac = [0; MAX_MOTORS];
+        for n in 1..50 {
+            c[..3].copy_from_slice(&[20.0 * n as f64, -7.0 * n as f64, 3.0]);
+            a[..3].copy_from_slice(&[c[0] - 40.0, c[1] + 9.0, -30.0]);
+            law.step(&ServoInput { n, elapsed: 1, cmd: &c, act: &a }, &mut dac);
+        }
+        assert!(dac[..3].iter().all(|&d| d != 0), "{dac:?}");
+        // The next move starts where the robot rests, each motor elsewhere, command on it.
+        let here = [5_000.0, -3_000.0, 123_456.0, 0.0];
+        law.reset(&here, &here);
+        for n in 1..4 {
+            law.step(&ServoInput { n, elapsed: 1, cmd: &here, act: &here }, &mut dac);
+            assert_eq!(dac, [0; MAX_MOTORS], "cycle {n} after the reset");
+        }
+        // Reset with the robot off its command: the first cycle sees that error and nothing
+        // else (no velocity from 0 to here, no acceleration, no integral yet).
+        let act = here.map(|h| h - 10.0);
+        law.reset(&here, &act);
+        law.step(&ServoInput { n: 1, elapsed: 1, cmd: &here, act: &act }, &mut dac);
+        let g = thesis_motor_1();
+        let p = PidFf::pmac_output(&g, 10.0, 0.0, 0.0, 0.0, 0.0).round() as i32;
+        assert_eq!(&dac[..3], &[p, p, p]);
+    }
+
+    /// Issue 32: after missed periods the integral counts the previous error once per period
+    /// it was held (the DAC held its output meanwhile): one late cycle after 4 periods sums
+    /// what 4 punctual ones do.
+    #[test]
+    fn the_integral_counts_a_held_error_once_per_missed_period_issue_32() {
+        // Ki alone, 1 code per count·period (as `integrator_sums_past_errors_only`).
+        let g = MotorGains { kp: 1.0, ki: (1u64 << 44) as f64, ..MotorGains::default() };
+        let at = |law: &mut PidFf, n: u64, elapsed: u64| {
+            let (mut c, a) = ([0.0; MAX_MOTORS], [0.0; MAX_MOTORS]);
+            c[0] = 5.0;
+            let mut dac = [0; MAX_MOTORS];
+            law.step(&ServoInput { n, elapsed, cmd: &c, act: &a }, &mut dac);
+            dac[0]
+        };
+        let (mut punctual, mut late) = (PidFf::new(&[g]), PidFf::new(&[g]));
+        let mut c0 = [0.0; MAX_MOTORS];
+        c0[0] = 5.0;
+        punctual.reset(&c0, &[0.0; MAX_MOTORS]);
+        late.reset(&c0, &[0.0; MAX_MOTORS]);
+        let expected: Vec<i32> = (1..=6).map(|n| at(&mut punctual, n, 1)).collect();
+        assert_eq!(expected, [0, 5, 10, 15, 20, 25]);
+        assert_eq!(at(&mut late, 1, 1), 0);
+        assert_eq!(at(&mut late, 5, 4), 20, "4 periods of FE 5 held");
+        assert_eq!(at(&mut late, 6, 1), 25);
+    }
+
     /// The shipped settings of one robot at both count scales: `config/qmarc.toml` at 4×
     /// (the thesis' counts) and `config/s626.toml` at the 626's 1×.
     fn shipped_at_both_scales() -> (Settings, Settings) {

@@ -199,7 +199,7 @@ impl S626 {
         let homed = state_file
             .as_deref()
             .map_or([false; MAX_MOTORS], |p| load_homed(p, n_motors, &identity));
-        Ok(S626 {
+        let mut card = S626 {
             transport,
             read: read_list(&w),
             write: write_list(&w),
@@ -219,7 +219,12 @@ impl S626 {
             homed,
             state_file,
             identity,
-        })
+        };
+        // The driver leaves the outputs at 0 after attach: active-low amplifiers
+        // (`enable_bit` 0) would read that as enabled. Off and at 0 V from the start.
+        card.safe_state();
+        card.write_ok = false; // the write list itself has not answered yet
+        Ok(card)
     }
 
     fn all_homed(mut self) -> S626 {

@@ -126,6 +126,18 @@ mod tests {
         }
     }
 
+    /// Issue 32: what a message quotes — whole counts below 10⁷, exponent notation from
+    /// there (`1e7`, not `10000000`), non-finite values as they are.
+    #[test]
+    fn values_are_quoted_whole_below_ten_million_issue_32() {
+        assert_eq!(rounded(9_999_999.4), "9999999");
+        assert_eq!(rounded(-270_000.6), "-270001");
+        assert_eq!(rounded(1e7), "1e7");
+        assert_eq!(rounded(-1.23456e8), "-1.235e8");
+        assert_eq!(rounded(1e308), "1e308");
+        assert_eq!(rounded(f64::INFINITY), "inf");
+    }
+
     #[test]
     fn limits_are_checked_and_nan_breaks_them() {
         let mut rules = KnotRules::new(1);

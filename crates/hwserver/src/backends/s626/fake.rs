@@ -156,6 +156,11 @@ impl Default for FakeRig {
 }
 
 impl FakeRig {
+    /// The rig with the card wired as `wiring` says (polarities, channels, directions).
+    pub fn wired(wiring: S626Settings) -> FakeRig {
+        FakeRig { fake: Arc::default(), wiring }
+    }
+
     fn card(&self) -> std::sync::MutexGuard<'_, FakeS626> {
         self.fake.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
     }
@@ -165,8 +170,14 @@ impl crate::conformance::Rig for FakeRig {
     fn backend(&mut self, n_motors: usize, start_counts: f64) -> Box<dyn Backend> {
         let w = &self.wiring;
         let mut fake = wired_fake(w, n_motors, &FakePlant::ideal(25_000.0 / 4.0), 400e-6);
-        for &chan in &w.counter_channels[..n_motors] {
-            fake.set_counter(chan as usize, COUNTER_ZERO.wrapping_add(start_counts as i64 as u32));
+        for m in 0..n_motors {
+            // The count the backend reads, as the counter holds it in the motor's direction.
+            let count = COUNTER_ZERO.wrapping_add(start_counts as i64 as u32);
+            let raw = if w.counter_sign[m] < 0 { count.wrapping_neg() } else { count };
+            fake.set_counter(
+                w.counter_channels[m] as usize,
+                raw & qmarc_comedi::s626::COUNTER_MASK,
+            );
         }
         self.fake = Arc::new(Mutex::new(fake));
         let transport = Box::new(SharedFake(self.fake.clone()));

@@ -221,3 +221,263 @@ fn a_device_that_is_not_a_626_is_refused_naming_it() {
     let e = Comedi::open(Path::new("/dev/null")).map(drop).unwrap_err();
     assert!(e.to_string().starts_with("/dev/null is not a comedi device"), "{e}");
 }
+
+/// The thesis' wiring with an emergency-stop chain on DIO5, and two others the conformance
+/// suite must hold for too: active-low amplifiers with switches closed to +5 V (they read 0),
+/// and every channel moved, with motors that count and drive the other way.
+fn wirings() -> [S626Settings; 3] {
+    let thesis = S626Settings { estop_dio: Some(5), ..S626Settings::default() };
+    let inverted = S626Settings { enable_bit: 0, switch_closed_bit: 0, ..thesis.clone() };
+    let moved = S626Settings {
+        enable_dio: vec![3, 0, 1],
+        limit_top_dio: vec![15, 9, 12],
+        limit_bottom_dio: vec![13, 10, 11],
+        estop_dio: Some(6),
+        dac_channels: vec![3, 1, 0],
+        counter_channels: vec![3, 0, 1],
+        dac_sign: vec![-1, 1, -1],
+        counter_sign: vec![1, -1, -1],
+        ..thesis.clone()
+    };
+    [thesis, inverted, moved]
+}
+
+/// The backend of `n_motors` over a fake wired as `w` says (switches and chain closed), and
+/// the fake.
+fn wired_card(w: &S626Settings, n_motors: usize) -> (S626, Arc<Mutex<FakeS626>>) {
+    let fake = Arc::new(Mutex::new(wired_fake(w, n_motors, &FakePlant::ideal(6_250.0), 400e-6)));
+    let transport = Box::new(SharedFake(fake.clone()));
+    (S626::with_transport(transport, "fake", w, n_motors, None).unwrap(), fake)
+}
+
+/// Issue 32: every conformance check on the card wired otherwise than the thesis' robot.
+#[test]
+fn the_conformance_suite_holds_for_other_wirings_issue_32() {
+    for w in wirings() {
+        for check in crate::conformance::CHECKS {
+            let mut rig = FakeRig::wired(w.clone());
+            if let Err(e) = (check.run)(&mut rig) {
+                panic!("{} with {w:?}: {e}", check.name);
+            }
+        }
+    }
+}
+
+/// Issue 32: a read sees the switches that are open and nothing else — none when all are
+/// closed, exactly the one that opens, the chain apart — in either polarity, whatever the
+/// card's other inputs do.
+#[test]
+fn a_read_sees_exactly_the_switch_that_opens_in_either_polarity_issue_32() {
+    for w in wirings() {
+        let (mut s, fake) = wired_card(&w, 3);
+        let closed_low = w.switch_closed_bit == 1;
+        let mut read = || {
+            let mut i = Inputs::default();
+            s.read_inputs(&mut i).unwrap();
+            (i.limits, i.estop_open)
+        };
+        assert_eq!(read(), (Status::OK, false), "all closed: {w:?}");
+        // The pins no switch is on, either way: nothing.
+        let used: Vec<u32> = w
+            .limit_top_dio
+            .iter()
+            .chain(&w.limit_bottom_dio)
+            .chain(&w.estop_dio)
+            .copied()
+            .collect();
+        for low in [true, false] {
+            for chan in (0..16).filter(|c| !used.contains(c)) {
+                locked(&fake).set_input_low(chan, low);
+            }
+            assert_eq!(read(), (Status::OK, false), "other pins {low}: {w:?}");
+        }
+        for m in 0..3 {
+            for (top, chan) in [(true, w.limit_top_dio[m]), (false, w.limit_bottom_dio[m])] {
+                locked(&fake).set_input_low(chan, !closed_low);
+                let bit = if top { Status::limit_top(m) } else { Status::limit_bottom(m) };
+                assert_eq!(read(), (bit, false), "DIO{chan} open: {w:?}");
+                locked(&fake).set_input_low(chan, closed_low);
+            }
+        }
+        let chain = w.estop_dio.unwrap();
+        locked(&fake).set_input_low(chain, !closed_low);
+        assert_eq!(read(), (Status::OK, true), "the chain open: {w:?}");
+        for &chan in &used {
+            locked(&fake).set_input_low(chan, !closed_low);
+        }
+        let all =
+            (0..3).fold(Status::OK, |a, m| a | Status::limit_top(m) | Status::limit_bottom(m));
+        assert_eq!(read(), (all, true), "all open: {w:?}");
+    }
+}
+
+/// Issue 32: the enable pins as the amplifiers see them, in either polarity: off from the
+/// moment the card is opened, each amplifier's own pin on when it is enabled and no other,
+/// off after the safe state and after the backend is dropped — which also zeroes every DAC.
+#[test]
+fn the_enable_pins_follow_each_amplifier_in_either_polarity_issue_32() {
+    for w in wirings() {
+        let (mut s, fake) = wired_card(&w, 3);
+        let on = |fake: &Arc<Mutex<FakeS626>>| -> [bool; 3] {
+            let out = locked(fake).outputs();
+            std::array::from_fn(|m| (out >> w.enable_dio[m]) & 1 == w.enable_bit)
+        };
+        let dacs_at_zero =
+            |fake: &Arc<Mutex<FakeS626>>| (0..4).all(|c| locked(fake).dac_volts(c) == 0.0);
+        assert_eq!(on(&fake), [false; 3], "when opened: {w:?}");
+        s.run_read_list().unwrap();
+        s.run_write_list().unwrap();
+        for m in 0..3 {
+            s.set_amp_enable(m, true).unwrap();
+            let only = std::array::from_fn(|k| k == m);
+            assert_eq!(on(&fake), only, "motor {} enabled: {w:?}", m + 1);
+            s.write_dacs(&[100, 200, 300, 0]).unwrap();
+            assert_eq!(on(&fake), only, "after a write: {w:?}");
+            assert_eq!(
+                s.outputs(),
+                Some(Outputs { dac: [100, 200, 300, 0], enabled: [m == 0, m == 1, m == 2, false] })
+            );
+            s.set_amp_enable(m, false).unwrap();
+            assert_eq!(on(&fake), [false; 3], "motor {} disabled: {w:?}", m + 1);
+        }
+        for m in 0..3 {
+            s.set_amp_enable(m, true).unwrap();
+        }
+        assert_eq!(on(&fake), [true; 3]);
+        s.safe_state();
+        assert_eq!((on(&fake), dacs_at_zero(&fake)), ([false; 3], true), "safe: {w:?}");
+        assert_eq!(s.outputs(), Some(Outputs::default()));
+        s.run_write_list().unwrap();
+        for m in 0..3 {
+            s.set_amp_enable(m, true).unwrap();
+        }
+        s.write_dacs(&[-900, 900, 500, 0]).unwrap();
+        assert!(!dacs_at_zero(&fake));
+        drop(s);
+        assert_eq!((on(&fake), dacs_at_zero(&fake)), ([false; 3], true), "dropped: {w:?}");
+        if let Some(pump) = w.charge_pump_dio {
+            assert!(!locked(&fake).pin_low(pump), "the pump held still, its relay dropped");
+        }
+    }
+}
+
+/// Settings for the card `device`, its homed frame kept in `state_dir`.
+fn card_settings(device: &Path, state_dir: &Path, extra: &str) -> Settings {
+    let names = qmarc_config::Names::backends_only(crate::backends::names());
+    let text = format!(
+        "[general]\ncounts_per_rev = 1024\n[hwserver]\nbackend = \"s626\"\n[s626]\n\
+         device = \"{}\"\nstate_dir = \"{}\"\n{extra}",
+        device.display(),
+        state_dir.display()
+    ) + &"[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n".repeat(3);
+    Settings::parse(Path::new("q.toml"), &text, &names).unwrap()
+}
+
+/// Issue 32: the homed frame is kept in `<state_dir>/s626-<device>.state` and belongs to
+/// that card as it was when homed: the same node and counters find it again; a node made
+/// anew (the driver reloaded, the counters reset) or counters counting the other way do not.
+#[test]
+fn the_homed_frame_is_kept_for_that_card_only_issue_32() {
+    let dir = std::env::temp_dir().join(format!("qmarc-frame-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let device = dir.join("comedi7"); // a file standing for the device node
+    std::fs::write(&device, b"").unwrap();
+    let s = card_settings(&device, &dir, "");
+    let file = state_file(&s);
+    assert_eq!(file, dir.join("s626-comedi7.state"));
+    let open = |s: &Settings| {
+        let fake = wired_fake(&s.s626, 3, &FakePlant::ideal(6_250.0), 400e-6);
+        let d = s.s626.device.display().to_string();
+        S626::with_transport(Box::new(fake), &d, &s.s626, 3, Some(state_file(s))).unwrap()
+    };
+    let homed = |c: &S626| [c.homed(0), c.homed(1), c.homed(2)];
+    let mut card = open(&s);
+    assert_eq!(homed(&card), [false; 3], "nothing kept yet");
+    card.set_homed(1);
+    assert_eq!(homed(&card), [false, true, false]);
+    drop(card);
+    assert!(file.exists());
+    assert_eq!(homed(&open(&s)), [false, true, false], "the same card, kept");
+    let other = card_settings(&device, &dir, "counter_sign = [1, -1, 1]\n");
+    assert_eq!(homed(&open(&other)), [false; 3], "counters the other way");
+    // The driver reloaded: a new node where the old one was.
+    let new = dir.join("comedi7.new");
+    std::fs::write(&new, b"").unwrap();
+    std::fs::rename(&new, &device).unwrap();
+    assert_eq!(homed(&open(&s)), [false; 3], "a new node");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 32: `open` drives the fake for `fake` (homed, in process) and the device otherwise;
+/// `check` refuses what `open` would, before anything is spawned; neither runs lock-step.
+#[test]
+fn open_and_check_take_the_device_the_settings_name_issue_32() {
+    let dir = std::env::temp_dir().join(format!("qmarc-open-{}", std::process::id()));
+    let fake = card_settings(Path::new(FAKE_DEVICE), &dir, "");
+    let card = S626::open(&fake, false).unwrap();
+    assert_eq!((card.name(), card.n_motors(), card.homed(2)), ("s626", 3, true));
+    drop(card);
+    S626::check(&fake, false).unwrap();
+    let e = S626::open(&fake, true).map(drop).unwrap_err().to_string();
+    assert!(e.starts_with("--deterministic runs the simulated robot only"), "{e}");
+    let e = S626::check(&fake, true).unwrap_err().to_string();
+    assert!(e.starts_with("--deterministic runs the simulated robot only"), "{e}");
+    let none = card_settings(Path::new("/dev/comedi-none"), &dir, "");
+    let e = S626::open(&none, false).map(drop).unwrap_err().to_string();
+    assert!(e.starts_with("/dev/comedi-none: no such device"), "{e}");
+    let e = S626::check(&none, false).unwrap_err().to_string();
+    assert!(e.starts_with("/dev/comedi-none: no such device"), "{e}");
+    let null = card_settings(Path::new("/dev/null"), &dir, "");
+    let e = S626::check(&null, false).unwrap_err().to_string();
+    assert!(e.starts_with("/dev/null is not a comedi device"), "{e}");
+    let other_counts = card_settings(Path::new(FAKE_DEVICE), &dir, "counts_per_rev = 4096\n");
+    let e = S626::check(&other_counts, false).unwrap_err().to_string();
+    assert!(e.contains("but the 626 counts 4096"), "{e}");
+    assert!(!dir.exists(), "the fake keeps no frame");
+}
+
+/// Issue 32: an ioctl's answer as a fault: a list that ran short says how far it got
+/// (−(instructions run) − 1), an errno is itself; the operation is named.
+#[test]
+fn a_short_list_or_an_errno_is_a_fault_of_that_operation_issue_32() {
+    assert_eq!(ran(Ok(4), 4, 2), Ok(()));
+    assert_eq!(ran(Ok(2), 4, 2), Err(HwFault { op: 2, code: -3 }));
+    assert_eq!(ran(Ok(0), 1, 4), Err(HwFault { op: 4, code: -1 }));
+    let eio = nix::errno::Errno::EIO;
+    assert_eq!(ran(Err(eio), 4, 1), Err(HwFault { op: 1, code: eio as i32 }));
+}
+
+/// Issue 32: the backend's clock is the monotonic clock, in nanoseconds.
+#[test]
+fn the_clock_is_monotonic_nanoseconds_issue_32() {
+    let (s, _) = card(1);
+    let a = s.now_ns();
+    std::thread::sleep(std::time::Duration::from_millis(2));
+    let b = s.now_ns();
+    let c = qmarc_timer::clock::monotonic_now_ns();
+    assert!(b >= a + 2_000_000 && c >= b, "{a} {b} {c}");
+}
+
+/// Issue 32: disabling a motor zeroes its DAC and drops its enable; if the DAC write fails
+/// the hardware is in doubt even though the enable dropped — a fault, made safe, latched.
+#[test]
+fn a_disable_whose_dac_write_fails_is_a_hardware_fault_issue_32() {
+    let (s, fake) = card(3);
+    let mut core = HwCore::new(Box::new(s));
+    core.handle(&HwMsg::read_all_encoders());
+    core.handle(&HwMsg::write_all_dacs(&[0; MAX_MOTORS]));
+    core.handle(&HwMsg::for_motor(MsgType::EnableMotor, 1));
+    core.handle(&HwMsg::write_all_dacs(&[0, 600, 0, 0]));
+    // The disable runs the write list (it fails), then the enables list.
+    locked(&fake).fail_next(Failure::ErrnoAfter { done: 0, errno: nix::errno::Errno::EIO });
+    let st = core.handle(&HwMsg::for_motor(MsgType::DisableMotor, 1)).status();
+    assert!(st.contains(Status::HARDWARE_FAULT), "{st}");
+    {
+        let fake = locked(&fake);
+        assert!((0..4).all(|c| fake.dac_volts(c) == 0.0));
+        assert!(!fake.pin_low(1), "motor 2's enable off");
+    }
+    let st = core.handle(&HwMsg::read_all_encoders()).status();
+    assert!(st.contains(Status::HARDWARE_FAULT), "latched: {st}");
+}

@@ -1,0 +1,450 @@
+//! Unit tests of homing: an ideal robot (actual = command), its switches where the test
+//! says, and switches injected in every phase.
+
+use super::*;
+
+fn settings() -> HomingSettings {
+    HomingSettings {
+        velocity_counts_per_s: 2_500.0,
+        creep_counts_per_s: 250.0,
+        clear_within_counts: 10.0,
+        max_travel_counts: 1_000.0,
+        settle_s: 0.004,
+    }
+}
+
+fn safety(offset: f64) -> [MotorSafety; MAX_MOTORS] {
+    [MotorSafety { home_offset_counts: offset, top_direction: -1.0, ..MotorSafety::default() };
+        MAX_MOTORS]
+}
+
+/// Drives the homing against an ideal robot (actual = command) whose top switch is active
+/// at or below `switch`, until it ends; the commands of motor 1.
+fn drive(h: &mut Homing, switch: f64, stuck: bool) -> (Sample, Vec<f64>) {
+    let mut act = [0.0; MAX_MOTORS];
+    let mut cmd = [0.0; MAX_MOTORS];
+    h.start(&act).unwrap();
+    let mut seen = Vec::new();
+    let mut tripped = false;
+    for n in 0..100_000 {
+        let mut flags = [MotorFlags::default(); MAX_MOTORS];
+        tripped |= act[0] <= switch;
+        if act[0] <= switch || (stuck && tripped) {
+            flags[0] = MotorFlags(MotorFlags::TOP);
+        }
+        h.observe(&act, &flags);
+        match h.sample(n, &mut cmd) {
+            Sample::Ready => seen.push(cmd[0]),
+            other => return (other, seen),
+        }
+        act = cmd;
+    }
+    panic!("homing did not end");
+}
+
+#[test]
+fn finds_the_switch_backs_off_and_goes_to_the_offset() {
+    let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
+    let (end, cmds) = drive(&mut h, -200.0, false);
+    assert_eq!(end, Sample::Done);
+    let r = h.reports()[0];
+    assert_eq!(r.switch_found_counts, -200.0, "1 count per sample at 2500 counts/s");
+    assert!(r.switch_cleared_counts > -200.0 && r.switch_cleared_counts < -199.0, "{r:?}");
+    assert_eq!(r.home_counts, r.switch_cleared_counts + 300.0);
+    assert!((r.ended_counts - r.home_counts).abs() < 1e-9, "{r:?}");
+    assert_eq!(h.homed_frame().unwrap()[0], r.home_counts);
+    assert!(!r.started_on_switch);
+    assert!(cmds.iter().all(|&c| c >= -200.0), "never past the switch");
+}
+
+#[test]
+fn starting_deep_on_the_switch_leaves_it_and_comes_back_to_its_edge() {
+    let mut h = Homing::new(1, 0.0004, settings(), safety(50.0));
+    // The switch is active at and below +40: the robot starts 40 counts into it.
+    let (end, _) = drive(&mut h, 40.0, false);
+    assert_eq!(end, Sample::Done);
+    let r = h.reports()[0];
+    assert!(r.started_on_switch);
+    assert_eq!(r.switch_found_counts, 40.0, "found again at its edge");
+}
+
+#[test]
+fn a_stuck_switch_fails_within_ten_counts() {
+    let mut h = Homing::new(1, 0.0004, settings(), safety(50.0));
+    let (end, cmds) = drive(&mut h, -100.0, true);
+    assert_eq!(end, Sample::Failed);
+    assert_eq!(h.failure_kind(), FaultKind::HomingFailed);
+    let msg = h.failure().unwrap();
+    assert!(msg.starts_with("homing motor 1: its top switch was still active 10."), "{msg}");
+    assert!(cmds.last().unwrap() - -100.0 <= 10.0 + 0.1);
+}
+
+#[test]
+fn no_switch_within_the_travel_fails() {
+    let mut h = Homing::new(1, 0.0004, settings(), safety(50.0));
+    let (end, _) = drive(&mut h, -5_000.0, false);
+    assert_eq!(end, Sample::Failed);
+    assert!(
+        h.failure().unwrap().starts_with("homing motor 1: no top switch within 1001 counts"),
+        "{:?}",
+        h.failure()
+    );
+}
+
+/// Issue 9, item 3: while motor 1 homes, a switch of motor 2 (not yet homed) that trips
+/// ends the homing naming motor and side; one that motor 2 rested on from the start is
+/// its own homing's business, until it clears.
+#[test]
+fn another_motors_switch_ends_homing_issue_9() {
+    let run = |start_on_top: bool, trip_bottom_at: Option<u64>| -> (Sample, Option<String>) {
+        let mut h = Homing::new(2, 0.0004, settings(), safety(300.0));
+        let mut act = [0.0; MAX_MOTORS];
+        let mut cmd = [0.0; MAX_MOTORS];
+        h.start(&act).unwrap();
+        for n in 0..100_000 {
+            let mut flags = [MotorFlags::default(); MAX_MOTORS];
+            if act[0] <= -200.0 {
+                flags[0] = MotorFlags(MotorFlags::TOP);
+            }
+            if start_on_top && h.motor == 0 {
+                flags[1] = MotorFlags(MotorFlags::TOP);
+            }
+            if trip_bottom_at.is_some_and(|at| n >= at) {
+                flags[1] = MotorFlags(flags[1].0 | MotorFlags::BOTTOM);
+            }
+            h.observe(&act, &flags);
+            match h.sample(n, &mut cmd) {
+                Sample::Ready => act = cmd,
+                end => return (end, h.failure()),
+            }
+            if h.motor == 1 {
+                return (Sample::Ready, None); // motor 1 is home
+            }
+        }
+        panic!("homing did not end");
+    };
+    let (end, why) = run(false, Some(50));
+    assert_eq!(end, Sample::Failed);
+    assert_eq!(why.unwrap(), "homing motor 1: motor 2's bottom limit switch tripped");
+    assert_eq!(run(true, None), (Sample::Ready, None), "resting on its top switch");
+    let (end, why) = run(true, Some(100));
+    assert_eq!(end, Sample::Failed);
+    assert_eq!(why.unwrap(), "homing motor 1: motor 2's bottom limit switch tripped");
+}
+
+/// Issue 9, item 3: a motor homed already is watched too — its switch tripping while a
+/// later motor homes (a cable caught, the arm pushed) ends the homing.
+#[test]
+fn a_homed_motors_switch_ends_the_homing_of_the_next_issue_9() {
+    let mut h = Homing::new(2, 0.0004, settings(), safety(300.0));
+    let mut act = [0.0; MAX_MOTORS];
+    let mut cmd = [0.0; MAX_MOTORS];
+    h.start(&act).unwrap();
+    for n in 0..200_000 {
+        let mut flags = [MotorFlags::default(); MAX_MOTORS];
+        for (f, &a) in flags.iter_mut().zip(&act).take(2) {
+            if a <= -200.0 {
+                *f = MotorFlags(MotorFlags::TOP); // each motor's top switch
+            }
+        }
+        if h.motor == 1 && n % 1_000 == 999 {
+            flags[0] = MotorFlags(MotorFlags::TOP); // motor 1, home, bumped into its switch
+        }
+        h.observe(&act, &flags);
+        match h.sample(n, &mut cmd) {
+            Sample::Ready => act = cmd,
+            end => {
+                assert_eq!(end, Sample::Failed);
+                assert_eq!(
+                    h.failure().unwrap(),
+                    "homing motor 2: motor 1's top limit switch tripped"
+                );
+                return;
+            }
+        }
+    }
+    panic!("motor 1's switch went unnoticed while motor 2 homed");
+}
+/// Issue 32: a robot of three motors away from 0, exact in binary: 4096 counts/s at a
+/// period of 1/2048 s (two counts a sample), creep 256 counts/s (1/8 count a sample).
+/// Motors 1 and 2 find their top switch below them, motor 3 above; motor 2 starts on it.
+struct Robot {
+    start: [f64; MAX_MOTORS],
+    top: [f64; MAX_MOTORS],
+    dir: [f64; MAX_MOTORS],
+}
+
+/// One sample of a [`Robot`] run: the progress word before it and after it, the commands.
+#[derive(Debug, Clone, Copy)]
+struct Step {
+    before: u32,
+    after: u32,
+    cmd: [f64; MAX_MOTORS],
+}
+
+const PERIOD: f64 = 1.0 / 2048.0;
+
+fn exact() -> HomingSettings {
+    HomingSettings {
+        velocity_counts_per_s: 4096.0,
+        creep_counts_per_s: 256.0,
+        clear_within_counts: 10.0,
+        max_travel_counts: 1_000.0,
+        settle_s: 4.0 * PERIOD,
+    }
+}
+
+impl Robot {
+    fn three() -> Robot {
+        Robot {
+            start: [5_000.0, -3_000.0, 12_346.0, 0.0],
+            top: [4_800.0, -2_960.0, 12_500.0, 0.0],
+            dir: [-1.0, -1.0, 1.0, -1.0],
+        }
+    }
+
+    fn homing(&self, offset: f64) -> Homing {
+        let mut motors = [MotorSafety::default(); MAX_MOTORS];
+        for (m, s) in motors.iter_mut().enumerate() {
+            *s = MotorSafety {
+                home_offset_counts: offset,
+                top_direction: self.dir[m],
+                ..MotorSafety::default()
+            };
+        }
+        Homing::new(3, PERIOD, exact(), motors)
+    }
+
+    /// Each motor's top switch is active at and past `top` (in its direction), its
+    /// bottom switch never; `inject` may add switches to a sample's flags.
+    fn run(
+        &self,
+        h: &mut Homing,
+        mut inject: impl FnMut(u32, &mut [MotorFlags; MAX_MOTORS]),
+    ) -> (Sample, Vec<Step>) {
+        let mut act = self.start;
+        let mut cmd = [f64::NAN; MAX_MOTORS];
+        h.start(&act).unwrap();
+        let mut steps = Vec::new();
+        for n in 0..200_000 {
+            let mut flags = [MotorFlags::default(); MAX_MOTORS];
+            for m in 0..3 {
+                if (act[m] - self.top[m]) * self.dir[m] >= 0.0 {
+                    flags[m] = MotorFlags(MotorFlags::TOP);
+                }
+            }
+            // The phase this sample runs in (progress() says 0 until feedback arrives).
+            let before = ((h.motor as u32 + 1) << 8) | (h.phase as u32 + 1);
+            inject(before, &mut flags);
+            h.observe(&act, &flags);
+            let end = h.sample(n, &mut cmd);
+            if end != Sample::Ready {
+                return (end, steps);
+            }
+            steps.push(Step { before, after: h.progress(), cmd });
+            act = cmd;
+        }
+        panic!("homing did not end");
+    }
+}
+
+/// Issue 32: from anywhere, each motor in turn leaves its switch if it starts on it,
+/// approaches it at the homing velocity, creeps off it, goes to its offset and settles
+/// for the settle time; the others hold where they are (the homed ones at home); every
+/// command moves a motor by exactly what its phase allows.
+#[test]
+fn homes_three_motors_from_anywhere_at_each_phases_speed_issue_32() {
+    let robot = Robot::three();
+    let mut h = robot.homing(300.0);
+    assert_eq!(h.samples(), None, "homing ends when every motor is home");
+    assert_eq!(h.progress(), 0, "nothing seen yet");
+    assert_eq!(h.name(), "home");
+    let (end, steps) = robot.run(&mut h, |_, _| {});
+    assert_eq!(end, Sample::Done, "{:?}", h.failure());
+    assert_eq!(h.progress(), 0, "done");
+    let reports = h.homing_report().unwrap();
+    assert_eq!(reports.len(), 3);
+    let mut home = [0.0; MAX_MOTORS];
+    for (m, r) in reports.iter().enumerate() {
+        let (dir, top) = (robot.dir[m], robot.top[m]);
+        assert_eq!(r.motor, m + 1);
+        assert!(r.home, "{r:?}");
+        assert_eq!(r.started_on_switch, m == 1, "{r:?}");
+        assert_eq!(r.switch_found_counts, top, "two counts a sample from an even count");
+        // Cleared one creep step (1/8 count) back from the trip.
+        assert_eq!(r.switch_cleared_counts, top - dir * 0.125, "{r:?}");
+        assert_eq!(r.home_counts, r.switch_cleared_counts - dir * 300.0, "{r:?}");
+        assert_eq!(r.ended_counts, r.home_counts, "{r:?}");
+        home[m] = r.home_counts;
+    }
+    assert_eq!(h.homed_frame(), Some(home));
+
+    let phase = |p: u32| (p >> 8, p & 0xff);
+    let mut settling = [0; 3];
+    let mut last = robot.start;
+    for s in &steps {
+        let (motor, ph) = phase(s.before);
+        let m = motor as usize - 1;
+        for k in (0..3).filter(|&k| k != m) {
+            let held = if k < m { home[k] } else { robot.start[k] };
+            assert_eq!(s.cmd[k], held, "motor {} while motor {motor} homes", k + 1);
+        }
+        let moved = s.cmd[m] - last[m];
+        let dir = robot.dir[m];
+        if s.after == s.before {
+            match ph {
+                1 => assert_eq!(moved, -dir * 2.0, "leaving the switch: the velocity"),
+                2 => assert_eq!(moved, dir * 2.0, "approaching: the velocity"),
+                3 => assert_eq!(moved, -dir * 0.125, "backing off: the creep"),
+                4 => assert_eq!(moved, -dir * 2.0, "to home: the velocity"),
+                5 => assert_eq!(moved, 0.0, "settling"),
+                _ => unreachable!(),
+            }
+        }
+        if phase(s.after) == (motor, 5) {
+            settling[m] += 1;
+        }
+        last = s.cmd;
+    }
+    assert_eq!(settling, [5; 3], "settle_s is 4 periods, then one more sample to move on");
+
+    // What the console says, in order, for motor 2 (which started on its switch).
+    let mut said: Vec<String> = steps
+        .iter()
+        .filter(|s| phase(s.after).0 == 2)
+        .filter_map(|s| describe_progress(s.after))
+        .collect();
+    said.dedup();
+    assert_eq!(
+        said,
+        [
+            "homing motor 2: approaching the top switch",
+            "homing motor 2: leaving the top switch it started on",
+            "homing motor 2: approaching the top switch",
+            "homing motor 2: backing off the top switch",
+            "homing motor 2: moving to home",
+            "homing motor 2: settling at home",
+        ]
+    );
+    assert_eq!(describe_progress(0), None);
+    assert_eq!(describe_progress(2), None, "no motor 0");
+    assert_eq!(describe_progress(1 << 8 | 6), None);
+}
+
+/// Issue 32: during homing the switches are the only limit protection. In every phase of
+/// every motor's homing, any switch that trips ends it naming the switch — but the top
+/// switch of the motor homing while it leaves, approaches or backs off it, its bottom
+/// switch while it approaches (moving away from it), and a switch a motor not yet homed
+/// has rested on since the start.
+#[test]
+fn every_unexpected_switch_in_every_phase_ends_the_homing_issue_32() {
+    let robot = Robot::three();
+    let mut cases = 0;
+    for m in 0..3u32 {
+        for ph in 1..=5u32 {
+            if ph == 1 && m != 1 {
+                continue; // only motor 2 starts on its switch
+            }
+            for k in 0..3usize {
+                for top in [true, false] {
+                    let mut h = robot.homing(300.0);
+                    let at = (m + 1) << 8 | ph;
+                    // In the phase's second sample (the first feedback of all is what
+                    // the motors rest on).
+                    let mut seen = 0;
+                    let bit = if top { MotorFlags::TOP } else { MotorFlags::BOTTOM };
+                    let (end, steps) = robot.run(&mut h, |before, flags| {
+                        seen += u32::from(before == at);
+                        if before == at && seen == 2 {
+                            flags[k] = MotorFlags(flags[k].0 | bit);
+                        }
+                    });
+                    assert!(seen >= 2, "motor {} not two samples in phase {ph}", m + 1);
+                    let mine = k == m as usize;
+                    let resting = k == 1 && top && m == 0; // motor 2 rests on its top
+                    let allowed = mine && if top { ph <= 3 } else { ph == 2 } || resting;
+                    let case = format!(
+                        "motor {}'s {} switch while motor {} is in phase {ph}",
+                        k + 1,
+                        if top { "top" } else { "bottom" },
+                        m + 1
+                    );
+                    let refused =
+                        Some(HomingFailure::UnexpectedSwitch { motor: k, top, homing: m as usize });
+                    if allowed {
+                        assert!(steps.iter().any(|s| s.before == at), "{case}: {:?}", h.failure());
+                        assert_ne!(h.failure, refused, "{case}");
+                    } else {
+                        assert_eq!((end, h.failure), (Sample::Failed, refused), "{case}");
+                        // In the very sample that saw it.
+                        assert_eq!(steps.last().map(|s| s.after), Some(at), "{case}");
+                    }
+                    cases += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(cases, (1 + 4 * 3) * 6);
+}
+
+/// Issue 32: a motor that starts on its bottom switch may move away from it, but the
+/// switch must clear: still active when its top switch trips (a stuck switch, a short),
+/// it ends the homing.
+#[test]
+fn a_bottom_switch_that_never_clears_ends_the_homing_at_the_top_issue_32() {
+    let robot = Robot::three();
+    let mut h = robot.homing(300.0);
+    let (end, steps) = robot.run(&mut h, |_, flags| {
+        flags[0] = MotorFlags(flags[0].0 | MotorFlags::BOTTOM);
+    });
+    assert_eq!(end, Sample::Failed);
+    assert_eq!(
+        h.failure,
+        Some(HomingFailure::UnexpectedSwitch { motor: 0, top: false, homing: 0 })
+    );
+    assert_eq!(steps.last().unwrap().after, 1 << 8 | 3, "at the trip, backing off");
+}
+
+/// Issue 32: the runaway guards count travel from where the motor's homing began, not
+/// from 0: no switch within `max_travel_counts`, a switch it started on that never
+/// clears within it, a switch that does not clear within `clear_within_counts` of its
+/// trip — each to the count.
+#[test]
+fn the_runaway_guards_hold_from_any_origin_issue_32() {
+    let far = Robot { top: [-1e9, 1e9, 1e9, 0.0], ..Robot::three() };
+    // Motor 1 at 5000 finds nothing: it stops one step past the travel.
+    let mut h = far.homing(300.0);
+    let (end, steps) = far.run(&mut h, |_, _| {});
+    assert_eq!(end, Sample::Failed);
+    assert_eq!(h.failure, Some(HomingFailure::NoSwitch { motor: 0, travel: 1002.0 }));
+    assert_eq!(h.reports().iter().map(|r| (r.motor, r.home)).collect::<Vec<_>>(), [(1, false)]);
+    assert_eq!(steps.last().unwrap().cmd[0], 5_000.0 - 1_000.0);
+    // Motor 3 (upwards), from 12 346, after motors 1 and 2 homed.
+    let far3 = Robot { top: [4_800.0, -2_960.0, 1e9, 0.0], ..Robot::three() };
+    let mut h = far3.homing(300.0);
+    assert_eq!(far3.run(&mut h, |_, _| {}).0, Sample::Failed);
+    assert_eq!(h.failure, Some(HomingFailure::NoSwitch { motor: 2, travel: 1002.0 }));
+    // The report says motors 1 and 2 got home and motor 3 did not.
+    let homes: Vec<(usize, bool)> = h.reports().iter().map(|r| (r.motor, r.home)).collect();
+    assert_eq!(homes, [(1, true), (2, true), (3, false)]);
+    // Motor 2 starts on a switch that is active everywhere: it leaves for 1000 counts.
+    let stuck = Robot { top: [4_800.0, 1e9, 12_500.0, 0.0], ..Robot::three() };
+    let mut h = stuck.homing(300.0);
+    let (end, steps) = stuck.run(&mut h, |_, _| {});
+    assert_eq!(end, Sample::Failed);
+    assert_eq!(h.failure, Some(HomingFailure::NotCleared { motor: 1, backed_off: 1002.0 }));
+    assert_eq!(steps.last().unwrap().cmd[1], -3_000.0 + 1_000.0);
+    // Motor 1's switch sticks once tripped: refused 10 counts back, 80 creep steps.
+    let robot = Robot::three();
+    let mut h = robot.homing(300.0);
+    let mut tripped = false;
+    let (end, steps) = robot.run(&mut h, |_, flags| {
+        tripped |= flags[0].top();
+        if tripped {
+            flags[0] = MotorFlags(MotorFlags::TOP);
+        }
+    });
+    assert_eq!(end, Sample::Failed);
+    assert_eq!(h.failure, Some(HomingFailure::NotCleared { motor: 0, backed_off: 10.0 }));
+    assert_eq!(steps.last().unwrap().cmd[0], 4_800.0 + 10.0);
+}
