@@ -70,6 +70,25 @@ fn path_refuses_bad_waypoints_before_writing_anything_issue_13() {
     let r = call(args(&[&format!("--out={}", w.display())]));
     assert_eq!(r.code, Some(3));
     assert!(r.stderr.contains("that is the waypoint file"), "{}", r.stderr);
+    // Issue 28, item 5: an existing file is never written over (as `tune --write`).
+    let kept = run.out("kept.txt");
+    std::fs::write(&kept, "mine\n").unwrap();
+    let good = run.out("good.txt");
+    std::fs::write(&good, "# t x y z\n0.0 0 0 -0.6\n0.1 0 0 -0.62\n").unwrap();
+    let mut a = args(&[&format!("--out={}", kept.display())]);
+    a[2] = format!("--waypoints={}", good.display());
+    let r = call(a);
+    assert_eq!(r.code, Some(3), "{}", r.stderr);
+    assert!(
+        r.stderr.contains(&format!(
+            "--out {}: it exists; path never writes over a file (remove it, or give another \
+             name)",
+            kept.display()
+        )),
+        "{}",
+        r.stderr
+    );
+    assert_eq!(std::fs::read_to_string(&kept).unwrap(), "mine\n", "left as it was");
     let r = call(args(&[]));
     assert!(r.stderr.contains("--out FILE"), "{}", r.stderr);
     // Without a [robot] table there is no geometry to go by.

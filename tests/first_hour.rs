@@ -442,7 +442,8 @@ fn a_full_disk_never_loses_a_move_issue_10() {
     let filler = small.join("filler");
     let _ = std::fs::write(&filler, vec![0u8; 4 << 20]);
     let r = wait_with_timeout(child, TIMEOUT);
-    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    // Issue 28, item 3: results that did not reach --out are not a success.
+    assert_eq!(r.code, Some(i32::from(exit::RESCUED)), "{}\n{}", r.stdout, r.stderr);
     let rescue = std::env::temp_dir().join(format!("qmarc-rescue-{starter_pid}"));
     assert!(
         r.stderr.contains(&format!("the data of this move are in {}", rescue.display())),
@@ -698,4 +699,60 @@ fn the_consoles_subcommands_call_themselves_qmarc_issue_10() {
     assert_eq!(r.code, Some(0));
     assert!(r.stdout.contains("Usage: qmarc step"), "{}", r.stdout);
     assert!(!r.stdout.contains("qmarc-starter step"), "{}", r.stdout);
+}
+
+/// Issue 28, item 1: Ctrl-C while a finished move's data are written ends the writing at once
+/// (before: `write_all` retried the stop's error forever, the controller spun until the
+/// starter killed it, and the run ended `controller_lost` with a half-written folder). The
+/// run exits INTERRUPTED; the folder holds this move's summary, saying what was not written,
+/// and the set it replaced in `previous/`; nothing half-written is left.
+#[test]
+fn a_stop_while_the_data_are_written_ends_the_writing_cleanly_issue_28() {
+    let run = TestRun::new("stopwrite");
+    let out = run.out("out");
+    let det = ["--deterministic", "--unpaced"];
+    let first = run.starter(&[&config_arg(), &out_arg(&out), det[0], "step"], TIMEOUT);
+    assert_eq!(first.code, Some(0), "{}", first.stderr);
+    let before = read_summary(&out);
+    // A long move (150 000 rows) whose writing takes a while.
+    let child = run.spawn_starter(&[
+        &config_arg(),
+        &out_arg(&out),
+        det[0],
+        det[1],
+        "step",
+        "--duration=60",
+    ]);
+    let incoming = || {
+        std::fs::read_dir(&out)
+            .unwrap()
+            .flatten()
+            .any(|e| e.file_name().to_string_lossy().starts_with(".incoming-"))
+    };
+    let start = Instant::now();
+    while !incoming() {
+        assert!(start.elapsed() < TIMEOUT * 2, "the data were never written");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    signal(child.id(), Signal::SIGINT);
+    let r = wait_with_timeout(child, STOPPED_WITHIN);
+    assert_eq!(r.code, Some(i32::from(exit::INTERRUPTED)), "{}\n{}", r.stdout, r.stderr);
+    assert!(!incoming(), "a half-written set was left");
+    let s = read_summary(&out);
+    assert!(s.fault.is_none(), "the move itself ended well: {:?}", s.fault);
+    assert!(s.gathered_rows > 100_000, "{}", s.gathered_rows);
+    let stopped = s.warnings.iter().any(|w| w.starts_with("a stop signal arrived while the data"));
+    if stopped {
+        // This move's rows were abandoned; the set it replaced is whole in previous/.
+        assert!(!out.join("gather.csv").exists());
+        let previous = out.join("previous");
+        assert_eq!(read_summary(&previous).gathered_rows, before.gathered_rows);
+        let (_, rows) = qmarc_tests::read_gather(&previous);
+        assert_eq!(rows.len() as u64, before.gathered_rows);
+    } else {
+        // The signal came as the last file was put in place: the set is whole.
+        let (_, rows) = qmarc_tests::read_gather(&out);
+        assert_eq!(rows.len() as u64, s.gathered_rows);
+    }
+    run.assert_clean();
 }

@@ -172,9 +172,15 @@ pub struct WriteError {
     pub reason: std::io::Error,
 }
 
-/// A writer that fails (`Interrupted`) once a stop signal arrives after it was made: the
-/// stop that ended a move does not cut its data short, a second one (Ctrl-C again) ends the
-/// writing at once.
+/// Why [`StopAware`] stopped writing. Deliberately not `ErrorKind::Interrupted`: `write_all`
+/// and `BufWriter` retry that kind, so the writing would spin until the process is killed.
+#[derive(Debug, thiserror::Error)]
+#[error("a stop signal arrived while the data were written")]
+struct StoppedWriting;
+
+/// A writer that fails ([`StoppedWriting`]) once a stop signal arrives after it was made:
+/// the stop that ended a move does not cut its data short, a later one (Ctrl-C during the
+/// writing) ends the writing at once.
 struct StopAware<W> {
     inner: W,
     signals: u32,
@@ -183,10 +189,7 @@ struct StopAware<W> {
 impl<W: Write> Write for StopAware<W> {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         if qmarc_timer::stop::count() > self.signals {
-            return Err(std::io::Error::new(
-                std::io::ErrorKind::Interrupted,
-                "a stop signal arrived while the data were written",
-            ));
+            return Err(std::io::Error::other(StoppedWriting));
         }
         self.inner.write(buf)
     }
@@ -196,9 +199,9 @@ impl<W: Write> Write for StopAware<W> {
     }
 }
 
-/// True when `e` is the interruption of `StopAware`.
+/// True when `e` is a stop signal's end of the writing ([`StopAware`]).
 pub fn interrupted(e: &WriteError) -> bool {
-    e.reason.kind() == std::io::ErrorKind::Interrupted
+    e.reason.get_ref().is_some_and(|r| r.is::<StoppedWriting>())
 }
 
 /// Writes `files` into `dir` as one set: each into `dir/.incoming-<pid>/`, then, when all are
@@ -289,9 +292,10 @@ fn write_json(summary: &Summary, w: &mut dyn Write) -> std::io::Result<()> {
 /// Writes the move's data files and `summary.json` into `dir` as one set
 /// ([`write_set`]): the previous results stay until all of them are written.
 /// The stop that ended the move does not cut the writing short; a further stop signal while
-/// the rows are written abandons the data files (the summary is still written, with a
-/// warning); a failure writes everything to the rescue folder instead, with a warning, and
-/// says so on standard error.
+/// the rows are written abandons the data files at once (the summary is still written, with a
+/// warning, and the folder keeps the previous data files, if any: never a half-written set);
+/// a failure writes everything to the rescue folder instead, with a warning, and says so on
+/// standard error.
 pub fn write_results(dir: &Path, servo: &Servo, summary: &mut Summary) -> Result<(), WriteError> {
     let gather = servo.gather();
     let csv = |w: &mut dyn Write| crate::files::write_csv(gather, w);
@@ -308,9 +312,9 @@ pub fn write_results(dir: &Path, servo: &Servo, summary: &mut Summary) -> Result
     let Err(e) = attempt(dir, summary, true) else { return Ok(()) };
     if interrupted(&e) {
         summary.warnings.push(format!(
-            "a second stop signal arrived while the data were written: gather.csv and \
-             gather.m were not written (in {} the previous ones, if any, are as they were)",
-            dir.display()
+            "a stop signal arrived while the data were written: this move's gather.csv and \
+             gather.m were not written (the set they would have replaced, if any, is in {})",
+            dir.join(PREVIOUS_DIR).display()
         ));
         attempt(dir, summary, false)?;
         return Ok(());

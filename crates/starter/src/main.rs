@@ -3,7 +3,8 @@
 //!
 //! Exit codes: the table of [`qmarc_proto::exit`] (README "Exit codes") — 0 the move ran to
 //! its end and both children exited cleanly, 2 a fault ended it, 3 refused before anything
-//! moved, 130 interrupted by a stop signal, 64 a bad command line, 1 anything else.
+//! moved, 4 the results went to the rescue folder, 130 interrupted by a stop signal, 64 a bad
+//! command line, 1 anything else.
 
 use anyhow::{Context, anyhow};
 use clap::{Parser, Subcommand};
@@ -47,7 +48,7 @@ macro_rules! say {
     version,
     about = "Run the QMARC controller: spawns qmarc-hwserver and qmarc-controller for one move",
     after_help = "Exit codes: 0 ok, 1 internal error, 2 fault during the move, 3 refused before \
-                  moving, 64 usage error, 130 interrupted."
+                  moving, 4 results rescued (not in --out), 64 usage error, 130 interrupted."
 )]
 struct StarterArgs {
     #[command(flatten)]
@@ -302,6 +303,8 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
     let code = match (&summary, controller) {
         // The check ran, and found a motor to mend.
         (Some(s), _) if s.check.as_ref().is_some_and(|c| c.iter().any(|m| !m.ok)) => exit::FAULT,
+        // The move ran, but its results are not where they were asked for.
+        (Some(s), Some(Exit::Code(c))) if s.ok && c == i32::from(exit::RESCUED) => exit::RESCUED,
         (Some(s), _) if s.ok && all_clean => exit::OK,
         (Some(s), _) if s.fault.as_ref().is_some_and(|f| f.kind == FaultKind::Aborted) => {
             exit::INTERRUPTED

@@ -22,8 +22,8 @@ pub struct PathArgs {
     pub every_ms: Option<f64>,
 }
 
-/// Makes the knot file of `args` and writes it to `opts.out` (never over the waypoint file);
-/// returns what it did, for the terminal.
+/// Makes the knot file of `args` and writes it to `opts.out`, a file that must not exist yet
+/// (as `tune --write`: nothing is ever written over); returns what it did, for the terminal.
 pub fn make(opts: &MoveOptions, args: &PathArgs) -> anyhow::Result<String> {
     let out = opts.out.as_deref().context("--out FILE: where to write the knot file")?;
     let format = KnotFormat::of_method(&args.method).ok_or_else(|| {
@@ -31,6 +31,9 @@ pub fn make(opts: &MoveOptions, args: &PathArgs) -> anyhow::Result<String> {
     })?;
     if same_file(out, &args.waypoints) {
         bail!("--out {}: that is the waypoint file; write the knots elsewhere", out.display());
+    }
+    if out.symlink_metadata().is_ok() {
+        bail!(already_there(out));
     }
     let settings = opts.load(&crate::names())?;
     let made = qmarc_paths::generate(&settings, &args.waypoints, format, args.every_ms)?;
@@ -46,8 +49,17 @@ fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
-/// Writes `bytes` to `path` through a temporary file beside it, so a reader never sees half
-/// a knot file and a failure leaves the old one.
+/// Why `--out` is refused when it names something that exists.
+fn already_there(out: &Path) -> String {
+    format!(
+        "--out {}: it exists; path never writes over a file (remove it, or give another name)",
+        out.display()
+    )
+}
+
+/// Writes `bytes` to the new file `path` through a temporary file beside it, so a reader
+/// never sees half a knot file; the temporary file is linked into place only if nothing has
+/// appeared there meanwhile.
 fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     let name =
         path.file_name().with_context(|| format!("--out {}: not a file name", path.display()))?;
@@ -55,10 +67,11 @@ fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
         path.with_file_name(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
     let written = std::fs::File::create(&tmp)
         .and_then(|mut f| f.write_all(bytes).and_then(|()| f.sync_all()))
-        .and_then(|()| std::fs::rename(&tmp, path));
-    if let Err(e) = written {
-        let _ = std::fs::remove_file(&tmp);
-        bail!("cannot write {}: {e}", path.display());
+        .and_then(|()| std::fs::hard_link(&tmp, path));
+    let _ = std::fs::remove_file(&tmp);
+    match written {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => bail!(already_there(path)),
+        Err(e) => bail!("cannot write {}: {e}", path.display()),
     }
-    Ok(())
 }

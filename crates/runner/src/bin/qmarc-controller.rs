@@ -3,8 +3,9 @@
 //! file from `qmarc-starter --print-settings`.
 //!
 //! Exit codes: the table of [`qmarc_proto::exit`] — 0 the move ran to its end, 2 a fault ended
-//! it (the summary says which), 3 refused before anything moved, 130 a stop signal, 64 a bad
-//! command line, 1 anything else.
+//! it (the summary says which), 3 refused before anything moved, 4 the move ran to its end
+//! but its results are in the rescue folder, 130 a stop signal, 64 a bad command line, 1
+//! anything else.
 
 use clap::Parser;
 use qmarc_config::RunSpec;
@@ -35,6 +36,12 @@ fn run(args: &ControllerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
         eprintln!("qmarc-controller: warning: {w}");
     }
     Ok(ExitCode::from(match &summary.fault {
+        // A stop signal after the move (while its data were written): the user stopped it.
+        None if qmarc_timer::stop::count() > 0 => exit::INTERRUPTED,
+        // Its results are not in the output folder: the rescue folder holds them.
+        None if !summary.files.iter().all(|f| f.starts_with(&spec.settings.gather.out_dir)) => {
+            exit::RESCUED
+        }
         None => exit::OK,
         Some(f) => {
             eprintln!("qmarc-controller: fault ({}): {}", f.kind, f.message);
