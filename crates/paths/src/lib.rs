@@ -97,7 +97,7 @@ pub enum PathError {
         knots: u64,
     },
     /// A point of the path has no joint position or velocity.
-    #[error("{file}:{lines}: at t = {t_s} s: {source}")]
+    #[error("{file}:{lines}: at t = {t_s} s: {why}")]
     Kinematics {
         /// The waypoint file.
         file: String,
@@ -105,8 +105,9 @@ pub enum PathError {
         lines: String,
         /// The knot's time from the path's start, s.
         t_s: f64,
-        /// Why.
-        source: KinematicsError,
+        /// Why: said in the message, not chained as a source (a chain printed with `{:#}`
+        /// would say it twice).
+        why: KinematicsError,
     },
     /// The knot file made does not read back (a bug: it is checked before it is written).
     #[error("the knot file made does not read back: {0}")]
@@ -157,11 +158,11 @@ pub fn joint_knots(
             Some(i) => format!("{}-{}", w.lines[i - 1], w.lines[i]),
             None => w.lines[w.lines.len() - 1].to_string(),
         };
-        let at = |source| PathError::Kinematics {
+        let at = |why| PathError::Kinematics {
             file: file.to_string(),
             lines: lines(),
             t_s: t - t0,
-            source,
+            why,
         };
         let theta = robot.geometry.inverse(&p).map_err(at)?;
         let theta_dot = robot.geometry.jacobian(&p, &theta).map_err(at)? * v;

@@ -112,6 +112,9 @@ fn unreachable_points_name_the_line_and_the_arm() {
         e.to_string(),
         "w.txt:3: at t = 0.1 s: arm 1 cannot reach (0.0, 0.0, -1200.0) mm: the point is out of its reach"
     );
+    // Issue 28, item 8: said once — the reason is in the message and not chained as a source
+    // too, which the starter's `{:#}` would print a second time.
+    assert!(std::error::Error::source(&e).is_none(), "{e}");
     // A resampled knot between waypoints names both: the spline through these reachable
     // points (the reach on the axis ends near z = −0.99 m) dips below z = −0.98 m.
     let w = waypoints("0.0 0 0 -0.6\n0.1 0 0 -0.98\n0.12 0 0 -0.6\n");

@@ -41,6 +41,12 @@ pub enum OutDirError {
         /// Why.
         reason: std::io::Error,
     },
+    /// It names something that is not a folder.
+    #[error("output folder {dir}: it is a file, not a folder: give a folder for --out")]
+    NotAFolder {
+        /// The path.
+        dir: PathBuf,
+    },
     /// A file cannot be written there.
     #[error("output folder {dir}: cannot write there: {reason}")]
     NotWritable {
@@ -116,6 +122,9 @@ pub fn lock(dir: &Path) -> Result<OutLock, OutDirError> {
 /// Checks before a move that `dir` exists (or is created), can be written (a probe file is
 /// written and removed) and that its filesystem has room for `bytes` of data.
 pub fn check(dir: &Path, bytes: u64) -> Result<(), OutDirError> {
+    if dir.metadata().is_ok_and(|m| !m.is_dir()) {
+        return Err(OutDirError::NotAFolder { dir: dir.to_path_buf() });
+    }
     std::fs::create_dir_all(dir)
         .map_err(|reason| OutDirError::Create { dir: dir.to_path_buf(), reason })?;
     remove_dead_incoming(dir);
@@ -199,7 +208,8 @@ impl<W: Write> Write for StopAware<W> {
     }
 }
 
-/// True when `e` is a stop signal's end of the writing ([`StopAware`]).
+/// True when `e` is a stop signal's end of the writing (the writer `write_set` uses watches
+/// for one).
 pub fn interrupted(e: &WriteError) -> bool {
     e.reason.get_ref().is_some_and(|r| r.is::<StoppedWriting>())
 }
@@ -437,6 +447,12 @@ mod tests {
         assert!(
             e.to_string().starts_with("output folder /proc/qmarc-out: cannot create it: "),
             "{e}"
+        );
+        // Issue 28, item 8: a file is called a file (before: "cannot create it: File exists").
+        let e = check(Path::new("/etc/hostname"), 0).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "output folder /etc/hostname: it is a file, not a folder: give a folder for --out"
         );
         let dir = scratch("room");
         let e = check(&dir, u64::MAX / 2).unwrap_err();

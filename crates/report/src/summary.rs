@@ -193,6 +193,10 @@ pub struct AfterHoming {
     pub homed: Vec<bool>,
 }
 
+/// [`TimingSummary::method`] of a move no timer paced (`--unpaced`): each cycle followed the
+/// last at once, so its periods, latencies and misses mean nothing.
+pub const UNPACED: &str = "unpaced";
+
 /// Timing figures in `summary.json`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct TimingSummary {

@@ -139,7 +139,12 @@ pub fn render(s: &Summary) -> String {
         );
     }
     let tm = &s.timing;
-    if !tm.method.is_empty() {
+    if tm.method == crate::summary::UNPACED {
+        let _ = writeln!(
+            t,
+            "\n  timing: none to show — unpaced (--unpaced), each cycle followed the last at once"
+        );
+    } else if !tm.method.is_empty() {
         let _ = writeln!(t, "\n  timing ({})", tm.method);
         let mut rows = vec![["", "p50", "p99", "p99.9", "max"].map(String::from).to_vec()];
         for (name, p) in [
@@ -262,6 +267,7 @@ fn aligned(t: &mut String, rows: &[Vec<String>]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use qmarc_config::Mode;
 
     #[test]
     fn durations_are_in_human_units() {
@@ -284,5 +290,19 @@ mod tests {
             t,
             "  wake latency  142030.25           1\n  x                     2  99999999.5\n"
         );
+    }
+
+    /// Issue 28, item 8: an unpaced move has no timing to show, and says so (before: "periods
+    /// off by > 40 µs: 500499"); a paced one shows its table.
+    #[test]
+    fn an_unpaced_move_says_it_has_no_timing_issue_28() {
+        let mut s = Summary::controller_lost((Mode::Step, true), 3, 400, 10, "x".into());
+        s.timing.method = crate::summary::UNPACED.to_string();
+        s.timing.outside_40us = 500_499;
+        let t = render(&s);
+        assert!(t.contains("timing: none to show — unpaced (--unpaced)"), "{t}");
+        assert!(!t.contains("periods off by"), "{t}");
+        s.timing.method = "timerfd".to_string();
+        assert!(render(&s).contains("periods off by > 40 µs: 500499"));
     }
 }

@@ -148,6 +148,10 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     result?;
 
     let mut summary = summarize(settings, &servo, &rt, spec.mode, spec.deterministic);
+    if spec.unpaced {
+        // No timer paced it: its timing figures measure nothing (the table says so).
+        summary.timing.method = qmarc_report::summary::UNPACED.to_string();
+    }
     if spec.mode == Mode::Home {
         summary.homing = Some(homing_report(&servo, homed_read, settings.n_motors));
     }

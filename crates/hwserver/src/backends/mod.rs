@@ -39,7 +39,7 @@ pub const BACKENDS: &[BackendEntry] = &[
         name: "sim",
         description: "the simulated Deltabot: velocity-mode amplifiers, 24-bit counters, limit switches",
         open: |s, lockstep| Ok(Box::new(sim::SimDeltabot::open(s, lockstep)?)),
-        check: |s, lockstep| sim::SimDeltabot::open(s, lockstep).map(drop),
+        check: sim::SimDeltabot::check,
         rig: || Some(Box::new(sim::SimRig::default())),
     },
     BackendEntry {

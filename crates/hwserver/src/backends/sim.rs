@@ -311,6 +311,13 @@ impl SimDeltabot {
             || self.p.estop_open_s.is_some_and(|[from, to]| (from..to).contains(&t))
     }
 
+    /// The registry's check: a robot whose homed frame `sim.state_file` can keep.
+    pub fn check(s: &Settings, lockstep: bool) -> Result<(), BackendOpenError> {
+        SimDeltabot::open(s, lockstep)?;
+        let why = super::state::keep_problem("sim.state_file", s.sim.state_file.as_deref());
+        why.map_or(Ok(()), |why| Err(BackendOpenError::Invalid(why)))
+    }
+
     /// The simulated robot of the settings `s`, its homed frame kept in `sim.state_file` and
     /// its event log written to `sim.events_file` when the server ends: the registry's
     /// constructor.

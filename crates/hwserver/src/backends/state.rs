@@ -32,6 +32,41 @@ pub fn load_homed(path: &Path, n_motors: usize, identity: &str) -> [bool; MAX_MO
     homed
 }
 
+/// Checks, without touching a frame kept there, that `path` can keep one: not a folder, its
+/// folder made if missing and writable, the file itself writable if it exists. A homing whose
+/// frame could not be kept would be forgotten at once.
+pub fn check_keepable(path: &Path) -> std::io::Result<()> {
+    if path.is_dir() {
+        return Err(std::io::Error::new(std::io::ErrorKind::IsADirectory, "it is a folder"));
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(dir)?;
+    let probe = dir.join(format!(".qmarc-probe-{}", std::process::id()));
+    let written = std::fs::write(&probe, b"qmarc");
+    let _ = std::fs::remove_file(&probe);
+    written?;
+    if path.exists() {
+        std::fs::OpenOptions::new().append(true).open(path)?;
+    }
+    Ok(())
+}
+
+/// Why the setting `key` = `path` cannot keep a homed frame ([`check_keepable`]), if it is
+/// set and cannot.
+pub fn keep_problem(key: &str, path: Option<&Path>) -> Option<String> {
+    let path = path?;
+    check_keepable(path).err().map(|e| {
+        format!(
+            "{key} = {}: cannot keep the homed frame there ({e}): give a file in a writable \
+             folder, or \"\" to keep none",
+            path.display()
+        )
+    })
+}
+
 /// Writes `homed` for `identity` to `path`, its folder made if missing.
 pub fn save_homed(path: &Path, homed: &[bool], identity: &str) -> std::io::Result<()> {
     if let Some(dir) = path.parent() {

@@ -76,10 +76,17 @@ pub fn parse_offline(
 fn declared_knots(at: &At<'_>, hline: usize, header: &str) -> Result<usize, KnotFileError> {
     let htoks = tokens(header);
     let declared: usize = htoks[0].text.parse().map_err(|_| {
+        // A PVT file's lines begin with a motor letter (thesis A.2.3.2).
+        let pvt =
+            htoks[0].text.len() == 1 && htoks[0].text.chars().all(|c| c.is_ascii_alphabetic());
+        let hint = if pvt { " (it looks like a PVT file: run it with --method pvt)" } else { "" };
         at.err(
             hline,
             htoks[0].column,
-            format!("expected the number of knots (a whole number), found `{}`", htoks[0].text),
+            format!(
+                "expected the number of knots (a whole number), found `{}`{hint}",
+                htoks[0].text
+            ),
         )
     })?;
     if let Some(extra) = htoks.get(1) {

@@ -60,6 +60,13 @@ fn offline_errors_are_exact() {
         1,
         "k.txt:1:1: expected the number of knots (a whole number), found `three`",
     );
+    // Issue 28, item 8: a PVT file given to the spline says what it looks like.
+    offline_err(
+        "X 0 1000 10 Y 0 0 10 Z 0 0 10\n",
+        1,
+        "k.txt:1:1: expected the number of knots (a whole number), found `X` (it looks like a \
+         PVT file: run it with --method pvt)",
+    );
     offline_err(
         "3 knots\n",
         1,

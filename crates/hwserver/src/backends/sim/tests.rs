@@ -137,3 +137,37 @@ fn invalid_parameters_are_named() {
         "simulator parameter `tau_s` = -1 is invalid: finite and > 0"
     );
 }
+
+/// Issue 28, item 4: a homed frame that could not be kept is refused before the run (before:
+/// `home` said "reads 0 from now on", exited 0, and the next step was refused as unhomed).
+#[test]
+fn a_state_file_that_cannot_keep_the_frame_is_refused_before_the_run_issue_28() {
+    let dir = std::env::temp_dir().join(format!("qmarc-simstate-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let settings = |state_file: &std::path::Path| {
+        let names = qmarc_config::Names::backends_only(crate::backends::names());
+        let text = format!("[sim]\nstate_file = \"{}\"\n", state_file.display())
+            + &"[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n".repeat(3);
+        Settings::parse(std::path::Path::new("q.toml"), &text, &names).unwrap()
+    };
+    // A folder where the file should be.
+    let e = SimDeltabot::check(&settings(&dir), true).unwrap_err().to_string();
+    assert!(
+        e.starts_with(&format!(
+            "sim.state_file = {}: cannot keep the homed frame there (it is a folder)",
+            dir.display()
+        )),
+        "{e}"
+    );
+    // A folder that cannot be made.
+    let e = SimDeltabot::check(&settings(std::path::Path::new("/proc/qmarc/s.state")), true)
+        .unwrap_err()
+        .to_string();
+    assert!(e.starts_with("sim.state_file = /proc/qmarc/s.state: cannot keep"), "{e}");
+    // A file that can be kept: nothing written, nothing left but what was there.
+    let file = dir.join("sub/s.state");
+    SimDeltabot::check(&settings(&file), true).unwrap();
+    assert!(!file.exists());
+    assert_eq!(std::fs::read_dir(dir.join("sub")).unwrap().count(), 0, "no probe left");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
