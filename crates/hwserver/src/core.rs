@@ -345,11 +345,10 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("qmarc-finish-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let core_logging_to = |events: &std::path::Path| {
-            let names = qmarc_config::Names::backends_only(crate::backends::names());
-            let text = format!("[sim]\nevents_file = \"{}\"\n", events.display())
-                + &"[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n".repeat(3);
-            let s = qmarc_config::Settings::parse(std::path::Path::new("q.toml"), &text, &names)
-                .unwrap();
+            let s = crate::backends::test_settings(&format!(
+                "[sim]\nevents_file = \"{}\"\n",
+                events.display()
+            ));
             HwCore::new(Box::new(SimDeltabot::open(&s, true).unwrap()))
         };
         let events = dir.join("events.csv");

@@ -87,8 +87,9 @@ pub struct Homing {
     motors: [MotorSafety; MAX_MOTORS],
     motor: usize,
     phase: Phase,
-    /// Samples spent on the current motor.
-    samples_on_motor: u64,
+    /// No sample of the current motor has run yet (one that starts on its top switch leaves
+    /// it first).
+    fresh: bool,
     cmd: [f64; MAX_MOTORS],
     act: [f64; MAX_MOTORS],
     flags: [MotorFlags; MAX_MOTORS],
@@ -128,7 +129,7 @@ impl Homing {
             motors,
             motor: 0,
             phase: Phase::Approach,
-            samples_on_motor: 0,
+            fresh: true,
             cmd: [0.0; MAX_MOTORS],
             act: [0.0; MAX_MOTORS],
             flags: [MotorFlags::default(); MAX_MOTORS],
@@ -151,7 +152,7 @@ impl Homing {
     fn begin(&mut self, motor: usize) {
         self.motor = motor;
         self.phase = Phase::Approach;
-        self.samples_on_motor = 0;
+        self.fresh = true;
         self.origin = self.cmd[motor];
         self.reports[motor] = MotorHomeReport { motor: motor + 1, ..MotorHomeReport::default() };
     }
@@ -179,6 +180,11 @@ impl Homing {
         None
     }
 
+    /// `(motor + 1) << 8 | phase + 1`: the motor being homed and its phase.
+    fn phase_code(&self) -> u32 {
+        ((self.motor as u32 + 1) << 8) + (self.phase as u32 + 1)
+    }
+
     fn fail(&mut self, why: HomingFailure) -> Sample {
         self.failure = Some(why);
         Sample::Failed
@@ -190,9 +196,8 @@ impl Homing {
         let m = self.motor;
         let dir = self.motors[m].top_direction;
         let step = self.settings.velocity_counts_per_s * self.period_s;
-        // Its first sample (counted here: `begin` of the next motor runs within a sample).
-        let first = self.samples_on_motor == 0;
-        self.samples_on_motor += 1;
+        // Cleared here, not after the sample: `begin` of the next motor runs within a sample.
+        let first = std::mem::replace(&mut self.fresh, false);
         match self.phase {
             Phase::LeaveSwitch => self.leave_switch(m, dir, step)?,
             Phase::Approach if first && self.flags[m].top() => {
@@ -368,7 +373,7 @@ impl TrajectoryGenerator for Homing {
         if self.phase == Phase::Done || !self.observed {
             return 0;
         }
-        ((self.motor as u32 + 1) << 8) + (self.phase as u32 + 1)
+        self.phase_code()
     }
 
     fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {

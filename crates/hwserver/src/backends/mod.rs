@@ -100,3 +100,12 @@ pub fn standalone_run(
         iox_root: location.root.clone(),
     })
 }
+
+/// The settings file `toml` (read as `q.toml`) with three motors of unit gains appended: what
+/// the backends' unit tests parse, knowing only the backends' names.
+#[cfg(test)]
+pub(crate) fn test_settings(toml: &str) -> Settings {
+    let names = Names::backends_only(names());
+    let motors = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n".repeat(3);
+    Settings::parse(std::path::Path::new("q.toml"), &format!("{toml}{motors}"), &names).unwrap()
+}

@@ -244,11 +244,16 @@ impl S626 {
         self.write_dacs(&[0; MAX_MOTORS])
     }
 
-    /// The counter sample of a raw 24-bit count, or the count of a sample, for `motor`'s
-    /// counting direction (the same map both ways).
+    /// [`oriented`] for `motor`'s counting direction.
     fn oriented(&self, motor: usize, raw: u32) -> u32 {
-        if self.w.counter_sign[motor] < 0 { raw.wrapping_neg() & COUNTER_MASK } else { raw }
+        oriented(self.w.counter_sign[motor], raw)
     }
+}
+
+/// The counter sample of a raw 24-bit count, or the count of a sample, for a counter that
+/// counts in direction `sign` (the same map both ways).
+fn oriented(sign: i32, raw: u32) -> u32 {
+    if sign < 0 { raw.wrapping_neg() & COUNTER_MASK } else { raw }
 }
 
 /// Why `--deterministic` cannot drive the card: lock-step time is the simulator's.
@@ -320,10 +325,7 @@ fn card_identity(device: &str, w: &S626Settings) -> String {
 /// it a homing would be forgotten at once and every move refused as unhomed.
 fn check_state_dir(s: &Settings) -> Result<(), BackendOpenError> {
     let dir = &s.s626.state_dir;
-    let probe = dir.join(format!(".qmarc-probe-{}", std::process::id()));
-    let written = std::fs::create_dir_all(dir).and_then(|()| std::fs::write(&probe, b"qmarc"));
-    let _ = std::fs::remove_file(&probe);
-    written.map_err(|e| {
+    crate::backends::state::check_folder(dir).map_err(|e| {
         BackendOpenError::Invalid(format!(
             "{}: cannot keep the homed frame there ({e}): create it for the card's group \
              (`sudo install -d -m 2770 -g iocard {}`, or the tmpfiles.d line of \

@@ -43,15 +43,20 @@ pub fn check_keepable(path: &Path) -> std::io::Result<()> {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    std::fs::create_dir_all(dir)?;
-    let probe = dir.join(format!(".qmarc-probe-{}", std::process::id()));
-    let written = std::fs::write(&probe, b"qmarc");
-    let _ = std::fs::remove_file(&probe);
-    written?;
+    check_folder(dir)?;
     if path.exists() {
         std::fs::OpenOptions::new().append(true).open(path)?;
     }
     Ok(())
+}
+
+/// Checks that files can be made in `dir` (made if missing): a probe file written and
+/// removed.
+pub fn check_folder(dir: &Path) -> std::io::Result<()> {
+    let probe = dir.join(format!(".qmarc-probe-{}", std::process::id()));
+    let written = std::fs::create_dir_all(dir).and_then(|()| std::fs::write(&probe, b"qmarc"));
+    let _ = std::fs::remove_file(&probe);
+    written
 }
 
 /// Why the setting `key` = `path` cannot keep a homed frame ([`check_keepable`]), if it is

@@ -234,7 +234,7 @@ impl Robot {
                 }
             }
             // The phase this sample runs in (progress() says 0 until feedback arrives).
-            let before = ((h.motor as u32 + 1) << 8) | (h.phase as u32 + 1);
+            let before = h.phase_code();
             inject(before, &mut flags);
             h.observe(&act, &flags);
             let end = h.sample(n, &mut cmd);

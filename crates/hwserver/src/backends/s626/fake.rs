@@ -173,10 +173,9 @@ impl crate::conformance::Rig for FakeRig {
         for m in 0..n_motors {
             // The count the backend reads, as the counter holds it in the motor's direction.
             let count = COUNTER_ZERO.wrapping_add(start_counts as i64 as u32);
-            let raw = if w.counter_sign[m] < 0 { count.wrapping_neg() } else { count };
             fake.set_counter(
                 w.counter_channels[m] as usize,
-                raw & qmarc_comedi::s626::COUNTER_MASK,
+                super::oriented(w.counter_sign[m], count),
             );
         }
         self.fake = Arc::new(Mutex::new(fake));

@@ -152,12 +152,10 @@ fn a_stop_signal_stills_the_pump_and_holds_the_dacs_at_zero() {
 
 #[test]
 fn a_homed_frame_that_cannot_be_kept_is_refused_before_the_run() {
-    let names = qmarc_config::Names::backends_only(crate::backends::names());
-    let text = "[general]\ncounts_per_rev = 1024\n[hwserver]\nbackend = \"s626\"\n[s626]\n\
-                state_dir = \"/proc/qmarc\"\n"
-        .to_string()
-        + &"[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n".repeat(3);
-    let s = qmarc_config::Settings::parse(Path::new("q.toml"), &text, &names).unwrap();
+    let s = crate::backends::test_settings(
+        "[general]\ncounts_per_rev = 1024\n[hwserver]\nbackend = \"s626\"\n[s626]\n\
+         state_dir = \"/proc/qmarc\"\n",
+    );
     let e = check_state_dir(&s).unwrap_err().to_string();
     assert!(e.starts_with("/proc/qmarc: cannot keep the homed frame there ("), "{e}");
     assert!(e.contains("or set [s626] state_dir"), "{e}");
@@ -363,14 +361,12 @@ fn the_enable_pins_follow_each_amplifier_in_either_polarity_issue_32() {
 
 /// Settings for the card `device`, its homed frame kept in `state_dir`.
 fn card_settings(device: &Path, state_dir: &Path, extra: &str) -> Settings {
-    let names = qmarc_config::Names::backends_only(crate::backends::names());
-    let text = format!(
+    crate::backends::test_settings(&format!(
         "[general]\ncounts_per_rev = 1024\n[hwserver]\nbackend = \"s626\"\n[s626]\n\
          device = \"{}\"\nstate_dir = \"{}\"\n{extra}",
         device.display(),
         state_dir.display()
-    ) + &"[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n".repeat(3);
-    Settings::parse(Path::new("q.toml"), &text, &names).unwrap()
+    ))
 }
 
 /// Issue 32: the homed frame is kept in `<state_dir>/s626-<device>.state` and belongs to

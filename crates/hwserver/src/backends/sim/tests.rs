@@ -145,10 +145,10 @@ fn a_state_file_that_cannot_keep_the_frame_is_refused_before_the_run_issue_28() 
     let dir = std::env::temp_dir().join(format!("qmarc-simstate-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let settings = |state_file: &std::path::Path| {
-        let names = qmarc_config::Names::backends_only(crate::backends::names());
-        let text = format!("[sim]\nstate_file = \"{}\"\n", state_file.display())
-            + &"[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n".repeat(3);
-        Settings::parse(std::path::Path::new("q.toml"), &text, &names).unwrap()
+        crate::backends::test_settings(&format!(
+            "[sim]\nstate_file = \"{}\"\n",
+            state_file.display()
+        ))
     };
     // A folder where the file should be.
     let e = SimDeltabot::check(&settings(&dir), true).unwrap_err().to_string();
