@@ -756,3 +756,39 @@ fn a_stop_while_the_data_are_written_ends_the_writing_cleanly_issue_28() {
     }
     run.assert_clean();
 }
+
+/// Issue 28, item 2: a child that job control stops (SIGSTOP) mid-move has stopped
+/// responding once the other would wait for it no longer (the hwserver's watchdog, the
+/// controller's response timeout: 100 ms on the simulator). The starter names it at once,
+/// ends the run (the stopped child is told to end and continued), keeps the data gathered
+/// up to then, and leaves nothing behind. Before: a stopped controller was waited for 131 s
+/// in silence and its data were lost; a stopped hwserver took 5.6 s and was not named.
+#[test]
+fn a_stopped_child_ends_the_run_and_is_named_issue_28() {
+    for (who, kind) in
+        [("qmarc-controller", "controller_lost"), ("qmarc-hwserver", "hwserver_lost")]
+    {
+        let run = TestRun::new(&format!("sigstop-{}", &who[6..]));
+        let out = run.out("out");
+        let child = run.spawn_starter(&[&config_arg(), &out_arg(&out), "step", "--duration=30"]);
+        qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+        std::thread::sleep(Duration::from_millis(200));
+        signal(pid_of(&run, who), Signal::SIGSTOP);
+        let stopped = Instant::now();
+        let r = wait_with_timeout(child, STOPPED_WITHIN);
+        println!("{who} stopped: the run ended {:.2} s later", stopped.elapsed().as_secs_f64());
+        assert_eq!(r.code, Some(i32::from(exit::FAULT)), "{who}: {}\n{}", r.stdout, r.stderr);
+        let said = format!("qmarc-starter: {who} stopped responding: it was stopped by SIGSTOP");
+        assert!(r.stderr.contains(&said), "{who}: {}", r.stderr);
+        let s = read_summary(&out);
+        let fault = s.fault.as_ref().expect("a fault");
+        assert_eq!(fault.kind.name(), kind, "{who}: {}", fault.message);
+        assert!(fault.message.starts_with(&said["qmarc-starter: ".len()..]), "{}", fault.message);
+        assert!(!s.ok);
+        // What was gathered until the stop is kept, whole.
+        let (_, rows) = qmarc_tests::read_gather(&out);
+        assert!(rows.len() > 200, "{who}: {} rows", rows.len());
+        assert_eq!(rows.len() as u64, s.gathered_rows);
+        run.assert_clean();
+    }
+}

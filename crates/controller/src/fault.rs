@@ -37,7 +37,7 @@ pub enum FaultKind {
     Overrun,
     /// Homing could not find, clear or leave a switch as it should.
     HomingFailed,
-    /// The controller process died (reported by the starter).
+    /// The controller process died or stopped responding (reported by the starter).
     ControllerLost,
     /// The trajectory commanded a position that is not a finite number.
     BadCommand,

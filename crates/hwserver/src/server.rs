@@ -69,6 +69,10 @@ fn port_err(op: &'static str) -> impl FnOnce(&dyn std::fmt::Debug) -> ServeError
     move |e| ServeError::Port { op, reason: format!("{e:?}") }
 }
 
+/// While ending, a controller silent this long is checked for (a cleanup of dead nodes: a
+/// directory scan, so not after every request).
+const GONE_CHECK_NS: u64 = 5_000_000;
+
 /// Longest single wait, so that stop requests are noticed while idle.
 const IDLE_WAIT_NS: u64 = 50_000_000;
 
@@ -136,8 +140,11 @@ fn serve_inner(
                 ending = Some((now, end));
             }
         }
+        // Ending: until the controller has fallen silent for the grace time, or is silent and
+        // gone (it gave up on us, or died: nobody is left to tell).
         if let Some((since, end)) = ending
-            && now.saturating_sub(since.max(last_request_ns)) > opts.shutdown_grace_ns
+            && (now.saturating_sub(since.max(last_request_ns)) > opts.shutdown_grace_ns
+                || (now.saturating_sub(last_request_ns) > GONE_CHECK_NS && !controller_alive()))
         {
             return Ok(end);
         }

@@ -293,6 +293,24 @@ pub fn write_summary_set(dir: &Path, summary: &Summary) -> Result<PathBuf, Write
     Ok(done.remove(0))
 }
 
+/// Replaces `dir/summary.json` by `summary` in one step (written beside it, then renamed over
+/// it), leaving the data files it describes in place: what the starter learnt after the
+/// controller wrote it (a process that stopped responding).
+pub fn amend_summary(dir: &Path, summary: &Summary) -> Result<PathBuf, WriteError> {
+    let to = dir.join("summary.json");
+    let tmp = dir.join(format!(".summary.json.{}", std::process::id()));
+    let result = std::fs::File::create(&tmp).and_then(|f| {
+        let mut w = std::io::BufWriter::new(f);
+        write_json(summary, &mut w)?;
+        w.into_inner().map_err(|e| e.into_error())?.sync_data()?;
+        std::fs::rename(&tmp, &to)
+    });
+    result.map(|()| to.clone()).map_err(|reason| {
+        let _ = std::fs::remove_file(&tmp);
+        WriteError { file: to, reason }
+    })
+}
+
 /// `summary` as `summary.json` holds it.
 fn write_json(summary: &Summary, w: &mut dyn Write) -> std::io::Result<()> {
     serde_json::to_writer_pretty(&mut *w, summary).map_err(std::io::Error::other)?;

@@ -240,13 +240,26 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
         }
     }
     let status = std::cell::RefCell::new(StatusLine::new(progress.as_ref()));
+    // A child stopped (SIGSTOP) this long has stopped responding: the other would wait for it
+    // no longer (the hwserver's watchdog, the controller's response timeout).
+    let hw = &settings.hwserver;
+    let stall_limit = Duration::from_secs_f64(
+        settings.period_s() * f64::from(hw.watchdog_periods.max(hw.response_timeout_periods)),
+    );
     supervise::wait_all(
         &mut children,
         stop,
+        stall_limit,
         |s| {
             status.borrow_mut().clear();
-            if let Some(exit) = s.exit.filter(|e| !e.success()) {
-                say!("qmarc-starter: {}", describe_exit(s.name, exit));
+            match (s.exit, s.unresponsive) {
+                (Some(exit), _) if !exit.success() => {
+                    say!("qmarc-starter: {}", describe_exit(s.name, exit))
+                }
+                (None, Some(u)) => {
+                    say!("qmarc-starter: {}; ending the run", u.describe(s.name))
+                }
+                _ => {}
             }
         },
         || status.borrow_mut().update(),
@@ -260,10 +273,18 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
         children.len() == 2 && children.iter().all(|s| s.exit.is_some_and(|e| e.success()));
     let controller = children.iter().find(|s| s.name == "qmarc-controller").and_then(|s| s.exit);
     let hwserver = children[0].exit;
+    let unresponsive = children.iter().find_map(|s| s.unresponsive.map(|u| (s.name, u)));
     let (mut summary, mut summary_dir) = match read_own_summary(&out_dir) {
         Some((s, d)) => (Some(s), d),
         None => (None, out_dir.clone()),
     };
+    // The controller wrote what it gathered, but could not know why the run ended.
+    if let (Some(s), Some((name, u))) = (summary.as_mut(), unresponsive) {
+        stopped_responding(s, name, u);
+        if let Err(e) = qmarc_report::output::amend_summary(&summary_dir, s) {
+            say!("qmarc-starter: {e}");
+        }
+    }
     // A controller that died — killed, or failed once its move had begun (a panic, data it
     // could not write anywhere) — wrote nothing: say what is known, and what the hwserver
     // did. One that refused before anything moved has said why.
@@ -273,13 +294,16 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
     if summary.is_none()
         && let Some(exit) = controller.filter(|e| matches!(e, Exit::Signal(_)) || began)
     {
-        let lost = Summary::controller_lost(
+        let mut lost = Summary::controller_lost(
             (mode, spec.deterministic),
             settings.n_motors,
             settings.period_us,
             reached.map_or(0, |r| r.cycle),
             controller_lost_message(exit, hwserver, settings, reached),
         );
+        if let Some((name, u)) = unresponsive {
+            stopped_responding(&mut lost, name, u);
+        }
         if let Err(e) = qmarc_report::output::write_summary_set(&out_dir, &lost) {
             say!("qmarc-starter: {e}");
         }
@@ -303,6 +327,8 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
     let code = match (&summary, controller) {
         // The check ran, and found a motor to mend.
         (Some(s), _) if s.check.as_ref().is_some_and(|c| c.iter().any(|m| !m.ok)) => exit::FAULT,
+        // A process stopped responding: the run was ended for it.
+        _ if unresponsive.is_some() => exit::FAULT,
         // The move ran, but its results are not where they were asked for.
         (Some(s), Some(Exit::Code(c))) if s.ok && c == i32::from(exit::RESCUED) => exit::RESCUED,
         (Some(s), _) if s.ok && all_clean => exit::OK,
@@ -520,6 +546,25 @@ impl<'a> StatusLine<'a> {
             self.shown.clear();
         }
     }
+}
+
+/// The fault of a run that `name` ended by stopping to respond: that, then what the controller
+/// saw (its own fault, or how it died).
+fn stopped_responding(s: &mut Summary, name: &str, u: supervise::Unresponsive) {
+    let kind =
+        if name == "qmarc-hwserver" { FaultKind::HwserverLost } else { FaultKind::ControllerLost };
+    let then = s.fault.as_ref().map(|f| format!(" (then: {})", f.message)).unwrap_or_default();
+    let message = format!("{}{then}", u.describe(name));
+    let report = qmarc_report::summary::FaultReport {
+        kind,
+        motor: None,
+        cycle: s.cycles,
+        message: String::new(),
+        hw_time_ns: None,
+    };
+    let f = s.fault.get_or_insert(report);
+    (f.kind, f.message) = (kind, message);
+    s.ok = false;
 }
 
 /// What the starter knows when the controller died: how, how far the move got, and how the

@@ -1,6 +1,6 @@
 //! Spawning and supervising the two children.
 
-use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Child, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -20,13 +20,26 @@ impl Exit {
     pub fn success(self) -> bool {
         self == Exit::Code(0)
     }
+}
 
-    fn from_status(s: std::process::ExitStatus) -> Exit {
-        match (s.code(), s.signal()) {
-            (Some(c), _) => Exit::Code(c),
-            (None, Some(sig)) => Exit::Signal(sig),
-            (None, None) => Exit::Code(-1),
-        }
+/// A child that job control stopped (SIGSTOP, SIGTSTP, …) for longer than the run can wait:
+/// the starter ended the run for it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Unresponsive {
+    /// The signal that stopped it.
+    pub signal: i32,
+    /// How long it had been stopped when the starter ended the run.
+    pub stopped_for: Duration,
+}
+
+impl Unresponsive {
+    /// "qmarc-controller stopped responding: it was stopped by SIGSTOP for 0.10 s".
+    pub fn describe(&self, name: &str) -> String {
+        format!(
+            "{name} stopped responding: it was stopped by {} for {:.2} s",
+            qmarc_timer::stop::signal_name(self.signal),
+            self.stopped_for.as_secs_f64()
+        )
     }
 }
 
@@ -104,6 +117,10 @@ pub struct Supervised {
     pub term_after: Duration,
     /// After SIGTERM, how long before SIGKILL.
     pub kill_after: Duration,
+    /// Since when, and by which signal, it is stopped (job control), if it is.
+    stopped: Option<(Instant, i32)>,
+    /// Set when it stayed stopped too long and the starter ended the run for it.
+    pub unresponsive: Option<Unresponsive>,
 }
 
 impl Supervised {
@@ -114,7 +131,46 @@ impl Supervised {
         term_after: Duration,
         kill_after: Duration,
     ) -> Supervised {
-        Supervised { name, child, exit: None, term_after, kill_after }
+        Supervised {
+            name,
+            child,
+            exit: None,
+            term_after,
+            kill_after,
+            stopped: None,
+            unresponsive: None,
+        }
+    }
+
+    fn pid(&self) -> nix::unistd::Pid {
+        nix::unistd::Pid::from_raw(self.child.id() as i32)
+    }
+
+    /// Reaps it if it has ended, and notes whether job control stopped or continued it
+    /// (`waitpid` with `WUNTRACED | WCONTINUED`: a stopped child is seen at once).
+    /// Returns true when it has just ended.
+    fn poll(&mut self) -> bool {
+        use nix::sys::wait::{WaitPidFlag, WaitStatus, waitpid};
+        let flags = WaitPidFlag::WNOHANG | WaitPidFlag::WUNTRACED | WaitPidFlag::WCONTINUED;
+        loop {
+            match waitpid(self.pid(), Some(flags)) {
+                Ok(WaitStatus::Exited(_, code)) => self.exit = Some(Exit::Code(code)),
+                Ok(WaitStatus::Signaled(_, sig, _)) => self.exit = Some(Exit::Signal(sig as i32)),
+                Ok(WaitStatus::Stopped(_, sig)) => {
+                    self.stopped.get_or_insert((Instant::now(), sig as i32));
+                    continue;
+                }
+                Ok(WaitStatus::Continued(_)) => {
+                    self.stopped = None;
+                    continue;
+                }
+                Err(nix::errno::Errno::EINTR) => continue,
+                // Reaped elsewhere (cannot happen: the starter alone waits for its children).
+                Err(_) => self.exit = Some(Exit::Code(-1)),
+                Ok(_) => {}
+            }
+            return self.exit.is_some();
+        }
     }
 }
 
@@ -123,10 +179,21 @@ pub fn send(child: &Child, sig: nix::sys::signal::Signal) {
     let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(child.id() as i32), sig);
 }
 
+/// Ends a child that stays stopped: SIGTERM, then SIGCONT, so that it wakes to its stop
+/// request (the controller writes what it gathered; the hwserver disables the motors).
+fn wake_to_end(child: &Child) {
+    send(child, nix::sys::signal::Signal::SIGTERM);
+    send(child, nix::sys::signal::Signal::SIGCONT);
+}
+
 /// Waits until every child has ended. When one ends, each other gets its `term_after` to
 /// finish on its own (the controller notices a dead hwserver and writes its data, the
 /// hwserver's watchdog notices a dead controller), then SIGTERM, then after its `kill_after`
-/// SIGKILL. A stop request (`stop`) forwards its signal (SIGINT from Ctrl-C stays SIGINT, so
+/// SIGKILL. A child that job control stopped for `stall_limit` (the time the other would
+/// wait for it: the hwserver's watchdog, the controller's response timeout) stopped
+/// responding: it is told to end and continued, so it keeps what it can and cleans up, and
+/// `report` names it at once (its `unresponsive` set, its `exit` not yet); a shorter stop is
+/// ridden out. A stopped child that is told to end is continued too. A stop request (`stop`) forwards its signal (SIGINT from Ctrl-C stays SIGINT, so
 /// the summaries name what the user did) to all at once, in reverse order of
 /// `children` (the controller before the hwserver: its signal is pending by the time the
 /// hwserver shuts down, so it reports an abort, not a hwserver fault). Each child's end is
@@ -134,6 +201,7 @@ pub fn send(child: &Child, sig: nix::sys::signal::Signal) {
 pub fn wait_all(
     children: &mut [Supervised],
     stop: &AtomicBool,
+    stall_limit: Duration,
     mut report: impl FnMut(&Supervised),
     mut tick: impl FnMut(),
 ) {
@@ -143,8 +211,7 @@ pub fn wait_all(
     let mut forwarded = false;
     loop {
         for s in children.iter_mut().filter(|s| s.exit.is_none()) {
-            if let Ok(Some(status)) = s.child.try_wait() {
-                s.exit = Some(Exit::from_status(status));
+            if s.poll() {
                 first_exit.get_or_insert_with(Instant::now);
                 report(s);
             }
@@ -154,11 +221,23 @@ pub fn wait_all(
         }
         let forward = stop.load(Ordering::Relaxed) && !forwarded;
         forwarded |= forward;
-        let alive = children.iter().zip(termed.iter_mut()).filter(|(s, _)| s.exit.is_none());
+        let alive = children.iter_mut().zip(termed.iter_mut()).filter(|(s, _)| s.exit.is_none());
         for (s, termed) in alive.rev() {
             if termed.is_none() && forward {
                 send(&s.child, forwarded_signal());
                 *termed = Some(Instant::now());
+            }
+            if let Some((since, signal)) = s.stopped
+                && s.unresponsive.is_none()
+                && since.elapsed() >= stall_limit
+            {
+                s.unresponsive = Some(Unresponsive { signal, stopped_for: since.elapsed() });
+                report(s);
+                wake_to_end(&s.child);
+                termed.get_or_insert_with(Instant::now);
+            } else if s.stopped.is_some() && termed.is_some() {
+                // Told to end while stopped (a forwarded stop, a SIGTERM): it must run to end.
+                send(&s.child, Signal::SIGCONT);
             }
             if termed.is_none() && first_exit.is_some_and(|t| t.elapsed() >= s.term_after) {
                 send(&s.child, Signal::SIGTERM);
@@ -204,7 +283,7 @@ mod tests {
         ];
         let stop = AtomicBool::new(false);
         let mut seen = Vec::new();
-        wait_all(&mut kids, &stop, |s| seen.push(s.name), || {});
+        wait_all(&mut kids, &stop, ms(1000), |s| seen.push(s.name), || {});
         assert_eq!(seen, ["quick", "stubborn"]);
         assert_eq!(kids[0].exit, Some(Exit::Code(4)));
         assert_eq!(
@@ -212,5 +291,60 @@ mod tests {
             Some(Exit::Signal(nix::sys::signal::Signal::SIGKILL as i32)),
             "TERM ignored, then KILL"
         );
+    }
+
+    /// A child stopped longer than the limit is reported at once, told to end and continued
+    /// (its SIGTERM is delivered: it does not wait for SIGKILL), and its partner, which never
+    /// ended, is not waited for.
+    #[test]
+    fn a_child_stopped_too_long_is_ended_and_named() {
+        let sh = Path::new("/bin/sh");
+        let stops = spawn(sh, &["-c".into(), "kill -STOP $$; exit 0".into()]).unwrap();
+        let ms = Duration::from_millis;
+        let mut kids = vec![Supervised::new("stops", stops, ms(60_000), ms(60_000))];
+        let stop = AtomicBool::new(false);
+        let mut seen = Vec::new();
+        let start = Instant::now();
+        wait_all(&mut kids, &stop, ms(100), |s| seen.push((s.name, s.exit, s.unresponsive)), || {});
+        assert!(start.elapsed() < ms(30_000), "waited for the grace times: {:?}", start.elapsed());
+        let u = kids[0].unresponsive.expect("named unresponsive");
+        assert_eq!(u.signal, nix::sys::signal::Signal::SIGSTOP as i32);
+        assert!(u.stopped_for >= ms(100), "{:?}", u.stopped_for);
+        assert_eq!(
+            seen,
+            [("stops", None, Some(u)), ("stops", Some(Exit::Signal(15)), Some(u))],
+            "named when it stopped responding, then when it ended by the SIGTERM"
+        );
+        assert!(
+            u.describe("x").starts_with("x stopped responding: it was stopped by SIGSTOP for ")
+        );
+    }
+
+    /// A stop shorter than the limit is ridden out: the child goes on and ends by itself.
+    #[test]
+    fn a_short_stop_is_ridden_out() {
+        let sh = Path::new("/bin/sh");
+        let child = spawn(sh, &["-c".into(), "sleep 0.3; exit 5".into()]).unwrap();
+        let pid = child.id();
+        let ms = Duration::from_millis;
+        let mut kids = vec![Supervised::new("short", child, ms(60_000), ms(60_000))];
+        let stop = AtomicBool::new(false);
+        let kill = |sig| nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), sig);
+        kill(nix::sys::signal::Signal::SIGSTOP).unwrap();
+        let mut polls = 0;
+        wait_all(
+            &mut kids,
+            &stop,
+            ms(60_000),
+            |_| {},
+            || {
+                polls += 1;
+                if polls == 10 {
+                    kill(nix::sys::signal::Signal::SIGCONT).unwrap();
+                }
+            },
+        );
+        assert_eq!(kids[0].exit, Some(Exit::Code(5)));
+        assert_eq!(kids[0].unresponsive, None);
     }
 }
