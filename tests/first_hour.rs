@@ -792,3 +792,41 @@ fn a_stopped_child_ends_the_run_and_is_named_issue_28() {
         run.assert_clean();
     }
 }
+
+/// Issue 28, item 6: paced homing on the simulator rides out host stalls as a move does.
+/// The controller is stopped for 50 ms every 0.3 s while three motors home (the approach,
+/// the trip, the back-off, the way home and the settle each see some): the plant coasts on
+/// its last output meanwhile, and homing must neither fall behind it (a following error) nor
+/// blame the switch for the distance the stall carried the motor past it. Before: two of two
+/// paced homing runs on a loaded machine ended in `following_error` after 24–40 ms stalls.
+#[test]
+fn paced_homing_rides_out_host_stalls_issue_28() {
+    let run = TestRun::new("homestall");
+    let out = run.out("out");
+    let cfg = run.config_with(&[
+        ("homed", "false"),
+        ("start_counts", "[-9000, -9000, -9000]"),
+        ("home_offset_counts", "1000.0"),
+    ]);
+    let child =
+        run.spawn_starter(&[&format!("--config={}", cfg.display()), &out_arg(&out), "home"]);
+    let controller = pid_of(&run, "qmarc-controller");
+    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    let mut stops = 0;
+    while run.processes().iter().any(|(pid, _)| *pid == controller) && stops < 40 {
+        signal(controller, Signal::SIGSTOP);
+        std::thread::sleep(Duration::from_millis(50));
+        signal(controller, Signal::SIGCONT);
+        stops += 1;
+        std::thread::sleep(Duration::from_millis(300));
+    }
+    let r = wait_with_timeout(child, TIMEOUT);
+    println!("{stops} stops of 50 ms while homing");
+    assert!(stops >= 5, "homing ended before the stalls: {stops}");
+    assert_eq!(r.code, Some(0), "after {stops} stops: {}\n{}", r.stdout, r.stderr);
+    let s = read_summary(&out);
+    assert!(s.ok, "{:?}", s.fault);
+    let homing = s.homing.expect("a homing report");
+    assert_eq!(homing.motors.len(), 3, "{homing:?}");
+    run.assert_clean();
+}

@@ -135,6 +135,17 @@ pub struct Fault {
     /// The hwserver's timestamp of the read that showed the fault (its own clock: simulated
     /// time in lock-step), 0 if none.
     pub hw_time_ns: u64,
+    /// A host stall shortly before it (real-time runs): the loop could not act meanwhile.
+    pub stall: Option<HostStall>,
+}
+
+/// Servo periods that went by without a cycle, some cycles before a fault.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct HostStall {
+    /// Periods missed in a row.
+    pub missed: u64,
+    /// Cycles between the stall and the fault.
+    pub cycles_before: u64,
 }
 
 impl Fault {
@@ -153,6 +164,7 @@ impl Fault {
             limit: 0.0,
             integrated: false,
             hw_time_ns: 0,
+            stall: None,
         }
     }
 
@@ -210,7 +222,16 @@ impl Fault {
             "the hwserver did not acknowledge disabling the motors (on hardware the charge-pump \
              relay drops them when the hwserver stops)"
         };
-        format!("{what} at cycle {}; {after}", self.cycle)
+        let stall = match self.stall {
+            Some(st) if self.kind != FaultKind::Overrun => format!(
+                " ({} servo periods went by without a cycle {} cycles before: a host stall, the \
+                 motors running on their last output meanwhile; without PREEMPT_RT a loaded \
+                 host stalls like that)",
+                st.missed, st.cycles_before
+            ),
+            _ => String::new(),
+        };
+        format!("{what} at cycle {}{stall}; {after}", self.cycle)
     }
 
     /// What went wrong with the hardware, the hwserver or the run (a stop signal).

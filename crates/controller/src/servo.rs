@@ -6,7 +6,7 @@
 //! does no I/O besides the two exchanges of the link; a fault is recorded as a `Copy` value
 //! and handled by disabling every motor.
 
-use crate::fault::{Fault, FaultKind};
+use crate::fault::{Fault, FaultKind, HostStall};
 use crate::gather::{Gather, GatherRow};
 use crate::law::{ServoInput, ServoLaw, is_dac_code};
 use crate::link::{HwLink, LinkError};
@@ -112,6 +112,8 @@ pub struct Servo {
     errors: ErrorStats,
     timing: TimingStats,
     fault: Option<Fault>,
+    /// The latest host stall in a real-time run: its sample and the periods it missed.
+    last_stall: Option<(u64, u64)>,
     planned_samples: Option<u64>,
     /// The command is frozen: the trajectory starved, or the path ended and the robot settles.
     holding: bool,
@@ -166,6 +168,7 @@ impl Servo {
             errors: ErrorStats::default(),
             timing,
             fault: None,
+            last_stall: None,
             planned_samples: None,
             holding: false,
             settle_executed: 0,
@@ -417,6 +420,9 @@ impl Servo {
         self.last_sample = n;
 
         self.timing.record_tick(tick);
+        if tick.missed > 0 && !self.plan.deterministic {
+            self.last_stall = Some((n, tick.missed));
+        }
         if tick.missed >= self.plan.limits.max_missed_in_row {
             return CycleEnd::Fault(Fault {
                 value: tick.missed as f64,
@@ -546,7 +552,13 @@ impl Servo {
     /// known to be gone, and records `fault` with whether the disable was acknowledged.
     pub fn handle_fault(&mut self, link: &mut dyn HwLink, fault: Fault) {
         let disabled = !server_gone(Some(fault)) && self.disable_all(link);
-        self.fault = Some(Fault { disabled, ..fault });
+        // A stall within the last second may be why: the plant ran on the last output.
+        let recent = 1_000_000_000 / self.plan.period_ns.max(1);
+        let stall = self.last_stall.and_then(|(at, missed)| {
+            let cycles_before = fault.cycle.checked_sub(at)?;
+            (cycles_before <= recent).then_some(HostStall { missed, cycles_before })
+        });
+        self.fault = Some(Fault { disabled, stall, ..fault });
         self.enter(Phase::Fault);
     }
 

@@ -4,7 +4,7 @@
 
 mod util;
 
-use qmarc_controller::fault::FaultKind;
+use qmarc_controller::fault::{FaultKind, HostStall};
 use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
 use qmarc_controller::plan::{MoveLimits, MovePlan};
 use qmarc_controller::servo::{CycleEnd, Phase, Servo};
@@ -806,4 +806,47 @@ fn a_non_finite_command_or_output_is_a_fault_in_that_cycle_issue_27() {
     assert!(f.disabled && !link.0.any_enabled(), "{f:?}");
     assert!(servo.gather().rows().iter().all(|r| r.dac.iter().all(|&c| c == 0)));
     assert_eq!(f.kind.name(), "bad_output");
+}
+
+/// Issue 28, item 6: a fault shortly after a host stall says so — the loop could not act
+/// for those periods, the motors ran on their last output — naming how many periods went by
+/// and how long before; one without a recent stall does not, and neither does a lock-step
+/// run (simulated time does not see the host's stalls).
+#[test]
+fn a_fault_after_a_host_stall_says_so_issue_28() {
+    let fault_after = |stall_at: Option<u64>, deterministic: bool| {
+        let mut p = lockstep();
+        p.stall_motor = Some(1);
+        let plan = MovePlan { limits: limits(), deterministic, ..plan(3) };
+        let s = settings();
+        let mut link = CoreLink::new(p);
+        let ramp = Box::new(Ramp(2.0, [0.0; MAX_MOTORS]));
+        let mut servo = Servo::new(plan, ramp, (LAWS[0].build)(&s), Box::new(MockClock::new(0)));
+        let mut ticker = ManualTicker::new(400_000);
+        servo.prepare(&mut link).unwrap();
+        ticker.start().unwrap();
+        for i in 0..10_000 {
+            if Some(i) == stall_at {
+                ticker.inject_delay(0, 4);
+            }
+            if let CycleEnd::Fault(f) = servo.cycle(&mut link, &ticker.wait().unwrap()) {
+                servo.handle_fault(&mut link, f);
+                return servo.fault().unwrap();
+            }
+        }
+        panic!("no fault");
+    };
+    let f = fault_after(Some(100), false);
+    assert_eq!((f.kind, f.motor), (FaultKind::FollowingError, Some(1)));
+    let before = f.cycle - 104;
+    assert_eq!(f.stall, Some(HostStall { missed: 4, cycles_before: before }));
+    let said = format!(
+        " at cycle {} (4 servo periods went by without a cycle {before} cycles before: a host \
+         stall",
+        f.cycle
+    );
+    assert!(f.message().contains(&said), "{}", f.message());
+    assert_eq!(fault_after(None, false).stall, None);
+    assert!(!fault_after(None, false).message().contains("host stall"));
+    assert_eq!(fault_after(Some(100), true).stall, None, "lock-step");
 }

@@ -94,8 +94,15 @@ pub struct Homing {
     act: [f64; MAX_MOTORS],
     flags: [MotorFlags; MAX_MOTORS],
     origin: f64,
-    /// Where the switch tripped.
+    /// Where the switch tripped: at most one period's travel past where it was last seen
+    /// open (a host stall between the two must not count against the switch).
     trip: f64,
+    /// Where the motor being homed was last seen with its top switch open.
+    open_seen: f64,
+    /// The sample index of the last sample that moved homing on: the next moves it on by as
+    /// many periods as went by (missed periods of a host stall too, so the command keeps
+    /// pace with time, as the plant did).
+    last_n: Option<u64>,
     target: f64,
     settle_left: u64,
     reports: [MotorHomeReport; MAX_MOTORS],
@@ -135,6 +142,8 @@ impl Homing {
             flags: [MotorFlags::default(); MAX_MOTORS],
             origin: 0.0,
             trip: 0.0,
+            open_seen: 0.0,
+            last_n: None,
             target: 0.0,
             settle_left: 0,
             reports: [MotorHomeReport::default(); MAX_MOTORS],
@@ -154,6 +163,7 @@ impl Homing {
         self.phase = Phase::Approach;
         self.fresh = true;
         self.origin = self.cmd[motor];
+        self.open_seen = self.act[motor];
         self.reports[motor] = MotorHomeReport { motor: motor + 1, ..MotorHomeReport::default() };
     }
 
@@ -190,12 +200,14 @@ impl Homing {
         Sample::Failed
     }
 
-    /// One sample of the motor being homed: moves its command by the phase it is in and
-    /// moves on to the next phase (or motor) when the phase's condition is met.
-    fn advance(&mut self) -> Result<(), HomingFailure> {
+    /// One sample of the motor being homed, `periods` after the last: moves its command by
+    /// the phase it is in (as far as that many periods take it) and moves on to the next
+    /// phase (or motor) when the phase's condition is met.
+    fn advance(&mut self, periods: u64) -> Result<(), HomingFailure> {
         let m = self.motor;
         let dir = self.motors[m].top_direction;
-        let step = self.settings.velocity_counts_per_s * self.period_s;
+        let one = self.settings.velocity_counts_per_s * self.period_s;
+        let step = one * periods as f64;
         // Cleared here, not after the sample: `begin` of the next motor runs within a sample.
         let first = std::mem::replace(&mut self.fresh, false);
         match self.phase {
@@ -204,8 +216,8 @@ impl Homing {
                 self.reports[m].started_on_switch = true;
                 self.phase = Phase::LeaveSwitch;
             }
-            Phase::Approach => self.approach(m, dir, step)?,
-            Phase::Backoff => self.back_off(m, dir)?,
+            Phase::Approach => self.approach(m, dir, one, periods)?,
+            Phase::Backoff => self.back_off(m, dir, periods)?,
             Phase::ToOffset => {
                 let left = self.target - self.cmd[m];
                 if left.abs() <= step {
@@ -216,7 +228,7 @@ impl Homing {
                     self.cmd[m] += step.copysign(left);
                 }
             }
-            Phase::Settle => self.settle(m),
+            Phase::Settle => self.settle(m, periods),
             Phase::Done => {}
         }
         Ok(())
@@ -232,21 +244,31 @@ impl Homing {
             }
         } else {
             self.origin = self.cmd[m];
+            self.open_seen = self.act[m];
             self.phase = Phase::Approach;
         }
         Ok(())
     }
 
-    /// Towards the top switch at the homing velocity until it trips.
-    fn approach(&mut self, m: usize, dir: f64, step: f64) -> Result<(), HomingFailure> {
+    /// Towards the top switch at the homing velocity (`step` a period) until it trips.
+    fn approach(
+        &mut self,
+        m: usize,
+        dir: f64,
+        step: f64,
+        periods: u64,
+    ) -> Result<(), HomingFailure> {
         if self.flags[m].top() {
-            // Stop where it is and back off from there.
+            // Stop where it is and back off from there. The switch tripped somewhere since it
+            // was last seen open: a period's travel after that, or here if that is nearer.
             self.reports[m].switch_found_counts = self.act[m];
-            self.trip = self.act[m];
+            let earliest = self.open_seen + dir * step;
+            self.trip = if (self.act[m] - earliest) * dir < 0.0 { self.act[m] } else { earliest };
             self.cmd[m] = self.act[m];
             self.phase = Phase::Backoff;
         } else {
-            self.cmd[m] += dir * step;
+            self.open_seen = self.act[m];
+            self.cmd[m] += dir * step * periods as f64;
             let travel = (self.cmd[m] - self.origin).abs();
             if travel > self.settings.max_travel_counts {
                 return Err(HomingFailure::NoSwitch { motor: m, travel });
@@ -256,7 +278,7 @@ impl Homing {
     }
 
     /// Off the switch at the creep velocity until it clears: home is the offset from there.
-    fn back_off(&mut self, m: usize, dir: f64) -> Result<(), HomingFailure> {
+    fn back_off(&mut self, m: usize, dir: f64, periods: u64) -> Result<(), HomingFailure> {
         if !self.flags[m].top() {
             self.reports[m].switch_cleared_counts = self.act[m];
             self.target = self.act[m] - dir * self.motors[m].home_offset_counts;
@@ -267,13 +289,14 @@ impl Homing {
             if backed_off >= self.settings.clear_within_counts {
                 return Err(HomingFailure::NotCleared { motor: m, backed_off });
             }
-            self.cmd[m] -= dir * self.settings.creep_counts_per_s * self.period_s;
+            self.cmd[m] -= dir * self.settings.creep_counts_per_s * self.period_s * periods as f64;
         }
         Ok(())
     }
 
-    /// Holds home for the settle time, then the next motor (or done).
-    fn settle(&mut self, m: usize) {
+    /// Holds home for the settle time (`periods` more of it gone by), then the next motor
+    /// (or done).
+    fn settle(&mut self, m: usize, periods: u64) {
         if self.settle_left == 0 {
             self.reports[m].ended_counts = self.act[m];
             self.reports[m].home = true;
@@ -284,7 +307,7 @@ impl Homing {
                 self.phase = Phase::Done;
             }
         } else {
-            self.settle_left -= 1;
+            self.settle_left = self.settle_left.saturating_sub(periods);
         }
     }
 }
@@ -299,6 +322,7 @@ impl TrajectoryGenerator for Homing {
         self.act = *start;
         self.failure = None;
         self.observed = false;
+        self.last_n = None;
         self.begin(0);
         Ok(())
     }
@@ -318,7 +342,7 @@ impl TrajectoryGenerator for Homing {
         self.observed = true;
     }
 
-    fn sample(&mut self, _n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
         if self.failure.is_some() {
             return Sample::Failed;
         }
@@ -332,7 +356,9 @@ impl TrajectoryGenerator for Homing {
         if let Some(why) = self.unexpected_switch() {
             return self.fail(why);
         }
-        if let Err(why) = self.advance() {
+        let periods = self.last_n.map_or(1, |last| n.saturating_sub(last).max(1));
+        self.last_n = Some(n);
+        if let Err(why) = self.advance(periods) {
             return self.fail(why);
         }
         *cmd = self.cmd;

@@ -448,3 +448,86 @@ fn the_runaway_guards_hold_from_any_origin_issue_32() {
     assert_eq!(h.failure, Some(HomingFailure::NotCleared { motor: 0, backed_off: 10.0 }));
     assert_eq!(steps.last().unwrap().cmd[0], 4_800.0 + 10.0);
 }
+
+/// Drives one motor's homing against a plant that follows its command but coasts through a
+/// host stall: at sample `stall_at` the next `missed` periods go by without a sample, the
+/// plant moving on meanwhile at the velocity it had. Its top switch is active at or below
+/// `switch` (and for good once tripped, if `stuck`). Returns how it ended, the commands and
+/// the sample indices.
+fn drive_through_a_stall(
+    h: &mut Homing,
+    switch: f64,
+    stuck: bool,
+    (stall_at, missed): (u64, u64),
+) -> (Sample, Vec<(u64, f64)>) {
+    let mut act = [0.0; MAX_MOTORS];
+    let mut cmd = [0.0; MAX_MOTORS];
+    h.start(&act).unwrap();
+    let (mut seen, mut tripped, mut n) = (Vec::new(), false, 0);
+    while n < 100_000 {
+        tripped |= act[0] <= switch;
+        let mut flags = [MotorFlags::default(); MAX_MOTORS];
+        if act[0] <= switch || (stuck && tripped) {
+            flags[0] = MotorFlags(MotorFlags::TOP);
+        }
+        h.observe(&act, &flags);
+        match h.sample(n, &mut cmd) {
+            Sample::Ready => seen.push((n, cmd[0])),
+            other => return (other, seen),
+        }
+        let velocity = cmd[0] - act[0];
+        act = cmd;
+        n += 1;
+        if n == stall_at {
+            act[0] += velocity * missed as f64; // coasting on the last output
+            n += missed;
+        }
+    }
+    panic!("homing did not end");
+}
+
+/// Issue 28, item 6: a host stall while homing. The command keeps pace with time (a sample
+/// after missed periods moves it as far as those periods would have: the plant coasted on
+/// meanwhile, and a command left behind is a following error), the settle time is time, and
+/// a switch passed during the stall is judged from where it was last seen open, not from
+/// where the stall left the motor (before: "its top switch was still active 10 counts back
+/// from where it tripped" after a 50 ms stall at the trip).
+#[test]
+fn homing_keeps_pace_through_a_host_stall_issue_28() {
+    // 1 count a period (2500 counts/s at 400 µs); the switch at −200; 10 000 counts/s creep.
+    let settings = || HomingSettings { creep_counts_per_s: 2_500.0, ..settings() };
+    // A 125-period (50 ms) stall on the way to the switch: the next command is 126 on.
+    let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
+    let (end, cmds) = drive_through_a_stall(&mut h, -200.0, false, (50, 125));
+    assert_eq!(end, Sample::Done);
+    let at = cmds.iter().position(|&(n, _)| n > 50).unwrap();
+    assert_eq!((cmds[at - 1], cmds[at]), ((49, -50.0), (175, -176.0)));
+    // The same stall just before the trip: the motor coasts 100 counts into the switch
+    // (found at −250), which is open again at −199 on the way back; home is 300 from there.
+    let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
+    let (end, _) = drive_through_a_stall(&mut h, -200.0, false, (150, 100));
+    assert_eq!(end, Sample::Done, "{:?}", h.failure());
+    let r = h.reports()[0];
+    assert_eq!(r.switch_found_counts, -250.0);
+    assert_eq!(r.switch_cleared_counts, -199.0, "the first open position");
+    assert_eq!(r.home_counts, r.switch_cleared_counts + 300.0);
+    // A switch that sticks is still refused within 10 counts of where it can have tripped
+    // (a period after it was last seen open, at −149: −150).
+    let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
+    let (end, cmds) = drive_through_a_stall(&mut h, -200.0, true, (150, 100));
+    assert_eq!(end, Sample::Failed);
+    assert_eq!(h.failure, Some(HomingFailure::NotCleared { motor: 0, backed_off: 10.0 }));
+    assert_eq!(cmds.last().unwrap().1, -150.0 + 10.0);
+    // Settling is time: a stall longer than the settle time (10 periods) ends it.
+    let settled = |stall: (u64, u64)| {
+        let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
+        let (end, cmds) = drive_through_a_stall(&mut h, -200.0, false, stall);
+        assert_eq!(end, Sample::Done);
+        cmds.len()
+    };
+    let plain = settled((0, 0));
+    // Stalled with 10 of the settle's 11 samples to go (10 periods, and the one that ends
+    // it): the sample after the stall finds the time gone, the next one ends it.
+    let stall_at = plain - 10;
+    assert_eq!(settled((stall_at as u64, 50)), stall_at + 2);
+}
