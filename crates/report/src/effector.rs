@@ -13,12 +13,16 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct AxisMm {
     /// Smallest.
+    #[serde(deserialize_with = "crate::summary::figure")]
     pub min_mm: f64,
     /// Largest.
+    #[serde(deserialize_with = "crate::summary::figure")]
     pub max_mm: f64,
     /// Root mean square.
+    #[serde(deserialize_with = "crate::summary::figure")]
     pub rms_mm: f64,
     /// Largest magnitude.
+    #[serde(deserialize_with = "crate::summary::figure")]
     pub max_abs_mm: f64,
 }
 

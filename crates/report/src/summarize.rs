@@ -107,7 +107,7 @@ pub fn summarize(
             .map(|e| e.max.abs().max(e.min.abs()))
             .collect(),
     });
-    Summary {
+    let mut summary = Summary {
         mode,
         trajectory: servo.generator_name().to_string(),
         ok: servo.fault().is_none(),
@@ -146,5 +146,7 @@ pub fn summarize(
         check: servo
             .check_report()
             .map(|r| r.iter().map(|m| crate::check::MotorCheck::of(settings, m)).collect()),
-    }
+    };
+    summary.judge_figures();
+    summary
 }

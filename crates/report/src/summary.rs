@@ -25,24 +25,39 @@ pub struct FaultReport {
     pub hw_time_ns: Option<u64>,
 }
 
+/// A figure as `summary.json` holds it: a number, or null for one that is not (serde_json
+/// writes NaN and ±∞ as null), read back as NaN — so a summary with such a figure can still be
+/// read, and says the move is not ok ([`Summary::figures_not_numbers`]).
+pub(crate) fn figure<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
 /// Error figures of one motor in `summary.json`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MotorSummary {
     /// Smallest error, counts.
+    #[serde(deserialize_with = "figure")]
     pub min_error_counts: f64,
     /// Largest error, counts.
+    #[serde(deserialize_with = "figure")]
     pub max_error_counts: f64,
     /// Σ |error|, counts.
+    #[serde(deserialize_with = "figure")]
     pub accumulated_abs_error_counts: f64,
     /// Σ error², counts².
+    #[serde(deserialize_with = "figure")]
     pub sum_squares_error_counts2: f64,
     /// Smallest error, rad at the arm.
+    #[serde(deserialize_with = "figure")]
     pub min_error_rad: f64,
     /// Largest error, rad.
+    #[serde(deserialize_with = "figure")]
     pub max_error_rad: f64,
     /// Σ |error|, rad.
+    #[serde(deserialize_with = "figure")]
     pub accumulated_abs_error_rad: f64,
     /// Σ error², rad².
+    #[serde(deserialize_with = "figure")]
     pub sum_squares_error_rad2: f64,
     /// False when the motor did not follow its command ([`Travel::not_followed`](qmarc_controller::stats::Travel::not_followed)): a seized
     /// joint, a dead amplifier. Such a motor is never reported ok.
@@ -320,6 +335,44 @@ impl Summary {
         serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", path.display()))
     }
 
+    /// The error figures that are not numbers (NaN or infinite: null in `summary.json`), by
+    /// name: a move with any is not ok.
+    pub fn figures_not_numbers(&self) -> Vec<String> {
+        let mut bad = Vec::new();
+        let gathered = self.gathered.iter().flat_map(|g| g.motors.iter().map(|m| ("gathered ", m)));
+        for (i, (set, m)) in self.motors.iter().map(|m| ("", m)).chain(gathered).enumerate() {
+            let figures = [
+                m.min_error_counts,
+                m.max_error_counts,
+                m.accumulated_abs_error_counts,
+                m.sum_squares_error_counts2,
+            ];
+            if figures.iter().any(|f| !f.is_finite()) {
+                bad.push(format!("{set}motor {}'s error", i % self.motors.len().max(1) + 1));
+            }
+        }
+        if let Some(e) = &self.effector {
+            for (axis, a) in [("x", e.x), ("y", e.y), ("z", e.z), ("distance", e.distance)] {
+                if [a.min_mm, a.max_mm, a.rms_mm, a.max_abs_mm].iter().any(|f| !f.is_finite()) {
+                    bad.push(format!("the end-effector's {axis} error"));
+                }
+            }
+        }
+        bad
+    }
+
+    /// A move with figures that are not numbers is not ok: says which, in a warning.
+    pub fn judge_figures(&mut self) {
+        let bad = self.figures_not_numbers();
+        if !bad.is_empty() {
+            self.ok = false;
+            self.warnings.push(format!(
+                "figures that are not numbers (null in summary.json): {}; the move is not ok",
+                bad.join(", ")
+            ));
+        }
+    }
+
     /// What the move was in words: `step`, `home`, `run (spline)`.
     pub fn what(&self) -> String {
         if self.trajectory.is_empty() || self.trajectory == self.mode.to_string() {
@@ -414,5 +467,38 @@ mod tests {
         let json = serde_json::to_string(&r).unwrap();
         assert!(json.starts_with(r#"{"kind":"limit_switch","motor":1,"cycle":1234"#), "{json}");
         assert_eq!(serde_json::from_str::<FaultReport>(&json).unwrap(), r);
+    }
+
+    /// Issue 28, item 7: figures that are not numbers are written as null and read back as
+    /// NaN (before, such a summary could not be read, and the starter reported a controller
+    /// that exited 0 as lost); the move is not ok, and the warning names them.
+    #[test]
+    fn figures_that_are_not_numbers_read_back_and_make_the_move_not_ok() {
+        let mut s = Summary::controller_lost((Mode::Step, true), 2, 400, 10, String::new());
+        (s.fault, s.ok) = (None, true);
+        let mut e = AxisErrors::default();
+        e.add(1.0);
+        s.motors = vec![MotorSummary::new(&e, 1.0); 2];
+        s.motors[1].max_error_counts = f64::NAN;
+        let mut eff = crate::effector::EffectorSummary::default();
+        eff.z.min_mm = f64::INFINITY;
+        s.effector = Some(eff);
+        s.judge_figures();
+        assert!(!s.ok);
+        assert_eq!(
+            s.warnings,
+            ["figures that are not numbers (null in summary.json): motor 2's error, the \
+              end-effector's z error; the move is not ok"]
+        );
+        let json = serde_json::to_string(&s).unwrap();
+        assert!(json.contains(r#""max_error_counts":null"#), "{json}");
+        let back: Summary = serde_json::from_str(&json).expect("readable");
+        assert!(back.motors[1].max_error_counts.is_nan() && !back.ok);
+        assert!(back.effector.unwrap().z.min_mm.is_nan());
+        assert_eq!(back.figures_not_numbers().len(), 2);
+        let mut fine = Summary { motors: vec![MotorSummary::new(&e, 1.0); 2], ..back };
+        (fine.effector, fine.ok, fine.warnings) = (None, true, Vec::new());
+        fine.judge_figures();
+        assert!(fine.ok && fine.warnings.is_empty());
     }
 }

@@ -292,7 +292,7 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
         .and_then(|r| qmarc_controller::servo::Phase::from_code(r.phase))
         .is_some_and(|p| !matches!(p, Phase::Idle | Phase::Preparing));
     if summary.is_none()
-        && let Some(exit) = controller.filter(|e| matches!(e, Exit::Signal(_)) || began)
+        && let Some(exit) = controller.filter(|e| lost(*e, began))
     {
         let mut lost = Summary::controller_lost(
             (mode, spec.deterministic),
@@ -309,6 +309,11 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
         }
         summary = Some(lost);
         summary_dir = out_dir.clone();
+    }
+    if summary.is_none() && controller.is_some_and(Exit::success) {
+        // It ended well and said it wrote its results: they are there, but cannot be read.
+        let why = Summary::read(&out_dir).err().unwrap_or_else(|| "not this run's".into());
+        say!("qmarc-starter: the controller ended well, but its summary cannot be read: {why}");
     }
     match &summary {
         Some(_) if quiet => {}
@@ -343,6 +348,8 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
             exit::INTERNAL
         }
         (Some(s), _) if s.fault.is_some() => exit::FAULT,
+        // Done without a fault, but not ok (figures that are not numbers).
+        (Some(s), _) if !s.ok => exit::FAULT,
         (None, Some(Exit::Code(c))) if c == i32::from(exit::REFUSED) => exit::REFUSED,
         (None, Some(Exit::Code(c))) if c == i32::from(exit::INTERRUPTED) => exit::INTERRUPTED,
         _ if stop.load(std::sync::atomic::Ordering::Relaxed) => exit::INTERRUPTED,
@@ -548,6 +555,13 @@ impl<'a> StatusLine<'a> {
     }
 }
 
+/// Whether the controller, ended by `exit` without a summary, was lost: killed, or failed
+/// once its move had `began` (a panic, data it could not write anywhere). One that refused
+/// before anything moved has said why; one that ended well was not lost, whatever is missing.
+fn lost(exit: Exit, began: bool) -> bool {
+    matches!(exit, Exit::Signal(_)) || (began && !exit.success())
+}
+
 /// The fault of a run that `name` ended by stopping to respond: that, then what the controller
 /// saw (its own fault, or how it died).
 fn stopped_responding(s: &mut Summary, name: &str, u: supervise::Unresponsive) {
@@ -615,5 +629,21 @@ fn main() -> ExitCode {
             say!("qmarc-starter: error: {e:#}");
             ExitCode::from(code)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 28, item 7: a controller that ended well is never reported lost, whatever is
+    /// missing; one killed always is; one that failed is lost only once its move began.
+    #[test]
+    fn a_controller_that_ended_well_is_never_lost() {
+        assert!(!lost(Exit::Code(0), true));
+        assert!(!lost(Exit::Code(0), false));
+        assert!(lost(Exit::Signal(9), false));
+        assert!(lost(Exit::Code(1), true));
+        assert!(!lost(Exit::Code(3), false), "refused before anything moved");
     }
 }
