@@ -38,6 +38,7 @@ mod timer;
 mod trajectory;
 mod tune;
 
+pub use source::num;
 pub use check::{CheckSettings, MAX_CHECK_PULSE_S, MAX_CHECK_VOLTS};
 pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};

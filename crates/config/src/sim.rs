@@ -131,7 +131,10 @@ impl RawSim {
                     if v.is_finite() && (*v == 0.0 || (1.0..=1000.0).contains(v)) {
                         Ok(())
                     } else {
-                        Err(format!("must be 0 (a first-order lag) or 1‥1000 Hz, found {v}"))
+                        Err(format!(
+                            "must be 0 (a first-order lag) or 1‥1000 Hz, found {}",
+                            crate::num(*v)
+                        ))
                     }
                 },
             )?,
@@ -143,7 +146,10 @@ impl RawSim {
                     if v.is_finite() && (0.05..=0.99).contains(v) {
                         Ok(())
                     } else {
-                        Err(format!("must be 0.05‥0.99 (a velocity loop that rings), found {v}"))
+                        Err(format!(
+                            "must be 0.05‥0.99 (a velocity loop that rings), found {}",
+                            crate::num(*v)
+                        ))
                     }
                 },
             )?,

@@ -145,14 +145,21 @@ pub(crate) fn in_range(lo: i64, hi: i64) -> impl FnOnce(&i64) -> Result<(), Stri
 
 /// A finite number.
 pub(crate) fn finite(v: &f64) -> Result<(), String> {
-    if v.is_finite() { Ok(()) } else { Err(format!("must be a finite number, found {v}")) }
+    if v.is_finite() { Ok(()) } else { Err(format!("must be a finite number, found {}", num(*v))) }
 }
 
 /// `x` as a person reads it: plain between 10⁻⁴ and 10⁷, in exponent notation beyond
 /// (`1e20`, `1e-300`).
-pub(crate) fn num(x: f64) -> String {
+pub fn num(x: f64) -> String {
     if x != 0.0 && x.is_finite() && !(1e-4..1e7).contains(&x.abs()) {
-        format!("{x:e}")
+        // Six significant digits at most, trailing zeros dropped: 1e308, 1.5e-6.
+        let short = format!("{x:.5e}");
+        match short.split_once('e') {
+            Some((mantissa, exp)) if mantissa.contains('.') => {
+                format!("{}e{exp}", mantissa.trim_end_matches('0').trim_end_matches('.'))
+            }
+            _ => short,
+        }
     } else {
         format!("{x}")
     }

@@ -36,7 +36,11 @@ pub(crate) fn check_duration(s: f64, max: f64) -> Result<(), String> {
     if s.is_finite() && s > 0.0 && s <= max {
         Ok(())
     } else {
-        Err(format!("duration must be > 0 and ≤ {max} s (trajectory.max_duration_s), found {s}"))
+        Err(format!(
+            "duration must be > 0 and ≤ {} s (trajectory.max_duration_s), found {}",
+            crate::num(max),
+            crate::num(s)
+        ))
     }
 }
 

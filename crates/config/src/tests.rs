@@ -620,3 +620,22 @@ fn gains_and_motion_limits_are_checked_issue_27() {
         );
     }
 }
+
+/// Issue 28, item 8: numbers in messages as a person writes them — plain in the everyday
+/// range, short exponent notation beyond (six significant digits at most), never 309 digits
+/// or float noise.
+#[test]
+fn numbers_in_messages_are_short_issue_28() {
+    assert_eq!(crate::num(1e308), "1e308");
+    assert_eq!(crate::num(-2.5e-9), "-2.5e-9");
+    assert_eq!(crate::num(1e-3 * 1e-3 * 1e3 * 1e-3), "1e-6", "float noise rounded off");
+    assert_eq!(crate::num(1.234_567_89e12), "1.23457e12");
+    assert_eq!(crate::num(86_400.0), "86400");
+    assert_eq!(crate::num(0.25), "0.25");
+    assert_eq!(crate::num(0.0), "0");
+    let text = std::fs::read_to_string(shipped_path()).unwrap();
+    let big = text.replace("\nduration_s = 2.0", "\nduration_s = 1e308");
+    assert!(big != text, "the shipped file's step duration moved");
+    let e = parse(&big).unwrap_err().to_string();
+    assert!(e.ends_with("(trajectory.max_duration_s), found 1e308"), "{e}");
+}

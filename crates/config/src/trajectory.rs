@@ -79,7 +79,7 @@ pub(crate) fn check_speed(v: &f64) -> Result<(), String> {
     if v.is_finite() && *v > 0.0 && *v <= 1.0 {
         Ok(())
     } else {
-        Err(format!("must be > 0 and ≤ 1 (a fraction of the motors' limits), found {v}"))
+        Err(format!("must be > 0 and ≤ 1 (a fraction of the motors' limits), found {}", crate::num(*v)))
     }
 }
 
@@ -100,7 +100,7 @@ impl RawTrajectory {
                     if v.is_finite() && *v > 0.0 && *v <= 1e7 {
                         Ok(())
                     } else {
-                        Err(format!("must be > 0 and ≤ 10000000 s, found {v}"))
+                        Err(format!("must be > 0 and ≤ 10000000 s, found {}", crate::num(*v)))
                     }
                 },
             )?,

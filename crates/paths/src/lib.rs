@@ -84,11 +84,12 @@ pub enum PathError {
     #[error("{0}: no [robot] table, or not 3 motors: a Cartesian path needs the robot's geometry")]
     NoRobot(String),
     /// The resampling interval is unusable.
-    #[error("--every-ms must be a finite number of ms > 0, found {0}")]
+    #[error("--every-ms must be a finite number of ms > 0, found {}", qmarc_config::num(*.0))]
     Every(f64),
     /// Resampling makes too many knots.
     #[error(
-        "--every-ms {every_ms} makes {knots} knots, more than the {MAX_KNOTS} a knot file may hold"
+        "--every-ms {} makes {knots} knots, more than the {MAX_KNOTS} a knot file may hold",
+        qmarc_config::num(*every_ms)
     )]
     TooManyKnots {
         /// The interval, ms.
