@@ -38,7 +38,6 @@ mod timer;
 mod trajectory;
 mod tune;
 
-pub use source::num;
 pub use check::{CheckSettings, MAX_CHECK_PULSE_S, MAX_CHECK_VOLTS};
 pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};
@@ -50,6 +49,7 @@ pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
 pub use s626::{S626_DIO_CHANNELS, S626Settings};
 pub use sim::{DEFAULT_SIM_STATE_FILE, SimSettings};
+pub use source::num;
 pub use step::{MAX_STEP_COUNTS, StepSettings};
 pub use telemetry::{MAX_TELEMETRY_EVERY, TelemetrySettings};
 pub use timer::{TimerMethod, TimerSettings};

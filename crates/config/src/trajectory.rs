@@ -79,7 +79,10 @@ pub(crate) fn check_speed(v: &f64) -> Result<(), String> {
     if v.is_finite() && *v > 0.0 && *v <= 1.0 {
         Ok(())
     } else {
-        Err(format!("must be > 0 and ≤ 1 (a fraction of the motors' limits), found {}", crate::num(*v)))
+        Err(format!(
+            "must be > 0 and ≤ 1 (a fraction of the motors' limits), found {}",
+            crate::num(*v)
+        ))
     }
 }
 

@@ -128,6 +128,8 @@ fn unreachable_points_name_the_line_and_the_arm() {
     // Issue 28, item 8: the interval as given, not float noise (0.0000010000000000000002).
     assert_eq!(
         joint_knots(&robot(), &w, "w.txt", Some(1e-9)).unwrap_err().to_string(),
-        format!("--every-ms 1e-6 makes 120000001 knots, more than the {MAX_KNOTS} a knot file may hold")
+        format!(
+            "--every-ms 1e-6 makes 120000001 knots, more than the {MAX_KNOTS} a knot file may hold"
+        )
     );
 }

@@ -67,8 +67,11 @@ pub fn summarize(
             t.add(s.act.1, s.act.1);
         }
     }
+    // Judged on a move that ran its course: one a fault cut short (a stop a few cycles into a
+    // step) gave the motors no time to follow, and its fault says what happened.
+    let ran_its_course = servo.fault().is_none();
     for (m, summary) in motors.iter_mut().enumerate() {
-        if travel[m].not_followed(final_error[m]) {
+        if ran_its_course && travel[m].not_followed(final_error[m]) {
             summary.followed = false;
             let (commanded, moved) = travel[m].lengths();
             warnings.push(format!(

@@ -83,3 +83,36 @@ fn in_process_moves_repeat_bit_for_bit() {
     assert_eq!(a, b);
     assert!(a.fault.is_none() && a.motors.iter().all(|m| m.abs_rad > 0.1));
 }
+
+/// Issue 28, item 8: a step a fault cut short a few cycles in gave the motors no time to
+/// follow: its fault says what happened, never motors that "DID NOT FOLLOW … a seized joint?".
+#[test]
+fn a_move_cut_short_is_not_judged_for_following() {
+    let mut s = xz_spec().settings;
+    s.step.duration_s = 0.5;
+    for m in &mut s.safety {
+        m.max_integrated_error_counts = 12_000.0; // Σ FE of a 1000-count step: ~13 cycles
+    }
+    let spec = qmarc_tune::local::local_spec(s, Mode::Step);
+    let done = qmarc_tune::local::run_local(&spec, &AtomicBool::new(false)).unwrap();
+    let summary = done.summary;
+    assert_eq!(summary.fault.as_ref().map(|f| f.kind.name()), Some("following_error"));
+    assert!((5..50).contains(&summary.cycles), "{}", summary.cycles);
+    assert!(summary.motors.iter().all(|m| m.followed), "{:?}", summary.motors);
+    assert!(
+        summary.warnings.iter().all(|w| !w.contains("did not follow")),
+        "{:?}",
+        summary.warnings
+    );
+    // The same step run to its end, on a seized motor, is still judged.
+    let mut s = xz_spec().settings;
+    s.step.duration_s = 0.5;
+    s.sim.stall_motor = Some(2);
+    for m in &mut s.safety {
+        m.max_integrated_error_counts = 1e9; // the seized motor runs the step to its end
+    }
+    let spec = qmarc_tune::local::local_spec(s, Mode::Step);
+    let done = qmarc_tune::local::run_local(&spec, &AtomicBool::new(false)).unwrap();
+    assert!(done.summary.fault.is_none(), "{:?}", done.summary.fault);
+    assert!(!done.summary.motors[1].followed);
+}
