@@ -830,3 +830,37 @@ fn paced_homing_rides_out_host_stalls_issue_28() {
     assert_eq!(homing.motors.len(), 3, "{homing:?}");
     run.assert_clean();
 }
+
+/// Issue 28, item 8: Ctrl-C as a run starts (its first milliseconds, while iceoryx2 sets up
+/// and its calls are interrupted) is the user's stop: the run exits INTERRUPTED, and no
+/// process calls it an internal error or prints iceoryx2's `…(Interrupt)`.
+#[test]
+fn a_stop_as_the_run_starts_is_an_interruption_issue_28() {
+    for delay_ms in [0, 2, 4, 6, 10, 20, 40] {
+        let run = TestRun::new(&format!("earlyint{delay_ms}"));
+        let out = run.out("out");
+        let child = run.spawn_starter(&[
+            &config_arg(),
+            &out_arg(&out),
+            "--deterministic",
+            "step",
+            "--duration=2",
+        ]);
+        std::thread::sleep(Duration::from_millis(delay_ms));
+        signal(child.id(), Signal::SIGINT);
+        let r = wait_with_timeout(child, STOPPED_WITHIN);
+        // Before the starter handles signals (its first checks), SIGINT ends it as it ends
+        // any program (the shell says 130 too): nothing had started.
+        assert!(
+            matches!(r.code, None | Some(130)) && i32::from(exit::INTERRUPTED) == 130,
+            "{delay_ms} ms: {:?}: {}\n{}",
+            r.code,
+            r.stdout,
+            r.stderr
+        );
+        for bad in ["internal error", "Interrupt)", "error:"] {
+            assert!(!r.stderr.contains(bad), "{delay_ms} ms: {bad}: {}", r.stderr);
+        }
+        run.assert_clean();
+    }
+}

@@ -292,7 +292,7 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
         .and_then(|r| qmarc_controller::servo::Phase::from_code(r.phase))
         .is_some_and(|p| !matches!(p, Phase::Idle | Phase::Preparing));
     if summary.is_none()
-        && let Some(exit) = controller.filter(|e| lost(*e, began))
+        && let Some(exit) = controller.filter(|e| lost(*e, began, stopped_by(stop)))
     {
         let mut lost = Summary::controller_lost(
             (mode, spec.deterministic),
@@ -557,9 +557,20 @@ impl<'a> StatusLine<'a> {
 
 /// Whether the controller, ended by `exit` without a summary, was lost: killed, or failed
 /// once its move had `began` (a panic, data it could not write anywhere). One that refused
-/// before anything moved has said why; one that ended well was not lost, whatever is missing.
-fn lost(exit: Exit, began: bool) -> bool {
-    matches!(exit, Exit::Signal(_)) || (began && !exit.success())
+/// before anything moved has said why; one that ended well was not lost, whatever is missing;
+/// one the user's stop (`stopped_by`, forwarded to it) ended before its move began, before it
+/// could handle signals, was stopped, not lost.
+fn lost(exit: Exit, began: bool, stopped_by: Option<i32>) -> bool {
+    match exit {
+        Exit::Signal(s) => began || stopped_by != Some(s),
+        _ => began && !exit.success(),
+    }
+}
+
+/// The signal the user stopped this run with, if they did.
+fn stopped_by(stop: &std::sync::atomic::AtomicBool) -> Option<i32> {
+    stop.load(std::sync::atomic::Ordering::Relaxed)
+        .then(|| qmarc_timer::stop::signal().unwrap_or(nix::sys::signal::Signal::SIGTERM as i32))
 }
 
 /// The fault of a run that `name` ended by stopping to respond: that, then what the controller
@@ -636,14 +647,20 @@ fn main() -> ExitCode {
 mod tests {
     use super::*;
 
-    /// Issue 28, item 7: a controller that ended well is never reported lost, whatever is
-    /// missing; one killed always is; one that failed is lost only once its move began.
+    /// Issue 28, items 7 and 8: a controller that ended well is never reported lost, whatever
+    /// is missing; one killed is, unless by the user's stop before its move began; one that
+    /// failed is lost only once its move began.
     #[test]
     fn a_controller_that_ended_well_is_never_lost() {
-        assert!(!lost(Exit::Code(0), true));
-        assert!(!lost(Exit::Code(0), false));
-        assert!(lost(Exit::Signal(9), false));
-        assert!(lost(Exit::Code(1), true));
-        assert!(!lost(Exit::Code(3), false), "refused before anything moved");
+        assert!(!lost(Exit::Code(0), true, None));
+        assert!(!lost(Exit::Code(0), false, None));
+        assert!(lost(Exit::Signal(9), false, None));
+        assert!(lost(Exit::Code(1), true, None));
+        assert!(!lost(Exit::Code(3), false, None), "refused before anything moved");
+        // Ctrl-C forwarded before it could handle signals: stopped, not lost; after its move
+        // began, or by another signal, lost.
+        assert!(!lost(Exit::Signal(2), false, Some(2)));
+        assert!(lost(Exit::Signal(2), true, Some(2)));
+        assert!(lost(Exit::Signal(9), false, Some(2)));
     }
 }
