@@ -247,7 +247,13 @@ fn without_realtime_privileges_the_run_is_degraded_and_says_so() {
         std::fs::copy(qmarc_tests::bin_dir().join(b), bin.join(b)).unwrap();
     }
     let config = run.out("qmarc.toml");
-    std::fs::copy(default_config(), &config).unwrap();
+    // The simulator's homed frame in the run's own folder: the shared one in /dev/shm may
+    // have been made by root (another test, an earlier run), and nobody cannot write it.
+    let shipped = std::fs::read_to_string(default_config()).unwrap();
+    let state = format!("state_file = \"{}\"", run.dir.join("sim.state").display());
+    let own = shipped.replace("state_file = \"/dev/shm/qmarc-sim.state\"", &state);
+    assert!(own != shipped, "the shipped state_file moved");
+    std::fs::write(&config, own).unwrap();
     let mut cmd = std::process::Command::new(bin.join("qmarc-starter"));
     cmd.args(run.isolation_args())
         .args([format!("--config={}", config.display()), format!("--out={}", out.display())])

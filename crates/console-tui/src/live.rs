@@ -44,7 +44,9 @@ impl std::fmt::Debug for Live {
 impl Live {
     /// The live view of the move whose iceoryx2 files are at `location` (not attached yet).
     pub fn new(location: IpcLocation) -> Live {
-        // The terminal is the console's: iceoryx2 says nothing on it.
+        // The terminal is the console's: iceoryx2 says nothing on it (its errors neither:
+        // quieted once for good first, so that no node made later sets them back).
+        qmarc_proto::service::quiet_iceoryx2();
         iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Fatal);
         Live {
             location,

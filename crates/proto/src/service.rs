@@ -127,6 +127,17 @@ impl std::fmt::Display for ServiceError {
 
 impl std::error::Error for ServiceError {}
 
+/// iceoryx2 logs only its errors (unless `IOX2_LOG_LEVEL` says otherwise). Every QMARC
+/// program passes iceoryx2 its configuration explicitly ([`IpcLocation::config`]), but
+/// iceoryx2 0.10 falls back on its global one in places (cleaning up a dead node whose details
+/// are unreadable) and warns then "No config file was loaded, a config with default values
+/// will be used" — which a user who passed `--config` reads as their file ignored. Our own
+/// messages say what went wrong. Runs once; [`create_node`] calls it.
+pub fn quiet_iceoryx2() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| set_log_level_from_env_or(LogLevel::Error));
+}
+
 /// Creates a node of service type `S` (the link's [`Link`], or `ipc::Service` for the rest)
 /// named `name` at `location`. iceoryx2's own signal handling is off: each process installs
 /// its own handlers.
@@ -134,6 +145,7 @@ pub fn create_node<S: iceoryx2::service::Service>(
     name: &str,
     location: &IpcLocation,
 ) -> Result<Node<S>, ServiceError> {
+    quiet_iceoryx2();
     let cfg = location.config()?;
     let node_name = NodeName::new(name).map_err(|e| ServiceError::new("node name", name, e))?;
     NodeBuilder::new()
@@ -273,5 +285,27 @@ mod tests {
         let long_root = format!("/tmp/{}", "r".repeat(70));
         assert!(IpcLocation::checked("p_", &long_root).unwrap_err().contains("at most 72"));
         assert_eq!(IpcLocation::new("", "/tmp").remove_files(), 0);
+    }
+
+    /// Issue 28, item 8: iceoryx2's fallback on its global configuration says nothing once
+    /// QMARC has quieted it (checked in a child process: the log level is global).
+    #[test]
+    fn iceoryx2_does_not_say_it_loaded_no_config_file() {
+        if std::env::var_os("QMARC_QUIET_CHILD").is_some() {
+            quiet_iceoryx2();
+            let _ = iceoryx2::config::Config::global_config();
+            return;
+        }
+        let me = std::env::current_exe().unwrap();
+        let child = std::process::Command::new(me)
+            .args(["--exact", "service::tests::iceoryx2_does_not_say_it_loaded_no_config_file"])
+            .env("QMARC_QUIET_CHILD", "1")
+            .env_remove("IOX2_LOG_LEVEL")
+            .env("HOME", "/nonexistent")
+            .output()
+            .unwrap();
+        assert!(child.status.success(), "{child:?}");
+        let err = String::from_utf8_lossy(&child.stderr);
+        assert!(!err.contains("No config file was loaded"), "{err}");
     }
 }

@@ -67,11 +67,12 @@ pub fn summarize(
             t.add(s.act.1, s.act.1);
         }
     }
-    // Judged on a move that ran its course: one a fault cut short (a stop a few cycles into a
-    // step) gave the motors no time to follow, and its fault says what happened.
-    let ran_its_course = servo.fault().is_none();
+    // Judged on a move that ran its course. One a fault cut short (a stop a few cycles into a
+    // step) may have given the motors no time to follow: only the motor its fault names (a
+    // following error, a switch) is judged, and its fault says what happened.
+    let judged = |m: usize| servo.fault().is_none_or(|f| f.motor == Some(m));
     for (m, summary) in motors.iter_mut().enumerate() {
-        if ran_its_course && travel[m].not_followed(final_error[m]) {
+        if judged(m) && travel[m].not_followed(final_error[m]) {
             summary.followed = false;
             let (commanded, moved) = travel[m].lengths();
             warnings.push(format!(

@@ -85,7 +85,8 @@ fn in_process_moves_repeat_bit_for_bit() {
 }
 
 /// Issue 28, item 8: a step a fault cut short a few cycles in gave the motors no time to
-/// follow: its fault says what happened, never motors that "DID NOT FOLLOW … a seized joint?".
+/// follow: its fault says what happened, and only the motor it names is judged — never every
+/// motor "DID NOT FOLLOW … a seized joint?".
 #[test]
 fn a_move_cut_short_is_not_judged_for_following() {
     let mut s = xz_spec().settings;
@@ -98,12 +99,13 @@ fn a_move_cut_short_is_not_judged_for_following() {
     let summary = done.summary;
     assert_eq!(summary.fault.as_ref().map(|f| f.kind.name()), Some("following_error"));
     assert!((5..50).contains(&summary.cycles), "{}", summary.cycles);
-    assert!(summary.motors.iter().all(|m| m.followed), "{:?}", summary.motors);
-    assert!(
-        summary.warnings.iter().all(|w| !w.contains("did not follow")),
-        "{:?}",
-        summary.warnings
-    );
+    // The motors the fault does not name had no time to follow, and are not judged.
+    let faulted = summary.fault.as_ref().and_then(|f| f.motor).expect("a motor") - 1;
+    for (m, motor) in summary.motors.iter().enumerate().filter(|(m, _)| *m != faulted) {
+        assert!(motor.followed, "motor {}: {:?}", m + 1, summary.warnings);
+    }
+    let said = summary.warnings.iter().filter(|w| w.contains("did not follow"));
+    assert!(said.count() <= 1, "{:?}", summary.warnings);
     // The same step run to its end, on a seized motor, is still judged.
     let mut s = xz_spec().settings;
     s.step.duration_s = 0.5;

@@ -117,14 +117,7 @@ fn run(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
     let end = serve(&mut core, &location, &opts, stop);
     core.finish().context("the backend's files").map_err(internal)?;
     let end = match end {
-        // A stop signal while iceoryx2 was setting up (a Ctrl-C in the first milliseconds)
-        // interrupts its calls: that is the user's stop, not a failure.
-        Err(_) if qmarc_timer::stop::count() > 0 => {
-            let sig =
-                qmarc_timer::stop::signal().map_or("a stop signal", qmarc_timer::stop::signal_name);
-            eprintln!("qmarc-hwserver: stopped by {sig} as it started: all motors disabled");
-            return Ok(ExitCode::from(exit::INTERRUPTED));
-        }
+        Err(_) if qmarc_timer::stop::count() > 0 => return Ok(stopped_as_it_started()),
         end => end.map_err(|e| internal(e.into()))?,
     };
     Ok(match end {
@@ -153,6 +146,14 @@ fn run(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
             ExitCode::from(exit::FAULT)
         }
     })
+}
+
+/// A stop signal while iceoryx2 was setting up (a Ctrl-C in the first milliseconds)
+/// interrupts its calls: that is the user's stop, not a failure.
+fn stopped_as_it_started() -> ExitCode {
+    let sig = qmarc_timer::stop::signal().map_or("a stop signal", qmarc_timer::stop::signal_name);
+    eprintln!("qmarc-hwserver: stopped by {sig} as it started: all motors disabled");
+    ExitCode::from(exit::INTERRUPTED)
 }
 
 fn main() -> ExitCode {
