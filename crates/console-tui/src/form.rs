@@ -159,7 +159,7 @@ fn item_text(item: Option<&Item>) -> Option<String> {
     Some(match v {
         Value::String(s) => s.value().clone(),
         Value::Integer(i) => i.value().to_string(),
-        Value::Float(f) => f.value().to_string(),
+        Value::Float(f) => float_text(*f.value()),
         Value::Boolean(b) => b.value().to_string(),
         Value::Array(a) => a.iter().filter_map(|x| x.as_str()).collect::<Vec<_>>().join(","),
         _ => return None,
@@ -249,9 +249,7 @@ impl Form {
             Place::Notch(m, k) => {
                 let arr = self.motor_table(m)?.get("notch")?.as_array()?;
                 let v = arr.get(k)?;
-                v.as_float()
-                    .map(|f| f.to_string())
-                    .or_else(|| v.as_integer().map(|i| i.to_string()))
+                v.as_float().map(float_text).or_else(|| v.as_integer().map(|i| i.to_string()))
             }
         }
     }
@@ -300,7 +298,9 @@ impl Form {
                     if table.get("notch").and_then(Item::as_array).is_none_or(|a| a.len() != 4) {
                         table["notch"] = toml_edit::value(Array::from_iter([0.0, 0.0, 0.0, 0.0]));
                     }
-                    if let Some(arr) = table["notch"].as_array_mut() {
+                    if let Some(arr) = table["notch"].as_array_mut()
+                        && arr.get(k).is_none_or(|old| !same_value(old, &value))
+                    {
                         arr.replace(k, value);
                     }
                 }
@@ -501,11 +501,38 @@ impl Form {
 /// Replaces the value of `item`, keeping the comment after it.
 fn set_keeping_decor(item: &mut Item, mut value: Value) {
     if let Some(old) = item.as_value() {
+        if same_value(old, &value) {
+            return; // unchanged: as the file writes it (`1e308` stays `1e308`)
+        }
         *value.decor_mut() = old.decor().clone();
     } else {
         value.decor_mut().set_prefix(" ");
     }
     *item = Item::Value(value);
+}
+
+/// A float as the form shows it: plain in the everyday range, exponent notation beyond
+/// (`1e308`, not 309 digits), always the exact value (it is edited and written back).
+fn float_text(f: f64) -> String {
+    if f != 0.0 && f.is_finite() && !(1e-4..1e7).contains(&f.abs()) {
+        format!("{f:e}")
+    } else {
+        f.to_string()
+    }
+}
+
+/// Whether `new` is the value `old` holds (numbers by value, whatever their spelling).
+fn same_value(old: &Value, new: &Value) -> bool {
+    match (old, new) {
+        (Value::Float(a), Value::Float(b)) => a.value() == b.value(),
+        (Value::Integer(a), Value::Integer(b)) => a.value() == b.value(),
+        (Value::Boolean(a), Value::Boolean(b)) => a.value() == b.value(),
+        (Value::String(a), Value::String(b)) => a.value() == b.value(),
+        (Value::Array(a), Value::Array(b)) => {
+            a.len() == b.len() && a.iter().zip(b.iter()).all(|(x, y)| same_value(x, y))
+        }
+        _ => false,
+    }
 }
 
 #[cfg(test)]

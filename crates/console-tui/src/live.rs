@@ -29,6 +29,11 @@ pub struct Live {
     pub samples: u64,
     /// Samples lost (gaps in their numbers).
     pub lost: u64,
+    /// The run's progress page (its phase and, homing, motor and stage), once it is there.
+    progress: Option<qmarc_controller::progress::Progress>,
+    /// Homing's motor and stage as the CLI says them: `homing motor 2: backing off the top
+    /// switch`.
+    pub stage: Option<String>,
 }
 
 impl std::fmt::Debug for Live {
@@ -55,6 +60,8 @@ impl Live {
             ended: false,
             series: Series::default(),
             samples: 0,
+            progress: None,
+            stage: None,
             lost: 0,
         }
     }
@@ -77,8 +84,17 @@ impl Live {
         )
     }
 
-    /// Attaches when the move's telemetry is there, takes what arrived, lets go at the end.
+    /// Attaches when the move's telemetry is there, takes what arrived, lets go at the end;
+    /// reads homing's stage from the run's progress page.
     pub fn poll(&mut self) {
+        use qmarc_controller::progress::Progress;
+        if self.progress.is_none() {
+            self.progress = Progress::open(&Progress::path(&self.location.prefix)).ok();
+        }
+        self.stage = self
+            .progress
+            .as_ref()
+            .and_then(|p| qmarc_plugins::homing::describe_progress(p.read().detail));
         if self.ended {
             return;
         }
@@ -131,5 +147,30 @@ impl Live {
             let p = series.period_us.partition_point(|&(x, _)| x < t - WINDOW_S);
             series.period_us.drain(..p);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 28, item 9: while homing runs, the console has its motor and stage from the
+    /// run's progress page, as the CLI's status line (before: only "home running 11 s").
+    #[test]
+    fn homing_shows_its_motor_and_stage_issue_28() {
+        use qmarc_controller::progress::Progress;
+        let prefix = format!("qmarc_livestage{}_", std::process::id());
+        let mut live = Live::new(IpcLocation::new(&prefix, "/tmp/iceoryx2"));
+        live.poll();
+        assert_eq!(live.stage, None, "no progress page yet");
+        let path = Progress::path(&prefix);
+        let page = Progress::create(&path).unwrap();
+        page.set_cycle(1234, 2 << 8 | 3);
+        live.poll();
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(live.stage.as_deref(), Some("homing motor 2: backing off the top switch"));
+        page.set_cycle(1235, 0);
+        live.poll();
+        assert_eq!(live.stage, None, "not homing");
     }
 }

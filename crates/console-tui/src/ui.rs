@@ -31,7 +31,10 @@ pub fn draw(f: &mut Frame, app: &App) {
     .areas(f.area());
     let modified = if app.form.dirty() { " [modified]" } else { "" };
     let running = app.running.as_ref().map_or(String::new(), |r| {
-        format!(" — {} running {:.1} s", r.mode.arg(), r.started.elapsed().as_secs_f64())
+        // Homing says which motor and what it does, as the CLI's status line.
+        let stage = app.live.as_ref().and_then(|l| l.stage.as_deref());
+        let stage = stage.map(|s| format!(" · {s}")).unwrap_or_default();
+        format!(" — {} running {:.1} s{stage}", r.mode.arg(), r.started.elapsed().as_secs_f64())
     });
     f.render_widget(
         Line::from(vec![

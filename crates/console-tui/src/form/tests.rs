@@ -144,3 +144,20 @@ fn the_period_must_leave_room_for_what_the_last_move_needed() {
     form.set_text(period, "600");
     assert!(form.fields[period].error.is_none());
 }
+
+/// Issue 28, item 9: a file with `kp = 1e308` opens as it is — shown as `1e308`, not 309
+/// digits, and not `[modified]` — and an edit back to the same value changes nothing.
+#[test]
+fn a_huge_value_shows_short_and_opens_unmodified_issue_28() {
+    let text = shipped().replacen("kp = 182000.0", "kp = 1e308", 1);
+    let (_d, mut form) = form_of(&text);
+    let kp1 = form.index(Place::Motor(0, "kp")).unwrap();
+    assert_eq!(form.fields[kp1].text, "1e308");
+    assert!(!form.dirty(), "marked modified as it opened");
+    assert_eq!(form.text(), text);
+    form.fields[kp1].text = "1.0e308".into();
+    assert!(!form.dirty(), "the same value, spelt otherwise");
+    form.fields[kp1].text = "2e5".into();
+    assert!(form.dirty());
+    assert!(form.text().contains("kp = 200000.0"), "an edit is written");
+}
