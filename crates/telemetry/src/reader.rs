@@ -21,11 +21,37 @@ pub struct TelemetryReader {
     subscriber: Subscriber<ipc::Service, TelemetrySample, ()>,
     service: TelemetryService,
     _node: iceoryx2::node::Node<ipc::Service>,
-    last_seq: Option<u64>,
-    received: u64,
-    lost: u64,
+    count: SeqCount,
     last: Option<TelemetrySample>,
     publisher_seen: bool,
+}
+
+/// Samples received and lost, from their numbers (0, 1, 2… over the move).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SeqCount {
+    /// The number of the last sample received.
+    pub last: Option<u64>,
+    /// Samples received.
+    pub received: u64,
+    /// Gaps between received samples.
+    pub lost: u64,
+    /// Samples before the first received, when counting from the start.
+    pub before_first: u64,
+    /// Count from the move's first sample.
+    pub from_start: bool,
+}
+
+impl SeqCount {
+    /// Counts the sample numbered `seq`.
+    pub fn see(&mut self, seq: u64) {
+        match self.last {
+            Some(l) => self.lost += seq.saturating_sub(l + 1),
+            None if self.from_start => self.before_first = seq,
+            None => {}
+        }
+        self.last = Some(seq);
+        self.received += 1;
+    }
 }
 
 /// How a move's telemetry ended.
@@ -56,9 +82,7 @@ impl TelemetryReader {
             subscriber,
             service,
             _node: node,
-            last_seq: None,
-            received: 0,
-            lost: 0,
+            count: SeqCount::default(),
             last: None,
             publisher_seen: false,
         })
@@ -83,25 +107,35 @@ impl TelemetryReader {
             Ok(None) => return Ok(None),
             Err(e) => return Err(format!("cannot read qmarc/telemetry: {e:?}")),
         };
-        if let Some(l) = self.last_seq {
-            self.lost += s.seq.saturating_sub(l + 1);
-        }
-        self.last_seq = Some(s.seq);
-        self.received += 1;
+        self.count.see(s.seq);
         if is_last(&s) {
             self.last = Some(s);
         }
         Ok(Some(s))
     }
 
-    /// Samples received so far.
-    pub fn received(&self) -> u64 {
-        self.received
+    /// Counts the move's samples from its first: a reader attached while waiting for the
+    /// move counts those published before it attached as lost (before: "0 lost" while the
+    /// whole step transient had gone by).
+    pub fn count_from_start(&mut self) {
+        self.count.from_start = true;
     }
 
-    /// Samples lost so far (before this reader's first one not counted).
+    /// Samples received so far.
+    pub fn received(&self) -> u64 {
+        self.count.received
+    }
+
+    /// Samples lost so far: gaps in their numbers, and, counted from the start, those before
+    /// the first received.
     pub fn lost(&self) -> u64 {
-        self.lost
+        self.count.lost + self.count.before_first
+    }
+
+    /// Of [`lost`](Self::lost), those published before the first received (counted from the
+    /// start only).
+    pub fn lost_before_first(&self) -> u64 {
+        self.count.before_first
     }
 
     /// How the move ended, once it did: its last sample was received, or its publisher,
@@ -129,21 +163,42 @@ pub fn location_of(prefix: &str, root: Option<&str>) -> IpcLocation {
     IpcLocation::new(prefix, &root)
 }
 
-/// The runs whose run files are in `/dev/shm` now, newest first.
-pub fn runs() -> Vec<IpcLocation> {
+/// A run found by its run file in `/dev/shm`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FoundRun {
+    /// Where its iceoryx2 files are.
+    pub location: IpcLocation,
+    /// The user whose run it is (its run file's owner).
+    pub uid: u32,
+}
+
+/// The runs whose run files are in `/dev/shm` now (under `root` only, if given): the
+/// caller's own first, newest first within each.
+pub fn runs(root: Option<&str>) -> Vec<FoundRun> {
+    use std::os::unix::fs::MetadataExt;
     let Ok(entries) = std::fs::read_dir(qmarc_proto::service::SHM_DIR) else {
         return Vec::new();
     };
-    let mut found: Vec<(std::time::SystemTime, IpcLocation)> = entries
+    let found = entries
         .flatten()
         .filter(|e| e.file_name().to_string_lossy().ends_with("run.json"))
         .filter_map(|e| {
             let spec = qmarc_config::RunSpec::read(&e.path()).ok()?;
-            let when = e.metadata().and_then(|m| m.modified()).ok()?;
-            (run_file(&spec.iox_prefix) == e.path())
-                .then(|| (when, IpcLocation::new(&spec.iox_prefix, &spec.iox_root)))
+            let meta = e.metadata().ok()?;
+            let run = FoundRun {
+                location: IpcLocation::new(&spec.iox_prefix, &spec.iox_root),
+                uid: meta.uid(),
+            };
+            (run_file(&spec.iox_prefix) == e.path() && root.is_none_or(|r| r == spec.iox_root))
+                .then_some((meta.modified().ok()?, run))
         })
         .collect();
-    found.sort_by_key(|f| std::cmp::Reverse(f.0));
-    found.into_iter().map(|(_, l)| l).collect()
+    own_first(found, nix::unistd::geteuid().as_raw())
+}
+
+/// `found` (with when each was made) in the order to try them: `me`'s own first, newest first
+/// within each.
+pub fn own_first(mut found: Vec<(std::time::SystemTime, FoundRun)>, me: u32) -> Vec<FoundRun> {
+    found.sort_by_key(|(when, run)| (run.uid != me, std::cmp::Reverse(*when)));
+    found.into_iter().map(|(_, r)| r).collect()
 }

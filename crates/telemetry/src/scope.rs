@@ -4,7 +4,7 @@
 //! detaches when the move ends, after `--duration` seconds or on Ctrl-C. Started before a
 //! move, it says that none runs and waits for one.
 
-use crate::reader::{End, TelemetryReader, is_last, location_of, runs};
+use crate::reader::{End, FoundRun, TelemetryReader, is_last, location_of, runs};
 use anyhow::Context;
 use clap::Parser;
 use qmarc_controller::fault::FaultKind;
@@ -35,7 +35,8 @@ pub struct ScopeArgs {
     /// Detach after S seconds (waiting for a move included); default: when the move ends.
     #[arg(long)]
     pub duration: Option<f64>,
-    /// The run's iceoryx2 prefix (default: the newest run found in /dev/shm).
+    /// The run's iceoryx2 prefix (default: your newest run found in /dev/shm, else the
+    /// newest of another user's).
     #[arg(long)]
     pub iox_prefix: Option<String>,
     /// The run's iceoryx2 root (default: the one its run file names).
@@ -79,13 +80,21 @@ pub fn run(args: &ScopeArgs) -> anyhow::Result<u8> {
     if args.duration.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
         anyhow::bail!("--duration must be a number of seconds > 0");
     }
+    if let Some(root) = &args.iox_root
+        && !std::path::Path::new(root).is_dir()
+    {
+        anyhow::bail!(
+            "--iox-root {root}: no such folder (a run's iceoryx2 root exists while it runs: \
+             `qmarc-starter --iox-root` names it)"
+        );
+    }
     let stop = qmarc_timer::stop::install().context("signal handlers")?;
     let start = Instant::now();
     let deadline = args.duration.map(|d| start + Duration::from_secs_f64(d));
     let over = || deadline.is_some_and(|d| Instant::now() >= d);
     let stopped = || stop.load(std::sync::atomic::Ordering::Relaxed);
     let mut said = false;
-    let (mut reader, location) = loop {
+    let (mut reader, location, whose) = loop {
         if stopped() {
             return Ok(exit::INTERRUPTED);
         }
@@ -101,9 +110,14 @@ pub fn run(args: &ScopeArgs) -> anyhow::Result<u8> {
             println!("qmarc scope: no move is running{which}; waiting for one (Ctrl-C leaves)");
             said = true;
         }
-        std::thread::sleep(POLL * 5);
+        // Soon after the move's telemetry appears: before its first sample, mostly.
+        std::thread::sleep(POLL / 2);
     };
-    println!("qmarc scope: attached to the move of {} ({})", location.prefix, location.root);
+    if said {
+        // It waited for this move: what went by before it attached is lost, and said so.
+        reader.count_from_start();
+    }
+    println!("qmarc scope: attached to the move of {} ({}){whose}", location.prefix, location.root);
     let mut sink = match &args.csv {
         Some(path) => Sink::Csv {
             file: std::io::BufWriter::new(
@@ -144,6 +158,10 @@ pub fn run(args: &ScopeArgs) -> anyhow::Result<u8> {
         std::thread::sleep(POLL);
     };
     let (received, lost) = (reader.received(), reader.lost());
+    let lost = match reader.lost_before_first() {
+        0 => format!("{lost}"),
+        n => format!("{lost} ({n} before it attached)"),
+    };
     drop(reader);
     let written = match sink {
         Sink::Csv { mut file, path, .. } => {
@@ -156,15 +174,25 @@ pub fn run(args: &ScopeArgs) -> anyhow::Result<u8> {
     Ok(if stopped() { exit::INTERRUPTED } else { exit::OK })
 }
 
-/// The reader of the move `args` name (or of the newest run found), if one runs now.
-fn attach(args: &ScopeArgs) -> anyhow::Result<Option<(TelemetryReader, IpcLocation)>> {
+/// The reader of the move `args` name (or of the caller's newest run found, else another
+/// user's), if one runs now, and whose it is in words (empty when named by `--iox-prefix`).
+fn attach(args: &ScopeArgs) -> anyhow::Result<Option<(TelemetryReader, IpcLocation, String)>> {
+    let me = nix::unistd::geteuid().as_raw();
     let candidates = match &args.iox_prefix {
-        Some(p) => vec![location_of(p, args.iox_root.as_deref())],
-        None => runs(),
+        Some(p) => vec![FoundRun { location: location_of(p, args.iox_root.as_deref()), uid: me }],
+        None => runs(args.iox_root.as_deref()),
     };
-    for location in candidates {
+    let found = candidates.len();
+    for FoundRun { location, uid } in candidates {
+        let whose = match (&args.iox_prefix, uid == me) {
+            (Some(_), _) => String::new(),
+            (None, true) => format!(": your newest running move of the {found} runs found"),
+            (None, false) => {
+                format!(": user {uid}'s — none of yours runs (--iox-prefix names a run)")
+            }
+        };
         match TelemetryReader::open_run(&location) {
-            Ok(r) => return Ok(Some((r, location))),
+            Ok(r) => return Ok(Some((r, location, whose))),
             Err(TelemetryOpenError::NoMove) => {}
             Err(TelemetryOpenError::Failed(e)) if args.iox_prefix.is_some() => {
                 return Err(anyhow::Error::msg(e.to_string()));
@@ -209,19 +237,30 @@ impl Sink {
                 }
                 *at = Some(Instant::now());
                 let lines = live_lines(s);
-                let mut out = std::io::stdout().lock();
-                if *terminal && *shown > 0 {
-                    // Back over the block shown before: redrawn in place.
-                    write!(out, "\x1b[{}A", *shown)?;
-                }
-                for l in &lines {
-                    writeln!(out, "{l}\x1b[K")?;
-                }
+                std::io::stdout().lock().write_all(block(&lines, *terminal, *shown).as_bytes())?;
                 *shown = lines.len();
                 Ok(())
             }
         }
     }
+}
+
+/// The text that shows `lines`: on a terminal, back over the `shown` lines of the block before
+/// and each line cleared to its end (redrawn in place); elsewhere (a pipe, a file) the lines
+/// alone, no escape codes.
+pub fn block(lines: &[String], terminal: bool, shown: usize) -> String {
+    let mut text = String::new();
+    if terminal && shown > 0 {
+        text.push_str(&format!("\x1b[{shown}A"));
+    }
+    for l in lines {
+        text.push_str(l);
+        if terminal {
+            text.push_str("\x1b[K");
+        }
+        text.push('\n');
+    }
+    text
 }
 
 /// The live block of `s`: the cycle's line, then a line per motor.
@@ -278,4 +317,63 @@ pub fn csv_row(s: &TelemetrySample, n: usize) -> String {
         r.push_str(&format!(",{},{},{},{}", s.cmd[m], s.act[m], s.dac[m], s.following_error[m]));
     }
     r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reader::{SeqCount, own_first};
+
+    /// Issue 28, item 10: a scope that waited for the move counts the samples before its
+    /// first as lost (before: "0 lost" after missing the whole step transient); one that
+    /// attached to a move under way counts only gaps.
+    #[test]
+    fn samples_before_the_first_are_lost_when_counting_from_the_start() {
+        let mut waited = SeqCount { from_start: true, ..SeqCount::default() };
+        let mut late = SeqCount::default();
+        for seq in [21, 22, 25] {
+            waited.see(seq);
+            late.see(seq);
+        }
+        assert_eq!((waited.received, waited.lost, waited.before_first), (3, 2, 21));
+        assert_eq!((late.received, late.lost, late.before_first), (3, 2, 0));
+        let mut from_zero = SeqCount { from_start: true, ..SeqCount::default() };
+        from_zero.see(0);
+        assert_eq!(from_zero.before_first, 0);
+    }
+
+    /// Issue 28, item 10: the caller's own runs first (newest first), then others'.
+    #[test]
+    fn the_callers_own_runs_come_first() {
+        let t = |s| std::time::UNIX_EPOCH + Duration::from_secs(s);
+        let run = |p: &str, uid| FoundRun { location: IpcLocation::new(p, "/tmp/iceoryx2"), uid };
+        let found = vec![
+            (t(30), run("theirs_new_", 1000)),
+            (t(10), run("mine_old_", 0)),
+            (t(20), run("mine_new_", 0)),
+        ];
+        let order: Vec<String> =
+            own_first(found, 0).into_iter().map(|r| r.location.prefix).collect();
+        assert_eq!(order, ["mine_new_", "mine_old_", "theirs_new_"]);
+    }
+
+    /// Issue 28, item 10: piped or redirected, the live lines hold no escape codes; on a
+    /// terminal they are redrawn in place.
+    #[test]
+    fn no_escape_codes_unless_on_a_terminal() {
+        let lines = vec!["a".to_string(), "b".to_string()];
+        assert_eq!(block(&lines, false, 2), "a\nb\n");
+        assert_eq!(block(&lines, true, 2), "\x1b[2Aa\x1b[K\nb\x1b[K\n");
+        assert_eq!(block(&lines, true, 0), "a\x1b[K\nb\x1b[K\n");
+    }
+
+    /// Issue 28, item 10: an `--iox-root` that does not exist is refused, naming it (before:
+    /// ignored, the scope waiting for a move that could never come).
+    #[test]
+    fn a_root_that_does_not_exist_is_refused() {
+        let args =
+            ScopeArgs::try_parse_from(["qmarc scope", "--iox-root", "/nonexistent/iox"]).unwrap();
+        let e = run(&args).unwrap_err().to_string();
+        assert!(e.starts_with("--iox-root /nonexistent/iox: no such folder"), "{e}");
+    }
 }
