@@ -91,6 +91,68 @@ pub(crate) struct PanelSpec<'p> {
     pub min_span: (f64, f64),
     /// The x axis counts whole things (trials): only whole numbers are labelled.
     pub integer_x: bool,
+    /// The y axis starts at zero (or below, for negative data): a small spread of large
+    /// values is shown as what it is, not stretched over the whole axis.
+    pub from_zero: bool,
+}
+
+/// Pixels of a legend's line of text and of its frame around the lines (at the 15-point
+/// legend font), and of its distance from the plot's corner.
+const LEGEND_LINE_PX: f64 = 21.0;
+const LEGEND_FRAME_PX: f64 = 16.0;
+const LEGEND_MARGIN_PX: f64 = 12.0;
+/// A character of the legend font, wide ones included, px.
+const LEGEND_CHAR_PX: f64 = 9.0;
+/// The legend's sample line and the gap after it, px.
+const LEGEND_SAMPLE_PX: f64 = 40.0;
+
+/// Where a legend goes, and the y range to draw with it.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct LegendPlace {
+    /// The corner.
+    pub corner: SeriesLabelPosition,
+    /// The y axis (raised above the data when no corner is free).
+    pub ys: std::ops::Range<f64>,
+}
+
+/// Where the legend of `names` goes on a plot of `plot_px` (width, height) pixels whose axes
+/// span `xs` × `ys`: the first corner — upper right, upper left, lower right, lower left —
+/// whose box holds none of `pts`; when every corner has data, upper right above all of it,
+/// the y axis raised to make the room. A legend never covers data.
+pub(crate) fn legend_place(
+    pts: &[(f64, f64)],
+    names: &[&str],
+    xs: &std::ops::Range<f64>,
+    ys: &std::ops::Range<f64>,
+    plot_px: (f64, f64),
+) -> LegendPlace {
+    use SeriesLabelPosition::{LowerLeft, LowerRight, UpperLeft, UpperRight};
+    let chars = names.iter().map(|n| n.chars().count()).max().unwrap_or(0) as f64;
+    let box_px = (
+        LEGEND_SAMPLE_PX + chars * LEGEND_CHAR_PX + LEGEND_FRAME_PX + LEGEND_MARGIN_PX,
+        names.len() as f64 * LEGEND_LINE_PX + LEGEND_FRAME_PX + LEGEND_MARGIN_PX,
+    );
+    let (fw, fh) = ((box_px.0 / plot_px.0.max(1.0)).min(1.0), (box_px.1 / plot_px.1.max(1.0)));
+    let (w, h) = (fw * (xs.end - xs.start), fh.min(1.0) * (ys.end - ys.start));
+    let free = |right: bool, upper: bool| {
+        let x = if right { (xs.end - w)..=xs.end } else { xs.start..=(xs.start + w) };
+        let y = if upper { (ys.end - h)..=ys.end } else { ys.start..=(ys.start + h) };
+        !pts.iter().any(|(px, py)| x.contains(px) && y.contains(py))
+    };
+    for (corner, right, upper) in [
+        (UpperRight, true, true),
+        (UpperLeft, false, true),
+        (LowerRight, true, false),
+        (LowerLeft, false, false),
+    ] {
+        if free(right, upper) {
+            return LegendPlace { corner, ys: ys.clone() };
+        }
+    }
+    // Raised: the data's top stays below the box, the box a fraction `f` of the new span.
+    let f = fh.min(0.6);
+    let top = pts.iter().map(|p| p.1).filter(|v| v.is_finite()).fold(ys.start, f64::max);
+    LegendPlace { corner: UpperRight, ys: ys.start..((top - f * ys.start) / (1.0 - f)) }
 }
 
 /// `lo..hi` covering `values`, padded by 5 % (a flat series gets ±1 around its value).
@@ -170,8 +232,30 @@ pub(crate) fn figure(
 pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
     let xs =
         widen(range(spec.traces.iter().flat_map(|t| t.pts.iter().map(|p| p.0))), spec.min_span.0);
-    let ys =
-        widen(range(spec.traces.iter().flat_map(|t| t.pts.iter().map(|p| p.1))), spec.min_span.1);
+    let zero = spec.from_zero.then_some(0.0);
+    let ys = widen(
+        range(spec.traces.iter().flat_map(|t| t.pts.iter().map(|p| p.1)).chain(zero)),
+        spec.min_span.1,
+    );
+    // What is drawn (the lines' points, decimated as drawn), and where the legend has room.
+    let drawn: Vec<Vec<(f64, f64)>> = spec
+        .traces
+        .iter()
+        .map(|t| {
+            decimate(t.pts, 1_500)
+                .into_iter()
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                .collect()
+        })
+        .collect();
+    let all: Vec<(f64, f64)> = drawn.iter().flatten().copied().collect();
+    let names: Vec<&str> =
+        spec.traces.iter().map(|t| t.name.as_str()).filter(|n| !n.is_empty()).collect();
+    let (w, h) = area.dim_in_pixel();
+    // The plot inside the panel: less the y labels, the x labels, the caption and margins.
+    let plot_px = (f64::from(w) - 95.0 - 20.0, f64::from(h) - 45.0 - 20.0 - 30.0);
+    let place = legend_place(&all, &names, &xs, &ys, plot_px);
+    let ys = place.ys.clone();
     let (fx, fy) = (ticks(&xs), ticks(&ys));
     let whole =
         |v: &f64| if (v - v.round()).abs() < 1e-9 { format!("{v:.0}") } else { String::new() };
@@ -196,15 +280,24 @@ pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
             .light_line_style(RGBColor(235, 235, 235))
             .draw(),
     )?;
-    for t in &spec.traces {
+    for (i, (t, pts)) in spec.traces.iter().zip(&drawn).enumerate() {
         // One pixel wide: a thicker line's joins spike past the data on dense, noisy series.
         let style = t.colour.stroke_width(1);
-        let pts: Vec<(f64, f64)> = decimate(t.pts, 1_500)
-            .into_iter()
-            .filter(|p| p.0.is_finite() && p.1.is_finite())
-            .collect();
-        if t.points {
-            text(chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, t.colour.filled()))))?;
+        // Markers one kind per trace in turn: two traces with the same values stay apart.
+        let c = t.colour;
+        match (t.points, i % 3) {
+            (false, _) => {}
+            (true, 0) => {
+                text(chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, c.filled()))))?;
+            }
+            (true, 1) => {
+                let m = pts.iter().map(|&p| TriangleMarker::new(p, 6, c.filled()));
+                text(chart.draw_series(m))?;
+            }
+            (true, _) => {
+                let m = pts.iter().map(|&p| Cross::new(p, 5, c.stroke_width(2)));
+                text(chart.draw_series(m))?;
+            }
         }
         let drawn = text(chart.draw_series(LineSeries::new(pts.iter().copied(), style)))?;
         // A nameless trace (the second line of a band) has no legend entry of its own.
@@ -214,17 +307,19 @@ pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
         }
     }
-    legend(&mut chart)
+    legend(&mut chart, place.corner)
 }
 
-/// The legend of a chart (2-D or 3-D), top right.
+/// The legend of a chart (2-D or 3-D), in `corner`.
 pub(crate) fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
+    corner: SeriesLabelPosition,
 ) -> Drawn {
     text(
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(corner)
+            .margin(LEGEND_MARGIN_PX as u32)
             .background_style(WHITE.mix(0.85))
             .border_style(RGBColor(160, 160, 160))
             .label_font((FONT, 15))

@@ -64,6 +64,7 @@ fn arms(panels: &[Panel<'_, '_>], s: &Series) -> Drawn {
             &PanelSpec {
                 min_span: (0.0, 0.0),
                 integer_x: false,
+                from_zero: false,
                 title: format!("motor {}: command and actual position", m + 1),
                 x: TIME,
                 y: "position, counts".into(),
@@ -91,6 +92,7 @@ fn error(area: &Panel<'_, '_>, s: &Series, summary: &Summary) -> Drawn {
         &PanelSpec {
             min_span: (0.0, 0.0),
             integer_x: false,
+            from_zero: false,
             title: if per_rad > 0.0 {
                 format!("following error, command − actual (1 count = {:.3e} rad)", 1.0 / per_rad)
             } else {
@@ -124,12 +126,33 @@ pub(crate) fn second_derivative(x: &[f64], y: &[f64]) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// `x` and `y` with the rest before and after the move: a point a step before the first
+/// holding the first command, and one a step after the last holding the last. Every move
+/// starts and ends at rest, so the derivatives at its ends are there too: a step's
+/// acceleration shows its rise as well as its fall (before: the first sample, not interior,
+/// had none, and only the negative spike was drawn).
+pub(crate) fn at_rest_around(x: &[f64], y: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let (Some(&x0), Some(&xn), Some(&y0), Some(&yn)) = (x.first(), x.last(), y.first(), y.last())
+    else {
+        return (x.to_vec(), y.to_vec());
+    };
+    let (h0, hn) = match x {
+        [a, b, ..] => (b - a, x[x.len() - 1] - x[x.len() - 2]),
+        _ => (1.0, 1.0),
+    };
+    let xs = std::iter::once(x0 - h0).chain(x.iter().copied()).chain([xn + hn]).collect();
+    let ys = std::iter::once(y0).chain(y.iter().copied()).chain([yn]).collect();
+    (xs, ys)
+}
+
 /// The command's velocity and acceleration per motor, from the gathered command on the
-/// nominal clock (cycle × period: the command advances by cycles, whatever the wake times).
+/// nominal clock (cycle × period: the command advances by cycles, whatever the wake times),
+/// at rest before and after it.
 fn velocity(panels: &[Panel<'_, '_>], s: &Series, nominal: &[f64]) -> Drawn {
     let n = s.n_motors();
-    let v: Vec<_> = (0..n).map(|m| derivative(nominal, &s.cmd[m])).collect();
-    let a: Vec<_> = (0..n).map(|m| second_derivative(nominal, &s.cmd[m])).collect();
+    let padded: Vec<_> = (0..n).map(|m| at_rest_around(nominal, &s.cmd[m])).collect();
+    let v: Vec<_> = padded.iter().map(|(x, y)| derivative(x, y)).collect();
+    let a: Vec<_> = padded.iter().map(|(x, y)| second_derivative(x, y)).collect();
     for (area, (what, unit, series)) in
         panels.iter().zip([("velocity", "counts/s", &v), ("acceleration", "counts/s²", &a)])
     {
@@ -138,6 +161,7 @@ fn velocity(panels: &[Panel<'_, '_>], s: &Series, nominal: &[f64]) -> Drawn {
             &PanelSpec {
                 min_span: (0.0, 0.0),
                 integer_x: false,
+                from_zero: false,
                 title: format!("command {what}"),
                 x: TIME,
                 y: format!("{what}, {unit}"),
@@ -167,6 +191,7 @@ fn period(panels: &[Panel<'_, '_>], s: &Series, summary: &Summary) -> Drawn {
         &PanelSpec {
             min_span: (0.0, 100.0),
             integer_x: false,
+            from_zero: false,
             title: if summary.deterministic {
                 "servo period: simulated time (--deterministic), exact by construction".into()
             } else if every > 1 {
@@ -196,6 +221,7 @@ fn period(panels: &[Panel<'_, '_>], s: &Series, summary: &Summary) -> Drawn {
         &PanelSpec {
             min_span: (0.0, 0.0),
             integer_x: false,
+            from_zero: false,
             title: "DAC output (±8191 = ±10 V)".into(),
             x: TIME,
             y: "DAC, codes".into(),
@@ -267,7 +293,7 @@ fn effector_3d(area: &Panel<'_, '_>, p: &EffectorPath) -> Drawn {
             .label(name)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
     }
-    legend(&mut chart)
+    legend(&mut chart, SeriesLabelPosition::UpperRight)
 }
 
 /// The X-Z projection, command and actual (thesis Fig. 5-4), and the distance between them.
@@ -281,6 +307,7 @@ fn effector_xz(panels: &[Panel<'_, '_>], p: &EffectorPath) -> Drawn {
             // counts (38 µm at the arm tip) do not fill the panel.
             min_span: (10.0, 10.0),
             integer_x: false,
+            from_zero: false,
             title: "end-effector path, X-Z projection".into(),
             x: "x, mm",
             y: "z, mm".into(),
@@ -302,6 +329,7 @@ fn effector_xz(panels: &[Panel<'_, '_>], p: &EffectorPath) -> Drawn {
         &PanelSpec {
             min_span: (0.0, 0.0),
             integer_x: false,
+            from_zero: false,
             title: "end-effector error, |command − actual|".into(),
             x: TIME,
             y: "distance, mm".into(),

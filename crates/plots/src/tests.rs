@@ -156,3 +156,91 @@ fn tick_labels_carry_the_decimals_their_spacing_needs() {
     assert_eq!(label(0.0, 2.0, 0.2), "0.2");
     assert_eq!(label(-0.007, 0.007, -0.004), "-0.004");
 }
+
+/// Issue 28, item 11: a legend never covers data. A step held to the panel's end fills the
+/// upper right (before: the arms' legend hid its last 0.15 s): the legend goes to a free
+/// corner; data in every corner raise the y axis to make room above it.
+#[test]
+fn a_legend_goes_where_there_is_no_data_issue_28() {
+    use crate::chart::legend_place;
+    use plotters::prelude::SeriesLabelPosition;
+    let names = ["motor 1", "motor 2", "motor 3"];
+    let (xs, ys, px) = (0.0..2.0, 0.0..1000.0, (1085.0, 300.0));
+    let box_w = |corner_x: f64| (corner_x - 0.0).abs() / 2.0 * 1085.0;
+    // A step: 0 until 0.01 s, 1000 after, to the end.
+    let step: Vec<(f64, f64)> = (0..2000)
+        .map(|k| f64::from(k) * 1e-3)
+        .map(|t| (t, if t < 0.01 { 0.0 } else { 1000.0 }))
+        .collect();
+    let place = legend_place(&step, &names, &xs, &ys, px);
+    assert_eq!(place.corner, SeriesLabelPosition::LowerRight);
+    assert_eq!(place.ys, ys, "a free corner needs no room made");
+    assert!(box_w(0.3) > 100.0);
+    // Data in every corner: upper right, the axis raised so the data stay below the legend.
+    let full: Vec<(f64, f64)> =
+        (0..2000).map(|k| f64::from(k) * 1e-3).flat_map(|t| [(t, 0.0), (t, 1000.0)]).collect();
+    let place = legend_place(&full, &names, &xs, &ys, px);
+    assert_eq!(place.corner, SeriesLabelPosition::UpperRight);
+    let legend_px = 3.0 * 21.0 + 16.0 + 12.0;
+    let room = (place.ys.end - 1000.0) / (place.ys.end - place.ys.start) * px.1;
+    assert!(room >= legend_px - 1e-6, "{room} px above the data for a {legend_px} px legend");
+    // Trials' points in the middle: the upper right is free.
+    let mid = [(1.0, 500.0), (1.5, 520.0)];
+    assert_eq!(legend_place(&mid, &names, &xs, &ys, px).corner, SeriesLabelPosition::UpperRight);
+}
+
+/// Issue 28, item 11: a step's command acceleration has its rise and its fall — the move
+/// starts and ends at rest (before: only the negative spike, the first sample having no
+/// neighbour before it).
+#[test]
+fn a_steps_acceleration_rises_and_falls_issue_28() {
+    use crate::moves::at_rest_around;
+    let t: Vec<f64> = (0..10).map(|k| f64::from(k) * 4e-4).collect();
+    let cmd: Vec<f64> = (0..10).map(|k| if k == 0 { 0.0 } else { 1000.0 }).collect();
+    let (x, y) = at_rest_around(&t, &cmd);
+    assert_eq!((x.len(), y.len()), (12, 12));
+    let a = second_derivative(&x, &y);
+    let v = derivative(&x, &y);
+    assert_eq!(a.len(), t.len(), "an acceleration at every gathered sample");
+    let (lo, hi) = a.iter().fold((0.0f64, 0.0f64), |(lo, hi), p| (lo.min(p.1), hi.max(p.1)));
+    assert!(hi > 1e9 && lo < -1e9, "rise {hi}, fall {lo}");
+    assert!((hi + lo).abs() < 1e-3 * hi, "as large either way: {hi} {lo}");
+    assert!(v.iter().all(|p| p.1 >= 0.0) && v[0].1 > 0.0, "{v:?}");
+    let (x, y) = at_rest_around(&[], &[]);
+    assert!(x.is_empty() && y.is_empty());
+}
+
+/// Issue 28, item 11: the trials' error from zero — a 0.1 % spread is a flat row of
+/// points, as it is — with each arm beside the trial's number, so equal arms both show.
+#[test]
+fn trials_show_their_spread_from_zero_issue_28() {
+    let dir = scratch("trials-spread");
+    let rows: Vec<TrialRow> = (1..=5)
+        .map(|k| TrialRow {
+            trial: k,
+            abs_rad: vec![10.0 + 0.001 * f64::from(k), 10.0 + 0.001 * f64::from(k), 10.003],
+            sq_rad: vec![0.002; 3],
+            periods_off_40us: 0,
+            missed_periods: 0,
+            fault: String::new(),
+        })
+        .collect();
+    let done = trial_plots(&dir, "step", &rows).unwrap();
+    let img = image::open(&done[0]).unwrap().to_rgb8();
+    // Arm 1's colour and arm 2's both drawn (beside each other, not one under the other).
+    let count =
+        |c: plotters::style::RGBColor| img.pixels().filter(|p| p.0 == [c.0, c.1, c.2]).count();
+    let (a1, a2) = (count(crate::chart::motor_colour(0)), count(crate::chart::motor_colour(1)));
+    assert!(a1 > 100 && a2 > 100, "arm 1 {a1} px, arm 2 {a2} px");
+    // Arm 1's trials 1–3 (the left half: the legend is in a right corner) lie in one flat
+    // row, not stretched from the axis' bottom to its top.
+    let c = crate::chart::motor_colour(0);
+    let rows: Vec<u32> = img
+        .enumerate_pixels()
+        .filter(|(x, _, p)| *x < 600 && p.0 == [c.0, c.1, c.2])
+        .map(|(_, y, _)| y)
+        .collect();
+    let spread = rows.iter().max().unwrap() - rows.iter().min().unwrap();
+    assert!(spread < 20, "arm 1 spans {spread} px of the axis");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -16,9 +16,13 @@ pub fn trial_plots(dir: &Path, what: &str, rows: &[TrialRow]) -> Result<Vec<Path
     }
     let title = format!("QMARC {what}: {} trials", rows.len());
     let n = rows.iter().map(|r| r.abs_rad.len()).max().unwrap_or(0);
+    // Each arm a little beside the trial's number (arms of the same error do not hide one
+    // another), with a marker of its own.
+    let dodge = |m: usize| (m as f64 - (n as f64 - 1.0) / 2.0) * 0.08;
     let per_arm: Vec<Vec<(f64, f64)>> = (0..n)
         .map(|m| {
-            rows.iter().filter_map(|r| r.abs_rad.get(m).map(|&v| (f64::from(r.trial), v))).collect()
+            let at = |r: &TrialRow| r.abs_rad.get(m).map(|&v| (f64::from(r.trial) + dodge(m), v));
+            rows.iter().filter_map(at).collect()
         })
         .collect();
     let off: Vec<(f64, f64)> =
@@ -32,10 +36,15 @@ pub fn trial_plots(dir: &Path, what: &str, rows: &[TrialRow]) -> Result<Vec<Path
             &PanelSpec {
                 min_span: (0.0, 0.0),
                 integer_x: true,
+                // The spread of the trials as it is: from zero, not stretched over the axis.
+                from_zero: true,
                 title: "accumulated absolute following error per trial".into(),
                 x: "trial",
                 y: "Σ|error|, rad".into(),
-                traces: per_motor("arm", &per_arm),
+                traces: per_motor("arm", &per_arm)
+                    .into_iter()
+                    .map(|t| Trace { points: true, ..t })
+                    .collect(),
             },
         )
     })?;
@@ -45,6 +54,7 @@ pub fn trial_plots(dir: &Path, what: &str, rows: &[TrialRow]) -> Result<Vec<Path
             &PanelSpec {
                 min_span: (0.0, 0.0),
                 integer_x: true,
+                from_zero: true,
                 title: "servo periods more than 40 µs off, and missed, per trial".into(),
                 x: "trial",
                 y: "periods".into(),

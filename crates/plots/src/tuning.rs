@@ -34,6 +34,7 @@ pub fn convergence_plot(
             &PanelSpec {
                 min_span: (0.0, 0.0),
                 integer_x: true,
+                from_zero: false,
                 title: format!("best feasible {what} so far"),
                 x: "evaluation (moves of the path, per motor)",
                 y: what.to_string(),
@@ -45,6 +46,7 @@ pub fn convergence_plot(
             &PanelSpec {
                 min_span: (0.0, 0.1),
                 integer_x: true,
+                from_zero: false,
                 title: "relative to the first feasible gains (1 = before)".into(),
                 x: "evaluation (moves of the path, per motor)",
                 y: "best / first".into(),
