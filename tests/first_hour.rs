@@ -864,3 +864,46 @@ fn a_stop_as_the_run_starts_is_an_interruption_issue_28() {
         run.assert_clean();
     }
 }
+
+/// Issue 28, item 4: a homed frame that cannot be kept when homing ends (the state file's
+/// folder replaced by a file while homing ran) is a failed home: exit 2, the hwserver names
+/// the file, the summary says the frame was not kept, and no motor "reads 0 from now on"
+/// (before: ok, exit 0, and the next run found the robot unhomed).
+#[test]
+fn a_home_whose_frame_cannot_be_kept_fails_naming_the_file_issue_28() {
+    let run = TestRun::new("homekeep");
+    let out = run.out("out");
+    let folder = run.dir.join("state");
+    std::fs::create_dir_all(&folder).unwrap();
+    let state = folder.join("sim.state");
+    let quoted = format!("{:?}", state.display().to_string());
+    let cfg = run.config_with(&[
+        ("homed", "false"),
+        ("start_counts", "[-9000, -9000, -9000]"),
+        ("home_offset_counts", "1000.0"),
+        ("state_file", &quoted),
+    ]);
+    let config = format!("--config={}", cfg.display());
+    let child = run.spawn_starter(&[&config, &out_arg(&out), "--deterministic", "home"]);
+    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
+    std::fs::remove_dir_all(&folder).unwrap();
+    std::fs::write(&folder, b"a file where the folder was").unwrap();
+    let r = wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(i32::from(exit::FAULT)), "{}\n{}", r.stdout, r.stderr);
+    let said = format!("cannot keep the homed frame in {} (sim.state_file)", state.display());
+    assert!(r.stderr.contains(&said), "{}", r.stderr);
+    let s = read_summary(&out);
+    let fault = s.fault.as_ref().expect("a fault");
+    assert_eq!(fault.kind.name(), "homing_failed");
+    assert!(
+        fault.message.starts_with("homing set the frame, but it could not be kept"),
+        "{}",
+        fault.message
+    );
+    assert!(!r.stdout.contains("reads 0 from now on"), "{}", r.stdout);
+    // The next step finds the robot unhomed, as the home said.
+    std::fs::remove_file(&folder).unwrap();
+    let step = run.starter(&[&config, "--deterministic", "step", "--duration=0.05"], TIMEOUT);
+    assert_eq!(step.code, Some(i32::from(exit::REFUSED)), "{}", step.stderr);
+    run.assert_clean();
+}

@@ -307,6 +307,14 @@ impl Fault {
                  PREEMPT_RT, host stalls of a few ms can do that; raise safety.max_missed_in_row)",
                 self.value, self.limit
             ),
+            FaultKind::HomingFailed if self.status.contains(Status::NOT_KEPT) => {
+                "homing set the frame, but it could not be kept (the hwserver says where and \
+                 why): the next run would find the robot unhomed"
+                    .to_string()
+            }
+            FaultKind::HomingFailed if self.status.contains(Status::HARDWARE_FAULT) => {
+                "homing could not preset the counters: hardware fault".to_string()
+            }
             FaultKind::HomingFailed => "homing failed".to_string(),
             FaultKind::TooMuchTravel => {
                 "the open-loop check stopped: a motor moved too far".to_string()

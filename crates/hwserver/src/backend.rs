@@ -111,9 +111,11 @@ pub trait Backend: Send {
     }
 
     /// Homing has just set `motor`'s counter frame (persist it where the hardware does; this
-    /// hook runs after homing, outside the servo loop, and may do I/O).
-    fn set_homed(&mut self, motor: usize) {
+    /// hook runs after homing, outside the servo loop, and may do I/O). An error says where
+    /// and why it could not be kept: the homing then fails.
+    fn set_homed(&mut self, motor: usize) -> Result<(), String> {
         let _ = motor;
+        Ok(())
     }
 
     /// Writes what the backend recorded (the simulator's event log).

@@ -247,8 +247,13 @@ impl HwCore {
         }
         self.inputs.counters[motor] = raw;
         self.position[motor] = preset;
+        // A frame that cannot be kept is a failed home: the next run would find it unhomed.
+        if let Err(why) = self.backend.set_homed(motor) {
+            eprintln!("qmarc-hwserver: {why}");
+            self.homed[motor] = false;
+            return Status::NOT_KEPT;
+        }
         self.homed[motor] = true;
-        self.backend.set_homed(motor);
         Status::OK
     }
 

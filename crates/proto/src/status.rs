@@ -32,6 +32,10 @@ impl Status {
     /// disabled in the read that saw it. Latched until a [`crate::MsgType::ClearSafetyStatus`]
     /// finds the chain closed again; enabling is refused meanwhile.
     pub const ESTOP: Status = Status(1 << 21);
+    /// A preset homed the frame, but it could not be kept where the hardware keeps it between
+    /// runs (the simulator's state file, the card's state folder): the next run would find
+    /// the robot unhomed, so the homing failed. The hwserver says where and why.
+    pub const NOT_KEPT: Status = Status(1 << 22);
 
     /// Bit of motor `motor`'s top limit switch.
     #[inline]
@@ -154,6 +158,7 @@ impl std::fmt::Display for Status {
             (Status::HARDWARE_FAULT, "hardware fault"),
             (Status::SHUTDOWN, "server shutting down"),
             (Status::ESTOP, "emergency stop"),
+            (Status::NOT_KEPT, "homed frame not kept"),
         ];
         for (bit, name) in named {
             if self.contains(bit) {

@@ -61,7 +61,11 @@ pub fn render(s: &Summary) -> String {
     }
     if let Some(homing) = &s.homing {
         let _ = writeln!(t, "\n  homing (counts in the frame before homing)");
-        for r in &homing.motors {
+        // Home reads 0 only where the hwserver read the frame homed after the preset (a
+        // homing that failed, or a frame that could not be kept, leaves it unhomed).
+        let homed_after =
+            |i: usize| homing.after.as_ref().and_then(|a| a.homed.get(i)).copied().unwrap_or(false);
+        for (i, r) in homing.motors.iter().enumerate() {
             let _ = writeln!(
                 t,
                 "  motor {}: top switch found at {:.0}{}, cleared at {:.0}; home at {:.0}{}",
@@ -70,7 +74,11 @@ pub fn render(s: &Summary) -> String {
                 if r.started_on_switch { " (started on it)" } else { "" },
                 r.switch_cleared_counts,
                 r.home_counts,
-                if r.home { ", reads 0 from now on" } else { " — not reached" },
+                match (r.home, homed_after(i)) {
+                    (true, true) => ", reads 0 from now on",
+                    (true, false) => ", reached, but its frame is not homed (see the fault)",
+                    (false, _) => " — not reached",
+                },
             );
         }
     }

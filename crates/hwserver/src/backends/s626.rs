@@ -450,19 +450,21 @@ impl Backend for S626 {
         self.homed[motor]
     }
 
-    fn set_homed(&mut self, motor: usize) {
+    fn set_homed(&mut self, motor: usize) -> Result<(), String> {
         self.homed[motor] = true;
         if let Some(path) = &self.state_file
             && let Err(e) = save_homed(path, &self.homed[..self.w.n_motors], &self.identity)
         {
-            // Rare (the starter checked the folder): said, not hidden.
-            eprintln!(
-                "qmarc-hwserver: warning: cannot keep the homed frame in {}: {e}: the next \
-                 run will find motor {} unhomed",
+            // Rare (the starter checked the folder): a failed home, not a hidden one.
+            self.homed[motor] = false;
+            return Err(format!(
+                "cannot keep the homed frame in {}: {e}: the next run would find motor {} \
+                 unhomed (s626.state_dir)",
                 path.display(),
                 motor + 1
-            );
+            ));
         }
+        Ok(())
     }
 
     /// What the backend last wrote (the card reads the DACs back the same).

@@ -348,12 +348,6 @@ impl SimDeltabot {
         self
     }
 
-    fn save_state(&self) {
-        if let Some(path) = &self.state_file {
-            let _ = super::state::save_homed(path, &self.homed[..self.p.n_motors], SIM_IDENTITY);
-        }
-    }
-
     /// The recorded events (time on the simulator's clock, ns).
     pub fn events(&self) -> &[(u64, SimEvent)] {
         &self.events
@@ -538,9 +532,14 @@ impl Backend for SimDeltabot {
 
     /// Records the homed frame, in the state file too if there is one (a file write: this
     /// hook runs after homing, not in the servo loop).
-    fn set_homed(&mut self, motor: usize) {
+    fn set_homed(&mut self, motor: usize) -> Result<(), String> {
         self.homed[motor] = true;
-        self.save_state();
+        let Some(path) = &self.state_file else { return Ok(()) };
+        let n = self.p.n_motors;
+        super::state::save_homed(path, &self.homed[..n], SIM_IDENTITY).map_err(|e| {
+            self.homed[motor] = false;
+            format!("cannot keep the homed frame in {} (sim.state_file): {e}", path.display())
+        })
     }
 
     /// CSV: `t_ns,event,motor` (motor 1-based; events `top_on`, `top_off`, `bottom_on`,

@@ -390,7 +390,7 @@ fn the_homed_frame_is_kept_for_that_card_only_issue_32() {
     let homed = |c: &S626| [c.homed(0), c.homed(1), c.homed(2)];
     let mut card = open(&s);
     assert_eq!(homed(&card), [false; 3], "nothing kept yet");
-    card.set_homed(1);
+    card.set_homed(1).unwrap();
     assert_eq!(homed(&card), [false, true, false]);
     drop(card);
     assert!(file.exists());
@@ -402,6 +402,14 @@ fn the_homed_frame_is_kept_for_that_card_only_issue_32() {
     std::fs::write(&new, b"").unwrap();
     std::fs::rename(&new, &device).unwrap();
     assert_eq!(homed(&open(&s)), [false; 3], "a new node");
+    // Issue 28, item 4: a frame that cannot be kept (a file where its folder should be)
+    // is a failed home, saying where: not homed, and the caller told.
+    let blocked = card_settings(&device, &dir.join("comedi7"), "");
+    let mut blocked_card = open(&blocked);
+    let e = blocked_card.set_homed(0).unwrap_err();
+    assert!(e.starts_with("cannot keep the homed frame in "), "{e}");
+    assert!(e.ends_with("the next run would find motor 1 unhomed (s626.state_dir)"), "{e}");
+    assert_eq!(homed(&blocked_card), [false; 3]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

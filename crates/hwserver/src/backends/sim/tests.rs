@@ -171,3 +171,29 @@ fn a_state_file_that_cannot_keep_the_frame_is_refused_before_the_run_issue_28() 
     assert_eq!(std::fs::read_dir(dir.join("sub")).unwrap().count(), 0, "no probe left");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 28, item 4: a homed frame that cannot be kept when homing ends (the state file's
+/// folder gone since the run was checked) is a failed home: the preset answers `NOT_KEPT`,
+/// the frame is not homed, and the hwserver says where and why (before: "reads 0 from now
+/// on", exit 0, and the next run found the robot unhomed).
+#[test]
+fn a_frame_that_cannot_be_kept_fails_the_preset_issue_28() {
+    use qmarc_proto::{HwMsg, MotorFlags, MsgType, Status};
+    let sim = lockstep(2).with_state_file(std::path::Path::new("/proc/qmarc/sim.state"));
+    let mut core = crate::HwCore::new(Box::new(sim));
+    let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS);
+    preset.data[0] = 10.0;
+    let r = core.handle(&preset);
+    assert!(r.status().contains(Status::NOT_KEPT), "{}", r.status());
+    let read = core.handle(&HwMsg::read_all_encoders());
+    assert!(!MotorFlags(read.aux[0]).homed() && !MotorFlags(read.aux[1]).homed());
+    // Where it can be kept: ok, homed, and written.
+    let dir = std::env::temp_dir().join(format!("qmarc-simkeep-{}", std::process::id()));
+    let file = dir.join("sim.state");
+    let mut core = crate::HwCore::new(Box::new(lockstep(2).with_state_file(&file)));
+    assert_eq!(core.handle(&preset).status(), Status::OK);
+    let read = core.handle(&HwMsg::read_all_encoders());
+    assert!(MotorFlags(read.aux[0]).homed() && MotorFlags(read.aux[1]).homed());
+    assert!(std::fs::read_to_string(&file).unwrap().starts_with("homed 1 1"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
