@@ -523,4 +523,28 @@ mod tests {
         assert!(watchdog.contains("raise the limit"), "{watchdog}");
         assert!(watchdog.contains("hwserver.watchdog_periods"), "{watchdog}");
     }
+
+    /// Issue 28: a fault after a host stall says so, except an overrun (which is the stall);
+    /// a failed homing says whether its frame could not be kept or its preset failed.
+    #[test]
+    fn stalls_and_homing_presets_are_said_issue_28() {
+        let stall = Some(HostStall { missed: 7, cycles_before: 40 });
+        let said = "(7 servo periods went by without a cycle 40 cycles before: a host stall";
+        let fe = Fault { stall, ..Fault::new(FaultKind::FollowingError, 9) };
+        assert!(fe.message().contains(said), "{}", fe.message());
+        let overrun =
+            Fault { stall, value: 30.0, limit: 25.0, ..Fault::new(FaultKind::Overrun, 9) };
+        assert!(!overrun.message().contains("host stall 40"), "{}", overrun.message());
+        assert!(!overrun.message().contains(said), "{}", overrun.message());
+        let homing = |status| Fault { status, ..Fault::new(FaultKind::HomingFailed, 3) }.message();
+        assert!(
+            homing(Status::NOT_KEPT).starts_with("homing set the frame, but it could not be kept")
+        );
+        assert!(homing(Status::HARDWARE_FAULT).starts_with("homing could not preset the counters"));
+        assert!(
+            homing(Status::OK).starts_with("homing failed at cycle 3"),
+            "{}",
+            homing(Status::OK)
+        );
+    }
 }
