@@ -458,7 +458,19 @@ fn drive_through_a_stall(
     h: &mut Homing,
     switch: f64,
     stuck: bool,
-    (stall_at, missed): (u64, u64),
+    stall: (u64, u64),
+) -> (Sample, Vec<(u64, f64)>) {
+    drive_through_stalls(h, switch, stuck, &[stall], 1.0)
+}
+
+/// [`drive_through_a_stall`] with several stalls (sample, periods missed), and a plant that
+/// goes `lag` of the way to its command each period (1: all the way).
+fn drive_through_stalls(
+    h: &mut Homing,
+    switch: f64,
+    stuck: bool,
+    stalls: &[(u64, u64)],
+    lag: f64,
 ) -> (Sample, Vec<(u64, f64)>) {
     let mut act = [0.0; MAX_MOTORS];
     let mut cmd = [0.0; MAX_MOTORS];
@@ -475,10 +487,10 @@ fn drive_through_a_stall(
             Sample::Ready => seen.push((n, cmd[0])),
             other => return (other, seen),
         }
-        let velocity = cmd[0] - act[0];
-        act = cmd;
+        let velocity = lag * (cmd[0] - act[0]);
+        act[0] += velocity;
         n += 1;
-        if n == stall_at {
+        if let Some(&(_, missed)) = stalls.iter().find(|(at, _)| *at == n) {
             act[0] += velocity * missed as f64; // coasting on the last output
             n += missed;
         }
@@ -530,4 +542,46 @@ fn homing_keeps_pace_through_a_host_stall_issue_28() {
     // it): the sample after the stall finds the time gone, the next one ends it.
     let stall_at = plain - 10;
     assert_eq!(settled((stall_at as u64, 50)), stall_at + 2);
+}
+
+/// Issue 28, item 6: a stall while backing off and one on the way to the offset move the
+/// command on by the periods that went by, at the creep and at the homing velocity.
+#[test]
+fn backing_off_and_going_home_keep_pace_through_stalls_issue_28() {
+    let settings = || HomingSettings { creep_counts_per_s: 2_500.0, ..settings() };
+    // A stall before the trip (the motor coasts to −250), one while backing off (at 260),
+    // one on the way home (at 330: the switch clears at −199, home is 101).
+    let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
+    let stalls = [(150, 100), (260, 10), (330, 20)];
+    let (end, cmds) = drive_through_stalls(&mut h, -200.0, false, &stalls, 1.0);
+    assert_eq!(end, Sample::Done, "{:?}", h.failure());
+    let around = |at: u64| {
+        let i = cmds.iter().position(|&(n, _)| n >= at).unwrap();
+        (cmds[i - 1], cmds[i])
+    };
+    let ((before, b), (after, a)) = around(260);
+    assert_eq!((after - before, a - b), (11, 11.0), "backing off: 11 periods of creep");
+    let ((before, b), (after, a)) = around(330);
+    assert_eq!((after - before, a - b), (21, 21.0), "going home: 21 periods at the velocity");
+}
+
+/// Issue 28, item 6: without a stall, a motor that lags its command (here while it speeds
+/// up, going half-way to its command each period) is judged from where it was seen on the
+/// switch — nearer than a period's travel after where it was last seen open.
+#[test]
+fn a_lagging_motor_is_judged_from_where_it_tripped_issue_28() {
+    // 2 counts a period: commands −2, −4, …; the motor at 0, −1, −2.5: found at −2.5, last
+    // seen open at −1, a period after that is −3.
+    let fast = HomingSettings { velocity_counts_per_s: 5_000.0, ..settings() };
+    let mut h = Homing::new(1, 0.0004, fast, safety(300.0));
+    let (end, _) = drive_through_stalls(&mut h, -2.0, false, &[], 0.5);
+    assert_eq!(end, Sample::Done, "{:?}", h.failure());
+    let found = h.reports()[0].switch_found_counts;
+    assert_eq!(found, -2.5);
+    assert_eq!(h.trip, found);
+    // Passed during a stall: a period after where it was last seen open.
+    let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
+    let (end, _) = drive_through_stalls(&mut h, -200.0, false, &[(150, 100)], 1.0);
+    assert_eq!(end, Sample::Done, "{:?}", h.failure());
+    assert_eq!((h.reports()[0].switch_found_counts, h.trip), (-250.0, -150.0));
 }
