@@ -103,6 +103,15 @@ fn interrupted() -> RunError {
     RunError::Interrupted { signal }
 }
 
+/// `e`, an error before the move began, as the run's end: [`interrupted`] when a stop signal
+/// has arrived (a Ctrl-C as the run starts interrupts iceoryx2's calls, or finds the hwserver
+/// already shutting down: the user's stop, not a failure nor a refusal). An interruption that
+/// says what it interrupted (waiting for the knots) stays as it is.
+fn unless_stopped(e: RunError) -> RunError {
+    let stopped = qmarc_timer::stop::count() > 0;
+    if stopped && e.exit_code() != qmarc_proto::exit::INTERRUPTED { interrupted() } else { e }
+}
+
 /// The registered generator `mode` uses with `settings`.
 pub fn generator_name(mode: Mode, settings: &Settings) -> &str {
     match mode {
@@ -281,7 +290,7 @@ fn spawn_servo(
             let mut link = match IoxLink::connect(&location, timeouts, CONNECT_WAIT, Some(stop)) {
                 Err(LinkConnectError::Stopped) => return Err(interrupted()),
                 Ok(link) if spinning_server => link.to_spinning_server(),
-                link => link?,
+                link => link.map_err(|e| unless_stopped(e.into()))?,
             };
             let moved = servo.run(&mut link, ticker.as_mut(), stop);
             if let (Ok(()), None, Some(home)) = (&moved, servo.fault(), servo.homed_frame()) {
@@ -297,7 +306,7 @@ fn spawn_servo(
             if !server_gone(servo.fault()) {
                 let _ = link.exchange(&HwMsg::request(MsgType::Exit));
             }
-            moved.map_err(RunError::from)
+            moved.map_err(|e| unless_stopped(e.into()))
         })();
         (servo, rt, result, homed_read)
     })

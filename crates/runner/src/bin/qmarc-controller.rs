@@ -32,17 +32,9 @@ fn run(args: &ControllerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
     let spec = RunSpec::read(&args.settings).map_err(|e| (exit::USAGE, e.into()))?;
     qmarc_timer::stop::install().map_err(|e| (exit::INTERNAL, e.into()))?;
     let summary = match qmarc_runner::run::run_move(&spec) {
-        // A stop signal before the move began (a Ctrl-C as it started: iceoryx2's calls are
-        // interrupted, the hwserver is shutting down or gone): the user's stop, not a failure
-        // nor a refusal (what went wrong is said in brackets).
+        // A stop signal before the move began: the user's stop, said as such, not an error.
         Err(e) if e.exit_code() == exit::INTERRUPTED => {
             eprintln!("qmarc-controller: {e}");
-            return Ok(ExitCode::from(exit::INTERRUPTED));
-        }
-        Err(e) if qmarc_timer::stop::count() > 0 => {
-            let sig =
-                qmarc_timer::stop::signal().map_or("a stop signal", qmarc_timer::stop::signal_name);
-            eprintln!("qmarc-controller: stopped by {sig} before the move began ({e:#})");
             return Ok(ExitCode::from(exit::INTERRUPTED));
         }
         moved => moved.map_err(|e| (e.exit_code(), anyhow::Error::from(e)))?,
