@@ -339,16 +339,18 @@ impl Summary {
     /// name: a move with any is not ok.
     pub fn figures_not_numbers(&self) -> Vec<String> {
         let mut bad = Vec::new();
-        let gathered = self.gathered.iter().flat_map(|g| g.motors.iter().map(|m| ("gathered ", m)));
-        for (i, (set, m)) in self.motors.iter().map(|m| ("", m)).chain(gathered).enumerate() {
-            let figures = [
-                m.min_error_counts,
-                m.max_error_counts,
-                m.accumulated_abs_error_counts,
-                m.sum_squares_error_counts2,
-            ];
-            if figures.iter().any(|f| !f.is_finite()) {
-                bad.push(format!("{set}motor {}'s error", i % self.motors.len().max(1) + 1));
+        let gathered = self.gathered.as_ref().map_or(&[][..], |g| &g.motors[..]);
+        for (set, motors) in [("", &self.motors[..]), ("gathered ", gathered)] {
+            for (i, m) in motors.iter().enumerate() {
+                let figures = [
+                    m.min_error_counts,
+                    m.max_error_counts,
+                    m.accumulated_abs_error_counts,
+                    m.sum_squares_error_counts2,
+                ];
+                if figures.iter().any(|f| !f.is_finite()) {
+                    bad.push(format!("{set}motor {}'s error", i + 1));
+                }
             }
         }
         if let Some(e) = &self.effector {

@@ -19,10 +19,9 @@ pub(crate) fn lost(exit: Exit, began: bool, stopped_by: Option<i32>) -> bool {
     }
 }
 
-/// The signal the user stopped this run with, if they did.
+/// The signal the user stopped this run with (the one forwarded to the children), if they did.
 pub(crate) fn stopped_by(stop: &std::sync::atomic::AtomicBool) -> Option<i32> {
-    stop.load(std::sync::atomic::Ordering::Relaxed)
-        .then(|| qmarc_timer::stop::signal().unwrap_or(nix::sys::signal::Signal::SIGTERM as i32))
+    stop.load(std::sync::atomic::Ordering::Relaxed).then(|| supervise::forwarded_signal() as i32)
 }
 
 /// The fault of a run that `name` ended by stopping to respond: that, then what the controller

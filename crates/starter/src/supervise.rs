@@ -193,8 +193,9 @@ fn wake_to_end(child: &Child) {
 /// wait for it: the hwserver's watchdog, the controller's response timeout) stopped
 /// responding: it is told to end and continued, so it keeps what it can and cleans up, and
 /// `report` names it at once (its `unresponsive` set, its `exit` not yet); a shorter stop is
-/// ridden out. A stopped child that is told to end is continued too. A stop request (`stop`) forwards its signal (SIGINT from Ctrl-C stays SIGINT, so
-/// the summaries name what the user did) to all at once, in reverse order of
+/// ridden out. A stopped child that is told to end is continued too. A stop request (`stop`)
+/// forwards its signal (SIGINT from Ctrl-C stays SIGINT, so the summaries name what the
+/// user did) to all at once, in reverse order of
 /// `children` (the controller before the hwserver: its signal is pending by the time the
 /// hwserver shuts down, so it reports an abort, not a hwserver fault). Each child's end is
 /// reported through `report` as it happens; `tick` runs every few ms meanwhile.
@@ -252,8 +253,8 @@ pub fn wait_all(
     }
 }
 
-/// The stop signal this process received (SIGTERM when it is not known).
-fn forwarded_signal() -> nix::sys::signal::Signal {
+/// The stop signal this process received (SIGTERM when it is not known): the one it forwards.
+pub fn forwarded_signal() -> nix::sys::signal::Signal {
     qmarc_timer::stop::signal()
         .and_then(|s| nix::sys::signal::Signal::try_from(s).ok())
         .unwrap_or(nix::sys::signal::Signal::SIGTERM)
