@@ -148,10 +148,16 @@ pub(crate) fn finite(v: &f64) -> Result<(), String> {
     if v.is_finite() { Ok(()) } else { Err(format!("must be a finite number, found {}", num(*v))) }
 }
 
+/// Whether `x` is written in exponent notation where QMARC shows a number (messages, the
+/// console's form): outside 10⁻⁴‥10⁷, zero and non-finite values excepted.
+pub fn in_exponent_notation(x: f64) -> bool {
+    x != 0.0 && x.is_finite() && !(1e-4..1e7).contains(&x.abs())
+}
+
 /// `x` as a person reads it: plain between 10⁻⁴ and 10⁷, in exponent notation beyond
 /// (`1e20`, `1e-300`).
 pub fn num(x: f64) -> String {
-    if x != 0.0 && x.is_finite() && !(1e-4..1e7).contains(&x.abs()) {
+    if in_exponent_notation(x) {
         // Six significant digits at most, trailing zeros dropped: 1e308, 1.5e-6.
         let short = format!("{x:.5e}");
         match short.split_once('e') {

@@ -514,11 +514,7 @@ fn set_keeping_decor(item: &mut Item, mut value: Value) {
 /// A float as the form shows it: plain in the everyday range, exponent notation beyond
 /// (`1e308`, not 309 digits), always the exact value (it is edited and written back).
 fn float_text(f: f64) -> String {
-    if f != 0.0 && f.is_finite() && !(1e-4..1e7).contains(&f.abs()) {
-        format!("{f:e}")
-    } else {
-        f.to_string()
-    }
+    if qmarc_config::in_exponent_notation(f) { format!("{f:e}") } else { f.to_string() }
 }
 
 /// Whether `new` is the value `old` holds (numbers by value, whatever their spelling).

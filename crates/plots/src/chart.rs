@@ -96,6 +96,13 @@ pub(crate) struct PanelSpec<'p> {
     pub from_zero: bool,
 }
 
+/// A line panel's layout: its caption's size (pt; the caption takes about 1.5 × that in
+/// px), the margin around it and the room of the x and y labels, px.
+const CAPTION_PT: u32 = 20;
+const PANEL_MARGIN_PX: u32 = 10;
+const X_LABELS_PX: u32 = 45;
+const Y_LABELS_PX: u32 = 95;
+
 /// Pixels of a legend's line of text and of its frame around the lines (at the 15-point
 /// legend font), and of its distance from the plot's corner.
 const LEGEND_LINE_PX: f64 = 21.0;
@@ -253,7 +260,11 @@ pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
         spec.traces.iter().map(|t| t.name.as_str()).filter(|n| !n.is_empty()).collect();
     let (w, h) = area.dim_in_pixel();
     // The plot inside the panel: less the y labels, the x labels, the caption and margins.
-    let plot_px = (f64::from(w) - 95.0 - 20.0, f64::from(h) - 45.0 - 20.0 - 30.0);
+    let (margins, caption) = (2.0 * f64::from(PANEL_MARGIN_PX), 1.5 * f64::from(CAPTION_PT));
+    let plot_px = (
+        f64::from(w) - f64::from(Y_LABELS_PX) - margins,
+        f64::from(h) - f64::from(X_LABELS_PX) - margins - caption,
+    );
     let place = legend_place(&all, &names, &xs, &ys, plot_px);
     let ys = place.ys.clone();
     let (fx, fy) = (ticks(&xs), ticks(&ys));
@@ -262,10 +273,10 @@ pub(crate) fn line_panel(area: &Panel<'_, '_>, spec: &PanelSpec<'_>) -> Drawn {
     let fx: &dyn Fn(&f64) -> String = if spec.integer_x { &whole } else { &fx };
     let mut chart = text(
         ChartBuilder::on(area)
-            .caption(&spec.title, (FONT, 20))
-            .margin(10)
-            .x_label_area_size(45)
-            .y_label_area_size(95)
+            .caption(&spec.title, (FONT, CAPTION_PT))
+            .margin(PANEL_MARGIN_PX)
+            .x_label_area_size(X_LABELS_PX)
+            .y_label_area_size(Y_LABELS_PX)
             .build_cartesian_2d(xs, ys),
     )?;
     text(
