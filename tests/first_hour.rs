@@ -793,6 +793,14 @@ fn a_stopped_child_ends_the_run_and_is_named_issue_28() {
     }
 }
 
+/// An unhomed simulated robot 500 counts from its top switches, home 1000 counts from them:
+/// a homing of three motors at the shipped speeds in about 3.5 s.
+const SHORT_HOMING: [(&str, &str); 3] = [
+    ("homed", "false"),
+    ("start_counts", "[-9000, -9000, -9000]"),
+    ("home_offset_counts", "1000.0"),
+];
+
 /// Issue 28, item 6: paced homing on the simulator rides out host stalls as a move does.
 /// The controller is stopped for 50 ms every 0.3 s while three motors home (the approach,
 /// the trip, the back-off, the way home and the settle each see some): the plant coasts on
@@ -803,11 +811,7 @@ fn a_stopped_child_ends_the_run_and_is_named_issue_28() {
 fn paced_homing_rides_out_host_stalls_issue_28() {
     let run = TestRun::new("homestall");
     let out = run.out("out");
-    let cfg = run.config_with(&[
-        ("homed", "false"),
-        ("start_counts", "[-9000, -9000, -9000]"),
-        ("home_offset_counts", "1000.0"),
-    ]);
+    let cfg = run.config_with(&SHORT_HOMING);
     let child =
         run.spawn_starter(&[&format!("--config={}", cfg.display()), &out_arg(&out), "home"]);
     let controller = pid_of(&run, "qmarc-controller");
@@ -886,12 +890,7 @@ fn a_home_whose_frame_cannot_be_kept_fails_naming_the_file_issue_28() {
     std::fs::create_dir_all(&folder).unwrap();
     let state = folder.join("sim.state");
     let quoted = format!("{:?}", state.display().to_string());
-    let cfg = run.config_with(&[
-        ("homed", "false"),
-        ("start_counts", "[-9000, -9000, -9000]"),
-        ("home_offset_counts", "1000.0"),
-        ("state_file", &quoted),
-    ]);
+    let cfg = run.config_with(&[SHORT_HOMING.as_slice(), &[("state_file", &quoted)]].concat());
     let config = format!("--config={}", cfg.display());
     let child = run.spawn_starter(&[&config, &out_arg(&out), "--deterministic", "home"]);
     qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
