@@ -30,7 +30,7 @@ pub struct Live {
     /// Samples lost (gaps in their numbers).
     pub lost: u64,
     /// The run's progress page (its phase and, homing, motor and stage), once it is there.
-    progress: Option<qmarc_controller::progress::Progress>,
+    progress: Option<qmarc_proto::progress::Progress>,
     /// Homing's motor and stage as the CLI says them: `homing motor 2: backing off the top
     /// switch`.
     pub stage: Option<String>,
@@ -87,7 +87,7 @@ impl Live {
     /// Attaches when the move's telemetry is there, takes what arrived, lets go at the end;
     /// reads homing's stage from the run's progress page.
     pub fn poll(&mut self) {
-        use qmarc_controller::progress::Progress;
+        use qmarc_proto::progress::Progress;
         if self.progress.is_none() {
             self.progress = Progress::open(&Progress::path(&self.location.prefix)).ok();
         }
@@ -158,7 +158,7 @@ mod tests {
     /// run's progress page, as the CLI's status line (before: only "home running 11 s").
     #[test]
     fn homing_shows_its_motor_and_stage_issue_28() {
-        use qmarc_controller::progress::Progress;
+        use qmarc_proto::progress::Progress;
         let prefix = format!("qmarc_livestage{}_", std::process::id());
         let mut live = Live::new(IpcLocation::new(&prefix, "/tmp/iceoryx2"));
         live.poll();

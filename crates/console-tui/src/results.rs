@@ -95,7 +95,7 @@ pub struct HistoryEntry {
     /// `step`, `run (spline)`, `home`.
     pub what: String,
     /// The fault kind, if one ended it.
-    pub fault: Option<qmarc_controller::fault::FaultKind>,
+    pub fault: Option<qmarc_proto::state::FaultKind>,
     /// Σ|error| per motor, counts.
     pub accumulated: Vec<f64>,
     /// (Kp, Kd, Kvff) per motor when it ran.

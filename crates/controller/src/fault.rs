@@ -3,111 +3,7 @@
 
 use crate::link::LinkError;
 use qmarc_proto::Status;
-
-/// What ended a move early. In `summary.json` it is the snake-case name
-/// ([`FaultKind::name`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum FaultKind {
-    /// A limit switch tripped.
-    LimitSwitch,
-    /// The hwserver stopped answering or died.
-    HwserverLost,
-    /// The hwserver was stopped by a signal and refuses to drive.
-    HwserverShutdown,
-    /// The hwserver's watchdog fired.
-    Watchdog,
-    /// The hardware reported an error.
-    HardwareFault,
-    /// An encoder count jumped further than the motor can move (a counter or cable fault).
-    EncoderFault,
-    /// The hwserver did not understand a request (a bug on one side).
-    ProtocolError,
-    /// A stop signal (Ctrl-C, SIGTERM) aborted the move.
-    Aborted,
-    /// The trajectory generator had no command for a sample.
-    TrajectoryStarved,
-    /// The trajectory generator could not go on (a bad knot in a stream).
-    TrajectoryError,
-    /// |command − actual| or |Σ (command − actual)| went past its limit.
-    FollowingError,
-    /// A command went outside the software position limits.
-    SoftwareLimit,
-    /// Too many servo periods in a row went by without a cycle.
-    Overrun,
-    /// Homing could not find, clear or leave a switch as it should.
-    HomingFailed,
-    /// The controller process died or stopped responding (reported by the starter).
-    ControllerLost,
-    /// The trajectory commanded a position that is not a finite number.
-    BadCommand,
-    /// The servo law's output was not a finite number (or not a DAC code).
-    BadOutput,
-    /// The emergency-stop chain opened (pressed, or a broken wire).
-    EmergencyStop,
-    /// A motor moved further than a move with the loop open allows (`check`).
-    TooMuchTravel,
-}
-
-impl FaultKind {
-    /// Every kind, in the order of their codes ([`FaultKind::code`]).
-    pub const ALL: [FaultKind; 19] = [
-        FaultKind::LimitSwitch,
-        FaultKind::HwserverLost,
-        FaultKind::HwserverShutdown,
-        FaultKind::Watchdog,
-        FaultKind::HardwareFault,
-        FaultKind::EncoderFault,
-        FaultKind::ProtocolError,
-        FaultKind::Aborted,
-        FaultKind::TrajectoryStarved,
-        FaultKind::TrajectoryError,
-        FaultKind::FollowingError,
-        FaultKind::SoftwareLimit,
-        FaultKind::Overrun,
-        FaultKind::HomingFailed,
-        FaultKind::ControllerLost,
-        FaultKind::BadCommand,
-        FaultKind::BadOutput,
-        FaultKind::EmergencyStop,
-        FaultKind::TooMuchTravel,
-    ];
-
-    /// Its number in a telemetry sample (`fault` there is this + 1; 0 is no fault).
-    pub fn code(self) -> u32 {
-        FaultKind::ALL.iter().position(|&k| k == self).unwrap_or(0) as u32
-    }
-
-    /// The kind of `code`.
-    pub fn from_code(code: u32) -> Option<FaultKind> {
-        FaultKind::ALL.get(code as usize).copied()
-    }
-
-    /// The `kind` string of `summary.json`.
-    pub fn name(self) -> &'static str {
-        match self {
-            FaultKind::LimitSwitch => "limit_switch",
-            FaultKind::HwserverLost => "hwserver_lost",
-            FaultKind::HwserverShutdown => "hwserver_shutdown",
-            FaultKind::Watchdog => "watchdog",
-            FaultKind::HardwareFault => "hardware_fault",
-            FaultKind::EncoderFault => "encoder_fault",
-            FaultKind::ProtocolError => "protocol_error",
-            FaultKind::Aborted => "aborted",
-            FaultKind::TrajectoryStarved => "trajectory_starved",
-            FaultKind::TrajectoryError => "trajectory_error",
-            FaultKind::FollowingError => "following_error",
-            FaultKind::SoftwareLimit => "software_limit",
-            FaultKind::Overrun => "overrun",
-            FaultKind::HomingFailed => "homing_failed",
-            FaultKind::ControllerLost => "controller_lost",
-            FaultKind::BadCommand => "bad_command",
-            FaultKind::BadOutput => "bad_output",
-            FaultKind::EmergencyStop => "emergency_stop",
-            FaultKind::TooMuchTravel => "too_much_travel",
-        }
-    }
-}
+pub use qmarc_proto::state::FaultKind;
 
 /// A fault, as the loop records it: numbers only, `Copy`, formatted after the move.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -337,12 +233,6 @@ impl Fault {
     }
 }
 
-impl std::fmt::Display for FaultKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -370,21 +260,6 @@ mod tests {
             "motor 1 hit its top limit switch at cycle 1234; all motors disabled"
         );
         assert_eq!(f.kind.to_string(), "limit_switch");
-    }
-
-    /// Issue 32: a code is a kind's one number both ways, every kind its own (telemetry's
-    /// `fault` is the code + 1), and nothing past the last kind is one.
-    #[test]
-    fn codes_map_both_ways_one_per_kind_issue_32() {
-        for (i, &kind) in FaultKind::ALL.iter().enumerate() {
-            assert_eq!(kind.code(), i as u32, "{kind}");
-            assert_eq!(FaultKind::from_code(kind.code()), Some(kind));
-        }
-        assert_eq!(FaultKind::from_code(FaultKind::ALL.len() as u32), None);
-        assert_eq!(FaultKind::from_code(u32::MAX), None);
-        let names: std::collections::BTreeSet<&str> =
-            FaultKind::ALL.iter().map(|k| k.name()).collect();
-        assert_eq!(names.len(), FaultKind::ALL.len(), "two kinds share a name");
     }
 
     /// Issue 32: a stop signal that ended a wait for the hwserver is an abort (exit code

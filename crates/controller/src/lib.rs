@@ -59,7 +59,6 @@ pub mod gather;
 pub mod law;
 pub mod link;
 pub mod plan;
-pub mod progress;
 pub mod servo;
 pub mod stats;
 pub mod telemetry;

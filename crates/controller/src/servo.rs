@@ -13,6 +13,7 @@ use crate::link::{HwLink, LinkError};
 use crate::plan::MovePlan;
 use crate::stats::{ErrorStats, TimingStats};
 use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
+pub use qmarc_proto::state::Phase;
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_timer::{Clock, Tick};
 
@@ -21,67 +22,6 @@ mod limits;
 mod live;
 mod run;
 pub use error::MoveError;
-
-/// Where a move is. `run` goes Idle → Preparing → Moving (or Homing) → Settling → Done, or to
-/// Fault from Preparing onwards; Holding lies between Moving and Fault when a knot stream runs
-/// dry.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Phase {
-    /// Nothing happened yet.
-    Idle,
-    /// Reading the robot, starting the path, enabling the motors.
-    Preparing,
-    /// Homing, one motor at a time.
-    Homing,
-    /// Following the path.
-    Moving,
-    /// Holding the last command after the trajectory starved.
-    Holding,
-    /// The path ended: holding its last command with the loop closed for the settle time.
-    Settling,
-    /// The path ended and settled; motors disabled.
-    Done,
-    /// A fault ended the move; motors disabled where the hwserver could be reached.
-    Fault,
-}
-
-impl Phase {
-    /// Every phase, in the order of their codes.
-    pub const ALL: [Phase; 8] = [
-        Phase::Idle,
-        Phase::Preparing,
-        Phase::Homing,
-        Phase::Moving,
-        Phase::Holding,
-        Phase::Settling,
-        Phase::Done,
-        Phase::Fault,
-    ];
-
-    /// Its number in the progress file ([`crate::progress`]).
-    pub fn code(self) -> u32 {
-        Phase::ALL.iter().position(|&p| p == self).unwrap_or(0) as u32
-    }
-
-    /// The phase of `code`.
-    pub fn from_code(code: u32) -> Option<Phase> {
-        Phase::ALL.get(code as usize).copied()
-    }
-
-    /// What it is called in messages.
-    pub fn name(self) -> &'static str {
-        match self {
-            Phase::Idle => "not started",
-            Phase::Preparing => "preparing",
-            Phase::Homing => "homing",
-            Phase::Moving => "moving",
-            Phase::Holding => "holding (stream ran dry)",
-            Phase::Settling => "settling at the end of the path",
-            Phase::Done => "done",
-            Phase::Fault => "fault",
-        }
-    }
-}
 
 /// How a cycle ended.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -135,7 +75,7 @@ pub struct Servo {
     lead_executed: u64,
     lead_errors: ErrorStats,
     /// Where the move's progress is published, if anywhere.
-    progress: Option<crate::progress::Progress>,
+    progress: Option<qmarc_proto::progress::Progress>,
     /// Where the live samples go, if anywhere (until the move ends).
     telemetry: Option<crate::telemetry::Telemetry>,
     /// Live samples dropped because their ring was full (known once the move ended).
@@ -199,7 +139,7 @@ impl Servo {
     }
 
     /// Publishes the move's phase and cycles in `progress` as it goes.
-    pub fn with_progress(mut self, progress: Option<crate::progress::Progress>) -> Servo {
+    pub fn with_progress(mut self, progress: Option<qmarc_proto::progress::Progress>) -> Servo {
         self.progress = progress;
         self
     }

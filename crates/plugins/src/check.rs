@@ -9,9 +9,9 @@
 //! other guards stay on: a limit switch, the emergency stop, the watchdog end it at once.
 
 use qmarc_config::Settings;
-use qmarc_controller::fault::FaultKind;
 use qmarc_controller::law::{ServoInput, ServoLaw};
 use qmarc_controller::traj::{MotorCheckReport, Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_proto::state::FaultKind;
 use qmarc_proto::{DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, MotorFlags};
 
 /// When each motor is driven: one slot per motor, a pulse at its start and a rest after it.

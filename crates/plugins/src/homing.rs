@@ -15,8 +15,8 @@
 //! than the one being sought fails the homing.
 
 use qmarc_config::{HomingSettings, MotorSafety, Settings};
-use qmarc_controller::fault::FaultKind;
 use qmarc_controller::traj::{MotorHomeReport, Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_proto::state::FaultKind;
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
 
 /// The words for a homing progress number ([`TrajectoryGenerator::progress`]):

@@ -6,10 +6,10 @@
 
 use crate::step::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::Settings;
-use qmarc_controller::fault::FaultKind;
 use qmarc_controller::traj::{
     MotorHomeReport, Sample, TrajStartError, TrajectoryGenerator, bounds_of,
 };
+use qmarc_proto::state::FaultKind;
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
 use rsruckig::prelude::{DataArrayOrVec, InputParameter, Ruckig, ThrowErrorHandler, Trajectory};
 

@@ -5,7 +5,9 @@
 //! array, a per-motor `i32` auxiliary array and a status word. The twelve message types of
 //! thesis section 3.6 are [`MsgType`]; what went wrong is named by the bits of [`Status`].
 //! [`service`] opens the iceoryx2 services both sides use, with identical QoS; [`telemetry`]
-//! is the live sample a move publishes for its readers.
+//! is the live sample a move publishes for its readers, [`state`] the words of a move on the wire
+//! (its phase, the fault that ended it) and [`progress`] the page the starter and console read
+//! while a move runs.
 //!
 //! ```
 //! use qmarc_proto::{HwMsg, MsgType, Status};
@@ -22,7 +24,9 @@
 
 pub mod exit;
 pub mod msg;
+pub mod progress;
 pub mod service;
+pub mod state;
 pub mod status;
 pub mod telemetry;
 pub mod wake;

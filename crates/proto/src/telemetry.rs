@@ -44,11 +44,11 @@ pub struct TelemetrySample {
     pub output_latency_ns: u32,
     /// Wake to wake since the previous cycle, ns (0 for the first; saturated).
     pub period_ns: u32,
-    /// The move's phase (`qmarc_controller::servo::Phase::code`).
+    /// The move's phase ([`crate::state::Phase::code`]).
     pub phase: u32,
     /// The hwserver's status bits of the cycle ([`crate::Status`]).
     pub status: u32,
-    /// The fault that ended the move (`FaultKind` code + 1), 0 for none.
+    /// The fault that ended the move ([`crate::state::FaultKind::wire`]: its code + 1, 0 for none).
     pub fault: u32,
     /// Motors driven.
     pub n_motors: u32,

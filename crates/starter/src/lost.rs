@@ -2,7 +2,7 @@
 //! responding, what the starter knows when the controller died.
 
 use qmarc_config::Settings;
-use qmarc_controller::fault::FaultKind;
+use qmarc_proto::state::FaultKind;
 use qmarc_report::Summary;
 use qmarc_starter::supervise;
 use qmarc_starter::{Exit, describe_exit};
@@ -49,14 +49,14 @@ pub(crate) fn controller_lost_message(
     controller: Exit,
     hwserver: Option<Exit>,
     s: &Settings,
-    reached: Option<qmarc_controller::progress::Snapshot>,
+    reached: Option<qmarc_proto::progress::Snapshot>,
 ) -> String {
     let how = describe_exit("qmarc-controller", controller);
     let at = match reached {
         Some(r) if r.phase > 0 => format!(
             " at cycle {} while {}",
             r.cycle,
-            qmarc_controller::servo::Phase::from_code(r.phase).map_or("?", |p| p.name())
+            qmarc_proto::state::Phase::from_code(r.phase).map_or("?", |p| p.name())
         ),
         _ => " before the move began".to_string(),
     };

@@ -12,13 +12,13 @@ use anyhow::{Context, anyhow};
 use clap::{Parser, Subcommand};
 use lost::{controller_lost_message, lost, stopped_by, stopped_responding};
 use qmarc_config::{RunSpec, Settings};
-use qmarc_controller::fault::FaultKind;
 use qmarc_controller::gather::check_budget;
-use qmarc_controller::progress::Progress;
-use qmarc_controller::servo::Phase;
 use qmarc_plugins::registry;
 use qmarc_proto::exit;
+use qmarc_proto::progress::Progress;
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
+use qmarc_proto::state::FaultKind;
+use qmarc_proto::state::Phase;
 use qmarc_report::Summary;
 use qmarc_report::table;
 use qmarc_starter::cli::{Command, MoveOptions};
@@ -297,7 +297,7 @@ fn one_move(args: &StarterArgs, command: &Command, trial: TrialIo<'_>) -> Result
     // could not write anywhere) — wrote nothing: say what is known, and what the hwserver
     // did. One that refused before anything moved has said why.
     let began = reached
-        .and_then(|r| qmarc_controller::servo::Phase::from_code(r.phase))
+        .and_then(|r| qmarc_proto::state::Phase::from_code(r.phase))
         .is_some_and(|p| !matches!(p, Phase::Idle | Phase::Preparing));
     if summary.is_none()
         && let Some(exit) = controller.filter(|e| lost(*e, began, stopped_by(stop)))
@@ -474,7 +474,7 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
             .summary
             .as_ref()
             .and_then(|(s, _)| s.fault.as_ref())
-            .is_some_and(|f| f.kind == qmarc_controller::fault::FaultKind::EmergencyStop);
+            .is_some_and(|f| f.kind == qmarc_proto::state::FaultKind::EmergencyStop);
         if estop {
             stopped =
                 Some((exit::FAULT, format!("an emergency stop ended trial {k}: the series stops")));

@@ -1,5 +1,5 @@
 //! Live telemetry of a move. The servo loop puts a [`TelemetrySample`] into a wait-free ring
-//! every `telemetry.every` cycles ([`qmarc_controller::telemetry`]); [`relay`] is the
+//! every `telemetry.every` cycles (the controller's `telemetry` module); [`relay`] is the
 //! controller's thread that empties it and publishes each sample on the run's
 //! `qmarc/telemetry` publish–subscribe service; [`reader`] opens that service from another
 //! process (the console's live charts, [`scope`]); [`scope`] is `qmarc scope`.

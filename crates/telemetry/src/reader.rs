@@ -4,8 +4,8 @@
 
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{PortFactory, ipc};
-use qmarc_controller::servo::Phase;
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation, ServiceError, create_node, run_file};
+use qmarc_proto::state::Phase;
 use qmarc_proto::telemetry::{
     TELEMETRY_BUFFER, TELEMETRY_SERVICE, TelemetryOpenError, TelemetrySample, TelemetryService,
     open_telemetry_service,

@@ -7,10 +7,10 @@
 use crate::reader::{End, FoundRun, TelemetryReader, is_last, location_of, runs};
 use anyhow::Context;
 use clap::Parser;
-use qmarc_controller::fault::FaultKind;
-use qmarc_controller::servo::Phase;
 use qmarc_proto::exit;
 use qmarc_proto::service::IpcLocation;
+use qmarc_proto::state::FaultKind;
+use qmarc_proto::state::Phase;
 use qmarc_proto::telemetry::{TelemetryOpenError, TelemetrySample};
 use std::ffi::OsString;
 use std::io::Write;
@@ -206,7 +206,7 @@ fn attach(args: &ScopeArgs) -> anyhow::Result<Option<(TelemetryReader, IpcLocati
 
 /// How the move of its last sample `s` ended.
 fn ended(s: &TelemetrySample) -> String {
-    match s.fault.checked_sub(1).and_then(FaultKind::from_code) {
+    match FaultKind::from_wire(s.fault) {
         Some(kind) => format!("the move ended with the fault {}", kind.name()),
         None => "the move is done".to_string(),
     }
@@ -301,7 +301,7 @@ pub fn csv_header(n: usize) -> String {
 
 /// The CSV row of `s` (cmd, act and dac written as gather.csv writes them).
 pub fn csv_row(s: &TelemetrySample, n: usize) -> String {
-    let fault = s.fault.checked_sub(1).and_then(FaultKind::from_code).map_or("", FaultKind::name);
+    let fault = FaultKind::from_wire(s.fault).map_or("", FaultKind::name);
     let mut r = format!(
         "{},{},{},{},{fault},{},{},{},{}",
         s.seq,

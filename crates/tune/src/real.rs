@@ -54,10 +54,7 @@ impl<'a> RealEvaluator<'a> {
         self.budget_for(1)?;
         self.moves += 1;
         let (summary, dir) = (self.mover)(mode, s).map_err(EvalError::Move)?;
-        if summary
-            .fault
-            .as_ref()
-            .is_some_and(|f| f.kind == qmarc_controller::fault::FaultKind::Aborted)
+        if summary.fault.as_ref().is_some_and(|f| f.kind == qmarc_proto::state::FaultKind::Aborted)
         {
             return Err(EvalError::Interrupted);
         }

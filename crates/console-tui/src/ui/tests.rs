@@ -3,7 +3,7 @@
 use super::*;
 use crate::form::{Form, Place};
 use crate::results::{MoveResult, Series};
-use qmarc_controller::fault::FaultKind;
+use qmarc_proto::state::FaultKind;
 use qmarc_report::summary::{FaultReport, Summary};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;

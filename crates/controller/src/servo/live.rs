@@ -2,6 +2,7 @@
 //! ring when due, and the last one when the move ends.
 
 use super::Servo;
+use qmarc_proto::state::FaultKind;
 use qmarc_proto::telemetry::TelemetrySample;
 use qmarc_timer::Tick;
 
@@ -43,7 +44,7 @@ impl Servo {
             period_ns,
             phase: self.phase.code(),
             status,
-            fault: self.fault.map_or(0, |f| f.kind.code() + 1),
+            fault: FaultKind::wire(self.fault.map(|f| f.kind)),
             n_motors: self.plan.n_motors as u32,
             ..TelemetrySample::default()
         }

@@ -9,8 +9,8 @@
 
 use clap::Parser;
 use qmarc_config::RunSpec;
-use qmarc_controller::fault::FaultKind;
 use qmarc_proto::exit;
+use qmarc_proto::state::FaultKind;
 use std::path::PathBuf;
 use std::process::ExitCode;
 

@@ -26,9 +26,9 @@ struct Block {
 /// What the progress file says.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Snapshot {
-    /// The move's phase ([`crate::servo::Phase::code`]), 0 before it began.
+    /// The move's phase ([`crate::state::Phase::code`]), 0 before it began.
     pub phase: u32,
-    /// What the generator says about where it is ([`crate::traj::TrajectoryGenerator::progress`]).
+    /// What the generator says about where it is (the controller's `TrajectoryGenerator::progress`).
     pub detail: u32,
     /// Servo cycles executed.
     pub cycle: u64,
@@ -48,7 +48,7 @@ unsafe impl Sync for Progress {}
 impl Progress {
     /// The progress file of the run whose iceoryx2 prefix is `prefix`.
     pub fn path(prefix: &str) -> PathBuf {
-        Path::new(qmarc_proto::service::SHM_DIR).join(format!("{prefix}progress"))
+        Path::new(crate::service::SHM_DIR).join(format!("{prefix}progress"))
     }
 
     /// Creates (or clears) the file at `path` and maps it: the starter's side.
