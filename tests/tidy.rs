@@ -77,17 +77,29 @@ const LAYERS: &[&str] = &[
     "bench",
 ];
 
-/// The `qmarc-*` crates in the `[dependencies]` table of `crates/<name>/Cargo.toml`.
-fn our_dependencies(name: &str) -> Vec<String> {
-    let text = std::fs::read_to_string(workspace().join("crates").join(name).join("Cargo.toml"))
-        .unwrap_or_else(|e| panic!("crates/{name}/Cargo.toml: {e}"));
+/// The `qmarc-*` crates in the `[<table>]` table (`dependencies`, `dev-dependencies`) of the
+/// manifest `dir/Cargo.toml`.
+fn qmarc_crates_in(dir: &Path, table: &str) -> Vec<String> {
+    let manifest = dir.join("Cargo.toml");
+    let text = std::fs::read_to_string(&manifest)
+        .unwrap_or_else(|e| panic!("{}: {e}", manifest.display()));
     let table =
-        text.split("\n[dependencies]\n").nth(1).map_or("", |t| t.split("\n[").next().unwrap());
+        text.split(&format!("\n[{table}]\n")).nth(1).map_or("", |t| t.split("\n[").next().unwrap());
     table
         .lines()
         .filter_map(|l| l.trim().strip_prefix("qmarc-"))
         .map(|l| l.split(['.', ' ', '=']).next().unwrap().to_string())
         .collect()
+}
+
+/// The `qmarc-*` crates in the `[dependencies]` table of `crates/<name>/Cargo.toml`.
+fn our_dependencies(name: &str) -> Vec<String> {
+    qmarc_crates_in(&workspace().join("crates").join(name), "dependencies")
+}
+
+/// The `qmarc-*` crates in the `[dev-dependencies]` table of `crates/<name>/Cargo.toml`.
+fn our_dev_dependencies(name: &str) -> Vec<String> {
+    qmarc_crates_in(&workspace().join("crates").join(name), "dev-dependencies")
 }
 
 #[test]
@@ -105,11 +117,27 @@ fn crates_depend_only_on_lower_layers_issue_11() {
         let dep = if dep == "console" { "console-tui" } else { dep };
         LAYERS.iter().position(|l| *l == dep).unwrap_or_else(|| panic!("unknown crate {dep}"))
     };
+    // `qmarc-tests` (tests/util.rs: the end-to-end helpers) is only ever a dev-dependency;
+    // a crate may use it when everything it stands on is below that crate.
+    let helpers = qmarc_crates_in(&workspace().join("tests"), "dependencies");
     for (i, name) in LAYERS.iter().enumerate() {
         for dep in our_dependencies(name) {
             assert!(layer(&dep) < i, "crates/{name} depends on qmarc-{dep}, a layer above it");
         }
+        for dep in our_dev_dependencies(name) {
+            let below = |d: &str| layer(d) < i;
+            let ok = if dep == "tests" { helpers.iter().all(|d| below(d)) } else { below(&dep) };
+            assert!(ok, "crates/{name} dev-depends on qmarc-{dep}, a layer above it");
+        }
     }
+    for (name, not) in [("controller", "hwserver"), ("telemetry", "controller")] {
+        let all = [our_dependencies(name), our_dev_dependencies(name)].concat();
+        assert!(!all.contains(&not.to_string()), "crates/{name} depends on qmarc-{not}");
+    }
+    assert!(
+        !our_dependencies("console-tui").contains(&"controller".to_string()),
+        "the console reads the wire's words from proto, not from the loop's crate"
+    );
     assert_eq!(
         our_dependencies("config"),
         ["proto", "kinematics"],

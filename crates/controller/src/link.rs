@@ -1,58 +1,19 @@
-//! [`HwLink`]: one request/response exchange with the hardware server, and [`IoxLink`], the
-//! real one over iceoryx2.
+//! [`IoxLink`]: the controller's end of the iceoryx2 link to the hardware server, one
+//! [`HwLink`] exchange per request (the trait and its [`LinkError`] are the wire's, in
+//! `qmarc_proto::link`).
 
 use iceoryx2::port::client::Client;
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use qmarc_proto::HwMsg;
+pub use qmarc_proto::link::{HwLink, LinkError};
 use qmarc_proto::service::{
     CONTROLLER_NODE, HwServices, IpcLocation, Link, ServiceError, create_node, open_hw_services,
 };
 use qmarc_timer::clock::monotonic_now_ns;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
-
-/// An exchange failed. Carries numbers only: it is created in the servo loop.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-#[non_exhaustive]
-pub enum LinkError {
-    /// No response in time, or the hwserver process is gone.
-    #[error("no response from the hwserver for {:.1} ms (server process {})", *.waited_ns as f64 / 1e6, if *.server_alive { "alive" } else { "gone" })]
-    Lost {
-        /// How long the exchange waited.
-        waited_ns: u64,
-        /// Whether the server's node was still alive when the exchange gave up.
-        server_alive: bool,
-    },
-    /// An iceoryx2 operation failed.
-    #[error("iceoryx2 {op} failed")]
-    Ipc {
-        /// The operation.
-        op: &'static str,
-    },
-    /// A stop signal (Ctrl-C, SIGTERM) arrived while the response was late.
-    #[error("a stop signal arrived while waiting {:.1} ms for the hwserver", *.waited_ns as f64 / 1e6)]
-    Stopped {
-        /// How long the exchange waited.
-        waited_ns: u64,
-    },
-    /// The response answered another request.
-    #[error("response sequence {got} does not match request {expected}")]
-    Sequence {
-        /// Sequence number sent.
-        expected: u32,
-        /// Sequence number received.
-        got: u32,
-    },
-}
-
-/// One request, one response. Implementations never allocate in `exchange` in our code
-/// (iceoryx2's own loan allocation is stated in ARCHITECTURE.md).
-pub trait HwLink {
-    /// Sends `req` and waits for its response.
-    fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, LinkError>;
-}
 
 /// Connecting to the hwserver failed.
 #[derive(Debug, thiserror::Error)]

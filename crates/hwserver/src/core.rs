@@ -1,6 +1,7 @@
 //! [`HwCore`]: what the server does with each request, independent of IPC and hardware.
 
 use crate::backend::{Backend, Inputs};
+use qmarc_proto::link::{HwLink, LinkError};
 use qmarc_proto::{
     COUNTER_ZERO, DAC_MAX, HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status, counter_delta,
 };
@@ -320,6 +321,14 @@ impl HwCore {
         resp.status = (status | self.latched).0;
         resp.time_ns = self.backend.now_ns();
         resp
+    }
+}
+
+/// The core is the link inside one process (tuning's evaluations, tests, benchmarks): a
+/// request is handled where the iceoryx2 exchange would carry it, so the exchange never fails.
+impl HwLink for HwCore {
+    fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, LinkError> {
+        Ok(self.handle(req))
     }
 }
 

@@ -23,6 +23,7 @@
 #![deny(missing_docs)]
 
 pub mod exit;
+pub mod link;
 pub mod msg;
 pub mod progress;
 pub mod service;

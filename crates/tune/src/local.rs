@@ -2,17 +2,17 @@
 //!
 //! The very code of a move of the process set — the registry's generator and law in the
 //! controller's [`Servo`], the hwserver's [`HwCore`] around the simulated Deltabot — with the
-//! iceoryx2 exchange replaced by a call: [`LocalLink`] hands each request to the core and
-//! returns its response. Time is the simulator's and nothing waits for the timer, so a move
+//! iceoryx2 exchange replaced by a call: the core ([`open_core`]) is the link and answers
+//! each request in place. Time is the simulator's and nothing waits for the timer, so a move
 //! takes only its computing time, and its data are byte for byte those of
 //! `qmarc-starter --deterministic` (the tests compare them). Tuning evaluates its candidates
 //! this way.
 
 use qmarc_config::{Mode, RunSpec};
-use qmarc_controller::link::{HwLink, LinkError};
 use qmarc_controller::servo::Servo;
 use qmarc_hwserver::HwCore;
 use qmarc_hwserver::backend::BackendOpenError;
+use qmarc_proto::link::HwLink;
 use qmarc_proto::{HwMsg, MsgType};
 use qmarc_report::Summary;
 use qmarc_runner::run::{RunError, build_servo};
@@ -20,27 +20,15 @@ use qmarc_timer::UnpacedTicker;
 use qmarc_timer::rt::RtStatus;
 use std::sync::atomic::AtomicBool;
 
-/// The hwserver's state machine called in place of the iceoryx2 exchange.
-pub struct LocalLink {
-    core: HwCore,
-}
-
-impl LocalLink {
-    /// The core of the settings' simulated robot, in lock-step.
-    pub fn open(spec: &RunSpec) -> Result<LocalLink, LocalError> {
-        let s = &spec.settings;
-        if s.hwserver.backend != "sim" {
-            return Err(LocalError::NotSim(s.hwserver.backend.clone()));
-        }
-        let backend = qmarc_hwserver::backends::open(s, true)?;
-        Ok(LocalLink { core: HwCore::new(backend).with_encoder_limit(s.hwserver.max_counts_per_s) })
+/// The hwserver's core of the settings' simulated robot, in lock-step: the link of a local
+/// move (the core answers each request in place of the iceoryx2 exchange).
+pub fn open_core(spec: &RunSpec) -> Result<HwCore, LocalError> {
+    let s = &spec.settings;
+    if s.hwserver.backend != "sim" {
+        return Err(LocalError::NotSim(s.hwserver.backend.clone()));
     }
-}
-
-impl HwLink for LocalLink {
-    fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, LinkError> {
-        Ok(self.core.handle(req))
-    }
+    let backend = qmarc_hwserver::backends::open(s, true)?;
+    Ok(HwCore::new(backend).with_encoder_limit(s.hwserver.max_counts_per_s))
 }
 
 /// A local move could not run.
@@ -93,13 +81,13 @@ pub fn run_local(spec: &RunSpec, stop: &AtomicBool) -> Result<LocalMove, LocalEr
         return Err(LocalError::Homing);
     }
     let spec = RunSpec { deterministic: true, unpaced: true, ..spec.clone() };
-    let mut link = LocalLink::open(&spec)?;
+    let mut core = open_core(&spec)?;
     let mut servo = build_servo(&spec, None)?;
     let mut ticker = UnpacedTicker::new(spec.settings.period_ns());
-    let moved = servo.run(&mut link, &mut ticker, stop);
+    let moved = servo.run(&mut core, &mut ticker, stop);
     // The thesis' last message, as the controller sends it: the hardware is made safe.
-    let _ = link.exchange(&HwMsg::request(MsgType::Exit));
-    link.core.finish().map_err(LocalError::Finish)?;
+    let _ = core.exchange(&HwMsg::request(MsgType::Exit));
+    core.finish().map_err(LocalError::Finish)?;
     moved.map_err(RunError::from)?;
     let summary = qmarc_report::summarize::summarize(
         &spec.settings,

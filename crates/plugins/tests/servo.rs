@@ -1,5 +1,5 @@
-//! Integration tests of the controller library: the servo cycle allocates nothing, does no
-//! I/O and never blocks; the fault handler disables the motors; the loop runs over the real
+//! The servo loop with every registered generator and law against the hwserver's core: the
+//! servo cycle allocates nothing, does no I/O and never blocks; the fault handler disables the motors; the loop runs over the real
 //! iceoryx2 link.
 
 mod util;
@@ -16,7 +16,7 @@ use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
-use util::{CoreLink, CountingAllocator, ThreadCounters, allocations, knots, settings};
+use util::{CountingAllocator, ThreadCounters, allocations, knots, settings, sim_core};
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
@@ -88,7 +88,7 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
             let mut servo =
                 Servo::new(plan(3), generator, (l.build)(&s), Box::new(MockClock::new(0)))
                     .with_telemetry(Some(telemetry));
-            let mut link = CoreLink::new(lockstep());
+            let mut link = sim_core(lockstep());
             let mut ticker = ManualTicker::new(400_000);
             servo.prepare(&mut link).unwrap();
             servo.set_t0(ticker.start().unwrap());
@@ -128,7 +128,7 @@ fn limit_switch_trip_disables_every_motor_in_the_same_cycle() {
     let mut params = lockstep();
     // Motor 2 starts 300 counts below its bottom switch; the step drives it through.
     params.start_counts[1] = params.bottom_switch_counts - 300.0;
-    let mut link = CoreLink::new(params);
+    let mut link = sim_core(params);
     let mut servo = step_servo(&s);
     let stop = AtomicBool::new(false);
     servo.run(&mut link, &mut ManualTicker::new(400_000), &stop).unwrap();
@@ -139,7 +139,7 @@ fn limit_switch_trip_disables_every_motor_in_the_same_cycle() {
         "{}",
         fault.message()
     );
-    assert!(!link.0.any_enabled(), "all motors disabled");
+    assert!(!link.any_enabled(), "all motors disabled");
     // The cycle that saw the switch wrote no DAC: the last gathered row is the one before.
     let rows = servo.gather().rows();
     assert_eq!(rows.last().unwrap().cycle + 1, fault.cycle);
@@ -148,12 +148,12 @@ fn limit_switch_trip_disables_every_motor_in_the_same_cycle() {
 #[test]
 fn a_stop_request_aborts_the_move_and_disables_the_motors() {
     let s = settings();
-    let mut link = CoreLink::new(lockstep());
+    let mut link = sim_core(lockstep());
     let mut servo = step_servo(&s);
     let stop = AtomicBool::new(true);
     servo.run(&mut link, &mut ManualTicker::new(400_000), &stop).unwrap();
     assert_eq!(servo.fault().map(|f| f.kind), Some(FaultKind::Aborted));
-    assert!(!link.0.any_enabled());
+    assert!(!link.any_enabled());
 }
 
 /// The loop over real iceoryx2, the server in another thread of this process. Our code
@@ -257,7 +257,7 @@ fn servo_cycle_makes_no_system_call_under_seccomp_strict_mode() {
                 Box::new(MockClock::new(0)),
             )
             .with_telemetry(Some(telemetry));
-            let mut link = CoreLink::new(lockstep());
+            let mut link = sim_core(lockstep());
             let mut ticker = ManualTicker::new(400_000);
             servo.prepare(&mut link).unwrap();
             servo.set_t0(ticker.start().unwrap());
@@ -398,9 +398,9 @@ fn run_with(
     plan: MovePlan,
     generator: Box<dyn qmarc_controller::traj::TrajectoryGenerator>,
     params: SimParams,
-) -> (Servo, CoreLink, Result<(), qmarc_controller::servo::MoveError>) {
+) -> (Servo, HwCore, Result<(), qmarc_controller::servo::MoveError>) {
     let s = settings();
-    let mut link = CoreLink::new(params);
+    let mut link = sim_core(params);
     let mut servo = Servo::new(plan, generator, (LAWS[0].build)(&s), Box::new(MockClock::new(0)));
     let r = servo.run(&mut link, &mut ManualTicker::new(400_000), &AtomicBool::new(false));
     (servo, link, r)
@@ -425,7 +425,7 @@ fn a_following_error_past_its_limit_ends_the_move_in_that_cycle() {
     let f = servo.fault().expect("a fault");
     assert_eq!((f.kind, f.motor, f.integrated), (FaultKind::FollowingError, Some(1), false));
     assert!(f.value > 500.0 && f.value <= 502.0, "{}", f.value);
-    assert!(f.disabled && !link.0.any_enabled());
+    assert!(f.disabled && !link.any_enabled());
     assert_eq!(servo.phase(), Phase::Fault);
     // The integrated limit, with the instantaneous one out of the way: Σ FE of a stalled ramp.
     let mut p = lockstep();
@@ -462,7 +462,7 @@ fn software_limits_refuse_a_known_path_and_stop_an_unknown_one() {
         r.unwrap_err().to_string(),
         "motor 1: the path reaches 5000.0 counts, outside its software limits [-1000, 1000]: refused before the move"
     );
-    assert!(servo.fault().is_none() && !link.0.any_enabled());
+    assert!(servo.fault().is_none() && !link.any_enabled());
     // An unknown path (a stream): caught in the loop before the command is applied.
     let plan = MovePlan {
         limits: MoveLimits { max_following_error: [1e9; MAX_MOTORS], ..limits() },
@@ -480,7 +480,7 @@ fn software_limits_refuse_a_known_path_and_stop_an_unknown_one() {
         1_000,
         "the last command applied was 1000"
     );
-    assert!(!link.0.any_enabled());
+    assert!(!link.any_enabled());
 }
 
 #[test]
@@ -490,7 +490,7 @@ fn too_many_missed_periods_in_a_row_are_an_overrun() {
         limits: MoveLimits { max_following_error: [1e9; MAX_MOTORS], ..limits() },
         ..plan(3)
     };
-    let mut link = CoreLink::new(lockstep());
+    let mut link = sim_core(lockstep());
     let mut servo = Servo::new(
         plan,
         (GENERATORS[0].build)(&s).unwrap(),
@@ -529,7 +529,7 @@ fn an_unhomed_frame_is_refused_when_homing_is_required() {
         r.unwrap_err().to_string(),
         "motor 1 is not homed: run `qmarc-starter home` first, or give --unhomed (software limits off)"
     );
-    assert!(!link.0.any_enabled());
+    assert!(!link.any_enabled());
 }
 
 #[test]
@@ -641,7 +641,7 @@ fn the_626_backends_cycle_allocates_nothing_issue_12() {
     let mut s = util::settings_of("s626.toml");
     s.set_device(std::path::Path::new("fake")).unwrap();
     let card = qmarc_hwserver::backends::s626::S626::open(&s, false).unwrap();
-    let mut link = CoreLink(qmarc_hwserver::HwCore::new(Box::new(card)));
+    let mut link = qmarc_hwserver::HwCore::new(Box::new(card));
     let mut servo = step_servo(&s);
     let mut ticker = ManualTicker::new(400_000);
     servo.prepare(&mut link).unwrap();
@@ -655,7 +655,7 @@ fn the_626_backends_cycle_allocates_nothing_issue_12() {
         assert_eq!(servo.cycle(&mut link, &tick), CycleEnd::Continue);
     }
     assert_eq!(allocations() - before, 0, "allocations in 2000 cycles over the 626 backend");
-    assert!(link.0.position(0) > 100, "the fake card's motor followed the step");
+    assert!(link.position(0) > 100, "the fake card's motor followed the step");
 }
 
 /// Issue 13 (review): the path's gathered rows are told from the settle's by sample index.
@@ -671,7 +671,7 @@ fn the_path_rows_end_where_the_settle_begins_after_missed_periods_issue_13() {
         (LAWS[0].build)(&s),
         Box::new(MockClock::new(0)),
     );
-    let mut link = CoreLink::new(lockstep());
+    let mut link = sim_core(lockstep());
     let mut ticker = ManualTicker::new(400_000);
     ticker.inject_delay(0, 3); // the first wake finds three periods missed
     servo.run(&mut link, &mut ticker, &AtomicBool::new(false)).unwrap();
@@ -765,7 +765,7 @@ fn a_non_finite_command_or_output_is_a_fault_in_that_cycle_issue_27() {
     r.unwrap();
     let f = servo.fault().expect("a fault");
     assert_eq!((f.kind, f.motor, f.cycle), (FaultKind::BadCommand, Some(1), 50));
-    assert!(f.disabled && !link.0.any_enabled(), "{f:?}");
+    assert!(f.disabled && !link.any_enabled(), "{f:?}");
     assert_eq!(servo.cycles(), 50, "samples 0‥49 ran, 50 did not");
     assert!(
         f.message()
@@ -780,7 +780,7 @@ fn a_non_finite_command_or_output_is_a_fault_in_that_cycle_issue_27() {
         r.unwrap_err().to_string(),
         "motor 2: the path reaches NaN counts at sample 0: not a finite number"
     );
-    assert!(servo.fault().is_none() && !link.0.any_enabled());
+    assert!(servo.fault().is_none() && !link.any_enabled());
 
     /// Zero output, then no DAC code for motor 3 from sample 20 on.
     struct NanLaw;
@@ -797,13 +797,13 @@ fn a_non_finite_command_or_output_is_a_fault_in_that_cycle_issue_27() {
         }
     }
     let s = settings();
-    let mut link = CoreLink::new(lockstep());
+    let mut link = sim_core(lockstep());
     let generator = (GENERATORS[0].build)(&s).unwrap();
     let mut servo = Servo::new(plan(3), generator, Box::new(NanLaw), Box::new(MockClock::new(0)));
     servo.run(&mut link, &mut ManualTicker::new(400_000), &AtomicBool::new(false)).unwrap();
     let f = servo.fault().expect("a fault");
     assert_eq!((f.kind, f.motor, f.cycle), (FaultKind::BadOutput, Some(2), 20));
-    assert!(f.disabled && !link.0.any_enabled(), "{f:?}");
+    assert!(f.disabled && !link.any_enabled(), "{f:?}");
     assert!(servo.gather().rows().iter().all(|r| r.dac.iter().all(|&c| c == 0)));
     assert_eq!(f.kind.name(), "bad_output");
 }
@@ -819,7 +819,7 @@ fn a_fault_after_a_host_stall_says_so_issue_28() {
         p.stall_motor = Some(1);
         let plan = MovePlan { limits: limits(), deterministic, ..plan(3) };
         let s = settings();
-        let mut link = CoreLink::new(p);
+        let mut link = sim_core(p);
         let ramp = Box::new(Ramp(2.0, [0.0; MAX_MOTORS]));
         let mut servo = Servo::new(plan, ramp, (LAWS[0].build)(&s), Box::new(MockClock::new(0)));
         let mut ticker = ManualTicker::new(400_000);

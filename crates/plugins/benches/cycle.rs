@@ -1,13 +1,12 @@
 //! Criterion benchmarks of the servo loop's pieces for 3 motors: one whole cycle against the
 //! in-process hardware core (simulated Deltabot: the figure includes the plant model and
 //! excludes IPC), the law alone, one sample of each trajectory generator, and the natural
-//! spline's O(N) solve for 10³…10⁶ knots. Run with `cargo bench -p qmarc-controller --bench
+//! spline's O(N) solve for 10³…10⁶ knots. Run with `cargo bench -p qmarc-plugins --bench
 //! cycle`.
 
 use criterion::{BatchSize, BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use qmarc_config::Settings;
 use qmarc_controller::law::{ServoInput, ServoLaw};
-use qmarc_controller::link::{HwLink, LinkError};
 use qmarc_controller::plan::MovePlan;
 use qmarc_controller::servo::{CycleEnd, Servo};
 use qmarc_controller::traj::{Sample, TrajectoryGenerator};
@@ -18,20 +17,12 @@ use qmarc_plugins::pvt::Pvt;
 use qmarc_plugins::registry::GENERATORS;
 use qmarc_plugins::spline::{CubicSpline, NaturalSpline};
 use qmarc_plugins::step::Step;
-use qmarc_proto::{HwMsg, MAX_MOTORS};
+use qmarc_proto::MAX_MOTORS;
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
 use std::hint::black_box;
 use std::path::Path;
 
 const PERIOD_S: f64 = 0.0004;
-
-struct CoreLink(HwCore);
-
-impl HwLink for CoreLink {
-    fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, LinkError> {
-        Ok(self.0.handle(req))
-    }
-}
 
 fn settings() -> Settings {
     let names = qmarc_config::Names {
@@ -55,7 +46,7 @@ fn bench_cycle(c: &mut Criterion) {
     let mut servo = Servo::new(plan, generator, law, Box::new(MockClock::new(0)));
     let sim = SimDeltabot::new(SimParams { n_motors: 3, lockstep: true, ..SimParams::default() })
         .unwrap();
-    let mut link = CoreLink(HwCore::new(Box::new(sim)));
+    let mut link = HwCore::new(Box::new(sim));
     let mut ticker = ManualTicker::new(400_000);
     servo.prepare(&mut link).unwrap();
     servo.set_t0(ticker.start().unwrap());

@@ -1,10 +1,8 @@
-//! Helpers for the controller's integration tests: a counting allocator (per thread), an
-//! in-process hardware link, and settings.
+//! Helpers for the loop's integration tests: a counting allocator (per thread), the
+//! in-process hardware core, and settings.
 
 use qmarc_config::Settings;
-use qmarc_controller::link::{HwLink, LinkError};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
-use qmarc_proto::HwMsg;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::path::Path;
@@ -73,19 +71,9 @@ pub fn knots(name: &str) -> std::path::PathBuf {
 }
 
 /// The hwserver's core with a lock-step simulated Deltabot, called in-process.
-pub struct CoreLink(pub HwCore);
-
-impl CoreLink {
-    /// A link to a simulated robot with `params`.
-    pub fn new(params: SimParams) -> CoreLink {
-        CoreLink(HwCore::new(Box::new(SimDeltabot::new(params).unwrap())))
-    }
-}
-
-impl HwLink for CoreLink {
-    fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, LinkError> {
-        Ok(self.0.handle(req))
-    }
+/// The hwserver's core around the simulated Deltabot: the loop's link inside this process.
+pub fn sim_core(params: SimParams) -> HwCore {
+    HwCore::new(Box::new(SimDeltabot::new(params).unwrap()))
 }
 
 /// What the calling thread has done in the kernel: read/write syscalls and blocking waits.
