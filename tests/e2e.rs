@@ -2,15 +2,11 @@
 //! qmarc-controller over iceoryx2.
 
 use qmarc_tests::{
-    TestRun, default_config, read_gather, read_summary, status_field, thread_statuses,
+    TestRun, config_arg, default_config, read_gather, read_summary, status_field, thread_statuses,
 };
 use std::time::Duration;
 
 const TIMEOUT: Duration = Duration::from_secs(60);
-
-fn config_arg() -> String {
-    format!("--config={}", default_config().display())
-}
 
 #[test]
 fn step_of_1000_counts_settles() {

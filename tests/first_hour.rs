@@ -6,8 +6,8 @@ use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use qmarc_proto::exit;
 use qmarc_tests::{
-    TestRun, bin_dir, default_config, processes_matching, read_summary, run_with_timeout,
-    wait_with_timeout, workspace,
+    TestRun, bin_dir, config_arg, default_config, processes_matching, read_summary,
+    run_with_timeout, wait_with_timeout, workspace,
 };
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -18,10 +18,6 @@ const TIMEOUT: Duration = Duration::from_secs(60);
 /// Longest a process may take to end after a stop signal before a test calls it a hang (the
 /// rule is one second; this bound only tells a hang from a slow machine).
 const STOPPED_WITHIN: Duration = Duration::from_secs(20);
-
-fn config_arg() -> String {
-    format!("--config={}", default_config().display())
-}
 
 fn out_arg(out: &Path) -> String {
     format!("--out={}", out.display())

@@ -1,15 +1,11 @@
 //! The `run` move through the real processes: the offline spline and the online PVT
 //! generator, from files and from a pipe, the examples of `knots/`, and bad knots.
 
-use qmarc_tests::{TestRun, default_config, knots, read_gather, read_summary, wait_with_timeout};
+use qmarc_tests::{TestRun, config_arg, knots, read_gather, read_summary, wait_with_timeout};
 use std::io::Write;
 use std::time::Duration;
 
 const TIMEOUT: Duration = Duration::from_secs(60);
-
-fn config_arg() -> String {
-    format!("--config={}", default_config().display())
-}
 
 /// The knots of an offline file: (time, positions).
 fn offline_knots(name: &str) -> Vec<(f64, Vec<f64>)> {

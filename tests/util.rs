@@ -58,6 +58,11 @@ pub fn default_config() -> PathBuf {
     shipped_config()
 }
 
+/// `--config=<the shipped settings>`: a process test's settings flag.
+pub fn config_arg() -> String {
+    format!("--config={}", default_config().display())
+}
+
 /// What a process printed and how it ended.
 #[derive(Debug)]
 pub struct Finished {
@@ -143,39 +148,21 @@ impl TestRun {
     /// [`TestRun::config_from`] into the file `name` of this run's directory, for a test that
     /// keeps several settings files.
     pub fn config_as(&self, name: &str, base: &Path, edits: &[(&str, &str)]) -> PathBuf {
-        let mut text = std::fs::read_to_string(base).expect("test settings");
+        let text = std::fs::read_to_string(base).expect("test settings");
+        let mut doc: toml_edit::DocumentMut = text.parse().expect("the test settings parse");
         let state = format!("{:?}", self.dir.join("sim.state").display().to_string());
-        let own_state = [("state_file", state.as_str())];
+        let own_state = [("sim.state_file", state.as_str())];
         for (key, value) in own_state.iter().chain(edits) {
-            let (section, key) = match key.split_once('.') {
-                Some((section, key)) => (Some(section), key),
-                None => (None, *key),
+            let value: toml_edit::Value =
+                value.parse().unwrap_or_else(|e| panic!("`{key} = {value}`: {e}"));
+            let edited = match key.split_once('.') {
+                Some((section, key)) => set_in(&mut doc[section], key, &value, true),
+                None => doc.iter_mut().map(|(_, item)| set_in(item, key, &value, false)).sum(),
             };
-            let prefix = format!("{key} = ");
-            let mut found = false;
-            text = text
-                .lines()
-                .map(|l| {
-                    if l.starts_with(&prefix) {
-                        found = true;
-                        format!("{key} = {value}")
-                    } else {
-                        l.to_string()
-                    }
-                })
-                .collect::<Vec<_>>()
-                .join("\n");
-            if let (false, Some(section)) = (found, section) {
-                let header = format!("[{section}]");
-                let at = text.find(&header).unwrap_or_else(|| panic!("no {header}"));
-                let eol = at + text[at..].find('\n').unwrap_or(text.len() - at);
-                text.insert_str(eol, &format!("\n{key} = {value}"));
-                found = true;
-            }
-            assert!(found, "no `{key}` in the settings");
+            assert!(edited > 0, "no `{key}` in the settings");
         }
         let path = self.dir.join(name);
-        std::fs::write(&path, text + "\n").expect("write settings");
+        std::fs::write(&path, doc.to_string()).expect("write settings");
         path
     }
 
@@ -433,4 +420,23 @@ pub fn read_gather(out: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
         })
         .collect();
     (header, rows)
+}
+
+/// Sets `key = value` in the table `item`, or in each table of the array of tables `item`
+/// (`[[motor]]`): where the key is already, or everywhere when `insert`. The number of tables
+/// edited.
+fn set_in(item: &mut toml_edit::Item, key: &str, value: &toml_edit::Value, insert: bool) -> usize {
+    let set = |t: &mut toml_edit::Table| {
+        let there = t.contains_key(key);
+        if there || insert {
+            t[key] = toml_edit::value(value.clone());
+        }
+        usize::from(there || insert)
+    };
+    match item {
+        toml_edit::Item::Table(t) => set(t),
+        toml_edit::Item::ArrayOfTables(a) => a.iter_mut().map(set).sum(),
+        toml_edit::Item::None => panic!("no table for `{key}` in the settings"),
+        _ => 0,
+    }
 }

@@ -49,11 +49,6 @@ fn main() -> ExitCode {
         BenchCommand::Ipc(a) => ipc::run(a),
         BenchCommand::Cycle(a) => cycle::run(a),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("qmarc-bench: error: {e:#}");
-            ExitCode::from(qmarc_proto::exit::INTERNAL)
-        }
-    }
+    let outcome = result.map(|()| ExitCode::SUCCESS).map_err(|e| (qmarc_proto::exit::INTERNAL, e));
+    qmarc_config::program::conclude("qmarc-bench", outcome)
 }

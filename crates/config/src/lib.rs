@@ -27,6 +27,7 @@ mod homing;
 mod hwserver;
 mod jog;
 mod motor;
+pub mod program;
 mod robot;
 mod run;
 mod s626;
@@ -48,7 +49,7 @@ pub use motor::{MotorGains, MotorSafety, effective_gains_problem, gains_problem}
 pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
 pub use s626::{S626_DIO_CHANNELS, S626Settings};
-pub use sim::{DEFAULT_SIM_STATE_FILE, SimSettings};
+pub use sim::{DEFAULT_SIM_STATE_FILE, SimPlant, SimSettings};
 pub use source::{in_exponent_notation, num};
 pub use step::{MAX_STEP_COUNTS, StepSettings};
 pub use telemetry::{MAX_TELEMETRY_EVERY, TelemetrySettings};

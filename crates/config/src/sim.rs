@@ -11,9 +11,12 @@ use std::path::PathBuf;
 /// `/dev/shm`, which a reboot clears.
 pub const DEFAULT_SIM_STATE_FILE: &str = "/dev/shm/qmarc-sim.state";
 
-/// The simulated Deltabot.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SimSettings {
+/// The simulated Deltabot's plant, switches, frame and fault injection: the numbers the
+/// simulator runs on, one definition for the settings (`[sim]`) and the simulator's own
+/// parameters (`qmarc_hwserver::SimParams`). Motors are 1-based here and everywhere they are
+/// named, as the user counts them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SimPlant {
     /// Amplifier gain, counts/s per volt.
     pub kv: f64,
     /// Velocity lag of an enabled amplifier, s (a first-order loop: when
@@ -26,17 +29,18 @@ pub struct SimSettings {
     pub velocity_loop_zeta: f64,
     /// Coasting time constant of a disabled motor, s.
     pub coast_tau_s: f64,
-    /// Start position per motor, counts (motors beyond the list start at 0).
-    pub start_counts: Vec<f64>,
-    /// Top limit switch position, counts.
+    /// Top limit switch position, counts in the homed frame (reached moving away from the
+    /// bottom switch).
     pub top_switch_counts: f64,
-    /// Bottom limit switch position, counts.
+    /// Bottom limit switch position, counts in the homed frame.
     pub bottom_switch_counts: f64,
-    /// The robot starts homed.
+    /// The robot starts in the homed frame (its counters "kept counting since the last
+    /// homing"); false: the counters start `counter_offset` counts away from it.
     pub homed: bool,
     /// Offset of an unhomed counter frame, counts.
     pub counter_offset: i64,
-    /// Fault injection: this motor (1-based) does not move.
+    /// Fault injection: this motor (1-based) does not move, whatever it is told (a seized
+    /// joint, a broken coupling).
     pub stall_motor: Option<usize>,
     /// Fault injection: this motor's (1-based) top switch sticks once tripped.
     pub stuck_top_motor: Option<usize>,
@@ -49,6 +53,43 @@ pub struct SimSettings {
     /// released); `None`: never.
     #[serde(default)]
     pub estop_open_s: Option<[f64; 2]>,
+}
+
+impl SimPlant {
+    /// Whether the fault-injection motor `which` (1-based) is motor `m` (0-based).
+    pub fn is(which: Option<usize>, m: usize) -> bool {
+        which == Some(m + 1)
+    }
+}
+
+impl Default for SimPlant {
+    fn default() -> SimPlant {
+        SimPlant {
+            kv: 23_650.0,
+            tau_s: 0.004,
+            velocity_loop_hz: 61.6,
+            velocity_loop_zeta: 0.48,
+            coast_tau_s: 0.05,
+            top_switch_counts: -9_500.0,
+            bottom_switch_counts: 10_500.0,
+            homed: true,
+            counter_offset: 0,
+            stall_motor: None,
+            stuck_top_motor: None,
+            reversed_motor: None,
+            estop_open_s: None,
+        }
+    }
+}
+
+/// The simulated Deltabot: its plant, where its motors start, and its files.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SimSettings {
+    /// The plant, switches, frame and fault injection.
+    #[serde(flatten)]
+    pub plant: SimPlant,
+    /// Start position per motor, counts (motors beyond the list start at 0).
+    pub start_counts: Vec<f64>,
     /// Where the simulator writes its event log when it ends.
     pub events_file: Option<PathBuf>,
     /// Where the simulator keeps its homed frame between runs; `None`: nowhere.
@@ -58,20 +99,8 @@ pub struct SimSettings {
 impl Default for SimSettings {
     fn default() -> SimSettings {
         SimSettings {
-            kv: 23_650.0,
-            tau_s: 0.004,
-            velocity_loop_hz: 61.6,
-            velocity_loop_zeta: 0.48,
-            coast_tau_s: 0.05,
+            plant: SimPlant::default(),
             start_counts: Vec::new(),
-            top_switch_counts: -9_500.0,
-            bottom_switch_counts: 10_500.0,
-            homed: true,
-            counter_offset: 0,
-            stall_motor: None,
-            stuck_top_motor: None,
-            reversed_motor: None,
-            estop_open_s: None,
             events_file: None,
             state_file: Some(PathBuf::from(DEFAULT_SIM_STATE_FILE)),
         }
@@ -111,7 +140,7 @@ impl RawSim {
         src: &Source<'_>,
         n_motors: usize,
     ) -> Result<SimSettings, ConfigLoadError> {
-        let d = SimSettings::default();
+        let (d, files) = (SimPlant::default(), SimSettings::default());
         let motor = |v: &S<i64>, field: &str| -> Result<Option<usize>, ConfigLoadError> {
             let m = src.int(v, field, 0, 0, n_motors as i64)?;
             Ok((m > 0).then_some(m as usize))
@@ -120,7 +149,7 @@ impl RawSim {
             let d = default.map_or(String::new(), |p| p.display().to_string());
             src.take(v, field, d, |_| Ok(())).map(path_or_none)
         };
-        let sim = SimSettings {
+        let plant = SimPlant {
             kv: src.take(&self.kv, "sim.kv", d.kv, positive)?,
             tau_s: src.take(&self.tau_s, "sim.tau_s", d.tau_s, positive)?,
             velocity_loop_hz: src.take(
@@ -154,22 +183,6 @@ impl RawSim {
                 },
             )?,
             coast_tau_s: src.take(&self.coast_tau_s, "sim.coast_tau_s", d.coast_tau_s, positive)?,
-            start_counts: src.take(
-                &self.start_counts,
-                "sim.start_counts",
-                d.start_counts,
-                |v| {
-                    if v.len() > MAX_MOTORS {
-                        return Err(format!("at most {MAX_MOTORS} positions, found {}", v.len()));
-                    }
-                    match v.iter().find(|x| !(x.is_finite() && x.abs() < f64::from(1u32 << 23))) {
-                        Some(bad) => Err(format!(
-                            "positions must be finite and within ±2^23 counts, found {bad}"
-                        )),
-                        None => Ok(()),
-                    }
-                },
-            )?,
             top_switch_counts: src.take(
                 &self.top_switch_counts,
                 "sim.top_switch_counts",
@@ -204,10 +217,29 @@ impl RawSim {
                 })?
                 .try_into()
                 .ok(),
-            events_file: path(&self.events_file, "sim.events_file", d.events_file)?,
-            state_file: path(&self.state_file, "sim.state_file", d.state_file)?,
         };
-        if sim.top_switch_counts == sim.bottom_switch_counts {
+        let sim = SimSettings {
+            plant,
+            start_counts: src.take(
+                &self.start_counts,
+                "sim.start_counts",
+                files.start_counts,
+                |v| {
+                    if v.len() > MAX_MOTORS {
+                        return Err(format!("at most {MAX_MOTORS} positions, found {}", v.len()));
+                    }
+                    match v.iter().find(|x| !(x.is_finite() && x.abs() < f64::from(1u32 << 23))) {
+                        Some(bad) => Err(format!(
+                            "positions must be finite and within ±2^23 counts, found {bad}"
+                        )),
+                        None => Ok(()),
+                    }
+                },
+            )?,
+            events_file: path(&self.events_file, "sim.events_file", files.events_file)?,
+            state_file: path(&self.state_file, "sim.state_file", files.state_file)?,
+        };
+        if plant.top_switch_counts == plant.bottom_switch_counts {
             return Err(src.invalid(
                 span_of(&self.bottom_switch_counts),
                 "sim.bottom_switch_counts",

@@ -280,7 +280,7 @@ fn the_shipped_file_states_the_defaults_issue_11() {
 fn fault_injection_motors_are_one_based_or_none_issue_11() {
     let s = parse(&format!("[sim]\nstall_motor = 0\nstuck_top_motor = 2\n{}", MOTOR.repeat(3)))
         .unwrap();
-    assert_eq!((s.sim.stall_motor, s.sim.stuck_top_motor), (None, Some(2)));
+    assert_eq!((s.sim.plant.stall_motor, s.sim.plant.stuck_top_motor), (None, Some(2)));
     check(
         &format!("[sim]\nstall_motor = 4\n{}", MOTOR.repeat(3)),
         "q.toml:2:15: sim.stall_motor: must be 0‥3, found 4",
@@ -440,7 +440,7 @@ fn plant_and_law_scale_errors_name_the_field_issue_13() {
          found 1",
     );
     let s = parse(&format!("[sim]\nvelocity_loop_hz = 0\n{m}")).unwrap();
-    assert_eq!(s.sim.velocity_loop_hz, 0.0, "0: the first-order lag tau_s");
+    assert_eq!(s.sim.plant.velocity_loop_hz, 0.0, "0: the first-order lag tau_s");
 }
 
 /// Issue 14: the wait mode, the response spin and the CPUs are checked and named like every

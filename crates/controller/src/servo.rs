@@ -168,7 +168,7 @@ impl Servo {
     }
 
     /// Where homing found each motor's switch, after a homing.
-    pub fn homing_report(&self) -> Option<&[crate::traj::MotorHomeReport]> {
+    pub fn homing_report(&self) -> Option<&[crate::traj::MotorHome]> {
         self.generator.homing_report()
     }
 

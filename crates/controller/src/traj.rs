@@ -167,7 +167,7 @@ pub trait TrajectoryGenerator: Send {
 
     /// After a homing: where each motor's switch was found and cleared and where home is
     /// (the report's `homing`). Not called in the loop. Default: none.
-    fn homing_report(&self) -> Option<&[MotorHomeReport]> {
+    fn homing_report(&self) -> Option<&[MotorHome]> {
         None
     }
 
@@ -213,8 +213,8 @@ pub struct MotorCheckReport {
 }
 
 /// Where homing found and left one motor, counts in the frame before homing.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct MotorHomeReport {
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MotorHome {
     /// 1-based motor.
     pub motor: usize,
     /// Where the top switch was first seen active.

@@ -445,8 +445,8 @@ mod tests {
     fn software_position_survives_counter_wrap() {
         let mut p = SimParams { n_motors: 1, lockstep: true, ..SimParams::default() };
         p.start_counts[0] = 8_388_000.0;
-        p.top_switch_counts = -1e9;
-        p.bottom_switch_counts = 1e9;
+        p.plant.top_switch_counts = -1e9;
+        p.plant.bottom_switch_counts = 1e9;
         let mut c = core_with(p);
         assert_eq!(send(&mut c, HwMsg::read_all_encoders()).data[0], 8_388_000.0);
         send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 0));
@@ -464,8 +464,8 @@ mod tests {
     #[test]
     fn a_counter_jump_faster_than_physically_possible_is_an_encoder_fault() {
         let mut p = SimParams { n_motors: 2, lockstep: true, ..SimParams::default() };
-        p.top_switch_counts = -1e9;
-        p.bottom_switch_counts = 1e9;
+        p.plant.top_switch_counts = -1e9;
+        p.plant.bottom_switch_counts = 1e9;
         // 400 µs at 250 000 counts/s is 100 counts per read: the bound is 100 + 16.
         let sim = SimDeltabot::new(p).unwrap();
         let mut c = HwCore::new(Box::new(sim)).with_encoder_limit(250_000.0);
@@ -528,7 +528,7 @@ mod tests {
     #[test]
     fn limit_trip_latches_until_cleared_and_only_while_monitoring() {
         let mut p = SimParams { n_motors: 2, lockstep: true, ..SimParams::default() };
-        p.start_counts[1] = p.top_switch_counts - 1.0;
+        p.start_counts[1] = p.plant.top_switch_counts - 1.0;
         let mut c = core_with(p);
         assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok(), "not monitoring");
         send(&mut c, HwMsg::request(MsgType::EnableSafety));

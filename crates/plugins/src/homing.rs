@@ -15,7 +15,7 @@
 //! than the one being sought fails the homing.
 
 use qmarc_config::{HomingSettings, MotorSafety, Settings};
-use qmarc_controller::traj::{MotorHomeReport, Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_controller::traj::{MotorHome, Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_proto::state::FaultKind;
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
 
@@ -105,7 +105,7 @@ pub struct Homing {
     last_n: Option<u64>,
     target: f64,
     settle_left: u64,
-    reports: [MotorHomeReport; MAX_MOTORS],
+    reports: [MotorHome; MAX_MOTORS],
     failure: Option<HomingFailure>,
     /// Feedback has arrived (the servo seeds the law with one `sample` before the loop).
     observed: bool,
@@ -146,7 +146,7 @@ impl Homing {
             last_n: None,
             target: 0.0,
             settle_left: 0,
-            reports: [MotorHomeReport::default(); MAX_MOTORS],
+            reports: [MotorHome::default(); MAX_MOTORS],
             failure: None,
             observed: false,
             resting: [MotorFlags::default(); MAX_MOTORS],
@@ -154,7 +154,7 @@ impl Homing {
     }
 
     /// The reports of the motors homed so far and of the one being homed.
-    pub fn reports(&self) -> &[MotorHomeReport] {
+    pub fn reports(&self) -> &[MotorHome] {
         &self.reports[..(self.motor + 1).min(self.n_motors)]
     }
 
@@ -164,7 +164,7 @@ impl Homing {
         self.fresh = true;
         self.origin = self.cmd[motor];
         self.open_seen = self.act[motor];
-        self.reports[motor] = MotorHomeReport { motor: motor + 1, ..MotorHomeReport::default() };
+        self.reports[motor] = MotorHome { motor: motor + 1, ..MotorHome::default() };
     }
 
     /// A switch that must not be active now, of any motor: of a motor already homed; of the
@@ -410,7 +410,7 @@ impl TrajectoryGenerator for Homing {
         (self.phase == Phase::Done).then_some(home)
     }
 
-    fn homing_report(&self) -> Option<&[MotorHomeReport]> {
+    fn homing_report(&self) -> Option<&[MotorHome]> {
         Some(self.reports())
     }
 }

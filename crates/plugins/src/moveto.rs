@@ -6,9 +6,7 @@
 
 use crate::step::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::Settings;
-use qmarc_controller::traj::{
-    MotorHomeReport, Sample, TrajStartError, TrajectoryGenerator, bounds_of,
-};
+use qmarc_controller::traj::{MotorHome, Sample, TrajStartError, TrajectoryGenerator, bounds_of};
 use qmarc_proto::state::FaultKind;
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
 use rsruckig::prelude::{DataArrayOrVec, InputParameter, Ruckig, ThrowErrorHandler, Trajectory};
@@ -403,7 +401,7 @@ impl TrajectoryGenerator for Approach {
         self.path.homed_frame()
     }
 
-    fn homing_report(&self) -> Option<&[MotorHomeReport]> {
+    fn homing_report(&self) -> Option<&[MotorHome]> {
         self.path.homing_report()
     }
 

@@ -127,7 +127,7 @@ fn limit_switch_trip_disables_every_motor_in_the_same_cycle() {
     let s = settings();
     let mut params = lockstep();
     // Motor 2 starts 300 counts below its bottom switch; the step drives it through.
-    params.start_counts[1] = params.bottom_switch_counts - 300.0;
+    params.start_counts[1] = params.plant.bottom_switch_counts - 300.0;
     let mut link = sim_core(params);
     let mut servo = step_servo(&s);
     let stop = AtomicBool::new(false);
@@ -418,7 +418,7 @@ fn limits() -> MoveLimits {
 #[test]
 fn a_following_error_past_its_limit_ends_the_move_in_that_cycle() {
     let mut p = lockstep();
-    p.stall_motor = Some(1);
+    p.plant.stall_motor = Some(2); // 1-based
     let stalled = MovePlan { limits: limits(), ..plan(3) };
     let (servo, link, r) = run_with(stalled, Box::new(Ramp(2.0, [0.0; MAX_MOTORS])), p);
     r.unwrap();
@@ -429,7 +429,7 @@ fn a_following_error_past_its_limit_ends_the_move_in_that_cycle() {
     assert_eq!(servo.phase(), Phase::Fault);
     // The integrated limit, with the instantaneous one out of the way: Σ FE of a stalled ramp.
     let mut p = lockstep();
-    p.stall_motor = Some(0);
+    p.plant.stall_motor = Some(1);
     let integrated = MovePlan {
         limits: MoveLimits {
             max_following_error: [1e9; MAX_MOTORS],
@@ -523,7 +523,8 @@ fn too_many_missed_periods_in_a_row_are_an_overrun() {
 fn an_unhomed_frame_is_refused_when_homing_is_required() {
     let s = settings();
     let plan = MovePlan { require_homed: true, ..plan(3) };
-    let p = SimParams { homed: false, counter_offset: 777, ..lockstep() };
+    let mut p = lockstep();
+    (p.plant.homed, p.plant.counter_offset) = (false, 777);
     let (_, link, r) = run_with(plan, (GENERATORS[0].build)(&s).unwrap(), p);
     assert_eq!(
         r.unwrap_err().to_string(),
@@ -538,7 +539,8 @@ fn homing_in_process_finds_the_switches_and_presets_the_frame() {
     s.homing.velocity_counts_per_s = 20_000.0;
     s.homing.creep_counts_per_s = 1_000.0;
     s.homing.settle_s = 0.02;
-    let p = SimParams { homed: false, counter_offset: 5_000, ..lockstep() };
+    let mut p = lockstep();
+    (p.plant.homed, p.plant.counter_offset) = (false, 5_000);
     let plan =
         MovePlan { monitor_switches: false, ..MovePlan::new(qmarc_config::Mode::Home, 3, 400_000) };
     let (servo, mut link, r) =
@@ -816,7 +818,7 @@ fn a_non_finite_command_or_output_is_a_fault_in_that_cycle_issue_27() {
 fn a_fault_after_a_host_stall_says_so_issue_28() {
     let fault_after = |stall_at: Option<u64>, deterministic: bool| {
         let mut p = lockstep();
-        p.stall_motor = Some(1);
+        p.plant.stall_motor = Some(2);
         let plan = MovePlan { limits: limits(), deterministic, ..plan(3) };
         let s = settings();
         let mut link = sim_core(p);

@@ -5,7 +5,8 @@ use crate::effector::{EffectorSummary, GatheredErrors};
 use qmarc_config::{Mode, MotorGains};
 use qmarc_controller::fault::{Fault, FaultKind};
 use qmarc_controller::stats::{AxisErrors, TimingStats};
-use qmarc_controller::traj::MotorHomeReport;
+/// Where homing found and left one motor (the homing generator's record, as it is).
+pub use qmarc_controller::traj::MotorHome;
 use qmarc_timer::Percentiles;
 use serde::{Deserialize, Serialize};
 
@@ -164,39 +165,6 @@ pub struct HomingReport {
     pub motors: Vec<MotorHome>,
     /// What the hwserver read right after the counters were preset, if it got that far.
     pub after: Option<AfterHoming>,
-}
-
-/// Where homing found and left one motor, counts in the frame before homing.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct MotorHome {
-    /// 1-based motor.
-    pub motor: usize,
-    /// Where the top switch was first seen active.
-    pub switch_found_counts: f64,
-    /// Where it cleared while backing off.
-    pub switch_cleared_counts: f64,
-    /// Home; it reads 0 afterwards.
-    pub home_counts: f64,
-    /// Where the motor stood when the next one started.
-    pub ended_counts: f64,
-    /// The motor was already on its top switch when its homing began.
-    pub started_on_switch: bool,
-    /// It got home.
-    pub home: bool,
-}
-
-impl From<&MotorHomeReport> for MotorHome {
-    fn from(r: &MotorHomeReport) -> MotorHome {
-        MotorHome {
-            motor: r.motor,
-            switch_found_counts: r.switch_found_counts,
-            switch_cleared_counts: r.switch_cleared_counts,
-            home_counts: r.home_counts,
-            ended_counts: r.ended_counts,
-            started_on_switch: r.started_on_switch,
-            home: r.home,
-        }
-    }
 }
 
 /// The positions and homed flags the hwserver read after homing preset the counters.

@@ -20,7 +20,7 @@ use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_report::Summary;
 use qmarc_report::output::{WriteError, write_results};
 use qmarc_report::summarize::summarize;
-use qmarc_report::summary::{AfterHoming, HomingReport, MotorHome};
+use qmarc_report::summary::{AfterHoming, HomingReport};
 use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
 use qmarc_timer::{MonotonicClock, Ticker, TickerKind, UnpacedTicker};
 use std::time::{Duration, Instant};
@@ -335,7 +335,7 @@ fn preset_home(
 /// the hwserver read right after the counters were preset.
 fn homing_report(servo: &Servo, after: Option<HwMsg>, n: usize) -> HomingReport {
     HomingReport {
-        motors: servo.homing_report().unwrap_or_default().iter().map(MotorHome::from).collect(),
+        motors: servo.homing_report().unwrap_or_default().to_vec(),
         after: after.map(|r| AfterHoming {
             positions_counts: r.data[..n].to_vec(),
             homed: r.aux[..n].iter().map(|&f| MotorFlags(f).homed()).collect(),
@@ -346,6 +346,17 @@ fn homing_report(servo: &Servo, after: Option<HwMsg>, n: usize) -> HomingReport 
 /// Samples the gather buffer holds for a stream: `gather.stream_max_s` of servo periods.
 pub fn stream_gather_samples(settings: &Settings) -> u64 {
     (settings.gather.stream_max_s / settings.period_s()).ceil() as u64
+}
+
+/// Cycles the loop holds the end of a path of `mode` with its loop closed
+/// (`trajectory.settle_s`): none when homing, which settles every motor at home itself, or
+/// checking, which rests after each pulse.
+pub fn settle_cycles(settings: &Settings, mode: Mode) -> u64 {
+    if mode == Mode::Home || mode == Mode::Check {
+        0
+    } else {
+        (settings.trajectory.settle_s / settings.period_s()).round() as u64
+    }
 }
 
 /// The plan of `mode` with `settings`: the limits of the settings, software limits only in a
@@ -370,12 +381,7 @@ pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: b
         deterministic,
         starve_hold_cycles: (settings.trajectory.starve_hold_ms * 1e6 / settings.period_ns() as f64)
             .ceil() as u64,
-        // Homing settles every motor at home itself; the check rests after each pulse.
-        settle_cycles: if homing || mode == Mode::Check {
-            0
-        } else {
-            (settings.trajectory.settle_s / settings.period_s()).round() as u64
-        },
+        settle_cycles: settle_cycles(settings, mode),
         stream_gather_samples: stream_gather_samples(settings),
         limits,
         require_homed: !homing && !unhomed && !matches!(mode, Mode::Jog | Mode::Check),

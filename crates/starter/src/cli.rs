@@ -6,20 +6,7 @@ use clap::{Args, Subcommand};
 use qmarc_config::{ConfigLoadError, Mode, Names, Settings};
 use std::path::PathBuf;
 
-/// Parses the command line of a QMARC program. A wrong command line prints clap's message and
-/// exits with [`qmarc_proto::exit::USAGE`] (clap's own code, 2, would read as "fault"); `--help`
-/// and `--version` print and exit 0.
-pub fn parse_or_exit<T: clap::Parser>() -> T {
-    match T::try_parse() {
-        Ok(t) => t,
-        Err(e) => {
-            let code =
-                if e.use_stderr() { qmarc_proto::exit::USAGE } else { qmarc_proto::exit::OK };
-            let _ = e.print();
-            std::process::exit(i32::from(code));
-        }
-    }
-}
+pub use qmarc_config::program::parse_or_exit;
 
 /// Options of every move; flags override the settings file for this run. They are global:
 /// they go before or after the subcommand (`qmarc-starter --out x step` or

@@ -13,7 +13,10 @@
 #![deny(missing_docs)]
 
 pub mod cli;
+mod lost;
+pub mod moves;
 pub mod path;
+mod status;
 pub mod supervise;
 pub mod trials;
 pub mod tune;

@@ -1,11 +1,11 @@
 //! How a run that did not end well is told: a controller lost or not, a process that stopped
 //! responding, what the starter knows when the controller died.
 
+use crate::supervise;
+use crate::{Exit, describe_exit};
 use qmarc_config::Settings;
 use qmarc_proto::state::FaultKind;
 use qmarc_report::Summary;
-use qmarc_starter::supervise;
-use qmarc_starter::{Exit, describe_exit};
 
 /// Whether the controller, ended by `exit` without a summary, was lost: killed, or failed
 /// once its move had `began` (a panic, data it could not write anywhere). One that refused

@@ -127,7 +127,7 @@ pub fn path_ends(settings: &qmarc_config::Settings) -> Result<(Vec<f64>, Vec<f64
 pub fn on_the_path(settings: &qmarc_config::Settings) -> Result<qmarc_config::Settings, String> {
     let mut s = settings.clone();
     s.sim.start_counts = path_ends(settings)?.0;
-    s.sim.homed = true;
+    s.sim.plant.homed = true;
     s.sim.state_file = None;
     Ok(s)
 }

@@ -109,7 +109,7 @@ fn a_move_cut_short_is_not_judged_for_following() {
     // The same step run to its end, on a seized motor, is still judged.
     let mut s = xz_spec().settings;
     s.step.duration_s = 0.5;
-    s.sim.stall_motor = Some(2);
+    s.sim.plant.stall_motor = Some(2);
     for m in &mut s.safety {
         m.max_integrated_error_counts = 1e9; // the seized motor runs the step to its end
     }

@@ -13,15 +13,16 @@
 //! with the same requests give identical data).
 
 use crate::backend::{Backend, BackendOpenError, HwFault, Inputs, Outputs};
-use qmarc_config::{Settings, SimSettings};
+use qmarc_config::{Settings, SimPlant};
 use qmarc_proto::{COUNTER_MASK, COUNTER_ZERO, DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, Status};
 use qmarc_timer::clock::monotonic_now_ns;
 
 pub mod plant;
 use plant::{AxisState, VelocityLoop};
 
-/// Parameters of the simulated robot. Every constant of the model is here; the defaults are
-/// the values of `../shared/notes/deltabot.md` (an assumption, not measured data).
+/// Parameters of the simulated robot: the settings' plant ([`SimPlant`], every constant of the
+/// model; the defaults are the values of `../shared/notes/deltabot.md`, an assumption, not
+/// measured data) with the motors, the period and the clock of one run.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimParams {
     /// Motors simulated (1‥[`MAX_MOTORS`]).
@@ -30,66 +31,23 @@ pub struct SimParams {
     pub period_ns: u64,
     /// Lock-step clock (deterministic) instead of real time.
     pub lockstep: bool,
-    /// Amplifier gain: motor velocity in counts/s per volt of command.
-    pub kv_counts_per_s_per_v: f64,
-    /// Velocity-loop lag of the enabled amplifier, s (when `velocity_loop_hz` is 0).
-    pub tau_s: f64,
-    /// Natural frequency of the amplifier's second-order velocity loop, Hz; 0: the
-    /// first-order lag `tau_s`.
-    pub velocity_loop_hz: f64,
-    /// Damping ratio of the second-order velocity loop.
-    pub velocity_loop_zeta: f64,
-    /// Time constant of a disabled motor coasting to rest, s.
-    pub coast_tau_s: f64,
     /// Position of each motor at start, counts in the homed frame.
     pub start_counts: [f64; MAX_MOTORS],
-    /// Top limit switch position, counts in the homed frame (reached moving away from the
-    /// bottom switch).
-    pub top_switch_counts: f64,
-    /// Bottom limit switch position, counts in the homed frame.
-    pub bottom_switch_counts: f64,
-    /// The robot starts in the homed frame (its counters "kept counting since the last
-    /// homing"); false: the counters start `counter_offset` counts away from it.
-    pub homed: bool,
-    /// When not homed: how far the counter frame is from the homed one, counts.
-    pub counter_offset: i64,
-    /// Fault injection: this motor (0-based) does not move, whatever it is told (a seized
-    /// joint, a broken coupling).
-    pub stall_motor: Option<usize>,
-    /// Fault injection: this motor's (0-based) top switch sticks once it has tripped.
-    pub stuck_top_motor: Option<usize>,
-    /// Fault injection: this motor (0-based) moves against its command (an amplifier wired
-    /// the other way round).
-    pub reversed_motor: Option<usize>,
-    /// Fault injection: the emergency-stop chain is open from the first to the second time,
-    /// s on the simulator's clock (see [`SimDeltabot::estop_button`] for a button pressed from
-    /// outside).
-    pub estop_open_s: Option<[f64; 2]>,
+    /// The plant, switches, frame and fault injection (motors 1-based; see
+    /// [`SimDeltabot::estop_button`] for an emergency stop pressed from outside).
+    pub plant: SimPlant,
 }
 
 impl Default for SimParams {
-    /// The plant and switches of the settings' defaults ([`SimSettings::default`], where each
-    /// is defined once), three motors at 400 µs, paced, no fault injected.
+    /// The settings' plant ([`SimPlant::default`], where each constant is defined once), three
+    /// motors at 400 µs, paced, no fault injected.
     fn default() -> SimParams {
-        let d = SimSettings::default();
         SimParams {
             n_motors: 3,
             period_ns: 400_000,
             lockstep: false,
-            kv_counts_per_s_per_v: d.kv,
-            tau_s: d.tau_s,
-            velocity_loop_hz: d.velocity_loop_hz,
-            velocity_loop_zeta: d.velocity_loop_zeta,
-            coast_tau_s: d.coast_tau_s,
             start_counts: [0.0; MAX_MOTORS],
-            top_switch_counts: d.top_switch_counts,
-            bottom_switch_counts: d.bottom_switch_counts,
-            homed: d.homed,
-            counter_offset: d.counter_offset,
-            stall_motor: None,
-            stuck_top_motor: None,
-            reversed_motor: None,
-            estop_open_s: d.estop_open_s,
+            plant: SimPlant::default(),
         }
     }
 }
@@ -112,76 +70,54 @@ pub enum SimParamsError {
 
 impl SimParams {
     /// The simulated robot of `s` (`[sim]`, the motors and period of `[general]`), in
-    /// lock-step when `lockstep`. Fault-injection motors go from 1-based to 0-based here.
+    /// lock-step when `lockstep`.
     pub fn from_settings(s: &Settings, lockstep: bool) -> SimParams {
-        let sim = &s.sim;
         let mut start_counts = [0.0; MAX_MOTORS];
-        for (c, v) in start_counts.iter_mut().zip(&sim.start_counts) {
+        for (c, v) in start_counts.iter_mut().zip(&s.sim.start_counts) {
             *c = *v;
         }
         SimParams {
             n_motors: s.n_motors,
             period_ns: s.period_ns(),
             lockstep,
-            kv_counts_per_s_per_v: sim.kv,
-            tau_s: sim.tau_s,
-            velocity_loop_hz: sim.velocity_loop_hz,
-            velocity_loop_zeta: sim.velocity_loop_zeta,
-            coast_tau_s: sim.coast_tau_s,
             start_counts,
-            top_switch_counts: sim.top_switch_counts,
-            bottom_switch_counts: sim.bottom_switch_counts,
-            homed: sim.homed,
-            counter_offset: sim.counter_offset,
-            // 1-based in the settings; 0 there means none, and a 0 that reaches us anyway
-            // (a hand-written run file) is refused by `validate`, never wrapped around.
-            stall_motor: sim.stall_motor.map(|m| m.checked_sub(1).unwrap_or(usize::MAX)),
-            stuck_top_motor: sim.stuck_top_motor.map(|m| m.checked_sub(1).unwrap_or(usize::MAX)),
-            reversed_motor: sim.reversed_motor.map(|m| m.checked_sub(1).unwrap_or(usize::MAX)),
-            estop_open_s: sim.estop_open_s,
+            plant: s.sim.plant,
         }
     }
 
     /// Checks every parameter.
     pub fn validate(&self) -> Result<(), SimParamsError> {
         let bad = |name, value, expected| Err(SimParamsError::OutOfRange { name, value, expected });
+        let p = &self.plant;
         if !(1..=MAX_MOTORS).contains(&self.n_motors) {
             return bad("motors", self.n_motors as f64, "1 to 4");
         }
         if self.period_ns == 0 {
             return bad("period", 0.0, "a positive period");
         }
-        let positive = [
-            ("kv", self.kv_counts_per_s_per_v),
-            ("tau_s", self.tau_s),
-            ("coast_tau_s", self.coast_tau_s),
-        ];
+        let positive = [("kv", p.kv), ("tau_s", p.tau_s), ("coast_tau_s", p.coast_tau_s)];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
                 return bad(name, v, "finite and > 0");
             }
         }
-        if !(self.velocity_loop_hz.is_finite() && self.velocity_loop_hz >= 0.0) {
-            return bad("velocity_loop_hz", self.velocity_loop_hz, "finite and ≥ 0");
+        if !(p.velocity_loop_hz.is_finite() && p.velocity_loop_hz >= 0.0) {
+            return bad("velocity_loop_hz", p.velocity_loop_hz, "finite and ≥ 0");
         }
-        if self.velocity_loop_hz > 0.0
-            && !(self.velocity_loop_zeta > 0.0 && self.velocity_loop_zeta < 1.0)
-        {
-            return bad("velocity_loop_zeta", self.velocity_loop_zeta, "between 0 and 1");
+        if p.velocity_loop_hz > 0.0 && !(p.velocity_loop_zeta > 0.0 && p.velocity_loop_zeta < 1.0) {
+            return bad("velocity_loop_zeta", p.velocity_loop_zeta, "between 0 and 1");
         }
-        for v in [self.top_switch_counts, self.bottom_switch_counts] {
+        for v in [p.top_switch_counts, p.bottom_switch_counts] {
             if !v.is_finite() {
                 return bad("switch position", v, "finite");
             }
         }
-        if self.top_switch_counts == self.bottom_switch_counts {
-            return bad("top_switch", self.top_switch_counts, "different from bottom_switch");
+        if p.top_switch_counts == p.bottom_switch_counts {
+            return bad("top_switch", p.top_switch_counts, "different from bottom_switch");
         }
-        for m in [self.stall_motor, self.stuck_top_motor, self.reversed_motor].into_iter().flatten()
-        {
-            if m >= self.n_motors {
-                let one_based = if m == usize::MAX { 0.0 } else { m as f64 + 1.0 };
-                return bad("fault-injection motor", one_based, "one of the simulated motors");
+        for m in [p.stall_motor, p.stuck_top_motor, p.reversed_motor].into_iter().flatten() {
+            if !(1..=self.n_motors).contains(&m) {
+                return bad("fault-injection motor", m as f64, "one of the simulated motors");
             }
         }
         for &s in &self.start_counts[..self.n_motors] {
@@ -273,16 +209,21 @@ impl SimDeltabot {
     pub fn new(p: SimParams) -> Result<SimDeltabot, SimParamsError> {
         p.validate()?;
         let mut axes = [Axis::default(); MAX_MOTORS];
-        let offset = if p.homed { 0 } else { p.counter_offset };
+        let offset = if p.plant.homed { 0 } else { p.plant.counter_offset };
         for (axis, &start) in axes.iter_mut().zip(&p.start_counts) {
             axis.x = start;
             axis.counter_offset = COUNTER_ZERO.wrapping_add(offset as u32);
         }
-        let top_dir = if p.top_switch_counts < p.bottom_switch_counts { -1.0 } else { 1.0 };
+        let top_dir =
+            if p.plant.top_switch_counts < p.plant.bottom_switch_counts { -1.0 } else { 1.0 };
         Ok(SimDeltabot {
             p,
             axes,
-            velocity_loop: VelocityLoop::new(p.velocity_loop_hz, p.velocity_loop_zeta, p.tau_s),
+            velocity_loop: VelocityLoop::new(
+                p.plant.velocity_loop_hz,
+                p.plant.velocity_loop_zeta,
+                p.plant.tau_s,
+            ),
             switches: Status::OK,
             stuck: false,
             events: Vec::with_capacity(SIM_EVENT_CAPACITY),
@@ -291,7 +232,7 @@ impl SimDeltabot {
             t_ns: 0,
             origin_ns: monotonic_now_ns(),
             top_dir,
-            homed: [p.homed; MAX_MOTORS],
+            homed: [p.plant.homed; MAX_MOTORS],
             state_file: None,
             events_file: None,
             estop_button: std::sync::Arc::default(),
@@ -308,7 +249,7 @@ impl SimDeltabot {
     fn estop_open(&self) -> bool {
         let t = self.t_ns as f64 * 1e-9;
         self.estop_button.load(std::sync::atomic::Ordering::Relaxed)
-            || self.p.estop_open_s.is_some_and(|[from, to]| (from..to).contains(&t))
+            || self.p.plant.estop_open_s.is_some_and(|[from, to]| (from..to).contains(&t))
     }
 
     /// The registry's check: a robot whose homed frame `sim.state_file` can keep.
@@ -404,18 +345,17 @@ impl SimDeltabot {
         let n = self.p.n_motors;
         let volts_per_code = DAC_FULL_SCALE_V / f64::from(DAC_MAX);
         for (m, axis) in self.axes[..n].iter_mut().enumerate() {
-            if self.p.stall_motor == Some(m) {
+            if SimPlant::is(self.p.plant.stall_motor, m) {
                 (axis.v, axis.a) = (0.0, 0.0);
                 continue;
             }
             let mut s = AxisState { x: axis.x, v: axis.v, a: axis.a };
             if axis.enabled {
-                let wired = if self.p.reversed_motor == Some(m) { -1.0 } else { 1.0 };
-                let target =
-                    wired * self.p.kv_counts_per_s_per_v * volts_per_code * f64::from(axis.dac);
+                let wired = if SimPlant::is(self.p.plant.reversed_motor, m) { -1.0 } else { 1.0 };
+                let target = wired * self.p.plant.kv * volts_per_code * f64::from(axis.dac);
                 self.velocity_loop.advance(&mut s, target, dt);
             } else {
-                plant::first_order(&mut s, 0.0, self.p.coast_tau_s, dt);
+                plant::first_order(&mut s, 0.0, self.p.plant.coast_tau_s, dt);
             }
             (axis.x, axis.v, axis.a) = (s.x, s.v, s.a);
         }
@@ -438,14 +378,14 @@ impl SimDeltabot {
     fn limits(&mut self) -> Status {
         let mut s = Status::OK;
         for (m, axis) in self.axes[..self.p.n_motors].iter().enumerate() {
-            if (axis.x - self.p.top_switch_counts) * self.top_dir >= 0.0 {
+            if (axis.x - self.p.plant.top_switch_counts) * self.top_dir >= 0.0 {
                 s |= Status::limit_top(m);
             }
-            if (axis.x - self.p.bottom_switch_counts) * self.top_dir <= 0.0 {
+            if (axis.x - self.p.plant.bottom_switch_counts) * self.top_dir <= 0.0 {
                 s |= Status::limit_bottom(m);
             }
         }
-        if let Some(m) = self.p.stuck_top_motor {
+        if let Some(m) = self.p.plant.stuck_top_motor.and_then(|m| m.checked_sub(1)) {
             self.stuck |= s.contains(Status::limit_top(m));
             if self.stuck {
                 s |= Status::limit_top(m);

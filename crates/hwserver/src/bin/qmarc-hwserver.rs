@@ -157,18 +157,6 @@ fn stopped_as_it_started() -> ExitCode {
 }
 
 fn main() -> ExitCode {
-    let args = match HwServerArgs::try_parse() {
-        Ok(a) => a,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(if e.use_stderr() { exit::USAGE } else { exit::OK });
-        }
-    };
-    match run(&args) {
-        Ok(code) => code,
-        Err((code, e)) => {
-            eprintln!("qmarc-hwserver: error: {e:#}");
-            ExitCode::from(code)
-        }
-    }
+    let args: HwServerArgs = qmarc_config::program::parse_or_exit();
+    qmarc_config::program::conclude("qmarc-hwserver", run(&args))
 }

@@ -58,18 +58,6 @@ fn run(args: &ControllerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
 }
 
 fn main() -> ExitCode {
-    let args = match ControllerArgs::try_parse() {
-        Ok(a) => a,
-        Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(if e.use_stderr() { exit::USAGE } else { exit::OK });
-        }
-    };
-    match run(&args) {
-        Ok(code) => code,
-        Err((code, e)) => {
-            eprintln!("qmarc-controller: error: {e:#}");
-            ExitCode::from(code)
-        }
-    }
+    let args: ControllerArgs = qmarc_config::program::parse_or_exit();
+    qmarc_config::program::conclude("qmarc-controller", run(&args))
 }

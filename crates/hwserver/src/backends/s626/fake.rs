@@ -37,11 +37,11 @@ impl FakePlant {
             *c = *v;
         }
         FakePlant {
-            kv: s.sim.kv,
-            lag_s: s.sim.tau_s,
+            kv: s.sim.plant.kv,
+            lag_s: s.sim.plant.tau_s,
             start_counts,
-            switches: Some((s.sim.top_switch_counts, s.sim.bottom_switch_counts)),
-            reversed: s.sim.reversed_motor.and_then(|m| m.checked_sub(1)),
+            switches: Some((s.sim.plant.top_switch_counts, s.sim.plant.bottom_switch_counts)),
+            reversed: s.sim.plant.reversed_motor.and_then(|m| m.checked_sub(1)),
         }
     }
 

@@ -12,8 +12,7 @@ fn enabled_axis_approaches_kv_times_volts_with_lag_tau() {
     let p = SimParams {
         n_motors: 1,
         lockstep: true,
-        kv_counts_per_s_per_v: 25_000.0,
-        velocity_loop_hz: 0.0,
+        plant: SimPlant { kv: 25_000.0, velocity_loop_hz: 0.0, ..SimPlant::default() },
         ..SimParams::default()
     };
     let mut sim = SimDeltabot::new(p).unwrap();
@@ -40,7 +39,7 @@ fn the_default_velocity_loop_is_second_order_issue_13() {
     let mut sim = lockstep(1);
     sim.set_amp_enable(0, true).unwrap();
     sim.write_dacs(&[8191, 0, 0, 0]).unwrap();
-    let target = SimParams::default().kv_counts_per_s_per_v * 10.0;
+    let target = SimParams::default().plant.kv * 10.0;
     let mut inputs = Inputs::default();
     let mut peak = 0.0f64;
     for _ in 0..250 {
@@ -69,8 +68,11 @@ fn counter_wraps_at_24_bits_and_loads() {
         n_motors: 1,
         lockstep: true,
         start_counts: [8_388_608.0, 0.0, 0.0, 0.0],
-        top_switch_counts: -1e9,
-        bottom_switch_counts: 1e9,
+        plant: SimPlant {
+            top_switch_counts: -1e9,
+            bottom_switch_counts: 1e9,
+            ..SimPlant::default()
+        },
         ..SimParams::default()
     });
     assert!(sim.is_err(), "start beyond ±2^23 is refused");
@@ -78,8 +80,11 @@ fn counter_wraps_at_24_bits_and_loads() {
         n_motors: 1,
         lockstep: true,
         start_counts: [8_388_000.0, 0.0, 0.0, 0.0],
-        top_switch_counts: -1e9,
-        bottom_switch_counts: 1e9,
+        plant: SimPlant {
+            top_switch_counts: -1e9,
+            bottom_switch_counts: 1e9,
+            ..SimPlant::default()
+        },
         ..SimParams::default()
     });
     let mut sim = sim.unwrap();
@@ -110,8 +115,8 @@ fn switches_trip_beyond_their_positions() {
     sim.read_inputs(&mut inputs).unwrap();
     assert_eq!(inputs.limits, Status::limit_top(0) | Status::limit_bottom(1));
     // Reversed orientation: top above bottom.
-    p.top_switch_counts = 100.0;
-    p.bottom_switch_counts = -100.0;
+    p.plant.top_switch_counts = 100.0;
+    p.plant.bottom_switch_counts = -100.0;
     p.start_counts = [150.0, -150.0, 0.0, 0.0];
     let mut sim = SimDeltabot::new(p).unwrap();
     sim.read_inputs(&mut inputs).unwrap();
@@ -131,7 +136,10 @@ fn lockstep_advances_one_period_per_read() {
 
 #[test]
 fn invalid_parameters_are_named() {
-    let p = SimParams { tau_s: -1.0, ..SimParams::default() };
+    let p = SimParams {
+        plant: SimPlant { tau_s: -1.0, ..SimPlant::default() },
+        ..SimParams::default()
+    };
     assert_eq!(
         SimDeltabot::new(p).unwrap_err().to_string(),
         "simulator parameter `tau_s` = -1 is invalid: finite and > 0"

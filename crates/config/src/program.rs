@@ -1,0 +1,40 @@
+//! The two ends of every QMARC program's `main`: reading its command line
+//! ([`parse_or_exit`]) and turning what it did into its exit code ([`conclude`]), so that
+//! `qmarc-starter`, `qmarc-hwserver`, `qmarc-controller`, `qmarc` and `qmarc-bench` all
+//! answer a wrong command line, `--help` and an error the same way (README "Exit codes",
+//! [`qmarc_proto::exit`]).
+
+use std::io::Write;
+use std::process::ExitCode;
+
+/// Parses the command line of a QMARC program. A wrong command line prints clap's message and
+/// exits with [`qmarc_proto::exit::USAGE`] (clap's own code, 2, would read as "fault"); `--help`
+/// and `--version` print and exit 0.
+pub fn parse_or_exit<T: clap::Parser>() -> T {
+    match T::try_parse() {
+        Ok(t) => t,
+        Err(e) => {
+            let code =
+                if e.use_stderr() { qmarc_proto::exit::USAGE } else { qmarc_proto::exit::OK };
+            let _ = e.print();
+            std::process::exit(i32::from(code));
+        }
+    }
+}
+
+/// What a program's work ended with: its exit code, or the code of the table and the error
+/// that ended it.
+pub type Outcome<E> = Result<ExitCode, (u8, E)>;
+
+/// The exit code of `outcome`; an error is first said on standard error as
+/// `<program>: error: <error>` (`{:#}`: an `anyhow` error with its causes), without
+/// panicking when standard error is gone.
+pub fn conclude<E: std::fmt::Display>(program: &str, outcome: Outcome<E>) -> ExitCode {
+    match outcome {
+        Ok(code) => code,
+        Err((code, e)) => {
+            let _ = writeln!(std::io::stderr(), "{program}: error: {e:#}");
+            ExitCode::from(code)
+        }
+    }
+}

@@ -1,0 +1,536 @@
+//! One move through the process set, in steps: [`prepare`] checks everything and starts
+//! nothing; [`launch`] starts the two children and supervises them to their end;
+//! [`conclude`] finds (or writes) the move's summary; [`exit_code`] is README's "Exit codes"
+//! table, a pure function of what ended. [`one_move`] runs the four; `qmarc-starter`'s
+//! moves, trials and real tuning moves call it.
+
+use crate::lost::{controller_lost_message, lost, stopped_by, stopped_responding};
+use crate::status::StatusLine;
+use crate::supervise::{self, Supervised, Unresponsive};
+use crate::{Exit, check_iox_root, default_prefix, describe_exit, remove_stale_files, run_file};
+use anyhow::{Context, anyhow};
+use qmarc_config::{Mode, RunSpec, Settings};
+use qmarc_controller::gather::check_budget;
+use qmarc_plugins::registry;
+use qmarc_proto::exit;
+use qmarc_proto::progress::{Progress, Snapshot};
+use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
+use qmarc_proto::state::{FaultKind, Phase};
+use qmarc_report::Summary;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// A line on standard error that cannot fail: if whoever reads it went away (a closed pipe),
+/// the starter still stops its children and removes its files.
+#[macro_export]
+macro_rules! say {
+    ($($t:tt)*) => {{
+        let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!("{}\n", format_args!($($t)*)));
+    }};
+}
+
+/// An error and the exit code it ends the run with.
+pub type Failure = (u8, anyhow::Error);
+
+/// `?` for errors of the user's input: the run is refused.
+pub fn refused<E: Into<anyhow::Error>>(e: E) -> Failure {
+    (exit::REFUSED, e.into())
+}
+
+/// `?` for everything else.
+pub fn internal<E: Into<anyhow::Error>>(e: E) -> Failure {
+    (exit::INTERNAL, e.into())
+}
+
+/// What a move is asked to be: the settings (a file and the command line, or given), where
+/// the programs and the iceoryx2 files are, and how a trial's move differs.
+#[derive(Clone, Copy)]
+pub struct MoveRequest<'a> {
+    /// The options of every move (settings file, output folder, lock-step…).
+    pub opts: &'a crate::cli::MoveOptions,
+    /// The move and its own flags.
+    pub command: &'a crate::cli::Command,
+    /// `--bin-dir`.
+    pub bin_dir: Option<&'a Path>,
+    /// `--iox-prefix`.
+    pub iox_prefix: Option<&'a str>,
+    /// `--iox-root`.
+    pub iox_root: Option<&'a str>,
+    /// `--print-settings`: check, print the run file and start nothing.
+    pub print_settings: bool,
+    /// How a trial's move differs from a move by hand.
+    pub trial: TrialIo<'a>,
+}
+
+/// How a trial's move differs from a move by hand.
+#[derive(Clone, Copy, Default)]
+pub struct TrialIo<'a> {
+    /// The output folder instead of the settings'.
+    pub out: Option<&'a Path>,
+    /// The children's standard error goes here; no table is printed.
+    pub log: Option<&'a std::fs::File>,
+    /// Check everything, as `--print-settings` does, and start nothing.
+    pub check_only: bool,
+    /// These settings instead of the file's with the command line's (a tuning's candidate).
+    pub settings: Option<&'a Settings>,
+}
+
+/// A move checked and ready to start.
+pub struct Prepared {
+    /// The run both children get.
+    pub spec: RunSpec,
+    /// Where its iceoryx2 files are.
+    pub location: IpcLocation,
+    /// The hwserver's program.
+    pub hwserver_bin: PathBuf,
+    /// The controller's program.
+    pub controller_bin: PathBuf,
+    /// The iceoryx2 prefix was given (`--iox-prefix`): an earlier run's files under it are
+    /// removed before this one starts.
+    pub own_prefix: bool,
+}
+
+impl Prepared {
+    /// The settings of the run.
+    pub fn settings(&self) -> &Settings {
+        &self.spec.settings
+    }
+
+    /// Where the move's data go.
+    pub fn out_dir(&self) -> &Path {
+        &self.spec.settings.gather.out_dir
+    }
+}
+
+/// The settings of `req`: given, or the file's with the command line's, in the trial's folder.
+fn settings_of(req: &MoveRequest<'_>) -> Result<Settings, Failure> {
+    let names = crate::names();
+    let mut settings = match req.trial.settings {
+        Some(s) => s.clone(),
+        None => {
+            let mut s = req.opts.load(&names).map_err(refused)?;
+            req.command.apply(&mut s, &names).map_err(refused)?;
+            s
+        }
+    };
+    if let Some(out) = req.trial.out {
+        settings.gather.out_dir = out.to_path_buf();
+    }
+    Ok(settings)
+}
+
+/// The two children's programs in `bin_dir` (`--bin-dir`, or next to this program).
+fn programs(bin_dir: Option<&Path>) -> Result<(PathBuf, PathBuf), Failure> {
+    let dir = crate::bin_dir(bin_dir).map_err(internal)?;
+    let (hwserver, controller) = (dir.join("qmarc-hwserver"), dir.join("qmarc-controller"));
+    for b in [&hwserver, &controller] {
+        if !b.is_file() {
+            return Err(internal(anyhow!(
+                "{} not found: build the workspace first (`cargo build --release`)",
+                b.display()
+            )));
+        }
+    }
+    Ok((hwserver, controller))
+}
+
+/// Everything is checked before anything starts: the settings, the programs, the iceoryx2
+/// location, the hardware, the path, the gather budget and the output folder. Starts
+/// nothing, writes nothing.
+pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
+    let settings = settings_of(req)?;
+    let mode = req.command.mode();
+    let (hwserver_bin, controller_bin) = programs(req.bin_dir)?;
+    let prefix = req.iox_prefix.map_or_else(default_prefix, str::to_string);
+    let root = req.iox_root.unwrap_or(DEFAULT_ROOT);
+    let location = IpcLocation::checked(&prefix, root).map_err(|e| refused(anyhow!(e)))?;
+    check_iox_root(&location.root, req.iox_root.is_some()).map_err(|e| refused(anyhow!(e)))?;
+    location.config().map_err(refused)?;
+    let spec = RunSpec {
+        settings,
+        mode,
+        deterministic: req.opts.lockstep(),
+        unpaced: req.opts.unpaced,
+        unhomed: req.opts.unhomed,
+        iox_prefix: location.prefix.clone(),
+        iox_root: location.root.clone(),
+    };
+    let settings = &spec.settings;
+    if spec.unpaced && settings.hwserver.backend != "sim" {
+        return Err(refused(anyhow!(
+            "--unpaced runs only on the simulated robot (`--backend sim`), not on `{}`: real \
+             hardware moves in real time",
+            settings.hwserver.backend
+        )));
+    }
+    // The hardware: there, usable and as the settings describe it (a missing device fails
+    // here, at once, naming it).
+    qmarc_hwserver::backends::check(settings, spec.deterministic).map_err(refused)?;
+    check_path(settings, mode)?;
+    let own_prefix = req.iox_prefix.is_some();
+    Ok(Prepared { spec, location, hwserver_bin, controller_bin, own_prefix })
+}
+
+/// The path: knot files are read and checked now (streams are the controller's to read: it
+/// inherits standard input), and its data must fit the gather budget and the disk.
+fn check_path(settings: &Settings, mode: Mode) -> Result<(), Failure> {
+    let generator = qmarc_runner::run::generator_name(mode, settings);
+    let entry = registry::generator(generator)
+        .with_context(|| format!("no trajectory generator `{generator}`"))
+        .map_err(refused)?;
+    let planned = (entry.build)(settings).map_err(refused)?.samples();
+    let settle = qmarc_runner::run::settle_cycles(settings, mode);
+    let samples = planned.unwrap_or(qmarc_runner::run::stream_gather_samples(settings)) + settle;
+    check_budget(samples, settings.gather.every).map_err(refused)?;
+    let rows = samples.div_ceil(u64::from(settings.gather.every));
+    qmarc_report::output::check(
+        &settings.gather.out_dir,
+        qmarc_report::output::estimate_bytes(rows, settings.n_motors),
+    )
+    .map_err(refused)
+}
+
+/// How the two children ended.
+pub struct Ended {
+    /// How each child ended (hwserver first; the controller's missing if it could not start).
+    pub children: Vec<Supervised>,
+    /// What the progress page said last.
+    pub reached: Option<Snapshot>,
+    /// The user's stop flag (Ctrl-C, SIGTERM, the terminal gone).
+    pub stop: &'static AtomicBool,
+}
+
+impl Ended {
+    /// How the controller ended (None: it did not start, or did not end).
+    pub fn controller(&self) -> Option<Exit> {
+        self.children.iter().find(|s| s.name == "qmarc-controller").and_then(|s| s.exit)
+    }
+
+    /// How the hwserver ended.
+    pub fn hwserver(&self) -> Option<Exit> {
+        self.children.first().and_then(|s| s.exit)
+    }
+
+    /// Both children started and exited 0.
+    pub fn all_clean(&self) -> bool {
+        self.children.len() == 2
+            && self.children.iter().all(|s| s.exit.is_some_and(|e| e.success()))
+    }
+
+    /// The child that stopped responding, if one did.
+    pub fn unresponsive(&self) -> Option<(&'static str, Unresponsive)> {
+        self.children.iter().find_map(|s| s.unresponsive.map(|u| (s.name, u)))
+    }
+
+    /// Whether the user stopped the run.
+    pub fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    /// Whether the move had begun (it got past preparing) when the run ended.
+    pub fn began(&self) -> bool {
+        self.reached
+            .and_then(|r| Phase::from_code(r.phase))
+            .is_some_and(|p| !matches!(p, Phase::Idle | Phase::Preparing))
+    }
+}
+
+/// How long a stopped (SIGSTOP) child may stay stopped before it has stopped responding: as
+/// long as the other process would wait for it (the hwserver's watchdog, the controller's
+/// response timeout). In lock-step the other waits for as long as it lives (simulated time
+/// sees no stall): so does the starter.
+pub fn stall_limit(spec: &RunSpec) -> Duration {
+    let hw = &spec.settings.hwserver;
+    if spec.deterministic {
+        Duration::MAX
+    } else {
+        Duration::from_secs_f64(
+            spec.settings.period_s()
+                * f64::from(hw.watchdog_periods.max(hw.response_timeout_periods)),
+        )
+    }
+}
+
+/// Starts the two children on `p`'s run file and supervises them to their end (their
+/// standard error to `log`, if given): the output folder is locked meanwhile, and the run's
+/// shared-memory files are removed afterwards.
+pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failure> {
+    let _lock = qmarc_report::output::lock(p.out_dir()).map_err(refused)?;
+    remove_stale_files(&p.location.root);
+    if p.own_prefix {
+        crate::remove_own_stale_files(&p.location);
+    }
+    let stop = qmarc_timer::stop::install().map_err(internal)?;
+    let progress = Progress::create(&Progress::path(&p.location.prefix)).ok();
+    // The one settings value both children get, next to the run's shared memory.
+    let run = run_file(&p.location.prefix);
+    p.spec.write(&run).map_err(internal)?;
+    let child_args = [format!("--settings={}", run.display())];
+    // The children inherit this mask; the hwserver and the servo thread then pin themselves.
+    if let Err(e) = qmarc_timer::cpus::keep_off(&p.settings().timer.rt_cpus()) {
+        say!("qmarc-starter: warning: cannot keep off the real-time CPUs ({e})");
+    }
+    let mut children = spawn_both(p, &child_args, log)?;
+    let status = std::cell::RefCell::new(StatusLine::new(progress.as_ref()));
+    let said = |s: &Supervised| {
+        status.borrow_mut().clear();
+        match (s.exit, s.unresponsive) {
+            (Some(exit), _) if !exit.success() => {
+                say!("qmarc-starter: {}", describe_exit(s.name, exit))
+            }
+            (None, Some(u)) => say!("qmarc-starter: {}; ending the run", u.describe(s.name)),
+            _ => {}
+        }
+    };
+    let limit = stall_limit(&p.spec);
+    supervise::wait_all(&mut children, stop, limit, said, || status.borrow_mut().update());
+    status.borrow_mut().clear();
+    let reached = progress.as_ref().map(Progress::read);
+    drop(progress);
+    p.location.remove_files();
+    Ok(Ended { children, reached, stop })
+}
+
+/// The hwserver, then the controller. The hwserver has nothing to save: 3 s to end by
+/// itself, 2 s after SIGTERM. The controller may be writing a long move's data: two minutes
+/// to end by itself, and after SIGTERM (which it answers within a second, writing or not)
+/// 10 s. A controller that cannot start stops the hwserver.
+fn spawn_both(
+    p: &Prepared,
+    args: &[String],
+    log: Option<&std::fs::File>,
+) -> Result<Vec<Supervised>, Failure> {
+    let hwserver = supervise::spawn_logged(&p.hwserver_bin, args, log)
+        .with_context(|| format!("cannot start {}", p.hwserver_bin.display()))
+        .map_err(|e| {
+            p.location.remove_files();
+            internal(e)
+        })?;
+    let secs = Duration::from_secs;
+    let mut children = vec![Supervised::new("qmarc-hwserver", hwserver, secs(3), secs(2))];
+    match supervise::spawn_logged(&p.controller_bin, args, log) {
+        Ok(c) => children.push(Supervised::new("qmarc-controller", c, secs(120), secs(10))),
+        Err(e) => {
+            say!("qmarc-starter: cannot start {}: {e}", p.controller_bin.display());
+            supervise::send(&children[0].child, nix::sys::signal::Signal::SIGTERM);
+        }
+    }
+    Ok(children)
+}
+
+/// The summary of the move and the folder it is in: the one this run's controller wrote
+/// (amended when a child stopped responding: the controller could not know why the run
+/// ended), or, for a controller that died after its move began, one the starter writes with
+/// what it knows.
+pub fn conclude(p: &Prepared, e: &Ended) -> Option<(Summary, PathBuf)> {
+    let out_dir = p.out_dir();
+    let unresponsive = e.unresponsive();
+    if let Some((mut s, dir)) = read_own_summary(out_dir) {
+        if let Some((name, u)) = unresponsive {
+            stopped_responding(&mut s, name, u);
+            if let Err(err) = qmarc_report::output::amend_summary(&dir, &s) {
+                say!("qmarc-starter: {err}");
+            }
+        }
+        return Some((s, dir));
+    }
+    // A controller that died — killed, or failed once its move had begun (a panic, data it
+    // could not write anywhere) — wrote nothing: say what is known, and what the hwserver
+    // did. One that refused before anything moved has said why.
+    if let Some(exit) = e.controller().filter(|x| lost(*x, e.began(), stopped_by(e.stop))) {
+        let settings = p.settings();
+        let mut s = Summary::controller_lost(
+            (p.spec.mode, p.spec.deterministic),
+            settings.n_motors,
+            settings.period_us,
+            e.reached.map_or(0, |r| r.cycle),
+            controller_lost_message(exit, e.hwserver(), settings, e.reached),
+        );
+        if let Some((name, u)) = unresponsive {
+            stopped_responding(&mut s, name, u);
+        }
+        if let Err(err) = qmarc_report::output::write_summary_set(out_dir, &s) {
+            say!("qmarc-starter: {err}");
+        }
+        return Some((s, out_dir.to_path_buf()));
+    }
+    if e.controller().is_some_and(Exit::success) {
+        // It ended well and said it wrote its results: they are there, but cannot be read.
+        let why = Summary::read(out_dir).err().unwrap_or_else(|| "not this run's".into());
+        say!("qmarc-starter: the controller ended well, but its summary cannot be read: {why}");
+    }
+    None
+}
+
+/// The summary this run's controller wrote and its folder: `summary.json` in `out_dir` if
+/// this starter's (an older run's is not this run's result), else the one in the rescue
+/// folder.
+pub fn read_own_summary(out_dir: &Path) -> Option<(Summary, PathBuf)> {
+    let me = std::process::id();
+    let rescue = qmarc_report::output::rescue_dir(me);
+    [out_dir.to_path_buf(), rescue]
+        .into_iter()
+        .filter_map(|d| Summary::read(&d).ok().map(|s| (s, d)))
+        .find(|(s, _)| s.starter_pid == me)
+}
+
+/// What the exit code of a move is decided from.
+#[derive(Debug, Clone, Copy)]
+pub struct Ending<'a> {
+    /// The move's summary, if there is one.
+    pub summary: Option<&'a Summary>,
+    /// How the controller ended.
+    pub controller: Option<Exit>,
+    /// Both children started and exited 0.
+    pub all_clean: bool,
+    /// A child stopped responding and the run was ended for it.
+    pub unresponsive: bool,
+    /// The user stopped the run.
+    pub stopped: bool,
+}
+
+/// The exit code of a move: README's "Exit codes" table ([`qmarc_proto::exit`]).
+pub fn exit_code(e: &Ending<'_>) -> u8 {
+    let code_is = |c: u8| matches!(e.controller, Some(Exit::Code(x)) if x == i32::from(c));
+    let fault_is = |s: &Summary, k| s.fault.as_ref().is_some_and(|f| f.kind == k);
+    match e.summary {
+        // The check ran, and found a motor to mend.
+        Some(s) if s.check.as_ref().is_some_and(|c| c.iter().any(|m| !m.ok)) => exit::FAULT,
+        // A process stopped responding: the run was ended for it.
+        _ if e.unresponsive => exit::FAULT,
+        // The move ran, but its results are not where they were asked for.
+        Some(s) if s.ok && code_is(exit::RESCUED) => exit::RESCUED,
+        Some(s) if s.ok && e.all_clean => exit::OK,
+        Some(s) if fault_is(s, FaultKind::Aborted) => exit::INTERRUPTED,
+        // The move ran, but its controller failed after it (its data could not be written).
+        Some(s) if code_is(exit::INTERNAL) && fault_is(s, FaultKind::ControllerLost) => {
+            exit::INTERNAL
+        }
+        Some(s) if s.fault.is_some() => exit::FAULT,
+        // Done without a fault, but not ok (figures that are not numbers).
+        Some(s) if !s.ok => exit::FAULT,
+        None if code_is(exit::REFUSED) => exit::REFUSED,
+        None if code_is(exit::INTERRUPTED) => exit::INTERRUPTED,
+        _ if e.stopped => exit::INTERRUPTED,
+        _ => exit::INTERNAL,
+    }
+}
+
+/// How a move ended: its exit code, its summary and the folder it is in, and the robot of
+/// its settings (for the end-effector plots).
+pub struct Outcome {
+    /// README's exit code.
+    pub code: u8,
+    /// The summary and its folder.
+    pub summary: Option<(Summary, PathBuf)>,
+    /// The settings' robot.
+    pub robot: Option<qmarc_kinematics::Robot>,
+}
+
+/// One move: prepared, launched, concluded; the summary's table printed unless it is a
+/// trial's (which logs). With `--print-settings` or a trial's `check_only`, only prepared.
+pub fn one_move(req: &MoveRequest<'_>) -> Result<Outcome, Failure> {
+    let p = prepare(req)?;
+    if req.print_settings || req.trial.check_only {
+        if req.print_settings {
+            println!("{}", p.spec.to_json());
+        }
+        return Ok(Outcome { code: exit::OK, summary: None, robot: None });
+    }
+    let ended = launch(&p, req.trial.log)?;
+    let summary = conclude(&p, &ended);
+    match &summary {
+        Some(_) if req.trial.log.is_some() => {}
+        Some((s, _)) => {
+            let _ = write!(std::io::stdout(), "{}", qmarc_report::table::render(s));
+        }
+        None => say!(
+            "qmarc-starter: no move was made{}",
+            if ended.stopped() { ": interrupted before it began" } else { "" }
+        ),
+    }
+    let code = exit_code(&Ending {
+        summary: summary.as_ref().map(|(s, _)| s),
+        controller: ended.controller(),
+        all_clean: ended.all_clean(),
+        unresponsive: ended.unresponsive().is_some(),
+        stopped: ended.stopped(),
+    });
+    Ok(Outcome { code, summary, robot: p.settings().robot() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn summary(ok: bool, fault: Option<FaultKind>) -> Summary {
+        let mut s = Summary::controller_lost((Mode::Step, true), 3, 400, 10, String::new());
+        s.ok = ok;
+        s.fault = fault.map(|kind| qmarc_report::summary::FaultReport {
+            kind,
+            motor: None,
+            cycle: 10,
+            message: String::new(),
+            hw_time_ns: None,
+        });
+        s
+    }
+
+    fn ending(summary: Option<&Summary>, controller: Option<Exit>) -> Ending<'_> {
+        let all_clean = controller.is_some_and(Exit::success);
+        Ending { summary, controller, all_clean, unresponsive: false, stopped: false }
+    }
+
+    /// README's "Exit codes", row by row, from what a move ended with.
+    #[test]
+    fn the_exit_codes_are_the_readme_table() {
+        let ok = summary(true, None);
+        let code = |c: u8| Some(Exit::Code(i32::from(c)));
+        assert_eq!(exit_code(&ending(Some(&ok), code(exit::OK))), exit::OK);
+        // A clean summary with a child that did not end cleanly is not ok.
+        let unclean = Ending { all_clean: false, ..ending(Some(&ok), code(exit::OK)) };
+        assert_eq!(exit_code(&unclean), exit::INTERNAL);
+        let fault = summary(false, Some(FaultKind::FollowingError));
+        assert_eq!(exit_code(&ending(Some(&fault), code(exit::FAULT))), exit::FAULT);
+        let not_numbers = summary(false, None);
+        assert_eq!(exit_code(&ending(Some(&not_numbers), code(exit::OK))), exit::FAULT);
+        let stuck = Ending { unresponsive: true, ..ending(Some(&ok), code(exit::OK)) };
+        assert_eq!(exit_code(&stuck), exit::FAULT, "a child stopped responding");
+        assert_eq!(exit_code(&ending(None, code(exit::REFUSED))), exit::REFUSED);
+        assert_eq!(exit_code(&ending(Some(&ok), code(exit::RESCUED))), exit::RESCUED);
+        let aborted = summary(false, Some(FaultKind::Aborted));
+        assert_eq!(exit_code(&ending(Some(&aborted), code(exit::INTERRUPTED))), exit::INTERRUPTED);
+        assert_eq!(exit_code(&ending(None, code(exit::INTERRUPTED))), exit::INTERRUPTED);
+        let stopped = Ending { stopped: true, ..ending(None, Some(Exit::Signal(2))) };
+        assert_eq!(exit_code(&stopped), exit::INTERRUPTED, "stopped before it began");
+        let lost = summary(false, Some(FaultKind::ControllerLost));
+        assert_eq!(exit_code(&ending(Some(&lost), Some(Exit::Signal(9)))), exit::FAULT);
+        assert_eq!(exit_code(&ending(Some(&lost), code(exit::INTERNAL))), exit::INTERNAL);
+        assert_eq!(exit_code(&ending(None, Some(Exit::Signal(9)))), exit::INTERNAL);
+        assert_eq!(exit_code(&ending(None, None)), exit::INTERNAL, "no controller started");
+    }
+
+    /// A failed check is a fault, even when the move itself ran to its end.
+    #[test]
+    fn a_check_that_finds_a_motor_to_mend_is_a_fault() {
+        let mut s = summary(true, None);
+        let motor = |ok| qmarc_report::check::MotorCheck {
+            motor: 1,
+            volts: 1.0,
+            seconds: 0.1,
+            moved_counts: 0.0,
+            counts_per_volt_second: 0.0,
+            expected_counts_per_volt_second: 1.0,
+            other_motor: 0,
+            other_moved_counts: 0.0,
+            ok,
+            advice: String::new(),
+        };
+        s.check = Some(vec![motor(true)]);
+        assert_eq!(exit_code(&ending(Some(&s), Some(Exit::Code(0)))), exit::OK);
+        s.check = Some(vec![motor(true), motor(false)]);
+        assert_eq!(exit_code(&ending(Some(&s), Some(Exit::Code(0)))), exit::FAULT);
+    }
+}
