@@ -346,7 +346,18 @@ fn killing_the_controller_before_the_move_stops_the_hwserver() {
         assert!(Instant::now() < deadline, "the controller did not start");
         std::thread::sleep(Duration::from_millis(2));
     };
-    std::thread::sleep(Duration::from_millis(200));
+    // Killed once its progress page says it is preparing (it then waits there for the knots),
+    // however long a loaded machine takes to get it there.
+    let page = qmarc_proto::progress::Progress::path(&run.prefix);
+    loop {
+        let preparing = qmarc_proto::progress::Progress::open(&page)
+            .is_ok_and(|p| p.read().phase == qmarc_proto::state::Phase::Preparing.code());
+        if preparing {
+            break;
+        }
+        assert!(Instant::now() < deadline, "the controller did not begin preparing");
+        std::thread::sleep(Duration::from_millis(2));
+    }
     qmarc_tests::send_signal(pid, nix::sys::signal::Signal::SIGKILL);
     let r = wait_with_timeout(child, TIMEOUT);
     assert_eq!(r.code, Some(2), "{}\n{}", r.stdout, r.stderr);

@@ -53,10 +53,11 @@ fn the_state_diagram_in_architecture_md_names_every_phase_of_the_code() {
     }
 }
 
-/// The workspace's crates, lowest layer first: a crate may depend only on crates before it.
-/// `config` knows nothing of the plug-ins or the hardware (the registries inject the names it
-/// accepts), `controller` is the loop and knows no plug-in, the hardware server knows no
-/// controller, and the processes (`runner`, `starter`, the console) sit on top.
+/// The workspace's crates, lowest floor first (ARCHITECTURE.md's code map): a crate may
+/// depend only on crates of lower floors. `config` knows nothing of the plug-ins or the
+/// hardware (the registries inject the names it accepts), `controller` is the loop and knows
+/// no plug-in and no hardware, the hardware server knows no controller, and the processes
+/// (`runner`, `starter`, the console) sit on top.
 const LAYERS: &[&str] = &[
     "proto",
     "kinematics",
@@ -64,11 +65,11 @@ const LAYERS: &[&str] = &[
     "timer",
     "config",
     "controller",
-    "telemetry",
     "hwserver",
+    "telemetry",
     "plugins",
-    "paths",
     "report",
+    "paths",
     "plots",
     "runner",
     "tune",
@@ -245,7 +246,19 @@ fn the_function_length_check_finds_bodies() {
 /// over 80 lines in the crates the servo loop runs in: each stays readable in one sitting.
 #[test]
 fn files_and_loop_functions_stay_short_issue_11() {
-    const LOOP_CRATES: &[&str] = &["proto", "comedi", "timer", "controller", "hwserver", "plugins"];
+    // The loop's crates, and the process crates' steps (a move's preparation, launch and
+    // conclusion; its report): functions a reader must take in whole.
+    const SHORT_FUNCTIONS: &[&str] = &[
+        "proto",
+        "comedi",
+        "timer",
+        "controller",
+        "hwserver",
+        "plugins",
+        "report",
+        "runner",
+        "starter",
+    ];
     let mut problems = Vec::new();
     for name in LAYERS {
         let mut files = Vec::new();
@@ -256,7 +269,7 @@ fn files_and_loop_functions_stay_short_issue_11() {
             if text.lines().count() > 600 {
                 problems.push(format!("{shown}: {} lines", text.lines().count()));
             }
-            if LOOP_CRATES.contains(name) {
+            if SHORT_FUNCTIONS.contains(name) {
                 for (line, func, len) in long_functions(&text, 80) {
                     problems.push(format!("{shown}:{line}: fn {func} has {len} lines"));
                 }
@@ -268,4 +281,49 @@ fn files_and_loop_functions_stay_short_issue_11() {
         "too long (move tests to a tests.rs, split):\n{}",
         problems.join("\n")
     );
+}
+
+/// ARCHITECTURE.md's code map is true: its table names every crate once, on the floor its
+/// dependencies put it (one above the highest it stands on), with exactly the crates it
+/// depends on (`proto`, `config` and `timer` left out, as the table says).
+#[test]
+fn the_code_maps_table_is_the_manifests() {
+    let arch = std::fs::read_to_string(workspace().join("ARCHITECTURE.md")).unwrap();
+    let map = arch.split("## Code map").nth(1).expect("a code map");
+    let table = map.split("```text").nth(1).and_then(|t| t.split("```").next()).expect("a table");
+    let common = ["proto", "config", "timer"];
+    let mut floors = std::collections::BTreeMap::new();
+    let mut rows = Vec::new();
+    let row = |l: &&str| l.trim_start().starts_with(|c: char| c.is_ascii_digit());
+    for line in table.lines().filter(row) {
+        let mut words = line.split_whitespace();
+        let floor: usize = words.next().unwrap().parse().expect("a floor");
+        let name = words.next().unwrap().to_string();
+        let on: Vec<String> = words
+            .take_while(|w| LAYERS.contains(w) || *w == "—")
+            .filter(|w| *w != "—")
+            .map(str::to_string)
+            .collect();
+        floors.insert(name.clone(), floor);
+        rows.push((name, on));
+    }
+    let mut named: Vec<&str> = rows.iter().map(|(n, _)| n.as_str()).collect();
+    named.sort();
+    let mut crates = LAYERS.to_vec();
+    crates.sort();
+    assert_eq!(named, crates, "the table names every crate once");
+    for (name, on) in &rows {
+        let deps: Vec<String> = our_dependencies(name)
+            .into_iter()
+            .map(|d| if d == "console" { "console-tui".to_string() } else { d })
+            .collect();
+        let mut expected: Vec<&String> =
+            deps.iter().filter(|d| !common.contains(&d.as_str())).collect();
+        let mut listed: Vec<&String> = on.iter().collect();
+        expected.sort();
+        listed.sort();
+        assert_eq!(listed, expected, "{name}: the crates it stands on");
+        let floor = deps.iter().map(|d| floors[d.as_str()] + 1).max().unwrap_or(0);
+        assert_eq!(floors[name.as_str()], floor, "{name}: its floor");
+    }
 }

@@ -55,7 +55,9 @@ pub use step::{MAX_STEP_COUNTS, StepSettings};
 pub use telemetry::{MAX_TELEMETRY_EVERY, TelemetrySettings};
 pub use timer::{TimerMethod, TimerSettings};
 pub use trajectory::{DEFAULT_MAX_DURATION_S, TrajectorySettings};
-pub use tune::{TUNE_OBJECTIVES, TUNE_PARAMS, TuneSettings, check_objective, check_params};
+pub use tune::{
+    TUNE_OBJECTIVES, TUNE_PARAMS, TuneObjective, TuneSettings, check_objective, check_params,
+};
 
 use qmarc_proto::MAX_MOTORS;
 use serde::{Deserialize, Serialize};

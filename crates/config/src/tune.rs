@@ -8,16 +8,60 @@ use serde::{Deserialize, Serialize};
 /// The gains tuning can change, in the order of [`TuneSettings::bounds`].
 pub const TUNE_PARAMS: [&str; 5] = ["kp", "ki", "kd", "kvff", "kaff"];
 
-/// What tuning minimises, per motor, over the path's cycles (thesis 5.2's error figures).
+/// The names of [`TuneObjective`], in its order.
 pub const TUNE_OBJECTIVES: [&str; 3] = ["abs", "sse", "max"];
+
+/// What tuning minimises, per motor, over the path's cycles (thesis 5.2's error figures):
+/// `--objective`, `tune.objective`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TuneObjective {
+    /// Σ|e| over the path, rad (thesis 5.2: "the sum of absolute position error").
+    Abs,
+    /// Σe², rad².
+    Sse,
+    /// max |e|, rad.
+    Max,
+}
+
+impl TuneObjective {
+    /// Every objective, in the order of [`TUNE_OBJECTIVES`].
+    pub const ALL: [TuneObjective; 3] =
+        [TuneObjective::Abs, TuneObjective::Sse, TuneObjective::Max];
+
+    /// Its name in the settings and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            TuneObjective::Abs => "abs",
+            TuneObjective::Sse => "sse",
+            TuneObjective::Max => "max",
+        }
+    }
+}
+
+impl std::str::FromStr for TuneObjective {
+    type Err = String;
+    /// The objective named `v`; any other name is an error naming them all.
+    fn from_str(v: &str) -> Result<TuneObjective, String> {
+        TuneObjective::ALL.into_iter().find(|o| o.name() == v).ok_or_else(|| {
+            format!("unknown objective `{v}`: one of {}", TUNE_OBJECTIVES.join(", "))
+        })
+    }
+}
+
+impl std::fmt::Display for TuneObjective {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// The tuning of the gains.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TuneSettings {
     /// The gains tuned (names of [`TUNE_PARAMS`]).
     pub params: Vec<String>,
-    /// The objective ([`TUNE_OBJECTIVES`]): `abs` Σ|e|, `sse` Σe², `max` max |e|.
-    pub objective: String,
+    /// The objective: `abs` Σ|e|, `sse` Σe², `max` max |e|.
+    pub objective: TuneObjective,
     /// Optimiser iterations per motor.
     pub budget: u32,
     /// `[min, max]` of each gain of [`TUNE_PARAMS`], in that order (`kp_bounds` …): no
@@ -43,7 +87,7 @@ impl Default for TuneSettings {
     fn default() -> TuneSettings {
         TuneSettings {
             params: TUNE_PARAMS.iter().map(|p| p.to_string()).collect(),
-            objective: "abs".into(),
+            objective: TuneObjective::Abs,
             budget: 150,
             bounds: [[0.0, 2e6], [0.0, 1e4], [0.0, 1e5], [0.0, 1e6], [0.0, 1e7]],
             max_saturated_fraction: 0.01,
@@ -81,11 +125,7 @@ pub fn check_params(v: &[String]) -> Result<(), String> {
 
 /// One of [`TUNE_OBJECTIVES`].
 pub fn check_objective(v: &str) -> Result<(), String> {
-    if TUNE_OBJECTIVES.contains(&v) {
-        Ok(())
-    } else {
-        Err(format!("unknown objective `{v}`: one of {}", TUNE_OBJECTIVES.join(", ")))
-    }
+    v.parse::<TuneObjective>().map(drop)
 }
 
 #[derive(Deserialize, Default)]
@@ -135,7 +175,11 @@ impl RawTune {
         Ok(TuneSettings {
             params: src.take(&self.params, "tune.params", d.params, |v| check_params(v))?,
             objective: src
-                .take(&self.objective, "tune.objective", d.objective, |v| check_objective(v))?,
+                .take(&self.objective, "tune.objective", d.objective.name().into(), |v| {
+                    check_objective(v)
+                })?
+                .parse()
+                .unwrap_or(d.objective), // checked by `take`
             budget: src.int(&self.budget, "tune.budget", d.budget.into(), 1, 100_000)? as u32,
             bounds,
             max_saturated_fraction: src.take(

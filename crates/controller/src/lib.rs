@@ -59,6 +59,7 @@ pub mod gather;
 pub mod law;
 pub mod link;
 pub mod plan;
+pub mod record;
 pub mod servo;
 pub mod stats;
 pub mod telemetry;

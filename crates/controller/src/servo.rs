@@ -20,6 +20,7 @@ use qmarc_timer::{Clock, Tick};
 mod error;
 mod limits;
 mod live;
+mod record;
 mod run;
 pub use error::MoveError;
 
@@ -46,6 +47,8 @@ pub struct Servo {
     t0_ns: u64,
     executed: u64,
     last_sample: u64,
+    /// The last sample index the generator answered with a command.
+    last_ready: u64,
     /// The sample of the law's previous cycle (0 = the sample its reset seeded).
     law_sample: u64,
     gather: Gather,
@@ -103,6 +106,7 @@ impl Servo {
             t0_ns: 0,
             executed: 0,
             last_sample: 0,
+            last_ready: 0,
             law_sample: 0,
             gather,
             errors: ErrorStats::default(),
@@ -443,10 +447,30 @@ impl Servo {
     #[inline]
     fn sample(&mut self, n: u64) -> Option<CycleEnd> {
         match self.generator.sample(n, &mut self.cmd) {
-            Sample::Ready => None,
-            Sample::Done => Some(CycleEnd::Done),
+            Sample::Ready => {
+                self.last_ready = n;
+                None
+            }
+            Sample::Done => {
+                self.command_the_end();
+                Some(CycleEnd::Done)
+            }
             Sample::Starved => Some(CycleEnd::Fault(Fault::new(FaultKind::TrajectoryStarved, n))),
             Sample::Failed => Some(CycleEnd::Fault(Fault::new(self.generator.failure_kind(), n))),
+        }
+    }
+
+    /// Periods missed at the very end of a path skip its last samples: the command the
+    /// settle holds is then the path's last one, not one short of it.
+    #[inline]
+    fn command_the_end(&mut self) {
+        if let Some(last) = self.planned_samples.and_then(|s| s.checked_sub(1))
+            && self.last_ready < last
+        {
+            let mut end = self.cmd;
+            if matches!(self.generator.sample(last, &mut end), Sample::Ready) {
+                self.cmd = end;
+            }
         }
     }
 

@@ -852,3 +852,70 @@ fn a_fault_after_a_host_stall_says_so_issue_28() {
     assert!(!fault_after(None, false).message().contains("host stall"));
     assert_eq!(fault_after(Some(100), true).stall, None, "lock-step");
 }
+
+/// Periods missed at the very end of a path skip its last samples; the settle then holds
+/// the path's last command, not the one before the stall.
+#[test]
+fn a_stall_at_the_end_of_a_path_settles_on_its_last_command() {
+    use qmarc_controller::law::{ServoInput, ServoLaw};
+    use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
+
+    /// Sample n commands n counts, over 11 samples.
+    struct Ramp;
+    impl TrajectoryGenerator for Ramp {
+        fn name(&self) -> &'static str {
+            "ramp"
+        }
+        fn start(&mut self, _: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+            Ok(())
+        }
+        fn samples(&self) -> Option<u64> {
+            Some(11)
+        }
+        fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+            if n > 10 {
+                return Sample::Done;
+            }
+            cmd[0] = n as f64;
+            Sample::Ready
+        }
+    }
+    struct Off;
+    impl ServoLaw for Off {
+        fn name(&self) -> &'static str {
+            "off"
+        }
+        fn reset(&mut self, _: &[f64; MAX_MOTORS], _: &[f64; MAX_MOTORS]) {}
+        fn step(&mut self, _: &ServoInput<'_>, dac: &mut [i32; MAX_MOTORS]) {
+            *dac = [0; MAX_MOTORS];
+        }
+    }
+    /// A hardware that stands still at 0.
+    struct Still;
+    impl HwLink for Still {
+        fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, qmarc_controller::link::LinkError> {
+            Ok(req.response())
+        }
+    }
+    for (stall_after, skip) in [(7, 5), (9, 0)] {
+        let plan = MovePlan::new(qmarc_config::Mode::Run, 1, 400_000);
+        let mut servo =
+            Servo::new(plan, Box::new(Ramp), Box::new(Off), Box::new(MockClock::new(0)));
+        let mut ticker = ManualTicker::new(400_000);
+        servo.prepare(&mut Still).unwrap();
+        servo.set_t0(ticker.start().unwrap());
+        let end = loop {
+            let tick = ticker.wait().unwrap();
+            if tick.index == stall_after {
+                ticker.inject_delay(0, skip);
+            }
+            match servo.cycle(&mut Still, &tick) {
+                CycleEnd::Continue => {}
+                end => break (end, tick.index),
+            }
+        };
+        assert_eq!(end.0, CycleEnd::Done, "{end:?}");
+        let record = servo.into_record();
+        assert_eq!(record.last_error[0], 10.0, "skip {skip}: the path's last command is held");
+    }
+}

@@ -19,7 +19,7 @@
 
 use crate::summary::Summary;
 use nix::fcntl::{Flock, FlockArg};
-use qmarc_controller::servo::Servo;
+use qmarc_controller::gather::Gather;
 use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
 
@@ -324,8 +324,7 @@ fn write_json(summary: &Summary, w: &mut dyn Write) -> std::io::Result<()> {
 /// warning, and the folder keeps the previous data files, if any: never a half-written set);
 /// a failure writes everything to the rescue folder instead, with a warning, and says so on
 /// standard error.
-pub fn write_results(dir: &Path, servo: &Servo, summary: &mut Summary) -> Result<(), WriteError> {
-    let gather = servo.gather();
+pub fn write_results(dir: &Path, gather: &Gather, summary: &mut Summary) -> Result<(), WriteError> {
     let csv = |w: &mut dyn Write| crate::files::write_csv(gather, w);
     let octave = |w: &mut dyn Write| crate::files::write_octave(gather, w);
     let attempt = |dir: &Path, summary: &mut Summary, data: bool| {

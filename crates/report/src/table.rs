@@ -35,6 +35,22 @@ fn check_lines(t: &mut String, check: &[crate::check::MotorCheck]) {
 /// Renders `s` as a table for the terminal, ending with the data files it wrote that exist.
 pub fn render(s: &Summary) -> String {
     let mut t = String::new();
+    headline(&mut t, s);
+    if let Some(check) = &s.check {
+        check_lines(&mut t, check);
+    }
+    if let Some(homing) = &s.homing {
+        homing_lines(&mut t, homing);
+    }
+    error_lines(&mut t, s);
+    approach_and_settle_lines(&mut t, s);
+    timing_lines(&mut t, &s.timing);
+    warnings_and_files(&mut t, s);
+    t
+}
+
+/// What the move was and how it ended, on two lines.
+fn headline(t: &mut String, s: &Summary) {
     let check_failed = s.check.as_ref().is_some_and(|c| c.iter().any(|m| !m.ok));
     let verdict = match &s.fault {
         None if check_failed => "CHECK FAILED: see below what to change".to_string(),
@@ -56,37 +72,40 @@ pub fn render(s: &Summary) -> String {
         if s.degraded { " — DEGRADED: not real time" } else { "" },
         if s.deterministic { ", deterministic (simulated time)" } else { "" },
     );
-    if let Some(check) = &s.check {
-        check_lines(&mut t, check);
+}
+
+/// Where homing found each switch and put home.
+fn homing_lines(t: &mut String, homing: &crate::summary::HomingReport) {
+    let _ = writeln!(t, "\n  homing (counts in the frame before homing)");
+    // Home reads 0 only where the hwserver read the frame homed after the preset (a
+    // homing that failed, or a frame that could not be kept, leaves it unhomed).
+    let homed_after =
+        |i: usize| homing.after.as_ref().and_then(|a| a.homed.get(i)).copied().unwrap_or(false);
+    for (i, r) in homing.motors.iter().enumerate() {
+        let _ = writeln!(
+            t,
+            "  motor {}: top switch found at {:.0}{}, cleared at {:.0}; home at {:.0}{}",
+            r.motor,
+            r.switch_found_counts,
+            if r.started_on_switch { " (started on it)" } else { "" },
+            r.switch_cleared_counts,
+            r.home_counts,
+            match (r.home, homed_after(i)) {
+                (true, true) => ", reads 0 from now on",
+                (true, false) => ", reached, but its frame is not homed (see the fault)",
+                (false, _) => " — not reached",
+            },
+        );
     }
-    if let Some(homing) = &s.homing {
-        let _ = writeln!(t, "\n  homing (counts in the frame before homing)");
-        // Home reads 0 only where the hwserver read the frame homed after the preset (a
-        // homing that failed, or a frame that could not be kept, leaves it unhomed).
-        let homed_after =
-            |i: usize| homing.after.as_ref().and_then(|a| a.homed.get(i)).copied().unwrap_or(false);
-        for (i, r) in homing.motors.iter().enumerate() {
-            let _ = writeln!(
-                t,
-                "  motor {}: top switch found at {:.0}{}, cleared at {:.0}; home at {:.0}{}",
-                r.motor,
-                r.switch_found_counts,
-                if r.started_on_switch { " (started on it)" } else { "" },
-                r.switch_cleared_counts,
-                r.home_counts,
-                match (r.home, homed_after(i)) {
-                    (true, true) => ", reads 0 from now on",
-                    (true, false) => ", reached, but its frame is not homed (see the fault)",
-                    (false, _) => " — not reached",
-                },
-            );
-        }
-    }
+}
+
+/// The following errors of the path, per cycle and over the gathered rows, and the end-effector's (none for the check, whose command is where the motors are).
+fn error_lines(t: &mut String, s: &Summary) {
     // The check's command is where the motors are: it has no following error to show.
     let closed_loop = s.check.is_none();
     if !s.motors.is_empty() && closed_loop {
         let _ = writeln!(t, "\n  following error (command − actual), every cycle of the path");
-        error_table(&mut t, &s.motors, true);
+        error_table(t, &s.motors, true);
     }
     match &s.gathered {
         Some(g) if g.every > 1 => {
@@ -95,7 +114,7 @@ pub fn render(s: &Summary) -> String {
                 "\n  the same over the {} gathered rows of the path (every {} cycles, as the thesis summed them)",
                 g.rows, g.every
             );
-            error_table(&mut t, &g.motors, false);
+            error_table(t, &g.motors, false);
         }
         _ => {}
     }
@@ -121,8 +140,12 @@ pub fn render(s: &Summary) -> String {
                 format!("{:.3}", a.max_abs_mm),
             ]);
         }
-        aligned(&mut t, &rows);
+        aligned(t, &rows);
     }
+}
+
+/// The approach before the path and the settle after it.
+fn approach_and_settle_lines(t: &mut String, s: &Summary) {
     if let Some(a) = &s.approach {
         let list = |v: &[f64]| v.iter().map(|e| format!("{e:.1}")).collect::<Vec<_>>().join(" ");
         let _ = writeln!(
@@ -146,7 +169,10 @@ pub fn render(s: &Summary) -> String {
             list(&st.max_abs_error_counts),
         );
     }
-    let tm = &s.timing;
+}
+
+/// The loop's timing figures.
+fn timing_lines(t: &mut String, tm: &crate::summary::TimingSummary) {
     if tm.method == crate::summary::UNPACED {
         let _ = writeln!(
             t,
@@ -164,7 +190,7 @@ pub fn render(s: &Summary) -> String {
         ] {
             rows.push(pct_row(name, p));
         }
-        aligned(&mut t, &rows);
+        aligned(t, &rows);
         let _ = write!(
             t,
             "  periods off by > 40 µs: {}   missed periods: {}",
@@ -175,6 +201,10 @@ pub fn render(s: &Summary) -> String {
             n => writeln!(t, " ({n} of them in host stalls of ≥ 1 ms)"),
         };
     }
+}
+
+/// The warnings, then the data files the move wrote that exist.
+fn warnings_and_files(t: &mut String, s: &Summary) {
     for w in &s.warnings {
         let _ = writeln!(t, "  warning: {w}");
     }
@@ -191,7 +221,6 @@ pub fn render(s: &Summary) -> String {
             files.join(", ")
         );
     }
-    t
 }
 
 /// The thesis' Table 5-2 columns per motor, in counts and rad; `followed` marks a motor that

@@ -10,6 +10,7 @@ use qmarc_config::{Mode, RunSpec, Settings};
 use qmarc_controller::fault::{Fault, FaultKind};
 use qmarc_controller::link::{HwLink, IoxLink, LinkConnectError, LinkTimeouts};
 use qmarc_controller::plan::{MoveLimits, MovePlan};
+use qmarc_controller::record::MoveRecord;
 use qmarc_controller::servo::{MoveError, Servo, server_gone};
 use qmarc_controller::traj::TrajStartError;
 use qmarc_plugins::registry;
@@ -154,26 +155,25 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     // The loop lets go of its ring (a move that never began did not): the relay publishes
     // what is left and ends.
     servo.end_telemetry();
+    let record = servo.into_record();
     let relayed = relay.map(qmarc_telemetry::relay::Relay::join);
     result?;
 
-    let mut summary = summarize(settings, &servo, &rt, spec.mode, spec.deterministic);
+    let mut summary = summarize(settings, &record, &rt, spec.mode, spec.deterministic);
     if spec.unpaced {
         // No timer paced it: its timing figures measure nothing (the table says so).
         summary.timing.method = qmarc_report::summary::UNPACED.to_string();
     }
     if spec.mode == Mode::Home {
-        summary.homing = Some(homing_report(&servo, homed_read, settings.n_motors));
+        summary.homing = Some(homing_report(&record, homed_read, settings.n_motors));
     }
     if spec.unhomed && spec.mode != Mode::Home {
         summary.warnings.push(
             "--unhomed: the frame may not be homed; software position limits were off".into(),
         );
     }
-    let unhomed: Vec<String> = (0..settings.n_motors)
-        .filter(|&m| !servo.homed()[m])
-        .map(|m| (m + 1).to_string())
-        .collect();
+    let unhomed: Vec<String> =
+        (0..settings.n_motors).filter(|&m| !record.homed[m]).map(|m| (m + 1).to_string()).collect();
     if matches!(spec.mode, Mode::Jog | Mode::Check) && !unhomed.is_empty() && !spec.unhomed {
         summary.warnings.push(format!(
             "motors {} are not homed: the software position limits did not hold for them",
@@ -183,13 +183,13 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     if let Some(why) = relayed.and_then(|r| r.error) {
         summary.warnings.push(format!("no live telemetry: {why}"));
     }
-    if servo.telemetry_dropped() > 0 {
+    if record.telemetry_dropped > 0 {
         summary.warnings.push(format!(
             "live telemetry: {} samples dropped (its publishing thread fell behind)",
-            servo.telemetry_dropped()
+            record.telemetry_dropped
         ));
     }
-    write_results(&settings.gather.out_dir, &servo, &mut summary)?;
+    write_results(&settings.gather.out_dir, &record.gather, &mut summary)?;
     Ok(summary)
 }
 
@@ -333,9 +333,9 @@ fn preset_home(
 
 /// Homing's part of the summary: where each switch was found and where home is, and what
 /// the hwserver read right after the counters were preset.
-fn homing_report(servo: &Servo, after: Option<HwMsg>, n: usize) -> HomingReport {
+fn homing_report(record: &MoveRecord, after: Option<HwMsg>, n: usize) -> HomingReport {
     HomingReport {
-        motors: servo.homing_report().unwrap_or_default().to_vec(),
+        motors: record.homing.clone().unwrap_or_default(),
         after: after.map(|r| AfterHoming {
             positions_counts: r.data[..n].to_vec(),
             homed: r.aux[..n].iter().map(|&f| MotorFlags(f).homed()).collect(),

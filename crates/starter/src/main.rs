@@ -112,8 +112,8 @@ fn plot_move(summary: &Summary, dir: &Path, robot: Option<&qmarc_kinematics::Rob
     }
 }
 
-/// `trials`: the move `t.command` made `t.n` times, each by its own process set.
-fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
+/// The settings of `trials`, refused where a series would not repeat one move.
+fn trials_settings(args: &StarterArgs, t: &TrialsArgs) -> Result<qmarc_config::Settings, Failure> {
     let names = names();
     let mut settings = args.opts.load(&names).map_err(refused)?;
     t.command.apply(&mut settings, &names).map_err(refused)?;
@@ -135,6 +135,12 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
              a knot file"
         )));
     }
+    Ok(settings)
+}
+
+/// `trials`: the move `t.command` made `t.n` times, each by its own process set.
+fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
+    let settings = trials_settings(args, t)?;
     let base = settings.gather.out_dir.clone();
     qmarc_report::output::check(&base, 0).map_err(refused)?;
     let _lock = qmarc_report::output::lock(&base).map_err(refused)?;
@@ -161,58 +167,8 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
         .map_err(internal)?
         .progress_chars("=> "),
     );
-    let mut what = String::new();
-    let mut stopped = None;
-    for k in 1..=t.n {
-        let command = qmarc_starter::trials::command_of(&t.command, k, settings.step.size);
-        let dir = qmarc_starter::trials::trial_dir(&base, k);
-        let _ = writeln!(&log, "== trial {k} ({})", dir.display());
-        let io = TrialIo { out: Some(&dir), log: Some(&log), ..TrialIo::default() };
-        let outcome = match one_move(args, &command, io) {
-            Ok(o) => o,
-            Err(e) if k == 1 => return Err(e),
-            Err((_, e)) => {
-                stopped = Some((exit::INTERNAL, format!("trial {k} could not start: {e:#}")));
-                break;
-            }
-        };
-        if let Some((summary, dir)) = &outcome.summary {
-            what = summary.what();
-            let row = qmarc_report::trials::TrialRow::of(k, summary, settings.n_motors);
-            if let Some(e) = row.abs_rad.first().filter(|e| e.is_finite()) {
-                bar.set_message(format!("last Σ|e| {e:.3e} rad (arm 1)"));
-            }
-            csv.push(row).map_err(internal)?;
-            if args.plots {
-                bar.suspend(|| plot_move(summary, dir, outcome.robot.as_ref()));
-            }
-        }
-        bar.inc(1);
-        // An emergency stop ends the series: the next trial must be a person's decision, not
-        // the chain closing again by itself.
-        let estop = outcome
-            .summary
-            .as_ref()
-            .and_then(|(s, _)| s.fault.as_ref())
-            .is_some_and(|f| f.kind == qmarc_proto::state::FaultKind::EmergencyStop);
-        if estop {
-            stopped =
-                Some((exit::FAULT, format!("an emergency stop ended trial {k}: the series stops")));
-            break;
-        }
-        match outcome.code {
-            exit::OK | exit::FAULT => {}
-            exit::INTERRUPTED => {
-                stopped = Some((exit::INTERRUPTED, format!("interrupted during trial {k}")));
-                break;
-            }
-            c => {
-                stopped =
-                    Some((c, format!("trial {k} ended with exit code {c}: the series stops")));
-                break;
-            }
-        }
-    }
+    let series = Series { args, t, settings: &settings, base: &base, log: &log, bar: &bar };
+    let (mut what, stopped) = series.run(&mut csv)?;
     bar.finish_and_clear();
     if what.is_empty() {
         what = t.command.mode().to_string();
@@ -239,6 +195,74 @@ fn trials(args: &StarterArgs, t: &TrialsArgs) -> Result<ExitCode, Failure> {
         None if csv.rows().iter().any(|r| !r.fault.is_empty()) => exit::FAULT,
         None => exit::OK,
     }))
+}
+
+/// A series of trials under way.
+struct Series<'a> {
+    args: &'a StarterArgs,
+    t: &'a TrialsArgs,
+    settings: &'a qmarc_config::Settings,
+    base: &'a Path,
+    log: &'a std::fs::File,
+    bar: &'a indicatif::ProgressBar,
+}
+
+impl Series<'_> {
+    /// The trials, one row of `csv` each: what they were (`Summary::what`) and, when the
+    /// series stopped early, its exit code and why.
+    fn run(&self, csv: &mut TrialsCsv) -> Result<(String, Option<(u8, String)>), Failure> {
+        let (t, n_motors) = (self.t, self.settings.n_motors);
+        let mut what = String::new();
+        for k in 1..=t.n {
+            let command = qmarc_starter::trials::command_of(&t.command, k, self.settings.step.size);
+            let dir = qmarc_starter::trials::trial_dir(self.base, k);
+            let _ = writeln!(&mut &*self.log, "== trial {k} ({})", dir.display());
+            let io = TrialIo { out: Some(&dir), log: Some(self.log), ..TrialIo::default() };
+            let outcome = match one_move(self.args, &command, io) {
+                Ok(o) => o,
+                Err(e) if k == 1 => return Err(e),
+                Err((_, e)) => {
+                    let why = format!("trial {k} could not start: {e:#}");
+                    return Ok((what, Some((exit::INTERNAL, why))));
+                }
+            };
+            if let Some((summary, dir)) = &outcome.summary {
+                what = summary.what();
+                let row = qmarc_report::trials::TrialRow::of(k, summary, n_motors);
+                if let Some(e) = row.abs_rad.first().filter(|e| e.is_finite()) {
+                    self.bar.set_message(format!("last Σ|e| {e:.3e} rad (arm 1)"));
+                }
+                csv.push(row).map_err(internal)?;
+                if self.args.plots {
+                    self.bar.suspend(|| plot_move(summary, dir, outcome.robot.as_ref()));
+                }
+            }
+            self.bar.inc(1);
+            if let Some(stop) = series_stops(k, &outcome) {
+                return Ok((what, Some(stop)));
+            }
+        }
+        Ok((what, None))
+    }
+}
+
+/// Whether the series stops after trial `k` ended with `outcome`: its exit code and why. An
+/// emergency stop ends it (the next trial must be a person's decision, not the chain closing
+/// again by itself), and so does anything but a move that ran or faulted.
+fn series_stops(k: u32, outcome: &Outcome) -> Option<(u8, String)> {
+    let estop = outcome
+        .summary
+        .as_ref()
+        .and_then(|(s, _)| s.fault.as_ref())
+        .is_some_and(|f| f.kind == qmarc_proto::state::FaultKind::EmergencyStop);
+    if estop {
+        return Some((exit::FAULT, format!("an emergency stop ended trial {k}: the series stops")));
+    }
+    match outcome.code {
+        exit::OK | exit::FAULT => None,
+        exit::INTERRUPTED => Some((exit::INTERRUPTED, format!("interrupted during trial {k}"))),
+        c => Some((c, format!("trial {k} ended with exit code {c}: the series stops"))),
+    }
 }
 
 fn main() -> ExitCode {

@@ -66,8 +66,7 @@ impl TuneArgs {
             s.tune.params = p.clone();
         }
         if let Some(o) = &self.objective {
-            qmarc_config::check_objective(o).map_err(|e| anyhow!("--objective: {e}"))?;
-            s.tune.objective = o.clone();
+            s.tune.objective = o.parse().map_err(|e| anyhow!("--objective: {e}"))?;
         }
         if let Some(b) = self.budget {
             s.tune.budget = b;
@@ -100,7 +99,7 @@ pub fn run(
     on_record: &mut dyn FnMut(&Record),
 ) -> anyhow::Result<TuneOutcome> {
     let params: Vec<Param> = settings.tune.params.iter().filter_map(|p| Param::named(p)).collect();
-    let objective: Objective = settings.tune.objective.parse().map_err(|e: String| anyhow!(e))?;
+    let objective: Objective = settings.tune.objective;
     let plan = Plan {
         tune: &settings.tune,
         params: &params,
@@ -176,6 +175,6 @@ fn write_local(
     s.gather.out_dir = dir.to_path_buf();
     let spec = RunSpec { settings: s, mode: Mode::Run, ..spec.clone() };
     let mut done = qmarc_tune::local::run_local(&spec, &AtomicBool::new(false))?;
-    qmarc_report::output::write_results(dir, &done.servo, &mut done.summary)?;
+    qmarc_report::output::write_results(dir, &done.record.gather, &mut done.summary)?;
     Ok(dir.to_path_buf())
 }

@@ -20,8 +20,9 @@ use std::time::{Duration, Instant};
 /// How often a line of progress is printed when no terminal shows the bar.
 const PROGRESS_EVERY: Duration = Duration::from_millis(250);
 
-/// `tune`: better gains on the path of `t`.
-pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure> {
+/// The settings of `tune` (the file's, the command line's and the tuning's own flags) and
+/// whether its candidates are real moves; refused where a tuning would not be safe or sound.
+fn tune_settings(args: &StarterArgs, t: &TuneArgs) -> Result<(Settings, bool), Failure> {
     let names = names();
     let mut settings = args.opts.load(&names).map_err(refused)?;
     Command::Run(t.run_args().clone()).apply(&mut settings, &names).map_err(refused)?;
@@ -52,6 +53,60 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
             settings.tune.max_change
         )));
     }
+    Ok((settings, real))
+}
+
+/// Real moves run the path back to back, so it must end where it starts.
+fn check_back_to_back(settings: &Settings, first: &[f64], last: &[f64]) -> Result<(), Failure> {
+    let far = (0..settings.n_motors)
+        .find(|&m| (first[m] - last[m]).abs() > settings.trajectory.start_tolerance_counts);
+    match far {
+        Some(m) => Err(refused(anyhow!(
+            "real moves run the path back to back, so it must end where it starts: motor {} \
+             starts at {:.0} and ends at {:.0} counts",
+            m + 1,
+            first[m],
+            last[m]
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// Tuning by real moves, each through the process set ([`one_move`]) into `out/moves`, the
+/// processes' messages into `log` (at `log_path`).
+fn tune_by_real_moves(
+    args: &StarterArgs,
+    settings: &Settings,
+    out: &std::path::Path,
+    (log, log_path): (&std::fs::File, &std::path::Path),
+    stop: &'static std::sync::atomic::AtomicBool,
+    on_record: &mut dyn FnMut(&Record),
+) -> anyhow::Result<qmarc_starter::tune::TuneOutcome> {
+    let moves = out.join("moves");
+    let mut mover =
+        |mode: Mode, s: &Settings| -> Result<(qmarc_report::Summary, PathBuf), String> {
+            let command = match mode {
+                Mode::Step => Command::Step(StepArgs::default()),
+                _ => Command::Run(RunArgs::default()),
+            };
+            let io =
+                TrialIo { out: Some(&moves), log: Some(log), check_only: false, settings: Some(s) };
+            let o = one_move(args, &command, io).map_err(|(_, e)| format!("{e:#}"))?;
+            o.summary.ok_or_else(|| {
+                format!(
+                    "no move was made (exit code {}): the processes say why in {}",
+                    o.code,
+                    log_path.display()
+                )
+            })
+        };
+    let mut eval = RealEvaluator::new(settings, &mut mover, stop);
+    qmarc_starter::tune::run(settings, &mut eval, out, None, on_record)
+}
+
+/// `tune`: better gains on the path of `t`.
+pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure> {
+    let (settings, real) = tune_settings(args, t)?;
     let (first, last) = qmarc_tune::local::path_ends(&settings).map_err(|e| refused(anyhow!(e)))?;
     if let Some(w) = &t.write {
         report::check_copy(&settings.source, w).map_err(refused)?;
@@ -65,7 +120,7 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
     // instead, at each motor's first candidate and then every PROGRESS_EVERY.
     let mut last_line: Option<(usize, Instant)> = None;
     let mut on_record = |r: &Record| {
-        let line = report::progress_line(r, settings.n_motors, &settings.tune.objective);
+        let line = report::progress_line(r, settings.n_motors, settings.tune.objective.name());
         bar.set_position(r.motor as u64);
         bar.set_message(line.trim_start_matches(report::PROGRESS_PREFIX).to_string());
         if bar.is_hidden()
@@ -76,43 +131,10 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
         }
     };
     let outcome = if real {
-        let far = (0..settings.n_motors)
-            .find(|&m| (first[m] - last[m]).abs() > settings.trajectory.start_tolerance_counts);
-        if let Some(m) = far {
-            return Err(refused(anyhow!(
-                "real moves run the path back to back, so it must end where it starts: motor {} \
-                 starts at {:.0} and ends at {:.0} counts",
-                m + 1,
-                first[m],
-                last[m]
-            )));
-        }
+        check_back_to_back(&settings, &first, &last)?;
         let log_path = out.join("tune.log");
         let log = std::fs::File::create(&log_path).map_err(internal)?;
-        let moves = out.join("moves");
-        let mut mover =
-            |mode: Mode, s: &Settings| -> Result<(qmarc_report::Summary, PathBuf), String> {
-                let command = match mode {
-                    Mode::Step => Command::Step(StepArgs::default()),
-                    _ => Command::Run(RunArgs::default()),
-                };
-                let io = TrialIo {
-                    out: Some(&moves),
-                    log: Some(&log),
-                    check_only: false,
-                    settings: Some(s),
-                };
-                let o = one_move(args, &command, io).map_err(|(_, e)| format!("{e:#}"))?;
-                o.summary.ok_or_else(|| {
-                    format!(
-                        "no move was made (exit code {}): the processes say why in {}",
-                        o.code,
-                        log_path.display()
-                    )
-                })
-            };
-        let mut eval = RealEvaluator::new(&settings, &mut mover, stop);
-        qmarc_starter::tune::run(&settings, &mut eval, &out, None, &mut on_record)
+        tune_by_real_moves(args, &settings, &out, (&log, &log_path), stop, &mut on_record)
     } else {
         let settings =
             qmarc_tune::local::on_the_path(&settings).map_err(|e| refused(anyhow!(e)))?;

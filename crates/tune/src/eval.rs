@@ -10,37 +10,7 @@ use qmarc_report::Summary;
 use std::sync::atomic::AtomicBool;
 
 /// What tuning minimises per motor (`--objective`, `tune.objective`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Objective {
-    /// Σ|e| over the path, rad (thesis 5.2: "the sum of absolute position error").
-    Abs,
-    /// Σe², rad².
-    Sse,
-    /// max |e|, rad.
-    Max,
-}
-
-impl std::str::FromStr for Objective {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Objective, String> {
-        qmarc_config::check_objective(s)?;
-        Ok(match s {
-            "abs" => Objective::Abs,
-            "sse" => Objective::Sse,
-            _ => Objective::Max,
-        })
-    }
-}
-
-impl std::fmt::Display for Objective {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Objective::Abs => "abs",
-            Objective::Sse => "sse",
-            Objective::Max => "max",
-        })
-    }
-}
+pub use qmarc_config::TuneObjective as Objective;
 
 /// One gain of a motor that tuning changes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -255,9 +225,9 @@ impl Evaluator for SimEvaluator<'_> {
         let settings = move_settings(&self.path.settings, gains);
         let n = settings.n_motors;
         let done = self.run(Mode::Run, settings)?;
-        let rows = done.servo.gather().rows();
+        let rows = done.record.gather.rows();
         let path_rows: Vec<&GatherRow> =
-            rows.iter().filter(|r| done.servo.is_path_sample(r.cycle)).collect();
+            rows.iter().filter(|r| done.record.is_path_sample(r.cycle)).collect();
         let motors = (0..n)
             .map(|m| {
                 let sat = saturated_share(path_rows.iter().map(|r| f64::from(r.dac[m])));
@@ -271,7 +241,7 @@ impl Evaluator for SimEvaluator<'_> {
         let settings = step_settings(&self.step.settings, gains);
         let n = settings.n_motors;
         let done = self.run(Mode::Step, settings)?;
-        let rows = cmd_act(done.servo.gather().rows());
+        let rows = cmd_act(done.record.gather.rows());
         Ok(StepRun { residual_counts: residuals(&rows, n), fault: fault_of(&done.summary) })
     }
 

@@ -9,7 +9,7 @@
 //! this way.
 
 use qmarc_config::{Mode, RunSpec};
-use qmarc_controller::servo::Servo;
+use qmarc_controller::record::MoveRecord;
 use qmarc_hwserver::HwCore;
 use qmarc_hwserver::backend::BackendOpenError;
 use qmarc_proto::link::HwLink;
@@ -67,8 +67,8 @@ pub fn local_spec(settings: qmarc_config::Settings, mode: Mode) -> RunSpec {
 
 /// A move made by [`run_local`]: the loop with its gathered data, and its summary.
 pub struct LocalMove {
-    /// The servo after the move (its gather buffer, its error figures).
-    pub servo: Servo,
+    /// What the move left (its gathered rows, its error figures).
+    pub record: MoveRecord,
     /// What `summary.json` would say.
     pub summary: Summary,
 }
@@ -89,9 +89,10 @@ pub fn run_local(spec: &RunSpec, stop: &AtomicBool) -> Result<LocalMove, LocalEr
     let _ = core.exchange(&HwMsg::request(MsgType::Exit));
     core.finish().map_err(LocalError::Finish)?;
     moved.map_err(RunError::from)?;
+    let record = servo.into_record();
     let summary = qmarc_report::summarize::summarize(
         &spec.settings,
-        &servo,
+        &record,
         &RtStatus {
             requested_priority: None,
             fifo_priority: None,
@@ -101,7 +102,7 @@ pub fn run_local(spec: &RunSpec, stop: &AtomicBool) -> Result<LocalMove, LocalEr
         spec.mode,
         true,
     );
-    Ok(LocalMove { servo, summary })
+    Ok(LocalMove { record, summary })
 }
 
 /// The first and the last command of the path of `settings` (`trajectory.knots` with its

@@ -269,7 +269,7 @@ impl TuneSummary {
             starter_pid: std::process::id(),
             knots: knots.map_or(String::new(), |k| k.display().to_string()),
             method: settings.trajectory.method.clone(),
-            objective: settings.tune.objective.clone(),
+            objective: settings.tune.objective.to_string(),
             params: settings.tune.params.clone(),
             candidates: tuned.records.len(),
             moves: tuned.records.last().map_or(0, |r| r.moves),

@@ -2,6 +2,77 @@
 //! in this folder plus one line in [`BACKENDS`]; the settings (`hwserver.backend`,
 //! `--backend`) choose from it, and the conformance suite (`crate::conformance`,
 //! `tests/conformance.rs`) runs on every entry.
+//!
+//! The recipe, for a card `foo` (this example is compiled and run by `cargo test`): the card
+//! in `crates/hwserver/src/backends/foo.rs`, then `pub mod foo;` and its entry in
+//! [`BACKENDS`]. `--backend foo` and `hwserver.backend = "foo"` then work.
+//!
+//! ```
+//! use qmarc_hwserver::HwCore;
+//! use qmarc_hwserver::backend::{Backend, BackendOpenError, HwFault, Inputs};
+//! use qmarc_hwserver::backends::BackendEntry;
+//! use qmarc_config::{Names, Settings};
+//! use qmarc_proto::{COUNTER_ZERO, HwMsg, MAX_MOTORS};
+//!
+//! /// The card (`backends/foo.rs`): its counters, DACs, enables and switches.
+//! pub struct Foo {
+//!     counters: [u32; MAX_MOTORS],
+//!     n_motors: usize,
+//! }
+//!
+//! impl Foo {
+//!     /// Opens the card of the settings (`[foo]`, if it has settings of its own).
+//!     pub fn open(s: &Settings, _lockstep: bool) -> Result<Foo, BackendOpenError> {
+//!         Ok(Foo { counters: [COUNTER_ZERO; MAX_MOTORS], n_motors: s.n_motors })
+//!     }
+//!
+//!     /// Whether the card is there and usable as the settings describe it, keeping and
+//!     /// driving nothing: the starter asks before it spawns anything.
+//!     pub fn check(s: &Settings, lockstep: bool) -> Result<(), BackendOpenError> {
+//!         Foo::open(s, lockstep).map(drop)
+//!     }
+//! }
+//!
+//! impl Backend for Foo {
+//!     fn name(&self) -> &'static str { "foo" }
+//!     fn n_motors(&self) -> usize { self.n_motors }
+//!     fn read_inputs(&mut self, inputs: &mut Inputs) -> Result<(), HwFault> {
+//!         inputs.counters = self.counters;
+//!         Ok(())
+//!     }
+//!     fn write_dacs(&mut self, _codes: &[i32; MAX_MOTORS]) -> Result<(), HwFault> { Ok(()) }
+//!     fn set_amp_enable(&mut self, _motor: usize, _on: bool) -> Result<(), HwFault> { Ok(()) }
+//!     fn load_counter(&mut self, motor: usize, raw: u32) -> Result<(), HwFault> {
+//!         self.counters[motor] = raw;
+//!         Ok(())
+//!     }
+//!     fn safe_state(&mut self) {}
+//!     fn now_ns(&self) -> u64 { qmarc_timer::clock::monotonic_now_ns() }
+//! }
+//!
+//! // Its line in BACKENDS (`backends/mod.rs`).
+//! const FOO: BackendEntry = BackendEntry {
+//!     name: "foo",
+//!     description: "the Foo card",
+//!     open: |s, lockstep| Ok(Box::new(Foo::open(s, lockstep)?)),
+//!     check: Foo::check,
+//!     // A fake of the card's driver for the conformance suite (`conformance::Rig`), or
+//!     // None where there is none at hand.
+//!     rig: || None,
+//! };
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let names = Names { laws: vec!["pidff"], methods: vec!["spline"], backends: vec!["foo"], any_plugin: false };
+//! let toml = "[general]\nn_motors = 1\n[hwserver]\nbackend = \"foo\"\n\
+//!             [[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
+//! let settings = Settings::parse("q.toml".as_ref(), toml, &names)?;
+//! (FOO.check)(&settings, false)?;
+//! let mut core = HwCore::new((FOO.open)(&settings, false)?);
+//! let read = core.handle(&HwMsg::read_all_encoders());
+//! assert!(read.status().is_ok());
+//! assert_eq!(read.data[0], 0.0);
+//! # Ok(()) }
+//! ```
 
 use crate::backend::{Backend, BackendOpenError};
 use crate::conformance::Rig;

@@ -1,0 +1,41 @@
+//! The move's record handed over when it ends ([`crate::record::MoveRecord`]).
+
+use super::Servo;
+use crate::record::{MoveRecord, Stretch};
+
+impl Servo {
+    /// What the move leaves, taken when it has ended: the loop is spent (its gather buffer
+    /// moves into the record).
+    pub fn into_record(mut self) -> MoveRecord {
+        let gather = std::mem::replace(&mut self.gather, crate::gather::Gather::for_move(0, 1, 0));
+        MoveRecord {
+            generator: self.generator_name(),
+            cycles: self.cycles(),
+            planned_samples: self.planned_samples,
+            fault: self.fault,
+            failure: self.failure(),
+            errors: self.errors,
+            last_error: self.last_error(),
+            end_velocity: self.generator.end_velocity(),
+            approach: (self.lead_in > 0).then_some(Stretch {
+                samples: self.lead_in,
+                cycles: self.lead_executed,
+                errors: self.lead_errors,
+            }),
+            settle: (self.settle_executed > 0).then_some(Stretch {
+                samples: self.settle_executed,
+                cycles: self.settle_executed,
+                errors: self.settle_errors,
+            }),
+            path_from: self.lead_in,
+            settle_from: self.settle_from,
+            timing: self.timing.clone(),
+            homed: self.homed,
+            homed_frame: self.generator.homed_frame(),
+            homing: self.generator.homing_report().map(<[_]>::to_vec),
+            check: self.generator.check_report().map(<[_]>::to_vec),
+            telemetry_dropped: self.telemetry_dropped(),
+            gather,
+        }
+    }
+}
