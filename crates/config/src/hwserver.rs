@@ -2,14 +2,57 @@
 //! bounds whose defaults depend on the backend.
 
 use crate::source::{S, Source, one_of, positive, span_of};
-use crate::{ConfigLoadError, Names, TimerSettings};
+use crate::{ConfigLoadError, TimerSettings};
 use serde::{Deserialize, Serialize};
+
+/// The hardware the hwserver drives (`hwserver.backend`, `--backend`): a closed set, one
+/// variant per entry of the hwserver's registry (`qmarc_hwserver::backends::BACKENDS`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BackendKind {
+    /// The simulated Deltabot.
+    #[default]
+    Sim,
+    /// The Sensoray 626 through the kernel's comedi driver.
+    S626,
+}
+
+impl BackendKind {
+    /// Every backend, in the registry's order.
+    pub const ALL: [BackendKind; 2] = [BackendKind::Sim, BackendKind::S626];
+    /// Their names.
+    pub const NAMES: [&'static str; 2] = ["sim", "s626"];
+
+    /// Its name in the settings and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Sim => "sim",
+            BackendKind::S626 => "s626",
+        }
+    }
+}
+
+impl std::str::FromStr for BackendKind {
+    type Err = String;
+    /// The backend named `v`; any other name is an error naming them all.
+    fn from_str(v: &str) -> Result<BackendKind, String> {
+        BackendKind::ALL.into_iter().find(|b| b.name() == v).ok_or_else(|| {
+            format!("unknown backend `{v}`; available: {}", BackendKind::NAMES.join(", "))
+        })
+    }
+}
+
+impl std::fmt::Display for BackendKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// The link to the hardware server.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HwServerSettings {
-    /// Backend name (`sim`, from the hwserver's registry).
-    pub backend: String,
+    /// The hardware.
+    pub backend: BackendKind,
     /// Controller silence, in periods, after which the hwserver disables everything.
     pub watchdog_periods: u32,
     /// A response later than this many periods makes the controller check whether the
@@ -60,7 +103,7 @@ impl std::str::FromStr for HwWait {
 impl Default for HwServerSettings {
     fn default() -> HwServerSettings {
         HwServerSettings {
-            backend: "sim".to_string(),
+            backend: BackendKind::Sim,
             watchdog_periods: TimingDefaults::SIMULATED.watchdog_periods,
             deadline_periods: 5,
             response_timeout_periods: 250,
@@ -93,8 +136,11 @@ impl TimingDefaults {
         TimingDefaults { watchdog_periods: 250, max_missed_in_row: 250 };
 
     /// The defaults of `backend`.
-    pub fn of(backend: &str) -> TimingDefaults {
-        if backend == "sim" { TimingDefaults::SIMULATED } else { TimingDefaults::HARDWARE }
+    pub fn of(backend: BackendKind) -> TimingDefaults {
+        match backend {
+            BackendKind::Sim => TimingDefaults::SIMULATED,
+            BackendKind::S626 => TimingDefaults::HARDWARE,
+        }
     }
 }
 
@@ -127,19 +173,18 @@ pub(crate) struct RawSafety {
 
 impl RawHwServer {
     /// Checked; the watchdog's default is the backend's.
-    pub(crate) fn check(
-        &self,
-        src: &Source<'_>,
-        names: &Names,
-    ) -> Result<HwServerSettings, ConfigLoadError> {
+    pub(crate) fn check(&self, src: &Source<'_>) -> Result<HwServerSettings, ConfigLoadError> {
         let d = HwServerSettings::default();
-        let backend = src.take(
-            &self.backend,
-            "hwserver.backend",
-            d.backend,
-            one_of(&names.backends, "backend"),
-        )?;
-        let watchdog = TimingDefaults::of(&backend).watchdog_periods;
+        let backend: BackendKind = src
+            .take(
+                &self.backend,
+                "hwserver.backend",
+                d.backend.name().to_string(),
+                one_of(&BackendKind::NAMES, "backend"),
+            )?
+            .parse()
+            .unwrap_or(d.backend); // checked by `take`
+        let watchdog = TimingDefaults::of(backend).watchdog_periods;
         let deadline_periods = src.int(
             &self.deadline_periods,
             "hwserver.deadline_periods",
@@ -217,7 +262,11 @@ impl RawHwServer {
 
 impl RawSafety {
     /// `safety.max_missed_in_row`, its default the backend's.
-    pub(crate) fn check(&self, src: &Source<'_>, backend: &str) -> Result<u64, ConfigLoadError> {
+    pub(crate) fn check(
+        &self,
+        src: &Source<'_>,
+        backend: BackendKind,
+    ) -> Result<u64, ConfigLoadError> {
         let d = TimingDefaults::of(backend).max_missed_in_row as i64;
         Ok(src.int(&self.max_missed_in_row, "safety.max_missed_in_row", d, 1, 1_000_000)? as u64)
     }

@@ -11,7 +11,7 @@
 //! ```
 //! use qmarc_config::{Names, Settings};
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let names = Names { laws: vec!["pidff"], methods: vec!["spline", "pvt"], backends: vec!["sim"], any_plugin: false };
+//! let names = Names { laws: vec!["pidff"], methods: vec!["spline", "pvt"], any_plugin: false };
 //! let table = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
 //! let s = Settings::parse("q.toml".as_ref(), &format!("[general]\nn_motors = 1\n{table}"), &names)?;
 //! assert_eq!((s.n_motors, s.period_us, s.hwserver.watchdog_periods), (1, 400, 250));
@@ -43,7 +43,7 @@ pub use check::{CheckSettings, MAX_CHECK_PULSE_S, MAX_CHECK_VOLTS};
 pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
-pub use hwserver::{ExplicitTiming, HwServerSettings, HwWait, TimingDefaults};
+pub use hwserver::{BackendKind, ExplicitTiming, HwServerSettings, HwWait, TimingDefaults};
 pub use jog::{JogSettings, MAX_JOG_COUNTS};
 pub use motor::{MotorGains, MotorSafety, effective_gains_problem, gains_problem};
 pub use robot::{RobotSettings, WORK_CENTRE_M};
@@ -56,7 +56,8 @@ pub use telemetry::{MAX_TELEMETRY_EVERY, TelemetrySettings};
 pub use timer::{TimerMethod, TimerSettings};
 pub use trajectory::{DEFAULT_MAX_DURATION_S, TrajectorySettings};
 pub use tune::{
-    TUNE_OBJECTIVES, TUNE_PARAMS, TuneObjective, TuneSettings, check_objective, check_params,
+    TUNE_OBJECTIVES, TUNE_PARAMS, TuneObjective, TuneParam, TuneSettings, check_objective,
+    check_params,
 };
 
 use qmarc_proto::MAX_MOTORS;
@@ -72,17 +73,16 @@ pub struct Names {
     pub laws: Vec<&'static str>,
     /// Trajectory generators that follow a path (`trajectory.method`, `--method`).
     pub methods: Vec<&'static str>,
-    /// Hardware backends (`hwserver.backend`, `--backend`).
-    pub backends: Vec<&'static str>,
     /// Accept any law and method name: for a process that runs none of them (the
     /// hwserver's selftest), which cannot know the plug-ins' registry.
     pub any_plugin: bool,
 }
 
 impl Names {
-    /// The names of a process that knows only the backends ([`Names::any_plugin`]).
-    pub fn backends_only(backends: Vec<&'static str>) -> Names {
-        Names { backends, any_plugin: true, ..Names::default() }
+    /// The names of a process that runs no plug-in (the hwserver) and so cannot know their
+    /// registry: any law and method name is taken ([`Names::any_plugin`]).
+    pub fn any() -> Names {
+        Names { any_plugin: true, ..Names::default() }
     }
 }
 
@@ -223,10 +223,10 @@ impl RawFile {
         let step = self.step.check(src, trajectory.max_duration_s)?;
         let jog = self.jog.check(src, n_motors)?;
         let check = self.check.check(src)?;
-        let hwserver = self.hwserver.check(src, names)?;
+        let hwserver = self.hwserver.check(src)?;
         self.hwserver.check_spin_cpu(src, &hwserver, &timer)?;
         let sim = self.sim.check(src, n_motors)?;
-        let s626 = self.s626.check(src, n_motors, hwserver.backend == "s626")?;
+        let s626 = self.s626.check(src, n_motors, hwserver.backend == BackendKind::S626)?;
         let robot = match &self.robot {
             Some(r) => Some(r.get_ref().check(src, r.span())?),
             None => None,
@@ -311,7 +311,7 @@ impl RawFile {
             jog,
             check,
             homing,
-            max_missed_in_row: self.safety.check(src, &hwserver.backend)?,
+            max_missed_in_row: self.safety.check(src, hwserver.backend)?,
             sim,
             explicit: ExplicitTiming {
                 watchdog_periods: self.hwserver.sets_watchdog(),
@@ -381,7 +381,7 @@ impl Settings {
     /// What the 626's wiring lacks for the motors in use, when it is the backend.
     fn check_s626_wiring(&self, flag: &'static str) -> Result<(), ConfigLoadError> {
         match self.s626.wiring_problem(self.n_motors) {
-            Some((key, message)) if self.hwserver.backend == "s626" => {
+            Some((key, message)) if self.hwserver.backend == BackendKind::S626 => {
                 Err(ConfigLoadError::Override {
                     flag,
                     message: format!("s626.{key} in {}: {message}", self.source.display()),
@@ -489,17 +489,11 @@ impl Settings {
 
     /// Overrides the hardware backend (`--backend`); the timing bounds the file does not set
     /// become the new backend's defaults.
-    pub fn set_backend(&mut self, backend: &str, names: &Names) -> Result<(), ConfigLoadError> {
-        if !names.backends.contains(&backend) {
-            return Err(ConfigLoadError::Override {
-                flag: "--backend",
-                message: format!(
-                    "unknown backend `{backend}`; available: {}",
-                    names.backends.join(", ")
-                ),
-            });
-        }
-        self.hwserver.backend = backend.to_string();
+    pub fn set_backend(&mut self, backend: &str) -> Result<(), ConfigLoadError> {
+        let backend: BackendKind = backend
+            .parse()
+            .map_err(|message| ConfigLoadError::Override { flag: "--backend", message })?;
+        self.hwserver.backend = backend;
         let d = TimingDefaults::of(backend);
         if !self.explicit.watchdog_periods {
             self.hwserver.watchdog_periods = d.watchdog_periods;

@@ -6,12 +6,7 @@ use std::path::Path;
 
 /// The names the tests accept (the registries' at the time of writing).
 fn names() -> Names {
-    Names {
-        laws: vec!["pidff"],
-        methods: vec!["step", "spline", "pvt"],
-        backends: vec!["sim", "s626"],
-        any_plugin: false,
-    }
+    Names { laws: vec!["pidff"], methods: vec!["step", "spline", "pvt"], any_plugin: false }
 }
 
 fn shipped_path() -> PathBuf {
@@ -215,6 +210,11 @@ fn every_field_round_trips_to_the_children_issue_11() {
             // Enums: another of their values.
             serde_json::Value::String(s) if s == "block" => *s = "spin".into(),
             serde_json::Value::String(s) if s == "abs" => *s = "sse".into(),
+            serde_json::Value::String(s) if s == "sim" => *s = "s626".into(),
+            serde_json::Value::String(s) if crate::TuneParam::named(s).is_some() => {
+                let i = crate::TUNE_PARAMS.iter().position(|p| p == s).unwrap_or(0);
+                *s = crate::TUNE_PARAMS[(i + 1) % crate::TUNE_PARAMS.len()].into();
+            }
             serde_json::Value::String(s) if !matches!(s.as_str(), "timerfd" | "run") => {
                 *n += 1;
                 s.push_str(&n.to_string());
@@ -296,14 +296,14 @@ fn the_backend_chooses_the_timing_defaults() {
     let motors = MOTOR.repeat(3);
     let mut s = Settings::parse(Path::new("q.toml"), &motors, &names).unwrap();
     assert_eq!((s.hwserver.watchdog_periods, s.max_missed_in_row), (250, 250));
-    s.set_backend("s626", &names).unwrap();
+    s.set_backend("s626").unwrap();
     assert_eq!((s.hwserver.watchdog_periods, s.max_missed_in_row), (10, 25));
     let text = format!("[hwserver]\nwatchdog_periods = 40\n{motors}");
     let mut s = Settings::parse(Path::new("q.toml"), &text, &names).unwrap();
-    s.set_backend("s626", &names).unwrap();
+    s.set_backend("s626").unwrap();
     assert_eq!((s.hwserver.watchdog_periods, s.max_missed_in_row), (40, 25));
     assert_eq!(
-        s.set_backend("s7", &names).unwrap_err().to_string(),
+        s.set_backend("s7").unwrap_err().to_string(),
         "--backend: unknown backend `s7`; available: sim, s626"
     );
 }
@@ -353,7 +353,7 @@ fn the_626_wiring_is_checked_when_it_is_the_backend_issue_12() {
     // The sim ignores the 626's wiring; switching to the 626 checks it.
     let text = format!("[s626]\nenable_dio = [0, 1]\n{motors}");
     let mut s = parse(&text).unwrap();
-    let e = s.set_backend("s626", &names()).unwrap_err();
+    let e = s.set_backend("s626").unwrap_err();
     assert_eq!(
         e.to_string(),
         "--backend: s626.enable_dio in q.toml: 3 motors need 3 entries, found 2"
@@ -488,8 +488,8 @@ fn tune_settings_are_checked_issue_15() {
     assert_eq!(shipped().tune, crate::TuneSettings::default());
     let s = parse(&format!("[tune]\nparams = [\"kvff\"]\nkaff_bounds = [1.0, 5.0]\n{m}")).unwrap();
     assert_eq!(
-        (s.tune.params.clone(), s.tune.bounds_of("kaff")),
-        (vec!["kvff".into()], Some([1.0, 5.0]))
+        (s.tune.params.clone(), s.tune.bounds_of(crate::TuneParam::Kaff)),
+        (vec![crate::TuneParam::Kvff], [1.0, 5.0])
     );
     check(
         &format!("[tune]\nparams = [\"kq\"]\n{m}"),

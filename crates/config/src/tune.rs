@@ -5,8 +5,61 @@ use crate::ConfigLoadError;
 use crate::source::{S, Source, num, positive, within};
 use serde::{Deserialize, Serialize};
 
-/// The gains tuning can change, in the order of [`TuneSettings::bounds`].
+/// The names of the gains tuning can change ([`TuneParam`]), in the order of
+/// [`TuneSettings::bounds`].
 pub const TUNE_PARAMS: [&str; 5] = ["kp", "ki", "kd", "kvff", "kaff"];
+
+/// One gain of a motor that tuning changes (`tune.params`, `--params`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TuneParam {
+    /// Proportional gain.
+    Kp,
+    /// Integral gain.
+    Ki,
+    /// Derivative gain.
+    Kd,
+    /// Velocity feed-forward.
+    Kvff,
+    /// Acceleration feed-forward.
+    Kaff,
+}
+
+impl TuneParam {
+    /// Every gain, in the order of [`TUNE_PARAMS`] and [`TuneSettings::bounds`].
+    pub const ALL: [TuneParam; 5] =
+        [TuneParam::Kp, TuneParam::Ki, TuneParam::Kd, TuneParam::Kvff, TuneParam::Kaff];
+
+    /// The gain named `name`.
+    pub fn named(name: &str) -> Option<TuneParam> {
+        TuneParam::ALL.into_iter().find(|p| p.name() == name)
+    }
+
+    /// Its name.
+    pub fn name(self) -> &'static str {
+        TUNE_PARAMS[self.index()]
+    }
+
+    /// Its index in [`TUNE_PARAMS`] (and `tune.bounds`).
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Its value in `g`.
+    pub fn get(self, g: &crate::MotorGains) -> f64 {
+        [g.kp, g.ki, g.kd, g.kvff, g.kaff][self.index()]
+    }
+
+    /// Sets it in `g`.
+    pub fn set(self, g: &mut crate::MotorGains, v: f64) {
+        *[&mut g.kp, &mut g.ki, &mut g.kd, &mut g.kvff, &mut g.kaff][self.index()] = v;
+    }
+
+    /// Whether it is a feedback gain (Kp, Ki, Kd: scaled by the stability margin's step).
+    pub fn feedback(self) -> bool {
+        matches!(self, TuneParam::Kp | TuneParam::Ki | TuneParam::Kd)
+    }
+}
 
 /// The names of [`TuneObjective`], in its order.
 pub const TUNE_OBJECTIVES: [&str; 3] = ["abs", "sse", "max"];
@@ -58,8 +111,8 @@ impl std::fmt::Display for TuneObjective {
 /// The tuning of the gains.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TuneSettings {
-    /// The gains tuned (names of [`TUNE_PARAMS`]).
-    pub params: Vec<String>,
+    /// The gains tuned, each once.
+    pub params: Vec<TuneParam>,
     /// The objective: `abs` Σ|e|, `sse` Σe², `max` max |e|.
     pub objective: TuneObjective,
     /// Optimiser iterations per motor.
@@ -86,7 +139,7 @@ pub struct TuneSettings {
 impl Default for TuneSettings {
     fn default() -> TuneSettings {
         TuneSettings {
-            params: TUNE_PARAMS.iter().map(|p| p.to_string()).collect(),
+            params: TuneParam::ALL.to_vec(),
             objective: TuneObjective::Abs,
             budget: 150,
             bounds: [[0.0, 2e6], [0.0, 1e4], [0.0, 1e5], [0.0, 1e6], [0.0, 1e7]],
@@ -101,26 +154,28 @@ impl Default for TuneSettings {
 }
 
 impl TuneSettings {
-    /// The bounds of the gain named `param`.
-    pub fn bounds_of(&self, param: &str) -> Option<[f64; 2]> {
-        TUNE_PARAMS.iter().position(|p| *p == param).map(|i| self.bounds[i])
+    /// The bounds of `param`.
+    pub fn bounds_of(&self, param: TuneParam) -> [f64; 2] {
+        self.bounds[param.index()]
     }
 }
 
-/// A list of gain names, each once, out of [`TUNE_PARAMS`].
-pub fn check_params(v: &[String]) -> Result<(), String> {
+/// The gains of a list of names, each once, out of [`TUNE_PARAMS`].
+pub fn check_params(v: &[String]) -> Result<Vec<TuneParam>, String> {
     if v.is_empty() {
         return Err(format!("name at least one of {}", TUNE_PARAMS.join(", ")));
     }
+    let mut params = Vec::with_capacity(v.len());
     for (i, p) in v.iter().enumerate() {
-        if !TUNE_PARAMS.contains(&p.as_str()) {
+        let Some(param) = TuneParam::named(p) else {
             return Err(format!("unknown gain `{p}`: one of {}", TUNE_PARAMS.join(", ")));
-        }
+        };
         if v[..i].contains(p) {
             return Err(format!("`{p}` is named twice"));
         }
+        params.push(param);
     }
-    Ok(())
+    Ok(params)
 }
 
 /// One of [`TUNE_OBJECTIVES`].
@@ -173,7 +228,13 @@ impl RawTune {
         }
         let fraction = within(0.0, 1.0, "(a share of the cycles)");
         Ok(TuneSettings {
-            params: src.take(&self.params, "tune.params", d.params, |v| check_params(v))?,
+            params: check_params(&src.take(
+                &self.params,
+                "tune.params",
+                d.params.iter().map(|p| p.name().to_string()).collect(),
+                |v| check_params(v).map(drop),
+            )?)
+            .unwrap_or(d.params), // checked by `take`
             objective: src
                 .take(&self.objective, "tune.objective", d.objective.name().into(), |v| {
                     check_objective(v)

@@ -12,7 +12,7 @@ use std::hint::black_box;
 use std::path::Path;
 
 fn fake_card() -> S626 {
-    let names = Names::backends_only(qmarc_hwserver::backends::names());
+    let names = Names::any();
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/s626.toml");
     let mut s = Settings::load(&path, &names).expect("the shipped settings for the 626");
     s.set_device(Path::new("fake")).expect("the fake card");

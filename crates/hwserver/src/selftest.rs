@@ -38,7 +38,7 @@ fn time(
 /// Runs the selftest on the 626 of `s`, `count` lists of each kind; the report, or why the
 /// card cannot be used.
 pub fn run(s: &Settings, count: u32) -> Result<String, BackendOpenError> {
-    if s.hwserver.backend != "s626" {
+    if s.hwserver.backend != qmarc_config::BackendKind::S626 {
         return Err(BackendOpenError::Invalid(format!(
             "--selftest checks the Sensoray 626: give --backend s626 (the settings say `{}`)",
             s.hwserver.backend

@@ -12,12 +12,12 @@ fn check(name: &str) {
     let mut ran = 0;
     for entry in BACKENDS {
         let Some(mut rig) = (entry.rig)() else {
-            eprintln!("{}: no rig at hand (no device named): `{name}` not run", entry.name);
+            eprintln!("{}: no rig at hand (no device named): `{name}` not run", entry.kind);
             continue;
         };
         ran += 1;
         if let Err(e) = (check.run)(rig.as_mut()) {
-            failures.push(format!("{}: {e}", entry.name));
+            failures.push(format!("{}: {e}", entry.kind));
         }
     }
     assert!(ran > 0, "no backend could be checked");

@@ -28,7 +28,6 @@ fn settings() -> Settings {
     let names = qmarc_config::Names {
         laws: qmarc_plugins::registry::law_names(),
         methods: qmarc_plugins::registry::path_generator_names(),
-        backends: qmarc_hwserver::backends::names(),
         any_plugin: false,
     };
     Settings::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml"), &names)

@@ -427,7 +427,6 @@ mod tests {
         let names = qmarc_config::Names {
             laws: crate::registry::law_names(),
             methods: crate::registry::path_generator_names(),
-            backends: qmarc_hwserver::backends::names(),
             any_plugin: false,
         };
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config");

@@ -142,7 +142,6 @@ mod tests {
         let names = qmarc_config::Names {
             laws: vec!["pidff"],
             methods: vec!["step", "spline", "pvt"],
-            backends: vec!["sim", "s626"],
             any_plugin: false,
         };
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");

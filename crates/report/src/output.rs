@@ -17,7 +17,7 @@
 //! - If writing still fails after a move (a full disk), the data go to a rescue folder
 //!   ([`rescue_dir`]) and the message says where.
 
-use crate::summary::Summary;
+use crate::summary::{Summary, Warning, WarningKind};
 use nix::fcntl::{Flock, FlockArg};
 use qmarc_controller::gather::Gather;
 use std::io::{Read, Seek, Write};
@@ -338,10 +338,13 @@ pub fn write_results(dir: &Path, gather: &Gather, summary: &mut Summary) -> Resu
     };
     let Err(e) = attempt(dir, summary, true) else { return Ok(()) };
     if interrupted(&e) {
-        summary.warnings.push(format!(
-            "a stop signal arrived while the data were written: this move's gather.csv and \
-             gather.m were not written (the set they would have replaced, if any, is in {})",
-            dir.join(PREVIOUS_DIR).display()
+        summary.warnings.push(Warning::new(
+            WarningKind::DataNotWritten,
+            format!(
+                "a stop signal arrived while the data were written: this move's gather.csv and \
+                 gather.m were not written (the set they would have replaced, if any, is in {})",
+                dir.join(PREVIOUS_DIR).display()
+            ),
         ));
         attempt(dir, summary, false)?;
         return Ok(());
@@ -349,7 +352,7 @@ pub fn write_results(dir: &Path, gather: &Gather, summary: &mut Summary) -> Resu
     let rescue = rescue_dir(nix::unistd::getppid().as_raw() as u32);
     let warning = format!("{e}; the data of this move are in {} instead", rescue.display());
     let _ = writeln!(std::io::stderr(), "qmarc-controller: {warning}");
-    summary.warnings.push(warning);
+    summary.warnings.push(Warning::new(WarningKind::Rescued, warning));
     attempt(&rescue, summary, true)?;
     Ok(())
 }

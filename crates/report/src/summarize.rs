@@ -3,7 +3,8 @@
 //! did not follow its command).
 
 use crate::summary::{
-    ApproachSummary, FaultReport, MotorSummary, SettleSummary, Summary, TimingSummary,
+    ApproachSummary, FaultReport, MotorSummary, SettleSummary, Summary, TimingSummary, Warning,
+    WarningKind,
 };
 use qmarc_config::{Mode, Settings};
 use qmarc_controller::record::MoveRecord;
@@ -22,7 +23,8 @@ pub fn summarize(
 ) -> Summary {
     let cpr = settings.counts_per_rad();
     let n = settings.n_motors;
-    let mut warnings = rt.warnings.clone();
+    let real_time = rt.warnings.iter().map(|w| Warning::new(WarningKind::RealTime, w.as_str()));
+    let mut warnings: Vec<Warning> = real_time.collect();
     warnings.extend(move_warnings(settings, record));
     let motors = followed(record, n, cpr, &mut warnings);
     // The rows of the path (the settle's come after it).
@@ -81,37 +83,46 @@ pub fn summarize(
 
 /// What the settings and the path call for a warning about: gathered rows not kept, a path
 /// that ends moving, gains rescaled to the period.
-fn move_warnings(settings: &Settings, record: &MoveRecord) -> Vec<String> {
+fn move_warnings(settings: &Settings, record: &MoveRecord) -> Vec<Warning> {
     let n = settings.n_motors;
     let mut warnings = Vec::new();
     if record.gather.dropped() > 0 {
-        warnings.push(format!(
-            "{} rows of the stream were not kept: the gather buffer holds gather.stream_max_s \
+        warnings.push(Warning::new(
+            WarningKind::GatherDropped,
+            format!(
+                "{} rows of the stream were not kept: the gather buffer holds gather.stream_max_s \
              = {} s of a stream (raise it, or gather less often with gather.every)",
-            record.gather.dropped(),
-            settings.gather.stream_max_s
+                record.gather.dropped(),
+                settings.gather.stream_max_s
+            ),
         ));
     }
     if let Some(v) = record.end_velocity
         && let Some(m) = (0..n).find(|&m| v[m].abs() > END_AT_REST_COUNTS_PER_S)
     {
-        warnings.push(format!(
-            "the path ends moving (motor {} at {:.1} counts/s): its last command was held for \
+        warnings.push(Warning::new(
+            WarningKind::EndsMoving,
+            format!(
+                "the path ends moving (motor {} at {:.1} counts/s): its last command was held for \
              trajectory.settle_s = {} s so that the motors stop under control; end the path at \
              rest (a last knot repeated, or a PVT velocity of 0) to avoid the jolt",
-            m + 1,
-            v[m],
-            settings.trajectory.settle_s
+                m + 1,
+                v[m],
+                settings.trajectory.settle_s
+            ),
         ));
     }
     if settings.gains_rescaled() {
-        warnings.push(format!(
-            "the gains were tuned at general.gains_period_us = {} µs and run at {} µs: Kd and \
+        warnings.push(Warning::new(
+            WarningKind::GainsRescaled,
+            format!(
+                "the gains were tuned at general.gains_period_us = {} µs and run at {} µs: Kd and \
              Kvff × {r}, Kaff × {r2}, Ki ÷ {r} (the effective gains are in summary.json)",
-            settings.gains_period_us,
-            settings.period_us,
-            r = f64::from(settings.gains_period_us) / f64::from(settings.period_us),
-            r2 = (f64::from(settings.gains_period_us) / f64::from(settings.period_us)).powi(2),
+                settings.gains_period_us,
+                settings.period_us,
+                r = f64::from(settings.gains_period_us) / f64::from(settings.period_us),
+                r2 = (f64::from(settings.gains_period_us) / f64::from(settings.period_us)).powi(2),
+            ),
         ));
     }
     warnings
@@ -151,7 +162,7 @@ fn followed(
     record: &MoveRecord,
     n: usize,
     cpr: f64,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> Vec<MotorSummary> {
     // The error at the end: of the settle, or of the path when there was none.
     let final_error = record.final_error();
@@ -172,13 +183,13 @@ fn followed(
         if judged(m) && travel[m].not_followed(final_error[m]) {
             summary.followed = false;
             let (commanded, moved) = travel[m].lengths();
-            warnings.push(format!(
+            warnings.push(Warning::new(WarningKind::NotFollowed, format!(
                 "motor {} did not follow its command: it moved {moved:.0} of the {commanded:.0} \
                  counts commanded and ended {:.0} counts from its last command (a seized joint, \
                  an amplifier that is off or not wired, a gain of the wrong sign?)",
                 m + 1,
                 final_error[m]
-            ));
+            )));
         }
     }
     motors

@@ -158,6 +158,71 @@ impl From<Percentiles> for Pct {
     }
 }
 
+/// What a warning is about: tools and tests tell warnings apart by their kind; the user reads
+/// the message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WarningKind {
+    /// The servo loop did not get what real time needs (SCHED_FIFO, locked memory, a CPU).
+    RealTime,
+    /// Rows of a stream were not kept: the gather buffer was full.
+    GatherDropped,
+    /// The path ends moving: its last command was held so that the motors stop.
+    EndsMoving,
+    /// The gains were tuned at another period and rescaled to this one.
+    GainsRescaled,
+    /// A motor did not follow its command.
+    NotFollowed,
+    /// `--unhomed`: the software position limits were off.
+    Unhomed,
+    /// Motors not homed: the software position limits did not hold for them.
+    NotHomed,
+    /// The live telemetry did not run, or dropped samples.
+    Telemetry,
+    /// A stop signal while the data were written: the data files were not written.
+    DataNotWritten,
+    /// The results could not be written where asked: they are in the rescue folder.
+    Rescued,
+    /// Figures that are not numbers.
+    NotNumbers,
+}
+
+/// A warning of a run: its kind and what the user reads. It reads as its message (`Deref` to
+/// `str`, `Display`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Warning {
+    /// What it is about.
+    pub kind: WarningKind,
+    /// What the user reads.
+    pub message: String,
+}
+
+impl Warning {
+    /// A warning of `kind` saying `message`.
+    pub fn new(kind: WarningKind, message: impl Into<String>) -> Warning {
+        Warning { kind, message: message.into() }
+    }
+}
+
+impl std::ops::Deref for Warning {
+    type Target = str;
+    fn deref(&self) -> &str {
+        &self.message
+    }
+}
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl PartialEq<&str> for Warning {
+    fn eq(&self, other: &&str) -> bool {
+        self.message == *other
+    }
+}
+
 /// Homing's part of `summary.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HomingReport {
@@ -278,8 +343,8 @@ pub struct Summary {
     pub approach: Option<ApproachSummary>,
     /// Timing figures.
     pub timing: TimingSummary,
-    /// Warnings of the run (degraded real time, dropped rows).
-    pub warnings: Vec<String>,
+    /// Warnings of the run (degraded real time, dropped rows), each with its kind.
+    pub warnings: Vec<Warning>,
     /// The pid of the run's `qmarc-starter` (the controller's parent): whose files these are.
     #[serde(default)]
     pub starter_pid: u32,
@@ -336,9 +401,12 @@ impl Summary {
         let bad = self.figures_not_numbers();
         if !bad.is_empty() {
             self.ok = false;
-            self.warnings.push(format!(
-                "figures that are not numbers (null in summary.json): {}; the move is not ok",
-                bad.join(", ")
+            self.warnings.push(Warning::new(
+                WarningKind::NotNumbers,
+                format!(
+                    "figures that are not numbers (null in summary.json): {}; the move is not ok",
+                    bad.join(", ")
+                ),
             ));
         }
     }

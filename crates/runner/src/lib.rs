@@ -6,7 +6,7 @@
 //! ```
 //! use qmarc_config::Mode;
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let names = qmarc_config::Names { laws: vec!["pidff"], methods: vec!["spline"], backends: vec!["sim"], any_plugin: false };
+//! let names = qmarc_config::Names { laws: vec!["pidff"], methods: vec!["spline"], any_plugin: false };
 //! let table = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
 //! let settings = qmarc_config::Settings::parse("q.toml".as_ref(), &table.repeat(3), &names)?;
 //! let plan = qmarc_runner::run::plan_for(&settings, Mode::Home, false, false);

@@ -21,7 +21,7 @@ use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_report::Summary;
 use qmarc_report::output::{WriteError, write_results};
 use qmarc_report::summarize::summarize;
-use qmarc_report::summary::{AfterHoming, HomingReport};
+use qmarc_report::summary::{AfterHoming, HomingReport, Warning, WarningKind};
 use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
 use qmarc_timer::{MonotonicClock, Ticker, TickerKind, UnpacedTicker};
 use std::time::{Duration, Instant};
@@ -168,25 +168,34 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
         summary.homing = Some(homing_report(&record, homed_read, settings.n_motors));
     }
     if spec.unhomed && spec.mode != Mode::Home {
-        summary.warnings.push(
-            "--unhomed: the frame may not be homed; software position limits were off".into(),
-        );
+        summary.warnings.push(Warning::new(
+            WarningKind::Unhomed,
+            "--unhomed: the frame may not be homed; software position limits were off",
+        ));
     }
     let unhomed: Vec<String> =
         (0..settings.n_motors).filter(|&m| !record.homed[m]).map(|m| (m + 1).to_string()).collect();
     if matches!(spec.mode, Mode::Jog | Mode::Check) && !unhomed.is_empty() && !spec.unhomed {
-        summary.warnings.push(format!(
-            "motors {} are not homed: the software position limits did not hold for them",
-            unhomed.join(", ")
+        summary.warnings.push(Warning::new(
+            WarningKind::NotHomed,
+            format!(
+                "motors {} are not homed: the software position limits did not hold for them",
+                unhomed.join(", ")
+            ),
         ));
     }
     if let Some(why) = relayed.and_then(|r| r.error) {
-        summary.warnings.push(format!("no live telemetry: {why}"));
+        summary
+            .warnings
+            .push(Warning::new(WarningKind::Telemetry, format!("no live telemetry: {why}")));
     }
     if record.telemetry_dropped > 0 {
-        summary.warnings.push(format!(
-            "live telemetry: {} samples dropped (its publishing thread fell behind)",
-            record.telemetry_dropped
+        summary.warnings.push(Warning::new(
+            WarningKind::Telemetry,
+            format!(
+                "live telemetry: {} samples dropped (its publishing thread fell behind)",
+                record.telemetry_dropped
+            ),
         ));
     }
     write_results(&settings.gather.out_dir, &record.gather, &mut summary)?;

@@ -75,7 +75,7 @@ impl MoveOptions {
             s.gather.out_dir = out.clone();
         }
         if let Some(b) = &self.backend {
-            s.set_backend(b, names)?;
+            s.set_backend(b)?;
         }
         if let Some(d) = &self.device {
             s.set_device(d)?;

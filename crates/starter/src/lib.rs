@@ -53,7 +53,6 @@ pub fn names() -> Names {
     Names {
         laws: qmarc_plugins::registry::law_names(),
         methods: qmarc_plugins::registry::path_generator_names(),
-        backends: qmarc_hwserver::backends::names(),
         any_plugin: false,
     }
 }
@@ -183,7 +182,10 @@ mod tests {
         let n = names();
         assert_eq!(n.laws, ["pidff"]);
         assert_eq!(n.methods, ["step", "spline", "pvt"]);
-        assert_eq!(n.backends, ["sim", "s626"]);
+        let backends: Vec<&str> =
+            qmarc_hwserver::backends::BACKENDS.iter().map(|b| b.kind.name()).collect();
+        assert_eq!(backends, ["sim", "s626"], "one registry entry per BackendKind, in its order");
+        assert_eq!(backends, qmarc_config::BackendKind::NAMES);
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
         assert!(qmarc_config::Settings::load(&path, &n).is_ok());
     }

@@ -158,7 +158,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
         iox_root: location.root.clone(),
     };
     let settings = &spec.settings;
-    if spec.unpaced && settings.hwserver.backend != "sim" {
+    if spec.unpaced && settings.hwserver.backend != qmarc_config::BackendKind::Sim {
         return Err(refused(anyhow!(
             "--unpaced runs only on the simulated robot (`--backend sim`), not on `{}`: real \
              hardware moves in real time",

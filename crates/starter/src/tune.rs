@@ -62,8 +62,7 @@ impl TuneArgs {
     /// Applies `--params`, `--objective` and `--budget` to `s.tune`.
     pub fn apply(&self, s: &mut Settings) -> anyhow::Result<()> {
         if let Some(p) = &self.params {
-            qmarc_config::check_params(p).map_err(|e| anyhow!("--params: {e}"))?;
-            s.tune.params = p.clone();
+            s.tune.params = qmarc_config::check_params(p).map_err(|e| anyhow!("--params: {e}"))?;
         }
         if let Some(o) = &self.objective {
             s.tune.objective = o.parse().map_err(|e| anyhow!("--objective: {e}"))?;
@@ -98,7 +97,7 @@ pub fn run(
     local: Option<&RunSpec>,
     on_record: &mut dyn FnMut(&Record),
 ) -> anyhow::Result<TuneOutcome> {
-    let params: Vec<Param> = settings.tune.params.iter().filter_map(|p| Param::named(p)).collect();
+    let params: Vec<Param> = settings.tune.params.clone();
     let objective: Objective = settings.tune.objective;
     let plan = Plan {
         tune: &settings.tune,

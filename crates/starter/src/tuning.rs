@@ -32,7 +32,7 @@ fn tune_settings(args: &StarterArgs, t: &TuneArgs) -> Result<(Settings, bool), F
             "tune makes moves: check the path with `qmarc-starter --print-settings run …`"
         )));
     }
-    let real = t.paced || settings.hwserver.backend != "sim";
+    let real = t.paced || settings.hwserver.backend != qmarc_config::BackendKind::Sim;
     if real && args.opts.unpaced {
         return Err(refused(anyhow!(
             "--unpaced is the simulated robot's lock-step: tuning with --paced or on `{}` \
@@ -186,7 +186,7 @@ fn print_outcome(settings: &Settings, o: &qmarc_starter::tune::TuneOutcome, real
     let evaluations = o.tuned.records.len();
     println!(
         "tuned {} on {} by {} ({} candidates, objective {})",
-        settings.tune.params.join(","),
+        settings.tune.params.iter().map(|p| p.name()).collect::<Vec<_>>().join(","),
         settings.trajectory.knots.as_ref().map_or(String::new(), |k| k.display().to_string()),
         if real { "real moves" } else { "lock-step simulation (the motors are independent there)" },
         evaluations,

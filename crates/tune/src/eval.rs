@@ -3,7 +3,7 @@
 //! or real moves through the process set (the starter's, on hardware).
 
 use crate::local::{LocalError, run_local};
-use qmarc_config::{Mode, MotorGains, RunSpec, Settings, TUNE_PARAMS};
+use qmarc_config::{Mode, MotorGains, RunSpec, Settings};
 use qmarc_controller::gather::GatherRow;
 use qmarc_proto::DAC_MAX;
 use qmarc_report::Summary;
@@ -13,45 +13,7 @@ use std::sync::atomic::AtomicBool;
 pub use qmarc_config::TuneObjective as Objective;
 
 /// One gain of a motor that tuning changes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Param(usize);
-
-impl Param {
-    /// The gain named `name` ([`TUNE_PARAMS`]).
-    pub fn named(name: &str) -> Option<Param> {
-        TUNE_PARAMS.iter().position(|p| *p == name).map(Param)
-    }
-
-    /// The gain at `index` of [`TUNE_PARAMS`].
-    pub(crate) fn at(index: usize) -> Param {
-        Param(index)
-    }
-
-    /// Its name.
-    pub fn name(self) -> &'static str {
-        TUNE_PARAMS[self.0]
-    }
-
-    /// Its index in [`TUNE_PARAMS`] (and `tune.bounds`).
-    pub fn index(self) -> usize {
-        self.0
-    }
-
-    /// Its value in `g`.
-    pub fn get(self, g: &MotorGains) -> f64 {
-        [g.kp, g.ki, g.kd, g.kvff, g.kaff][self.0]
-    }
-
-    /// Sets it in `g`.
-    pub fn set(self, g: &mut MotorGains, v: f64) {
-        *[&mut g.kp, &mut g.ki, &mut g.kd, &mut g.kvff, &mut g.kaff][self.0] = v;
-    }
-
-    /// Whether it is a feedback gain (scaled by the stability margin's step).
-    pub fn feedback(self) -> bool {
-        self.0 < 3
-    }
-}
+pub use qmarc_config::TuneParam as Param;
 
 /// The error figures of one motor over the path (thesis Table 5-2), and its DAC saturation.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]

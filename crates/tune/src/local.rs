@@ -24,8 +24,8 @@ use std::sync::atomic::AtomicBool;
 /// move (the core answers each request in place of the iceoryx2 exchange).
 pub fn open_core(spec: &RunSpec) -> Result<HwCore, LocalError> {
     let s = &spec.settings;
-    if s.hwserver.backend != "sim" {
-        return Err(LocalError::NotSim(s.hwserver.backend.clone()));
+    if s.hwserver.backend != qmarc_config::BackendKind::Sim {
+        return Err(LocalError::NotSim(s.hwserver.backend));
     }
     let backend = qmarc_hwserver::backends::open(s, true)?;
     Ok(HwCore::new(backend).with_encoder_limit(s.hwserver.max_counts_per_s))
@@ -37,7 +37,7 @@ pub fn open_core(spec: &RunSpec) -> Result<HwCore, LocalError> {
 pub enum LocalError {
     /// Only the simulated robot runs in lock-step.
     #[error("a move inside this process runs only on the simulated robot, not on `{0}`")]
-    NotSim(String),
+    NotSim(qmarc_config::BackendKind),
     /// Homing presets the counters between moves: run it through the process set.
     #[error("homing is not run inside this process: `qmarc-starter home`")]
     Homing,

@@ -265,7 +265,7 @@ impl<'a> Search<'a> {
             }
             let mut gains = all.to_vec();
             if margin {
-                for p in [0, 1, 2].map(Param::at) {
+                for p in [Param::Kp, Param::Ki, Param::Kd] {
                     let [lo, hi] = self.tune.bounds[p.index()];
                     p.set(&mut gains[motor], (p.get(&all[motor]) * self.tune.margin).clamp(lo, hi));
                 }

@@ -270,7 +270,7 @@ impl TuneSummary {
             knots: knots.map_or(String::new(), |k| k.display().to_string()),
             method: settings.trajectory.method.clone(),
             objective: settings.tune.objective.to_string(),
-            params: settings.tune.params.clone(),
+            params: settings.tune.params.iter().map(|p| p.name().to_string()).collect(),
             candidates: tuned.records.len(),
             moves: tuned.records.last().map_or(0, |r| r.moves),
             ended_early: tuned.aborted.as_ref().map(ToString::to_string),

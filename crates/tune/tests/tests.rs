@@ -12,12 +12,7 @@ fn workspace() -> PathBuf {
 
 /// The shipped settings on the X-Z path, the simulated robot at its start.
 fn xz_spec() -> RunSpec {
-    let names = Names {
-        laws: vec!["pidff"],
-        methods: vec!["spline", "pvt"],
-        backends: vec!["sim", "s626"],
-        any_plugin: false,
-    };
+    let names = Names { laws: vec!["pidff"], methods: vec!["spline", "pvt"], any_plugin: false };
     let mut s = Settings::load(&workspace().join("config/qmarc.toml"), &names).unwrap();
     s.set_knots(&workspace().join("knots/xz-pick-place-spline.txt"));
     let s = qmarc_tune::local::on_the_path(&s).unwrap();

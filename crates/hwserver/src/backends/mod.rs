@@ -3,15 +3,16 @@
 //! `--backend`) choose from it, and the conformance suite (`crate::conformance`,
 //! `tests/conformance.rs`) runs on every entry.
 //!
-//! The recipe, for a card `foo` (this example is compiled and run by `cargo test`): the card
-//! in `crates/hwserver/src/backends/foo.rs`, then `pub mod foo;` and its entry in
-//! [`BACKENDS`]. `--backend foo` and `hwserver.backend = "foo"` then work.
+//! The recipe, for a card `foo` (this example is compiled and run by `cargo test`): its
+//! variant in `qmarc_config::BackendKind` (the settings' closed set of hardware), the card in
+//! `crates/hwserver/src/backends/foo.rs`, then `pub mod foo;` and its entry in [`BACKENDS`].
+//! `--backend foo` and `hwserver.backend = "foo"` then work.
 //!
 //! ```
 //! use qmarc_hwserver::HwCore;
 //! use qmarc_hwserver::backend::{Backend, BackendOpenError, HwFault, Inputs};
 //! use qmarc_hwserver::backends::BackendEntry;
-//! use qmarc_config::{Names, Settings};
+//! use qmarc_config::{BackendKind, Names, Settings};
 //! use qmarc_proto::{COUNTER_ZERO, HwMsg, MAX_MOTORS};
 //!
 //! /// The card (`backends/foo.rs`): its counters, DACs, enables and switches.
@@ -52,7 +53,9 @@
 //!
 //! // Its line in BACKENDS (`backends/mod.rs`).
 //! const FOO: BackendEntry = BackendEntry {
-//!     name: "foo",
+//!     // Its variant of `qmarc_config::BackendKind` (`Foo`, named "foo" there); the 626's
+//!     // here, so that this example compiles.
+//!     kind: BackendKind::S626,
 //!     description: "the Foo card",
 //!     open: |s, lockstep| Ok(Box::new(Foo::open(s, lockstep)?)),
 //!     check: Foo::check,
@@ -62,8 +65,8 @@
 //! };
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let names = Names { laws: vec!["pidff"], methods: vec!["spline"], backends: vec!["foo"], any_plugin: false };
-//! let toml = "[general]\nn_motors = 1\n[hwserver]\nbackend = \"foo\"\n\
+//! let names = Names { laws: vec!["pidff"], methods: vec!["spline"], any_plugin: false };
+//! let toml = "[general]\nn_motors = 1\n\
 //!             [[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
 //! let settings = Settings::parse("q.toml".as_ref(), toml, &names)?;
 //! (FOO.check)(&settings, false)?;
@@ -76,7 +79,7 @@
 
 use crate::backend::{Backend, BackendOpenError};
 use crate::conformance::Rig;
-use qmarc_config::{ConfigLoadError, Mode, Names, RunSpec, Settings};
+use qmarc_config::{BackendKind, ConfigLoadError, Mode, Names, RunSpec, Settings};
 use qmarc_proto::MAX_MOTORS;
 use qmarc_proto::service::IpcLocation;
 
@@ -90,8 +93,8 @@ pub type OpenFn = fn(&Settings, bool) -> Result<Box<dyn Backend>, BackendOpenErr
 /// A registered backend.
 #[derive(Clone, Copy)]
 pub struct BackendEntry {
-    /// Name used in `hwserver.backend` and `--backend`.
-    pub name: &'static str,
+    /// Which it is (`hwserver.backend`, `--backend`: its name).
+    pub kind: BackendKind,
     /// One line for lists.
     pub description: &'static str,
     /// Opens the hardware of the settings; `lockstep`: simulated time, where the backend has
@@ -107,14 +110,14 @@ pub struct BackendEntry {
 /// Every backend.
 pub const BACKENDS: &[BackendEntry] = &[
     BackendEntry {
-        name: "sim",
+        kind: BackendKind::Sim,
         description: "the simulated Deltabot: velocity-mode amplifiers, 24-bit counters, limit switches",
         open: |s, lockstep| Ok(Box::new(sim::SimDeltabot::open(s, lockstep)?)),
         check: sim::SimDeltabot::check,
         rig: || Some(Box::new(sim::SimRig::default())),
     },
     BackendEntry {
-        name: "s626",
+        kind: BackendKind::S626,
         description: "the Sensoray 626 through the kernel's comedi driver (--device /dev/comediN)",
         open: |s, lockstep| Ok(Box::new(s626::S626::open(s, lockstep)?)),
         check: s626::S626::check,
@@ -122,21 +125,16 @@ pub const BACKENDS: &[BackendEntry] = &[
     },
 ];
 
-/// The backend named `name`.
-pub fn backend(name: &str) -> Option<&'static BackendEntry> {
-    BACKENDS.iter().find(|b| b.name == name)
-}
-
-/// Names of every backend.
-pub fn names() -> Vec<&'static str> {
-    BACKENDS.iter().map(|b| b.name).collect()
+/// The registry entry of `kind`.
+pub fn backend(kind: BackendKind) -> Option<&'static BackendEntry> {
+    BACKENDS.iter().find(|b| b.kind == kind)
 }
 
 /// The registry entry of the backend the settings name.
 fn entry_of(s: &Settings) -> Result<&'static BackendEntry, BackendOpenError> {
-    backend(&s.hwserver.backend).ok_or_else(|| BackendOpenError::Unknown {
-        name: s.hwserver.backend.clone(),
-        available: names().join(", "),
+    backend(s.hwserver.backend).ok_or_else(|| BackendOpenError::Unknown {
+        name: s.hwserver.backend.to_string(),
+        available: BACKENDS.iter().map(|b| b.kind.name()).collect::<Vec<_>>().join(", "),
     })
 }
 
@@ -160,7 +158,7 @@ pub fn standalone_run(
 ) -> Result<RunSpec, ConfigLoadError> {
     let table = "\n[[motor]]\nkp = 0.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
     let text = format!("{text}{}", table.repeat(MAX_MOTORS));
-    let names = Names::backends_only(names());
+    let names = Names::any();
     Ok(RunSpec {
         settings: Settings::parse("standalone.toml".as_ref(), &text, &names)?,
         mode: Mode::Step,
@@ -176,7 +174,7 @@ pub fn standalone_run(
 /// the backends' unit tests parse, knowing only the backends' names.
 #[cfg(test)]
 pub(crate) fn test_settings(toml: &str) -> Settings {
-    let names = Names::backends_only(names());
+    let names = Names::any();
     let motors = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n".repeat(3);
     Settings::parse(std::path::Path::new("q.toml"), &format!("{toml}{motors}"), &names).unwrap()
 }

@@ -56,12 +56,12 @@ struct HwServerArgs {
 
 /// `--selftest`: the settings file with the flags, then the card's check and timing.
 fn selftest(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
-    let names = qmarc_config::Names::backends_only(qmarc_hwserver::backends::names());
+    let names = qmarc_config::Names::any();
     let refused = |e: anyhow::Error| (exit::REFUSED, e);
     let mut s =
         qmarc_config::Settings::load(&args.config, &names).map_err(|e| refused(e.into()))?;
     if let Some(b) = &args.backend {
-        s.set_backend(b, &names).map_err(|e| refused(e.into()))?;
+        s.set_backend(b).map_err(|e| refused(e.into()))?;
     }
     // The selftest moves nothing: the settings' counts (4× in config/qmarc.toml) do not
     // matter to it, only the card and its wiring.
