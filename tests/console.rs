@@ -413,7 +413,7 @@ fn killing_the_console_during_a_move_stops_it_with_motors_disabled() {
 /// the page, Ctrl-U empties a field, the actions fit a small terminal — and a second move is
 /// never started while one runs.
 #[test]
-fn console_pages_are_usable_and_one_move_runs_at_a_time_issue_10() {
+fn console_pages_are_usable_and_one_move_runs_at_a_time() {
     let run = TestRun::new("conspage");
     let long = run.dir.join("long.txt");
     let mut text = String::from("1001\n");
@@ -506,7 +506,7 @@ fn console_pages_are_usable_and_one_move_runs_at_a_time_issue_10() {
 /// `tune run`), the progress comes as lines in the log, the results page shows the before →
 /// after figures and gains, and Ctrl-A puts the tuned gains in the form, which F10 saves.
 #[test]
-fn console_tunes_the_gains_on_the_path_and_takes_them_issue_15() {
+fn console_tunes_the_gains_on_the_path_and_takes_them() {
     let run = TestRun::new("constune");
     let xz = knots("xz-pick-place-spline.txt");
     let config = run.config_with(&[
@@ -568,7 +568,7 @@ fn console_tunes_the_gains_on_the_path_and_takes_them_issue_15() {
 /// actual, following error, servo period — redrawn as samples come (the count on its line
 /// grows between two looks); when the move ends the page is the finished move's again.
 #[test]
-fn console_charts_a_running_move_live_then_its_results_issue_16() {
+fn console_charts_a_running_move_live_then_its_results() {
     let run = TestRun::new("conslive");
     let tmux = console_running_a_long_move(&run);
     tmux.keys(&["F7"]);
@@ -603,7 +603,7 @@ fn console_charts_a_running_move_live_then_its_results_issue_16() {
 /// Issue 27, item 3: the jog keys in the console: Ctrl-↓ chooses motor 2, Ctrl-→ jogs it by
 /// `[jog] counts` through the starter, and its results show; nothing else moved.
 #[test]
-fn the_console_jogs_a_motor_with_its_keys_issue_27() {
+fn the_console_jogs_a_motor_with_its_keys() {
     let run = TestRun::new("consjog");
     run.config_with(&[]);
     let edit = |key: &str, value: &str| {

@@ -161,7 +161,7 @@ fn xz_path_at_both_scales(run: &TestRun) -> (PathBuf, PathBuf, [i64; 3]) {
 }
 
 #[test]
-fn one_physical_move_gives_the_same_loop_at_4x_and_1x_counting_issue_27() {
+fn one_physical_move_gives_the_same_loop_at_4x_and_1x_counting() {
     let run = TestRun::new("counting");
     let at4 = lean(&run, "at4.toml", &shipped_config(), &[]);
     let at1 = lean(&run, "at1.toml", &s626_config(), &[]);
@@ -236,7 +236,7 @@ fn home_ok(run: &TestRun, config: &Path, out: &Path, device: Option<&str>) {
 }
 
 #[test]
-fn homing_at_1x_passes_over_the_amplifier_gain_range_issue_27() {
+fn homing_at_1x_passes_over_the_amplifier_gain_range() {
     let run = TestRun::new("kvrange");
     // The plant's Kv 25 % either side of the calibrated 5912.5 counts/s per volt (1×).
     for kv in [0.75 * 5912.5, 1.25 * 5912.5] {

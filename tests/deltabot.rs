@@ -13,7 +13,7 @@ const THESIS_PATHS: [(&str, &str, &str); 2] = [
 /// The shipped knot files are what `path` makes of the shipped waypoints, byte for byte:
 /// 37 knots 11.07 ms apart and 57 knots 10 ms apart, as the thesis resampled them.
 #[test]
-fn path_makes_the_shipped_thesis_knot_files_issue_13() {
+fn path_makes_the_shipped_thesis_knot_files() {
     let run = TestRun::new("pathknots");
     for (waypoints, name, every) in THESIS_PATHS {
         for method in ["spline", "pvt"] {
@@ -37,7 +37,7 @@ fn path_makes_the_shipped_thesis_knot_files_issue_13() {
 }
 
 #[test]
-fn path_refuses_bad_waypoints_before_writing_anything_issue_13() {
+fn path_refuses_bad_waypoints_before_writing_anything() {
     let run = TestRun::new("pathbad");
     let w = run.out("w.txt");
     std::fs::write(&w, "# t x y z\n0.0 0 0 -0.6\n0.1 0 0 -1.2\n").unwrap();
@@ -140,7 +140,7 @@ fn run_xz(run: &TestRun, out: &std::path::Path, before: &[&str]) -> qmarc_tests:
 
 /// Every shipped thesis path runs to its end on the simulated robot with the thesis' gains.
 #[test]
-fn every_thesis_path_runs_without_a_fault_issue_13() {
+fn every_thesis_path_runs_without_a_fault() {
     let run = TestRun::new("thesispaths");
     for (_, name, _) in THESIS_PATHS {
         let config = starting_at_the_path(&run, &format!("{name}-spline.txt"));
@@ -166,7 +166,7 @@ fn every_thesis_path_runs_without_a_fault_issue_13() {
 /// The figures of this deterministic run are reproducible to the last bit; the band is the
 /// one docs/deltabot.md justifies, around the thesis' own figures.
 #[test]
-fn the_xz_path_reports_arm_and_effector_errors_issue_13() {
+fn the_xz_path_reports_arm_and_effector_errors() {
     let run = TestRun::new("xzreport");
     let out = run.out("out");
     let r = run_xz(&run, &out, &["--plots"]);
@@ -209,7 +209,7 @@ fn the_xz_path_reports_arm_and_effector_errors_issue_13() {
 /// trial in trials.csv equal to that trial's summary, its two plots and the spread table.
 /// Deterministic trials of the same path give the same figures.
 #[test]
-fn trials_repeat_a_move_and_tabulate_it_issue_13() {
+fn trials_repeat_a_move_and_tabulate_it() {
     let run = TestRun::new("trials");
     let out = run.out("out");
     let r = run_xz(&run, &out, &["trials", "--n=3"]);
@@ -254,7 +254,7 @@ fn trials_repeat_a_move_and_tabulate_it_issue_13() {
 
 /// Step trials go back and forth: on hardware each starts where the last ended.
 #[test]
-fn step_trials_alternate_the_step_issue_13() {
+fn step_trials_alternate_the_step() {
     let run = TestRun::new("steptrials");
     let out = run.out("out");
     let r = run.step_ok(&out, &["--deterministic", "trials", "--n=2", "step", "--duration=0.1"]);
@@ -273,7 +273,7 @@ fn step_trials_alternate_the_step_issue_13() {
 /// plant rings at 57 Hz: a change within 1.5 ms of each, and the step's summed error stays
 /// far below the thesis' integrated-error limit of 200 000 counts.
 #[test]
-fn the_step_rings_as_thesis_fig_5_1_issue_13() {
+fn the_step_rings_as_thesis_fig_5_1() {
     let run = TestRun::new("fig51");
     let out = run.out("out");
     run.step_ok(&out, &["--deterministic", "step", "--size=1000", "--duration=0.5"]);
@@ -298,7 +298,7 @@ fn the_step_rings_as_thesis_fig_5_1_issue_13() {
 /// its waypoints, byte for byte) runs from the work centre, where the simulated robot starts,
 /// ends at rest, and leaves every motor within the path's start tolerance of its first knot.
 #[test]
-fn the_approach_brings_the_robot_to_the_xz_start_issue_13() {
+fn the_approach_brings_the_robot_to_the_xz_start() {
     let run = TestRun::new("approach");
     let made = run.out("approach.txt");
     run.starter_ok(&[
@@ -335,7 +335,7 @@ fn the_approach_brings_the_robot_to_the_xz_start_issue_13() {
 /// trial would read it again), a missing knot file and --print-settings are refused, and an
 /// earlier series in the folder is left as it was.
 #[test]
-fn trials_refuse_before_touching_an_earlier_series_issue_13() {
+fn trials_refuse_before_touching_an_earlier_series() {
     let run = TestRun::new("trialsno");
     let out = run.out("out");
     std::fs::create_dir_all(&out).unwrap();

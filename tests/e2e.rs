@@ -191,7 +191,7 @@ fn bad_settings_are_refused_before_anything_starts() {
 /// Issue 9, item 5: every global option works before or after the subcommand, for the
 /// starter and for the console's plain subcommands.
 #[test]
-fn global_options_work_after_the_subcommand_issue_9() {
+fn global_options_work_after_the_subcommand() {
     let run = TestRun::new("globals");
     let (a, b) = (run.out("a"), run.out("b"));
     let out_a = format!("--out={}", a.display());
@@ -384,7 +384,7 @@ fn a_starter_whose_output_is_closed_still_runs_and_cleans_up() {
 /// responses, a deterministic move writes the same data as with both blocking — the wait
 /// mode changes how fast the exchange is, never what it carries.
 #[test]
-fn spin_mode_moves_exactly_as_blocking_mode_issue_14() {
+fn spin_mode_moves_exactly_as_blocking_mode() {
     let run = TestRun::new("spinmode");
     let moved = |name: &str, edits: &[(&str, &str)]| {
         let out = run.out(name);
@@ -433,7 +433,7 @@ fn thread_cpus(pid: u32) -> Vec<(String, Vec<usize>)> {
 /// CPUs, where the machine has any: their system calls never hold up the real-time pair's
 /// wake. The knot thread is spawned by the pinned servo thread and must not inherit its CPU.
 #[test]
-fn threads_that_are_not_real_time_keep_off_the_pinned_cpu_issue_14() {
+fn threads_that_are_not_real_time_keep_off_the_pinned_cpu() {
     let run = TestRun::new("keepoff");
     let cfg = run.config_with(&[("servo_cpu", "0"), ("hwserver_cpu", "0")]);
     let status = std::fs::read_to_string("/proc/self/status").unwrap();

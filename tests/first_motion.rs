@@ -25,7 +25,7 @@ fn col(header: &[String], name: &str) -> usize {
 /// move to the X-Z path's first knot, then the path, at rest at both ends; the approach is
 /// reported apart from the path's figures. Without it the path is refused, saying so.
 #[test]
-fn run_with_the_approach_moves_to_the_paths_start_first_issue_27() {
+fn run_with_the_approach_moves_to_the_paths_start_first() {
     let run = TestRun::new("approach");
     let config = run.config_with(&[]);
     let path = knots("xz-pick-place-spline.txt");
@@ -90,7 +90,7 @@ fn run_with_the_approach_moves_to_the_paths_start_first_issue_27() {
 /// homed the software limits hold; where it is not, jog still moves (that is what it is for),
 /// more slowly.
 #[test]
-fn jog_moves_one_motor_within_the_soft_limits_and_slower_unhomed_issue_27() {
+fn jog_moves_one_motor_within_the_soft_limits_and_slower_unhomed() {
     let run = TestRun::new("jog");
     let config = run.config_with(&[]);
     let jog = |config: &Path, out: &Path, counts: &str| {
@@ -150,7 +150,7 @@ fn jog_moves_one_motor_within_the_soft_limits_and_slower_unhomed_issue_27() {
 /// card; a motor whose amplifier is wired backwards (`sim.reversed_motor`) fails the check
 /// (exit 2) with what to change, and nothing else moved.
 #[test]
-fn check_finds_a_motor_wired_backwards_and_says_what_to_change_issue_27() {
+fn check_finds_a_motor_wired_backwards_and_says_what_to_change() {
     let run = TestRun::new("check");
     let good = run.config_with(&[]);
     let out = run.out("good");

@@ -10,7 +10,7 @@ use std::time::Duration;
 const TIMEOUT: Duration = Duration::from_secs(60);
 
 #[test]
-fn a_missing_card_fails_at_once_naming_its_device_issue_12() {
+fn a_missing_card_fails_at_once_naming_its_device() {
     let run = TestRun::new("nocard");
     // The shipped settings (the simulated robot's): the device is what is wrong first.
     let config = run.config_with(&[]);
@@ -41,7 +41,7 @@ fn a_missing_card_fails_at_once_naming_its_device_issue_12() {
 }
 
 #[test]
-fn the_hwserver_selftest_checks_the_card_and_times_its_lists_issue_12() {
+fn the_hwserver_selftest_checks_the_card_and_times_its_lists() {
     let run = TestRun::new("selftest");
     // The shipped settings: the selftest moves nothing, their counts do not matter to it.
     let config = run.config_with(&[]);
@@ -71,7 +71,7 @@ fn the_hwserver_selftest_checks_the_card_and_times_its_lists_issue_12() {
 }
 
 #[test]
-fn a_step_runs_through_the_626_backend_against_the_fake_card_issue_12() {
+fn a_step_runs_through_the_626_backend_against_the_fake_card() {
     let run = TestRun::new("fakecard");
     let out = run.out("out");
     // The 626 keeps the hardware bounds (10 and 25 periods); this VM's stalls are not the

@@ -529,7 +529,7 @@ fn moves_refuse_an_unhomed_frame_unless_told() {
 /// those of an undisturbed run, byte for byte. A dead process is still noticed by its death
 /// (`killing_the_controller_of_a_lock_step_run_trips_the_watchdog_at_once`).
 #[test]
-fn lock_step_runs_ride_out_host_stalls_issue_9() {
+fn lock_step_runs_ride_out_host_stalls() {
     let run = TestRun::new("stalls");
     let cfg =
         run.config_with(&[("hwserver.watchdog_periods", "10"), ("safety.max_missed_in_row", "25")]);
@@ -597,7 +597,7 @@ fn killing_the_controller_of_a_lock_step_run_trips_the_watchdog_at_once() {
 /// summary.json (the latch while the chain closes again is the conformance suite's check); a
 /// move with the chain open is refused before anything is enabled; closed, the next runs.
 #[test]
-fn the_emergency_stop_disables_every_motor_at_once_and_refuses_moves_while_open_issue_27() {
+fn the_emergency_stop_disables_every_motor_at_once_and_refuses_moves_while_open() {
     let run = TestRun::new("estop");
     let (cfg, events) = with_events(&run, &[("sim.estop_open_s", "[0.5, 0.6]")]);
     let out = run.out("out");

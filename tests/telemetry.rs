@@ -66,7 +66,7 @@ fn assert_rows_are_gathered(csv: &Path, out: &Path) -> usize {
 }
 
 #[test]
-fn scope_records_a_move_started_before_or_during_it_and_its_samples_are_gathered_rows_issue_16() {
+fn scope_records_a_move_started_before_or_during_it_and_its_samples_are_gathered_rows() {
     let run = TestRun::new("scope");
     let config = run.config_with(&[("duration_s", "3.0")]);
     let (before_csv, during_csv) = (run.out("before.csv"), run.out("during.csv"));
@@ -110,7 +110,7 @@ fn scope_records_a_move_started_before_or_during_it_and_its_samples_are_gathered
 /// row, and nothing of the reader is left. The timing figures of the two moves are printed
 /// beside each other (a VM's noise decides them, so they are compared by eye, not asserted).
 #[test]
-fn a_reader_that_never_reads_or_is_killed_changes_nothing_of_the_move_issue_16() {
+fn a_reader_that_never_reads_or_is_killed_changes_nothing_of_the_move() {
     let run = TestRun::new("deafscope");
     let config = run.config_with(&[("duration_s", "2.0")]);
     let c = format!("--config={}", config.display());
@@ -163,7 +163,7 @@ fn a_reader_that_never_reads_or_is_killed_changes_nothing_of_the_move_issue_16()
 /// move ran, exits 0 and leaves no file of its waiting (it looks every 50 ms with a node of
 /// its own) under the run's prefix.
 #[test]
-fn a_scope_with_a_duration_and_no_move_says_so_and_leaves_nothing_issue_16() {
+fn a_scope_with_a_duration_and_no_move_says_so_and_leaves_nothing() {
     let run = TestRun::new("idlescope");
     let started = std::time::Instant::now();
     let idle = wait_with_timeout(scope(&run, &["--duration", "0.6"]), Duration::from_secs(30));

@@ -57,7 +57,7 @@ fn the_state_diagram_in_architecture_md_names_every_phase_of_the_code() {
 /// depend only on crates of lower floors. `config` knows nothing of the plug-ins or the
 /// hardware (the registries inject the names it accepts), `controller` is the loop and knows
 /// no plug-in and no hardware, the hardware server knows no controller, and the processes
-/// (`runner`, `starter`, the console) sit on top.
+/// (`controller-process`, `starter`, the console) sit on top.
 const LAYERS: &[&str] = &[
     "proto",
     "kinematics",
@@ -69,9 +69,9 @@ const LAYERS: &[&str] = &[
     "telemetry",
     "plugins",
     "report",
-    "paths",
+    "waypoints",
     "plots",
-    "runner",
+    "controller-process",
     "tune",
     "starter",
     "console-tui",
@@ -104,7 +104,7 @@ fn our_dev_dependencies(name: &str) -> Vec<String> {
 }
 
 #[test]
-fn crates_depend_only_on_lower_layers_issue_11() {
+fn crates_depend_only_on_lower_layers() {
     let mut listed: Vec<String> = std::fs::read_dir(workspace().join("crates"))
         .unwrap()
         .flatten()
@@ -245,7 +245,7 @@ fn the_function_length_check_finds_bodies() {
 /// No source file over 600 lines (tests, in `tests.rs` files, excepted), and no function
 /// over 80 lines in the crates the servo loop runs in: each stays readable in one sitting.
 #[test]
-fn files_and_loop_functions_stay_short_issue_11() {
+fn files_and_loop_functions_stay_short() {
     // The loop's crates, and the process crates' steps (a move's preparation, launch and
     // conclusion; its report): functions a reader must take in whole.
     const SHORT_FUNCTIONS: &[&str] = &[
@@ -256,7 +256,7 @@ fn files_and_loop_functions_stay_short_issue_11() {
         "hwserver",
         "plugins",
         "report",
-        "runner",
+        "controller-process",
         "starter",
     ];
     let mut problems = Vec::new();

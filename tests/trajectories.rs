@@ -251,7 +251,7 @@ fn a_bad_knot_in_a_stream_ends_the_move_naming_line_and_column() {
 /// arrives, before its segment is used: 270 000 counts/s on line 7 ends the move in
 /// `trajectory_error` naming the line, column and motor, the motors disabled.
 #[test]
-fn a_streamed_knot_beyond_the_motion_limits_ends_the_move_before_it_is_used_issue_27() {
+fn a_streamed_knot_beyond_the_motion_limits_ends_the_move_before_it_is_used() {
     let run = TestRun::new("fastknot");
     let out = run.out("out");
     let mut lines = pvt_lines(12);
@@ -281,7 +281,7 @@ fn a_streamed_knot_beyond_the_motion_limits_ends_the_move_before_it_is_used_issu
 /// NaN in the loop), a path 270 000 counts/s fast, and gains eq. 3-1 cannot servo with are
 /// refused before anything starts, naming file, line and field.
 #[test]
-fn paths_and_gains_beyond_what_the_law_may_be_asked_are_refused_before_anything_starts_issue_27() {
+fn paths_and_gains_beyond_what_the_law_may_be_asked_are_refused_before_anything_starts() {
     let run = TestRun::new("absurd");
     let bad = run.dir.join("bad.txt");
     let knots = |text: &str| {
@@ -388,7 +388,7 @@ fn ramp_knots(run: &TestRun) -> std::path::PathBuf {
 /// last command is held with the loop closed for `trajectory.settle_s`, with a warning, and
 /// the summary has the settle's own figures.
 #[test]
-fn a_path_that_ends_moving_is_held_until_the_motors_stop_issue_9() {
+fn a_path_that_ends_moving_is_held_until_the_motors_stop() {
     let run = TestRun::new("endmove");
     let out = run.out("out");
     let k = ramp_knots(&run);
@@ -432,7 +432,7 @@ fn a_path_that_ends_moving_is_held_until_the_motors_stop_issue_9() {
 /// does at 400 µs; with the gains taken as they are (declared tuned at 200 µs) the velocity
 /// feed-forward halves and the following error grows many times.
 #[test]
-fn gains_keep_their_loop_at_another_period_issue_9() {
+fn gains_keep_their_loop_at_another_period() {
     let run = TestRun::new("gainsT");
     let k = ramp_knots(&run);
     let knots_arg = format!("--knots={}", k.display());
@@ -475,7 +475,7 @@ fn gains_keep_their_loop_at_another_period_issue_9() {
 /// Issue 10 ("never lose data"): a stream longer than its gather buffer keeps its first
 /// `gather.stream_max_s`, and the summary says how many rows were not kept and what to raise.
 #[test]
-fn a_stream_longer_than_its_buffer_says_what_was_not_kept_issue_10() {
+fn a_stream_longer_than_its_buffer_says_what_was_not_kept() {
     let run = TestRun::new("pvtcap");
     let out = run.out("out");
     let cfg = run.config_with(&[("stream_max_s", "0.5")]);

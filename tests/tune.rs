@@ -34,7 +34,7 @@ fn abs_errors(dir: &Path) -> Vec<f64> {
 /// The paced lock-step move, the `--unpaced` one (three processes, no timer) and the one
 /// inside the tuning process (its `before/`) leave the same data files, byte for byte.
 #[test]
-fn unpaced_lock_step_equals_paced_lock_step_byte_for_byte_issue_15() {
+fn unpaced_lock_step_equals_paced_lock_step_byte_for_byte() {
     let run = TestRun::new("unpaced");
     let config = at_the_xz_start(&run, &[]);
     let knots = format!("--knots={}", knots(XZ).display());
@@ -76,7 +76,7 @@ fn unpaced_lock_step_equals_paced_lock_step_byte_for_byte_issue_15() {
 /// the same command twice gives the same gains; `--write` writes a copy that loads, and
 /// never touches the settings file.
 #[test]
-fn tuning_halves_the_xz_error_deterministically_and_writes_a_copy_issue_15() {
+fn tuning_halves_the_xz_error_deterministically_and_writes_a_copy() {
     let run = TestRun::new("tunexz");
     let config = at_the_xz_start(&run, &[]);
     let source = std::fs::read(&config).unwrap();
@@ -127,7 +127,7 @@ fn tuning_halves_the_xz_error_deterministically_and_writes_a_copy_issue_15() {
 /// A deliberately detuned motor (its velocity feed-forward halved) is brought back: its
 /// error falls by more than half, with only Kvff tuned and a small budget.
 #[test]
-fn tuning_repairs_a_detuned_motor_issue_15() {
+fn tuning_repairs_a_detuned_motor() {
     let run = TestRun::new("detuned");
     let config = at_the_xz_start(&run, &[]);
     let text = std::fs::read_to_string(&config).unwrap();
@@ -148,7 +148,7 @@ fn tuning_repairs_a_detuned_motor_issue_15() {
 /// candidate is a move of the three processes, and tuning stops at `tune.max_moves` with the
 /// best gains so far; `--unpaced` and `--unhomed` are refused there.
 #[test]
-fn paced_tuning_makes_real_moves_within_the_move_budget_issue_15() {
+fn paced_tuning_makes_real_moves_within_the_move_budget() {
     let run = TestRun::new("tunepaced");
     let config = at_the_xz_start(&run, &[("max_moves", "8")]);
     let out = run.out("p");

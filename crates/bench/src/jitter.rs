@@ -425,7 +425,7 @@ fn all_rounds(
     let config = segment_config(a, scratch)?;
     let starter = (starter.as_path(), config.as_path());
     let period_ns = u64::from(a.period_us) * 1_000;
-    let first = qmarc_runner::run::ticker_kind(timers[0]);
+    let first = qmarc_controller_process::run::ticker_kind(timers[0]);
     bare(first, period_ns, a.warmup_s, req, 0)?;
     let mut rounds: Vec<Vec<Round>> = vec![Vec::new(); timers.len()];
     let began = std::time::Instant::now();
@@ -450,7 +450,7 @@ fn round_of(
     scratch: &Path,
 ) -> anyhow::Result<Round> {
     let period_ns = u64::from(a.period_us) * 1_000;
-    let kind = qmarc_runner::run::ticker_kind(timer);
+    let kind = qmarc_controller_process::run::ticker_kind(timer);
     let bare_for =
         |work_us: u32| bare(kind, period_ns, a.segment_s, req, u64::from(work_us) * 1_000);
     let worked = || a.bare_work_us.map(bare_for).transpose();

@@ -43,7 +43,7 @@ fn config(dir: &Path) -> PathBuf {
 }
 
 #[test]
-fn jitter_runs_both_loops_and_writes_the_ratio_issue_14() {
+fn jitter_runs_both_loops_and_writes_the_ratio() {
     let starter = bench().with_file_name("qmarc-starter");
     assert!(starter.is_file(), "{} missing: build the workspace", starter.display());
     let dir = scratch("jitter");
@@ -89,7 +89,7 @@ fn jitter_runs_both_loops_and_writes_the_ratio_issue_14() {
 }
 
 #[test]
-fn ipc_prints_the_exchange_beside_both_baselines_issue_14() {
+fn ipc_prints_the_exchange_beside_both_baselines() {
     let dir = scratch("ipc");
     let json = dir.join("ipc.json");
     let out = run(&["ipc", "--samples=300", &format!("--json={}", json.display())]);
@@ -126,7 +126,7 @@ fn ipc_prints_the_exchange_beside_both_baselines_issue_14() {
 }
 
 #[test]
-fn cycle_times_every_generator_and_law_for_1_to_4_motors_issue_14() {
+fn cycle_times_every_generator_and_law_for_1_to_4_motors() {
     let out = run(&["cycle", "--cycles=2000"]);
     let t = text(&out);
     assert!(out.status.success(), "{t}");
@@ -138,7 +138,7 @@ fn cycle_times_every_generator_and_law_for_1_to_4_motors_issue_14() {
 }
 
 #[test]
-fn bad_options_are_refused_with_a_message_issue_14() {
+fn bad_options_are_refused_with_a_message() {
     let out = run(&["jitter", "--rounds=0"]);
     assert_eq!(out.status.code(), Some(1));
     assert!(text(&out).contains("--rounds must be ≥ 1"), "{}", text(&out));
@@ -180,7 +180,7 @@ fn short_jitter(dir: &Path, rounds: u32, extra: &[&str]) -> (String, serde_json:
 /// BENCHMARKS.md); the settings copy pins both and the missed periods outside host stalls are
 /// reported for both loops.
 #[test]
-fn jitter_runs_with_both_processes_on_one_cpu_issue_14() {
+fn jitter_runs_with_both_processes_on_one_cpu() {
     let dir = scratch("same");
     let (t, j) = short_jitter(&dir, 1, &["--period-us=200", "--pin=same"]);
     assert!(t.contains("servo, hwserver and bare loop on CPU 0"), "{t}");
@@ -205,7 +205,7 @@ fn jitter_runs_with_both_processes_on_one_cpu_issue_14() {
 /// `--spin --pin`: the servo segments run with a spinning hwserver on CPU 1 and a polling
 /// controller; the settings copy says so and the pipeline still reports every figure.
 #[test]
-fn jitter_runs_with_a_spinning_hwserver_issue_14() {
+fn jitter_runs_with_a_spinning_hwserver() {
     let dir = scratch("spin");
     let (t, j) = short_jitter(&dir, 1, &["--spin", "--pin"]);
     assert!(
@@ -222,7 +222,7 @@ fn jitter_runs_with_a_spinning_hwserver_issue_14() {
 /// round, so both meet the same hour of the host; each round says when it started, and the
 /// missed periods of both timers are also given together.
 #[test]
-fn jitter_timers_take_turns_within_each_round_issue_14() {
+fn jitter_timers_take_turns_within_each_round() {
     let dir = scratch("turns");
     let (t, j) = short_jitter(&dir, 2, &["--timer=both", "--period-us=500"]);
     assert!(t.contains("the timers taking turns within each round"), "{t}");

@@ -431,7 +431,7 @@ mod tests {
     /// The plant: an enabled motor follows its DAC (through the lag), a preload moves the
     /// counter's frame and not the motor, and a switch opens where the motor passes it.
     #[test]
-    fn a_wired_motor_moves_its_counter_and_opens_its_switch_where_it_passes_issue_27() {
+    fn a_wired_motor_moves_its_counter_and_opens_its_switch_where_it_passes() {
         let mut fake = FakeS626::new();
         let top = SwitchWire { dio: 9, at_counts: -100.0, toward: -1.0, closed_low: true };
         let wire = Wire {

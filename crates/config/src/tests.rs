@@ -113,7 +113,7 @@ fn errors_name_file_line_column_and_field() {
 /// Issue 10, item 1: every number that becomes a duration or a count is bounded, so none
 /// can overflow or panic downstream (`stream_wait_s = 1e20` panicked in `Duration`).
 #[test]
-fn durations_and_counts_are_bounded_issue_10() {
+fn durations_and_counts_are_bounded() {
     let one = format!("[general]\nn_motors = 1\n{MOTOR}");
     let check = |text: &str, expected: &str| check(&format!("{text}{one}"), expected);
     check(
@@ -166,7 +166,7 @@ fn missing_file_is_named() {
 
 /// Issue 11: a value whose text spans lines is named by its key, at the element at fault.
 #[test]
-fn errors_in_values_that_span_lines_name_their_key_issue_11() {
+fn errors_in_values_that_span_lines_name_their_key() {
     check(
         &format!(
             "{}[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\nnotch = [\n  0,\n  \"x\",\n  0,\n  0,\n]\n",
@@ -184,7 +184,7 @@ fn errors_in_values_that_span_lines_name_their_key_issue_11() {
 /// and flag of the serialized value is changed to a value of its own, and what the child
 /// reads back serializes to exactly that.
 #[test]
-fn every_field_round_trips_to_the_children_issue_11() {
+fn every_field_round_trips_to_the_children() {
     let spec = RunSpec {
         settings: shipped(),
         mode: Mode::Run,
@@ -248,7 +248,7 @@ fn every_field_round_trips_to_the_children_issue_11() {
 /// the shipped values are the defaults. (Homing's velocity was 1000 counts/s in the code and
 /// 2000 in the file.)
 #[test]
-fn the_shipped_file_states_the_defaults_issue_11() {
+fn the_shipped_file_states_the_defaults() {
     let s = shipped();
     let tables = std::fs::read_to_string(shipped_path()).unwrap();
     let motors = &tables[tables.find("\n[[motor]]").unwrap()..];
@@ -278,7 +278,7 @@ fn the_shipped_file_states_the_defaults_issue_11() {
 /// Issue 11: `stall_motor = 0` is "none" (it used to wrap around on the way to the
 /// hwserver), and a motor that is not simulated is refused by name.
 #[test]
-fn fault_injection_motors_are_one_based_or_none_issue_11() {
+fn fault_injection_motors_are_one_based_or_none() {
     let s = parse(&format!("[sim]\nstall_motor = 0\nstuck_top_motor = 2\n{}", MOTOR.repeat(3)))
         .unwrap();
     assert_eq!((s.sim.plant.stall_motor, s.sim.plant.stuck_top_motor), (None, Some(2)));
@@ -311,7 +311,7 @@ fn the_backend_chooses_the_timing_defaults() {
 /// Issue 12: the 626's wiring is checked where it is used — every motor with its channels,
 /// no DIO channel twice or reserved — naming the key; `--device` and `--backend` too.
 #[test]
-fn the_626_wiring_is_checked_when_it_is_the_backend_issue_12() {
+fn the_626_wiring_is_checked_when_it_is_the_backend() {
     let motors = MOTOR.repeat(3);
     let on = |s626: &str| {
         format!(
@@ -377,7 +377,7 @@ fn the_626_wiring_is_checked_when_it_is_the_backend_issue_12() {
 /// work centre; a file without the table has no robot, and one with an empty table takes the
 /// defaults, the home angle computed from the geometry.
 #[test]
-fn the_robot_table_is_the_notes_deltabot_issue_13() {
+fn the_robot_table_is_the_notes_deltabot() {
     let s = shipped();
     let robot = s.robot().expect("the shipped file describes the robot");
     assert_eq!(robot.geometry, qmarc_kinematics::Geometry::ASSUMED);
@@ -396,7 +396,7 @@ fn the_robot_table_is_the_notes_deltabot_issue_13() {
 }
 
 #[test]
-fn robot_errors_name_the_field_issue_13() {
+fn robot_errors_name_the_field() {
     let m = MOTOR.repeat(3);
     check(
         &format!("[robot]\nrod_length_m = -0.7\n{m}"),
@@ -425,7 +425,7 @@ fn robot_errors_name_the_field_issue_13() {
 
 /// Issue 13: the calibration's keys are checked and named like every other.
 #[test]
-fn plant_and_law_scale_errors_name_the_field_issue_13() {
+fn plant_and_law_scale_errors_name_the_field() {
     let m = MOTOR.repeat(3);
     check(
         &format!("[general]\nfe_scale = 0\n{m}"),
@@ -447,7 +447,7 @@ fn plant_and_law_scale_errors_name_the_field_issue_13() {
 /// Issue 14: the wait mode, the response spin and the CPUs are checked and named like every
 /// other key; blocking, no spin and no pinning are the defaults.
 #[test]
-fn wait_mode_and_cpus_are_checked_issue_14() {
+fn wait_mode_and_cpus_are_checked() {
     let m = MOTOR.repeat(3);
     let d = parse(&m).unwrap();
     assert_eq!((d.hwserver.wait, d.hwserver.response_spin_us), (HwWait::Block, 0));
@@ -482,7 +482,7 @@ fn wait_mode_and_cpus_are_checked_issue_14() {
 /// `[tune]`: the shipped file states the defaults; gains, objective and bounds are checked
 /// with the file, line and field named.
 #[test]
-fn tune_settings_are_checked_issue_15() {
+fn tune_settings_are_checked() {
     let m = MOTOR.repeat(3);
     assert_eq!(parse(&m).unwrap().tune, crate::TuneSettings::default());
     assert_eq!(shipped().tune, crate::TuneSettings::default());
@@ -510,7 +510,7 @@ fn tune_settings_are_checked_issue_15() {
 }
 
 #[test]
-fn telemetry_settings_are_checked_issue_16() {
+fn telemetry_settings_are_checked() {
     let m = MOTOR.repeat(3);
     assert_eq!(parse(&m).unwrap().telemetry, crate::TelemetrySettings::default());
     assert_eq!(shipped().telemetry, crate::TelemetrySettings { enabled: true, every: 4 });
@@ -526,7 +526,7 @@ fn telemetry_settings_are_checked_issue_16() {
 /// resolution alone asks more than the DAC's full scale (eq. 3-1, `gains_problem`); the motion
 /// limits are positive and below the encoder-fault speed; homing may not outrun them.
 #[test]
-fn gains_and_motion_limits_are_checked_issue_27() {
+fn gains_and_motion_limits_are_checked() {
     let one = |motor: &str| format!("[general]\nn_motors = 1\nfe_scale = 96.0\n{motor}");
     let thesis =
         "[[motor]]\nkp = 182000.0\nki = 100.0\nkd = 3000.0\nkvff = 119000.0\nkaff = 100.0\n";
@@ -626,7 +626,7 @@ fn gains_and_motion_limits_are_checked_issue_27() {
 /// range, short exponent notation beyond (six significant digits at most), never 309 digits
 /// or float noise.
 #[test]
-fn numbers_in_messages_are_short_issue_28() {
+fn numbers_in_messages_are_short() {
     assert_eq!(crate::num(1e308), "1e308");
     assert_eq!(crate::num(-2.5e-9), "-2.5e-9");
     assert_eq!(crate::num(1e-3 * 1e-3 * 1e3 * 1e-3), "1e-6", "float noise rounded off");

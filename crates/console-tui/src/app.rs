@@ -3,7 +3,7 @@
 
 use crate::form::{Action, Form, Kind};
 use crate::results::{HistoryEntry, MoveResult};
-use crate::runner::{Mode, Running};
+use crate::starter_process::{Mode, Running};
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
 use std::path::PathBuf;
 

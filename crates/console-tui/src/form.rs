@@ -4,7 +4,7 @@
 
 use qmarc_config::{ConfigLoadError, Settings};
 use qmarc_plugins::registry;
-use qmarc_plugins::step::KnotSource;
+use qmarc_plugins::source::KnotSource;
 use std::path::{Path, PathBuf};
 use toml_edit::{Array, DocumentMut, Item, Table, Value};
 

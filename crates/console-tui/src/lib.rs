@@ -31,6 +31,6 @@ pub mod app;
 pub mod form;
 pub mod live;
 pub mod results;
-pub mod runner;
+pub mod starter_process;
 pub mod tuning;
 pub mod ui;

@@ -157,7 +157,7 @@ mod tests {
     /// Issue 28, item 9: while homing runs, the console has its motor and stage from the
     /// run's progress page, as the CLI's status line (before: only "home running 11 s").
     #[test]
-    fn homing_shows_its_motor_and_stage_issue_28() {
+    fn homing_shows_its_motor_and_stage() {
         use qmarc_proto::progress::Progress;
         let prefix = format!("qmarc_livestage{}_", std::process::id());
         let mut live = Live::new(IpcLocation::new(&prefix, "/tmp/iceoryx2"));

@@ -7,7 +7,7 @@
 use crate::app::{App, Page};
 use crate::form::Place;
 use crate::results::MoveResult;
-use crate::runner::Running;
+use crate::starter_process::Running;
 use qmarc_config::TUNE_PARAMS;
 use qmarc_tune::eval::Figures;
 use qmarc_tune::report::{PROGRESS_PREFIX, TuneSummary, gain_text};

@@ -265,7 +265,7 @@ mod tests {
     /// Issue 32: a stop signal that ended a wait for the hwserver is an abort (exit code
     /// INTERRUPTED), every other link failure is a lost hwserver, and the link is kept.
     #[test]
-    fn a_stop_during_a_wait_is_an_abort_and_any_other_link_failure_a_lost_hwserver_issue_32() {
+    fn a_stop_during_a_wait_is_an_abort_and_any_other_link_failure_a_lost_hwserver() {
         let stopped = LinkError::Stopped { waited_ns: 2_000_000 };
         let f = Fault::from_link(stopped, 11);
         assert_eq!((f.kind, f.cycle, f.link), (FaultKind::Aborted, 11, Some(stopped)));
@@ -283,7 +283,7 @@ mod tests {
     /// a stop, the hardware, the emergency stop, then a switch (the first motor's), then an
     /// encoder; the word itself is kept.
     #[test]
-    fn the_most_severe_condition_names_the_fault_issue_32() {
+    fn the_most_severe_condition_names_the_fault() {
         let kind = |s: Status| Fault::from_status(s, 0).map(|f| (f.kind, f.motor, f.status));
         let every = Status::WATCHDOG
             | Status::SHUTDOWN
@@ -316,7 +316,7 @@ mod tests {
     /// Issue 32: every kind says what happened in words of its own, naming the motor
     /// (1-based) where it concerns one, and whether the motors were disabled.
     #[test]
-    fn every_kind_says_what_happened_issue_32() {
+    fn every_kind_says_what_happened() {
         let mut seen = std::collections::BTreeMap::new();
         for kind in FaultKind::ALL {
             let f = Fault {
@@ -375,7 +375,7 @@ mod tests {
     /// Issue 9, item 7: a timing fault that a host stall can cause says which setting to
     /// raise; a dead hwserver does not (no setting helps).
     #[test]
-    fn timing_faults_name_the_setting_to_raise_issue_9() {
+    fn timing_faults_name_the_setting_to_raise() {
         let overrun = Fault { value: 300.0, limit: 250.0, ..Fault::new(FaultKind::Overrun, 9) };
         assert!(overrun.message().starts_with(
             "300 servo periods in a row went by without a cycle (limit 250: without PREEMPT_RT, \
@@ -402,7 +402,7 @@ mod tests {
     /// Issue 28: a fault after a host stall says so, except an overrun (which is the stall);
     /// a failed homing says whether its frame could not be kept or its preset failed.
     #[test]
-    fn stalls_and_homing_presets_are_said_issue_28() {
+    fn stalls_and_homing_presets_are_said() {
         let stall = Some(HostStall { missed: 7, cycles_before: 40 });
         let said = "(7 servo periods went by without a cycle 40 cycles before: a host stall";
         let fe = Fault { stall, ..Fault::new(FaultKind::FollowingError, 9) };

@@ -164,7 +164,7 @@ mod tests {
     /// executed cycles: after missed periods they stay on the multiples of N (or the first
     /// sample after one the stall skipped), never N executed cycles after the last row.
     #[test]
-    fn rows_stay_on_the_sample_grid_after_missed_periods_issue_10() {
+    fn rows_stay_on_the_sample_grid_after_missed_periods() {
         let mut g = Gather::for_move(40, 4, 1);
         // Executed samples: 0‥5, a stall skips 6‥8, then 9‥13, a stall skips 14‥17, 18‥23.
         let executed = (0..6).chain(9..14).chain(18..24);

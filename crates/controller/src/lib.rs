@@ -5,7 +5,7 @@
 //! The loop is [`servo::Servo`]. Its plug-ins are the [`traj::TrajectoryGenerator`] and
 //! [`law::ServoLaw`] traits (the thesis' generators and law, and their registry, are in
 //! `qmarc-plugins`); it talks to the hardware server through a [`link::HwLink`]
-//! ([`link::IoxLink`] over iceoryx2). `qmarc-runner` builds a move from the settings and runs
+//! ([`link::IoxLink`] over iceoryx2). `qmarc-controller-process` builds a move from the settings and runs
 //! it on a SCHED_FIFO thread; `qmarc-report` writes what it leaves behind.
 //!
 //! A move against a hardware that stands still, on simulated time:

@@ -355,7 +355,7 @@ mod tests {
     /// event log, which the fault tests read), and a failure to write it is an error naming
     /// the file.
     #[test]
-    fn finishing_writes_what_the_backend_keeps_issue_32() {
+    fn finishing_writes_what_the_backend_keeps() {
         let dir = std::env::temp_dir().join(format!("qmarc-finish-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let core_logging_to = |events: &std::path::Path| {

@@ -32,7 +32,7 @@ fn unknown_message_types_get_a_status_bit_and_the_server_carries_on() {
 /// requests: no wake-up is notified or read on either side while they poll, yet every
 /// request of thousands in a row is answered, in order, and the server still ends on Exit.
 #[test]
-fn a_polling_controller_and_a_spinning_hwserver_answer_every_request_issue_14() {
+fn a_polling_controller_and_a_spinning_hwserver_answer_every_request() {
     let mut server = Server::start("polled", "[hwserver]\nwait = \"spin\"\n");
     let mut link = server.connect_polling();
     for i in 0..5_000 {
@@ -93,7 +93,7 @@ fn watchdog_disables_the_motors_when_the_controller_falls_silent() {
 /// Issue 9, item 6: in lock-step time is simulated, so a silent controller whose process
 /// lives (a host stall) does not trip the watchdog; it is still served afterwards.
 #[test]
-fn in_lock_step_a_living_silent_controller_does_not_trip_the_watchdog_issue_9() {
+fn in_lock_step_a_living_silent_controller_does_not_trip_the_watchdog() {
     let mut server = Server::start("lockwd", "[hwserver]\nwatchdog_periods = 10\n");
     let mut link = server.connect();
     assert!(link.exchange(&HwMsg::for_motor(MsgType::EnableMotor, 0)).unwrap().status().is_ok());

@@ -67,7 +67,7 @@ fn look(png: &Path) -> (u32, u32, usize) {
 }
 
 #[test]
-fn a_move_gives_every_plot_readable_issue_13() {
+fn a_move_gives_every_plot_readable() {
     let dir = scratch("move");
     let r = robot();
     let s = write_move(&dir, &r);
@@ -125,7 +125,7 @@ fn derivatives_of_a_parabola_are_exact() {
 }
 
 #[test]
-fn trials_give_their_two_plots_issue_13() {
+fn trials_give_their_two_plots() {
     let dir = scratch("trials");
     let rows: Vec<TrialRow> = (1..=20)
         .map(|k| TrialRow {
@@ -161,7 +161,7 @@ fn tick_labels_carry_the_decimals_their_spacing_needs() {
 /// upper right (before: the arms' legend hid its last 0.15 s): the legend goes to a free
 /// corner; data in every corner raise the y axis to make room above it.
 #[test]
-fn a_legend_goes_where_there_is_no_data_issue_28() {
+fn a_legend_goes_where_there_is_no_data() {
     use crate::chart::legend_place;
     use plotters::prelude::SeriesLabelPosition;
     let names = ["motor 1", "motor 2", "motor 3"];
@@ -193,7 +193,7 @@ fn a_legend_goes_where_there_is_no_data_issue_28() {
 /// starts and ends at rest (before: only the negative spike, the first sample having no
 /// neighbour before it).
 #[test]
-fn a_steps_acceleration_rises_and_falls_issue_28() {
+fn a_steps_acceleration_rises_and_falls() {
     use crate::moves::at_rest_around;
     let t: Vec<f64> = (0..10).map(|k| f64::from(k) * 4e-4).collect();
     let cmd: Vec<f64> = (0..10).map(|k| if k == 0 { 0.0 } else { 1000.0 }).collect();
@@ -213,7 +213,7 @@ fn a_steps_acceleration_rises_and_falls_issue_28() {
 /// Issue 28, item 11: the trials' error from zero — a 0.1 % spread is a flat row of
 /// points, as it is — with each arm beside the trial's number, so equal arms both show.
 #[test]
-fn trials_show_their_spread_from_zero_issue_28() {
+fn trials_show_their_spread_from_zero() {
     let dir = scratch("trials-spread");
     let rows: Vec<TrialRow> = (1..=5)
         .map(|k| TrialRow {

@@ -6,7 +6,7 @@
 //! (thesis: 10) back from where it tripped, something is wrong (a stuck switch, a broken wire)
 //! and homing fails; then move to the home offset (counts from where the switch cleared, away
 //! from it) and let it settle. When every motor is home, the move ends and the caller resets
-//! every counter so that home reads 0 (`qmarc-runner`), which makes the frame homed. The frame
+//! every counter so that home reads 0 (`qmarc-controller-process`), which makes the frame homed. The frame
 //! comes from where each switch cleared, not from where the motor came to rest, so a sluggish
 //! position loop does not shift it.
 //!

@@ -23,5 +23,6 @@ pub mod moveto;
 pub mod pidff;
 pub mod pvt;
 pub mod registry;
+pub mod source;
 pub mod spline;
 pub mod step;

@@ -4,7 +4,7 @@
 //! acceleration and jerk limits allow, the others slower. It is planned before the move and
 //! sampled into the command queue, so the loop only reads the queue.
 
-use crate::step::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
+use crate::source::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::Settings;
 use qmarc_controller::traj::{MotorHome, Sample, TrajStartError, TrajectoryGenerator, bounds_of};
 use qmarc_proto::state::FaultKind;

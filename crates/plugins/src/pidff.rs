@@ -234,7 +234,7 @@ mod tests {
     /// `fe_scale` multiplies the following error and the integral, nothing else: the same
     /// cycle 2 as above with s = 96: inner = 96·10 + 4644.53125 + 96·100·8/2²³ − 70.3125.
     #[test]
-    fn fe_scale_multiplies_the_error_terms_only_issue_13() {
+    fn fe_scale_multiplies_the_error_terms_only() {
         let mut law = PidFf::with_fe_scale(&[thesis_motor_1()], 96.0);
         law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
         let inner1: f64 = 96.0 * 8.0 + 9_304.687_5 - 46.875;
@@ -323,7 +323,7 @@ mod tests {
     /// a punctual loop and one that misses 3 periods before sample 8 give the same DAC code
     /// at sample 8 (before the fix, CV, CA and AV spanned 4 periods: 5353 instead of ≈ 1338).
     #[test]
-    fn missed_periods_do_not_kick_the_feed_forward_issue_9() {
+    fn missed_periods_do_not_kick_the_feed_forward() {
         let g = thesis_motor_1();
         let ramp = |n: u64| 17.0 * n as f64;
         let lag = 3.0;
@@ -364,7 +364,7 @@ mod tests {
     /// A law reset there and held there outputs nothing: no feed-forward or derivative kick
     /// from a previous position, no integral, no notch state left from the last move.
     #[test]
-    fn a_law_reset_away_from_zero_starts_without_a_kick_issue_32() {
+    fn a_law_reset_away_from_zero_starts_without_a_kick() {
         let notched = MotorGains { notch: [0.0, 0.0, -0.5, 0.0], ki: 1e6, ..thesis_motor_1() };
         let mut law = PidFf::new(&[notched, thesis_motor_1(), thesis_motor_1()]);
         assert_eq!(law.name(), "pidff", "the name settings and results know it by");
@@ -399,7 +399,7 @@ mod tests {
     /// it was held (the DAC held its output meanwhile): one late cycle after 4 periods sums
     /// what 4 punctual ones do.
     #[test]
-    fn the_integral_counts_a_held_error_once_per_missed_period_issue_32() {
+    fn the_integral_counts_a_held_error_once_per_missed_period() {
         // Ki alone, 1 code per count·period (as `integrator_sums_past_errors_only`).
         let g = MotorGains { kp: 1.0, ki: (1u64 << 44) as f64, ..MotorGains::default() };
         let at = |law: &mut PidFf, n: u64, elapsed: u64| {
@@ -440,7 +440,7 @@ mod tests {
         /// carries the factor of 4. The shipped files' laws, fed the same motion in each
         /// file's counts (1× = 4× / 4), output the same DAC code every cycle (rounding apart).
         #[test]
-        fn the_shipped_626_gains_are_the_4x_loop_at_1x_counting_issue_27(
+        fn the_shipped_626_gains_are_the_4x_loop_at_1x_counting(
             motion in proptest::collection::vec((-60.0f64..60.0, -30.0f64..30.0), 2..200),
         ) {
             let (at4, at1) = shipped_at_both_scales();

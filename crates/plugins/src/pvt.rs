@@ -12,8 +12,8 @@ use crate::knots::{
     KnotFileError, KnotRules, MAX_LINE_BYTES, MIN_PVT_KNOTS, PvtKnot, PvtLineParser, parse_pvt,
     read_knot_file, read_line_bounded,
 };
+use crate::source::{KnotSource, TrajBuildError};
 use crate::spline::samples_between;
-use crate::step::{KnotSource, TrajBuildError};
 use qmarc_config::Settings;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of, check_start};
 use qmarc_proto::MAX_MOTORS;

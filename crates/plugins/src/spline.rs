@@ -11,7 +11,7 @@ use crate::knots::{
     KnotFileError, KnotRules, MAX_KNOT_FILE_BYTES, OfflineKnots, parse_offline, read_knot_file,
     text_of,
 };
-use crate::step::{KnotSource, QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
+use crate::source::{KnotSource, QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::Settings;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of, check_start};
 use qmarc_proto::MAX_MOTORS;
@@ -451,7 +451,7 @@ mod tests {
     /// the move, naming the file, the line of the knot the offending segment leads to, and
     /// the motor; the same path within its limits, or without limits, runs.
     #[test]
-    fn a_spline_beyond_the_motion_limits_is_refused_naming_the_knot_issue_27() {
+    fn a_spline_beyond_the_motion_limits_is_refused_naming_the_knot() {
         let text = "4\n0.0 0 0\n0.5 0 0\n0.75 5000 0\n1.0 5000 0\n";
         let mut rules = KnotRules::new(2);
         rules.max_velocity = [80_000.0; MAX_MOTORS];

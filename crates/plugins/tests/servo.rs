@@ -570,7 +570,7 @@ fn homing_in_process_finds_the_switches_and_presets_the_frame() {
 /// Issue 9, item 1: the loop tells the law how many servo periods a late cycle spans, so the
 /// real `PidFf` outputs after a stall what a punctual cycle would — no feed-forward kick.
 #[test]
-fn a_late_cycle_outputs_what_a_punctual_one_would_issue_9() {
+fn a_late_cycle_outputs_what_a_punctual_one_would() {
     use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
     use std::cell::Cell;
     use std::rc::Rc;
@@ -639,7 +639,7 @@ fn a_late_cycle_outputs_what_a_punctual_one_would_issue_9() {
 /// Issue 12: with the Sensoray 626 backend (its instruction lists against the fake of the
 /// driver) the servo cycle — and the hardware server's side of it — allocates nothing either.
 #[test]
-fn the_626_backends_cycle_allocates_nothing_issue_12() {
+fn the_626_backends_cycle_allocates_nothing() {
     let mut s = util::settings_of("s626.toml");
     s.set_device(std::path::Path::new("fake")).unwrap();
     let card = qmarc_hwserver::backends::s626::S626::open(&s, false).unwrap();
@@ -663,7 +663,7 @@ fn the_626_backends_cycle_allocates_nothing_issue_12() {
 /// Issue 13 (review): the path's gathered rows are told from the settle's by sample index.
 /// Missed periods skip samples, so counting executed cycles would drop the path's last rows.
 #[test]
-fn the_path_rows_end_where_the_settle_begins_after_missed_periods_issue_13() {
+fn the_path_rows_end_where_the_settle_begins_after_missed_periods() {
     let mut s = settings();
     s.step.duration_s = 0.02; // samples 0..=50
     let plan = MovePlan { settle_cycles: 10, ..plan(3) };
@@ -739,7 +739,7 @@ fn a_telemetry_publish_allocates_exactly_its_loan_and_the_relay_delivers_every_s
 /// NaN) or a law output that is not a DAC code ends the move in that cycle, every motor
 /// disabled, before it reaches the law or the DAC — never a silent 0 V with the amplifiers on.
 #[test]
-fn a_non_finite_command_or_output_is_a_fault_in_that_cycle_issue_27() {
+fn a_non_finite_command_or_output_is_a_fault_in_that_cycle() {
     use qmarc_controller::law::{NOT_A_CODE, ServoInput, ServoLaw};
     use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
 
@@ -815,7 +815,7 @@ fn a_non_finite_command_or_output_is_a_fault_in_that_cycle_issue_27() {
 /// and how long before; one without a recent stall does not, and neither does a lock-step
 /// run (simulated time does not see the host's stalls).
 #[test]
-fn a_fault_after_a_host_stall_says_so_issue_28() {
+fn a_fault_after_a_host_stall_says_so() {
     let fault_after = |stall_at: Option<u64>, deterministic: bool| {
         let mut p = lockstep();
         p.plant.stall_motor = Some(2);

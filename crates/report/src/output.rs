@@ -392,7 +392,7 @@ mod tests {
     /// beside the previous run's data nor destroys them; the last complete set is kept in
     /// `previous/`, and a second incomplete run does not push it out.
     #[test]
-    fn a_new_set_retires_the_old_one_whole_issue_10() {
+    fn a_new_set_retires_the_old_one_whole() {
         let dir = scratch("retire");
         let text = |t: &'static str| move |w: &mut dyn Write| w.write_all(t.as_bytes());
         let (csv, m, json) = (text("data 1"), text("octave 1"), text("summary 1"));

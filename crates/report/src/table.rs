@@ -316,7 +316,7 @@ mod tests {
 
     /// Issue 10, item 15: wide figures do not run together.
     #[test]
-    fn columns_never_run_together_issue_10() {
+    fn columns_never_run_together() {
         let mut t = String::new();
         let rows = vec![
             vec!["wake latency".to_string(), "142030.25".into(), "1".into()],
@@ -332,7 +332,7 @@ mod tests {
     /// Issue 28, item 8: an unpaced move has no timing to show, and says so (before: "periods
     /// off by > 40 µs: 500499"); a paced one shows its table.
     #[test]
-    fn an_unpaced_move_says_it_has_no_timing_issue_28() {
+    fn an_unpaced_move_says_it_has_no_timing() {
         let mut s = Summary::controller_lost((Mode::Step, true), 3, 400, 10, "x".into());
         s.timing.method = crate::summary::UNPACED.to_string();
         s.timing.outside_40us = 500_499;

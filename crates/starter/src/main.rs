@@ -21,7 +21,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-mod tuning;
+mod tune_command;
 
 /// Command line of `qmarc-starter`.
 #[derive(Debug, Parser)]
@@ -276,7 +276,7 @@ fn main() -> ExitCode {
             })
             .map_err(refused),
         StarterCommand::Trials(t) => trials(&args, t),
-        StarterCommand::Tune(t) => tuning::tune(&args, t),
+        StarterCommand::Tune(t) => tune_command::tune(&args, t),
     };
     qmarc_config::program::conclude("qmarc-starter", result)
 }

@@ -176,13 +176,14 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
 /// The path: knot files are read and checked now (streams are the controller's to read: it
 /// inherits standard input), and its data must fit the gather budget and the disk.
 fn check_path(settings: &Settings, mode: Mode) -> Result<(), Failure> {
-    let generator = qmarc_runner::run::generator_name(mode, settings);
+    let generator = qmarc_controller_process::run::generator_name(mode, settings);
     let entry = registry::generator(generator)
         .with_context(|| format!("no trajectory generator `{generator}`"))
         .map_err(refused)?;
     let planned = (entry.build)(settings).map_err(refused)?.samples();
-    let settle = qmarc_runner::run::settle_cycles(settings, mode);
-    let samples = planned.unwrap_or(qmarc_runner::run::stream_gather_samples(settings)) + settle;
+    let settle = qmarc_controller_process::run::settle_cycles(settings, mode);
+    let samples =
+        planned.unwrap_or(qmarc_controller_process::run::stream_gather_samples(settings)) + settle;
     check_budget(samples, settings.gather.every).map_err(refused)?;
     let rows = samples.div_ceil(u64::from(settings.gather.every));
     qmarc_report::output::check(

@@ -1,10 +1,10 @@
 //! `qmarc-starter path`: a Cartesian waypoint file into a knot file for `run`
-//! ([`qmarc_paths`]), on the robot the settings describe.
+//! ([`qmarc_waypoints`]), on the robot the settings describe.
 
 use crate::cli::MoveOptions;
 use anyhow::{Context, anyhow, bail};
 use clap::Args;
-use qmarc_paths::KnotFormat;
+use qmarc_waypoints::KnotFormat;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -36,7 +36,7 @@ pub fn make(opts: &MoveOptions, args: &PathArgs) -> anyhow::Result<String> {
         bail!(already_there(out));
     }
     let settings = opts.load(&crate::names())?;
-    let made = qmarc_paths::generate(&settings, &args.waypoints, format, args.every_ms)?;
+    let made = qmarc_waypoints::generate(&settings, &args.waypoints, format, args.every_ms)?;
     write_atomically(out, made.text.as_bytes())?;
     Ok(format!("wrote {} {} knots to {}", made.knots, args.method, out.display()))
 }

@@ -257,7 +257,7 @@ mod tests {
 
     /// Issue 10, item 4: a helper spawned by a real-time thread runs SCHED_OTHER.
     #[test]
-    fn helper_threads_run_normal_scheduling_issue_10() {
+    fn helper_threads_run_normal_scheduling() {
         let policy = || {
             // SAFETY: sched_getscheduler(0) asks about the calling thread.
             unsafe { libc::sched_getscheduler(0) }

@@ -37,14 +37,14 @@ fn nanosleep_ticks_are_reported_against_their_expiry() {
 }
 
 #[test]
-fn periodic_timerfd_ticks_are_reported_against_their_expiry_issue_14() {
+fn periodic_timerfd_ticks_are_reported_against_their_expiry() {
     check_ticks(TickerKind::TimerFdPeriodic);
 }
 
 /// Issue 14: the one-shot timerfd counts a stall longer than a period as missed ticks,
 /// measured against the first unserviced one, as the periodic one does.
 #[test]
-fn a_stall_is_counted_by_every_kind_issue_14() {
+fn a_stall_is_counted_by_every_kind() {
     for kind in TickerKind::ALL {
         let mut t = kind.build(1_000_000);
         t.start().unwrap();

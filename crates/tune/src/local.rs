@@ -10,12 +10,12 @@
 
 use qmarc_config::{Mode, RunSpec};
 use qmarc_controller::record::MoveRecord;
+use qmarc_controller_process::run::{RunError, build_servo};
 use qmarc_hwserver::HwCore;
 use qmarc_hwserver::backend::BackendOpenError;
 use qmarc_proto::link::HwLink;
 use qmarc_proto::{HwMsg, MsgType};
 use qmarc_report::Summary;
-use qmarc_runner::run::{RunError, build_servo};
 use qmarc_timer::UnpacedTicker;
 use qmarc_timer::rt::RtStatus;
 use std::sync::atomic::AtomicBool;

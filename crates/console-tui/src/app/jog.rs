@@ -2,7 +2,7 @@
 //! through the starter's `jog` (README, "Running moves").
 
 use super::{App, Page};
-use crate::runner::Mode;
+use crate::starter_process::Mode;
 
 impl App {
     /// Whether the page shown takes the jog keys: the log, the results and the history.

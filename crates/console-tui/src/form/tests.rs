@@ -148,7 +148,7 @@ fn the_period_must_leave_room_for_what_the_last_move_needed() {
 /// Issue 28, item 9: a file with `kp = 1e308` opens as it is — shown as `1e308`, not 309
 /// digits, and not `[modified]` — and an edit back to the same value changes nothing.
 #[test]
-fn a_huge_value_shows_short_and_opens_unmodified_issue_28() {
+fn a_huge_value_shows_short_and_opens_unmodified() {
     let text = shipped().replacen("kp = 182000.0", "kp = 1e308", 1);
     let (_d, mut form) = form_of(&text);
     let kp1 = form.index(Place::Motor(0, "kp")).unwrap();

@@ -227,7 +227,7 @@ fn key(code: ratatui::crossterm::event::KeyCode) -> ratatui::crossterm::event::K
 
 /// Issue 10, item 17: the log wraps long lines and scrolls (↑↓ PgUp PgDn Home End).
 #[test]
-fn the_log_wraps_and_scrolls_issue_10() {
+fn the_log_wraps_and_scrolls() {
     use ratatui::crossterm::event::KeyCode;
     let (_d, mut app) = app();
     app.log = (0..60).map(|i| format!("line {i}")).collect();
@@ -252,7 +252,7 @@ fn the_log_wraps_and_scrolls_issue_10() {
 /// Issue 10, item 17: Ctrl-U empties a field instead of typing a `u`; a hint never
 /// outlives its page or its key.
 #[test]
-fn ctrl_u_clears_a_field_and_hints_follow_the_page_issue_10() {
+fn ctrl_u_clears_a_field_and_hints_follow_the_page() {
     use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
     let (_d, mut app) = app();
     let period = app.form.index(Place::Key("general", "period_us")).unwrap();
@@ -273,7 +273,7 @@ fn ctrl_u_clears_a_field_and_hints_follow_the_page_issue_10() {
 /// Issue 10, item 17: the charts have legends; the results of a homing show where each
 /// switch was found.
 #[test]
-fn charts_have_legends_and_homing_results_show_the_switches_issue_10() {
+fn charts_have_legends_and_homing_results_show_the_switches() {
     let (_d, mut app) = app();
     let mut r = result(false);
     r.summary.mode = qmarc_config::Mode::Home;
@@ -302,7 +302,7 @@ fn charts_have_legends_and_homing_results_show_the_switches_issue_10() {
 
 /// Issue 10, item 17: the actions never overflow their box, however small the terminal.
 #[test]
-fn the_actions_fit_their_box_at_any_size_issue_10() {
+fn the_actions_fit_their_box_at_any_size() {
     let (_d, app) = app();
     for (w, h) in [(80, 24), (80, 18), (60, 14), (40, 10)] {
         let s = text(&render(&app, w, h));
@@ -324,7 +324,7 @@ fn the_actions_fit_their_box_at_any_size_issue_10() {
 /// A tuning's results page fits 80 columns (three motors' before → after cells side by side)
 /// and Ctrl-A puts exactly the tuned gains into the form, unsaved.
 #[test]
-fn a_tuning_is_shown_before_after_and_ctrl_a_takes_its_gains_issue_15() {
+fn a_tuning_is_shown_before_after_and_ctrl_a_takes_its_gains() {
     use crate::tuning::TuneResult;
     use qmarc_tune::eval::Figures;
     use qmarc_tune::report::{MotorOutcome, TuneSummary};
@@ -382,8 +382,8 @@ fn a_tuning_is_shown_before_after_and_ctrl_a_takes_its_gains_issue_15() {
 /// Ctrl-←/→ jog it by `[jog] counts` through the starter's `jog`, on the log, results and
 /// history pages (not where arrows edit or choose).
 #[test]
-fn the_jog_keys_choose_a_motor_and_jog_it_through_the_starter_issue_27() {
-    use crate::runner::Mode;
+fn the_jog_keys_choose_a_motor_and_jog_it_through_the_starter() {
+    use crate::starter_process::Mode;
     use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
     let ctrl = |code| KeyEvent::new(code, KeyModifiers::CONTROL);
     let (_d, mut app) = app();

@@ -95,7 +95,7 @@ fn no_switch_within_the_travel_fails() {
 /// ends the homing naming motor and side; one that motor 2 rested on from the start is
 /// its own homing's business, until it clears.
 #[test]
-fn another_motors_switch_ends_homing_issue_9() {
+fn another_motors_switch_ends_homing() {
     let run = |start_on_top: bool, trip_bottom_at: Option<u64>| -> (Sample, Option<String>) {
         let mut h = Homing::new(2, 0.0004, settings(), safety(300.0));
         let mut act = [0.0; MAX_MOTORS];
@@ -135,7 +135,7 @@ fn another_motors_switch_ends_homing_issue_9() {
 /// Issue 9, item 3: a motor homed already is watched too — its switch tripping while a
 /// later motor homes (a cable caught, the arm pushed) ends the homing.
 #[test]
-fn a_homed_motors_switch_ends_the_homing_of_the_next_issue_9() {
+fn a_homed_motors_switch_ends_the_homing_of_the_next() {
     let mut h = Homing::new(2, 0.0004, settings(), safety(300.0));
     let mut act = [0.0; MAX_MOTORS];
     let mut cmd = [0.0; MAX_MOTORS];
@@ -253,7 +253,7 @@ impl Robot {
 /// for the settle time; the others hold where they are (the homed ones at home); every
 /// command moves a motor by exactly what its phase allows.
 #[test]
-fn homes_three_motors_from_anywhere_at_each_phases_speed_issue_32() {
+fn homes_three_motors_from_anywhere_at_each_phases_speed() {
     let robot = Robot::three();
     let mut h = robot.homing(300.0);
     assert_eq!(h.samples(), None, "homing ends when every motor is home");
@@ -337,7 +337,7 @@ fn homes_three_motors_from_anywhere_at_each_phases_speed_issue_32() {
 /// switch while it approaches (moving away from it), and a switch a motor not yet homed
 /// has rested on since the start.
 #[test]
-fn every_unexpected_switch_in_every_phase_ends_the_homing_issue_32() {
+fn every_unexpected_switch_in_every_phase_ends_the_homing() {
     let robot = Robot::three();
     let mut cases = 0;
     for m in 0..3u32 {
@@ -391,7 +391,7 @@ fn every_unexpected_switch_in_every_phase_ends_the_homing_issue_32() {
 /// switch must clear: still active when its top switch trips (a stuck switch, a short),
 /// it ends the homing.
 #[test]
-fn a_bottom_switch_that_never_clears_ends_the_homing_at_the_top_issue_32() {
+fn a_bottom_switch_that_never_clears_ends_the_homing_at_the_top() {
     let robot = Robot::three();
     let mut h = robot.homing(300.0);
     let (end, steps) = robot.run(&mut h, |_, flags| {
@@ -410,7 +410,7 @@ fn a_bottom_switch_that_never_clears_ends_the_homing_at_the_top_issue_32() {
 /// clears within it, a switch that does not clear within `clear_within_counts` of its
 /// trip — each to the count.
 #[test]
-fn the_runaway_guards_hold_from_any_origin_issue_32() {
+fn the_runaway_guards_hold_from_any_origin() {
     let far = Robot { top: [-1e9, 1e9, 1e9, 0.0], ..Robot::three() };
     // Motor 1 at 5000 finds nothing: it stops one step past the travel.
     let mut h = far.homing(300.0);
@@ -505,7 +505,7 @@ fn drive_through_stalls(
 /// where the stall left the motor (before: "its top switch was still active 10 counts back
 /// from where it tripped" after a 50 ms stall at the trip).
 #[test]
-fn homing_keeps_pace_through_a_host_stall_issue_28() {
+fn homing_keeps_pace_through_a_host_stall() {
     // 1 count a period (2500 counts/s at 400 µs); the switch at −200; 10 000 counts/s creep.
     let settings = || HomingSettings { creep_counts_per_s: 2_500.0, ..settings() };
     // A 125-period (50 ms) stall on the way to the switch: the next command is 126 on.
@@ -547,7 +547,7 @@ fn homing_keeps_pace_through_a_host_stall_issue_28() {
 /// Issue 28, item 6: a stall while backing off and one on the way to the offset move the
 /// command on by the periods that went by, at the creep and at the homing velocity.
 #[test]
-fn backing_off_and_going_home_keep_pace_through_stalls_issue_28() {
+fn backing_off_and_going_home_keep_pace_through_stalls() {
     let settings = || HomingSettings { creep_counts_per_s: 2_500.0, ..settings() };
     // A stall before the trip (the motor coasts to −250), one while backing off (at 260),
     // one on the way home (at 330: the switch clears at −199, home is 101).
@@ -569,7 +569,7 @@ fn backing_off_and_going_home_keep_pace_through_stalls_issue_28() {
 /// up, going half-way to its command each period) is judged from where it was seen on the
 /// switch — nearer than a period's travel after where it was last seen open.
 #[test]
-fn a_lagging_motor_is_judged_from_where_it_tripped_issue_28() {
+fn a_lagging_motor_is_judged_from_where_it_tripped() {
     // 2 counts a period: commands −2, −4, …; the motor at 0, −1, −2.5: found at −2.5, last
     // seen open at −1, a period after that is −3.
     let fast = HomingSettings { velocity_counts_per_s: 5_000.0, ..settings() };

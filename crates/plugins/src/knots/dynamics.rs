@@ -129,7 +129,7 @@ mod tests {
     /// Issue 32: what a message quotes — whole counts below 10⁷, exponent notation from
     /// there (`1e7`, not `10000000`), non-finite values as they are.
     #[test]
-    fn values_are_quoted_whole_below_ten_million_issue_32() {
+    fn values_are_quoted_whole_below_ten_million() {
         assert_eq!(rounded(9_999_999.4), "9999999");
         assert_eq!(rounded(-270_000.6), "-270001");
         assert_eq!(rounded(1e7), "1e7");

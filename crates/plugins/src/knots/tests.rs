@@ -213,7 +213,7 @@ fn too_large_files_are_refused_before_reading() {
 /// `trajectory.max_duration_s` is an error naming file, line and column (a time of 1e20
 /// used to overflow the sample count, one of 1e300 to spin for minutes).
 #[test]
-fn paths_longer_than_the_longest_are_refused_issue_10() {
+fn paths_longer_than_the_longest_are_refused() {
     offline_err(
         "2\n0 0\n1e20 5\n",
         1,
@@ -235,7 +235,7 @@ fn paths_longer_than_the_longest_are_refused_issue_10() {
 /// Issue 10, items 2 and 16: comments and blank lines anywhere; a byte-order mark; lines
 /// and streams are bounded.
 #[test]
-fn comments_blank_lines_and_bounded_lines_issue_10() {
+fn comments_blank_lines_and_bounded_lines() {
     let k = parse_offline(
         "k.txt",
         "\u{feff}# a path\n\n3\n  # times in s\n0 0 0\n\n1 5 5\n# the end\n2 9 9\n",
@@ -285,7 +285,7 @@ fn limited(n: usize) -> KnotRules {
 /// is used — a file before the move, a stream knot by knot (the same parser) — naming the
 /// file, the line and column of the motor's velocity, and the setting it breaks.
 #[test]
-fn pvt_knots_beyond_the_motion_limits_are_refused_naming_line_and_motor_issue_27() {
+fn pvt_knots_beyond_the_motion_limits_are_refused_naming_line_and_motor() {
     let err = |text: &str| parse_pvt("p.txt", text, &limited(3)).unwrap_err().to_string();
     let rest = "X 0 0 10 Y 0 0 10 Z 0 0 10\n";
     // The issue's knot: 1e308 counts/s (its cubic would be NaN in the loop).

@@ -81,7 +81,7 @@ proptest! {
     /// The motion limits' view of a segment (its end accelerations, from which its
     /// extremes are found) is this generator's cubic.
     #[test]
-    fn the_limits_see_the_segment_the_generator_samples_issue_27(
+    fn the_limits_see_the_segment_the_generator_samples(
         x0 in -1e5f64..1e5, x1 in -1e5f64..1e5, v0 in -5e4f64..5e4, v1 in -5e4f64..5e4, t in 0.001f64..0.2,
     ) {
         let h = Hermite::new(x0, v0, x1, v1, t);

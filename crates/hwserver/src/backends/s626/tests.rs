@@ -250,7 +250,7 @@ fn wired_card(w: &S626Settings, n_motors: usize) -> (S626, Arc<Mutex<FakeS626>>)
 
 /// Issue 32: every conformance check on the card wired otherwise than the thesis' robot.
 #[test]
-fn the_conformance_suite_holds_for_other_wirings_issue_32() {
+fn the_conformance_suite_holds_for_other_wirings() {
     for w in wirings() {
         for check in crate::conformance::CHECKS {
             let mut rig = FakeRig::wired(w.clone());
@@ -265,7 +265,7 @@ fn the_conformance_suite_holds_for_other_wirings_issue_32() {
 /// closed, exactly the one that opens, the chain apart — in either polarity, whatever the
 /// card's other inputs do.
 #[test]
-fn a_read_sees_exactly_the_switch_that_opens_in_either_polarity_issue_32() {
+fn a_read_sees_exactly_the_switch_that_opens_in_either_polarity() {
     for w in wirings() {
         let (mut s, fake) = wired_card(&w, 3);
         let closed_low = w.switch_closed_bit == 1;
@@ -313,7 +313,7 @@ fn a_read_sees_exactly_the_switch_that_opens_in_either_polarity_issue_32() {
 /// moment the card is opened, each amplifier's own pin on when it is enabled and no other,
 /// off after the safe state and after the backend is dropped — which also zeroes every DAC.
 #[test]
-fn the_enable_pins_follow_each_amplifier_in_either_polarity_issue_32() {
+fn the_enable_pins_follow_each_amplifier_in_either_polarity() {
     for w in wirings() {
         let (mut s, fake) = wired_card(&w, 3);
         let on = |fake: &Arc<Mutex<FakeS626>>| -> [bool; 3] {
@@ -373,7 +373,7 @@ fn card_settings(device: &Path, state_dir: &Path, extra: &str) -> Settings {
 /// that card as it was when homed: the same node and counters find it again; a node made
 /// anew (the driver reloaded, the counters reset) or counters counting the other way do not.
 #[test]
-fn the_homed_frame_is_kept_for_that_card_only_issue_32() {
+fn the_homed_frame_is_kept_for_that_card_only() {
     let dir = std::env::temp_dir().join(format!("qmarc-frame-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -416,7 +416,7 @@ fn the_homed_frame_is_kept_for_that_card_only_issue_32() {
 /// Issue 32: `open` drives the fake for `fake` (homed, in process) and the device otherwise;
 /// `check` refuses what `open` would, before anything is spawned; neither runs lock-step.
 #[test]
-fn open_and_check_take_the_device_the_settings_name_issue_32() {
+fn open_and_check_take_the_device_the_settings_name() {
     let dir = std::env::temp_dir().join(format!("qmarc-open-{}", std::process::id()));
     let fake = card_settings(Path::new(FAKE_DEVICE), &dir, "");
     let card = S626::open(&fake, false).unwrap();
@@ -444,7 +444,7 @@ fn open_and_check_take_the_device_the_settings_name_issue_32() {
 /// Issue 32: an ioctl's answer as a fault: a list that ran short says how far it got
 /// (−(instructions run) − 1), an errno is itself; the operation is named.
 #[test]
-fn a_short_list_or_an_errno_is_a_fault_of_that_operation_issue_32() {
+fn a_short_list_or_an_errno_is_a_fault_of_that_operation() {
     assert_eq!(ran(Ok(4), 4, 2), Ok(()));
     assert_eq!(ran(Ok(2), 4, 2), Err(HwFault { op: 2, code: -3 }));
     assert_eq!(ran(Ok(0), 1, 4), Err(HwFault { op: 4, code: -1 }));
@@ -454,7 +454,7 @@ fn a_short_list_or_an_errno_is_a_fault_of_that_operation_issue_32() {
 
 /// Issue 32: the backend's clock is the monotonic clock, in nanoseconds.
 #[test]
-fn the_clock_is_monotonic_nanoseconds_issue_32() {
+fn the_clock_is_monotonic_nanoseconds() {
     let (s, _) = card(1);
     let a = s.now_ns();
     std::thread::sleep(std::time::Duration::from_millis(2));
@@ -466,7 +466,7 @@ fn the_clock_is_monotonic_nanoseconds_issue_32() {
 /// Issue 32: disabling a motor zeroes its DAC and drops its enable; if the DAC write fails
 /// the hardware is in doubt even though the enable dropped — a fault, made safe, latched.
 #[test]
-fn a_disable_whose_dac_write_fails_is_a_hardware_fault_issue_32() {
+fn a_disable_whose_dac_write_fails_is_a_hardware_fault() {
     let (s, fake) = card(3);
     let mut core = HwCore::new(Box::new(s));
     core.handle(&HwMsg::read_all_encoders());

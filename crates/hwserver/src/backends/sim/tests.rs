@@ -35,7 +35,7 @@ fn enabled_axis_approaches_kv_times_volts_with_lag_tau() {
 /// The default plant, the second-order velocity loop: full scale settles at Kv × 10 V after
 /// overshooting it (ζ 0.48), and the position is the velocity's integral.
 #[test]
-fn the_default_velocity_loop_is_second_order_issue_13() {
+fn the_default_velocity_loop_is_second_order() {
     let mut sim = lockstep(1);
     sim.set_amp_enable(0, true).unwrap();
     sim.write_dacs(&[8191, 0, 0, 0]).unwrap();
@@ -149,7 +149,7 @@ fn invalid_parameters_are_named() {
 /// Issue 28, item 4: a homed frame that could not be kept is refused before the run (before:
 /// `home` said "reads 0 from now on", exited 0, and the next step was refused as unhomed).
 #[test]
-fn a_state_file_that_cannot_keep_the_frame_is_refused_before_the_run_issue_28() {
+fn a_state_file_that_cannot_keep_the_frame_is_refused_before_the_run() {
     let dir = std::env::temp_dir().join(format!("qmarc-simstate-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let settings = |state_file: &std::path::Path| {
@@ -185,7 +185,7 @@ fn a_state_file_that_cannot_keep_the_frame_is_refused_before_the_run_issue_28() 
 /// the frame is not homed, and the hwserver says where and why (before: "reads 0 from now
 /// on", exit 0, and the next run found the robot unhomed).
 #[test]
-fn a_frame_that_cannot_be_kept_fails_the_preset_issue_28() {
+fn a_frame_that_cannot_be_kept_fails_the_preset() {
     use qmarc_proto::{HwMsg, MotorFlags, MsgType, Status};
     let sim = lockstep(2).with_state_file(std::path::Path::new("/proc/qmarc/sim.state"));
     let mut core = crate::HwCore::new(Box::new(sim));

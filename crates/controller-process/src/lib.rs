@@ -9,9 +9,9 @@
 //! let names = qmarc_config::Names { laws: vec!["pidff"], methods: vec!["spline"], any_plugin: false };
 //! let table = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
 //! let settings = qmarc_config::Settings::parse("q.toml".as_ref(), &table.repeat(3), &names)?;
-//! let plan = qmarc_runner::run::plan_for(&settings, Mode::Home, false, false);
+//! let plan = qmarc_controller_process::run::plan_for(&settings, Mode::Home, false, false);
 //! assert!(!plan.monitor_switches && !plan.require_homed, "homing watches its switches itself");
-//! assert_eq!(qmarc_runner::run::generator_name(Mode::Run, &settings), "spline");
+//! assert_eq!(qmarc_controller_process::run::generator_name(Mode::Run, &settings), "spline");
 //! # Ok(()) }
 //! ```
 #![deny(missing_docs)]

@@ -31,7 +31,7 @@ struct ControllerArgs {
 fn run(args: &ControllerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
     let spec = RunSpec::read(&args.settings).map_err(|e| (exit::USAGE, e.into()))?;
     qmarc_timer::stop::install().map_err(|e| (exit::INTERNAL, e.into()))?;
-    let summary = match qmarc_runner::run::run_move(&spec) {
+    let summary = match qmarc_controller_process::run::run_move(&spec) {
         // A stop signal before the move began: the user's stop, said as such, not an error.
         Err(e) if e.exit_code() == exit::INTERRUPTED => {
             eprintln!("qmarc-controller: {e}");

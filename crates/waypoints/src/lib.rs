@@ -14,7 +14,7 @@
 //!
 //! ```
 //! use qmarc_plugins::knots::{KnotRules, parse_waypoints};
-//! use qmarc_paths::{KnotFormat, joint_knots, render};
+//! use qmarc_waypoints::{KnotFormat, joint_knots, render};
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let robot = qmarc_kinematics::Robot {
 //!     geometry: qmarc_kinematics::Geometry::ASSUMED,

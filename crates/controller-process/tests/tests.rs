@@ -20,7 +20,7 @@ fn spawn_with_settings(bin: &str, settings: &std::path::Path) -> std::process::C
 }
 
 #[test]
-fn the_children_run_by_hand_from_the_printed_settings_issue_11() {
+fn the_children_run_by_hand_from_the_printed_settings() {
     let t = TestRun::new("byhand");
     let config = t.config_with(&[]);
     let out = t.out("out");
@@ -56,7 +56,7 @@ fn the_children_run_by_hand_from_the_printed_settings_issue_11() {
 }
 
 #[test]
-fn a_file_that_is_not_a_run_file_is_a_usage_error_naming_it_issue_11() {
+fn a_file_that_is_not_a_run_file_is_a_usage_error_naming_it() {
     let t = TestRun::new("badrun");
     for (name, text) in
         [("garbage.json", "step --size 1000\n"), ("old.json", "{\"mode\": \"step\"}")]

@@ -59,7 +59,7 @@ fn fifo(run: &TestRun, name: &str) -> PathBuf {
 /// Item 14: one table of exit codes, the same for the starter and the console's plain
 /// subcommands: 0 ok, 1 internal, 2 fault, 3 refused, 64 usage, 130 interrupted.
 #[test]
-fn exit_codes_follow_the_table_issue_10() {
+fn exit_codes_follow_the_table() {
     let run = TestRun::new("exitcodes");
     let out = run.out("out");
     let ok = run.starter(
@@ -118,7 +118,7 @@ fn exit_codes_follow_the_table_issue_10() {
 /// the user, is bounded; each breach is an error naming file, line and field (or the
 /// limit), before anything moves.
 #[test]
-fn hostile_inputs_are_bounded_errors_issue_10() {
+fn hostile_inputs_are_bounded_errors() {
     let run = TestRun::new("hostile");
     let refused = |args: &[&str], expected: &str| {
         let r = run.starter(args, TIMEOUT);
@@ -198,7 +198,7 @@ fn hostile_inputs_are_bounded_errors_issue_10() {
 
 /// Item 3: `--knots -` on a terminal is refused with what to do instead.
 #[test]
-fn knots_from_a_terminal_are_refused_issue_10() {
+fn knots_from_a_terminal_are_refused() {
     let run = TestRun::new("ttyknots");
     let pty = nix::pty::openpty(None, None).unwrap();
     let tty = std::fs::File::from(pty.slave.try_clone().unwrap());
@@ -221,7 +221,7 @@ fn knots_from_a_terminal_are_refused_issue_10() {
 /// Item 3: Ctrl-C ends a run waiting for a FIFO that has no writer, and a killed starter's
 /// children never outlive it, even blocked there.
 #[test]
-fn ctrl_c_and_a_dead_starter_end_a_run_waiting_for_its_knots_issue_10() {
+fn ctrl_c_and_a_dead_starter_end_a_run_waiting_for_its_knots() {
     let run = TestRun::new("fifowait");
     let path = fifo(&run, "knots.fifo");
     let knots = format!("--knots={}", path.display());
@@ -274,7 +274,7 @@ fn thread_policies(pid: u32) -> Vec<(String, u32)> {
 /// Item 4: only the servo thread runs real time; the knot reader (and every other helper)
 /// runs with normal scheduling, although the servo thread starts it.
 #[test]
-fn only_the_servo_thread_runs_real_time_issue_10() {
+fn only_the_servo_thread_runs_real_time() {
     let run = TestRun::new("policies");
     let path = fifo(&run, "knots.fifo");
     let out = run.out("out");
@@ -330,7 +330,7 @@ fn only_the_servo_thread_runs_real_time_issue_10() {
 /// Items 5, 6 and 7: the output folder is checked before anything starts, locked against a
 /// second run, and a refused or failed run never destroys the last good results.
 #[test]
-fn the_output_folder_never_loses_results_issue_10() {
+fn the_output_folder_never_loses_results() {
     let run = TestRun::new("outdir");
     let out = run.out("out");
     // Not a folder: refused before any process starts.
@@ -395,7 +395,7 @@ fn the_output_folder_never_loses_results_issue_10() {
 /// starts; when the disk fills during the move, the data go to the rescue folder and the
 /// message says where.
 #[test]
-fn a_full_disk_never_loses_a_move_issue_10() {
+fn a_full_disk_never_loses_a_move() {
     if !nix::unistd::geteuid().is_root() {
         return; // mounting a small filesystem needs root (CI runs as root)
     }
@@ -481,7 +481,7 @@ fn a_full_disk_never_loses_a_move_issue_10() {
 /// cycles the move reached, the phase, the signal by name — and lists no file that does not
 /// exist.
 #[test]
-fn a_dead_controller_is_reported_with_what_is_known_issue_10() {
+fn a_dead_controller_is_reported_with_what_is_known() {
     let run = TestRun::new("deadctl");
     let out = run.out("out");
     // The folder holds a good run's results: the dead run's summary must neither sit beside
@@ -528,7 +528,7 @@ fn a_dead_controller_is_reported_with_what_is_known_issue_10() {
 
 /// Item 11: a motor that does not follow its command is never reported ok.
 #[test]
-fn a_stalled_motor_is_never_ok_issue_10() {
+fn a_stalled_motor_is_never_ok() {
     let run = TestRun::new("stalled");
     let out = run.out("out");
     let cfg = run.config_with(&[("stall_motor", "2")]);
@@ -563,7 +563,7 @@ fn a_stalled_motor_is_never_ok_issue_10() {
 /// Item 12: the advice "home first" can be followed on the simulated robot: its homed frame
 /// is kept between runs (in `sim.state_file`), as the card keeps its counters.
 #[test]
-fn the_simulated_robot_keeps_its_homing_between_runs_issue_10() {
+fn the_simulated_robot_keeps_its_homing_between_runs() {
     let run = TestRun::new("keephome");
     let out = run.out("out");
     let cfg = run.config_with(&[
@@ -585,7 +585,7 @@ fn the_simulated_robot_keeps_its_homing_between_runs_issue_10() {
 
 /// Item 16: homing shows its phase and motor on a terminal.
 #[test]
-fn homing_shows_its_progress_on_a_terminal_issue_10() {
+fn homing_shows_its_progress_on_a_terminal() {
     let run = TestRun::new("homeprog");
     let out = run.out("out");
     let cfg = run.config_with(&[
@@ -642,7 +642,7 @@ fn homing_shows_its_progress_on_a_terminal_issue_10() {
 /// Item 9: iceoryx2 files that are in the way are named with what to do, and a missing
 /// `--iox-root` is refused, not created.
 #[test]
-fn iceoryx2_files_in_the_way_are_named_issue_10() {
+fn iceoryx2_files_in_the_way_are_named() {
     let run = TestRun::new("ioxroot");
     let missing = run.dir.join("no-such-root");
     let mut cmd = Command::new(bin_dir().join("qmarc-starter"));
@@ -688,7 +688,7 @@ fn iceoryx2_files_in_the_way_are_named_issue_10() {
 
 /// Item 15: `qmarc step --help` calls itself `qmarc`.
 #[test]
-fn the_consoles_subcommands_call_themselves_qmarc_issue_10() {
+fn the_consoles_subcommands_call_themselves_qmarc() {
     let mut cmd = Command::new(bin_dir().join("qmarc"));
     cmd.args(["step", "--help"]).current_dir(workspace());
     let r = run_with_timeout(&mut cmd, TIMEOUT);
@@ -703,7 +703,7 @@ fn the_consoles_subcommands_call_themselves_qmarc_issue_10() {
 /// run exits INTERRUPTED; the folder holds this move's summary, saying what was not written,
 /// and the set it replaced in `previous/`; nothing half-written is left.
 #[test]
-fn a_stop_while_the_data_are_written_ends_the_writing_cleanly_issue_28() {
+fn a_stop_while_the_data_are_written_ends_the_writing_cleanly() {
     let run = TestRun::new("stopwrite");
     let out = run.out("out");
     let det = ["--deterministic", "--unpaced"];
@@ -760,7 +760,7 @@ fn a_stop_while_the_data_are_written_ends_the_writing_cleanly_issue_28() {
 /// up to then, and leaves nothing behind. Before: a stopped controller was waited for 131 s
 /// in silence and its data were lost; a stopped hwserver took 5.6 s and was not named.
 #[test]
-fn a_stopped_child_ends_the_run_and_is_named_issue_28() {
+fn a_stopped_child_ends_the_run_and_is_named() {
     for (who, kind) in
         [("qmarc-controller", "controller_lost"), ("qmarc-hwserver", "hwserver_lost")]
     {
@@ -804,7 +804,7 @@ const SHORT_HOMING: [(&str, &str); 3] = [
 /// blame the switch for the distance the stall carried the motor past it. Before: two of two
 /// paced homing runs on a loaded machine ended in `following_error` after 24–40 ms stalls.
 #[test]
-fn paced_homing_rides_out_host_stalls_issue_28() {
+fn paced_homing_rides_out_host_stalls() {
     let run = TestRun::new("homestall");
     let out = run.out("out");
     let cfg = run.config_with(&SHORT_HOMING);
@@ -844,7 +844,7 @@ fn paced_homing_rides_out_host_stalls_issue_28() {
 /// and its calls are interrupted) is the user's stop: the run exits INTERRUPTED, and no
 /// process calls it an internal error or prints iceoryx2's `…(Interrupt)`.
 #[test]
-fn a_stop_as_the_run_starts_is_an_interruption_issue_28() {
+fn a_stop_as_the_run_starts_is_an_interruption() {
     for delay_ms in [0, 2, 4, 6, 10, 20, 40] {
         let run = TestRun::new(&format!("earlyint{delay_ms}"));
         let out = run.out("out");
@@ -879,7 +879,7 @@ fn a_stop_as_the_run_starts_is_an_interruption_issue_28() {
 /// the file, the summary says the frame was not kept, and no motor "reads 0 from now on"
 /// (before: ok, exit 0, and the next run found the robot unhomed).
 #[test]
-fn a_home_whose_frame_cannot_be_kept_fails_naming_the_file_issue_28() {
+fn a_home_whose_frame_cannot_be_kept_fails_naming_the_file() {
     let run = TestRun::new("homekeep");
     let out = run.out("out");
     let folder = run.dir.join("state");

@@ -14,7 +14,7 @@ use qmarc_controller::record::MoveRecord;
 use qmarc_controller::servo::{MoveError, Servo, server_gone};
 use qmarc_controller::traj::TrajStartError;
 use qmarc_plugins::registry;
-use qmarc_plugins::step::TrajBuildError;
+use qmarc_plugins::source::TrajBuildError;
 use qmarc_proto::progress::Progress;
 use qmarc_proto::service::IpcLocation;
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
