@@ -571,27 +571,9 @@ fn homing_in_process_finds_the_switches_and_presets_the_frame() {
 /// real `PidFf` outputs after a stall what a punctual cycle would — no feed-forward kick.
 #[test]
 fn a_late_cycle_outputs_what_a_punctual_one_would() {
-    use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
     use std::cell::Cell;
     use std::rc::Rc;
 
-    /// 17 counts per sample on motor 1.
-    struct Ramp;
-    impl TrajectoryGenerator for Ramp {
-        fn name(&self) -> &'static str {
-            "ramp"
-        }
-        fn start(&mut self, _: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
-            Ok(())
-        }
-        fn samples(&self) -> Option<u64> {
-            Some(1_000)
-        }
-        fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
-            cmd[0] = 17.0 * n as f64;
-            Sample::Ready
-        }
-    }
     /// A motor exactly on its command (the test says where), recording the DAC code written.
     struct OnCommand {
         at: Rc<Cell<f64>>,
@@ -612,7 +594,8 @@ fn a_late_cycle_outputs_what_a_punctual_one_would() {
     let gains = qmarc_config::MotorGains { kp: 182_000.0, kvff: 119_000.0, ..Default::default() };
     let law = qmarc_plugins::pidff::PidFf::new(&[gains]);
     let plan = MovePlan::new(qmarc_config::Mode::Run, 1, 400_000);
-    let mut servo = Servo::new(plan, Box::new(Ramp), Box::new(law), Box::new(MockClock::new(0)));
+    let ramp = util::Ramp { slope: 17.0, samples: 1_000 }; // 17 counts per sample on motor 1
+    let mut servo = Servo::new(plan, Box::new(ramp), Box::new(law), Box::new(MockClock::new(0)));
     let (at, dac) = (Rc::new(Cell::new(0.0)), Rc::new(Cell::new(0)));
     let mut link = OnCommand { at: at.clone(), dac: dac.clone() };
     let mut ticker = ManualTicker::new(400_000);
@@ -858,28 +841,7 @@ fn a_fault_after_a_host_stall_says_so() {
 #[test]
 fn a_stall_at_the_end_of_a_path_settles_on_its_last_command() {
     use qmarc_controller::law::{ServoInput, ServoLaw};
-    use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
 
-    /// Sample n commands n counts, over 11 samples.
-    struct Ramp;
-    impl TrajectoryGenerator for Ramp {
-        fn name(&self) -> &'static str {
-            "ramp"
-        }
-        fn start(&mut self, _: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
-            Ok(())
-        }
-        fn samples(&self) -> Option<u64> {
-            Some(11)
-        }
-        fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
-            if n > 10 {
-                return Sample::Done;
-            }
-            cmd[0] = n as f64;
-            Sample::Ready
-        }
-    }
     struct Off;
     impl ServoLaw for Off {
         fn name(&self) -> &'static str {
@@ -899,8 +861,9 @@ fn a_stall_at_the_end_of_a_path_settles_on_its_last_command() {
     }
     for (stall_after, skip) in [(7, 5), (9, 0)] {
         let plan = MovePlan::new(qmarc_config::Mode::Run, 1, 400_000);
+        let ramp = util::Ramp { slope: 1.0, samples: 11 }; // sample n commands n counts
         let mut servo =
-            Servo::new(plan, Box::new(Ramp), Box::new(Off), Box::new(MockClock::new(0)));
+            Servo::new(plan, Box::new(ramp), Box::new(Off), Box::new(MockClock::new(0)));
         let mut ticker = ManualTicker::new(400_000);
         servo.prepare(&mut Still).unwrap();
         servo.set_t0(ticker.start().unwrap());

@@ -142,3 +142,35 @@ impl Drop for IpcDir {
         let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
+
+/// A path of `samples` samples commanding `slope · n` counts to motor 1 at sample `n`.
+pub struct Ramp {
+    pub slope: f64,
+    pub samples: u64,
+}
+
+impl qmarc_controller::traj::TrajectoryGenerator for Ramp {
+    fn name(&self) -> &'static str {
+        "ramp"
+    }
+    fn start(
+        &mut self,
+        _: &[f64; qmarc_proto::MAX_MOTORS],
+    ) -> Result<(), qmarc_controller::traj::TrajStartError> {
+        Ok(())
+    }
+    fn samples(&self) -> Option<u64> {
+        Some(self.samples)
+    }
+    fn sample(
+        &mut self,
+        n: u64,
+        cmd: &mut [f64; qmarc_proto::MAX_MOTORS],
+    ) -> qmarc_controller::traj::Sample {
+        if n >= self.samples {
+            return qmarc_controller::traj::Sample::Done;
+        }
+        cmd[0] = self.slope * n as f64;
+        qmarc_controller::traj::Sample::Ready
+    }
+}
