@@ -54,8 +54,9 @@ fn the_state_diagram_in_architecture_md_names_every_phase_of_the_code() {
 }
 
 /// The workspace's crates, lowest floor first (ARCHITECTURE.md's code map): a crate may
-/// depend only on crates of lower floors. `config` knows nothing of the plug-ins or the
-/// hardware (the registries inject the names it accepts), `controller` is the loop and knows
+/// depend only on crates of lower floors. `config` knows nothing of the plug-ins (the
+/// registries inject the names it accepts) and of the hardware only which backends there are,
+/// `controller` is the loop and knows
 /// no plug-in and no hardware, the hardware server knows no controller, and the processes
 /// (`controller-process`, `starter`, the console) sit on top.
 const LAYERS: &[&str] = &[
@@ -131,7 +132,9 @@ fn crates_depend_only_on_lower_layers() {
             assert!(ok, "crates/{name} dev-depends on qmarc-{dep}, a layer above it");
         }
     }
-    for (name, not) in [("controller", "hwserver"), ("telemetry", "controller")] {
+    for (name, not) in
+        [("controller", "hwserver"), ("hwserver", "controller"), ("telemetry", "controller")]
+    {
         let all = [our_dependencies(name), our_dev_dependencies(name)].concat();
         assert!(!all.contains(&not.to_string()), "crates/{name} depends on qmarc-{not}");
     }
@@ -325,5 +328,9 @@ fn the_code_maps_table_is_the_manifests() {
         assert_eq!(listed, expected, "{name}: the crates it stands on");
         let floor = deps.iter().map(|d| floors[d.as_str()] + 1).max().unwrap_or(0);
         assert_eq!(floors[name.as_str()], floor, "{name}: its floor");
+        // Crates on one floor know nothing of each other, in their tests neither.
+        for dev in our_dev_dependencies(name).iter().filter(|d| *d != "tests") {
+            assert!(floors[dev.as_str()] < floor, "{name} dev-depends on {dev}, not below it");
+        }
     }
 }

@@ -5,8 +5,9 @@
 //! by section (one module each) into [`Settings`]. Every error names the file, line, column
 //! and field (`config/qmarc.toml:31:6: motor[2].kp: ...`); unknown keys are errors. Each
 //! default is defined once, in its section's `Default`. The crate knows nothing of the
-//! plug-ins or the hardware: the names it accepts for the law, the trajectory method and the
-//! backend are given to it ([`Names`], from the registries).
+//! plug-ins: the names it accepts for the law and the trajectory method are given to it
+//! ([`Names`], from the registries). Of the hardware it knows which backends there are
+//! ([`BackendKind`]), not what they are.
 //!
 //! ```
 //! use qmarc_config::{Names, Settings};

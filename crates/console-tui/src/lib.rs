@@ -1,7 +1,7 @@
 //! The QMARC console, `qmarc`: the thesis' controller console (3.4) as a terminal program.
 //!
 //! It edits the five sections of the settings file the starter reads ([`form`]), runs moves
-//! by spawning `qmarc-starter` and streaming its output ([`runner`]), and shows each move's
+//! by spawning `qmarc-starter` and streaming its output ([`starter_process`]), and shows each move's
 //! error figures, timing, fault and charts right after it, with a history of the session's
 //! moves ([`results`]); Ctrl-T tunes the gains on the path and Ctrl-A takes the tuned ones
 //! ([`tuning`]). [`app`] holds the state and the keys, [`ui`] draws it; both work on

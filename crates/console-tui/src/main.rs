@@ -196,26 +196,28 @@ fn main() -> ExitCode {
         return ExitCode::from(1);
     }
     let args: Args = qmarc_starter::cli::parse_or_exit();
-    match run_console(&args) {
-        // Written without panicking: the terminal may be gone.
-        Ok(Some(Quit::Saved)) => {
-            let _ =
-                writeln!(std::io::stdout(), "qmarc: settings saved to {}", args.config.display());
+    let outcome = run_console(&args)
+        .map(|quit| {
+            // Written without panicking: the terminal may be gone.
+            let _ = match quit {
+                Some(Quit::Saved) => writeln!(
+                    std::io::stdout(),
+                    "qmarc: settings saved to {}",
+                    args.config.display()
+                ),
+                _ => writeln!(std::io::stdout(), "qmarc: left without saving"),
+            };
             ExitCode::SUCCESS
-        }
-        Ok(_) => {
-            let _ = writeln!(std::io::stdout(), "qmarc: left without saving");
-            ExitCode::SUCCESS
-        }
-        Err(e) => {
-            let _ = writeln!(std::io::stderr(), "qmarc: error: {e:#}");
-            ExitCode::from(if e.is::<Refused>() {
+        })
+        .map_err(|e| {
+            let code = if e.is::<Refused>() {
                 qmarc_proto::exit::REFUSED
             } else {
                 qmarc_proto::exit::INTERNAL
-            })
-        }
-    }
+            };
+            (code, e)
+        });
+    qmarc_config::program::conclude("qmarc", outcome)
 }
 
 #[cfg(test)]

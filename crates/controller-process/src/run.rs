@@ -7,7 +7,7 @@
 //! happen only here, after the loop.
 
 use qmarc_config::{Mode, RunSpec, Settings};
-use qmarc_controller::fault::{Fault, FaultKind};
+use qmarc_controller::fault::Fault;
 use qmarc_controller::link::{HwLink, IoxLink, LinkConnectError, LinkTimeouts};
 use qmarc_controller::plan::{MoveLimits, MovePlan};
 use qmarc_controller::record::MoveRecord;
@@ -17,6 +17,7 @@ use qmarc_plugins::registry;
 use qmarc_plugins::source::TrajBuildError;
 use qmarc_proto::progress::Progress;
 use qmarc_proto::service::IpcLocation;
+use qmarc_proto::state::FaultKind;
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_report::Summary;
 use qmarc_report::output::{WriteError, write_results};

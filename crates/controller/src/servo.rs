@@ -464,6 +464,11 @@ impl Servo {
     /// settle holds is then the path's last one, not one short of it.
     #[inline]
     fn command_the_end(&mut self) {
+        // Only a settle holds it (homing and the check have none: their generators keep
+        // books of what they sampled).
+        if self.plan.settle_cycles == 0 {
+            return;
+        }
         if let Some(last) = self.planned_samples.and_then(|s| s.checked_sub(1))
             && self.last_ready < last
         {

@@ -3,7 +3,7 @@
 mod conformance;
 mod util;
 
-use qmarc_controller::link::HwLink;
+use qmarc_proto::link::HwLink;
 use qmarc_proto::{HwMsg, MsgType, Status};
 use std::time::Duration;
 use util::Server;

@@ -1,7 +1,7 @@
 //! Helpers for the hwserver integration tests: start the real binary with a private prefix
 //! and root, connect to it, and clean up after it.
 
-use qmarc_controller::link::{IoxLink, LinkTimeouts};
+use qmarc_proto::link::{IoxLink, LinkTimeouts};
 use qmarc_proto::service::IpcLocation;
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};

@@ -284,6 +284,12 @@ impl Homing {
             self.target = self.act[m] - dir * self.motors[m].home_offset_counts;
             self.reports[m].home_counts = self.target;
             self.phase = Phase::ToOffset;
+            // A host stall (periods missed before this sample) can carry the motor past its
+            // command (it runs on its last output meanwhile): the move home then starts where
+            // the motor is, never pulling it back toward the switch it just cleared.
+            if periods > 1 && (self.cmd[m] - self.act[m]) * dir > 0.0 {
+                self.cmd[m] = self.act[m];
+            }
         } else {
             let backed_off = (self.trip - self.act[m]) * dir;
             if backed_off >= self.settings.clear_within_counts {

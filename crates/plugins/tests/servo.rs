@@ -4,13 +4,14 @@
 
 mod util;
 
-use qmarc_controller::fault::{FaultKind, HostStall};
+use qmarc_controller::fault::HostStall;
 use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
 use qmarc_controller::plan::{MoveLimits, MovePlan};
 use qmarc_controller::servo::{CycleEnd, Phase, Servo};
 use qmarc_hwserver::server::{ServeEnd, ServeOptions, serve};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
 use qmarc_plugins::registry::{GENERATORS, LAWS};
+use qmarc_proto::state::FaultKind;
 
 use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
@@ -40,8 +41,8 @@ fn all_generators() -> Vec<qmarc_plugins::registry::GeneratorEntry> {
     GENERATORS.iter().copied().chain([approach]).collect()
 }
 
-/// Every law the loop runs: the registry's, and the check's open loop (which the runner
-/// picks for `check`, whatever `general.law` says).
+/// Every law the loop runs: the registry's, and the check's open loop (which the controller
+/// process picks for `check`, whatever `general.law` says).
 fn all_laws() -> Vec<qmarc_plugins::registry::LawEntry> {
     let open_loop = qmarc_plugins::registry::LawEntry {
         name: "open-loop",
@@ -860,7 +861,8 @@ fn a_stall_at_the_end_of_a_path_settles_on_its_last_command() {
         }
     }
     for (stall_after, skip) in [(7, 5), (9, 0)] {
-        let plan = MovePlan::new(qmarc_config::Mode::Run, 1, 400_000);
+        let plan =
+            MovePlan { settle_cycles: 10, ..MovePlan::new(qmarc_config::Mode::Run, 1, 400_000) };
         let ramp = util::Ramp { slope: 1.0, samples: 11 }; // sample n commands n counts
         let mut servo =
             Servo::new(plan, Box::new(ramp), Box::new(Off), Box::new(MockClock::new(0)));

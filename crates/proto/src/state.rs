@@ -213,6 +213,20 @@ mod tests {
         }
     }
 
+    /// The words of messages and of `summary.json`: a name per phase and per kind, each its
+    /// own, and a kind shows as its name.
+    #[test]
+    fn every_phase_and_kind_has_its_own_name() {
+        let phases: std::collections::BTreeSet<&str> =
+            Phase::ALL.iter().map(|p| p.name()).collect();
+        assert_eq!(phases.len(), Phase::ALL.len(), "two phases share a name");
+        assert_eq!((Phase::Idle.name(), Phase::Homing.name()), ("not started", "homing"));
+        assert_eq!(FaultKind::LimitSwitch.to_string(), "limit_switch");
+        for k in FaultKind::ALL {
+            assert_eq!(k.to_string(), k.name());
+        }
+    }
+
     /// A code is a kind's one number both ways, every kind its own (telemetry's
     /// `fault` is the code + 1), and nothing past the last kind is one.
     #[test]

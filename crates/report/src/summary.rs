@@ -3,10 +3,11 @@
 
 use crate::effector::{EffectorSummary, GatheredErrors};
 use qmarc_config::{Mode, MotorGains};
-use qmarc_controller::fault::{Fault, FaultKind};
+use qmarc_controller::fault::Fault;
 use qmarc_controller::stats::{AxisErrors, TimingStats};
 /// Where homing found and left one motor (the homing generator's record, as it is).
 pub use qmarc_controller::traj::MotorHome;
+use qmarc_proto::state::FaultKind;
 use qmarc_timer::Percentiles;
 use serde::{Deserialize, Serialize};
 
@@ -185,16 +186,39 @@ pub enum WarningKind {
     Rescued,
     /// Figures that are not numbers.
     NotNumbers,
+    /// A warning of a `summary.json` written before warnings had kinds (a plain string).
+    Unsorted,
 }
 
 /// A warning of a run: its kind and what the user reads. It reads as its message (`Deref` to
-/// `str`, `Display`).
+/// `str`, `Display`). In `summary.json` it is `{"kind": …, "message": …}`; a plain string (a
+/// summary written before warnings had kinds) reads as [`WarningKind::Unsorted`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(from = "WarningJson")]
 pub struct Warning {
     /// What it is about.
     pub kind: WarningKind,
     /// What the user reads.
     pub message: String,
+}
+
+/// A warning as `summary.json` may hold it.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum WarningJson {
+    /// This version's.
+    Kinded { kind: WarningKind, message: String },
+    /// An older summary's.
+    Plain(String),
+}
+
+impl From<WarningJson> for Warning {
+    fn from(w: WarningJson) -> Warning {
+        match w {
+            WarningJson::Kinded { kind, message } => Warning { kind, message },
+            WarningJson::Plain(message) => Warning { kind: WarningKind::Unsorted, message },
+        }
+    }
 }
 
 impl Warning {
@@ -538,5 +562,20 @@ mod tests {
         (fine.effector, fine.ok, fine.warnings) = (None, true, Vec::new());
         fine.judge_figures();
         assert!(fine.ok && fine.warnings.is_empty());
+    }
+
+    /// A warning keeps its kind through summary.json; an older summary's plain string still
+    /// reads, as an unsorted warning.
+    #[test]
+    fn warnings_keep_their_kind_and_old_plain_ones_still_read() {
+        let w = Warning::new(WarningKind::EndsMoving, "the path ends moving");
+        let json = serde_json::to_string(&w).unwrap();
+        assert_eq!(json, r#"{"kind":"ends_moving","message":"the path ends moving"}"#);
+        assert_eq!(serde_json::from_str::<Warning>(&json).unwrap(), w);
+        let old: Warning = serde_json::from_str(r#""SCHED_FIFO 80 refused""#).unwrap();
+        assert_eq!(
+            (old.kind, old.message.as_str()),
+            (WarningKind::Unsorted, "SCHED_FIFO 80 refused")
+        );
     }
 }

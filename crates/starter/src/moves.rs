@@ -255,10 +255,10 @@ pub fn stall_limit(spec: &RunSpec) -> Duration {
 }
 
 /// Starts the two children on `p`'s run file and supervises them to their end (their
-/// standard error to `log`, if given): the output folder is locked meanwhile, and the run's
-/// shared-memory files are removed afterwards.
+/// standard error to `log`, if given); the run's shared-memory files are removed afterwards.
+/// The caller holds the output folder's lock ([`qmarc_report::output::lock`]) from before
+/// this until the summary is concluded.
 pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failure> {
-    let _lock = qmarc_report::output::lock(p.out_dir()).map_err(refused)?;
     remove_stale_files(&p.location.root);
     if p.own_prefix {
         crate::remove_own_stale_files(&p.location);
@@ -440,8 +440,11 @@ pub fn one_move(req: &MoveRequest<'_>) -> Result<Outcome, Failure> {
         }
         return Ok(Outcome { code: exit::OK, summary: None, robot: None });
     }
+    // The folder is this run's from before the children start until its summary is final.
+    let lock = qmarc_report::output::lock(p.out_dir()).map_err(refused)?;
     let ended = launch(&p, req.trial.log)?;
     let summary = conclude(&p, &ended);
+    drop(lock);
     match &summary {
         Some(_) if req.trial.log.is_some() => {}
         Some((s, _)) => {

@@ -1,7 +1,7 @@
 //! [`run_local`]: a lock-step move on the simulated robot inside this process, unpaced.
 //!
 //! The very code of a move of the process set — the registry's generator and law in the
-//! controller's [`Servo`], the hwserver's [`HwCore`] around the simulated Deltabot — with the
+//! controller's `Servo`, the hwserver's [`HwCore`] around the simulated Deltabot — with the
 //! iceoryx2 exchange replaced by a call: the core ([`open_core`]) is the link and answers
 //! each request in place. Time is the simulator's and nothing waits for the timer, so a move
 //! takes only its computing time, and its data are byte for byte those of

@@ -1,6 +1,6 @@
-//! The backend registry: every hardware the server can drive, by name. A backend is one file
-//! in this folder plus one line in [`BACKENDS`]; the settings (`hwserver.backend`,
-//! `--backend`) choose from it, and the conformance suite (`crate::conformance`,
+//! The backend registry: every hardware the server can drive, one entry per
+//! `qmarc_config::BackendKind`. A backend is one file in this folder, its variant there and
+//! one line in [`BACKENDS`]; the settings (`hwserver.backend`, `--backend`) choose from it, and the conformance suite (`crate::conformance`,
 //! `tests/conformance.rs`) runs on every entry.
 //!
 //! The recipe, for a card `foo` (this example is compiled and run by `cargo test`): its

@@ -585,3 +585,42 @@ fn a_lagging_motor_is_judged_from_where_it_tripped() {
     assert_eq!(end, Sample::Done, "{:?}", h.failure());
     assert_eq!((h.reports()[0].switch_found_counts, h.trip), (-250.0, -150.0));
 }
+
+/// A host stall while backing off that carries the motor off the switch and past its command
+/// (it runs on its last output): the move home starts where the motor is, never pulling it
+/// back toward the switch it just cleared (before: the loop pulled it back onto the switch,
+/// and homing failed on a switch that tripped while going home).
+#[test]
+fn a_stall_that_carries_the_motor_off_the_switch_does_not_pull_it_back() {
+    let switch = -200.0;
+    let flags_at = |x: f64| {
+        let mut f = [MotorFlags::default(); MAX_MOTORS];
+        if x <= switch {
+            f[0] = MotorFlags(MotorFlags::TOP);
+        }
+        f
+    };
+    let settings = HomingSettings { creep_counts_per_s: 2_500.0, ..settings() };
+    let mut h = Homing::new(1, 0.0004, settings, safety(300.0));
+    let (mut act, mut cmd, mut n) = ([0.0; MAX_MOTORS], [0.0; MAX_MOTORS], 0);
+    h.start(&act).unwrap();
+    // To the switch and into the back-off, the motor on its command.
+    while h.phase != Phase::Backoff {
+        h.observe(&act, &flags_at(act[0]));
+        assert_eq!(h.sample(n, &mut cmd), Sample::Ready);
+        act[0] = cmd[0];
+        n += 1;
+    }
+    // A 50-period stall: the motor ran 40 counts off the switch, past its command.
+    act[0] = switch + 40.0;
+    n += 50;
+    h.observe(&act, &flags_at(act[0]));
+    assert_eq!(h.sample(n, &mut cmd), Sample::Ready);
+    assert_eq!(h.phase, Phase::ToOffset);
+    assert!(
+        cmd[0] >= act[0],
+        "the move home starts at the motor ({}), not behind: {}",
+        act[0],
+        cmd[0]
+    );
+}
