@@ -600,27 +600,37 @@ fn a_stall_that_carries_the_motor_off_the_switch_does_not_pull_it_back() {
         }
         f
     };
-    let settings = HomingSettings { creep_counts_per_s: 2_500.0, ..settings() };
-    let mut h = Homing::new(1, 0.0004, settings, safety(300.0));
-    let (mut act, mut cmd, mut n) = ([0.0; MAX_MOTORS], [0.0; MAX_MOTORS], 0);
-    h.start(&act).unwrap();
-    // To the switch and into the back-off, the motor on its command.
-    while h.phase != Phase::Backoff {
+    // Into the back-off, then a 50-period stall that leaves the motor at `after` (off the
+    // switch): the command before and after the stall.
+    let after_a_stall = |after: f64| {
+        let settings = HomingSettings { creep_counts_per_s: 2_500.0, ..settings() };
+        let mut h = Homing::new(1, 0.0004, settings, safety(300.0));
+        let (mut act, mut cmd, mut n) = ([0.0; MAX_MOTORS], [0.0; MAX_MOTORS], 0);
+        h.start(&act).unwrap();
+        while h.phase != Phase::Backoff {
+            h.observe(&act, &flags_at(act[0]));
+            assert_eq!(h.sample(n, &mut cmd), Sample::Ready);
+            act[0] = cmd[0];
+            n += 1;
+        }
+        // Ten periods of back-off with the motor still on the switch: the command leads.
+        for _ in 0..10 {
+            h.observe(&act, &flags_at(act[0]));
+            assert_eq!(h.sample(n, &mut cmd), Sample::Ready);
+            n += 1;
+        }
+        let before = cmd[0];
+        act[0] = after;
         h.observe(&act, &flags_at(act[0]));
-        assert_eq!(h.sample(n, &mut cmd), Sample::Ready);
-        act[0] = cmd[0];
-        n += 1;
-    }
-    // A 50-period stall: the motor ran 40 counts off the switch, past its command.
-    act[0] = switch + 40.0;
-    n += 50;
-    h.observe(&act, &flags_at(act[0]));
-    assert_eq!(h.sample(n, &mut cmd), Sample::Ready);
-    assert_eq!(h.phase, Phase::ToOffset);
-    assert!(
-        cmd[0] >= act[0],
-        "the move home starts at the motor ({}), not behind: {}",
-        act[0],
-        cmd[0]
-    );
+        assert_eq!(h.sample(n + 50, &mut cmd), Sample::Ready);
+        assert_eq!(h.phase, Phase::ToOffset);
+        (before, cmd[0])
+    };
+    // The motor ran 40 counts off the switch, past its command: the move home starts there.
+    let (_, cmd) = after_a_stall(switch + 40.0);
+    assert_eq!(cmd, switch + 40.0, "the move home starts at the motor, not behind it");
+    // The motor just cleared, still behind its command: the command is not pulled back.
+    let (before, cmd) = after_a_stall(switch + 1.0);
+    assert!(before > switch + 1.0, "the command led the motor: {before}");
+    assert_eq!(cmd, before, "the command stays ahead of the motor");
 }
