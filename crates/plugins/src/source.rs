@@ -1,6 +1,6 @@
 //! What every generator that reads knots shares: where knots come from ([`KnotSource`]),
 //! the memory a precomputed command queue may take ([`QUEUE_BUDGET_BYTES`], [`sample_queue`])
-//! and why a path cannot be built ([`TrajBuildError`]).
+//! and why a path cannot be built ([`TrajBuildError`], [`SplineError`]).
 
 use crate::knots::KnotFileError;
 use qmarc_config::Settings;
@@ -121,7 +121,7 @@ pub enum TrajBuildError {
     Knots(#[from] KnotFileError),
     /// The knots cannot carry a spline.
     #[error("{0}")]
-    Spline(crate::spline::SplineError),
+    Spline(SplineError),
     /// A step larger than a motor's following-error limit: it would fault at its first cycle.
     #[error(
         "a step of {size} counts is more than motor {motor}'s max_following_error_counts = \
@@ -159,4 +159,24 @@ pub enum TrajBuildError {
         /// [`QUEUE_BUDGET_BYTES`].
         budget: u64,
     },
+}
+
+/// The knots cannot carry a spline.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SplineError {
+    /// Fewer than two knots.
+    #[error("a spline needs at least 2 knots, found {0}")]
+    TooFew(usize),
+    /// Times and values differ in number.
+    #[error("{times} times but {values} values")]
+    Mismatch {
+        /// Number of times.
+        times: usize,
+        /// Number of values.
+        values: usize,
+    },
+    /// Times are not finite and strictly increasing.
+    #[error("knot times must be finite and strictly increasing (knot {0})")]
+    NotIncreasing(usize),
 }

@@ -28,25 +28,8 @@ pub struct NaturalSpline {
     cursor: usize,
 }
 
-/// The knots cannot carry a spline.
-#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
-#[non_exhaustive]
-pub enum SplineError {
-    /// Fewer than two knots.
-    #[error("a spline needs at least 2 knots, found {0}")]
-    TooFew(usize),
-    /// Times and values differ in number.
-    #[error("{times} times but {values} values")]
-    Mismatch {
-        /// Number of times.
-        times: usize,
-        /// Number of values.
-        values: usize,
-    },
-    /// Times are not finite and strictly increasing.
-    #[error("knot times must be finite and strictly increasing (knot {0})")]
-    NotIncreasing(usize),
-}
+/// The knots cannot carry a spline (defined with the other reasons a path cannot be built).
+pub use crate::source::SplineError;
 
 impl NaturalSpline {
     /// Solves the natural spline through `(t[i], y[i])` in O(N): the tridiagonal system of

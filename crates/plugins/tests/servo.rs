@@ -695,11 +695,13 @@ fn a_telemetry_publish_allocates_exactly_its_loan_and_the_relay_delivers_every_s
         }
         assert_eq!(got, 501);
     }
-    // Through the relay: the loop's end of the ring, let go when the move ends.
-    let mut reader = {
+    // Through the relay: the loop's end of the ring, let go when the move ends. The reader
+    // reads while the relay lives (a reader reads what a living publisher sent; the console
+    // and the scope read as the move goes), then what is left once the ring is let go.
+    let (cycles, reader) = {
         let (mut tx, rx) = qmarc_controller::telemetry::ring(1);
         let relay = spawn(ipc.location.clone(), rx).unwrap();
-        let reader = (0..200)
+        let mut reader = (0..200)
             .find_map(|_| {
                 std::thread::sleep(Duration::from_millis(10));
                 TelemetryReader::open(&ipc.location).ok()
@@ -708,13 +710,20 @@ fn a_telemetry_publish_allocates_exactly_its_loan_and_the_relay_delivers_every_s
         for k in 0..1_000 {
             tx.offer(TelemetrySample { cycle: k, ..TelemetrySample::default() });
         }
+        let mut cycles = Vec::new();
+        let deadline = std::time::Instant::now() + Duration::from_secs(30);
+        while cycles.len() < 1_000 && std::time::Instant::now() < deadline {
+            match reader.receive().unwrap() {
+                Some(s) => cycles.push(s.cycle),
+                None => std::thread::sleep(Duration::from_millis(1)),
+            }
+        }
         drop(tx);
         let report = relay.join();
         assert_eq!((report.published, report.refused, report.error), (1_000, 0, None));
-        reader
+        cycles.extend(std::iter::from_fn(|| reader.receive().unwrap()).map(|s| s.cycle));
+        (cycles, reader)
     };
-    let cycles: Vec<u64> =
-        std::iter::from_fn(|| reader.receive().unwrap()).map(|s| s.cycle).collect();
     assert_eq!(cycles, (0..1_000).collect::<Vec<_>>(), "every sample, in order");
     assert_eq!(reader.publishers(), 0, "the relay let go of the service");
 }
