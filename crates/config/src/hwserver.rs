@@ -25,10 +25,7 @@ impl BackendKind {
 
     /// Its name in the settings and on the command line.
     pub fn name(self) -> &'static str {
-        match self {
-            BackendKind::Sim => "sim",
-            BackendKind::S626 => "s626",
-        }
+        BackendKind::NAMES[self as usize]
     }
 }
 
@@ -175,15 +172,10 @@ impl RawHwServer {
     /// Checked; the watchdog's default is the backend's.
     pub(crate) fn check(&self, src: &Source<'_>) -> Result<HwServerSettings, ConfigLoadError> {
         let d = HwServerSettings::default();
-        let backend: BackendKind = src
-            .take(
-                &self.backend,
-                "hwserver.backend",
-                d.backend.name().to_string(),
-                one_of(&BackendKind::NAMES, "backend"),
-            )?
-            .parse()
-            .unwrap_or(d.backend); // checked by `take`
+        let backend = src.read(&self.backend, "hwserver.backend", d.backend, |v: &String| {
+            one_of(&BackendKind::NAMES, "backend")(v)?;
+            v.parse()
+        })?;
         let watchdog = TimingDefaults::of(backend).watchdog_periods;
         let deadline_periods = src.int(
             &self.deadline_periods,
@@ -214,12 +206,7 @@ impl RawHwServer {
                 d.max_counts_per_s,
                 positive,
             )?,
-            wait: src
-                .take(&self.wait, "hwserver.wait", d.wait.to_string(), |v| {
-                    v.parse::<HwWait>().map(|_| ())
-                })?
-                .parse()
-                .unwrap_or_default(),
+            wait: src.read(&self.wait, "hwserver.wait", d.wait, |v| v.parse())?,
             response_spin_us: src.int(
                 &self.response_spin_us,
                 "hwserver.response_spin_us",

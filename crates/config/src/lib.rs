@@ -57,8 +57,7 @@ pub use telemetry::{MAX_TELEMETRY_EVERY, TelemetrySettings};
 pub use timer::{TimerMethod, TimerSettings};
 pub use trajectory::{DEFAULT_MAX_DURATION_S, TrajectorySettings};
 pub use tune::{
-    TUNE_OBJECTIVES, TUNE_PARAMS, TuneObjective, TuneParam, TuneSettings, check_objective,
-    check_params,
+    TUNE_OBJECTIVES, TUNE_PARAMS, TuneObjective, TuneParam, TuneSettings, check_params,
 };
 
 use qmarc_proto::MAX_MOTORS;

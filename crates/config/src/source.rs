@@ -118,6 +118,21 @@ impl Source<'_> {
         }
     }
 
+    /// `v` read into a value by `read` (a name of a closed set, a list of them) or, when the
+    /// file does not set it, `default`: read once, an error of `read` at `v`'s position.
+    pub fn read<R, T>(
+        &self,
+        v: &S<R>,
+        field: &str,
+        default: T,
+        read: impl FnOnce(&R) -> Result<T, String>,
+    ) -> Result<T, ConfigLoadError> {
+        match v {
+            None => Ok(default),
+            Some(s) => read(s.get_ref()).map_err(|m| self.invalid(s.span(), field, m)),
+        }
+    }
+
     /// An integer setting within `lo‥=hi`, or `default` (callers narrow it: it is in range).
     pub fn int(
         &self,

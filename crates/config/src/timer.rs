@@ -103,9 +103,7 @@ fn cpu(src: &Source<'_>, v: &S<i64>, field: &str) -> Result<Option<usize>, Confi
 impl RawTimer {
     pub(crate) fn check(&self, src: &Source<'_>) -> Result<TimerSettings, ConfigLoadError> {
         let d = TimerSettings::default();
-        let method = src.take(&self.method, "timer.method", d.method.to_string(), |v| {
-            v.parse::<TimerMethod>().map(|_| ())
-        })?;
+        let method = src.read(&self.method, "timer.method", d.method, |v| v.parse())?;
         let servo_priority =
             src.int(&self.servo_priority, "timer.servo_priority", d.servo_priority.into(), 0, 98)?;
         let hwserver_priority = src.int(
@@ -126,7 +124,7 @@ impl RawTimer {
             ));
         }
         Ok(TimerSettings {
-            method: method.parse().unwrap_or_default(),
+            method,
             servo_priority: servo_priority as i32,
             hwserver_priority: hwserver_priority as i32,
             lock_memory: src

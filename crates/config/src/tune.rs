@@ -84,11 +84,7 @@ impl TuneObjective {
 
     /// Its name in the settings and on the command line.
     pub fn name(self) -> &'static str {
-        match self {
-            TuneObjective::Abs => "abs",
-            TuneObjective::Sse => "sse",
-            TuneObjective::Max => "max",
-        }
+        TUNE_OBJECTIVES[self as usize]
     }
 }
 
@@ -178,11 +174,6 @@ pub fn check_params(v: &[String]) -> Result<Vec<TuneParam>, String> {
     Ok(params)
 }
 
-/// One of [`TUNE_OBJECTIVES`].
-pub fn check_objective(v: &str) -> Result<(), String> {
-    v.parse::<TuneObjective>().map(drop)
-}
-
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawTune {
@@ -228,19 +219,8 @@ impl RawTune {
         }
         let fraction = within(0.0, 1.0, "(a share of the cycles)");
         Ok(TuneSettings {
-            params: check_params(&src.take(
-                &self.params,
-                "tune.params",
-                d.params.iter().map(|p| p.name().to_string()).collect(),
-                |v| check_params(v).map(drop),
-            )?)
-            .unwrap_or(d.params), // checked by `take`
-            objective: src
-                .take(&self.objective, "tune.objective", d.objective.name().into(), |v| {
-                    check_objective(v)
-                })?
-                .parse()
-                .unwrap_or(d.objective), // checked by `take`
+            params: src.read(&self.params, "tune.params", d.params, |v| check_params(v))?,
+            objective: src.read(&self.objective, "tune.objective", d.objective, |v| v.parse())?,
             budget: src.int(&self.budget, "tune.budget", d.budget.into(), 1, 100_000)? as u32,
             bounds,
             max_saturated_fraction: src.take(

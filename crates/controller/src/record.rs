@@ -36,7 +36,8 @@ pub struct MoveRecord {
     pub failure: Option<String>,
     /// The error figures of the path.
     pub errors: ErrorStats,
-    /// Command − actual of every motor in the last cycle.
+    /// Command − actual of every motor in the last cycle: the error at the end of the settle,
+    /// or of the path when there was none.
     pub last_error: [f64; MAX_MOTORS],
     /// Each motor's velocity at the end of the path, counts/s, if the generator knows it.
     pub end_velocity: Option<[f64; MAX_MOTORS]>,
@@ -71,10 +72,5 @@ impl MoveRecord {
     /// periods skip samples.
     pub fn is_path_sample(&self, cycle: u64) -> bool {
         cycle >= self.path_from && self.settle_from.is_none_or(|from| cycle < from)
-    }
-
-    /// The error at the end: of the settle, or of the path when there was none.
-    pub fn final_error(&self) -> [f64; MAX_MOTORS] {
-        self.last_error
     }
 }

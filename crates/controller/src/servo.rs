@@ -171,16 +171,6 @@ impl Servo {
         self.homed
     }
 
-    /// Where homing found each motor's switch, after a homing.
-    pub fn homing_report(&self) -> Option<&[crate::traj::MotorHome]> {
-        self.generator.homing_report()
-    }
-
-    /// What each motor did in an open-loop check, after one.
-    pub fn check_report(&self) -> Option<&[crate::traj::MotorCheckReport]> {
-        self.generator.check_report()
-    }
-
     /// The plan.
     pub fn plan(&self) -> &MovePlan {
         &self.plan
@@ -219,33 +209,10 @@ impl Servo {
         }
     }
 
-    /// Each motor's velocity at the end of the path, counts/s, if the generator knows it.
-    pub fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
-        self.generator.end_velocity()
-    }
-
-    /// Name of the trajectory generator.
-    pub fn generator_name(&self) -> &'static str {
-        self.generator.name()
-    }
-
     /// Cycles of the path executed (the error figures' cycles; the lead-in and the settle
     /// are apart).
     pub fn cycles(&self) -> u64 {
         self.executed - self.settle_executed - self.lead_executed
-    }
-
-    /// Whether the gathered row of sample `cycle` belongs to the path (not to the approach
-    /// before it nor to the settle after it). By sample index, not by cycles executed: missed
-    /// periods skip samples.
-    pub fn is_path_sample(&self, cycle: u64) -> bool {
-        cycle >= self.lead_in && self.settle_from.is_none_or(|from| cycle < from)
-    }
-
-    /// The lead-in before the path (an approach to its start), if the move had one: its
-    /// samples, the cycles of it that ran and their error figures.
-    pub fn lead_in_figures(&self) -> Option<(u64, u64, &ErrorStats)> {
-        (self.lead_in > 0).then_some((self.lead_in, self.lead_executed, &self.lead_errors))
     }
 
     /// Command − actual of every motor in the last cycle.
@@ -255,21 +222,6 @@ impl Servo {
             *e = c - a;
         }
         e
-    }
-
-    /// The settle at the end of the path, if it began: its cycles, the error figures over it
-    /// and each motor's command − actual at its end.
-    pub fn settle_figures(&self) -> Option<(u64, &ErrorStats, [f64; MAX_MOTORS])> {
-        (self.settle_executed > 0).then_some((
-            self.settle_executed,
-            &self.settle_errors,
-            self.last_error(),
-        ))
-    }
-
-    /// Samples of the path, if known.
-    pub fn planned_samples(&self) -> Option<u64> {
-        self.planned_samples
     }
 
     fn request(link: &mut dyn HwLink, req: HwMsg) -> Result<HwMsg, MoveError> {

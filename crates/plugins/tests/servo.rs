@@ -661,13 +661,14 @@ fn the_path_rows_end_where_the_settle_begins_after_missed_periods() {
     let mut ticker = ManualTicker::new(400_000);
     ticker.inject_delay(0, 3); // the first wake finds three periods missed
     servo.run(&mut link, &mut ticker, &AtomicBool::new(false)).unwrap();
-    let rows = servo.gather().rows();
+    let record = servo.into_record();
+    let rows = record.gather.rows();
     let path: Vec<u64> =
-        rows.iter().map(|r| r.cycle).filter(|&c| servo.is_path_sample(c)).collect();
-    assert_eq!(path.len() as u64, servo.cycles(), "every executed path cycle is a path row");
+        rows.iter().map(|r| r.cycle).filter(|&c| record.is_path_sample(c)).collect();
+    assert_eq!(path.len() as u64, record.cycles, "every executed path cycle is a path row");
     assert_eq!(path.last(), Some(&50), "the path's last sample is among them");
-    let settle = rows.iter().filter(|r| !servo.is_path_sample(r.cycle)).count() as u64;
-    assert_eq!(settle, servo.settle_figures().unwrap().0);
+    let settle = rows.iter().filter(|r| !record.is_path_sample(r.cycle)).count() as u64;
+    assert_eq!(settle, record.settle.unwrap().cycles);
 }
 
 /// The loop hands its samples to a ring (no allocation: the tests above); the publishing

@@ -165,7 +165,7 @@ fn followed(
     warnings: &mut Vec<Warning>,
 ) -> Vec<MotorSummary> {
     // The error at the end: of the settle, or of the path when there was none.
-    let final_error = record.final_error();
+    let final_error = record.last_error;
     let mut motors: Vec<MotorSummary> =
         record.errors.axes[..n].iter().map(|e| MotorSummary::new(e, cpr)).collect();
     let mut travel = record.errors.travel;

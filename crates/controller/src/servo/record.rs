@@ -5,11 +5,10 @@ use crate::record::{MoveRecord, Stretch};
 
 impl Servo {
     /// What the move leaves, taken when it has ended: the loop is spent (its gather buffer
-    /// moves into the record).
-    pub fn into_record(mut self) -> MoveRecord {
-        let gather = std::mem::replace(&mut self.gather, crate::gather::Gather::for_move(0, 1, 0));
+    /// and figures move into the record).
+    pub fn into_record(self) -> MoveRecord {
         MoveRecord {
-            generator: self.generator_name(),
+            generator: self.generator.name(),
             cycles: self.cycles(),
             planned_samples: self.planned_samples,
             fault: self.fault,
@@ -29,13 +28,14 @@ impl Servo {
             }),
             path_from: self.lead_in,
             settle_from: self.settle_from,
-            timing: self.timing.clone(),
             homed: self.homed,
             homed_frame: self.generator.homed_frame(),
             homing: self.generator.homing_report().map(<[_]>::to_vec),
             check: self.generator.check_report().map(<[_]>::to_vec),
             telemetry_dropped: self.telemetry_dropped(),
-            gather,
+            // Moved last: every field above reads the loop whole.
+            timing: self.timing,
+            gather: self.gather,
         }
     }
 }
