@@ -7,6 +7,7 @@ mod deltabot;
 mod e2e;
 mod first_motion;
 mod hardware;
+mod online;
 mod robustness;
 mod safety;
 mod telemetry;

@@ -23,7 +23,7 @@ pub fn bin_dir() -> PathBuf {
     for b in ["qmarc-starter", "qmarc-controller", "qmarc-hwserver", "qmarc"] {
         assert!(
             dir.join(b).is_file(),
-            "{} is missing: run the tests with `cargo test --workspace`, which builds it",
+            "{} is missing: run the tests with `scripts/test` (cargo test --workspace), which builds it",
             dir.join(b).display()
         );
     }

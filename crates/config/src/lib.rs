@@ -27,6 +27,7 @@ mod general;
 mod homing;
 mod hwserver;
 mod jog;
+mod motion;
 mod motor;
 pub mod program;
 mod robot;
@@ -46,6 +47,7 @@ pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
 pub use hwserver::{BackendKind, ExplicitTiming, HwServerSettings, HwWait, TimingDefaults};
 pub use jog::{JogSettings, MAX_JOG_COUNTS};
+pub use motion::{MAX_TARGET_COUNTS, MoveSettings, MoveTarget};
 pub use motor::{MotorGains, MotorSafety, effective_gains_problem, gains_problem};
 pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
@@ -119,6 +121,9 @@ pub struct Settings {
     /// `[jog]`: moving one motor by hand.
     #[serde(default)]
     pub jog: JogSettings,
+    /// `move`: the target of an online move (from the command line, not the file).
+    #[serde(default)]
+    pub motion: MoveSettings,
     /// `[check]`: the open-loop first motion.
     #[serde(default)]
     pub check: CheckSettings,
@@ -309,6 +314,7 @@ impl RawFile {
             step,
             trajectory,
             jog,
+            motion: MoveSettings::default(),
             check,
             homing,
             max_missed_in_row: self.safety.check(src, hwserver.backend)?,

@@ -24,6 +24,8 @@ pub enum Mode {
     Jog,
     /// The open-loop first motion: a small voltage on each motor in turn (`[check]`).
     Check,
+    /// An online, jerk-limited move to a target (`move`, [`crate::MoveSettings`]).
+    Move,
 }
 
 impl std::fmt::Display for Mode {
@@ -34,6 +36,7 @@ impl std::fmt::Display for Mode {
             Mode::Home => "home",
             Mode::Jog => "jog",
             Mode::Check => "check",
+            Mode::Move => "move",
         })
     }
 }
@@ -47,7 +50,8 @@ impl std::str::FromStr for Mode {
             "home" => Ok(Mode::Home),
             "jog" => Ok(Mode::Jog),
             "check" => Ok(Mode::Check),
-            other => Err(format!("unknown mode `{other}`: step, run, home, jog or check")),
+            "move" => Ok(Mode::Move),
+            other => Err(format!("unknown mode `{other}`: step, run, home, jog, check or move")),
         }
     }
 }

@@ -122,6 +122,8 @@ pub fn generator_name(mode: Mode, settings: &Settings) -> &str {
         Mode::Home => "home",
         Mode::Jog => "jog",
         Mode::Check => "check",
+        Mode::Move if settings.motion.linear => "linear",
+        Mode::Move => "move",
     }
 }
 

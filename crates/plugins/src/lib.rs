@@ -19,7 +19,9 @@ pub mod extending {}
 pub mod check;
 pub mod homing;
 pub mod knots;
+pub mod linear;
 pub mod moveto;
+pub mod online;
 pub mod pidff;
 pub mod pvt;
 pub mod registry;

@@ -4,7 +4,9 @@
 
 use crate::check::Check;
 use crate::homing::Homing;
+use crate::linear::LinearMove;
 use crate::moveto::Jog;
+use crate::online::OnlineMove;
 use crate::pidff::PidFf;
 use crate::pvt::Pvt;
 use crate::source::TrajBuildError;
@@ -79,6 +81,18 @@ pub const GENERATORS: &[GeneratorEntry] = &[
         build: |s| Ok(Box::new(Jog::from_settings(s)?)),
     },
     GeneratorEntry {
+        name: "move",
+        description: "to a target from where the motors are, jerk-limited and time-optimal (online Ruckig)",
+        needs_knots: false,
+        build: |s| Ok(Box::new(OnlineMove::from_settings(s)?)),
+    },
+    GeneratorEntry {
+        name: "linear",
+        description: "to a point along a straight line, jerk-limited, every joint within its limits",
+        needs_knots: false,
+        build: |s| Ok(Box::new(LinearMove::from_settings(s)?)),
+    },
+    GeneratorEntry {
         name: "pvt",
         description: "online position-velocity-time cubics, from a file or a stream (thesis 3.12.2)",
         needs_knots: true,
@@ -106,12 +120,12 @@ pub fn generator_names() -> Vec<&'static str> {
     GENERATORS.iter().map(|e| e.name).collect()
 }
 
-/// Names of the generators `run` accepts: every one that follows a path (not homing, jog or
-/// the check).
+/// Names of the generators `run` accepts: every one that follows a path (not homing, jog,
+/// the check or a move to a target).
 pub fn path_generator_names() -> Vec<&'static str> {
     GENERATORS
         .iter()
-        .filter(|e| !matches!(e.name, "home" | "jog" | "check"))
+        .filter(|e| !matches!(e.name, "home" | "jog" | "check" | "move" | "linear"))
         .map(|e| e.name)
         .collect()
 }

@@ -159,6 +159,17 @@ pub enum TrajBuildError {
         /// [`QUEUE_BUDGET_BYTES`].
         budget: u64,
     },
+    /// A move's target does not name every motor (`move --to`).
+    #[error("the move's target has {positions} positions for {motors} motors")]
+    Target {
+        /// Positions given.
+        positions: usize,
+        /// Motors in use.
+        motors: usize,
+    },
+    /// A straight line cannot be built (no `[robot]`, a point out of reach, limits).
+    #[error("{0}")]
+    Line(String),
 }
 
 /// The knots cannot carry a spline.

@@ -52,6 +52,20 @@ fn all_laws() -> Vec<qmarc_plugins::registry::LawEntry> {
     LAWS.iter().copied().chain([open_loop]).collect()
 }
 
+/// The settings `g` runs with in the proofs: an example path (the knot readers' threads are
+/// not the loop's), and a jog, a check and a move that last longer than the cycles counted.
+fn example_settings(g: &qmarc_plugins::registry::GeneratorEntry) -> qmarc_config::Settings {
+    let mut s = settings();
+    let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
+    s.trajectory.knots = Some(knots(example));
+    s.jog.counts = 20_000;
+    s.check.rest_s = 5.0;
+    s.set_move_xyz([80.0, -40.0, -660.0]).unwrap();
+    s.set_move_speed(0.01).unwrap();
+    s.motion.linear = g.name == "linear";
+    s
+}
+
 fn plan(n_motors: usize) -> MovePlan {
     MovePlan {
         starve_hold_cycles: 25,
@@ -76,12 +90,7 @@ fn lockstep() -> SimParams {
 #[test]
 fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
     for g in all_generators() {
-        // Every generator on an example path (the knot readers' threads are not the loop's).
-        let mut s = settings();
-        let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
-        s.trajectory.knots = Some(knots(example));
-        s.jog.counts = 20_000; // a jog longer than the cycles counted
-        s.check.rest_s = 5.0; // a check longer than the cycles counted
+        let s = example_settings(&g);
         for l in all_laws() {
             let generator = (g.build)(&s).unwrap();
             // With live telemetry, a sample every cycle into a ring nobody empties.
@@ -245,11 +254,7 @@ fn servo_cycle_makes_no_system_call_under_seccomp_strict_mode() {
     }
     for g in all_generators() {
         for l in all_laws() {
-            let mut s = settings();
-            let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
-            s.trajectory.knots = Some(knots(example));
-            s.jog.counts = 20_000; // a jog longer than the cycles counted
-            s.check.rest_s = 5.0; // a check longer than the cycles counted
+            let s = example_settings(&g);
             let (telemetry, ring) = qmarc_controller::telemetry::ring(1);
             let mut servo = Servo::new(
                 plan(3),

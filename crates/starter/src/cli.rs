@@ -104,6 +104,56 @@ pub enum Command {
     /// against the feed-forward, and which of dac_sign / counter_sign to change. Exit 2 when a
     /// motor fails it.
     Check,
+    /// Move to a target from where the motors are, at rest at the end: every motor starts and
+    /// arrives together, the slowest as fast as its velocity, acceleration and jerk limits
+    /// (`[[motor]] max_*`) allow — Ruckig's time-optimal, jerk-limited profile. Needs a homed
+    /// frame (or --unhomed).
+    Move(MoveArgs),
+}
+
+/// Options of `move`.
+#[derive(Debug, Clone, PartialEq, Args, Default)]
+#[command(group(clap::ArgGroup::new("target").required(true).args(["to", "xyz"])))]
+pub struct MoveArgs {
+    /// The target in joint counts, one per motor: `--to 1000,-500,250`.
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "C1,C2,C3")]
+    pub to: Option<Vec<f64>>,
+    /// The target effector point in mm (the base frame of `[robot]`): `--xyz 0,50,-600`;
+    /// a joint-space move to the inverse kinematics' counts, or a straight line with --linear.
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "X,Y,Z")]
+    pub xyz: Option<Vec<f64>>,
+    /// A straight line in Cartesian space to the --xyz point, jerk-limited along the line,
+    /// every joint within its limits.
+    #[arg(long, requires = "xyz")]
+    pub linear: bool,
+    /// A fraction of the motors' limits, 0 < F ≤ 1: velocity × F, acceleration × F², jerk × F³
+    /// (default 1).
+    #[arg(long, value_name = "F")]
+    pub speed: Option<f64>,
+}
+
+impl MoveArgs {
+    /// Applies the move's target, line and speed to `s`.
+    pub fn apply(&self, s: &mut Settings) -> Result<(), ConfigLoadError> {
+        if let Some(to) = &self.to {
+            s.set_move_to(to)?;
+        }
+        if let Some(xyz) = &self.xyz {
+            let mm: [f64; 3] =
+                xyz.as_slice().try_into().map_err(|_| ConfigLoadError::Override {
+                    flag: "--xyz",
+                    message: format!("a point is three numbers X,Y,Z in mm, found {}", xyz.len()),
+                })?;
+            s.set_move_xyz(mm)?;
+        }
+        if self.linear {
+            s.set_move_linear()?;
+        }
+        if let Some(f) = self.speed {
+            s.set_move_speed(f)?;
+        }
+        Ok(())
+    }
 }
 
 /// Options of `jog`.
@@ -154,6 +204,7 @@ impl Command {
             Command::Home => Mode::Home,
             Command::Jog(_) => Mode::Jog,
             Command::Check => Mode::Check,
+            Command::Move(_) => Mode::Move,
         }
     }
 
@@ -180,6 +231,7 @@ impl Command {
             Command::Jog(a) => {
                 s.set_jog(a.motor.unwrap_or(s.jog.motor), a.counts.unwrap_or(s.jog.counts))?
             }
+            Command::Move(a) => a.apply(s)?,
             Command::Home | Command::Check => {}
         }
         Ok(())

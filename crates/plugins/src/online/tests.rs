@@ -1,0 +1,212 @@
+//! The online planner and the `move` generator: the closed-form double-S time, limits,
+//! time synchronisation and mid-motion retargeting as properties.
+
+use super::*;
+use proptest::prelude::*;
+
+const T: f64 = 400e-6;
+
+/// The shipped robot's limits (config/qmarc.toml), per motor.
+fn limits() -> MotionLimits {
+    MotionLimits {
+        velocity: [80_000.0; MAX_MOTORS],
+        acceleration: [5.0e6; MAX_MOTORS],
+        jerk: [2.0e9; MAX_MOTORS],
+    }
+}
+
+/// How far above 1 [`sampled_ratio`] may read from rounding alone: its jerk is a third
+/// difference of positions of up to 10⁴ counts over T³, which carries about 8·ε·10⁴/T³ ≈
+/// 3·10⁻¹¹ counts/s³ per count/s³ of a slow limit (2.5·10⁵ at speed 0.05) — under 10⁻⁶ in
+/// the cube root.
+const ROUNDING: f64 = 1e-6;
+
+fn arr(v: &[f64]) -> [f64; MAX_MOTORS] {
+    let mut a = [0.0; MAX_MOTORS];
+    a[..v.len()].copy_from_slice(v);
+    a
+}
+
+/// Every sample of `g` until it is done, from sample `from`.
+fn run(g: &mut OnlineMove, from: u64, queue: &mut Vec<[f64; MAX_MOTORS]>) {
+    let mut cmd = [0.0; MAX_MOTORS];
+    let mut n = from;
+    while g.sample(n, &mut cmd) == Sample::Ready {
+        queue.push(cmd);
+        n += 1;
+        assert!(n < 1_000_000, "the move does not end");
+    }
+}
+
+fn moved(
+    start: &[f64],
+    target: &[f64],
+    lim: &MotionLimits,
+) -> (OnlineMove, Vec<[f64; MAX_MOTORS]>) {
+    let mut g = OnlineMove::new(arr(target), 3, T, *lim);
+    g.start(&arr(start)).unwrap();
+    let mut q = Vec::new();
+    run(&mut g, 0, &mut q);
+    (g, q)
+}
+
+/// The index of the last sample at which motor `m` moved.
+fn last_moving(q: &[[f64; MAX_MOTORS]], m: usize) -> usize {
+    (1..q.len()).rev().find(|&i| q[i][m] != q[i - 1][m]).unwrap_or(0)
+}
+
+#[test]
+fn a_one_motor_move_lasts_the_closed_form_double_s_time() {
+    // The double-S rest-to-rest time (Biagiotti & Melchiorri 3.4), independent of Ruckig, in
+    // each of its regimes: cruising, turning back before the velocity, and before the
+    // acceleration.
+    let lim = limits();
+    for d in [1.0, 37.0, 500.0, 4_000.0, 20_000.0, -9_000.0] {
+        let mut p = Profile::new(1, [0.0; MAX_MOTORS]);
+        p.plan(&MotionState::default(), &arr(&[d]), &lim).unwrap();
+        let want = double_s_duration(d, 80_000.0, 5.0e6, 2.0e9);
+        assert!((p.duration() - want).abs() < 1e-9 * want.max(1.0), "{d}: {}", p.duration());
+    }
+}
+
+#[test]
+fn the_move_starts_where_the_motors_are_and_ends_exactly_on_the_target() {
+    let (g, q) = moved(&[10.0, -20.0, 30.0], &[1000.0, -500.0, 250.0], &limits());
+    assert_eq!(q[0][..3], [10.0, -20.0, 30.0]);
+    assert_eq!(q.last().unwrap()[..3], [1000.0, -500.0, 250.0]);
+    assert_eq!(g.samples(), Some(q.len() as u64));
+    let expected = (g.duration() / T).ceil() as usize + 1;
+    assert_eq!(q.len(), expected);
+}
+
+#[test]
+fn a_move_of_no_distance_is_one_sample_at_rest() {
+    let (g, q) = moved(&[5.0, 6.0, 7.0], &[5.0, 6.0, 7.0], &limits());
+    assert_eq!(q, vec![arr(&[5.0, 6.0, 7.0])]);
+    assert_eq!(g.duration(), 0.0);
+}
+
+#[test]
+fn the_bounds_cover_every_sample_and_no_more() {
+    let mut g = OnlineMove::new(arr(&[3000.0, -3000.0, 100.0]), 3, T, limits());
+    g.start(&arr(&[0.0, 0.0, 0.0])).unwrap();
+    let b = g.path_bounds().unwrap();
+    let mut q = Vec::new();
+    run(&mut g, 0, &mut q);
+    let seen = qmarc_controller::traj::bounds_of(&q);
+    for m in 0..3 {
+        assert!((b[m].0 - seen[m].0).abs() < 1e-6 && (b[m].1 - seen[m].1).abs() < 1e-6);
+    }
+}
+
+#[test]
+fn the_speed_is_a_time_scaling() {
+    // Half speed: the same move in twice the time.
+    let lim = limits();
+    let (full, _) = moved(&[0.0; 3], &[4000.0, 1000.0, -2000.0], &lim);
+    let (half, _) = moved(&[0.0; 3], &[4000.0, 1000.0, -2000.0], &lim.at_speed(0.5));
+    assert!((half.duration() - 2.0 * full.duration()).abs() < 1e-9);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// Rest to rest: the sampled command's velocity, acceleration and jerk never above the
+    /// limits; every motor that moves starts at the first sample and stops with the last
+    /// (time-synchronised); the slowest motor as fast as the closed form allows.
+    #[test]
+    fn rest_to_rest_keeps_the_limits_and_is_time_synchronised(
+        start in prop::array::uniform3(-8000.0..8000.0f64),
+        target in prop::array::uniform3(-8000.0..8000.0f64),
+        speed in 0.05..=1.0f64,
+    ) {
+        let lim = limits().at_speed(speed);
+        let (g, q) = moved(&start, &target, &lim);
+        prop_assert!(sampled_ratio(&q, 3, T, &lim) <= 1.0 + ROUNDING);
+        let slowest = (0..3)
+            .map(|m| double_s_duration(target[m] - start[m], lim.velocity[m], lim.acceleration[m], lim.jerk[m]))
+            .fold(0.0, f64::max);
+        prop_assert!((g.duration() - slowest).abs() < 1e-7 * slowest.max(1.0));
+        let ends: Vec<usize> = (0..3)
+            .filter(|&m| (target[m] - start[m]).abs() > 1.0)
+            .map(|m| last_moving(&q, m))
+            .collect();
+        let (lo, hi) = (ends.iter().min(), ends.iter().max());
+        prop_assert!(hi.zip(lo).is_none_or(|(h, l)| h - l <= 1), "motors stop at samples {ends:?}");
+        for m in 0..3 {
+            if (target[m] - start[m]).abs() > 1.0 {
+                prop_assert!(q[1][m] != q[0][m], "motor {} does not start with the others", m + 1);
+            }
+        }
+    }
+
+    /// A new target mid-motion: the command goes on from the state it was in, with no jump in
+    /// position, velocity or acceleration (its sampled jerk stays within the limit across
+    /// the switch), and ends exactly on the new target.
+    #[test]
+    fn a_new_target_mid_motion_takes_over_without_a_jump(
+        target in prop::array::uniform3(-8000.0..8000.0f64),
+        second in prop::array::uniform3(-8000.0..8000.0f64),
+        at in 1u64..200,
+    ) {
+        let lim = limits();
+        let mut g = OnlineMove::new(arr(&target), 3, T, lim);
+        g.start(&[0.0; MAX_MOTORS]).unwrap();
+        let mut q = Vec::new();
+        let mut cmd = [0.0; MAX_MOTORS];
+        for n in 0..at {
+            if g.sample(n, &mut cmd) == Sample::Ready {
+                q.push(cmd);
+            }
+        }
+        let before = q.len() as u64;
+        g.retarget(&arr(&second), &lim).unwrap();
+        run(&mut g, before, &mut q);
+        prop_assert!(sampled_ratio(&q, 3, T, &lim) <= 1.0 + ROUNDING);
+        prop_assert_eq!(q.last().unwrap()[..3].to_vec(), second.to_vec());
+        prop_assert!(q[before as usize] != q[before as usize - 1] || second == target);
+    }
+}
+
+#[test]
+fn a_new_target_changes_the_very_next_sample() {
+    // Moving toward +4000, a target behind the motors: the next sample already brakes.
+    let lim = limits();
+    let mut g = OnlineMove::new(arr(&[4000.0, 4000.0, 4000.0]), 3, T, lim);
+    g.start(&[0.0; MAX_MOTORS]).unwrap();
+    let mut cmd = [0.0; MAX_MOTORS];
+    for n in 0..30 {
+        g.sample(n, &mut cmd);
+    }
+    let mut old = OnlineMove::new(arr(&[4000.0, 4000.0, 4000.0]), 3, T, lim);
+    old.start(&[0.0; MAX_MOTORS]).unwrap();
+    let mut old_cmd = [0.0; MAX_MOTORS];
+    old.sample(30, &mut old_cmd);
+    g.retarget(&arr(&[0.0, 0.0, 0.0]), &lim).unwrap();
+    g.sample(30, &mut cmd);
+    assert!(cmd[0] < old_cmd[0], "sample 30 is still the old profile's: {} {}", cmd[0], old_cmd[0]);
+}
+
+#[test]
+fn a_stalled_cycle_samples_the_profile_on_the_wall_clock() {
+    // Samples 10‥14 skipped (a host stall): sample 15 is where the profile is at 15·T.
+    let (_, q) = moved(&[0.0; 3], &[2000.0, 0.0, 0.0], &limits());
+    let mut g = OnlineMove::new(arr(&[2000.0, 0.0, 0.0]), 3, T, limits());
+    g.start(&[0.0; MAX_MOTORS]).unwrap();
+    let mut cmd = [0.0; MAX_MOTORS];
+    for n in (0..10).chain(15..16) {
+        g.sample(n, &mut cmd);
+    }
+    assert_eq!(cmd, q[15]);
+}
+
+#[test]
+fn unusable_limits_or_states_plan_nothing() {
+    let mut p = Profile::new(3, [0.0; MAX_MOTORS]);
+    let mut bad = limits();
+    bad.jerk[1] = 0.0;
+    assert_eq!(p.plan(&MotionState::default(), &arr(&[1.0, 1.0, 1.0]), &bad), Err(NoProfile));
+    let nan = MotionState { v: arr(&[f64::NAN]), ..MotionState::default() };
+    assert_eq!(p.plan(&nan, &arr(&[1.0, 1.0, 1.0]), &limits()), Err(NoProfile));
+    assert_eq!(p.plan(&MotionState::default(), &arr(&[f64::INFINITY]), &limits()), Err(NoProfile));
+}
