@@ -96,6 +96,58 @@ fn time_one(
     Ok(Some((t0.elapsed().as_nanos() as f64 / done as f64, worst)))
 }
 
+/// A slow move far enough to last many cycles: to 6000 counts on every motor, or along the
+/// line to a point (three motors only; the line's settings need the Delta).
+fn moving(s: &mut Settings, linear: bool) {
+    let _ = s.set_move_to(&vec![6_000.0; s.n_motors]);
+    let _ = s.set_move_speed(0.01);
+    if linear && s.set_move_xyz([80.0, -40.0, -660.0]).is_ok() {
+        let _ = s.set_move_linear();
+    }
+}
+
+/// The online generator's recomputation when a new target arrives mid-motion, 3 motors at
+/// the settings' limits: `targets` random targets, each from the state the profile is in
+/// somewhere along the last one. Each recomputation is timed `REPEATS` times from the same
+/// state and its fastest kept, so a preemption of this shared VM is not taken for the
+/// computation's cost; ns per recomputation (mean, p99, worst), and the worst single timing.
+fn retargets(base: &Settings, targets: usize) -> (f64, f64, f64, f64) {
+    use qmarc_plugins::moveto::MotionLimits;
+    use qmarc_plugins::online::{MotionState, Profile};
+    const REPEATS: usize = 5;
+    let limits = MotionLimits::of(base);
+    let mut profile = Profile::new(3, [0.0; MAX_MOTORS]);
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut times, mut single) = (Vec::with_capacity(targets), 0.0f64);
+    let mut from = MotionState::default();
+    for _ in 0..targets {
+        let mut target = [0.0; MAX_MOTORS];
+        for t in target.iter_mut().take(3) {
+            *t = -9_000.0 + next() * 19_000.0;
+        }
+        let mut fastest = f64::INFINITY;
+        for _ in 0..REPEATS {
+            let t0 = Instant::now();
+            let planned = profile.plan(black_box(&from), black_box(&target), &limits);
+            let ns = t0.elapsed().as_nanos() as f64;
+            black_box(planned.is_ok());
+            fastest = fastest.min(ns);
+            single = single.max(ns);
+        }
+        times.push(fastest);
+        from = profile.state_at(next() * profile.duration());
+    }
+    times.sort_by(f64::total_cmp);
+    let mean = times.iter().sum::<f64>() / times.len() as f64;
+    (mean, times[times.len() * 99 / 100], *times.last().unwrap_or(&0.0), single)
+}
+
 /// Runs `cycle`.
 pub fn run(a: &CycleArgs) -> anyhow::Result<()> {
     let base = Settings::load(&a.config, &names()).map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -118,6 +170,7 @@ pub fn run(a: &CycleArgs) -> anyhow::Result<()> {
                 s.step.duration_s = 3_600.0;
                 let (spline, pvt) = knot_files(&dir, n, a.cycles)?;
                 s.set_knots(if generator.name == "pvt" { &pvt } else { &spline });
+                moving(&mut s, generator.name == "linear");
                 let cell = time_one(&s, g, l, a.cycles)
                     .with_context(|| format!("{} × {}, {n} motors", law.name, generator.name))?;
                 skipped |= cell.is_none();
@@ -136,6 +189,16 @@ pub fn run(a: &CycleArgs) -> anyhow::Result<()> {
     if skipped {
         println!("  (— : the generator could not start here)");
     }
+    let (mean, p99, worst, single) = retargets(&base, 10_000);
+    println!(
+        "  online move, a new target mid-motion (3 motors, 10 000 random targets from moving \
+         states, each the fastest of 5): recomputation mean {:.1} µs, p99 {:.1} µs, worst \
+         {:.1} µs (worst single timing, preemptions included: {:.1} µs)",
+        mean / 1e3,
+        p99 / 1e3,
+        worst / 1e3,
+        single / 1e3
+    );
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }
