@@ -10,6 +10,7 @@ mod hardware;
 mod online;
 mod robustness;
 mod safety;
+mod serve;
 mod telemetry;
 mod tidy;
 mod trajectories;

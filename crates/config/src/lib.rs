@@ -47,7 +47,7 @@ pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
 pub use hwserver::{BackendKind, ExplicitTiming, HwServerSettings, HwWait, TimingDefaults};
 pub use jog::{JogSettings, MAX_JOG_COUNTS};
-pub use motion::{MAX_TARGET_COUNTS, MoveSettings, MoveTarget};
+pub use motion::{MAX_TARGET_COUNTS, MoveSettings, MoveTarget, TargetError};
 pub use motor::{MotorGains, MotorSafety, effective_gains_problem, gains_problem};
 pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};

@@ -52,25 +52,124 @@ impl MoveTarget {
 /// every count is exact in an `f64` command and in the hwserver's 64-bit counters.
 pub const MAX_TARGET_COUNTS: f64 = (1u64 << 31) as f64;
 
+/// Why a target is not one to move to.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum TargetError {
+    /// Not one position per motor in use.
+    #[error("one position per motor in use: {motors} numbers, found {found}")]
+    Count {
+        /// Motors in use.
+        motors: usize,
+        /// Positions given.
+        found: usize,
+    },
+    /// A number that is not a position.
+    #[error(
+        "motor {motor}: {value} is not a position (finite, within ±{MAX_TARGET_COUNTS} counts)"
+    )]
+    NotAPosition {
+        /// 1-based motor (or coordinate).
+        motor: usize,
+        /// The number.
+        value: f64,
+    },
+    /// No `[robot]` table (or not three motors): a point means nothing.
+    #[error(
+        "{file} has no [robot] table for {motors} motors: a point needs the Delta's geometry \
+         and three motors (give joint counts instead)"
+    )]
+    NoRobot {
+        /// The settings file.
+        file: String,
+        /// Motors in use.
+        motors: usize,
+    },
+    /// The point is out of the arms' reach.
+    #[error("{x:.1}, {y:.1}, {z:.1} mm is unreachable: {why}")]
+    Unreachable {
+        /// The point, mm.
+        x: f64,
+        /// The point, mm.
+        y: f64,
+        /// The point, mm.
+        z: f64,
+        /// The kinematics' reason.
+        why: String,
+    },
+    /// A motor's target is outside its soft limits.
+    #[error(
+        "motor {motor} would go to {counts:.1} counts, outside its soft limits [{lo}, {hi}] \
+         (motor.soft_limits in {file})"
+    )]
+    SoftLimits {
+        /// 1-based motor.
+        motor: usize,
+        /// Its target, counts.
+        counts: f64,
+        /// Its soft limits, counts.
+        lo: f64,
+        /// Its soft limits, counts.
+        hi: f64,
+        /// The settings file.
+        file: String,
+    },
+}
+
 fn refused(flag: &'static str, message: String) -> ConfigLoadError {
     ConfigLoadError::Override { flag, message }
 }
 
 impl Settings {
+    /// The joint counts of the effector point `mm`, within the soft limits.
+    pub fn counts_of_point(&self, mm: [f64; 3]) -> Result<Vec<f64>, TargetError> {
+        let robot = self.robot().ok_or_else(|| TargetError::NoRobot {
+            file: self.source.display().to_string(),
+            motors: self.n_motors,
+        })?;
+        if let Some((i, &bad)) = mm.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(TargetError::NotAPosition { motor: i + 1, value: bad });
+        }
+        let [x, y, z] = mm;
+        let point = qmarc_kinematics::Point::new(x / 1e3, y / 1e3, z / 1e3);
+        let counts = robot.counts_of(&point).map_err(|e| TargetError::Unreachable {
+            x,
+            y,
+            z,
+            why: e.to_string(),
+        })?;
+        self.check_target(&counts)?;
+        Ok(counts.to_vec())
+    }
+
+    /// `counts` as a target: one finite number per motor in use, each within
+    /// ±[`MAX_TARGET_COUNTS`] and its soft limits.
+    pub fn check_target(&self, counts: &[f64]) -> Result<(), TargetError> {
+        if counts.len() != self.n_motors {
+            return Err(TargetError::Count { motors: self.n_motors, found: counts.len() });
+        }
+        for (m, (&c, safety)) in counts.iter().zip(&self.safety).enumerate() {
+            if !c.is_finite() || c.abs() > MAX_TARGET_COUNTS {
+                return Err(TargetError::NotAPosition { motor: m + 1, value: c });
+            }
+            let [lo, hi] = safety.soft_limits;
+            if !(lo..=hi).contains(&c) {
+                return Err(TargetError::SoftLimits {
+                    motor: m + 1,
+                    counts: c,
+                    lo,
+                    hi,
+                    file: self.source.display().to_string(),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// Sets the move's target to the joint counts `counts` (`--to`): one finite number per
     /// motor, each within its `[[motor]]` soft limits.
     pub fn set_move_to(&mut self, counts: &[f64]) -> Result<(), ConfigLoadError> {
-        if counts.len() != self.n_motors {
-            return Err(refused(
-                "--to",
-                format!(
-                    "one position per motor in use: {} numbers, found {}",
-                    self.n_motors,
-                    counts.len()
-                ),
-            ));
-        }
-        self.check_target("--to", counts)?;
+        self.check_target(counts).map_err(|e| refused("--to", e.to_string()))?;
         self.motion.target = MoveTarget::Counts(counts.to_vec());
         Ok(())
     }
@@ -79,32 +178,10 @@ impl Settings {
     /// describe the robot, the point must be in its workspace and its joint counts within
     /// the soft limits.
     pub fn set_move_xyz(&mut self, mm: [f64; 3]) -> Result<(), ConfigLoadError> {
-        let robot = self.robot().ok_or_else(|| {
-            refused(
-                "--xyz",
-                format!(
-                    "{} has no [robot] table for {} motors: a point needs the Delta's \
-                     geometry and three motors (use --to with joint counts)",
-                    self.source.display(),
-                    self.n_motors
-                ),
-            )
-        })?;
-        if let Some(bad) = mm.iter().find(|v| !v.is_finite()) {
-            return Err(refused("--xyz", format!("must be finite numbers, found {bad}")));
-        }
-        let point = qmarc_kinematics::Point::new(mm[0] / 1e3, mm[1] / 1e3, mm[2] / 1e3);
-        let counts = robot.counts_of(&point).map_err(|e| {
-            refused(
-                "--xyz",
-                format!("{:.1}, {:.1}, {:.1} mm is unreachable: {e}", mm[0], mm[1], mm[2]),
-            )
-        })?;
-        self.check_target("--xyz", &counts)?;
-        self.motion.target = MoveTarget::Xyz { mm, counts: counts.to_vec() };
+        let counts = self.counts_of_point(mm).map_err(|e| refused("--xyz", e.to_string()))?;
+        self.motion.target = MoveTarget::Xyz { mm, counts };
         Ok(())
     }
-
     /// Sets how fast (`--speed`).
     pub fn set_move_speed(&mut self, speed: f64) -> Result<(), ConfigLoadError> {
         crate::trajectory::check_speed(&speed).map_err(|m| refused("--speed", m))?;
@@ -121,31 +198,6 @@ impl Settings {
             ));
         }
         self.motion.linear = true;
-        Ok(())
-    }
-
-    /// Each joint target finite, within ±[`MAX_TARGET_COUNTS`] and its soft limits.
-    fn check_target(&self, flag: &'static str, counts: &[f64]) -> Result<(), ConfigLoadError> {
-        for (m, (&c, safety)) in counts.iter().zip(&self.safety).enumerate() {
-            if !c.is_finite() || c.abs() > MAX_TARGET_COUNTS {
-                return Err(refused(
-                    flag,
-                    format!("motor {}: {c} counts is not a position (±{MAX_TARGET_COUNTS})", m + 1),
-                ));
-            }
-            let [lo, hi] = safety.soft_limits;
-            if !(lo..=hi).contains(&c) {
-                return Err(refused(
-                    flag,
-                    format!(
-                        "motor {} would go to {c:.1} counts, outside its soft limits \
-                         [{lo}, {hi}] (motor.soft_limits in {})",
-                        m + 1,
-                        self.source.display()
-                    ),
-                ));
-            }
-        }
         Ok(())
     }
 }

@@ -26,6 +26,8 @@ pub enum Mode {
     Check,
     /// An online, jerk-limited move to a target (`move`, [`crate::MoveSettings`]).
     Move,
+    /// Hold, and move as commands arrive over `qmarc/command` (`serve`).
+    Serve,
 }
 
 impl std::fmt::Display for Mode {
@@ -37,6 +39,7 @@ impl std::fmt::Display for Mode {
             Mode::Jog => "jog",
             Mode::Check => "check",
             Mode::Move => "move",
+            Mode::Serve => "serve",
         })
     }
 }
@@ -51,7 +54,10 @@ impl std::str::FromStr for Mode {
             "jog" => Ok(Mode::Jog),
             "check" => Ok(Mode::Check),
             "move" => Ok(Mode::Move),
-            other => Err(format!("unknown mode `{other}`: step, run, home, jog, check or move")),
+            "serve" => Ok(Mode::Serve),
+            other => {
+                Err(format!("unknown mode `{other}`: step, run, home, jog, check, move or serve"))
+            }
         }
     }
 }

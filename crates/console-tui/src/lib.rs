@@ -28,6 +28,7 @@
 #![deny(missing_docs)]
 
 pub mod app;
+pub mod cmd;
 pub mod form;
 pub mod live;
 pub mod results;

@@ -1,6 +1,7 @@
 //! `qmarc`: the console. `qmarc [--config FILE]` opens it; `qmarc home|step|run …` does the
 //! same as `qmarc-starter home|step|run …` without it, for scripts (same options, same exit
-//! codes); `qmarc scope …` shows or records a running move's live telemetry.
+//! codes); `qmarc scope …` shows or records a running move's live telemetry; `qmarc cmd …`
+//! commands a serving controller (`qmarc-starter serve`).
 
 use anyhow::Context;
 use clap::{Args as _, CommandFactory, Parser};
@@ -25,7 +26,8 @@ use std::time::Duration;
     about = "QMARC console: set up, home, step, run and tune the robot",
     after_help = "Without the console: qmarc [qmarc-starter options] home|step|run [options] \
                   runs qmarc-starter with the same arguments; qmarc scope [--help] shows a \
-                  running move's live telemetry."
+                  running move's live telemetry; qmarc cmd [--help] commands a serving \
+                  controller (qmarc-starter serve)."
 )]
 struct Args {
     /// Settings file (the one qmarc-starter reads).
@@ -170,7 +172,8 @@ fn plain_subcommand(raw: &[OsString]) -> Option<(Option<PathBuf>, Vec<OsString>)
             pass.push(a.clone());
             pass.extend(it.next().cloned());
         } else {
-            mode = matches!(s.as_ref(), "home" | "step" | "run" | "jog" | "check");
+            mode =
+                matches!(s.as_ref(), "home" | "step" | "run" | "jog" | "check" | "move" | "serve");
             if !mode && !s.starts_with('-') {
                 return None;
             }
@@ -187,6 +190,10 @@ fn main() -> ExitCode {
     // `qmarc scope …`: a running move's live telemetry.
     if raw.first().is_some_and(|a| a == "scope") {
         return qmarc_telemetry::scope::main(&raw[1..]);
+    }
+    // `qmarc cmd …`: a command to a serving controller.
+    if raw.first().is_some_and(|a| a == "cmd") {
+        return qmarc_console::cmd::main(&raw[1..]);
     }
     if let Some((starter, pass)) = plain_subcommand(&raw) {
         let starter = starter.unwrap_or_else(starter_next_to_me);

@@ -6,6 +6,7 @@
 //! thread then writes `gather.csv`, `gather.m` and `summary.json`. Formatting and file I/O
 //! happen only here, after the loop.
 
+use crate::serve;
 use qmarc_config::{Mode, RunSpec, Settings};
 use qmarc_controller::fault::Fault;
 use qmarc_controller::link::{HwLink, IoxLink, LinkConnectError, LinkTimeouts};
@@ -14,6 +15,7 @@ use qmarc_controller::record::MoveRecord;
 use qmarc_controller::servo::{MoveError, Servo, server_gone};
 use qmarc_controller::traj::TrajStartError;
 use qmarc_plugins::registry;
+use qmarc_plugins::serve::ServeHandle;
 use qmarc_plugins::source::TrajBuildError;
 use qmarc_proto::progress::Progress;
 use qmarc_proto::service::IpcLocation;
@@ -124,6 +126,7 @@ pub fn generator_name(mode: Mode, settings: &Settings) -> &str {
         Mode::Check => "check",
         Mode::Move if settings.motion.linear => "linear",
         Mode::Move => "move",
+        Mode::Serve => "serve",
     }
 }
 
@@ -140,7 +143,16 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     }
     let progress = Progress::open(&Progress::path(&location.prefix)).ok();
     let (telemetry, relay) = telemetry_for(settings, &location);
-    let servo = build_servo(spec, progress)?.with_telemetry(telemetry);
+    let (servo, serving) = build_serving(spec, progress)?;
+    let servo = servo.with_telemetry(telemetry);
+    // Serving: the command thread, answering from before the loop starts until this returns.
+    let commands = match serving {
+        Some(h) => Some(
+            serve::CommandThread::spawn(&location, settings, spec.unhomed, h)
+                .map_err(|e| RunError::Location(e.to_string()))?,
+        ),
+        None => None,
+    };
     let handle = spawn_servo(spec, location, servo)?;
     // The servo thread ends by itself on a stop signal, motors disabled first. Should it be
     // blocked outside the loop (nothing enabled), the controller does not wait for it.
@@ -159,6 +171,9 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     // what is left and ends.
     servo.end_telemetry();
     let record = servo.into_record();
+    if let Some(c) = &commands {
+        c.ended(FaultKind::wire(record.fault.as_ref().map(|f| f.kind)));
+    }
     let relayed = relay.map(qmarc_telemetry::relay::Relay::join);
     result?;
 
@@ -228,10 +243,16 @@ fn telemetry_for(
 /// The move of `spec`: its generator and law from the registry, its plan, and the progress
 /// block it reports to (the starter's, for a move of the process set).
 pub fn build_servo(spec: &RunSpec, progress: Option<Progress>) -> Result<Servo, RunError> {
+    Ok(build_serving(spec, progress)?.0)
+}
+
+/// [`build_servo`], and when `spec` serves (`serve`), the command thread's end of its
+/// generator.
+pub fn build_serving(
+    spec: &RunSpec,
+    progress: Option<Progress>,
+) -> Result<(Servo, Option<ServeHandle>), RunError> {
     let settings = &spec.settings;
-    let name = generator_name(spec.mode, settings);
-    let generator =
-        registry::generator(name).ok_or_else(|| RunError::Unregistered(name.to_string()))?;
     let law =
         registry::law(&settings.law).ok_or_else(|| RunError::Unregistered(settings.law.clone()))?;
     let plan = plan_for(settings, spec.mode, spec.deterministic, spec.unhomed);
@@ -240,7 +261,15 @@ pub fn build_servo(spec: &RunSpec, progress: Option<Progress>) -> Result<Servo, 
     let mut unhomed_jog = settings.clone();
     unhomed_jog.jog.speed = settings.jog.unhomed_speed;
     let settings = if spec.unhomed && spec.mode == Mode::Jog { &unhomed_jog } else { settings };
-    let mut path = (generator.build)(settings)?;
+    let (mut path, serving) = if spec.mode == Mode::Serve {
+        let (generator, handle) = serve::generator(settings, spec.unhomed);
+        (generator, Some(handle))
+    } else {
+        let name = generator_name(spec.mode, settings);
+        let entry =
+            registry::generator(name).ok_or_else(|| RunError::Unregistered(name.to_string()))?;
+        ((entry.build)(settings)?, None)
+    };
     if spec.mode == Mode::Run && settings.trajectory.approach {
         path = Box::new(qmarc_plugins::moveto::Approach::from_settings(path, settings));
     }
@@ -249,7 +278,8 @@ pub fn build_servo(spec: &RunSpec, progress: Option<Progress>) -> Result<Servo, 
         Mode::Check => Box::new(qmarc_plugins::check::OpenLoop::from_settings(settings)),
         _ => (law.build)(settings),
     };
-    Ok(Servo::new(plan, path, law, Box::new(MonotonicClock)).with_progress(progress))
+    let servo = Servo::new(plan, path, law, Box::new(MonotonicClock)).with_progress(progress);
+    Ok((servo, serving))
 }
 
 /// The ticker of `timer.method` (the benchmark's bare loop takes the same).
@@ -395,6 +425,8 @@ pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: b
             .ceil() as u64,
         settle_cycles: settle_cycles(settings, mode),
         stream_gather_samples: stream_gather_samples(settings),
+        // A session serves as long as it is told: it keeps its last gather.stream_max_s.
+        gather_keeps_last: mode == Mode::Serve,
         limits,
         require_homed: !homing && !unhomed && !matches!(mode, Mode::Jog | Mode::Check),
         // Homing and jog watch the switches themselves (a motor may rest on one).

@@ -62,6 +62,8 @@ pub struct Gather {
     n_motors: usize,
     dropped: u64,
     fields: GatherFields,
+    /// Full, a row replaces the oldest ([`Gather::keeping_last`]); the oldest row's index.
+    ring: Option<usize>,
 }
 
 impl Gather {
@@ -76,6 +78,20 @@ impl Gather {
             n_motors: n_motors.min(MAX_MOTORS),
             dropped: 0,
             fields: GatherFields::default(),
+            ring: None,
+        }
+    }
+
+    /// When full, keeps the last rows (a ring), counting the ones it overwrites as dropped.
+    pub fn keeping_last(mut self, keep_last: bool) -> Gather {
+        self.ring = keep_last.then_some(0);
+        self
+    }
+
+    /// Puts a ring's rows in order, oldest first (after the move: it moves memory).
+    pub fn in_order(&mut self) {
+        if let Some(oldest) = self.ring.replace(0) {
+            self.rows.rotate_left(oldest);
         }
     }
 
@@ -112,17 +128,22 @@ impl Gather {
         self.next_due = (row.cycle / every).saturating_add(1).saturating_mul(every);
         if self.rows.len() < self.rows.capacity() {
             self.rows.push(row);
-        } else {
-            self.dropped += 1;
+            return;
+        }
+        self.dropped += 1;
+        if let Some(oldest) = self.ring.as_mut().filter(|_| !self.rows.is_empty()) {
+            self.rows[*oldest] = row;
+            *oldest = (*oldest + 1) % self.rows.len();
         }
     }
 
-    /// The gathered rows.
+    /// The gathered rows (a ring's in memory order until [`Gather::in_order`]).
     pub fn rows(&self) -> &[GatherRow] {
         &self.rows
     }
 
-    /// Rows that did not fit (0 unless the move ran longer than planned).
+    /// Rows that did not fit, or that a ring overwrote (0 unless the move ran longer than
+    /// planned).
     pub fn dropped(&self) -> u64 {
         self.dropped
     }
@@ -145,6 +166,18 @@ mod tests {
             act: [998.0, -1.0, 0.0, 0.0],
             dac: [12, -8191, 0, 0],
         }
+    }
+
+    #[test]
+    fn a_ring_keeps_the_last_rows_in_order() {
+        let mut g = Gather::for_move(3, 1, 1).keeping_last(true);
+        for c in 0..8 {
+            g.push(row(c));
+        }
+        assert_eq!(g.dropped(), 5);
+        g.in_order();
+        let cycles: Vec<u64> = g.rows().iter().map(|r| r.cycle).collect();
+        assert_eq!(cycles, [5, 6, 7], "the last three, oldest first");
     }
 
     #[test]

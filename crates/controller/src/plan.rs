@@ -55,6 +55,9 @@ pub struct MovePlan {
     pub settle_cycles: u64,
     /// Samples the gather buffer holds for a path of unknown length (a stream).
     pub stream_gather_samples: u64,
+    /// A path of unknown length keeps its last rows (the buffer a ring: a session that serves
+    /// for hours keeps its last `stream_gather_samples`), not its first.
+    pub gather_keeps_last: bool,
     /// Limits checked before and during the move.
     pub limits: MoveLimits,
     /// Refuse to move unless every motor's frame is homed.
@@ -77,6 +80,7 @@ impl MovePlan {
             starve_hold_cycles: 0,
             settle_cycles: 0,
             stream_gather_samples: STREAM_GATHER_SAMPLES,
+            gather_keeps_last: false,
             limits: MoveLimits::none(),
             require_homed: false,
             monitor_switches: true,

@@ -280,7 +280,8 @@ impl Servo {
             + self.plan.settle_cycles;
         crate::gather::check_budget(samples, self.plan.gather_every)?;
         self.gather = Gather::for_move(samples, self.plan.gather_every, self.plan.n_motors)
-            .with_fields(self.plan.gather_fields);
+            .with_fields(self.plan.gather_fields)
+            .keeping_last(self.plan.gather_keeps_last && self.planned_samples.is_none());
         self.timing = TimingStats::new(self.plan.period_ns);
         self.errors = ErrorStats::default();
         self.settle_errors = ErrorStats::default();

@@ -25,6 +25,7 @@ pub mod online;
 pub mod pidff;
 pub mod pvt;
 pub mod registry;
+pub mod serve;
 pub mod source;
 pub mod spline;
 pub mod step;

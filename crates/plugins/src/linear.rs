@@ -54,6 +54,11 @@ impl LinearMove {
         Ok(LinearMove::new(robot, mm, s.period_s(), limits))
     }
 
+    /// After [`TrajectoryGenerator::start`]: its samples, one per period.
+    pub fn into_queue(self) -> Vec<[f64; MAX_MOTORS]> {
+        self.queue
+    }
+
     /// The joint counts of the line's point at `s` (0‥1) from `a` to `b`, m.
     fn counts_at(&self, a: &Point, b: &Point, s: f64) -> Result<[f64; MAX_MOTORS], String> {
         let p = a + (b - a) * s;

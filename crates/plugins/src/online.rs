@@ -13,7 +13,9 @@ use crate::source::TrajBuildError;
 use qmarc_config::Settings;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_proto::MAX_MOTORS;
-use rsruckig::prelude::{DataArrayOrVec, InputParameter, Ruckig, ThrowErrorHandler, Trajectory};
+use rsruckig::prelude::{
+    ControlInterface, DataArrayOrVec, InputParameter, Ruckig, ThrowErrorHandler, Trajectory,
+};
 
 /// The command's kinematic state: per motor, counts, counts/s, counts/s².
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -87,7 +89,30 @@ impl Profile {
         to: &[f64; MAX_MOTORS],
         limits: &MotionLimits,
     ) -> Result<(), NoProfile> {
+        self.solve(from, Some(to), limits)
+    }
+
+    /// Plans the quickest jerk-limited stop from `from` to rest wherever it comes, every
+    /// motor stopping together (Ruckig's velocity interface, to 0). Allocates nothing unless
+    /// Ruckig fails.
+    pub fn plan_stop(
+        &mut self,
+        from: &MotionState,
+        limits: &MotionLimits,
+    ) -> Result<(), NoProfile> {
+        self.solve(from, None, limits)
+    }
+
+    fn solve(
+        &mut self,
+        from: &MotionState,
+        to: Option<&[f64; MAX_MOTORS]>,
+        limits: &MotionLimits,
+    ) -> Result<(), NoProfile> {
         let n = self.n;
+        // A stop goes where the motion carries it: its distance is that of the velocity.
+        let stop = to.is_none();
+        let to = to.copied().unwrap_or(from.p);
         let (vl, al, jl) = (&limits.velocity, &limits.acceleration, &limits.jerk);
         let finite = (0..n).all(|m| {
             [from.p[m], from.v[m], from.a[m], to[m]].iter().all(|x| x.is_finite())
@@ -116,12 +141,14 @@ impl Profile {
             .fold(0.0, f64::max);
         if !(tau > 0.0 && length > 0.0) {
             // At rest on the target already.
-            self.origin = *to;
-            self.target = *to;
+            self.origin = to;
+            self.target = to;
             self.duration = 0.0;
             return Ok(());
         }
         let inp = &mut self.input;
+        inp.control_interface =
+            if stop { ControlInterface::Velocity } else { ControlInterface::Position };
         for m in 0..MAX_MOTORS {
             let used = m < n;
             let k = |x: f64| if used { x } else { 0.0 };
@@ -141,10 +168,16 @@ impl Profile {
             return Err(NoProfile);
         }
         self.origin = from.p;
-        self.target = *to;
         self.length = length;
         self.tau = tau;
         self.duration = duration;
+        self.target = to;
+        if stop {
+            // Where the stop comes to rest: the profile's end.
+            self.duration = f64::INFINITY;
+            self.target = self.state_at(duration).p;
+            self.duration = duration;
+        }
         Ok(())
     }
 
@@ -249,6 +282,30 @@ pub struct OnlineMove {
     samples: u64,
     /// The bounds of the move planned at the start.
     bounds: Option<[(f64, f64); MAX_MOTORS]>,
+    /// The planner a new target is planned into, kept only if it stays within `soft`.
+    spare: Option<Box<Profile>>,
+    /// The soft limits a new target's profile must keep, if any.
+    soft: Option<[(f64, f64); MAX_MOTORS]>,
+}
+
+/// A new target was not taken: no profile, or one that leaves the soft limits on its way
+/// (a target inside them that the motion's momentum would carry beyond).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RetargetError {
+    /// Ruckig found no profile.
+    #[error(transparent)]
+    NoProfile(#[from] NoProfile),
+    /// The profile would carry `motor` (1-based) to `counts`, outside its soft limits.
+    #[error(
+        "the way there would carry motor {motor} to {counts:.0} counts, outside its soft limits"
+    )]
+    SoftLimits {
+        /// 1-based motor.
+        motor: usize,
+        /// Where it would go, counts.
+        counts: f64,
+    },
 }
 
 impl OnlineMove {
@@ -270,6 +327,8 @@ impl OnlineMove {
             last: (0, MotionState::at_rest(target)),
             samples: 1,
             bounds: None,
+            spare: None,
+            soft: None,
         }
     }
 
@@ -285,22 +344,89 @@ impl OnlineMove {
         Ok(OnlineMove::new(target, s.n_motors, s.period_s(), limits))
     }
 
-    /// Replaces the target from sample `n` on: the new profile starts from the state of the
-    /// last sample commanded, so the command's position, velocity and acceleration go on
-    /// without a jump and sample `n` is already the new profile's. Allocates nothing; on
-    /// [`NoProfile`] the move goes on to its old target.
+    /// Every new target's profile must keep within `soft` (per motor, counts): one that would
+    /// leave them is not taken ([`RetargetError::SoftLimits`]). Allocates its second planner.
+    pub fn with_soft_limits(mut self, soft: [(f64, f64); MAX_MOTORS]) -> OnlineMove {
+        self.soft = Some(soft);
+        self.spare = Some(Box::new(Profile::new(self.n_motors, self.target)));
+        self
+    }
+
+    /// Replaces the target from the next sample on: the new profile starts from the state of
+    /// the last sample commanded, so the command's position, velocity and acceleration go on
+    /// without a jump and the next sample is already the new profile's. Allocates nothing; on
+    /// an error the move goes on as it was.
     pub fn retarget(
         &mut self,
         target: &[f64; MAX_MOTORS],
         limits: &MotionLimits,
-    ) -> Result<(), NoProfile> {
-        let (n_last, from) = self.last;
-        self.profile.plan(&from, target, limits)?;
-        self.target = *target;
+    ) -> Result<(), RetargetError> {
+        let from = self.last.1;
+        self.replan(|p| p.plan(&from, target, limits))?;
         self.limits = *limits;
+        Ok(())
+    }
+
+    /// A jerk-limited stop to rest from the state of the last sample commanded, every motor
+    /// stopping together, as [`OnlineMove::retarget`] takes over.
+    pub fn stop(&mut self, limits: &MotionLimits) -> Result<(), RetargetError> {
+        let from = self.last.1;
+        self.replan(|p| p.plan_stop(&from, limits))?;
+        self.limits = *limits;
+        Ok(())
+    }
+
+    /// Plans with `plan` (into the spare planner when the soft limits are kept, and swaps it
+    /// in only if its profile keeps them) and moves on from the last sample.
+    fn replan(
+        &mut self,
+        plan: impl Fn(&mut Profile) -> Result<(), NoProfile>,
+    ) -> Result<(), RetargetError> {
+        match (self.spare.as_deref_mut(), self.soft) {
+            (Some(spare), Some(soft)) => {
+                plan(spare)?;
+                let b = spare.bounds();
+                if let Some(m) =
+                    (0..self.n_motors).find(|&m| b[m].0 < soft[m].0 || b[m].1 > soft[m].1)
+                {
+                    let counts = if b[m].0 < soft[m].0 { b[m].0 } else { b[m].1 };
+                    return Err(RetargetError::SoftLimits { motor: m + 1, counts });
+                }
+                std::mem::swap(&mut self.profile, spare);
+            }
+            _ => plan(&mut self.profile)?,
+        }
+        let n_last = self.last.0;
+        self.target = *self.profile.target();
         self.origin_n = n_last;
         self.samples = n_last + self.samples_of(self.profile.duration());
         Ok(())
+    }
+
+    /// From sample `n` on, the command continues from `state` (a move that another generator
+    /// commanded until then): a target or a stop takes over from it; without one the command
+    /// holds its position.
+    pub fn continue_from(&mut self, n: u64, state: MotionState) {
+        self.last = (n, state);
+        self.target = state.p;
+        self.origin_n = n;
+        self.samples = n + 1;
+        let _ = self.profile.plan(&MotionState::at_rest(state.p), &state.p, &self.limits);
+    }
+
+    /// The target, counts.
+    pub fn target(&self) -> &[f64; MAX_MOTORS] {
+        &self.target
+    }
+
+    /// The last sample commanded and its state.
+    pub fn last(&self) -> (u64, MotionState) {
+        self.last
+    }
+
+    /// True while the command moves (before the profile's last sample).
+    pub fn moving(&self) -> bool {
+        self.last.0 + 1 < self.samples
     }
 
     /// The number of samples of a profile of `duration` s from its sample 0: the last one

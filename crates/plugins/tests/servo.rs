@@ -132,6 +132,54 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
     }
 }
 
+/// Serving: a new target, a stop and a new target again arrive while the loop runs — each
+/// planned in the cycle it arrives — and the cycle still allocates nothing, makes no I/O and
+/// never blocks; the loop takes every order.
+#[test]
+fn serve_cycle_allocates_nothing_while_commands_arrive() {
+    use qmarc_plugins::moveto::MotionLimits;
+    use qmarc_plugins::serve::{Order, ServeMove};
+    use std::sync::atomic::Ordering;
+    let s = settings();
+    let limits = MotionLimits::of(&s);
+    let soft = [(-9_000.0, 10_000.0); MAX_MOTORS];
+    let (serve, mut handle) = ServeMove::new(&s, Some(soft));
+    let mut servo =
+        Servo::new(plan(3), Box::new(serve), (LAWS[0].build)(&s), Box::new(MockClock::new(0)));
+    let mut link = sim_core(lockstep());
+    let mut ticker = ManualTicker::new(400_000);
+    servo.prepare(&mut link).unwrap();
+    servo.set_t0(ticker.start().unwrap());
+    for _ in 0..10 {
+        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+    }
+    let (a, b) = (ThreadCounters::now(), ThreadCounters::now());
+    let reading = a.delta(b);
+    let kernel_before = ThreadCounters::now();
+    let before = allocations();
+    let mut id = 0;
+    for k in 0..3_000 {
+        if k % 200 == 0 {
+            id += 1;
+            let sign = if id % 2 == 0 { 1.0 } else { -1.0 };
+            let order = if id % 5 == 0 {
+                Order::Stop { id, limits }
+            } else {
+                Order::Move { id, target: [sign * 3000.0, -sign * 1500.0, 800.0, 0.0], limits }
+            };
+            assert!(handle.orders.push(order).is_ok());
+        }
+        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+    }
+    let during = allocations() - before;
+    let kernel = kernel_before.delta(ThreadCounters::now());
+    assert_eq!(during, 0, "{during} allocations in 3000 cycles of serving");
+    assert_eq!(kernel, reading, "syscalls or blocking in the cycle");
+    assert_eq!(handle.shared.taken.load(Ordering::Acquire), id, "every order taken");
+    assert_eq!(handle.shared.not_taken.load(Ordering::Acquire), 0);
+    assert!(handle.spent.pop().is_err());
+}
+
 #[test]
 fn limit_switch_trip_disables_every_motor_in_the_same_cycle() {
     let s = settings();

@@ -22,6 +22,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod command;
 pub mod exit;
 pub mod link;
 pub mod msg;

@@ -109,6 +109,11 @@ pub enum Command {
     /// (`[[motor]] max_*`) allow — Ruckig's time-optimal, jerk-limited profile. Needs a homed
     /// frame (or --unhomed).
     Move(MoveArgs),
+    /// Enable the robot and hold it where it is; take commands while it holds and moves:
+    /// over the iceoryx2 service `qmarc/command` and from `qmarc cmd move|stop|wait|status|
+    /// quit`. Ends on `qmarc cmd quit` (or Ctrl-C) as any move ends, its data files written
+    /// (the last `gather.stream_max_s` of it). Needs a homed frame (or --unhomed).
+    Serve,
 }
 
 /// Options of `move`.
@@ -205,6 +210,7 @@ impl Command {
             Command::Jog(_) => Mode::Jog,
             Command::Check => Mode::Check,
             Command::Move(_) => Mode::Move,
+            Command::Serve => Mode::Serve,
         }
     }
 
@@ -232,7 +238,7 @@ impl Command {
                 s.set_jog(a.motor.unwrap_or(s.jog.motor), a.counts.unwrap_or(s.jog.counts))?
             }
             Command::Move(a) => a.apply(s)?,
-            Command::Home | Command::Check => {}
+            Command::Home | Command::Check | Command::Serve => {}
         }
         Ok(())
     }

@@ -165,6 +165,12 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
             settings.hwserver.backend
         )));
     }
+    if spec.unpaced && mode == qmarc_config::Mode::Serve {
+        return Err(refused(anyhow!(
+            "serve waits for commands in real time: not with --unpaced (--deterministic paces \
+             the simulated robot's lock-step by the timer)"
+        )));
+    }
     // The hardware: there, usable and as the settings describe it (a missing device fails
     // here, at once, naming it).
     qmarc_hwserver::backends::check(settings, spec.deterministic).map_err(refused)?;
@@ -176,11 +182,16 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
 /// The path: knot files are read and checked now (streams are the controller's to read: it
 /// inherits standard input), and its data must fit the gather budget and the disk.
 fn check_path(settings: &Settings, mode: Mode) -> Result<(), Failure> {
-    let generator = qmarc_controller_process::run::generator_name(mode, settings);
-    let entry = registry::generator(generator)
-        .with_context(|| format!("no trajectory generator `{generator}`"))
-        .map_err(refused)?;
-    let planned = (entry.build)(settings).map_err(refused)?.samples();
+    // A serving session has no path: it gathers its last gather.stream_max_s, as a stream.
+    let planned = if mode == Mode::Serve {
+        None
+    } else {
+        let generator = qmarc_controller_process::run::generator_name(mode, settings);
+        let entry = registry::generator(generator)
+            .with_context(|| format!("no trajectory generator `{generator}`"))
+            .map_err(refused)?;
+        (entry.build)(settings).map_err(refused)?.samples()
+    };
     let settle = qmarc_controller_process::run::settle_cycles(settings, mode);
     let samples =
         planned.unwrap_or(qmarc_controller_process::run::stream_gather_samples(settings)) + settle;

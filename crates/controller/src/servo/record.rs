@@ -35,7 +35,11 @@ impl Servo {
             telemetry_dropped: self.telemetry_dropped(),
             // Moved last: every field above reads the loop whole.
             timing: self.timing,
-            gather: self.gather,
+            gather: {
+                let mut g = self.gather;
+                g.in_order();
+                g
+            },
         }
     }
 }

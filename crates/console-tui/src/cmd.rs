@@ -1,0 +1,199 @@
+//! `qmarc cmd move|stop|wait|status|quit`: one command to a serving controller
+//! (`qmarc-starter serve`) over `qmarc/command`, its answer printed. The session is the one of
+//! `--iox-prefix`, or your newest serving run found in /dev/shm.
+//!
+//! Exit codes: 0 accepted (or, for `wait`, the move ended at rest), 3 refused (the reason is
+//! printed), 1 no serving controller or no answer, 64 bad options.
+
+use clap::{Parser, Subcommand};
+use qmarc_config::{Mode, RunSpec};
+use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandResponse};
+use qmarc_proto::service::{IpcLocation, run_file};
+use qmarc_proto::state::{FaultKind, Phase};
+use std::ffi::OsString;
+use std::process::ExitCode;
+use std::time::Duration;
+
+/// Command line of `qmarc cmd`.
+#[derive(Debug, Parser)]
+#[command(name = "qmarc cmd", about = "Command a serving controller (qmarc-starter serve)")]
+struct CmdArgs {
+    /// The session's iceoryx2 prefix (default: your newest serving run in /dev/shm).
+    #[arg(long, global = true)]
+    iox_prefix: Option<String>,
+    /// The session's iceoryx2 root (default: the one its run file names).
+    #[arg(long, global = true)]
+    iox_root: Option<String>,
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Debug, Subcommand)]
+enum Cmd {
+    /// Move to a target from wherever the robot is, moving or not: the new target takes over
+    /// in the next servo cycle, without a jump.
+    Move {
+        /// Joint counts, one per motor: `--to 1000,-500,250`.
+        #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "C1,C2,C3")]
+        to: Option<Vec<f64>>,
+        /// The effector's point in mm: `--xyz 0,50,-650`.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            allow_negative_numbers = true,
+            value_name = "X,Y,Z",
+            conflicts_with = "to"
+        )]
+        xyz: Option<Vec<f64>>,
+        /// A straight line to the --xyz point (from rest).
+        #[arg(long, requires = "xyz")]
+        linear: bool,
+        /// A fraction of the motors' limits, 0 < F ≤ 1.
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+    },
+    /// A jerk-limited stop to rest.
+    Stop,
+    /// Wait until the robot is at rest at the end of the last move accepted.
+    Wait {
+        /// Give up after S seconds (exit 1).
+        #[arg(long, default_value_t = 60.0)]
+        timeout: f64,
+    },
+    /// Where the robot is.
+    Status,
+    /// Stop, then end the session as a move ends (data files written).
+    Quit,
+}
+
+/// True while the run of `prefix` is a serving session (its run file says so). No iceoryx2
+/// node is made otherwise: a node under a prefix whose run has ended would leave iceoryx2's
+/// files of that prefix behind.
+fn serving(prefix: &str) -> bool {
+    RunSpec::read(&run_file(prefix)).is_ok_and(|s| s.mode == Mode::Serve)
+}
+
+/// The location of the serving session: `--iox-prefix`'s, else the newest of yours.
+fn session(args: &CmdArgs) -> anyhow::Result<IpcLocation> {
+    if let Some(prefix) = &args.iox_prefix {
+        anyhow::ensure!(
+            serving(prefix),
+            "no serving session under iceoryx2 prefix `{prefix}` (its run file {} is not a \
+             running `qmarc-starter serve`'s)",
+            run_file(prefix).display()
+        );
+        return Ok(qmarc_telemetry::reader::location_of(prefix, args.iox_root.as_deref()));
+    }
+    qmarc_telemetry::reader::runs(args.iox_root.as_deref())
+        .into_iter()
+        .map(|r| r.location)
+        .find(|l| serving(&l.prefix))
+        .ok_or_else(|| {
+            anyhow::anyhow!("no serving controller found in /dev/shm: start `qmarc-starter serve`")
+        })
+}
+
+/// The words of a status.
+fn describe(s: &CommandResponse, n: usize) -> String {
+    let phase = Phase::from_code(s.phase).map_or("?", Phase::name);
+    let fault = FaultKind::from_wire(s.fault).map_or(String::new(), |f| format!(", fault {f}"));
+    let counts = |v: &[f64]| v[..n].iter().map(|c| format!("{c:.1}")).collect::<Vec<_>>().join(" ");
+    let mut out = format!(
+        "{}; loop {phase}{fault}; moves accepted {}, settled {}\n  command {} cnt\n  actual  {} cnt",
+        if s.moving == 1 { "moving" } else { "at rest" },
+        s.accepted,
+        s.settled,
+        counts(&s.command),
+        counts(&s.actual),
+    );
+    if s.effector_mm.iter().all(|v| v.is_finite()) {
+        let [x, y, z] = s.effector_mm;
+        out.push_str(&format!("\n  effector {x:.2} {y:.2} {z:.2} mm"));
+    }
+    let unhomed: Vec<String> =
+        (0..n).filter(|m| s.homed & (1 << m) == 0).map(|m| (m + 1).to_string()).collect();
+    if !unhomed.is_empty() {
+        out.push_str(&format!("\n  not homed: motor {}", unhomed.join(", ")));
+    }
+    out
+}
+
+/// The request of a `move`.
+fn move_request(
+    to: &Option<Vec<f64>>,
+    xyz: &Option<Vec<f64>>,
+    linear: bool,
+    speed: f64,
+) -> anyhow::Result<CommandRequest> {
+    match (to, xyz) {
+        (Some(c), None) if !c.is_empty() && c.len() <= qmarc_proto::MAX_MOTORS => {
+            Ok(CommandRequest::move_to(c, speed))
+        }
+        (None, Some(p)) if p.len() == 3 => {
+            Ok(CommandRequest::move_xyz([p[0], p[1], p[2]], linear, speed))
+        }
+        (None, Some(p)) => {
+            anyhow::bail!("--xyz: a point is three numbers X,Y,Z in mm, found {}", p.len())
+        }
+        (Some(c), None) => {
+            anyhow::bail!("--to: 1 to {} joint counts, found {}", qmarc_proto::MAX_MOTORS, c.len())
+        }
+        _ => anyhow::bail!("move needs a target: --to C1,C2,C3 or --xyz X,Y,Z"),
+    }
+}
+
+fn run(args: &CmdArgs) -> anyhow::Result<u8> {
+    let location = session(args)?;
+    let n = RunSpec::read(&run_file(&location.prefix)).map_or(3, |s| s.settings.n_motors);
+    let mut client = match CommandClient::connect(&location) {
+        Ok(c) => c,
+        Err(e) => {
+            // The session ended meanwhile: what the node made goes with the run's files.
+            if !serving(&location.prefix) {
+                location.remove_files();
+            }
+            return Err(e.into());
+        }
+    };
+    let request = match &args.command {
+        Cmd::Move { to, xyz, linear, speed } => move_request(to, xyz, *linear, *speed)?,
+        Cmd::Stop => CommandRequest::of(CommandKind::Stop),
+        Cmd::Quit => CommandRequest::of(CommandKind::Quit),
+        Cmd::Status => CommandRequest::of(CommandKind::Status),
+        Cmd::Wait { timeout } => {
+            let s = client.wait(Duration::from_secs_f64(timeout.max(0.0)))?;
+            println!("{}", describe(&s, n));
+            return Ok(if s.fault == 0 { 0 } else { qmarc_proto::exit::FAULT });
+        }
+    };
+    let answer = client.send(request)?;
+    match (answer.refused(), &args.command) {
+        (None, Cmd::Status) => println!("{}", describe(&answer, n)),
+        (Some(_), Cmd::Status) => println!("{} (the session has ended)", describe(&answer, n)),
+        (None, _) => println!("accepted (move {})", answer.accepted),
+        (Some(r), _) => {
+            println!("refused ({}): {}", r.name(), answer.reason());
+            return Ok(qmarc_proto::exit::REFUSED);
+        }
+    }
+    Ok(0)
+}
+
+/// `qmarc cmd ARGS…`.
+pub fn main(args: &[OsString]) -> ExitCode {
+    let all = std::iter::once(OsString::from("qmarc cmd")).chain(args.iter().cloned());
+    let args = match CmdArgs::try_parse_from(all) {
+        Ok(a) => a,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { qmarc_proto::exit::USAGE } else { 0 });
+        }
+    };
+    match run(&args) {
+        Ok(code) => ExitCode::from(code),
+        Err(e) => {
+            eprintln!("qmarc cmd: {e:#}");
+            ExitCode::from(qmarc_proto::exit::INTERNAL)
+        }
+    }
+}

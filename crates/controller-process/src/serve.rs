@@ -1,0 +1,327 @@
+//! `qmarc-starter serve`: the command thread. It serves `qmarc/command`
+//! ([`qmarc_proto::command`]) beside the servo thread: it checks each command — the target
+//! reachable, inside the soft limits, the frame homed, the loop still serving — and answers
+//! at once, then hands what it accepted to the loop's [`ServeMove`] through a wait-free queue.
+//! It plans straight lines itself (from rest; [`LinearMove`]) and frees the loop's spent ones.
+//! It is a SCHED_OTHER thread: nothing in it is on the loop's time.
+
+use iceoryx2::prelude::ipc;
+use qmarc_config::{Settings, TargetError};
+use qmarc_controller::traj::TrajectoryGenerator;
+use qmarc_plugins::linear::LinearMove;
+use qmarc_plugins::moveto::MotionLimits;
+use qmarc_plugins::serve::{Order, ServeHandle, ServeMove, ServeShared};
+use qmarc_proto::MAX_MOTORS;
+use qmarc_proto::command::{
+    CommandKind, CommandRequest, CommandResponse, Refusal, open_command_service,
+};
+use qmarc_proto::progress::Progress;
+use qmarc_proto::service::{IpcLocation, ServiceError, create_node};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::time::Duration;
+
+/// How often the command thread looks whether it is to end, at the latest.
+const POLL: Duration = Duration::from_millis(20);
+
+/// How the session ended, for the answers after it: set by the controller's main thread.
+#[derive(Debug, Default)]
+pub struct Ended {
+    /// The loop has ended.
+    pub ended: AtomicBool,
+    /// Its fault ([`qmarc_proto::state::FaultKind::wire`]), 0 for none.
+    pub fault: AtomicU32,
+    /// The command thread is to end.
+    pub stop: AtomicBool,
+}
+
+/// The serving generator for `settings` (soft limits on its profiles unless `unhomed`) and the
+/// command thread's end of it.
+pub fn generator(
+    settings: &Settings,
+    unhomed: bool,
+) -> (Box<dyn TrajectoryGenerator>, ServeHandle) {
+    let mut soft = [(f64::NEG_INFINITY, f64::INFINITY); MAX_MOTORS];
+    for (m, s) in settings.safety.iter().enumerate().take(settings.n_motors) {
+        soft[m] = (s.soft_limits[0], s.soft_limits[1]);
+    }
+    let (serve, handle) = ServeMove::new(settings, (!unhomed).then_some(soft));
+    (Box::new(serve), handle)
+}
+
+/// The command thread's state.
+struct Commands {
+    settings: Settings,
+    unhomed: bool,
+    handle: ServeHandle,
+    ended: Arc<Ended>,
+    progress: Option<Progress>,
+    /// The last order id given.
+    seq: u64,
+    /// The last move accepted.
+    accepted: u64,
+}
+
+/// The command thread: it serves from [`CommandThread::spawn`] until dropped.
+pub struct CommandThread {
+    ended: Arc<Ended>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl CommandThread {
+    /// Starts the command thread of the run at `location`: its service exists when this
+    /// returns.
+    pub fn spawn(
+        location: &IpcLocation,
+        settings: &Settings,
+        unhomed: bool,
+        handle: ServeHandle,
+    ) -> Result<CommandThread, ServiceError> {
+        let ended = Arc::new(Ended::default());
+        let mut commands = Commands {
+            settings: settings.clone(),
+            unhomed,
+            handle,
+            ended: ended.clone(),
+            progress: Progress::open(&Progress::path(&location.prefix)).ok(),
+            seq: 0,
+            accepted: 0,
+        };
+        let location = location.clone();
+        // iceoryx2's ports stay on the thread that made them: made there, reported back.
+        let (ready, opened) = std::sync::mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("qmarc-commands".into())
+            .spawn(move || {
+                let ports = (|| {
+                    let node = create_node::<ipc::Service>("qmarc-commands", &location)?;
+                    let (service, event) = open_command_service(&node, true)?;
+                    let port = |what: &str, e: &dyn std::fmt::Debug| {
+                        ServiceError::new(what, "qmarc/command", e)
+                    };
+                    let server =
+                        service.server_builder().create().map_err(|e| port("server", &e))?;
+                    let listener =
+                        event.listener_builder().create().map_err(|e| port("listener", &e))?;
+                    Ok((node, server, listener))
+                })();
+                let (_node, server, listener) = match ports {
+                    Ok(p) => {
+                        let _ = ready.send(Ok(()));
+                        p
+                    }
+                    Err(e) => {
+                        let _ = ready.send(Err(e));
+                        return;
+                    }
+                };
+                while !commands.ended.stop.load(Ordering::Acquire) {
+                    let _ = listener.timed_wait(|_| {}, POLL);
+                    while let Ok(Some(active)) = server.receive() {
+                        let answer = commands.answer(active.payload());
+                        let _ = active.send_copy(answer);
+                    }
+                    // The loop's spent lines are freed here, not on the servo thread.
+                    while commands.handle.spent.pop().is_ok() {}
+                }
+            })
+            .map_err(|e| ServiceError::new("thread", "qmarc-commands", e))?;
+        let opened = opened.recv().unwrap_or_else(|_| {
+            Err(ServiceError::new("thread", "qmarc-commands", "ended before serving"))
+        });
+        if let Err(e) = opened {
+            let _ = thread.join();
+            return Err(e);
+        }
+        Ok(CommandThread { ended, thread: Some(thread) })
+    }
+
+    /// The loop has ended, with the fault `fault` ([`qmarc_proto::state::FaultKind::wire`]):
+    /// every command from now on is refused as not serving.
+    pub fn ended(&self, fault: u32) {
+        self.ended.fault.store(fault, Ordering::Release);
+        self.ended.ended.store(true, Ordering::Release);
+    }
+}
+
+impl Drop for CommandThread {
+    fn drop(&mut self) {
+        self.ended.ended.store(true, Ordering::Release);
+        self.ended.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Commands {
+    fn shared(&self) -> &ServeShared {
+        &self.handle.shared
+    }
+
+    /// The answer to `req`.
+    fn answer(&mut self, req: &CommandRequest) -> CommandResponse {
+        let mut r = self.status();
+        r.id = req.id;
+        let outcome = match CommandKind::from_wire(req.kind) {
+            None => Err((Refusal::BadRequest, format!("unknown command {}", req.kind))),
+            Some(CommandKind::Status) => Ok(()),
+            Some(_) if self.ended.ended.load(Ordering::Acquire) => {
+                Err((Refusal::NotServing, "the session has ended".to_string()))
+            }
+            Some(CommandKind::Move) => self.move_to(req),
+            Some(CommandKind::Stop) => {
+                let limits = MotionLimits::of(&self.settings);
+                self.give(|id| Order::Stop { id, limits }).map(|id| self.accepted = id)
+            }
+            Some(CommandKind::Quit) => {
+                let limits = MotionLimits::of(&self.settings);
+                self.give(|_| Order::Quit { limits }).map(|_| ())
+            }
+        };
+        match outcome {
+            Ok(()) => {
+                r.ok = 1;
+                r.accepted = self.accepted;
+            }
+            Err((refusal, why)) => {
+                r.refusal = refusal as u32;
+                r.set_reason(&why);
+            }
+        }
+        r
+    }
+
+    /// Queues the order `make(id)` for the loop under a new id.
+    fn give(&mut self, make: impl FnOnce(u64) -> Order) -> Result<u64, (Refusal, String)> {
+        let id = self.seq + 1;
+        self.handle.orders.push(make(id)).map_err(|_| {
+            (Refusal::Busy, "the loop has not taken the last commands yet".to_string())
+        })?;
+        self.seq = id;
+        Ok(id)
+    }
+
+    /// Where the robot is.
+    fn status(&self) -> CommandResponse {
+        let shared = self.shared();
+        let mut r = CommandResponse {
+            accepted: self.accepted,
+            settled: shared.settled.load(Ordering::Acquire),
+            homed: shared.homed.load(Ordering::Acquire),
+            moving: u32::from(shared.moving.load(Ordering::Acquire)),
+            command: shared.command(),
+            actual: shared.actual(),
+            fault: self.ended.fault.load(Ordering::Acquire),
+            phase: self.progress.as_ref().map_or(0, |p| p.read().phase),
+            ..CommandResponse::default()
+        };
+        let c = r.command;
+        if let Some(p) =
+            self.settings.robot().and_then(|robot| robot.point_of(&[c[0], c[1], c[2]]).ok())
+        {
+            r.effector_mm = [p.x * 1e3, p.y * 1e3, p.z * 1e3];
+        }
+        if self.ended.ended.load(Ordering::Acquire) {
+            r.refusal = Refusal::NotServing as u32;
+        }
+        r
+    }
+
+    /// A move: checked, then queued.
+    fn move_to(&mut self, req: &CommandRequest) -> Result<(), (Refusal, String)> {
+        let s = &self.settings;
+        let n = s.n_motors;
+        let bad = |why: String| (Refusal::BadRequest, why);
+        if !(req.speed.is_finite() && req.speed > 0.0 && req.speed <= 1.0) {
+            return Err(bad(format!("speed must be > 0 and ≤ 1, found {}", req.speed)));
+        }
+        let xyz = req.flags & CommandRequest::XYZ != 0;
+        let linear = req.flags & CommandRequest::LINEAR != 0;
+        let used = if xyz { 3 } else { n };
+        if let Some(v) = req.target[..used].iter().find(|v| !v.is_finite()) {
+            return Err(bad(format!("the target must be finite numbers, found {v}")));
+        }
+        if linear && !xyz {
+            return Err(bad("a straight line needs a Cartesian target (xyz)".into()));
+        }
+        // A point needs the homed frame the kinematics count from, --unhomed or not.
+        let homed = self.shared().homed.load(Ordering::Acquire);
+        if let Some(m) = (0..n).find(|m| homed & (1 << m) == 0).filter(|_| xyz || !self.unhomed) {
+            return Err((
+                Refusal::NotHomed,
+                format!("motor {} is not homed: home the robot first (qmarc-starter home)", m + 1),
+            ));
+        }
+        let mut target = [0.0; MAX_MOTORS];
+        if xyz {
+            let counts = s.counts_of_point([req.target[0], req.target[1], req.target[2]]);
+            target[..3].copy_from_slice(&counts.map_err(refusal_of)?);
+        } else {
+            target[..n].copy_from_slice(&req.target[..n]);
+            s.check_target(&target[..n]).map_err(refusal_of)?;
+        }
+        let limits = MotionLimits::of(s).at_speed(req.speed);
+        let id = if linear {
+            let queue = self.line_to([req.target[0], req.target[1], req.target[2]], &limits)?;
+            self.give(|id| Order::Line { id, queue })?
+        } else {
+            self.give(|id| Order::Move { id, target, limits })?
+        };
+        self.accepted = id;
+        Ok(())
+    }
+
+    /// The straight line from where the robot rests to `mm`, sampled.
+    fn line_to(
+        &self,
+        mm: [f64; 3],
+        limits: &MotionLimits,
+    ) -> Result<qmarc_plugins::serve::LineQueue, (Refusal, String)> {
+        let shared = self.shared();
+        let at_rest = !shared.moving.load(Ordering::Acquire)
+            && shared.settled.load(Ordering::Acquire) >= self.accepted
+            && shared.taken.load(Ordering::Acquire) >= self.seq;
+        if !at_rest {
+            return Err((
+                Refusal::Moving,
+                "a straight line starts from rest: wait for the move to end (qmarc cmd wait)"
+                    .into(),
+            ));
+        }
+        let robot = self.settings.robot().ok_or((
+            Refusal::BadRequest,
+            "no [robot] table for 3 motors: a line needs the Delta's geometry".to_string(),
+        ))?;
+        let mut line = LinearMove::new(robot, mm, self.settings.period_s(), *limits);
+        let start = shared.command();
+        line.start(&start).map_err(|e| (Refusal::Unreachable, e.to_string()))?;
+        let queue = line.into_queue();
+        for (m, s) in self.settings.safety.iter().enumerate().take(self.settings.n_motors) {
+            let [lo, hi] = s.soft_limits;
+            if let Some(c) = queue.iter().map(|c| c[m]).find(|c| !(lo..=hi).contains(c))
+                && !self.unhomed
+            {
+                return Err((
+                    Refusal::SoftLimits,
+                    format!(
+                        "the line takes motor {} to {c:.0} counts, outside its soft limits \
+                         [{lo}, {hi}]",
+                        m + 1
+                    ),
+                ));
+            }
+        }
+        Ok(queue.into_boxed_slice())
+    }
+}
+
+/// The refusal a target's error stands for, with its words.
+fn refusal_of(e: TargetError) -> (Refusal, String) {
+    let kind = match e {
+        TargetError::Unreachable { .. } => Refusal::Unreachable,
+        TargetError::SoftLimits { .. } => Refusal::SoftLimits,
+        _ => Refusal::BadRequest,
+    };
+    (kind, e.to_string())
+}

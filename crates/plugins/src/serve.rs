@@ -1,0 +1,290 @@
+//! `qmarc-starter serve`: the generator of a controller that takes commands while the robot
+//! holds. [`ServeMove`] holds the command where it is until an [`Order`] arrives through a
+//! wait-free queue from the command thread (`qmarc/command`, in the controller process): a
+//! new target or a stop takes over from the command's position, velocity and acceleration in
+//! the cycle it arrives ([`OnlineMove::retarget`]); a straight line, planned by the command
+//! thread from rest, is sampled from its queue. What the loop is doing goes back through
+//! atomics ([`ServeShared`]); a line's spent queue goes back through a second queue, so the
+//! servo thread never frees memory.
+
+use crate::moveto::MotionLimits;
+use crate::online::{MotionState, OnlineMove};
+use qmarc_config::Settings;
+use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_proto::{MAX_MOTORS, MotorFlags};
+use rtrb::{Consumer, Producer, RingBuffer};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+
+/// Orders queued for the loop at most (the command thread refuses more as busy).
+pub const ORDER_QUEUE: usize = 16;
+
+/// A command line's samples, one per servo period.
+pub type LineQueue = Box<[[f64; MAX_MOTORS]]>;
+
+/// What the command thread asks of the loop.
+pub enum Order {
+    /// To `target` (counts) under `limits`.
+    Move {
+        /// The move's id.
+        id: u64,
+        /// Where to, counts.
+        target: [f64; MAX_MOTORS],
+        /// Its limits (the speed applied).
+        limits: MotionLimits,
+    },
+    /// Along `queue` from where the robot rests (its first sample).
+    Line {
+        /// The move's id.
+        id: u64,
+        /// Its samples.
+        queue: LineQueue,
+    },
+    /// To rest, jerk-limited, under `limits`.
+    Stop {
+        /// The stop's id.
+        id: u64,
+        /// Its limits.
+        limits: MotionLimits,
+    },
+    /// Stop, then end the move (the session).
+    Quit {
+        /// The stop's limits.
+        limits: MotionLimits,
+    },
+}
+
+/// What the loop is doing, for the command thread: written by the servo thread with atomic
+/// stores only.
+#[derive(Debug, Default)]
+pub struct ServeShared {
+    /// The last order whose end the command has come to rest at.
+    pub settled: AtomicU64,
+    /// The last order the loop took.
+    pub taken: AtomicU64,
+    /// The last move the loop could not take (no profile, or one leaving the soft limits).
+    pub not_taken: AtomicU64,
+    /// The command moves.
+    pub moving: AtomicBool,
+    /// The command, counts (f64 bits).
+    pub command: [AtomicU64; MAX_MOTORS],
+    /// The motors' positions, counts (f64 bits).
+    pub actual: [AtomicU64; MAX_MOTORS],
+    /// Bit m: motor m's frame is homed.
+    pub homed: AtomicU32,
+    /// The loop has sampled at least once.
+    pub started: AtomicBool,
+}
+
+impl ServeShared {
+    /// The command, counts.
+    pub fn command(&self) -> [f64; MAX_MOTORS] {
+        self.command.each_ref().map(|a| f64::from_bits(a.load(Ordering::Acquire)))
+    }
+
+    /// The motors' positions, counts.
+    pub fn actual(&self) -> [f64; MAX_MOTORS] {
+        self.actual.each_ref().map(|a| f64::from_bits(a.load(Ordering::Acquire)))
+    }
+}
+
+/// The command thread's end of a [`ServeMove`].
+pub struct ServeHandle {
+    /// Orders to the loop.
+    pub orders: Producer<Order>,
+    /// Lines the loop is done with, to be freed here.
+    pub spent: Consumer<LineQueue>,
+    /// What the loop is doing.
+    pub shared: Arc<ServeShared>,
+}
+
+struct Line {
+    queue: LineQueue,
+    from_n: u64,
+}
+
+/// The serving generator: holds, moves to targets, stops, follows lines, never ends until a
+/// quit has brought it to rest.
+pub struct ServeMove {
+    online: OnlineMove,
+    orders: Consumer<Order>,
+    spent: Producer<LineQueue>,
+    shared: Arc<ServeShared>,
+    line: Option<Line>,
+    current: u64,
+    quitting: bool,
+    period_s: f64,
+    n_motors: usize,
+}
+
+impl ServeMove {
+    /// A serving generator for `settings` and its command thread's handle; `soft`, when the
+    /// frame is homed and the soft limits hold, bounds every profile it takes.
+    pub fn new(
+        settings: &Settings,
+        soft: Option<[(f64, f64); MAX_MOTORS]>,
+    ) -> (ServeMove, ServeHandle) {
+        let limits = MotionLimits::of(settings);
+        let mut online =
+            OnlineMove::new([0.0; MAX_MOTORS], settings.n_motors, settings.period_s(), limits);
+        if let Some(soft) = soft {
+            online = online.with_soft_limits(soft);
+        }
+        let (orders_tx, orders) = RingBuffer::new(ORDER_QUEUE);
+        let (spent, spent_rx) = RingBuffer::new(ORDER_QUEUE + 1);
+        let shared = Arc::new(ServeShared::default());
+        let serve = ServeMove {
+            online,
+            orders,
+            spent,
+            shared: shared.clone(),
+            line: None,
+            current: 0,
+            quitting: false,
+            period_s: settings.period_s(),
+            n_motors: settings.n_motors,
+        };
+        (serve, ServeHandle { orders: orders_tx, spent: spent_rx, shared })
+    }
+
+    /// The state of the last sample commanded: the line's (its velocity and acceleration
+    /// from its samples' differences) or the online profile's.
+    fn state_now(&self) -> (u64, MotionState) {
+        let (n, mut state) = self.online.last();
+        let Some(line) = &self.line else { return (n, state) };
+        let k = n.saturating_sub(line.from_n) as usize;
+        let q = |back: usize| line.queue[k.saturating_sub(back).min(line.queue.len() - 1)];
+        let t = self.period_s;
+        let (q0, q1, q2) = (q(0), q(1), q(2));
+        for m in 0..self.n_motors {
+            state.p[m] = q0[m];
+            state.v[m] = (q0[m] - q1[m]) / t;
+            state.a[m] = (q0[m] - 2.0 * q1[m] + q2[m]) / (t * t);
+        }
+        (n, state)
+    }
+
+    /// Leaves the line (if one runs) for the online profile, from its last sample's state.
+    fn leave_line(&mut self) {
+        if self.line.is_some() {
+            let (n, state) = self.state_now();
+            self.online.continue_from(n, state);
+            if let Some(line) = self.line.take() {
+                // Freed by the command thread; its queue has room for every line in flight.
+                let _ = self.spent.push(line.queue);
+            }
+        }
+    }
+
+    /// Takes the orders that have arrived, the last of each kind winning in turn.
+    fn take_orders(&mut self, n: u64) {
+        while let Ok(order) = self.orders.pop() {
+            match order {
+                Order::Move { id, target, limits } => {
+                    let line = self.line.is_some();
+                    self.leave_line();
+                    match self.online.retarget(&target, &limits) {
+                        Ok(()) => self.current = id,
+                        Err(_) => {
+                            self.shared.not_taken.store(id, Ordering::Release);
+                            if line {
+                                let _ = self.online.stop(&limits);
+                            }
+                        }
+                    }
+                    self.shared.taken.store(id, Ordering::Release);
+                }
+                Order::Stop { id, limits } => {
+                    self.leave_line();
+                    let _ = self.online.stop(&limits);
+                    self.current = id;
+                    self.shared.taken.store(id, Ordering::Release);
+                }
+                Order::Line { id, queue } => {
+                    self.leave_line();
+                    let (last, _) = self.online.last();
+                    self.line = Some(Line { queue, from_n: n.max(last + 1) });
+                    self.current = id;
+                    self.shared.taken.store(id, Ordering::Release);
+                }
+                Order::Quit { limits } => {
+                    self.leave_line();
+                    let _ = self.online.stop(&limits);
+                    self.quitting = true;
+                }
+            }
+        }
+    }
+
+    fn publish(&self, cmd: &[f64; MAX_MOTORS], moving: bool) {
+        for (a, c) in self.shared.command.iter().zip(cmd) {
+            a.store(c.to_bits(), Ordering::Release);
+        }
+        self.shared.moving.store(moving, Ordering::Release);
+        if !moving {
+            self.shared.settled.store(self.current, Ordering::Release);
+        }
+    }
+}
+
+impl TrajectoryGenerator for ServeMove {
+    fn name(&self) -> &'static str {
+        "serve"
+    }
+
+    fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+        self.online.continue_from(0, MotionState::at_rest(*start));
+        self.publish(start, false);
+        Ok(())
+    }
+
+    fn samples(&self) -> Option<u64> {
+        None
+    }
+
+    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        Some([0.0; MAX_MOTORS])
+    }
+
+    #[inline]
+    fn observe(&mut self, act: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
+        for (a, x) in self.shared.actual.iter().zip(act) {
+            a.store(x.to_bits(), Ordering::Release);
+        }
+        let homed = (0..self.n_motors).filter(|&m| flags[m].homed()).fold(0, |b, m| b | 1 << m);
+        self.shared.homed.store(homed, Ordering::Release);
+    }
+
+    #[inline]
+    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+        self.shared.started.store(true, Ordering::Release);
+        self.take_orders(n);
+        if let Some(line) = &self.line {
+            let k = n.saturating_sub(line.from_n) as usize;
+            if k + 1 < line.queue.len() {
+                *cmd = line.queue[k];
+                self.online.continue_from(n, MotionState::at_rest(*cmd));
+                self.publish(cmd, true);
+                return Sample::Ready;
+            }
+            *cmd = line.queue[line.queue.len() - 1];
+            self.online.continue_from(n, MotionState::at_rest(*cmd));
+            if let Some(line) = self.line.take() {
+                let _ = self.spent.push(line.queue);
+            }
+            self.publish(cmd, false);
+            return Sample::Ready;
+        }
+        let moving = match self.online.sample(n, cmd) {
+            Sample::Ready => self.online.moving(),
+            _ => {
+                // At rest on the target: hold it, from this sample on.
+                *cmd = *self.online.target();
+                self.online.continue_from(n, MotionState::at_rest(*cmd));
+                false
+            }
+        };
+        self.publish(cmd, moving);
+        if self.quitting && !moving { Sample::Done } else { Sample::Ready }
+    }
+}

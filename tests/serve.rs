@@ -1,0 +1,167 @@
+//! `qmarc-starter serve` and `qmarc cmd` (issue 30): the robot holds and moves as commands
+//! arrive over `qmarc/command`, a new target takes over mid-motion without a jump, refusals
+//! say why, and the session ends as any move ends — on `quit`, on Ctrl-C, and with every
+//! process killed in turn.
+
+use qmarc_plugins::moveto::MotionLimits;
+use qmarc_plugins::online::sampled_ratio;
+use qmarc_proto::MAX_MOTORS;
+use qmarc_tests::{Finished, TestRun, bin_dir, read_gather, read_summary, run_with_timeout};
+use std::path::Path;
+use std::process::{Child, Command};
+use std::time::{Duration, Instant};
+
+const TIMEOUT: Duration = Duration::from_secs(60);
+
+/// [`sampled_ratio`]'s rounding: a third difference of positions of 10⁴ counts over T³.
+const ROUNDING: f64 = 1e-6;
+
+/// A serving session of `run` on the settings `config`, lock-step.
+fn serve(run: &TestRun, config: &Path, extra: &[&str]) -> Child {
+    let (config, out) =
+        (format!("--config={}", config.display()), format!("--out={}", run.out("out").display()));
+    let mut args = vec![config.as_str(), out.as_str(), "--deterministic"];
+    args.extend_from_slice(extra);
+    args.push("serve");
+    let child = run.spawn_starter(&args);
+    let started = Instant::now();
+    while cmd(run, &["status"]).code != Some(0) {
+        assert!(started.elapsed() < TIMEOUT, "the session did not start serving");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child
+}
+
+/// `qmarc cmd --iox-prefix … ARGS`.
+fn cmd(run: &TestRun, args: &[&str]) -> Finished {
+    let mut c = Command::new(bin_dir().join("qmarc"));
+    c.arg("cmd").args(run.isolation_args()).args(args);
+    run_with_timeout(&mut c, TIMEOUT)
+}
+
+/// `qmarc cmd ARGS`, which must be accepted.
+fn accepted(run: &TestRun, args: &[&str]) -> String {
+    let r = cmd(run, args);
+    assert_eq!(r.code, Some(0), "{args:?}: {}\n{}", r.stdout, r.stderr);
+    r.stdout
+}
+
+/// The commands of gather.csv, one array per row.
+fn commands(out: &Path) -> Vec<[f64; MAX_MOTORS]> {
+    let (header, rows) = read_gather(out);
+    let col = |m: usize| header.iter().position(|h| *h == format!("cmd{}", m + 1)).unwrap();
+    rows.iter().map(|r| std::array::from_fn(|m| if m < 3 { r[col(m)] } else { 0.0 })).collect()
+}
+
+fn settings(config: &Path) -> qmarc_config::Settings {
+    qmarc_config::Settings::load(config, &qmarc_config::Names::any()).expect("settings")
+}
+
+/// The numbers after `label` in a status.
+fn numbers_after(status: &str, label: &str) -> Vec<f64> {
+    let line = status
+        .lines()
+        .find(|l| l.trim_start().starts_with(label))
+        .unwrap_or_else(|| panic!("no {label} in {status}"));
+    line.trim_start()[label.len()..].split_whitespace().filter_map(|w| w.parse().ok()).collect()
+}
+
+/// Moves, a target replaced mid-motion, a line, refusals, quit: the whole session's commands
+/// keep every joint's limits, each move ends where it was sent, and the session's data files
+/// are those of any move.
+#[test]
+fn serve_takes_moves_and_new_targets_mid_motion_within_the_limits() {
+    let run = TestRun::new("serve");
+    let config = run.config_with(&[]);
+    let s = settings(&config);
+    let child = serve(&run, &config, &[]);
+    assert!(accepted(&run, &["status"]).starts_with("at rest"));
+    // A slow move, replaced while it runs by one the other way at full speed.
+    assert!(accepted(&run, &["move", "--to=3000,-2000,1000", "--speed=0.2"]).contains("move 1"));
+    std::thread::sleep(Duration::from_millis(30));
+    let moving = accepted(&run, &["status"]);
+    assert!(moving.starts_with("moving"), "{moving}");
+    accepted(&run, &["move", "--to=-1500,2500,500"]);
+    let done = accepted(&run, &["wait"]);
+    assert_eq!(numbers_after(&done, "command"), [-1500.0, 2500.0, 500.0], "{done}");
+    // A straight line to a point, from rest.
+    accepted(&run, &["move", "--xyz=40,-30,-660", "--linear"]);
+    let done = accepted(&run, &["wait"]);
+    let at = numbers_after(&done, "effector");
+    assert!((at[0] - 40.0).abs() < 0.01 && (at[1] + 30.0).abs() < 0.01, "{done}");
+    // Refusals: said at once, with the reason; nothing moves.
+    let r = cmd(&run, &["move", "--xyz=0,0,-200"]);
+    assert_eq!(r.code, Some(3), "{}", r.stdout);
+    assert!(r.stdout.starts_with("refused (unreachable): 0.0, 0.0, -200.0 mm is unreachable"));
+    let r = cmd(&run, &["move", "--to=0,0,12000"]);
+    assert_eq!(r.code, Some(3), "{}", r.stdout);
+    assert!(r.stdout.contains("refused (soft_limits): motor 3 would go to 12000.0 counts"));
+    let r = cmd(&run, &["move", "--to=1,2,3", "--speed=2"]);
+    assert!(r.stdout.contains("refused (bad_request): speed must be > 0 and ≤ 1"), "{}", r.stdout);
+    accepted(&run, &["quit"]);
+    let r = qmarc_tests::wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stdout.contains("QMARC serve: ok"), "{}", r.stdout);
+    let out = run.out("out");
+    assert_eq!(read_summary(&out).mode.to_string(), "serve");
+    let cmds = commands(&out);
+    let ratio = sampled_ratio(&cmds, 3, s.period_s(), &MotionLimits::of(&s));
+    assert!(ratio <= 1.0 + ROUNDING, "the session's commands exceed a limit: ratio {ratio}");
+    // Once served, the session is gone: a command says so.
+    let r = cmd(&run, &["status"]);
+    assert_eq!(r.code, Some(1), "{}\n{}", r.stdout, r.stderr);
+    run.assert_clean();
+}
+
+/// Ctrl-C ends a serving session as it ends any move; kill -9 of the hwserver, the
+/// controller or the starter mid-move ends it with the motors disabled and says what
+/// happened; nothing is left behind.
+#[test]
+fn serve_ends_as_any_move_does_under_ctrl_c_and_kill_9() {
+    use nix::sys::signal::Signal;
+    for victim in ["qmarc-starter", "qmarc-hwserver", "qmarc-controller", "ctrl-c"] {
+        let run = TestRun::new(&format!("servekill{}", victim.len()));
+        let config = run.config_with(&[]);
+        let child = serve(&run, &config, &[]);
+        accepted(&run, &["move", "--to=4000,4000,4000", "--speed=0.05"]);
+        std::thread::sleep(Duration::from_millis(50));
+        let pid = match victim {
+            "ctrl-c" | "qmarc-starter" => child.id(),
+            name => run
+                .processes()
+                .into_iter()
+                .find(|(_, c)| c.contains(name))
+                .map(|(pid, _)| pid)
+                .expect("the victim runs"),
+        };
+        let signal = if victim == "ctrl-c" { Signal::SIGINT } else { Signal::SIGKILL };
+        qmarc_tests::send_signal(pid, signal);
+        let r = qmarc_tests::wait_with_timeout(child, TIMEOUT);
+        match victim {
+            "ctrl-c" => {
+                assert_eq!(r.code, Some(130), "{}\n{}", r.stdout, r.stderr);
+                qmarc_tests::assert_aborted_with_motors_disabled(&run.out("out"));
+            }
+            "qmarc-starter" => assert_eq!(r.code, None, "killed"),
+            name => {
+                assert_eq!(r.code, Some(2), "{victim}: {}\n{}", r.stdout, r.stderr);
+                assert!(
+                    r.stderr.contains(&format!("{name} was killed by SIGKILL")),
+                    "{}",
+                    r.stderr
+                );
+            }
+        }
+        // Nothing serves any more, and nothing is left (the children of a killed starter stop
+        // on their parent's death, motors disabled by the hwserver first).
+        let deadline = Instant::now() + TIMEOUT;
+        while !run.processes().is_empty() {
+            assert!(Instant::now() < deadline, "{victim}: {:?} left", run.processes());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        if victim == "qmarc-starter" {
+            run.location().remove_files();
+        }
+        run.assert_clean();
+    }
+}
