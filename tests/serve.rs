@@ -25,7 +25,7 @@ fn serve(run: &TestRun, config: &Path, extra: &[&str]) -> Child {
     args.push("serve");
     let child = run.spawn_starter(&args);
     let started = Instant::now();
-    while cmd(run, &["status"]).code != Some(0) {
+    while !cmd(run, &["status"]).stdout.contains("loop moving") {
         assert!(started.elapsed() < TIMEOUT, "the session did not start serving");
         std::thread::sleep(Duration::from_millis(20));
     }

@@ -7,10 +7,12 @@
 //!   bare loop's, per round, with the noisy-host flag.
 //! - `ipc`: the controller ⇄ hwserver exchange beside a raw futex and a raw spin ping-pong.
 //! - `cycle`: the per-cycle compute of every registered generator × law for 1–4 motors.
+//! - `command`: a serving session's move commands, from sent to the loop's first new command.
 //!
 //! Figures are printed (and written as JSON with `--json`), never asserted: the machine decides.
 
 mod baselines;
+mod command;
 mod cycle;
 mod ipc;
 mod jitter;
@@ -40,6 +42,8 @@ enum BenchCommand {
     Ipc(ipc::IpcArgs),
     /// Per-cycle compute (trajectory sample + law step) of every generator × law, 1–4 motors.
     Cycle(cycle::CycleArgs),
+    /// A serving session: from a move command sent to the loop's first command of it.
+    Command(command::CommandArgs),
 }
 
 fn main() -> ExitCode {
@@ -48,6 +52,7 @@ fn main() -> ExitCode {
         BenchCommand::Jitter(a) => jitter::run(a),
         BenchCommand::Ipc(a) => ipc::run(a),
         BenchCommand::Cycle(a) => cycle::run(a),
+        BenchCommand::Command(a) => command::run(a),
     };
     let outcome = result.map(|()| ExitCode::SUCCESS).map_err(|e| (qmarc_proto::exit::INTERNAL, e));
     qmarc_config::program::conclude("qmarc-bench", outcome)

@@ -145,6 +145,32 @@ fn cycle_times_every_generator_and_law_for_1_to_4_motors() {
 }
 
 #[test]
+fn command_measures_a_serving_sessions_moves() {
+    let dir = scratch("command");
+    let cfg = config(&dir);
+    let child = Command::new(bench())
+        .args(["command", "--moves=5", &format!("--config={}", cfg.display())])
+        .current_dir(workspace())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let prefix = format!("qmarc_benchcmd_{}_", child.id());
+    let out = child.wait_with_output().unwrap();
+    let t = text(&out);
+    assert!(out.status.success(), "{t}");
+    assert!(t.contains("qmarc-bench command: 5 moves"), "{t}");
+    assert!(t.contains("read → taken by the loop") && t.contains("of 5"), "{t}");
+    let left: Vec<_> = std::fs::read_dir("/dev/shm")
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+        .collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn bad_options_are_refused_with_a_message() {
     let out = run(&["jitter", "--rounds=0"]);
     assert_eq!(out.status.code(), Some(1));

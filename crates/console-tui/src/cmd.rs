@@ -163,6 +163,14 @@ fn run(args: &CmdArgs) -> anyhow::Result<u8> {
         Cmd::Wait { timeout } => {
             let s = client.wait(Duration::from_secs_f64(timeout.max(0.0)))?;
             println!("{}", describe(&s, n));
+            if s.not_taken >= s.accepted && s.accepted > 0 {
+                println!(
+                    "move {} was not taken: from the state the robot was in, its way would \
+                     leave the soft limits (or had no profile); the robot went on as it was",
+                    s.accepted
+                );
+                return Ok(qmarc_proto::exit::REFUSED);
+            }
             return Ok(if s.fault == 0 { 0 } else { qmarc_proto::exit::FAULT });
         }
     };

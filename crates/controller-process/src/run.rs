@@ -185,6 +185,20 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     if spec.mode == Mode::Home {
         summary.homing = Some(homing_report(&record, homed_read, settings.n_motors));
     }
+    warn(&mut summary, spec, &record, relayed.and_then(|r| r.error));
+    write_results(&settings.gather.out_dir, &record.gather, &mut summary)?;
+    Ok(summary)
+}
+
+/// The warnings of a move of `spec` that left `record`: a frame that may not be homed, motors
+/// whose soft limits did not hold, live telemetry missing (`telemetry_error`) or dropped.
+fn warn(
+    summary: &mut Summary,
+    spec: &RunSpec,
+    record: &MoveRecord,
+    telemetry_error: Option<String>,
+) {
+    let n_motors = spec.settings.n_motors;
     if spec.unhomed && spec.mode != Mode::Home {
         summary.warnings.push(Warning::new(
             WarningKind::Unhomed,
@@ -192,7 +206,7 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
         ));
     }
     let unhomed: Vec<String> =
-        (0..settings.n_motors).filter(|&m| !record.homed[m]).map(|m| (m + 1).to_string()).collect();
+        (0..n_motors).filter(|&m| !record.homed[m]).map(|m| (m + 1).to_string()).collect();
     if matches!(spec.mode, Mode::Jog | Mode::Check) && !unhomed.is_empty() && !spec.unhomed {
         summary.warnings.push(Warning::new(
             WarningKind::NotHomed,
@@ -202,7 +216,7 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
             ),
         ));
     }
-    if let Some(why) = relayed.and_then(|r| r.error) {
+    if let Some(why) = telemetry_error {
         summary
             .warnings
             .push(Warning::new(WarningKind::Telemetry, format!("no live telemetry: {why}")));
@@ -216,8 +230,6 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
             ),
         ));
     }
-    write_results(&settings.gather.out_dir, &record.gather, &mut summary)?;
-    Ok(summary)
 }
 
 /// The loop's end of the telemetry ring and the thread publishing it, when

@@ -60,6 +60,8 @@ struct Commands {
     seq: u64,
     /// The last move accepted.
     accepted: u64,
+    /// The loop's executed cycles right after the last order was queued.
+    queued_at: u64,
 }
 
 /// The command thread: it serves from [`CommandThread::spawn`] until dropped.
@@ -86,6 +88,7 @@ impl CommandThread {
             progress: Progress::open(&Progress::path(&location.prefix)).ok(),
             seq: 0,
             accepted: 0,
+            queued_at: 0,
         };
         let location = location.clone();
         // iceoryx2's ports stay on the thread that made them: made there, reported back.
@@ -161,7 +164,8 @@ impl Commands {
 
     /// The answer to `req`.
     fn answer(&mut self, req: &CommandRequest) -> CommandResponse {
-        let mut r = self.status();
+        let received_ns = qmarc_timer::clock::monotonic_now_ns();
+        let mut r = CommandResponse { received_ns, ..self.status() };
         r.id = req.id;
         let outcome = match CommandKind::from_wire(req.kind) {
             None => Err((Refusal::BadRequest, format!("unknown command {}", req.kind))),
@@ -169,6 +173,11 @@ impl Commands {
             Some(_) if self.ended.ended.load(Ordering::Acquire) => {
                 Err((Refusal::NotServing, "the session has ended".to_string()))
             }
+            Some(_) if !self.shared().started.load(Ordering::Acquire) => Err((
+                Refusal::Busy,
+                "the session is starting: its loop has not begun (qmarc cmd status says when)"
+                    .to_string(),
+            )),
             Some(CommandKind::Move) => self.move_to(req),
             Some(CommandKind::Stop) => {
                 let limits = MotionLimits::of(&self.settings);
@@ -183,6 +192,9 @@ impl Commands {
             Ok(()) => {
                 r.ok = 1;
                 r.accepted = self.accepted;
+                if req.kind != CommandKind::Status as u32 {
+                    r.received_cycle = self.queued_at;
+                }
             }
             Err((refusal, why)) => {
                 r.refusal = refusal as u32;
@@ -198,6 +210,7 @@ impl Commands {
         self.handle.orders.push(make(id)).map_err(|_| {
             (Refusal::Busy, "the loop has not taken the last commands yet".to_string())
         })?;
+        self.queued_at = self.shared().cycles.load(Ordering::Acquire);
         self.seq = id;
         Ok(id)
     }
@@ -210,6 +223,11 @@ impl Commands {
             settled: shared.settled.load(Ordering::Acquire),
             homed: shared.homed.load(Ordering::Acquire),
             moving: u32::from(shared.moving.load(Ordering::Acquire)),
+            taken: shared.taken.load(Ordering::Acquire),
+            taken_ns: shared.taken_ns.load(Ordering::Acquire),
+            taken_cycle: shared.taken_cycle.load(Ordering::Acquire),
+            not_taken: shared.not_taken.load(Ordering::Acquire),
+            received_cycle: shared.cycles.load(Ordering::Acquire),
             command: shared.command(),
             actual: shared.actual(),
             fault: self.ended.fault.load(Ordering::Acquire),

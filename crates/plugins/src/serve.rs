@@ -62,6 +62,14 @@ pub struct ServeShared {
     pub settled: AtomicU64,
     /// The last order the loop took.
     pub taken: AtomicU64,
+    /// When it took it (in the cycle whose command is the new one's first), ns of
+    /// `CLOCK_MONOTONIC` (read through the vDSO: no system call).
+    pub taken_ns: AtomicU64,
+    /// The cycles executed when it took it, that cycle included.
+    pub taken_cycle: AtomicU64,
+    /// The cycles the loop has executed (samples computed; a stall's skipped samples are no
+    /// cycles).
+    pub cycles: AtomicU64,
     /// The last move the loop could not take (no profile, or one leaving the soft limits).
     pub not_taken: AtomicU64,
     /// The command moves.
@@ -192,20 +200,20 @@ impl ServeMove {
                             }
                         }
                     }
-                    self.shared.taken.store(id, Ordering::Release);
+                    self.took(id);
                 }
                 Order::Stop { id, limits } => {
                     self.leave_line();
                     let _ = self.online.stop(&limits);
                     self.current = id;
-                    self.shared.taken.store(id, Ordering::Release);
+                    self.took(id);
                 }
                 Order::Line { id, queue } => {
                     self.leave_line();
                     let (last, _) = self.online.last();
                     self.line = Some(Line { queue, from_n: n.max(last + 1) });
                     self.current = id;
-                    self.shared.taken.store(id, Ordering::Release);
+                    self.took(id);
                 }
                 Order::Quit { limits } => {
                     self.leave_line();
@@ -214,6 +222,14 @@ impl ServeMove {
                 }
             }
         }
+    }
+
+    /// Order `id` taken now, in this cycle.
+    fn took(&self, id: u64) {
+        self.shared.taken_ns.store(qmarc_timer::clock::monotonic_now_ns(), Ordering::Release);
+        let cycle = self.shared.cycles.load(Ordering::Relaxed) + 1;
+        self.shared.taken_cycle.store(cycle, Ordering::Release);
+        self.shared.taken.store(id, Ordering::Release);
     }
 
     fn publish(&self, cmd: &[f64; MAX_MOTORS], moving: bool) {
@@ -259,6 +275,7 @@ impl TrajectoryGenerator for ServeMove {
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
         self.shared.started.store(true, Ordering::Release);
         self.take_orders(n);
+        self.shared.cycles.fetch_add(1, Ordering::AcqRel);
         if let Some(line) = &self.line {
             let k = n.saturating_sub(line.from_n) as usize;
             if k + 1 < line.queue.len() {

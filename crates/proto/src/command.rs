@@ -172,6 +172,22 @@ pub struct CommandResponse {
     pub homed: u32,
     /// 1 while the command moves.
     pub moving: u32,
+    /// When the command thread read this request, ns of `CLOCK_MONOTONIC`.
+    pub received_ns: u64,
+    /// The cycles the loop had executed when the command thread had queued this request's
+    /// order (for an order; else when it read it).
+    pub received_cycle: u64,
+    /// The last order the loop took (a move, a stop).
+    pub taken: u64,
+    /// When it took it, ns of `CLOCK_MONOTONIC`: in the cycle whose command is the new
+    /// profile's first, as that cycle computed it.
+    pub taken_ns: u64,
+    /// The cycles the loop had executed when it took it, that cycle included: one more than
+    /// `received_cycle` when the first cycle after the order was queued took it.
+    pub taken_cycle: u64,
+    /// The last move the loop could not take (its profile from the state the command was in
+    /// would leave the soft limits, or there was none): the command went on as it was.
+    pub not_taken: u64,
     /// The command, counts.
     pub command: [f64; MAX_MOTORS],
     /// The motors' positions, counts.
@@ -194,6 +210,12 @@ impl Default for CommandResponse {
             fault: 0,
             homed: 0,
             moving: 0,
+            received_ns: 0,
+            received_cycle: 0,
+            taken: 0,
+            taken_ns: 0,
+            taken_cycle: 0,
+            not_taken: 0,
             command: [0.0; MAX_MOTORS],
             actual: [0.0; MAX_MOTORS],
             effector_mm: [f64::NAN; 3],
@@ -340,7 +362,8 @@ impl CommandClient {
         loop {
             let s = self.send(CommandRequest::of(CommandKind::Status))?;
             let ended = s.refused() == Some(Refusal::NotServing);
-            if ended || (s.settled >= s.accepted && s.moving == 0) {
+            let dropped = s.not_taken >= s.accepted && s.accepted > 0;
+            if ended || dropped || (s.settled >= s.accepted && s.moving == 0) {
                 return Ok(s);
             }
             if started.elapsed() > timeout {
@@ -368,7 +391,7 @@ mod tests {
     #[test]
     fn the_messages_are_fixed_size_plain_data() {
         assert_eq!(std::mem::size_of::<CommandRequest>(), 56);
-        assert_eq!(std::mem::size_of::<CommandResponse>(), 336);
+        assert_eq!(std::mem::size_of::<CommandResponse>(), 384);
         assert_eq!(std::mem::align_of::<CommandResponse>(), 8);
     }
 

@@ -1,0 +1,136 @@
+//! `qmarc-bench command`: how soon a command changes what the loop commands. A serving
+//! session (`qmarc-starter serve` on the simulated robot, real time) gets `--moves` moves, each
+//! while the robot moves, through the command service; for each, on one clock
+//! (`CLOCK_MONOTONIC`): sent by the client → read by the controller's command thread → taken
+//! by the loop in the cycle whose command is the new profile's first. The goal: taken by the
+//! first cycle the loop runs after the order was queued — the command changes within one
+//! period, or at the first cycle after a host stall.
+
+use crate::stats::percentiles_us;
+use anyhow::Context;
+use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest};
+use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Options of `command`.
+#[derive(Debug, clap::Args)]
+pub struct CommandArgs {
+    /// Moves measured.
+    #[arg(long, default_value_t = 200)]
+    pub moves: u32,
+    /// Settings file of the session.
+    #[arg(long, default_value = "config/qmarc.toml")]
+    pub config: PathBuf,
+    /// Directory holding qmarc-starter and its children (default: next to this program).
+    #[arg(long)]
+    pub bin_dir: Option<PathBuf>,
+}
+
+/// Runs `command`.
+pub fn run(a: &CommandArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(a.moves >= 1, "--moves must be ≥ 1");
+    let starter = qmarc_starter::bin_dir(a.bin_dir.as_deref())?.join("qmarc-starter");
+    let prefix = format!("qmarc_benchcmd_{}_", std::process::id());
+    let scratch = std::env::temp_dir().join(format!("qmarc-bench-command-{}", std::process::id()));
+    let mut session = Command::new(&starter)
+        .arg(format!("--config={}", a.config.display()))
+        .arg(format!("--out={}", scratch.display()))
+        .arg(format!("--iox-prefix={prefix}"))
+        .arg("serve")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .with_context(|| format!("cannot run {}", starter.display()))?;
+    let location = IpcLocation::new(&prefix, DEFAULT_ROOT);
+    let measured = measure(&location, a.moves, &a.config);
+    let _ = CommandClient::connect(&location)
+        .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Quit)));
+    let ended = session.wait();
+    let _ = std::fs::remove_dir_all(&scratch);
+    let Measured { mut to_read, mut to_taken, cycles, period_ns } = measured?;
+    anyhow::ensure!(ended.is_ok_and(|s| s.success()), "the serving session did not end cleanly");
+    let (read, taken) = (percentiles_us(&mut to_read), percentiles_us(&mut to_taken));
+    let next = cycles.iter().filter(|&&c| c == 1).count();
+    let later = cycles.iter().max().copied().unwrap_or(0);
+    println!(
+        "qmarc-bench command: {} moves sent while the robot moved, {} µs period",
+        a.moves,
+        period_ns / 1_000
+    );
+    println!("                               p50       p99       max");
+    println!(
+        "  sent → read (command thread)  {:>6.0} µs {:>6.0} µs {:>6.0} µs",
+        read.p50, read.p99, read.max
+    );
+    println!(
+        "  read → taken by the loop      {:>6.0} µs {:>6.0} µs {:>6.0} µs",
+        taken.p50, taken.p99, taken.max
+    );
+    println!(
+        "  taken by the first cycle after it was queued: {next} of {} ({:.1} %); the latest by \
+         cycle +{later}",
+        cycles.len(),
+        100.0 * next as f64 / cycles.len() as f64
+    );
+    Ok(())
+}
+
+/// What the moves measured.
+struct Measured {
+    /// Sent → read by the command thread, ns.
+    to_read: Vec<u64>,
+    /// Read → taken by the loop, ns.
+    to_taken: Vec<u64>,
+    /// The loop's cycles from queued to taken (1: the first cycle after).
+    cycles: Vec<u64>,
+    /// The servo period, ns.
+    period_ns: u64,
+}
+
+/// Sends the moves and measures each.
+fn measure(
+    location: &IpcLocation,
+    moves: u32,
+    config: &std::path::Path,
+) -> anyhow::Result<Measured> {
+    let settings = qmarc_config::Settings::load(config, &qmarc_starter::names())
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let period_ns = settings.period_ns();
+    let started = Instant::now();
+    let serving = qmarc_proto::state::Phase::Moving.code();
+    let mut client = loop {
+        let status = CommandClient::connect(location)
+            .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Status)).map(|s| (c, s)));
+        match status {
+            Ok((c, s)) if s.phase == serving => break c,
+            _ if started.elapsed() < Duration::from_secs(20) => {
+                std::thread::sleep(Duration::from_millis(20))
+            }
+            Ok(_) => anyhow::bail!("the serving session did not start its loop"),
+            Err(e) => return Err(e).context("the serving session did not start"),
+        }
+    };
+    let (mut to_read, mut to_taken, mut cycles) = (Vec::new(), Vec::new(), Vec::new());
+    for k in 0..moves {
+        // Back and forth between two points: every move arrives while the last one runs.
+        let c = if k % 2 == 0 { 2_000.0 } else { -2_000.0 };
+        let sent = qmarc_timer::clock::monotonic_now_ns();
+        let r = client.send(CommandRequest::move_to(&[c, -c, c / 2.0], 1.0))?;
+        anyhow::ensure!(r.ok == 1, "move refused: {}", r.reason());
+        let id = r.accepted;
+        let (taken_ns, taken_cycle) = loop {
+            let s = client.send(CommandRequest::of(CommandKind::Status))?;
+            if s.taken >= id {
+                break (s.taken_ns, s.taken_cycle);
+            }
+            anyhow::ensure!(started.elapsed() < Duration::from_secs(600), "the loop took nothing");
+        };
+        to_read.push(r.received_ns.saturating_sub(sent));
+        to_taken.push(taken_ns.saturating_sub(r.received_ns));
+        cycles.push(taken_cycle.saturating_sub(r.received_cycle));
+        std::thread::sleep(Duration::from_millis(15));
+    }
+    Ok(Measured { to_read, to_taken, cycles, period_ns })
+}
