@@ -121,6 +121,8 @@ pub struct ServeMove {
     line: Option<Line>,
     current: u64,
     quitting: bool,
+    /// A quit's stop has come to rest: the next sample ends the move.
+    ended: bool,
     period_s: f64,
     n_motors: usize,
 }
@@ -149,6 +151,7 @@ impl ServeMove {
             line: None,
             current: 0,
             quitting: false,
+            ended: false,
             period_s: settings.period_s(),
             n_motors: settings.n_motors,
         };
@@ -273,6 +276,9 @@ impl TrajectoryGenerator for ServeMove {
 
     #[inline]
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+        if self.ended {
+            return Sample::Done;
+        }
         self.shared.started.store(true, Ordering::Release);
         self.take_orders(n);
         self.shared.cycles.fetch_add(1, Ordering::AcqRel);
@@ -302,6 +308,13 @@ impl TrajectoryGenerator for ServeMove {
             }
         };
         self.publish(cmd, moving);
-        if self.quitting && !moving { Sample::Done } else { Sample::Ready }
+        // The rest a quit's stop comes to is commanded once; the sample after it ends.
+        if self.quitting && !moving {
+            self.ended = true;
+        }
+        Sample::Ready
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,165 @@
+//! The serving generator: it holds until an order arrives, takes each order in the cycle it
+//! arrives, keeps the limits across every change, follows lines and hands their queues back,
+//! refuses a profile that would leave the soft limits, and ends only after a quit's stop.
+
+use super::*;
+use crate::online::sampled_ratio;
+use std::path::Path;
+
+/// The shipped settings.
+fn settings() -> Settings {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
+    Settings::load(&path, &qmarc_config::Names::any()).unwrap()
+}
+
+const SOFT: [(f64, f64); MAX_MOTORS] = [(-9_000.0, 10_000.0); MAX_MOTORS];
+
+/// A serving generator started at `start`, and its handle.
+fn serving(start: [f64; MAX_MOTORS]) -> (ServeMove, ServeHandle, MotionLimits, f64) {
+    let s = settings();
+    let (mut g, h) = ServeMove::new(&s, Some(SOFT));
+    g.start(&start).unwrap();
+    (g, h, MotionLimits::of(&s), s.period_s())
+}
+
+/// Samples `from..to` into `cmds`; the last answer.
+fn run(g: &mut ServeMove, n: std::ops::Range<u64>, cmds: &mut Vec<[f64; MAX_MOTORS]>) -> Sample {
+    let mut last = Sample::Ready;
+    for k in n {
+        let mut cmd = [0.0; MAX_MOTORS];
+        last = g.sample(k, &mut cmd);
+        if last != Sample::Ready {
+            break;
+        }
+        cmds.push(cmd);
+    }
+    last
+}
+
+fn load(a: &AtomicU64) -> u64 {
+    a.load(Ordering::Acquire)
+}
+
+#[test]
+fn it_holds_where_it_starts_until_an_order_arrives() {
+    let start = [100.0, -200.0, 300.0, 0.0];
+    let (mut g, h, ..) = serving(start);
+    let mut cmds = Vec::new();
+    assert_eq!(run(&mut g, 0..50, &mut cmds), Sample::Ready);
+    assert!(cmds.iter().all(|c| *c == start));
+    assert_eq!(h.shared.command(), start);
+    assert!(!h.shared.moving.load(Ordering::Acquire));
+    assert_eq!((load(&h.shared.taken), load(&h.shared.settled)), (0, 0));
+    assert_eq!(load(&h.shared.cycles), 50);
+    assert_eq!(g.samples(), None, "a session has no known length");
+}
+
+#[test]
+fn a_move_is_taken_in_the_cycle_it_arrives_and_settles_on_its_target() {
+    let (mut g, mut h, limits, t) = serving([0.0; MAX_MOTORS]);
+    let mut cmds = Vec::new();
+    run(&mut g, 0..10, &mut cmds);
+    let target = [3000.0, -1500.0, 800.0, 0.0];
+    assert!(h.orders.push(Order::Move { id: 1, target, limits }).is_ok());
+    run(&mut g, 10..11, &mut cmds);
+    assert_eq!((load(&h.shared.taken), load(&h.shared.taken_cycle)), (1, 11));
+    assert_ne!(cmds[10], cmds[9], "the cycle that takes it already moves");
+    assert!(h.shared.moving.load(Ordering::Acquire));
+    assert_eq!(load(&h.shared.settled), 0, "not at rest yet");
+    run(&mut g, 11..2_000, &mut cmds);
+    assert_eq!(*cmds.last().unwrap(), target);
+    assert_eq!(load(&h.shared.settled), 1);
+    assert!(!h.shared.moving.load(Ordering::Acquire));
+    assert!(sampled_ratio(&cmds, 3, t, &limits) <= 1.0 + 1e-6);
+}
+
+#[test]
+fn a_new_target_or_a_stop_takes_over_within_the_limits() {
+    let (mut g, mut h, limits, t) = serving([0.0; MAX_MOTORS]);
+    let mut cmds = Vec::new();
+    let far = [8000.0, 8000.0, -8000.0, 0.0];
+    assert!(h.orders.push(Order::Move { id: 1, target: far, limits }).is_ok());
+    run(&mut g, 0..60, &mut cmds);
+    let back = [-2000.0, 1000.0, 0.0, 0.0];
+    assert!(h.orders.push(Order::Move { id: 2, target: back, limits }).is_ok());
+    run(&mut g, 60..120, &mut cmds);
+    assert!(h.orders.push(Order::Stop { id: 3, limits }).is_ok());
+    run(&mut g, 120..3_000, &mut cmds);
+    assert!(sampled_ratio(&cmds, 3, t, &limits) <= 1.0 + 1e-6, "no jump at either change");
+    let end = *cmds.last().unwrap();
+    assert_ne!(end, back, "the stop came first");
+    assert_eq!(cmds[cmds.len() - 2], end, "at rest");
+    assert_eq!((load(&h.shared.taken), load(&h.shared.settled)), (3, 3));
+}
+
+#[test]
+fn a_line_is_followed_then_its_queue_handed_back_to_be_freed() {
+    let start = [10.0, 20.0, 30.0, 0.0];
+    let (mut g, mut h, limits, t) = serving(start);
+    let mut cmds = Vec::new();
+    run(&mut g, 0..5, &mut cmds);
+    let queue: LineQueue =
+        (0..200).map(|k| [10.0 + 0.01 * (k * k) as f64, 20.0, 30.0, 0.0]).collect();
+    let end = queue[199];
+    assert!(h.orders.push(Order::Line { id: 1, queue: queue.clone() }).is_ok());
+    run(&mut g, 5..400, &mut cmds);
+    assert_eq!(cmds[5..205], queue[..], "sample by sample from the cycle it arrived");
+    assert_eq!(*cmds.last().unwrap(), end);
+    assert_eq!(load(&h.shared.settled), 1);
+    assert_eq!(h.spent.pop().map(|q| q.len()), Ok(200), "handed back, not freed in the loop");
+    // A target while a line runs takes over from the line's state.
+    assert!(h.orders.push(Order::Line { id: 2, queue }).is_ok());
+    run(&mut g, 400..480, &mut cmds);
+    assert!(h.orders.push(Order::Move { id: 3, target: start, limits }).is_ok());
+    run(&mut g, 480..3_000, &mut cmds);
+    assert_eq!(*cmds.last().unwrap(), start);
+    assert!(h.spent.pop().is_ok(), "the line left for the target is handed back too");
+    let _ = t;
+}
+
+#[test]
+fn a_profile_that_would_leave_the_soft_limits_is_not_taken() {
+    let (mut g, mut h, limits, t) = serving([0.0; MAX_MOTORS]);
+    let mut cmds = Vec::new();
+    let target = [9_000.0, 0.0, 0.0, 0.0];
+    assert!(h.orders.push(Order::Move { id: 1, target, limits }).is_ok());
+    run(&mut g, 0..80, &mut cmds);
+    // At a twentieth of the speed (1/400 of the acceleration) the motor cannot turn round
+    // before 10 000 counts: not taken; the move goes on to its target.
+    let slow = limits.at_speed(0.05);
+    assert!(h.orders.push(Order::Move { id: 2, target: [0.0; MAX_MOTORS], limits: slow }).is_ok());
+    run(&mut g, 80..3_000, &mut cmds);
+    assert_eq!(load(&h.shared.not_taken), 2);
+    assert_eq!(*cmds.last().unwrap(), target);
+    assert!(cmds.iter().all(|c| c[0] <= 10_000.0));
+    assert!(sampled_ratio(&cmds, 3, t, &limits) <= 1.0 + 1e-6);
+}
+
+#[test]
+fn quit_stops_then_ends_the_move() {
+    let (mut g, mut h, limits, _) = serving([0.0; MAX_MOTORS]);
+    let mut cmds = Vec::new();
+    let far = [6000.0, 0.0, 0.0, 0.0];
+    assert!(h.orders.push(Order::Move { id: 1, target: far, limits }).is_ok());
+    run(&mut g, 0..50, &mut cmds);
+    assert!(h.orders.push(Order::Quit { limits }).is_ok());
+    let end = run(&mut g, 50..5_000, &mut cmds);
+    assert_eq!(end, Sample::Done);
+    let last = *cmds.last().unwrap();
+    assert!(last[0] < far[0], "stopped short of the target: {last:?}");
+    // The stop's last sample is its rest; it came to it jerk-limited, at a crawl.
+    let crawl = (last[0] - cmds[cmds.len() - 2][0]) / 400e-6;
+    assert!(crawl.abs() < 5.0, "{crawl} counts/s into its rest");
+    let mut after = [0.0; MAX_MOTORS];
+    assert_eq!(g.sample(5_000, &mut after), Sample::Done, "and stays ended");
+    assert_eq!(g.end_velocity(), Some([0.0; MAX_MOTORS]));
+}
+
+#[test]
+fn observe_publishes_the_positions_and_the_homed_motors() {
+    let (mut g, h, ..) = serving([0.0; MAX_MOTORS]);
+    let homed = MotorFlags(MotorFlags::HOMED);
+    g.observe(&[1.0, 2.0, 3.0, 0.0], &[homed, MotorFlags(0), homed, homed]);
+    assert_eq!(h.shared.actual(), [1.0, 2.0, 3.0, 0.0]);
+    assert_eq!(h.shared.homed.load(Ordering::Acquire), 0b101, "three motors in use");
+}
