@@ -180,6 +180,33 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
     assert!(handle.spent.pop().is_err());
 }
 
+/// The online planner refuses what it cannot plan — a state that is not finite, a limit that
+/// is not positive — before Ruckig sees it, so even a refused plan allocates nothing (Ruckig's
+/// own refusal formats a message).
+#[test]
+fn a_refused_online_plan_allocates_nothing() {
+    use qmarc_plugins::moveto::MotionLimits;
+    use qmarc_plugins::online::{MotionState, NoProfile, Profile};
+    let good = MotionLimits::of(&settings());
+    let mut p = Profile::new(3, [0.0; MAX_MOTORS]);
+    let mut no_jerk = good;
+    no_jerk.jerk[1] = 0.0;
+    let mut nan_limit = good;
+    nan_limit.velocity[2] = f64::NAN;
+    let nan_state = MotionState { v: [0.0, f64::NAN, 0.0, 0.0], ..MotionState::default() };
+    let to = [100.0, 200.0, 300.0, 0.0];
+    let before = allocations();
+    let refused = [
+        p.plan(&nan_state, &to, &good),
+        p.plan(&MotionState::default(), &to, &no_jerk),
+        p.plan(&MotionState::default(), &to, &nan_limit),
+        p.plan(&MotionState::default(), &[f64::INFINITY; MAX_MOTORS], &good),
+        p.plan_stop(&nan_state, &good),
+    ];
+    assert_eq!(allocations() - before, 0, "a refused plan allocated");
+    assert!(refused.iter().all(|r| *r == Err(NoProfile)), "{refused:?}");
+}
+
 #[test]
 fn limit_switch_trip_disables_every_motor_in_the_same_cycle() {
     let s = settings();

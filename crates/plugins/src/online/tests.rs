@@ -210,3 +210,59 @@ fn unusable_limits_or_states_plan_nothing() {
     assert_eq!(p.plan(&nan, &arr(&[1.0, 1.0, 1.0]), &limits()), Err(NoProfile));
     assert_eq!(p.plan(&MotionState::default(), &arr(&[f64::INFINITY]), &limits()), Err(NoProfile));
 }
+
+#[test]
+fn a_state_with_only_an_acceleration_is_not_at_rest() {
+    // On its target, not moving, but accelerating: the profile must take the acceleration
+    // away (jerk-limited), not jump to rest.
+    let lim = limits();
+    let from = MotionState { a: arr(&[2.0e6, 0.0, -1.0e6]), ..MotionState::default() };
+    for stop in [false, true] {
+        let mut p = Profile::new(3, [0.0; MAX_MOTORS]);
+        if stop {
+            p.plan_stop(&from, &lim).unwrap();
+        } else {
+            p.plan(&from, &[0.0; MAX_MOTORS], &lim).unwrap();
+        }
+        assert!(p.duration() >= 2.0e6 / 2.0e9, "stop {stop}: {} s", p.duration());
+        let s = p.state_at(0.0);
+        assert!((s.a[0] - 2.0e6).abs() < 1.0 && (s.a[2] + 1.0e6).abs() < 1.0, "{s:?}");
+    }
+}
+
+#[test]
+fn a_stop_from_full_speed_comes_to_rest_within_the_limits() {
+    let lim = limits();
+    let from = MotionState {
+        p: arr(&[0.0, 100.0, 0.0]),
+        v: arr(&[80_000.0, -40_000.0, 0.0]),
+        a: arr(&[0.0, 1.0e6, 0.0]),
+    };
+    let mut p = Profile::new(3, [0.0; MAX_MOTORS]);
+    p.plan_stop(&from, &lim).unwrap();
+    // From 80 000 counts/s at 5·10⁶ counts/s² and 2·10⁹ counts/s³: 16 ms plus the jerk's
+    // 2.5 ms, the motors stopping together.
+    assert!((p.duration() - 0.0185).abs() < 1e-4, "{} s", p.duration());
+    let mut q = vec![from.p];
+    let mut k = 1;
+    while (k as f64) * T < p.duration() + T {
+        q.push(p.state_at(k as f64 * T).p);
+        k += 1;
+    }
+    // The first samples continue the motion (no jump); the last is at rest, where it stops.
+    assert!((q[1][0] - 80_000.0 * T).abs() < 1.0, "{:?}", q[1]);
+    assert_eq!(*q.last().unwrap(), *p.target());
+    assert!(p.target()[0] > 600.0 && p.target()[1] < 100.0, "{:?}", p.target());
+    let end = p.state_at(p.duration());
+    assert_eq!((end.v, end.a), ([0.0; MAX_MOTORS], [0.0; MAX_MOTORS]));
+}
+
+#[test]
+fn a_plan_refused_keeps_the_last_one() {
+    let mut p = Profile::new(3, [0.0; MAX_MOTORS]);
+    p.plan(&MotionState::default(), &arr(&[5000.0, -100.0, 20.0]), &limits()).unwrap();
+    let (before, d) = (p.state_at(0.01), p.duration());
+    let nan = MotionState { a: arr(&[0.0, f64::NAN]), ..MotionState::default() };
+    assert_eq!(p.plan(&nan, &arr(&[1.0, 1.0, 1.0]), &limits()), Err(NoProfile));
+    assert_eq!((p.state_at(0.01), p.duration()), (before, d));
+}
