@@ -17,6 +17,10 @@ use rsruckig::prelude::{
     ControlInterface, DataArrayOrVec, InputParameter, Ruckig, ThrowErrorHandler, Trajectory,
 };
 
+/// How far a profile's extremum may read beyond a soft limit from rounding alone, counts
+/// (a millionth of a count: nothing a motor can do).
+pub const BOUND_ROUNDING: f64 = 1e-6;
+
 /// The command's kinematic state: per motor, counts, counts/s, counts/s².
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct MotionState {
@@ -217,8 +221,10 @@ impl Profile {
         s
     }
 
-    /// Each motor's smallest and largest position over the profile, counts.
-    pub fn bounds(&mut self) -> [(f64, f64); MAX_MOTORS] {
+    /// Each motor's smallest and largest position over the profile, counts: exactly, from
+    /// its segments (Ruckig's own `get_position_extrema` misses an extremum inside a segment
+    /// of constant acceleration — where a motor moving away from its target turns round).
+    pub fn bounds(&self) -> [(f64, f64); MAX_MOTORS] {
         let mut b = [(0.0, 0.0); MAX_MOTORS];
         for (m, bm) in b.iter_mut().enumerate() {
             *bm = (self.target[m], self.target[m]);
@@ -226,13 +232,49 @@ impl Profile {
         if self.duration == 0.0 {
             return b;
         }
-        let extrema = self.trajectory.get_position_extrema();
         for (m, bm) in b.iter_mut().enumerate().take(self.n) {
-            let (lo, hi) = (extrema[m].min, extrema[m].max);
+            let pr = &self.trajectory.profiles[0][m];
+            let mut ext = (self.origin[m], self.origin[m]);
             let (o, l) = (self.origin[m], self.length);
-            *bm = ((o + lo * l).min(bm.0), (o + hi * l).max(bm.1));
+            let mut segment = |t: f64, p: f64, v: f64, a: f64, j: f64| {
+                segment_extrema(&mut ext, t, o + p * l, v * l, a * l, j * l);
+            };
+            if pr.brake.duration > 0.0 {
+                for k in 0..2 {
+                    let br = &pr.brake;
+                    segment(br.t[k], br.p[k], br.v[k], br.a[k], br.j[k]);
+                }
+            }
+            for k in 0..7 {
+                segment(pr.t[k], pr.p[k], pr.v[k], pr.a[k], pr.j[k]);
+            }
+            *bm = (ext.0.min(bm.0), ext.1.max(bm.1));
         }
         b
+    }
+}
+
+/// Widens `ext` to the positions of one constant-jerk segment of `t` (normalised time units;
+/// positions already in counts, its velocity, acceleration and jerk in counts per normalised
+/// unit): its start, its end and where its velocity passes 0 inside it.
+fn segment_extrema(ext: &mut (f64, f64), t: f64, p: f64, v: f64, a: f64, j: f64) {
+    let at = |x: f64| p + x * (v + x * (a / 2.0 + x * j / 6.0));
+    let mut take = |x: f64| {
+        if x.is_finite() && (0.0..=t).contains(&x) {
+            let q = at(x);
+            *ext = (ext.0.min(q), ext.1.max(q));
+        }
+    };
+    take(0.0);
+    take(t);
+    if j != 0.0 {
+        let d = a * a - 2.0 * j * v;
+        if d >= 0.0 {
+            take((-a - d.sqrt()) / j);
+            take((-a + d.sqrt()) / j);
+        }
+    } else if a != 0.0 {
+        take(-v / a);
     }
 }
 
@@ -386,9 +428,11 @@ impl OnlineMove {
             (Some(spare), Some(soft)) => {
                 plan(spare)?;
                 let b = spare.bounds();
-                if let Some(m) =
-                    (0..self.n_motors).find(|&m| b[m].0 < soft[m].0 || b[m].1 > soft[m].1)
-                {
+                // The extrema come out of normalised units: a target on a limit may read a
+                // rounding beyond it.
+                let (lo, hi) =
+                    (|m: usize| soft[m].0 - BOUND_ROUNDING, |m: usize| soft[m].1 + BOUND_ROUNDING);
+                if let Some(m) = (0..self.n_motors).find(|&m| b[m].0 < lo(m) || b[m].1 > hi(m)) {
                     let counts = if b[m].0 < soft[m].0 { b[m].0 } else { b[m].1 };
                     return Err(RetargetError::SoftLimits { motor: m + 1, counts });
                 }

@@ -19,6 +19,10 @@ use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 /// Orders queued for the loop at most (the command thread refuses more as busy).
 pub const ORDER_QUEUE: usize = 16;
 
+/// How far a line's first sample may be from where the command rests, counts (the line is
+/// planned from the command's rest, through the kinematics and back).
+pub const LINE_START_COUNTS: f64 = 0.5;
+
 /// A command line's samples, one per servo period.
 pub type LineQueue = Box<[[f64; MAX_MOTORS]]>;
 
@@ -213,9 +217,20 @@ impl ServeMove {
                 }
                 Order::Line { id, queue } => {
                     self.leave_line();
-                    let (last, _) = self.online.last();
-                    self.line = Some(Line { queue, from_n: n.max(last + 1) });
-                    self.current = id;
+                    // A line starts where the command rests (the command thread planned it
+                    // from there); one that does not would jump: not taken.
+                    let (_, now) = self.online.last();
+                    let off = queue.first().is_none_or(|q| {
+                        (0..self.n_motors).any(|m| (q[m] - now.p[m]).abs() > LINE_START_COUNTS)
+                    });
+                    if off || self.online.moving() {
+                        self.shared.not_taken.store(id, Ordering::Release);
+                        let _ = self.spent.push(queue);
+                    } else {
+                        // Its first sample (where the robot rests) is this cycle's.
+                        self.line = Some(Line { queue, from_n: n });
+                        self.current = id;
+                    }
                     self.took(id);
                 }
                 Order::Quit { limits } => {

@@ -266,3 +266,106 @@ fn a_plan_refused_keeps_the_last_one() {
     assert_eq!(p.plan(&nan, &arr(&[1.0, 1.0, 1.0]), &limits()), Err(NoProfile));
     assert_eq!((p.state_at(0.01), p.duration()), (before, d));
 }
+
+#[test]
+fn the_bounds_cover_an_overshoot_from_a_moving_state() {
+    // Moving up at full speed toward a target below: the motor overshoots before it turns.
+    let mut p = Profile::new(3, [0.0; MAX_MOTORS]);
+    let from =
+        MotionState { p: arr(&[500.0, 0.0, 0.0]), v: arr(&[80_000.0]), ..Default::default() };
+    p.plan(&from, &arr(&[-1000.0, 0.0, 0.0]), &limits()).unwrap();
+    let b = p.bounds();
+    let mut seen = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut t = 0.0;
+    while t <= p.duration() {
+        let x = p.state_at(t).p[0];
+        seen = (seen.0.min(x), seen.1.max(x));
+        t += 1e-5;
+    }
+    assert!(seen.1 > 1000.0, "it overshoots: {seen:?}");
+    assert!((b[0].0 - seen.0).abs() < 0.5 && (b[0].1 - seen.1).abs() < 0.5, "{:?} {seen:?}", b[0]);
+}
+
+#[test]
+fn a_new_profile_is_held_to_both_soft_limits_with_the_motor_and_where() {
+    let soft = [(-9_000.0, 10_000.0); MAX_MOTORS];
+    let mut g = OnlineMove::new([0.0; MAX_MOTORS], 3, T, limits()).with_soft_limits(soft);
+    g.start(&[0.0; MAX_MOTORS]).unwrap();
+    // Exactly on either limit is inside.
+    g.retarget(&arr(&[-9_000.0, 10_000.0, 0.0]), &limits()).unwrap();
+    assert_eq!(*g.target(), arr(&[-9_000.0, 10_000.0, 0.0]));
+    // Moving down fast near the lower limit, a slow turn would carry motor 2 below it.
+    g.continue_from(
+        10,
+        MotionState {
+            p: arr(&[0.0, -8_000.0, 0.0]),
+            v: arr(&[0.0, -80_000.0]),
+            ..Default::default()
+        },
+    );
+    match g.retarget(&arr(&[0.0, 0.0, 0.0]), &limits().at_speed(0.1)) {
+        Err(RetargetError::SoftLimits { motor, counts }) => {
+            assert_eq!(motor, 2);
+            assert!(counts < -9_000.0, "{counts}");
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(g.last().0, 10, "the move goes on as it was");
+    // The same from the upper side, motor 3.
+    g.continue_from(
+        20,
+        MotionState {
+            p: arr(&[0.0, 0.0, 9_000.0]),
+            v: arr(&[0.0, 0.0, 80_000.0]),
+            ..Default::default()
+        },
+    );
+    match g.retarget(&arr(&[0.0, 0.0, 0.0]), &limits().at_speed(0.1)) {
+        Err(RetargetError::SoftLimits { motor, counts }) => {
+            assert_eq!(motor, 3);
+            assert!(counts > 10_000.0, "{counts}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn continuing_from_a_state_holds_it_from_that_sample() {
+    let mut g = OnlineMove::new([0.0; MAX_MOTORS], 3, T, limits());
+    g.start(&[0.0; MAX_MOTORS]).unwrap();
+    let at = MotionState::at_rest(arr(&[1.0, 2.0, 3.0]));
+    g.continue_from(500, at);
+    let mut cmd = [0.0; MAX_MOTORS];
+    assert_eq!(g.sample(500, &mut cmd), Sample::Ready);
+    assert_eq!(cmd, at.p);
+    assert_eq!(g.last(), (500, at));
+    assert!(!g.moving());
+    assert_eq!(g.sample(501, &mut cmd), Sample::Done, "nothing more to move");
+    assert_eq!(g.name(), "move");
+    assert_eq!(g.end_velocity(), Some([0.0; MAX_MOTORS]), "every move ends at rest");
+}
+
+#[test]
+fn the_move_is_moving_until_its_last_sample() {
+    let mut g = OnlineMove::new(arr(&[1000.0, 0.0, 0.0]), 3, T, limits());
+    g.start(&[0.0; MAX_MOTORS]).unwrap();
+    let last = g.samples().unwrap() - 1;
+    let mut cmd = [0.0; MAX_MOTORS];
+    for n in 0..last {
+        g.sample(n, &mut cmd);
+        assert!(g.moving(), "sample {n}");
+    }
+    g.sample(last, &mut cmd);
+    assert!(!g.moving(), "at its last sample it is on the target");
+    assert_eq!(cmd[0], 1000.0);
+}
+
+#[test]
+fn the_last_sample_is_the_target_even_when_its_time_falls_a_rounding_short() {
+    // A move whose duration is a whole number of periods to within rounding: its last sample
+    // time may fall just short of the profile's end, and still commands the target exactly.
+    for target in [[3000.0, -2500.0, 800.0], [1000.0, 0.0, 0.0], [-7321.0, 12.5, 4000.0]] {
+        let (_, q) = moved(&[0.0; 3], &target, &limits());
+        assert_eq!(q.last().unwrap()[..3], target);
+    }
+}

@@ -63,10 +63,20 @@ fn a_move_is_taken_in_the_cycle_it_arrives_and_settles_on_its_target() {
     assert!(h.orders.push(Order::Move { id: 1, target, limits }).is_ok());
     run(&mut g, 10..11, &mut cmds);
     assert_eq!((load(&h.shared.taken), load(&h.shared.taken_cycle)), (1, 11));
+    assert_eq!(g.name(), "serve");
     assert_ne!(cmds[10], cmds[9], "the cycle that takes it already moves");
     assert!(h.shared.moving.load(Ordering::Acquire));
     assert_eq!(load(&h.shared.settled), 0, "not at rest yet");
-    run(&mut g, 11..2_000, &mut cmds);
+    // Moving until the sample that reaches the target, at rest (settled) from that one on.
+    let mut n = 11;
+    while *cmds.last().unwrap() != target {
+        assert!(h.shared.moving.load(Ordering::Acquire), "sample {n}");
+        run(&mut g, n..n + 1, &mut cmds);
+        n += 1;
+    }
+    assert!(!h.shared.moving.load(Ordering::Acquire));
+    assert_eq!(load(&h.shared.settled), 1);
+    run(&mut g, n..2_000, &mut cmds);
     assert_eq!(*cmds.last().unwrap(), target);
     assert_eq!(load(&h.shared.settled), 1);
     assert!(!h.shared.moving.load(Ordering::Acquire));
@@ -98,23 +108,36 @@ fn a_line_is_followed_then_its_queue_handed_back_to_be_freed() {
     let (mut g, mut h, limits, t) = serving(start);
     let mut cmds = Vec::new();
     run(&mut g, 0..5, &mut cmds);
-    let queue: LineQueue =
-        (0..200).map(|k| [10.0 + 0.01 * (k * k) as f64, 20.0, 30.0, 0.0]).collect();
+    // From rest to rest, well within the limits: a raised cosine of 500 counts.
+    let along = |k: usize| 10.0 + 250.0 * (1.0 - (std::f64::consts::PI * k as f64 / 199.0).cos());
+    let queue: LineQueue = (0..200).map(|k| [along(k), 20.0, 30.0, 0.0]).collect();
     let end = queue[199];
     assert!(h.orders.push(Order::Line { id: 1, queue: queue.clone() }).is_ok());
-    run(&mut g, 5..400, &mut cmds);
+    run(&mut g, 5..204, &mut cmds);
+    assert!(h.shared.moving.load(Ordering::Acquire), "one sample before the line's end");
+    run(&mut g, 204..205, &mut cmds);
+    assert!(!h.shared.moving.load(Ordering::Acquire), "on the line's last sample");
+    assert_eq!(load(&h.shared.settled), 1);
+    run(&mut g, 205..400, &mut cmds);
     assert_eq!(cmds[5..205], queue[..], "sample by sample from the cycle it arrived");
     assert_eq!(*cmds.last().unwrap(), end);
     assert_eq!(load(&h.shared.settled), 1);
     assert_eq!(h.spent.pop().map(|q| q.len()), Ok(200), "handed back, not freed in the loop");
+    // A line that does not start where the robot is is not taken.
+    assert!(h.orders.push(Order::Line { id: 2, queue: queue.clone() }).is_ok());
+    run(&mut g, 400..401, &mut cmds);
+    assert_eq!((load(&h.shared.not_taken), cmds[400]), (2, end));
+    assert!(h.spent.pop().is_ok(), "handed back");
     // A target while a line runs takes over from the line's state.
-    assert!(h.orders.push(Order::Line { id: 2, queue }).is_ok());
-    run(&mut g, 400..480, &mut cmds);
-    assert!(h.orders.push(Order::Move { id: 3, target: start, limits }).is_ok());
+    let back: LineQueue = queue.iter().rev().copied().collect();
+    assert!(h.orders.push(Order::Line { id: 3, queue: back }).is_ok());
+    run(&mut g, 401..480, &mut cmds);
+    assert!(h.orders.push(Order::Move { id: 4, target: start, limits }).is_ok());
     run(&mut g, 480..3_000, &mut cmds);
     assert_eq!(*cmds.last().unwrap(), start);
     assert!(h.spent.pop().is_ok(), "the line left for the target is handed back too");
-    let _ = t;
+    // From the line's position, velocity and acceleration: no jump where the target took over.
+    assert!(sampled_ratio(&cmds, 3, t, &limits) <= 1.0 + 1e-6);
 }
 
 #[test]
