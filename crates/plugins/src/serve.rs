@@ -162,19 +162,21 @@ impl ServeMove {
         (serve, ServeHandle { orders: orders_tx, spent: spent_rx, shared })
     }
 
-    /// The state of the last sample commanded: the line's (its velocity and acceleration
-    /// from its samples' differences) or the online profile's.
+    /// The state of the last sample commanded: the line's or the online profile's. A line's
+    /// velocity and acceleration come from its last four samples' backward differences, exact
+    /// for a cubic — which a jerk-limited motion is, segment by segment (the samples before
+    /// the line are its first: at rest).
     fn state_now(&self) -> (u64, MotionState) {
         let (n, mut state) = self.online.last();
         let Some(line) = &self.line else { return (n, state) };
         let k = n.saturating_sub(line.from_n) as usize;
         let q = |back: usize| line.queue[k.saturating_sub(back).min(line.queue.len() - 1)];
         let t = self.period_s;
-        let (q0, q1, q2) = (q(0), q(1), q(2));
+        let (q0, q1, q2, q3) = (q(0), q(1), q(2), q(3));
         for m in 0..self.n_motors {
             state.p[m] = q0[m];
-            state.v[m] = (q0[m] - q1[m]) / t;
-            state.a[m] = (q0[m] - 2.0 * q1[m] + q2[m]) / (t * t);
+            state.v[m] = (11.0 * q0[m] - 18.0 * q1[m] + 9.0 * q2[m] - 2.0 * q3[m]) / (6.0 * t);
+            state.a[m] = (2.0 * q0[m] - 5.0 * q1[m] + 4.0 * q2[m] - q3[m]) / (t * t);
         }
         (n, state)
     }

@@ -369,3 +369,44 @@ fn the_last_sample_is_the_target_even_when_its_time_falls_a_rounding_short() {
         assert_eq!(q.last().unwrap()[..3], target);
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// The bounds are the profile's extremes: from any state — moving, turning inside a jerk
+    /// segment or a constant-acceleration one, braking from beyond slower limits first — every
+    /// position of the profile is within them, and they are reached (dense sampling finds
+    /// them to within a tenth of a count: what a position moves in a sampling step there).
+    #[test]
+    fn the_bounds_are_the_profiles_extremes(
+        p in prop::array::uniform3(-5000.0..5000.0f64),
+        v in prop::array::uniform3(-1.5..1.5f64),
+        a in prop::array::uniform3(-0.9..0.9f64),
+        to in prop::array::uniform3(-5000.0..5000.0f64),
+        speed in 0.3..=1.0f64,
+    ) {
+        let full = limits();
+        let lim = full.at_speed(speed);
+        // Velocities up to 1.5 × the slower limits: Ruckig brakes first.
+        let from = MotionState {
+            p: arr(&p),
+            v: arr(&v.map(|x| x * lim.velocity[0])),
+            a: arr(&a.map(|x| x * lim.acceleration[0])),
+        };
+        let mut pr = Profile::new(3, [0.0; MAX_MOTORS]);
+        pr.plan(&from, &arr(&to), &lim).unwrap();
+        let b = pr.bounds();
+        let mut seen = [(f64::INFINITY, f64::NEG_INFINITY); 3];
+        let steps = 4000;
+        for k in 0..=steps {
+            let s = pr.state_at(pr.duration() * k as f64 / steps as f64);
+            for m in 0..3 {
+                seen[m] = (seen[m].0.min(s.p[m]), seen[m].1.max(s.p[m]));
+            }
+        }
+        for m in 0..3 {
+            prop_assert!(b[m].0 <= seen[m].0 + 1e-6 && b[m].1 >= seen[m].1 - 1e-6, "motor {m}: {:?} {:?}", b[m], seen[m]);
+            prop_assert!(seen[m].0 - b[m].0 < 0.1 && b[m].1 - seen[m].1 < 0.1, "motor {m}: {:?} {:?}", b[m], seen[m]);
+        }
+    }
+}

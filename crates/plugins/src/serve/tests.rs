@@ -128,16 +128,26 @@ fn a_line_is_followed_then_its_queue_handed_back_to_be_freed() {
     run(&mut g, 400..401, &mut cmds);
     assert_eq!((load(&h.shared.not_taken), cmds[400]), (2, end));
     assert!(h.spent.pop().is_ok(), "handed back");
-    // A target while a line runs takes over from the line's state.
-    let back: LineQueue = queue.iter().rev().copied().collect();
-    assert!(h.orders.push(Order::Line { id: 3, queue: back }).is_ok());
-    run(&mut g, 401..480, &mut cmds);
-    assert!(h.orders.push(Order::Move { id: 4, target: start, limits }).is_ok());
-    run(&mut g, 480..3_000, &mut cmds);
-    assert_eq!(*cmds.last().unwrap(), start);
+    // A target while a line runs takes over from the line's state: a line at the limits
+    // (a full-speed jerk-limited move's samples), left while it accelerates hardest, so a
+    // velocity or an acceleration taken wrongly would break a limit.
+    let mut fast = crate::online::OnlineMove::new([3000.0, 20.0, 30.0, 0.0], 3, t, limits);
+    fast.start(&end).unwrap();
+    let mut back = Vec::new();
+    let mut cmd = [0.0; MAX_MOTORS];
+    for n in 0..fast.samples().unwrap() {
+        fast.sample(n, &mut cmd);
+        back.push(cmd);
+    }
+    assert!(h.orders.push(Order::Line { id: 3, queue: back.into() }).is_ok());
+    run(&mut g, 401..416, &mut cmds);
+    let elsewhere = [200.0, 20.0, 30.0, 0.0];
+    assert!(h.orders.push(Order::Move { id: 4, target: elsewhere, limits }).is_ok());
+    run(&mut g, 416..3_000, &mut cmds);
+    assert_eq!(*cmds.last().unwrap(), elsewhere, "the target, not the line's end");
     assert!(h.spent.pop().is_ok(), "the line left for the target is handed back too");
     // From the line's position, velocity and acceleration: no jump where the target took over.
-    assert!(sampled_ratio(&cmds, 3, t, &limits) <= 1.0 + 1e-6);
+    assert!(sampled_ratio(&cmds[400..], 3, t, &limits) <= 1.0 + 1e-6);
 }
 
 #[test]
