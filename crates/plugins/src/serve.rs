@@ -170,7 +170,10 @@ impl ServeMove {
         let (n, mut state) = self.online.last();
         let Some(line) = &self.line else { return (n, state) };
         let k = n.saturating_sub(line.from_n) as usize;
-        let q = |back: usize| line.queue[k.saturating_sub(back).min(line.queue.len() - 1)];
+        // A line is left at its last sample, so k is never past it; the bound only keeps the
+        // loop from ever panicking.
+        let last = line.queue.len().saturating_sub(1);
+        let q = |back: usize| line.queue[k.saturating_sub(back).min(last)];
         let t = self.period_s;
         let (q0, q1, q2, q3) = (q(0), q(1), q(2), q(3));
         for m in 0..self.n_motors {
