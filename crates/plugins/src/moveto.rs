@@ -4,12 +4,12 @@
 //! acceleration and jerk limits allow, the others slower. It is planned before the move and
 //! sampled into the command queue, so the loop only reads the queue.
 
+use crate::online::{MotionState, Profile};
 use crate::source::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::Settings;
 use qmarc_controller::traj::{MotorHome, Sample, TrajStartError, TrajectoryGenerator, bounds_of};
 use qmarc_proto::state::FaultKind;
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
-use rsruckig::prelude::{DataArrayOrVec, InputParameter, Ruckig, ThrowErrorHandler, Trajectory};
 
 /// The limits a jerk-limited move keeps, per motor.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -105,12 +105,8 @@ pub fn double_s_duration(d: f64, v: f64, a: f64, j: f64) -> f64 {
 
 /// The command queue of the move of the first `n_motors` from `from` to `to`, at rest at both
 /// ends, under `limits`, one sample every `period_s`: sample 0 is `from`, the last is exactly
-/// `to` (a move of no distance is that one sample).
-///
-/// Ruckig plans it in units where the longest distance is 1 and the move lasts about 1 (the
-/// slowest motor's closed-form duration, [`double_s_duration`]): in raw counts and seconds
-/// its root finding failed on about one random move in five of the shipped robot (10⁴ counts,
-/// 10⁹ counts/s³), normalised on none of 25 000.
+/// `to` (a move of no distance is that one sample). Planned by the online generator's
+/// [`Profile`] (Ruckig, normalised), sampled before the move.
 pub fn rest_to_rest(
     from: &[f64; MAX_MOTORS],
     to: &[f64; MAX_MOTORS],
@@ -120,53 +116,33 @@ pub fn rest_to_rest(
 ) -> Result<Vec<[f64; MAX_MOTORS]>, MoveToError> {
     let n = n_motors.min(MAX_MOTORS);
     let (from_v, to_v) = (from[..n].to_vec(), to[..n].to_vec());
-    let fail =
-        |reason: String| MoveToError::NoProfile { from: from_v.clone(), to: to_v.clone(), reason };
-    let distance = |m: usize| to[m] - from[m];
-    let length = (0..n).map(|m| distance(m).abs()).fold(0.0, f64::max);
-    let mut queue = vec![*from];
-    if length == 0.0 {
-        return Ok(queue);
-    }
-    let (v, a, j) = (limits.velocity, limits.acceleration, limits.jerk);
-    let tau = (0..n).map(|m| double_s_duration(distance(m), v[m], a[m], j[m])).fold(0.0, f64::max);
-    if !(tau.is_finite() && tau > 0.0) {
-        return Err(fail(format!("limits {v:?}, {a:?}, {j:?} counts/s, /s², /s³")));
-    }
-    let mut input = InputParameter::<MAX_MOTORS>::new(None);
-    for m in 0..MAX_MOTORS {
-        let used = m < n;
-        input.current_position[m] = 0.0;
-        input.target_position[m] = if used { distance(m) / length } else { 0.0 };
-        input.max_velocity[m] = if used { v[m] * tau / length } else { 1.0 };
-        input.max_acceleration[m] = if used { a[m] * tau * tau / length } else { 1.0 };
-        input.max_jerk[m] = if used { j[m] * tau * tau * tau / length } else { 1.0 };
-    }
-    let mut trajectory = Trajectory::<MAX_MOTORS>::new(None);
-    Ruckig::<MAX_MOTORS, ThrowErrorHandler>::new(None, period_s / tau)
-        .calculate(&input, &mut trajectory)
-        .map_err(|e| fail(e.to_string().lines().next().unwrap_or_default().to_string()))?;
-    let seconds = trajectory.get_duration() * tau;
+    let mut profile = Profile::new(n, *from);
+    profile.plan(&MotionState::at_rest(*from), to, limits).map_err(|e| {
+        let (v, a, j) = (limits.velocity, limits.acceleration, limits.jerk);
+        MoveToError::NoProfile {
+            from: from_v.clone(),
+            to: to_v.clone(),
+            reason: format!("{e} under the limits {v:?}, {a:?}, {j:?} counts/s, /s², /s³"),
+        }
+    })?;
+    let seconds = profile.duration();
     let samples = (seconds / period_s).ceil();
     let bytes = (samples + 1.0) * std::mem::size_of::<[f64; MAX_MOTORS]>() as f64;
     if !seconds.is_finite() || bytes > QUEUE_BUDGET_BYTES as f64 {
         return Err(MoveToError::TooLong { from: from_v, to: to_v, seconds });
     }
-    let mut at = DataArrayOrVec::<f64, MAX_MOTORS>::new(None, 0.0);
-    let mut section = None;
-    queue.reserve(samples as usize);
+    let mut queue = Vec::with_capacity(samples as usize + 1);
+    queue.push(*from);
     for k in 1..samples as u64 {
-        let t = k as f64 * period_s / tau;
-        trajectory.at_time(t, &mut Some(&mut at), &mut None, &mut None, &mut None, &mut section);
         let mut cmd = *from;
-        for (m, c) in cmd.iter_mut().enumerate().take(n) {
-            *c = from[m] + at[m] * length;
-        }
+        cmd[..n].copy_from_slice(&profile.state_at(k as f64 * period_s).p[..n]);
         queue.push(cmd);
     }
-    let mut last = *from;
-    last[..n].copy_from_slice(&to[..n]);
-    queue.push(last);
+    if seconds > 0.0 {
+        let mut last = *from;
+        last[..n].copy_from_slice(&to[..n]);
+        queue.push(last);
+    }
     Ok(queue)
 }
 
