@@ -76,8 +76,9 @@ fn serve_takes_moves_and_new_targets_mid_motion_within_the_limits() {
     let s = settings(&config);
     let child = serve(&run, &config, &[]);
     assert!(accepted(&run, &["status"]).starts_with("at rest"));
-    // A slow move, replaced while it runs by one the other way at full speed.
-    assert!(accepted(&run, &["move", "--to=3000,-2000,1000", "--speed=0.2"]).contains("move 1"));
+    // A slow move (over a second: a status under load still finds it moving), replaced while
+    // it runs by one the other way at full speed.
+    assert!(accepted(&run, &["move", "--to=3000,-2000,1000", "--speed=0.05"]).contains("move 1"));
     std::thread::sleep(Duration::from_millis(30));
     let moving = accepted(&run, &["status"]);
     assert!(moving.starts_with("moving"), "{moving}");

@@ -6,6 +6,7 @@ mod counting;
 mod deltabot;
 mod e2e;
 mod first_motion;
+mod gripper;
 mod hardware;
 mod online;
 mod robustness;

@@ -119,7 +119,7 @@ fn thesis_examples_run_on_two_motors() {
         let s = read_summary(&out);
         assert!(s.ok && s.motors.len() == 2, "{file}");
         let (header, rows) = read_gather(&out);
-        assert_eq!(header.len(), 2 + 3 * 2);
+        assert_eq!(header.len(), 2 + 3 * 2 + 1, "cycle, time, 3 per motor, the gripper");
         let knots = if method == "spline" { offline_knots(file) } else { pvt_knots(file) };
         assert_passes_through(&rows, &knots, 0.0);
     }

@@ -6,12 +6,10 @@
 //! first cycle the loop runs after the order was queued — the command changes within one
 //! period, or at the first cycle after a host stall.
 
+use crate::session::Session;
 use crate::stats::percentiles_us;
-use anyhow::Context;
 use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest};
-use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
 use std::path::PathBuf;
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Options of `command`.
@@ -31,26 +29,11 @@ pub struct CommandArgs {
 /// Runs `command`.
 pub fn run(a: &CommandArgs) -> anyhow::Result<()> {
     anyhow::ensure!(a.moves >= 1, "--moves must be ≥ 1");
-    let starter = qmarc_starter::bin_dir(a.bin_dir.as_deref())?.join("qmarc-starter");
-    let prefix = format!("qmarc_benchcmd_{}_", std::process::id());
-    let scratch = std::env::temp_dir().join(format!("qmarc-bench-command-{}", std::process::id()));
-    let mut session = Command::new(&starter)
-        .arg(format!("--config={}", a.config.display()))
-        .arg(format!("--out={}", scratch.display()))
-        .arg(format!("--iox-prefix={prefix}"))
-        .arg("serve")
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .with_context(|| format!("cannot run {}", starter.display()))?;
-    let location = IpcLocation::new(&prefix, DEFAULT_ROOT);
-    let measured = measure(&location, a.moves, &a.config);
-    let _ = CommandClient::connect(&location)
-        .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Quit)));
-    let ended = session.wait();
-    let _ = std::fs::remove_dir_all(&scratch);
+    let session = Session::start(&a.config, a.bin_dir.as_deref(), "cmd")?;
+    let measured = session.client().and_then(|client| measure(client, a.moves, &a.config));
+    let ended = session.quit();
     let Measured { mut to_read, mut to_taken, cycles, period_ns } = measured?;
-    anyhow::ensure!(ended.is_ok_and(|s| s.success()), "the serving session did not end cleanly");
+    ended?;
     let (read, taken) = (percentiles_us(&mut to_read), percentiles_us(&mut to_taken));
     let next = cycles.iter().filter(|&&c| c == 1).count();
     let later = cycles.iter().max().copied().unwrap_or(0);
@@ -91,7 +74,7 @@ struct Measured {
 
 /// Sends the moves and measures each.
 fn measure(
-    location: &IpcLocation,
+    mut client: CommandClient,
     moves: u32,
     config: &std::path::Path,
 ) -> anyhow::Result<Measured> {
@@ -99,19 +82,6 @@ fn measure(
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let period_ns = settings.period_ns();
     let started = Instant::now();
-    let serving = qmarc_proto::state::Phase::Moving.code();
-    let mut client = loop {
-        let status = CommandClient::connect(location)
-            .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Status)).map(|s| (c, s)));
-        match status {
-            Ok((c, s)) if s.phase == serving => break c,
-            _ if started.elapsed() < Duration::from_secs(20) => {
-                std::thread::sleep(Duration::from_millis(20))
-            }
-            Ok(_) => anyhow::bail!("the serving session did not start its loop"),
-            Err(e) => return Err(e).context("the serving session did not start"),
-        }
-    };
     let (mut to_read, mut to_taken, mut cycles) = (Vec::new(), Vec::new(), Vec::new());
     for k in 0..moves {
         // Back and forth between two points: every move arrives while the last one runs.

@@ -8,6 +8,7 @@
 //! - `ipc`: the controller ⇄ hwserver exchange beside a raw futex and a raw spin ping-pong.
 //! - `cycle`: the per-cycle compute of every registered generator × law for 1–4 motors.
 //! - `command`: a serving session's move commands, from sent to the loop's first new command.
+//! - `pick`: the Delta pick-and-place cycle through a serving session, with the gripper.
 //!
 //! Figures are printed (and written as JSON with `--json`), never asserted: the machine decides.
 
@@ -16,6 +17,8 @@ mod command;
 mod cycle;
 mod ipc;
 mod jitter;
+mod pick;
+mod session;
 mod stats;
 
 use clap::{Parser, Subcommand};
@@ -44,6 +47,9 @@ enum BenchCommand {
     Cycle(cycle::CycleArgs),
     /// A serving session: from a move command sent to the loop's first command of it.
     Command(command::CommandArgs),
+    /// The Delta pick-and-place cycle through a serving session: cycle time, picks per
+    /// minute, tracking error, beside the thesis' X-Z path.
+    Pick(pick::PickArgs),
 }
 
 fn main() -> ExitCode {
@@ -53,6 +59,7 @@ fn main() -> ExitCode {
         BenchCommand::Ipc(a) => ipc::run(a),
         BenchCommand::Cycle(a) => cycle::run(a),
         BenchCommand::Command(a) => command::run(a),
+        BenchCommand::Pick(a) => pick::run(a),
     };
     let outcome = result.map(|()| ExitCode::SUCCESS).map_err(|e| (qmarc_proto::exit::INTERNAL, e));
     qmarc_config::program::conclude("qmarc-bench", outcome)

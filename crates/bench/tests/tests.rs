@@ -146,21 +146,38 @@ fn cycle_times_every_generator_and_law_for_1_to_4_motors() {
 
 #[test]
 fn command_measures_a_serving_sessions_moves() {
-    let dir = scratch("command");
+    let t = serving_bench("cmd", &["command", "--moves=5"]);
+    assert!(t.contains("qmarc-bench command: 5 moves"), "{t}");
+    assert!(t.contains("read → taken by the loop") && t.contains("of 5"), "{t}");
+}
+
+/// Issue 30: the pick-and-place cycle runs through a serving session with the gripper and
+/// prints its figures.
+#[test]
+fn pick_runs_the_delta_cycle_through_a_serving_session() {
+    let t = serving_bench("pick", &["pick", "--cycles=2", "--blend-mm=3"]);
+    assert!(t.contains("qmarc-bench pick: 2 cycles at (-150, 0, -600) mm"), "{t}");
+    assert!(t.contains("picks/min") && t.contains("thesis X-Z path"), "{t}");
+    assert!(t.contains("tracking error") && t.contains(" 0 lost"), "{t}");
+}
+
+/// Runs `qmarc-bench ARGS` (a subcommand that serves a session under the prefix of `name`)
+/// on the shipped settings; asserts it succeeded and left nothing behind; its output.
+fn serving_bench(name: &str, args: &[&str]) -> String {
+    let dir = scratch(name);
     let cfg = config(&dir);
     let child = Command::new(bench())
-        .args(["command", "--moves=5", &format!("--config={}", cfg.display())])
+        .args(args)
+        .arg(format!("--config={}", cfg.display()))
         .current_dir(workspace())
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let prefix = format!("qmarc_benchcmd_{}_", child.id());
+    let prefix = format!("qmarc_bench{name}_{}_", child.id());
     let out = child.wait_with_output().unwrap();
     let t = text(&out);
     assert!(out.status.success(), "{t}");
-    assert!(t.contains("qmarc-bench command: 5 moves"), "{t}");
-    assert!(t.contains("read → taken by the loop") && t.contains("of 5"), "{t}");
     let left: Vec<_> = std::fs::read_dir("/dev/shm")
         .unwrap()
         .flatten()
@@ -168,6 +185,7 @@ fn command_measures_a_serving_sessions_moves() {
         .collect();
     assert!(left.is_empty(), "left behind: {left:?}");
     let _ = std::fs::remove_dir_all(&dir);
+    t
 }
 
 #[test]

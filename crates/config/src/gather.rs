@@ -41,32 +41,37 @@ pub struct GatherFields {
     pub act: bool,
     /// `dacM`.
     pub dac: bool,
+    /// `grip`: the gripper's state (0 open, 1 closing, 2 closed, 3 opening), when one is
+    /// wired (`s626.gripper_dio`).
+    #[serde(default)]
+    pub grip: bool,
 }
 
 impl Default for GatherFields {
     fn default() -> GatherFields {
-        GatherFields { time: true, cmd: true, act: true, dac: true }
+        GatherFields { time: true, cmd: true, act: true, dac: true, grip: true }
     }
 }
 
 impl GatherFields {
     /// The names used in `gather.fields`.
-    pub const NAMES: [&'static str; 4] = ["time", "cmd", "act", "dac"];
+    pub const NAMES: [&'static str; 5] = ["time", "cmd", "act", "dac", "grip"];
 
     /// Parses a list of names; the error names the first unknown one.
     pub fn from_names<'a>(
         names: impl IntoIterator<Item = &'a str>,
     ) -> Result<GatherFields, String> {
-        let mut f = GatherFields { time: false, cmd: false, act: false, dac: false };
+        let mut f = GatherFields { time: false, cmd: false, act: false, dac: false, grip: false };
         for n in names {
             match n {
                 "time" => f.time = true,
                 "cmd" => f.cmd = true,
                 "act" => f.act = true,
                 "dac" => f.dac = true,
+                "grip" => f.grip = true,
                 other => {
                     return Err(format!(
-                        "unknown field `{other}`: the fields are time, cmd, act, dac"
+                        "unknown field `{other}`: the fields are time, cmd, act, dac, grip"
                     ));
                 }
             }
@@ -76,7 +81,7 @@ impl GatherFields {
 
     /// The names of the selected fields.
     pub fn names(&self) -> Vec<&'static str> {
-        let on = [self.time, self.cmd, self.act, self.dac];
+        let on = [self.time, self.cmd, self.act, self.dac, self.grip];
         GatherFields::NAMES.iter().zip(on).filter(|(_, on)| *on).map(|(n, _)| *n).collect()
     }
 }

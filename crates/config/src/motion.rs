@@ -31,11 +31,20 @@ pub struct MoveSettings {
     /// The motors' limits played this much slower: velocity × s, acceleration × s², jerk ×
     /// s³ (`--speed`, 0 < s ≤ 1).
     pub speed: f64,
+    /// The gripper closed (`Some(true)`) or opened at the end of the move (`--grip on|off`);
+    /// `None`: left as it is.
+    #[serde(default)]
+    pub grip: Option<bool>,
 }
 
 impl Default for MoveSettings {
     fn default() -> MoveSettings {
-        MoveSettings { target: MoveTarget::Counts(Vec::new()), linear: false, speed: 1.0 }
+        MoveSettings {
+            target: MoveTarget::Counts(Vec::new()),
+            linear: false,
+            speed: 1.0,
+            grip: None,
+        }
     }
 }
 
@@ -182,6 +191,7 @@ impl Settings {
         self.motion.target = MoveTarget::Xyz { mm, counts };
         Ok(())
     }
+
     /// Sets how fast (`--speed`).
     pub fn set_move_speed(&mut self, speed: f64) -> Result<(), ConfigLoadError> {
         crate::trajectory::check_speed(&speed).map_err(|m| refused("--speed", m))?;
@@ -198,6 +208,22 @@ impl Settings {
             ));
         }
         self.motion.linear = true;
+        Ok(())
+    }
+
+    /// Closes (`close`) or opens the gripper at the end of the move (`--grip on|off`): one
+    /// must be wired (`s626.gripper_dio`).
+    pub fn set_move_grip(&mut self, close: bool) -> Result<(), ConfigLoadError> {
+        if self.s626.gripper_dio.is_none() {
+            return Err(refused(
+                "--grip",
+                format!(
+                    "no gripper is wired: set [s626] gripper_dio in {} to its output",
+                    self.source.display()
+                ),
+            ));
+        }
+        self.motion.grip = Some(close);
         Ok(())
     }
 }

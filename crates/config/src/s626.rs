@@ -41,6 +41,14 @@ pub struct S626Settings {
     /// once and stays off until it closes again); `None`: none wired.
     #[serde(default)]
     pub estop_dio: Option<u32>,
+    /// The gripper's output (thesis 6.2.2), a free DIO channel of bank 0: on (1, 0 V) closes
+    /// it. The simulated robot's gripper is wired here too. `None`: no gripper.
+    #[serde(default)]
+    pub gripper_dio: Option<u32>,
+    /// How long the gripper takes to close or to open, s: the simulated gripper's travel,
+    /// and on the card (no sensor) the time after which it counts as closed or open.
+    #[serde(default = "default_gripper_close_s")]
+    pub gripper_close_s: f64,
     /// DAC channel per motor.
     pub dac_channels: Vec<u32>,
     /// Counter channel per motor (0‥2 are counters 0A‥2A).
@@ -53,6 +61,14 @@ pub struct S626Settings {
     /// cycle clears the card's counters).
     pub state_dir: PathBuf,
 }
+
+/// [`S626Settings::gripper_close_s`] when the file does not say: a small pneumatic gripper.
+fn default_gripper_close_s() -> f64 {
+    0.05
+}
+
+/// The longest [`S626Settings::gripper_close_s`] taken, s.
+pub const MAX_GRIPPER_CLOSE_S: f64 = 10.0;
 
 impl Default for S626Settings {
     fn default() -> S626Settings {
@@ -67,6 +83,8 @@ impl Default for S626Settings {
             reserved_dio: vec![2, 8, 14],
             charge_pump_dio: Some(4),
             estop_dio: None,
+            gripper_dio: None,
+            gripper_close_s: default_gripper_close_s(),
             dac_channels: vec![0, 1, 2],
             counter_channels: vec![0, 1, 2],
             dac_sign: vec![1, 1, 1],
@@ -89,6 +107,8 @@ pub(crate) struct RawS626 {
     reserved_dio: S<Vec<i64>>,
     charge_pump_dio: S<i64>,
     estop_dio: S<i64>,
+    gripper_dio: S<i64>,
+    gripper_close_s: S<f64>,
     dac_channels: S<Vec<i64>>,
     counter_channels: S<Vec<i64>>,
     dac_sign: S<Vec<i64>>,
@@ -109,6 +129,13 @@ fn list(lo: i64, hi: i64) -> impl Fn(&Vec<i64>) -> Result<(), String> {
     }
 }
 
+/// The channels of `mask`, as `DIO6, DIO7` ("none" when empty).
+fn channels(mask: u32) -> String {
+    let names: Vec<String> =
+        (0..32).filter(|c| mask & 1 << c != 0).map(|c| format!("DIO{c}")).collect();
+    if names.is_empty() { "none".into() } else { names.join(", ") }
+}
+
 fn to_u32(v: Vec<i64>) -> Vec<u32> {
     v.into_iter().map(|x| x as u32).collect()
 }
@@ -122,6 +149,7 @@ impl RawS626 {
             "limit_bottom_dio" => span_of(&self.limit_bottom_dio),
             "charge_pump_dio" => span_of(&self.charge_pump_dio),
             "estop_dio" => span_of(&self.estop_dio),
+            "gripper_dio" => span_of(&self.gripper_dio),
             "dac_channels" => span_of(&self.dac_channels),
             "counter_channels" => span_of(&self.counter_channels),
             "dac_sign" => span_of(&self.dac_sign),
@@ -170,6 +198,15 @@ impl RawS626 {
         };
         let pump = optional_dio(&self.charge_pump_dio, "charge_pump_dio", d.charge_pump_dio)?;
         let estop = optional_dio(&self.estop_dio, "estop_dio", d.estop_dio)?;
+        let gripper = optional_dio(&self.gripper_dio, "gripper_dio", d.gripper_dio)?;
+        let gripper_close_s =
+            src.take(&self.gripper_close_s, "s626.gripper_close_s", d.gripper_close_s, |v| {
+                if v.is_finite() && *v > 0.0 && *v <= MAX_GRIPPER_CLOSE_S {
+                    Ok(())
+                } else {
+                    Err(format!("must be above 0 and at most {MAX_GRIPPER_CLOSE_S} s, found {v}"))
+                }
+            })?;
         let s = S626Settings {
             device: src
                 .take(&self.device, "s626.device", d.device.display().to_string(), |v| {
@@ -199,6 +236,8 @@ impl RawS626 {
             reserved_dio: ints(&self.reserved_dio, "reserved_dio", &d.reserved_dio, &list(0, 15))?,
             charge_pump_dio: pump,
             estop_dio: estop,
+            gripper_dio: gripper,
+            gripper_close_s,
             dac_channels: ints(&self.dac_channels, "dac_channels", &d.dac_channels, &list(0, 3))?,
             counter_channels: ints(
                 &self.counter_channels,
@@ -218,11 +257,45 @@ impl RawS626 {
         if used && let Some((key, message)) = s.wiring_problem_in(n_motors, &explicit) {
             return Err(src.invalid(self.span_of_key(key), &format!("s626.{key}"), message));
         }
+        // The simulated robot's gripper is wired as the card's: checked whatever the backend.
+        if let Some(message) = s.gripper_problem(n_motors) {
+            let key = "gripper_dio";
+            return Err(src.invalid(self.span_of_key(key), &format!("s626.{key}"), message));
+        }
         Ok(s)
     }
 }
 
 impl S626Settings {
+    /// The DIO channels of bank 0 that message 13 may write for `n_motors` motors (bit c:
+    /// channel c): every channel but the amplifier enables, the charge pump, the reserved
+    /// channels and the inputs (the limit switches, the emergency stop).
+    pub fn free_outputs(&self, n_motors: usize) -> u32 {
+        let n = |v: &[u32]| v.len().min(n_motors);
+        let taken = self.enable_dio[..n(&self.enable_dio)]
+            .iter()
+            .chain(&self.limit_top_dio[..n(&self.limit_top_dio)])
+            .chain(&self.limit_bottom_dio[..n(&self.limit_bottom_dio)])
+            .chain(&self.reserved_dio)
+            .chain(&self.charge_pump_dio)
+            .chain(&self.estop_dio)
+            .filter(|&&c| c < S626_DIO_CHANNELS)
+            .fold(0u32, |mask, &c| mask | 1 << c);
+        !taken & ((1 << S626_DIO_CHANNELS) - 1)
+    }
+
+    /// Why `gripper_dio` cannot be the gripper's output for `n_motors` motors, if it cannot.
+    pub fn gripper_problem(&self, n_motors: usize) -> Option<String> {
+        let c = self.gripper_dio?;
+        (self.free_outputs(n_motors) & 1 << c == 0).then(|| {
+            format!(
+                "DIO{c} is not a free output: it is an amplifier enable, the charge pump, a \
+                 reserved channel or an input (free: {})",
+                channels(self.free_outputs(n_motors))
+            )
+        })
+    }
+
     /// What is wrong with the wiring for `n_motors` motors, if anything: `(key, message)`.
     /// Every motor needs its channels; no DIO channel may serve twice or be a reserved one;
     /// DACs and counters are one per motor.
@@ -254,6 +327,7 @@ impl S626Settings {
             .map(|&c| (c, "enable_dio"))
             .chain(self.charge_pump_dio.map(|c| (c, "charge_pump_dio")))
             .chain(self.estop_dio.map(|c| (c, "estop_dio")))
+            .chain(self.gripper_dio.map(|c| (c, "gripper_dio")))
             .chain(self.limit_top_dio[..n_motors].iter().map(|&c| (c, "limit_top_dio")))
             .chain(self.limit_bottom_dio[..n_motors].iter().map(|&c| (c, "limit_bottom_dio")));
         let mut seen: Vec<(u32, &str)> = Vec::new();

@@ -271,7 +271,10 @@ fn the_shipped_file_states_the_defaults() {
     );
     assert_eq!((&s.hwserver, s.max_missed_in_row), (&d.hwserver, d.max_missed_in_row));
     assert_eq!(SimSettings { start_counts: vec![], ..s.sim.clone() }, d.sim);
-    assert_eq!(s.s626, d.s626, "[s626]");
+    // The shipped files wire a gripper on DIO6; without the key there is none (an output is
+    // switched only where someone wired a gripper).
+    assert_eq!((s.s626.gripper_dio, d.s626.gripper_dio), (Some(6), None));
+    assert_eq!(S626Settings { gripper_dio: None, ..s.s626.clone() }, d.s626, "[s626]");
     assert!(s.sim.start_counts.iter().all(|&c| c == 0.0), "start at 0, the default");
 }
 
@@ -338,6 +341,21 @@ fn the_626_wiring_is_checked_when_it_is_the_backend() {
     check(&on("estop_dio = 16\n"), "q.toml:4:13: s626.estop_dio: must be -1‥15, found 16");
     assert_eq!(parse(&on("estop_dio = 5\n")).unwrap().s626.estop_dio, Some(5));
     assert_eq!(parse(&on("estop_dio = -1\n")).unwrap().s626.estop_dio, None);
+    // Issue 30: the gripper's output is a free output of the bank, never one the server keeps.
+    check(
+        &on("gripper_dio = 1\n"),
+        "q.toml:4:15: s626.gripper_dio: DIO1 is already s626.enable_dio",
+    );
+    check(
+        &on("gripper_dio = 14\n"),
+        "q.toml:4:15: s626.gripper_dio: DIO14 is reserved (s626.reserved_dio: the counters' index inputs)",
+    );
+    let s = parse(&on("gripper_dio = 7\ngripper_close_s = 0.2\n")).unwrap();
+    assert_eq!((s.s626.gripper_dio, s.s626.gripper_close_s), (Some(7), 0.2));
+    check(
+        &on("gripper_close_s = 0\n"),
+        "q.toml:4:19: s626.gripper_close_s: must be above 0 and at most 10 s, found 0",
+    );
     check(
         &on("dac_channels = [0, 1, 1]\n"),
         "q.toml:4:16: s626.dac_channels: each motor needs a channel of its own, found [0, 1, 1]",
@@ -350,7 +368,17 @@ fn the_626_wiring_is_checked_when_it_is_the_backend() {
         &on("enable_dio = [0, 1, 16]\n"),
         "q.toml:4:14: s626.enable_dio: entries must be 0‥15, found 16",
     );
-    // The sim ignores the 626's wiring; switching to the 626 checks it.
+    // The sim ignores the 626's wiring but for the gripper, which it wires as the card.
+    let text = format!("[s626]\ngripper_dio = 10\n{motors}");
+    assert_eq!(
+        parse(&text).unwrap_err().to_string(),
+        "q.toml:2:15: s626.gripper_dio: DIO10 is not a free output: it is an amplifier enable, \
+         the charge pump, a reserved channel or an input (free: DIO5, DIO6, DIO7)"
+    );
+    let s = parse(&format!("[s626]\ngripper_dio = 6\n{motors}")).unwrap();
+    assert_eq!(s.s626.free_outputs(3), 1 << 5 | 1 << 6 | 1 << 7);
+    assert_eq!(s.s626.free_outputs(2), 1 << 5 | 1 << 6 | 1 << 7 | 1 << 3 | 1 << 13 | 1 << 15);
+    // The switching to the 626 checks the rest of the wiring.
     let text = format!("[s626]\nenable_dio = [0, 1]\n{motors}");
     let mut s = parse(&text).unwrap();
     let e = s.set_backend("s626").unwrap_err();

@@ -1,4 +1,4 @@
-//! `qmarc cmd move|stop|wait|status|quit`: one command to a serving controller
+//! `qmarc cmd move|stop|grip|wait|status|quit`: one command to a serving controller
 //! (`qmarc-starter serve`) over `qmarc/command`, its answer printed. The session is the one of
 //! `--iox-prefix`, or your newest serving run found in /dev/shm.
 //!
@@ -54,6 +54,12 @@ enum Cmd {
     },
     /// A jerk-limited stop to rest.
     Stop,
+    /// Close (`on`) or open (`off`) the gripper now; `wait` then waits until it is there.
+    Grip {
+        /// `on` closes it, `off` opens it.
+        #[arg(value_name = "on|off", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+        close: bool,
+    },
     /// Wait until the robot is at rest at the end of the last move accepted.
     Wait {
         /// Give up after S seconds (exit 1).
@@ -66,28 +72,39 @@ enum Cmd {
     Quit,
 }
 
-/// True while the run of `prefix` is a serving session (its run file says so). No iceoryx2
-/// node is made otherwise: a node under a prefix whose run has ended would leave iceoryx2's
-/// files of that prefix behind.
-fn serving(prefix: &str) -> bool {
-    RunSpec::read(&run_file(prefix)).is_ok_and(|s| s.mode == Mode::Serve)
+/// `on` or `off`.
+fn parse_on_off(v: &str) -> Result<bool, String> {
+    match v {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("`{v}` is not on or off")),
+    }
 }
 
-/// The location of the serving session: `--iox-prefix`'s, else the newest of yours.
-fn session(args: &CmdArgs) -> anyhow::Result<IpcLocation> {
+/// The run of `prefix` while it is a serving session (its run file says so). No iceoryx2
+/// node is made otherwise: a node under a prefix whose run has ended would leave iceoryx2's
+/// files of that prefix behind.
+fn serving(prefix: &str) -> Option<RunSpec> {
+    RunSpec::read(&run_file(prefix)).ok().filter(|s| s.mode == Mode::Serve)
+}
+
+/// The location of the serving session, `--iox-prefix`'s, else the newest of yours, and its
+/// motors.
+fn session(args: &CmdArgs) -> anyhow::Result<(IpcLocation, usize)> {
     if let Some(prefix) = &args.iox_prefix {
-        anyhow::ensure!(
-            serving(prefix),
-            "no serving session under iceoryx2 prefix `{prefix}` (its run file {} is not a \
-             running `qmarc-starter serve`'s)",
-            run_file(prefix).display()
-        );
-        return Ok(qmarc_telemetry::reader::location_of(prefix, args.iox_root.as_deref()));
+        let spec = serving(prefix).ok_or_else(|| {
+            anyhow::anyhow!(
+                "no serving session under iceoryx2 prefix `{prefix}` (its run file {} is not a \
+                 running `qmarc-starter serve`'s)",
+                run_file(prefix).display()
+            )
+        })?;
+        let location = qmarc_telemetry::reader::location_of(prefix, args.iox_root.as_deref());
+        return Ok((location, spec.settings.n_motors));
     }
     qmarc_telemetry::reader::runs(args.iox_root.as_deref())
         .into_iter()
-        .map(|r| r.location)
-        .find(|l| serving(&l.prefix))
+        .find_map(|r| serving(&r.location.prefix).map(|s| (r.location, s.settings.n_motors)))
         .ok_or_else(|| {
             anyhow::anyhow!("no serving controller found in /dev/shm: start `qmarc-starter serve`")
         })
@@ -109,6 +126,10 @@ fn describe(s: &CommandResponse, n: usize) -> String {
     if s.effector_mm.iter().all(|v| v.is_finite()) {
         let [x, y, z] = s.effector_mm;
         out.push_str(&format!("\n  effector {x:.2} {y:.2} {z:.2} mm"));
+    }
+    let gripper = qmarc_proto::Gripper(s.gripper);
+    if gripper.code() >= 0 {
+        out.push_str(&format!("\n  gripper {}", gripper.name()));
     }
     let unhomed: Vec<String> =
         (0..n).filter(|m| s.homed & (1 << m) == 0).map(|m| (m + 1).to_string()).collect();
@@ -143,13 +164,12 @@ fn move_request(
 }
 
 fn run(args: &CmdArgs) -> anyhow::Result<u8> {
-    let location = session(args)?;
-    let n = RunSpec::read(&run_file(&location.prefix)).map_or(3, |s| s.settings.n_motors);
+    let (location, n) = session(args)?;
     let mut client = match CommandClient::connect(&location) {
         Ok(c) => c,
         Err(e) => {
             // The session ended meanwhile: what the node made goes with the run's files.
-            if !serving(&location.prefix) {
+            if serving(&location.prefix).is_none() {
                 location.remove_files();
             }
             return Err(e.into());
@@ -158,6 +178,7 @@ fn run(args: &CmdArgs) -> anyhow::Result<u8> {
     let request = match &args.command {
         Cmd::Move { to, xyz, linear, speed } => move_request(to, xyz, *linear, *speed)?,
         Cmd::Stop => CommandRequest::of(CommandKind::Stop),
+        Cmd::Grip { close } => CommandRequest::grip(*close),
         Cmd::Quit => CommandRequest::of(CommandKind::Quit),
         Cmd::Status => CommandRequest::of(CommandKind::Status),
         Cmd::Wait { timeout } => {
@@ -203,5 +224,25 @@ pub fn main(args: &[OsString]) -> ExitCode {
             eprintln!("qmarc cmd: {e:#}");
             ExitCode::from(qmarc_proto::exit::INTERNAL)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_command_line_is_well_formed_and_grip_takes_on_or_off() {
+        CmdArgs::command().debug_assert();
+        let parse = |args: &[&str]| CmdArgs::try_parse_from(args);
+        let grip = |args: &[&str]| match parse(args).map(|a| a.command) {
+            Ok(Cmd::Grip { close }) => Some(close),
+            _ => None,
+        };
+        assert_eq!(grip(&["cmd", "grip", "on"]), Some(true));
+        assert_eq!(grip(&["cmd", "grip", "off"]), Some(false));
+        assert!(parse(&["cmd", "grip", "half"]).is_err());
+        assert!(parse(&["cmd", "grip"]).is_err());
     }
 }

@@ -443,6 +443,7 @@ pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: b
         require_homed: !homing && !unhomed && !matches!(mode, Mode::Jog | Mode::Check),
         // Homing and jog watch the switches themselves (a motor may rest on one).
         monitor_switches: !homing && mode != Mode::Jog,
+        gripper_mask: settings.s626.gripper_dio.map_or(0, |c| 1 << c),
         ..MovePlan::new(mode, settings.n_motors, settings.period_ns())
     }
 }

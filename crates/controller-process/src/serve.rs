@@ -187,6 +187,14 @@ impl Commands {
                 let limits = MotionLimits::of(&self.settings);
                 self.give(|_| Order::Quit { limits }).map(|_| ())
             }
+            Some(CommandKind::Grip) if self.settings.s626.gripper_dio.is_none() => Err((
+                Refusal::NoGripper,
+                "no gripper is wired: set [s626] gripper_dio to its output".to_string(),
+            )),
+            Some(CommandKind::Grip) => {
+                let close = req.flags & CommandRequest::CLOSE != 0;
+                self.give(|id| Order::Grip { id, close }).map(|id| self.accepted = id)
+            }
         };
         match outcome {
             Ok(()) => {
@@ -232,6 +240,7 @@ impl Commands {
             actual: shared.actual(),
             fault: self.ended.fault.load(Ordering::Acquire),
             phase: self.progress.as_ref().map_or(0, |p| p.read().phase),
+            gripper: shared.gripper.load(Ordering::Acquire),
             ..CommandResponse::default()
         };
         let c = r.command;

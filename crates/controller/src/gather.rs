@@ -19,6 +19,9 @@ pub struct GatherRow {
     pub act: [f64; MAX_MOTORS],
     /// DAC code sent per motor.
     pub dac: [i32; MAX_MOTORS],
+    /// The gripper's state ([`qmarc_proto::Gripper::code`]: 0 open, 1 closing, 2 closed,
+    /// 3 opening, −1 none).
+    pub grip: i8,
 }
 
 /// Most memory the gather buffer may take, bytes (`mlockall` keeps it resident).
@@ -77,7 +80,8 @@ impl Gather {
             next_due: 0,
             n_motors: n_motors.min(MAX_MOTORS),
             dropped: 0,
-            fields: GatherFields::default(),
+            // No gripper unless the move says one is wired (`with_fields`).
+            fields: GatherFields { grip: false, ..GatherFields::default() },
             ring: None,
         }
     }
@@ -165,6 +169,7 @@ mod tests {
             cmd: [1000.5, -3.0, 0.0, 0.0],
             act: [998.0, -1.0, 0.0, 0.0],
             dac: [12, -8191, 0, 0],
+            grip: 0,
         }
     }
 

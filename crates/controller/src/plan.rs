@@ -64,6 +64,8 @@ pub struct MovePlan {
     pub require_homed: bool,
     /// Latch limit switches in the hwserver (off while homing: homing watches its switch).
     pub monitor_switches: bool,
+    /// The gripper's output bit (bit c: DIO channel c, `s626.gripper_dio`); 0: no gripper.
+    pub gripper_mask: u32,
 }
 
 impl MovePlan {
@@ -84,6 +86,7 @@ impl MovePlan {
             limits: MoveLimits::none(),
             require_homed: false,
             monitor_switches: true,
+            gripper_mask: 0,
         }
     }
 }

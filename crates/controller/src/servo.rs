@@ -13,8 +13,9 @@ use crate::link::{HwLink, LinkError};
 use crate::plan::MovePlan;
 use crate::stats::{ErrorStats, TimingStats};
 use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_config::GatherFields;
 pub use qmarc_proto::state::Phase;
-use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
+use qmarc_proto::{Gripper, HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_timer::{Clock, Tick};
 
 mod error;
@@ -83,6 +84,11 @@ pub struct Servo {
     telemetry: Option<crate::telemetry::Telemetry>,
     /// Live samples dropped because their ring was full (known once the move ended).
     telemetry_dropped: u32,
+    /// The gripper as the cycle's read reported it.
+    grip: Gripper,
+    /// The free outputs as the cycle's read reported them (after a write of this cycle, as
+    /// written).
+    outputs: u32,
 }
 
 impl Servo {
@@ -128,6 +134,8 @@ impl Servo {
             progress: None,
             telemetry: None,
             telemetry_dropped: 0,
+            grip: Gripper(Gripper::ABSENT),
+            outputs: 0,
         }
     }
 
@@ -280,7 +288,10 @@ impl Servo {
             + self.plan.settle_cycles;
         crate::gather::check_budget(samples, self.plan.gather_every)?;
         self.gather = Gather::for_move(samples, self.plan.gather_every, self.plan.n_motors)
-            .with_fields(self.plan.gather_fields)
+            .with_fields(GatherFields {
+                grip: self.plan.gather_fields.grip && self.plan.gripper_mask != 0,
+                ..self.plan.gather_fields
+            })
             .keeping_last(self.plan.gather_keeps_last && self.planned_samples.is_none());
         self.timing = TimingStats::new(self.plan.period_ns);
         self.errors = ErrorStats::default();
@@ -366,6 +377,11 @@ impl Servo {
         };
         let written = self.clock.now_ns();
 
+        // 4b. The gripper, in a cycle its command changes: message 13, one more exchange.
+        if let Some(f) = self.write_gripper(link, n) {
+            return CycleEnd::Fault(Fault { hw_time_ns, ..f });
+        }
+
         // 5. Gather.
         self.timing.record_cycle(tick, read_start, read_done, computed, written);
         self.record(n, tick);
@@ -391,8 +407,29 @@ impl Servo {
             return Err(Fault { hw_time_ns, ..f });
         }
         self.act = resp.data;
+        self.grip = Gripper(resp.gripper);
+        self.outputs = resp.outputs;
         self.generator.observe(&self.act, &resp.aux.map(MotorFlags));
         Ok(hw_time_ns)
+    }
+
+    /// Step 4b of a cycle: what the generator wants of the gripper, written when it is not
+    /// what the outputs are (`None`: nothing to write, or written); the fault otherwise.
+    #[inline]
+    fn write_gripper(&mut self, link: &mut dyn HwLink, n: u64) -> Option<Fault> {
+        let mask = self.plan.gripper_mask;
+        let close = self.generator.gripper(self.grip)?;
+        if mask == 0 || close == (self.outputs & mask != 0) {
+            return None;
+        }
+        let values = if close { mask } else { 0 };
+        match link.exchange(&HwMsg::write_outputs(mask, values)) {
+            Err(e) => Some(Fault::from_link(e, n)),
+            Ok(resp) => {
+                self.outputs = (self.outputs & !mask) | values;
+                Fault::from_status(resp.status(), n)
+            }
+        }
     }
 
     /// Step 2 of a cycle: the command of sample `n` into `cmd`, or how the cycle ends when
@@ -455,6 +492,7 @@ impl Servo {
                 cmd: self.cmd,
                 act: self.act,
                 dac: self.dac,
+                grip: self.grip.code(),
             });
         }
     }

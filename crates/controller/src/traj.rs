@@ -3,7 +3,7 @@
 //! `qmarc-plugins`.
 
 use crate::fault::FaultKind;
-use qmarc_proto::{MAX_MOTORS, MotorFlags};
+use qmarc_proto::{Gripper, MAX_MOTORS, MotorFlags};
 
 /// What a generator says about a sample.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -136,6 +136,17 @@ pub trait TrajectoryGenerator: Send {
     #[inline]
     fn observe(&mut self, act: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
         let _ = (act, flags);
+    }
+
+    /// Every cycle after [`TrajectoryGenerator::sample`], with the gripper as this cycle's
+    /// read found it ([`Gripper::ABSENT`] when none is wired): whether it should be closed
+    /// (`Some(true)`), open (`Some(false)`), or left as it is (`None`, the default). The loop
+    /// writes it (message 13) only in a cycle where it differs from the output. Same contract
+    /// as `sample`.
+    #[inline]
+    fn gripper(&mut self, state: Gripper) -> Option<bool> {
+        let _ = state;
+        None
     }
 
     /// After `start`: the smallest and largest command of each motor over the whole path,

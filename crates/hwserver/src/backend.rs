@@ -13,13 +13,17 @@ pub struct Inputs {
     /// The emergency-stop chain reads open now (pressed, or a broken wire); false for a
     /// backend without one.
     pub estop_open: bool,
+    /// The free outputs ([`Backend::free_outputs`]) that are on now, as the pins read (bit c:
+    /// DIO channel c); 0 for a backend without outputs.
+    pub outputs: u32,
 }
 
 /// A hardware operation failed (a short ioctl, a device error). Carries numbers only.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 #[error("hardware operation {op} failed with code {code}")]
 pub struct HwFault {
-    /// Which operation: 1 read inputs, 2 write DACs, 3 enable, 4 load counter.
+    /// Which operation: 1 read inputs, 2 write DACs, 3 enable, 4 load counter, 5 write
+    /// outputs.
     pub op: u8,
     /// Backend-specific code (an errno for ioctl backends).
     pub code: i32,
@@ -86,6 +90,21 @@ pub trait Backend: Send {
 
     /// Loads the hardware counter of `motor` with `raw`.
     fn load_counter(&mut self, motor: usize, raw: u32) -> Result<(), HwFault>;
+
+    /// The digital outputs message 13 may write (bit c: DIO channel c of the first bank):
+    /// every output the backend does not keep for itself (amplifier enables, a charge pump,
+    /// reserved channels, inputs). Default: none.
+    fn free_outputs(&self) -> u32 {
+        0
+    }
+
+    /// Sets the outputs of `mask` (always within [`Backend::free_outputs`], the server checks)
+    /// to the bits of `values`, leaving every other output as it is. Same real-time contract
+    /// as [`Backend::write_dacs`]. Default: a backend without outputs fails.
+    fn write_outputs(&mut self, mask: u32, values: u32) -> Result<(), HwFault> {
+        let _ = (mask, values);
+        Err(HwFault { op: 5, code: nix::errno::Errno::ENOTSUP as i32 })
+    }
 
     /// All DACs to 0 V and all amplifiers off, as far as the hardware still obeys. Never fails:
     /// it is what every fault path calls.

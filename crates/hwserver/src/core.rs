@@ -1,6 +1,7 @@
 //! [`HwCore`]: what the server does with each request, independent of IPC and hardware.
 
 use crate::backend::{Backend, Inputs};
+use crate::gripper::GripperModel;
 use qmarc_proto::link::{HwLink, LinkError};
 use qmarc_proto::{
     COUNTER_ZERO, DAC_MAX, HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status, counter_delta,
@@ -25,6 +26,10 @@ pub struct HwCore {
     /// Fastest a counter can physically change, counts/s (∞: unchecked).
     max_counts_per_s: f64,
     last_read_ns: u64,
+    /// The free outputs as message 13 last set them (from the pins read at start).
+    outputs: u32,
+    /// The gripper on one of them, if one is wired.
+    gripper: GripperModel,
 }
 
 /// Counts a counter may move beyond the physical bound between two reads (quantisation and
@@ -51,6 +56,8 @@ impl HwCore {
             homed: [false; MAX_MOTORS],
             max_counts_per_s: f64::INFINITY,
             last_read_ns: 0,
+            outputs: 0,
+            gripper: GripperModel::NONE,
         };
         // The kept frame holds only where the counters could be read: their distance from
         // COUNTER_ZERO is the position. Without that read no motor counts as homed.
@@ -59,6 +66,7 @@ impl HwCore {
                 core.homed[m] = core.backend.homed(m);
                 core.position[m] = i64::from(counter_delta(COUNTER_ZERO, core.inputs.counters[m]));
             }
+            core.outputs = core.inputs.outputs & core.backend.free_outputs();
         }
         core.last_read_ns = core.backend.now_ns();
         core
@@ -69,6 +77,26 @@ impl HwCore {
     /// the jump is not added to the position. A 24-bit wrap is a normal step, not a jump.
     pub fn with_encoder_limit(mut self, counts_per_s: f64) -> HwCore {
         self.max_counts_per_s = counts_per_s;
+        self
+    }
+
+    /// The server of the settings `s` around `backend`: the encoder limit of
+    /// `hwserver.max_counts_per_s` and the gripper of `s626.gripper_dio`.
+    pub fn for_settings(backend: Box<dyn Backend>, s: &qmarc_config::Settings) -> HwCore {
+        let core = HwCore::new(backend).with_encoder_limit(s.hwserver.max_counts_per_s);
+        match s.s626.gripper_dio {
+            Some(c) => core.with_gripper(1 << c, s.s626.gripper_close_s),
+            None => core,
+        }
+    }
+
+    /// A gripper on the free output bit `mask` whose jaws travel in `travel_s`
+    /// ([`GripperModel`]), as the outputs read at start leave it. A bit the backend does not
+    /// leave free is no gripper (the settings' check refuses it before this).
+    pub fn with_gripper(mut self, mask: u32, travel_s: f64) -> HwCore {
+        if mask & self.backend.free_outputs() == mask && mask != 0 {
+            self.gripper = GripperModel::new(mask, travel_s, self.outputs);
+        }
         self
     }
 
@@ -227,6 +255,21 @@ impl HwCore {
         }
     }
 
+    /// Message 13: the outputs of `mask` to `values`, unless the mask holds a channel the
+    /// backend keeps, or the emergency stop or a fault that ends the server holds the outputs.
+    fn write_outputs(&mut self, mask: u32, values: u32) -> Status {
+        let held = self.outputs_locked() || self.latched.intersects(Status::ESTOP);
+        if mask & !self.backend.free_outputs() != 0 || held {
+            return Status::PROTECTED_OUTPUT;
+        }
+        if self.backend.write_outputs(mask, values & mask).is_err() {
+            return self.hardware_failed();
+        }
+        self.outputs = (self.outputs & !mask) | (values & mask);
+        self.gripper.set(self.outputs, self.backend.now_ns());
+        Status::OK
+    }
+
     /// Zeroes `motor`'s DAC and disables its amplifier (both tried, whatever fails).
     fn disable(&mut self, motor: usize) -> Status {
         self.dacs[motor] = 0;
@@ -277,6 +320,8 @@ impl HwCore {
                     resp.data[m] = self.position[m] as f64;
                     resp.aux[m] = self.flags(m);
                 }
+                resp.outputs = self.outputs;
+                resp.gripper = self.gripper.state(self.backend.now_ns()).0;
             }
             Ok(MsgType::WriteAllDacs) => {
                 for m in 0..self.n_motors {
@@ -312,6 +357,9 @@ impl HwCore {
                 }
                 self.latched = self.latched & !cleared;
             }
+            Ok(MsgType::WriteDigitalOutputs) => {
+                status |= self.write_outputs(req.aux[0] as u32, req.aux[1] as u32);
+            }
             Ok(MsgType::Exit) => {
                 self.safe_state();
                 self.exit_requested = true;
@@ -333,246 +381,4 @@ impl HwLink for HwCore {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::backends::sim::{SimDeltabot, SimParams};
-
-    fn core_with(p: SimParams) -> HwCore {
-        HwCore::new(Box::new(SimDeltabot::new(p).unwrap()))
-    }
-
-    fn core(n_motors: usize) -> HwCore {
-        core_with(SimParams { n_motors, lockstep: true, ..SimParams::default() })
-    }
-
-    fn send(core: &mut HwCore, req: HwMsg) -> HwMsg {
-        let resp = core.handle(&req);
-        assert_eq!((resp.msg_type, resp.seq, resp.motor), (req.msg_type, req.seq, req.motor));
-        resp
-    }
-
-    /// Issue 32: when the server ends, what the backend keeps is written (the simulator's
-    /// event log, which the fault tests read), and a failure to write it is an error naming
-    /// the file.
-    #[test]
-    fn finishing_writes_what_the_backend_keeps() {
-        let dir = std::env::temp_dir().join(format!("qmarc-finish-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let core_logging_to = |events: &std::path::Path| {
-            let s = crate::backends::test_settings(&format!(
-                "[sim]\nevents_file = \"{}\"\n",
-                events.display()
-            ));
-            HwCore::new(Box::new(SimDeltabot::open(&s, true).unwrap()))
-        };
-        let events = dir.join("events.csv");
-        let mut core = core_logging_to(&events);
-        send(&mut core, HwMsg::for_motor(MsgType::EnableMotor, 0));
-        send(&mut core, HwMsg::request(MsgType::DisableAll));
-        core.finish().unwrap();
-        assert!(std::fs::metadata(&events).unwrap().len() > 0, "the event log written");
-        let nowhere = dir.join("no-such-dir/events.csv");
-        let e = core_logging_to(&nowhere).finish().unwrap_err().to_string();
-        assert!(e.starts_with(&nowhere.display().to_string()), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    #[test]
-    fn unknown_message_types_get_a_status_bit() {
-        let mut c = core(3);
-        for raw in [0, 13, 1000, u32::MAX] {
-            let resp = send(&mut c, HwMsg { msg_type: raw, seq: 9, ..HwMsg::default() });
-            assert_eq!(resp.status(), Status::UNKNOWN_MESSAGE);
-        }
-        // The bit is per response, not latched.
-        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
-    }
-
-    #[test]
-    fn bad_motor_indices_get_a_status_bit() {
-        let mut c = core(3);
-        for t in
-            [MsgType::ReadEncoder, MsgType::WriteDac, MsgType::EnableMotor, MsgType::DisableMotor]
-        {
-            let resp = send(&mut c, HwMsg::for_motor(t, 3));
-            assert_eq!(resp.status(), Status::BAD_MOTOR, "{t:?}");
-        }
-        assert!(!c.any_enabled());
-        // Issue 32: a preset of a motor that is not there (and not "all") presets nothing.
-        let before: Vec<i64> = (0..3).map(|m| c.position(m)).collect();
-        let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, 3);
-        preset.data = [1234.0; MAX_MOTORS];
-        assert_eq!(send(&mut c, preset).status(), Status::BAD_MOTOR);
-        send(&mut c, HwMsg::read_all_encoders());
-        assert_eq!((0..3).map(|m| c.position(m)).collect::<Vec<_>>(), before);
-        // And a motor that is there is read and written as asked.
-        for m in 0..3u32 {
-            assert_eq!(
-                send(&mut c, HwMsg::for_motor(MsgType::ReadEncoder, m)).status(),
-                Status::OK
-            );
-        }
-        for (code, written) in [(100, 100), (-100, -100), (-9_000, -DAC_MAX), (9_000, DAC_MAX)] {
-            let mut w = HwMsg::for_motor(MsgType::WriteDac, 2);
-            w.aux[2] = code;
-            assert_eq!(send(&mut c, w).status(), Status::OK);
-            assert_eq!(c.dacs[2], written, "WriteDac {code}");
-        }
-    }
-
-    #[test]
-    fn step_response_moves_the_software_position() {
-        let mut c = core(2);
-        send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 1));
-        let mut codes = [0; MAX_MOTORS];
-        codes[1] = 1000;
-        send(&mut c, HwMsg::write_all_dacs(&codes));
-        let mut last = 0.0;
-        for _ in 0..50 {
-            let resp = send(&mut c, HwMsg::read_all_encoders());
-            assert!(resp.data[1] >= last);
-            last = resp.data[1];
-            assert_eq!(resp.data[0], 0.0, "motor 1 is disabled");
-        }
-        assert!(last > 100.0, "{last}");
-        let resp = send(&mut c, HwMsg::for_motor(MsgType::ReadEncoder, 1));
-        assert!(resp.data[1] >= last);
-        // 50 + 1 reads here and the one of HwCore::new, one period each.
-        assert_eq!(resp.time_ns, 52 * 400_000);
-    }
-
-    #[test]
-    fn software_position_survives_counter_wrap() {
-        let mut p = SimParams { n_motors: 1, lockstep: true, ..SimParams::default() };
-        p.start_counts[0] = 8_388_000.0;
-        p.plant.top_switch_counts = -1e9;
-        p.plant.bottom_switch_counts = 1e9;
-        let mut c = core_with(p);
-        assert_eq!(send(&mut c, HwMsg::read_all_encoders()).data[0], 8_388_000.0);
-        send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 0));
-        let mut codes = [0; MAX_MOTORS];
-        codes[0] = 8191;
-        send(&mut c, HwMsg::write_all_dacs(&codes));
-        let mut pos = 0.0;
-        for _ in 0..100 {
-            pos = send(&mut c, HwMsg::read_all_encoders()).data[0];
-        }
-        assert!(pos > 8_388_608.0, "crossed the 24-bit wrap: {pos}");
-        assert_eq!(pos, c.position(0) as f64);
-    }
-
-    #[test]
-    fn a_counter_jump_faster_than_physically_possible_is_an_encoder_fault() {
-        let mut p = SimParams { n_motors: 2, lockstep: true, ..SimParams::default() };
-        p.plant.top_switch_counts = -1e9;
-        p.plant.bottom_switch_counts = 1e9;
-        // 400 µs at 250 000 counts/s is 100 counts per read: the bound is 100 + 16.
-        let sim = SimDeltabot::new(p).unwrap();
-        let mut c = HwCore::new(Box::new(sim)).with_encoder_limit(250_000.0);
-        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
-        // Full speed crosses nothing: the sim cannot exceed Kv·10 V = 250 000 counts/s.
-        send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 0));
-        let mut codes = [0; MAX_MOTORS];
-        codes[0] = 8191;
-        send(&mut c, HwMsg::write_all_dacs(&codes));
-        for _ in 0..200 {
-            assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
-        }
-        let before = c.position(1);
-        // A glitch: motor 2's counter is reloaded behind the core's back (a cable fault).
-        c.backend.load_counter(1, COUNTER_ZERO + 5_000).unwrap();
-        let r = send(&mut c, HwMsg::read_all_encoders());
-        assert_eq!(r.status(), Status::encoder_overflow(1));
-        assert_eq!(c.position(1), before, "the jump is not believed");
-        // Latched until cleared.
-        assert_eq!(send(&mut c, HwMsg::read_all_encoders()).status(), Status::encoder_overflow(1));
-        send(&mut c, HwMsg::request(MsgType::ClearSafetyStatus));
-        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
-        // Issue 32: a jump of the bound exactly is believed, one count more is not (the bound
-        // as the core computes it from the lock-step period, 400 000 ns).
-        let bound = (250_000.0 * (400_000.0 * 1e-9f64)).ceil() as i64 + ENCODER_SLACK_COUNTS;
-        let jump = |c: &mut HwCore, by: i64| {
-            let raw = c.inputs.counters[1].wrapping_add(by as u32) & qmarc_proto::COUNTER_MASK;
-            c.backend.load_counter(1, raw).unwrap();
-            send(c, HwMsg::read_all_encoders()).status()
-        };
-        let before = c.position(1);
-        assert_eq!(jump(&mut c, bound), Status::OK);
-        assert_eq!(c.position(1), before + bound);
-        assert_eq!(jump(&mut c, -bound - 1), Status::encoder_overflow(1));
-    }
-
-    #[test]
-    fn reset_zero_sets_software_position_to_zero() {
-        let mut p = SimParams { n_motors: 2, lockstep: true, ..SimParams::default() };
-        p.start_counts = [123.0, -77.0, 0.0, 0.0];
-        let mut c = core_with(p);
-        let r = send(&mut c, HwMsg::read_all_encoders());
-        assert_eq!(&r.data[..2], &[123.0, -77.0]);
-        send(&mut c, HwMsg::for_motor(MsgType::ResetEncoderZero, 1));
-        let r = send(&mut c, HwMsg::read_all_encoders());
-        assert_eq!(&r.data[..2], &[123.0, 0.0]);
-        send(&mut c, HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS));
-        let r = send(&mut c, HwMsg::read_all_encoders());
-        assert_eq!(&r.data[..2], &[0.0, 0.0]);
-        // A preset: the position reads data[m] there (homing sets home to 0 this way).
-        let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS);
-        preset.data[0] = -37.0;
-        preset.data[1] = 5.4;
-        send(&mut c, preset);
-        let r = send(&mut c, HwMsg::read_all_encoders());
-        assert_eq!(&r.data[..2], &[-37.0, 5.0]);
-        assert!(MotorFlags(r.aux[0]).homed() && MotorFlags(r.aux[1]).homed());
-    }
-
-    #[test]
-    fn limit_trip_latches_until_cleared_and_only_while_monitoring() {
-        let mut p = SimParams { n_motors: 2, lockstep: true, ..SimParams::default() };
-        p.start_counts[1] = p.plant.top_switch_counts - 1.0;
-        let mut c = core_with(p);
-        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok(), "not monitoring");
-        send(&mut c, HwMsg::request(MsgType::EnableSafety));
-        let r = send(&mut c, HwMsg::read_all_encoders());
-        assert_eq!(r.status(), Status::limit_top(1));
-        // Latched in every response, including writes.
-        assert_eq!(send(&mut c, HwMsg::write_all_dacs(&[0; 4])).status(), Status::limit_top(1));
-        send(&mut c, HwMsg::request(MsgType::ClearSafetyStatus));
-        // Monitoring stopped at the trip (thesis 3.10.1): still on the switch, but no new bit.
-        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
-        send(&mut c, HwMsg::request(MsgType::EnableSafety));
-        assert_eq!(send(&mut c, HwMsg::read_all_encoders()).status(), Status::limit_top(1));
-        send(&mut c, HwMsg::request(MsgType::DisableSafety));
-        send(&mut c, HwMsg::request(MsgType::ClearSafetyStatus));
-        assert!(send(&mut c, HwMsg::read_all_encoders()).status().is_ok());
-    }
-
-    #[test]
-    fn watchdog_and_shutdown_disable_and_refuse_enable() {
-        let mut c = core(3);
-        for m in 0..3 {
-            send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, m));
-        }
-        assert!(c.any_enabled());
-        c.trip_watchdog();
-        assert!(!c.any_enabled());
-        let r = send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 0));
-        assert!(r.status().contains(Status::WATCHDOG | Status::SHUTDOWN));
-        assert!(!c.any_enabled());
-        let mut c = core(1);
-        c.shut_down();
-        assert_eq!(send(&mut c, HwMsg::read_all_encoders()).status(), Status::SHUTDOWN);
-    }
-
-    #[test]
-    fn exit_and_disable_all_leave_the_safe_state() {
-        let mut c = core(3);
-        send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 2));
-        send(&mut c, HwMsg::request(MsgType::DisableAll));
-        assert!(!c.any_enabled());
-        send(&mut c, HwMsg::for_motor(MsgType::EnableMotor, 0));
-        assert!(!c.exit_requested());
-        assert!(send(&mut c, HwMsg::request(MsgType::Exit)).status().is_ok());
-        assert!(c.exit_requested());
-        assert!(!c.any_enabled());
-    }
-}
+mod tests;

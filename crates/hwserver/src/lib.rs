@@ -27,6 +27,7 @@ pub mod backend;
 pub mod backends;
 pub mod conformance;
 pub mod core;
+pub mod gripper;
 pub mod selftest;
 pub mod server;
 

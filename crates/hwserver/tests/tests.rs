@@ -12,7 +12,7 @@ use util::Server;
 fn unknown_message_types_get_a_status_bit_and_the_server_carries_on() {
     let mut server = Server::start("unknown", "");
     let mut link = server.connect();
-    for raw in [0, 13, 4242] {
+    for raw in [0, 14, 4242] {
         let resp = link.exchange(&HwMsg { msg_type: raw, ..HwMsg::default() }).unwrap();
         assert_eq!(resp.status(), Status::UNKNOWN_MESSAGE, "type {raw}");
         assert_eq!(resp.msg_type, raw, "echoed");

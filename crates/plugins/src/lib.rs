@@ -17,6 +17,7 @@
 #[doc = include_str!("../../../docs/extending.md")]
 pub mod extending {}
 pub mod check;
+pub mod grip;
 pub mod homing;
 pub mod knots;
 pub mod linear;

@@ -84,13 +84,13 @@ pub const GENERATORS: &[GeneratorEntry] = &[
         name: "move",
         description: "to a target from where the motors are, jerk-limited and time-optimal (online Ruckig)",
         needs_knots: false,
-        build: |s| Ok(Box::new(OnlineMove::from_settings(s)?)),
+        build: |s| Ok(crate::grip::at_end(s, Box::new(OnlineMove::from_settings(s)?))),
     },
     GeneratorEntry {
         name: "linear",
         description: "to a point along a straight line, jerk-limited, every joint within its limits",
         needs_knots: false,
-        build: |s| Ok(Box::new(LinearMove::from_settings(s)?)),
+        build: |s| Ok(crate::grip::at_end(s, Box::new(LinearMove::from_settings(s)?))),
     },
     GeneratorEntry {
         name: "pvt",

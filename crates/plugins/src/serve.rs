@@ -11,7 +11,7 @@ use crate::moveto::MotionLimits;
 use crate::online::{MotionState, OnlineMove};
 use qmarc_config::Settings;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
-use qmarc_proto::{MAX_MOTORS, MotorFlags};
+use qmarc_proto::{Gripper, MAX_MOTORS, MotorFlags};
 use rtrb::{Consumer, Producer, RingBuffer};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
@@ -51,6 +51,14 @@ pub enum Order {
         /// Its limits.
         limits: MotionLimits,
     },
+    /// Close the gripper (`close`) or open it; settled once it is there and the command at
+    /// rest.
+    Grip {
+        /// The order's id.
+        id: u64,
+        /// Close it.
+        close: bool,
+    },
     /// Stop, then end the move (the session).
     Quit {
         /// The stop's limits.
@@ -86,6 +94,8 @@ pub struct ServeShared {
     pub homed: AtomicU32,
     /// The loop has sampled at least once.
     pub started: AtomicBool,
+    /// The gripper as the loop's last read found it ([`Gripper`] bits).
+    pub gripper: AtomicU32,
 }
 
 impl ServeShared {
@@ -127,6 +137,10 @@ pub struct ServeMove {
     quitting: bool,
     /// A quit's stop has come to rest: the next sample ends the move.
     ended: bool,
+    /// What the gripper was last told (`None`: nothing yet, it stays as it is).
+    grip: Option<bool>,
+    /// The gripper is where it was last told to be (or was told nothing).
+    grip_arrived: bool,
     period_s: f64,
     n_motors: usize,
 }
@@ -147,6 +161,7 @@ impl ServeMove {
         let (orders_tx, orders) = RingBuffer::new(ORDER_QUEUE);
         let (spent, spent_rx) = RingBuffer::new(ORDER_QUEUE + 1);
         let shared = Arc::new(ServeShared::default());
+        shared.gripper.store(Gripper::ABSENT, Ordering::Release);
         let serve = ServeMove {
             online,
             orders,
@@ -156,6 +171,8 @@ impl ServeMove {
             current: 0,
             quitting: false,
             ended: false,
+            grip: None,
+            grip_arrived: true,
             period_s: settings.period_s(),
             n_motors: settings.n_motors,
         };
@@ -238,6 +255,12 @@ impl ServeMove {
                     }
                     self.took(id);
                 }
+                Order::Grip { id, close } => {
+                    self.grip = Some(close);
+                    self.grip_arrived = false;
+                    self.current = id;
+                    self.took(id);
+                }
                 Order::Quit { limits } => {
                     self.leave_line();
                     let _ = self.online.stop(&limits);
@@ -260,7 +283,7 @@ impl ServeMove {
             a.store(c.to_bits(), Ordering::Release);
         }
         self.shared.moving.store(moving, Ordering::Release);
-        if !moving {
+        if !moving && self.grip_arrived {
             self.shared.settled.store(self.current, Ordering::Release);
         }
     }
@@ -292,6 +315,15 @@ impl TrajectoryGenerator for ServeMove {
         }
         let homed = (0..self.n_motors).filter(|&m| flags[m].homed()).fold(0, |b, m| b | 1 << m);
         self.shared.homed.store(homed, Ordering::Release);
+    }
+
+    #[inline]
+    fn gripper(&mut self, state: Gripper) -> Option<bool> {
+        self.shared.gripper.store(state.0, Ordering::Release);
+        // Told and there: the order settles with the next sample at rest.
+        self.grip_arrived |=
+            self.grip.is_some_and(|c| state.told_to_close() == c && state.arrived());
+        self.grip
     }
 
     #[inline]

@@ -144,9 +144,11 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
     let limits = MotionLimits::of(&s);
     let soft = [(-9_000.0, 10_000.0); MAX_MOTORS];
     let (serve, mut handle) = ServeMove::new(&s, Some(soft));
+    // With the gripper on DIO6: a grip's third exchange is in the counted cycles too.
+    let plan = MovePlan { gripper_mask: 1 << 6, ..plan(3) };
     let mut servo =
-        Servo::new(plan(3), Box::new(serve), (LAWS[0].build)(&s), Box::new(MockClock::new(0)));
-    let mut link = sim_core(lockstep());
+        Servo::new(plan, Box::new(serve), (LAWS[0].build)(&s), Box::new(MockClock::new(0)));
+    let mut link = sim_core(lockstep()).with_gripper(1 << 6, 0.05);
     let mut ticker = ManualTicker::new(400_000);
     servo.prepare(&mut link).unwrap();
     servo.set_t0(ticker.start().unwrap());
@@ -164,6 +166,8 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
             let sign = if id % 2 == 0 { 1.0 } else { -1.0 };
             let order = if id % 5 == 0 {
                 Order::Stop { id, limits }
+            } else if id % 3 == 0 {
+                Order::Grip { id, close: id % 2 == 0 }
             } else {
                 Order::Move { id, target: [sign * 3000.0, -sign * 1500.0, 800.0, 0.0], limits }
             };
@@ -178,6 +182,9 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
     assert_eq!(handle.shared.taken.load(Ordering::Acquire), id, "every order taken");
     assert_eq!(handle.shared.not_taken.load(Ordering::Acquire), 0);
     assert!(handle.spent.pop().is_err());
+    // The last grip (id 12: close) was written and the gripper has closed.
+    let gripper = qmarc_proto::Gripper(handle.shared.gripper.load(Ordering::Acquire));
+    assert_eq!(gripper.name(), "closed");
 }
 
 /// The online planner refuses what it cannot plan — a state that is not finite, a limit that

@@ -38,12 +38,19 @@ pub enum CommandKind {
     Status = 3,
     /// Stop, then end the session as a move ends (its data files written).
     Quit = 4,
+    /// Close the gripper ([`CommandRequest::CLOSE`]) or open it, now.
+    Grip = 5,
 }
 
 impl CommandKind {
     /// Every kind, by wire number.
-    pub const ALL: [CommandKind; 4] =
-        [CommandKind::Move, CommandKind::Stop, CommandKind::Status, CommandKind::Quit];
+    pub const ALL: [CommandKind; 5] = [
+        CommandKind::Move,
+        CommandKind::Stop,
+        CommandKind::Status,
+        CommandKind::Quit,
+        CommandKind::Grip,
+    ];
 
     /// The kind of wire number `raw`.
     pub fn from_wire(raw: u32) -> Option<CommandKind> {
@@ -70,11 +77,13 @@ pub enum Refusal {
     Moving = 6,
     /// The loop has not taken the last commands yet (its queue is full).
     Busy = 7,
+    /// No gripper is wired (`s626.gripper_dio`).
+    NoGripper = 8,
 }
 
 impl Refusal {
     /// Every refusal, by wire number.
-    pub const ALL: [Refusal; 7] = [
+    pub const ALL: [Refusal; 8] = [
         Refusal::BadRequest,
         Refusal::Unreachable,
         Refusal::SoftLimits,
@@ -82,6 +91,7 @@ impl Refusal {
         Refusal::NotServing,
         Refusal::Moving,
         Refusal::Busy,
+        Refusal::NoGripper,
     ];
 
     /// The refusal of wire number `raw`.
@@ -99,18 +109,19 @@ impl Refusal {
             Refusal::NotServing => "not_serving",
             Refusal::Moving => "moving",
             Refusal::Busy => "busy",
+            Refusal::NoGripper => "no_gripper",
         }
     }
 }
 
 /// A command.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("qmarc.CommandRequest.v1")]
+#[type_name("qmarc.CommandRequest.v2")]
 #[repr(C)]
 pub struct CommandRequest {
     /// [`CommandKind`] as its wire number.
     pub kind: u32,
-    /// [`CommandRequest::XYZ`], [`CommandRequest::LINEAR`].
+    /// [`CommandRequest::XYZ`], [`CommandRequest::LINEAR`], [`CommandRequest::CLOSE`].
     pub flags: u32,
     /// The client's number for it, echoed in the response.
     pub id: u64,
@@ -125,6 +136,14 @@ impl CommandRequest {
     pub const XYZ: u32 = 1;
     /// A straight line in Cartesian space (with [`CommandRequest::XYZ`]).
     pub const LINEAR: u32 = 2;
+    /// A grip closes the gripper (else it opens it).
+    pub const CLOSE: u32 = 4;
+
+    /// Close the gripper (`close`) or open it.
+    pub fn grip(close: bool) -> CommandRequest {
+        let flags = if close { CommandRequest::CLOSE } else { 0 };
+        CommandRequest { flags, ..CommandRequest::of(CommandKind::Grip) }
+    }
 
     /// A request of `kind` and nothing else.
     pub fn of(kind: CommandKind) -> CommandRequest {
@@ -150,7 +169,7 @@ impl CommandRequest {
 
 /// The answer to a command: accepted or refused, and where the robot is.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("qmarc.CommandResponse.v1")]
+#[type_name("qmarc.CommandResponse.v2")]
 #[repr(C)]
 pub struct CommandResponse {
     /// The request's id.
@@ -194,6 +213,10 @@ pub struct CommandResponse {
     pub actual: [f64; MAX_MOTORS],
     /// The effector's commanded point, mm (NaN without the robot's geometry).
     pub effector_mm: [f64; 3],
+    /// The gripper as the loop's last read found it ([`crate::Gripper`] bits).
+    pub gripper: u32,
+    /// Zero (keeps the layout free of padding).
+    pub reserved: u32,
     /// Why it was refused: UTF-8, NUL-padded.
     pub reason: [u8; REASON_BYTES],
 }
@@ -219,6 +242,8 @@ impl Default for CommandResponse {
             command: [0.0; MAX_MOTORS],
             actual: [0.0; MAX_MOTORS],
             effector_mm: [f64::NAN; 3],
+            gripper: crate::Gripper::ABSENT,
+            reserved: 0,
             reason: [0; REASON_BYTES],
         }
     }
@@ -379,19 +404,23 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_wire_numbers_are_those_of_v1() {
+    fn the_wire_numbers_are_those_of_v2() {
         let kinds: Vec<u32> = CommandKind::ALL.iter().map(|k| *k as u32).collect();
-        assert_eq!(kinds, [1, 2, 3, 4]);
+        assert_eq!(kinds, [1, 2, 3, 4, 5]);
         let refusals: Vec<u32> = Refusal::ALL.iter().map(|r| *r as u32).collect();
-        assert_eq!(refusals, [1, 2, 3, 4, 5, 6, 7]);
+        assert_eq!(refusals, [1, 2, 3, 4, 5, 6, 7, 8]);
         assert_eq!(CommandKind::from_wire(3), Some(CommandKind::Status));
-        assert_eq!((CommandKind::from_wire(0), Refusal::from_wire(8)), (None, None));
+        assert_eq!((CommandKind::from_wire(0), Refusal::from_wire(9)), (None, None));
+        let grip = CommandRequest::grip(true);
+        assert_eq!((grip.kind, grip.flags), (5, CommandRequest::CLOSE));
+        assert_eq!(CommandRequest::grip(false).flags, 0);
+        assert_eq!(Refusal::NoGripper.name(), "no_gripper");
     }
 
     #[test]
     fn the_messages_are_fixed_size_plain_data() {
         assert_eq!(std::mem::size_of::<CommandRequest>(), 56);
-        assert_eq!(std::mem::size_of::<CommandResponse>(), 384);
+        assert_eq!(std::mem::size_of::<CommandResponse>(), 392);
         assert_eq!(std::mem::align_of::<CommandResponse>(), 8);
     }
 

@@ -3,7 +3,7 @@
 //! QMARC's controller and hardware server exchange one fixed-size message, [`HwMsg`], the Rust
 //! form of the thesis' `ClientMessageT` (section 3.3.1): a message type, a per-motor `f64` data
 //! array, a per-motor `i32` auxiliary array and a status word. The twelve message types of
-//! thesis section 3.6 are [`MsgType`]; what went wrong is named by the bits of [`Status`].
+//! thesis section 3.6, and the digital outputs its section 6.2.2 asks for, are [`MsgType`]; what went wrong is named by the bits of [`Status`].
 //! [`service`] opens the iceoryx2 services both sides use, with identical QoS; [`telemetry`]
 //! is the live sample a move publishes for its readers, [`state`] the words of a move on the wire
 //! (its phase, the fault that ended it) and [`progress`] the page the starter and console read
@@ -33,7 +33,7 @@ pub mod status;
 pub mod telemetry;
 pub mod wake;
 
-pub use msg::{HwMsg, MotorFlags, MsgType, UnknownMsgType};
+pub use msg::{Gripper, HwMsg, MotorFlags, MsgType, UnknownMsgType};
 pub use status::Status;
 
 /// Most motors one hardware server drives. One Sensoray 626 has four DACs (and six counters),

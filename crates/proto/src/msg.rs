@@ -3,7 +3,8 @@
 use crate::{MAX_MOTORS, Status};
 use iceoryx2::prelude::ZeroCopySend;
 
-/// The twelve requests of thesis section 3.6, with their wire values.
+/// The twelve requests of thesis section 3.6, with their wire values, and the thirteenth its
+/// section 6.2.2 asks for (the digital outputs of a gripper).
 ///
 /// Single-motor requests name their motor in [`HwMsg::motor`]; all-motor requests use the
 /// arrays. The numbering follows the thesis' list (1 = read all encoders … 12 = exit).
@@ -38,11 +39,18 @@ pub enum MsgType {
     ClearSafetyStatus = 11,
     /// Thesis message 12: Put the hardware in the safe state, answer, and exit the server.
     Exit = 12,
+    /// Message 13 (thesis 6.2.2, a gripper on a free digital output): set the outputs of mask
+    /// `aux[0]` (bit c: DIO channel c of the card's first bank) to the bits of `aux[1]`. A
+    /// mask holding a channel the server keeps for itself (an amplifier enable, the charge
+    /// pump, a reserved channel, an input) is refused with [`Status::PROTECTED_OUTPUT`] and
+    /// nothing is written; while the emergency stop or a fault that ends the server holds, it
+    /// is refused with that status. Build it with [`HwMsg::write_outputs`].
+    WriteDigitalOutputs = 13,
 }
 
 impl MsgType {
     /// Every message type, in wire order.
-    pub const ALL: [MsgType; 12] = [
+    pub const ALL: [MsgType; 13] = [
         MsgType::ReadAllEncoders,
         MsgType::WriteAllDacs,
         MsgType::ReadEncoder,
@@ -55,13 +63,14 @@ impl MsgType {
         MsgType::DisableSafety,
         MsgType::ClearSafetyStatus,
         MsgType::Exit,
+        MsgType::WriteDigitalOutputs,
     ];
 
-    /// Decodes a wire value; `None` for anything that is not one of the twelve.
+    /// Decodes a wire value; `None` for anything that is not one of the thirteen.
     #[inline]
     pub fn from_raw(raw: u32) -> Option<MsgType> {
         match raw {
-            1..=12 => Some(Self::ALL[raw as usize - 1]),
+            1..=13 => Some(Self::ALL[raw as usize - 1]),
             _ => None,
         }
     }
@@ -108,6 +117,53 @@ impl MotorFlags {
     }
 }
 
+/// The gripper as a read response reports it ([`HwMsg::gripper`]): whether it is told to
+/// close, and whether it is sensed (or, without a sensor, timed) fully open or fully closed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+pub struct Gripper(pub u32);
+
+impl Gripper {
+    /// Its output is on: it is told to close.
+    pub const CLOSE: u32 = 1;
+    /// It is fully open.
+    pub const OPEN: u32 = 2;
+    /// It is fully closed.
+    pub const CLOSED: u32 = 4;
+    /// No gripper is wired: nothing else is set.
+    pub const ABSENT: u32 = 8;
+
+    /// Told to close.
+    #[inline]
+    pub fn told_to_close(self) -> bool {
+        self.0 & Self::CLOSE != 0
+    }
+
+    /// It is where it was told to be (fully closed when told to close, else fully open).
+    #[inline]
+    pub fn arrived(self) -> bool {
+        let want = if self.told_to_close() { Self::CLOSED } else { Self::OPEN };
+        self.0 & want != 0
+    }
+
+    /// The state as gather.csv's `grip` column writes it: 0 open, 1 closing, 2 closed,
+    /// 3 opening (−1: no gripper).
+    #[inline]
+    pub fn code(self) -> i8 {
+        match (self.0 & Self::ABSENT != 0, self.told_to_close(), self.arrived()) {
+            (true, _, _) => -1,
+            (false, false, true) => 0,
+            (false, true, false) => 1,
+            (false, true, true) => 2,
+            (false, false, false) => 3,
+        }
+    }
+
+    /// The state's name: `open`, `closing`, `closed`, `opening` or `none`.
+    pub fn name(self) -> &'static str {
+        ["none", "open", "closing", "closed", "opening"][(self.code() + 1) as usize]
+    }
+}
+
 /// A wire value that is not a [`MsgType`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct UnknownMsgType(pub u32);
@@ -125,7 +181,7 @@ impl std::error::Error for UnknownMsgType {}
 /// Plain old data: fixed arrays, no pointers, the same layout in both processes. A response
 /// echoes `msg_type`, `seq` and `motor` of its request.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("qmarc.HwMsg.v1")]
+#[type_name("qmarc.HwMsg.v2")]
 #[repr(C)]
 #[doc(alias = "ClientMessageT")]
 pub struct HwMsg {
@@ -145,9 +201,15 @@ pub struct HwMsg {
     pub data: [f64; MAX_MOTORS],
     /// Per-motor integer data (`iInitData`): DAC codes.
     pub aux: [i32; MAX_MOTORS],
+    /// In read responses: the digital outputs message 13 has set (bit c: DIO channel c of
+    /// the first bank; the server's own channels are not shown); 0 in requests.
+    pub outputs: u32,
+    /// In read responses: the gripper as the server knows it ([`Gripper`] bits); 0 in
+    /// requests.
+    pub gripper: u32,
 }
 
-const _: () = assert!(core::mem::size_of::<HwMsg>() == 72);
+const _: () = assert!(core::mem::size_of::<HwMsg>() == 80);
 const _: () = assert!(core::mem::align_of::<HwMsg>() == 8);
 
 impl HwMsg {
@@ -176,6 +238,15 @@ impl HwMsg {
     #[inline]
     pub fn write_all_dacs(codes: &[i32; MAX_MOTORS]) -> HwMsg {
         HwMsg { aux: *codes, ..HwMsg::request(MsgType::WriteAllDacs) }
+    }
+
+    /// Message 13: the outputs of `mask` to the bits of `values` (bit c: DIO channel c).
+    #[inline]
+    pub fn write_outputs(mask: u32, values: u32) -> HwMsg {
+        let mut m = HwMsg::request(MsgType::WriteDigitalOutputs);
+        m.aux[0] = mask as i32;
+        m.aux[1] = (values & mask) as i32;
+        m
     }
 
     /// Decodes [`HwMsg::msg_type`].
@@ -208,7 +279,7 @@ mod tests {
             assert_eq!(*t as u32, i as u32 + 1);
             assert_eq!(MsgType::from_raw(*t as u32), Some(*t));
         }
-        for raw in [0, 13, 99, u32::MAX] {
+        for raw in [0, 14, 99, u32::MAX] {
             assert_eq!(MsgType::from_raw(raw), None);
             let m = HwMsg { msg_type: raw, ..HwMsg::default() };
             assert_eq!(m.msg_type(), Err(UnknownMsgType(raw)));
@@ -225,13 +296,39 @@ mod tests {
         assert_eq!(resp.data, [0.0; MAX_MOTORS]);
     }
 
-    fn to_bytes(m: &HwMsg) -> [u8; 72] {
-        // SAFETY: HwMsg is repr(C) plain old data of exactly 72 bytes without padding
-        // (4 × u32, u64, 4 × f64, 4 × i32), so every byte is initialised.
+    #[test]
+    fn an_output_request_carries_only_its_masked_values() {
+        let m = HwMsg::write_outputs(1 << 6, 0xffff_ffff);
+        assert_eq!(m.msg_type(), Ok(MsgType::WriteDigitalOutputs));
+        assert_eq!((m.aux[0], m.aux[1]), (64, 64));
+        assert_eq!(HwMsg::write_outputs(1 << 6, 0).aux[1], 0);
+        assert_eq!(HwMsg::write_outputs(1 << 31, 1 << 31).aux[0], i32::MIN);
+    }
+
+    #[test]
+    fn the_gripper_states_have_their_codes_and_names() {
+        let g = |bits| Gripper(bits);
+        let cases = [
+            (g(Gripper::OPEN), 0, "open", true),
+            (g(Gripper::CLOSE), 1, "closing", false),
+            (g(Gripper::CLOSE | Gripper::OPEN), 1, "closing", false),
+            (g(Gripper::CLOSE | Gripper::CLOSED), 2, "closed", true),
+            (g(0), 3, "opening", false),
+            (g(Gripper::CLOSED), 3, "opening", false),
+            (g(Gripper::ABSENT), -1, "none", false),
+        ];
+        for (state, code, name, arrived) in cases {
+            assert_eq!((state.code(), state.name(), state.arrived()), (code, name, arrived));
+        }
+    }
+
+    fn to_bytes(m: &HwMsg) -> [u8; 80] {
+        // SAFETY: HwMsg is repr(C) plain old data of exactly 80 bytes without padding
+        // (4 × u32, u64, 4 × f64, 4 × i32, 2 × u32), so every byte is initialised.
         unsafe { core::mem::transmute_copy(m) }
     }
 
-    fn from_bytes(b: &[u8; 72]) -> HwMsg {
+    fn from_bytes(b: &[u8; 80]) -> HwMsg {
         // SAFETY: every bit pattern is a valid HwMsg (integers and floats only).
         unsafe { core::mem::transmute_copy(b) }
     }
@@ -243,8 +340,9 @@ mod tests {
             motor in any::<u32>(), time_ns in any::<u64>(),
             data in proptest::array::uniform4(any::<f64>()),
             aux in proptest::array::uniform4(any::<i32>()),
+            outputs in any::<u32>(), gripper in any::<u32>(),
         ) {
-            let m = HwMsg { msg_type, seq, status, motor, time_ns, data, aux };
+            let m = HwMsg { msg_type, seq, status, motor, time_ns, data, aux, outputs, gripper };
             let back = from_bytes(&to_bytes(&m));
             prop_assert_eq!(to_bytes(&back), to_bytes(&m));
             prop_assert_eq!(back.msg_type, msg_type);

@@ -36,6 +36,11 @@ impl Status {
     /// runs (the simulator's state file, the card's state folder): the next run would find
     /// the robot unhomed, so the homing failed. The hwserver says where and why.
     pub const NOT_KEPT: Status = Status(1 << 22);
+    /// A [`crate::MsgType::WriteDigitalOutputs`] was refused and nothing written: its mask
+    /// held a channel the server keeps for itself (an amplifier enable, the charge pump, a
+    /// reserved channel, an input, or one the card does not have), or the outputs may not
+    /// change now (the emergency stop, a fault that ends the server).
+    pub const PROTECTED_OUTPUT: Status = Status(1 << 23);
 
     /// Bit of motor `motor`'s top limit switch.
     #[inline]
@@ -159,6 +164,7 @@ impl std::fmt::Display for Status {
             (Status::SHUTDOWN, "server shutting down"),
             (Status::ESTOP, "emergency stop"),
             (Status::NOT_KEPT, "homed frame not kept"),
+            (Status::PROTECTED_OUTPUT, "digital output refused"),
         ];
         for (bit, name) in named {
             if self.contains(bit) {
@@ -207,6 +213,8 @@ mod tests {
                 Status::HARDWARE_FAULT,
                 Status::SHUTDOWN,
                 Status::ESTOP,
+                Status::NOT_KEPT,
+                Status::PROTECTED_OUTPUT,
             ]);
         for s in all {
             assert_eq!(s.0.count_ones(), 1);

@@ -21,7 +21,7 @@ pub const TELEMETRY_MAX_READERS: usize = 8;
 
 /// One sample of the servo loop, taken after the cycle's DAC write.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("qmarc.TelemetrySample.v1")]
+#[type_name("qmarc.TelemetrySample.v2")]
 #[repr(C)]
 pub struct TelemetrySample {
     /// 0, 1, 2… over the move's samples: a gap is samples lost (a full queue, a slow reader).
@@ -54,9 +54,13 @@ pub struct TelemetrySample {
     pub n_motors: u32,
     /// Samples the loop could not hand over so far (its queue to the publisher was full).
     pub dropped: u32,
+    /// The gripper ([`crate::Gripper`] bits; [`crate::Gripper::ABSENT`] when none is wired).
+    pub gripper: u32,
+    /// The free digital outputs that are on (bit c: DIO channel c).
+    pub outputs: u32,
 }
 
-const _: () = assert!(core::mem::size_of::<TelemetrySample>() == 168);
+const _: () = assert!(core::mem::size_of::<TelemetrySample>() == 176);
 
 /// The telemetry service.
 pub type TelemetryService = publish_subscribe::PortFactory<ipc::Service, TelemetrySample, ()>;

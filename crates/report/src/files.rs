@@ -4,7 +4,8 @@
 use qmarc_controller::gather::{Gather, GatherRow};
 use std::io::{self, Write};
 
-/// Column names: `cycle,time_s,cmd1,act1,dac1,cmd2,…`.
+/// Column names: `cycle,time_s,cmd1,act1,dac1,cmd2,…`, and `grip` last when a gripper is
+/// wired.
 pub fn columns(g: &Gather) -> Vec<String> {
     let f = g.fields();
     let mut c = vec!["cycle".to_string()];
@@ -17,6 +18,9 @@ pub fn columns(g: &Gather) -> Vec<String> {
                 c.push(format!("{name}{m}"));
             }
         }
+    }
+    if f.grip {
+        c.push("grip".to_string());
     }
     c
 }
@@ -45,6 +49,9 @@ fn write_row(
             write!(w, "{sep}{}", r.dac[m])?;
         }
     }
+    if f.grip {
+        write!(w, "{sep}{}", r.grip)?;
+    }
     writeln!(w)
 }
 
@@ -67,6 +74,9 @@ pub fn write_octave(g: &Gather, w: &mut (impl Write + ?Sized)) -> io::Result<()>
         w,
         "% cycle: servo sample n; time_s: s; cmdM/actM: counts; dacM: DAC codes (±8191 = ±10 V)."
     )?;
+    if g.fields().grip {
+        writeln!(w, "% grip: the gripper, 0 open, 1 closing, 2 closed, 3 opening.")?;
+    }
     let quoted: Vec<String> = cols.iter().map(|c| format!("'{c}'")).collect();
     writeln!(w, "qmarc_columns = {{{}}};", quoted.join(", "))?;
     writeln!(w, "qmarc_data = [")?;
@@ -92,6 +102,7 @@ mod tests {
             cmd: [1000.5, -3.0, 0.0, 0.0],
             act: [998.0, -1.0, 0.0, 0.0],
             dac: [12, -8191, 0, 0],
+            grip: 2,
         }
     }
 
@@ -138,6 +149,7 @@ mod tests {
             cmd: true,
             act: true,
             dac: false,
+            grip: false,
         });
         g.push(row(7));
         let mut csv = Vec::new();
@@ -146,5 +158,15 @@ mod tests {
             String::from_utf8(csv).unwrap(),
             "cycle,cmd1,act1,cmd2,act2\n7,1000.5,998,-3,-1\n"
         );
+        // Issue 30: the gripper's state last, when one is wired.
+        let fields = GatherFields { time: false, cmd: false, act: false, dac: true, grip: true };
+        let mut g = Gather::for_move(1, 1, 2).with_fields(fields);
+        g.push(row(7));
+        let mut csv = Vec::new();
+        write_csv(&g, &mut csv).unwrap();
+        assert_eq!(String::from_utf8(csv).unwrap(), "cycle,dac1,dac2,grip\n7,12,-8191,2\n");
+        let mut m = Vec::new();
+        write_octave(&g, &mut m).unwrap();
+        assert!(String::from_utf8(m).unwrap().contains("% grip: the gripper, 0 open"));
     }
 }

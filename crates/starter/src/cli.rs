@@ -135,6 +135,19 @@ pub struct MoveArgs {
     /// (default 1).
     #[arg(long, value_name = "F")]
     pub speed: Option<f64>,
+    /// Close (`on`) or open (`off`) the gripper at the end of the move; the move ends once
+    /// it is there.
+    #[arg(long, value_name = "on|off", value_parser = parse_on_off)]
+    pub grip: Option<bool>,
+}
+
+/// `on` or `off`.
+pub fn parse_on_off(v: &str) -> Result<bool, String> {
+    match v {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("`{v}` is not on or off")),
+    }
 }
 
 impl MoveArgs {
@@ -156,6 +169,9 @@ impl MoveArgs {
         }
         if let Some(f) = self.speed {
             s.set_move_speed(f)?;
+        }
+        if let Some(close) = self.grip {
+            s.set_move_grip(close)?;
         }
         Ok(())
     }

@@ -28,7 +28,7 @@ pub fn open_core(spec: &RunSpec) -> Result<HwCore, LocalError> {
         return Err(LocalError::NotSim(s.hwserver.backend));
     }
     let backend = qmarc_hwserver::backends::open(s, true)?;
-    Ok(HwCore::new(backend).with_encoder_limit(s.hwserver.max_counts_per_s))
+    Ok(HwCore::for_settings(backend, s))
 }
 
 /// A local move could not run.

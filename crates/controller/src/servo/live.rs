@@ -46,6 +46,8 @@ impl Servo {
             status,
             fault: FaultKind::wire(self.fault.map(|f| f.kind)),
             n_motors: self.plan.n_motors as u32,
+            gripper: self.grip.0,
+            outputs: self.outputs,
             ..TelemetrySample::default()
         }
     }

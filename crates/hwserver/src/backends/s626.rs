@@ -4,7 +4,8 @@
 //! Per servo cycle two instruction lists, each one `COMEDI_INSNLIST` ioctl, built once at open
 //! and reused: the read list (every motor's counter, then the DIO bank with the switches) and
 //! the write list (every motor's DAC, then the DIO bank: amplifier enables and the charge
-//! pump, which toggles once per write). Nothing else touches the card during a move. DIO is
+//! pump, which toggles once per write). Nothing else touches the card during a move but message
+//! 13, one `INSN_BITS` under the free outputs' mask (the gripper) in a cycle it changes. DIO is
 //! only ever `INSN_BITS` (never `INSN_CONFIG`, which would switch on the bank's other outputs),
 //! and a write mask holds outputs only. DAC samples are computed around the exact zero
 //! `0x1fff`; counters are preset with `INSN_WRITE`. An amplifier is enabled only after a read
@@ -46,6 +47,8 @@ struct Wiring {
     closed_bit: u32,
     pump: Option<u32>,
     estop: Option<u32>,
+    /// The outputs message 13 may write ([`S626Settings::free_outputs`]).
+    free: u32,
 }
 
 impl Wiring {
@@ -68,6 +71,7 @@ impl Wiring {
             closed_bit: s.switch_closed_bit,
             pump: s.charge_pump_dio,
             estop: s.estop_dio,
+            free: s.free_outputs(n_motors),
         })
     }
 
@@ -92,6 +96,8 @@ pub struct S626 {
     read: InsnList,
     write: InsnList,
     enables: InsnList,
+    /// Message 13's list: DIO bank 0 under the free outputs' mask.
+    outputs: InsnList,
     safe: InsnList,
     /// The safe list's instructions one by one, for when the list fails part-way.
     safe_singles: Vec<InsnList>,
@@ -204,6 +210,7 @@ impl S626 {
             read: read_list(&w),
             write: write_list(&w),
             enables: InsnList::new(&[Insn::bits(SUBDEV_DIO0)]),
+            outputs: InsnList::new(&[Insn::bits(SUBDEV_DIO0)]),
             safe: safe_list(),
             safe_singles: safe_singles(),
             presets: (0..n_motors)
@@ -371,6 +378,7 @@ impl Backend for S626 {
         }
         inputs.limits = limits;
         inputs.estop_open = self.w.estop.is_some_and(tripped);
+        inputs.outputs = pins & self.w.free;
         Ok(())
     }
 
@@ -415,6 +423,18 @@ impl Backend for S626 {
         let preset = &mut self.presets[motor];
         preset.data_mut(0)[0] = sample;
         ran(self.transport.run(preset), 1, 4)
+    }
+
+    fn free_outputs(&self) -> u32 {
+        self.w.free
+    }
+
+    /// One `INSN_BITS` under `mask` (free outputs only: never an input, an enable or the
+    /// pump); the driver keeps the bank's other outputs as they are.
+    fn write_outputs(&mut self, mask: u32, values: u32) -> Result<(), HwFault> {
+        let mask = mask & self.w.free;
+        self.outputs.data_mut(0).copy_from_slice(&[mask, values & mask]);
+        ran(self.transport.run(&mut self.outputs), 1, 5)
     }
 
     fn safe_state(&mut self) {

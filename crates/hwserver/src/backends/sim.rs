@@ -36,6 +36,9 @@ pub struct SimParams {
     /// The plant, switches, frame and fault injection (motors 1-based; see
     /// [`SimDeltabot::estop_button`] for an emergency stop pressed from outside).
     pub plant: SimPlant,
+    /// The outputs message 13 may write: the 626's free outputs, as the settings wire them
+    /// ([`qmarc_config::S626Settings::free_outputs`]; the gripper is one of them).
+    pub free_outputs: u32,
 }
 
 impl Default for SimParams {
@@ -48,6 +51,7 @@ impl Default for SimParams {
             lockstep: false,
             start_counts: [0.0; MAX_MOTORS],
             plant: SimPlant::default(),
+            free_outputs: qmarc_config::S626Settings::default().free_outputs(3),
         }
     }
 }
@@ -82,6 +86,7 @@ impl SimParams {
             lockstep,
             start_counts,
             plant: s.sim.plant,
+            free_outputs: s.s626.free_outputs(s.n_motors),
         }
     }
 
@@ -165,6 +170,13 @@ pub enum SimEvent {
         /// Enabled now.
         on: bool,
     },
+    /// A free digital output (message 13: the gripper) was switched.
+    Output {
+        /// DIO channel.
+        channel: u8,
+        /// On now.
+        on: bool,
+    },
 }
 
 /// Events the log keeps; later ones are dropped (and counted).
@@ -199,6 +211,8 @@ pub struct SimDeltabot {
     events_file: Option<std::path::PathBuf>,
     /// The emergency-stop button, pressed from outside ([`SimDeltabot::estop_button`]).
     estop_button: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    /// The free outputs that are on.
+    outputs: u32,
 }
 
 /// What the simulated robot's state file says its frame belongs to.
@@ -236,6 +250,7 @@ impl SimDeltabot {
             state_file: None,
             events_file: None,
             estop_button: std::sync::Arc::default(),
+            outputs: 0,
         })
     }
 
@@ -415,6 +430,7 @@ impl Backend for SimDeltabot {
         }
         inputs.limits = self.limits();
         inputs.estop_open = self.estop_open();
+        inputs.outputs = self.outputs;
         let changed = inputs.limits.0 ^ self.switches.0;
         for m in 0..self.p.n_motors {
             for (top, bit) in [(true, Status::limit_top(m)), (false, Status::limit_bottom(m))] {
@@ -456,6 +472,22 @@ impl Backend for SimDeltabot {
         Ok(())
     }
 
+    fn free_outputs(&self) -> u32 {
+        self.p.free_outputs
+    }
+
+    fn write_outputs(&mut self, mask: u32, values: u32) -> Result<(), HwFault> {
+        self.catch_up();
+        let new = (self.outputs & !mask) | (values & mask);
+        let changed = new ^ self.outputs;
+        self.outputs = new;
+        for channel in (0..32u8).filter(|c| changed & 1 << c != 0) {
+            self.log(SimEvent::Output { channel, on: new & 1 << channel != 0 });
+        }
+        self.last_access_ns = self.t_ns;
+        Ok(())
+    }
+
     fn safe_state(&mut self) {
         self.catch_up();
         for m in 0..MAX_MOTORS {
@@ -483,12 +515,14 @@ impl Backend for SimDeltabot {
     }
 
     /// CSV: `t_ns,event,motor` (motor 1-based; events `top_on`, `top_off`, `bottom_on`,
-    /// `bottom_off`, `amp_on`, `amp_off`), then `t_ns,last_access,0`: the last time the server
-    /// touched the robot before it ended.
+    /// `bottom_off`, `amp_on`, `amp_off`; `out_on` and `out_off` name a DIO channel in the
+    /// third column), then `t_ns,last_access,0`: the last time the server touched the robot
+    /// before it ended.
     fn write_log(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
         writeln!(w, "t_ns,event,motor")?;
         for (t, e) in &self.events {
-            let (name, motor) = match *e {
+            // Motors 1-based; an output's DIO channel as it is.
+            let (name, column) = match *e {
                 SimEvent::Switch { motor, top, on } => {
                     let name = match (top, on) {
                         (true, true) => "top_on",
@@ -496,11 +530,16 @@ impl Backend for SimDeltabot {
                         (false, true) => "bottom_on",
                         (false, false) => "bottom_off",
                     };
-                    (name, motor)
+                    (name, u32::from(motor) + 1)
                 }
-                SimEvent::Amp { motor, on } => (if on { "amp_on" } else { "amp_off" }, motor),
+                SimEvent::Amp { motor, on } => {
+                    (if on { "amp_on" } else { "amp_off" }, u32::from(motor) + 1)
+                }
+                SimEvent::Output { channel, on } => {
+                    (if on { "out_on" } else { "out_off" }, u32::from(channel))
+                }
             };
-            writeln!(w, "{t},{name},{}", motor + 1)?;
+            writeln!(w, "{t},{name},{column}")?;
         }
         writeln!(w, "{},last_access,0", self.last_access_ns)?;
         if self.dropped_events > 0 {

@@ -94,7 +94,7 @@ fn run(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
     for w in &rt.warnings {
         eprintln!("qmarc-hwserver: warning: {w}");
     }
-    let mut core = HwCore::new(backend).with_encoder_limit(s.hwserver.max_counts_per_s);
+    let mut core = HwCore::for_settings(backend, s);
     let opts = ServeOptions {
         watchdog_ns: u64::from(s.hwserver.watchdog_periods) * s.period_ns(),
         spin: args.spin || s.hwserver.wait == qmarc_config::HwWait::Spin,

@@ -196,3 +196,50 @@ fn observe_publishes_the_positions_and_the_homed_motors() {
     assert_eq!(h.shared.actual(), [1.0, 2.0, 3.0, 0.0]);
     assert_eq!(h.shared.homed.load(Ordering::Acquire), 0b101, "three motors in use");
 }
+
+/// Issue 30: a grip order tells the gripper in the cycle it arrives and leaves the motion as
+/// it is; it settles once the command is at rest and a read finds the gripper there.
+#[test]
+fn a_grip_is_told_at_once_and_settles_when_the_gripper_is_there() {
+    let (mut g, mut h, limits, _) = serving([0.0; MAX_MOTORS]);
+    let mut cmd = [0.0; MAX_MOTORS];
+    let open = Gripper(Gripper::OPEN);
+    g.sample(0, &mut cmd);
+    assert_eq!(g.gripper(open), None, "told nothing: left as it is");
+    assert_eq!(load(&h.shared.settled), 0);
+    assert_eq!(h.shared.gripper.load(Ordering::Acquire), Gripper::OPEN);
+    // A move, then a grip while it moves: the grip takes over nothing of the motion.
+    let target = [2000.0, 0.0, 0.0, 0.0];
+    assert!(h.orders.push(Order::Move { id: 1, target, limits }).is_ok());
+    g.sample(1, &mut cmd);
+    assert!(h.orders.push(Order::Grip { id: 2, close: true }).is_ok());
+    g.sample(2, &mut cmd);
+    assert_eq!(load(&h.shared.taken), 2);
+    assert_eq!(g.gripper(open), Some(true), "told in the cycle it arrives");
+    let mut n = 3;
+    while g.sample(n, &mut cmd) == Sample::Ready && cmd != target {
+        assert_eq!(g.gripper(Gripper(Gripper::CLOSE)), Some(true), "closing");
+        n += 1;
+    }
+    assert_eq!(cmd, target, "the move went on to its target");
+    // At rest, but the gripper still closing: not settled.
+    for k in n + 1..n + 20 {
+        g.sample(k, &mut cmd);
+        assert_eq!(g.gripper(Gripper(Gripper::CLOSE)), Some(true));
+    }
+    assert_eq!(load(&h.shared.settled), 0, "the gripper is not there yet");
+    g.gripper(Gripper(Gripper::CLOSE | Gripper::CLOSED));
+    g.sample(n + 20, &mut cmd);
+    assert_eq!(load(&h.shared.settled), 2);
+    // Opened: settled only when a read finds it open (a closed one is not "there").
+    assert!(h.orders.push(Order::Grip { id: 3, close: false }).is_ok());
+    g.sample(n + 21, &mut cmd);
+    assert_eq!(g.gripper(Gripper(Gripper::CLOSE | Gripper::CLOSED)), Some(false));
+    g.sample(n + 22, &mut cmd);
+    g.gripper(Gripper(Gripper::CLOSED));
+    g.sample(n + 23, &mut cmd);
+    assert_eq!(load(&h.shared.settled), 2, "still opening");
+    g.gripper(Gripper(Gripper::OPEN));
+    g.sample(n + 24, &mut cmd);
+    assert_eq!(load(&h.shared.settled), 3);
+}

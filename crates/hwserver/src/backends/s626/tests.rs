@@ -485,3 +485,49 @@ fn a_disable_whose_dac_write_fails_is_a_hardware_fault() {
     let st = core.handle(&HwMsg::read_all_encoders()).status();
     assert!(st.contains(Status::HARDWARE_FAULT), "latched: {st}");
 }
+
+/// Issue 30: the gripper on the card is one `INSN_BITS` under its own bit, once per change;
+/// the enables and the charge pump written every cycle leave it as it is, the pins read it
+/// back, and a mask with a channel the server keeps reaches nothing.
+#[test]
+fn the_gripper_output_is_one_masked_write_that_the_cycle_leaves_alone() {
+    let w = S626Settings { gripper_dio: Some(6), ..S626Settings::default() };
+    let fake = Arc::new(Mutex::new(wired_fake(&w, 3, &FakePlant::ideal(6_250.0), 400e-6)));
+    let transport = Box::new(SharedFake(fake.clone()));
+    let s = S626::with_transport(transport, "fake", &w, 3, None).unwrap();
+    let mut core = HwCore::new(Box::new(s)).with_gripper(1 << 6, 0.05);
+    for m in 0..3 {
+        core.handle(&HwMsg::for_motor(MsgType::EnableMotor, m));
+    }
+    let before = locked(&fake).runs();
+    let r = core.handle(&HwMsg::write_outputs(1 << 6, 1 << 6));
+    assert_eq!(r.status(), Status::OK);
+    assert_eq!(locked(&fake).runs() - before, 1, "one ioctl");
+    assert_eq!(locked(&fake).last_list(), [(INSN_BITS, 2, 0)]);
+    assert!(locked(&fake).pin_low(6), "on: the pin at 0 V");
+    for _ in 0..5 {
+        let r = core.handle(&HwMsg::read_all_encoders());
+        assert_eq!(r.outputs, 1 << 6);
+        core.handle(&HwMsg::write_all_dacs(&[100, 100, 100, 0]));
+        assert!(locked(&fake).pin_low(6), "the cycle's enable write keeps it");
+    }
+    for kept in [0, 2, 4, 9] {
+        let runs = locked(&fake).runs();
+        let r = core.handle(&HwMsg::write_outputs(1 << kept | 1 << 6, 0));
+        assert_eq!(r.status(), Status::PROTECTED_OUTPUT, "DIO{kept}");
+        assert_eq!(locked(&fake).runs(), runs, "nothing reached the card");
+    }
+    assert!(locked(&fake).pin_low(6) && locked(&fake).pin_low(0), "gripper and enable on");
+    core.handle(&HwMsg::write_outputs(1 << 6, 0));
+    assert!(!locked(&fake).pin_low(6));
+    assert!(locked(&fake).pin_low(0), "motor 1 still enabled");
+    // A new server finds the gripper where the card holds it (an earlier one closed it).
+    let mut card = wired_fake(&w, 3, &FakePlant::ideal(6_250.0), 400e-6);
+    let mut close = InsnList::new(&[Insn::bits(SUBDEV_DIO0)]);
+    close.data_mut(0).copy_from_slice(&[1 << 6, 1 << 6]);
+    assert_eq!(card.run(&mut close), Ok(1));
+    let s = S626::with_transport(Box::new(card), "fake", &w, 3, None).unwrap();
+    let mut core = HwCore::new(Box::new(s)).with_gripper(1 << 6, 0.05);
+    let r = core.handle(&HwMsg::read_all_encoders());
+    assert_eq!((r.outputs, qmarc_proto::Gripper(r.gripper).name()), (1 << 6, "closed"));
+}

@@ -1,0 +1,68 @@
+//! A serving session for a benchmark: `qmarc-starter serve` on the settings given, in real
+//! time, under a prefix of its own; a client once its loop serves; quit and cleaned up after.
+
+use anyhow::Context;
+use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest};
+use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A running `qmarc-starter serve`.
+pub struct Session {
+    child: Child,
+    /// Where its services are.
+    pub location: IpcLocation,
+    scratch: PathBuf,
+}
+
+impl Session {
+    /// Starts serving on the settings `config` (`name` tells the prefix and scratch folder).
+    pub fn start(config: &Path, bin_dir: Option<&Path>, name: &str) -> anyhow::Result<Session> {
+        let starter = qmarc_starter::bin_dir(bin_dir)?.join("qmarc-starter");
+        let pid = std::process::id();
+        let prefix = format!("qmarc_bench{name}_{pid}_");
+        let scratch = std::env::temp_dir().join(format!("qmarc-bench-{name}-{pid}"));
+        let child = Command::new(&starter)
+            .arg(format!("--config={}", config.display()))
+            .arg(format!("--out={}", scratch.display()))
+            .arg(format!("--iox-prefix={prefix}"))
+            .arg("serve")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .with_context(|| format!("cannot run {}", starter.display()))?;
+        Ok(Session { child, location: IpcLocation::new(&prefix, DEFAULT_ROOT), scratch })
+    }
+
+    /// A client, once the session's loop serves (within 20 s).
+    pub fn client(&self) -> anyhow::Result<CommandClient> {
+        let started = Instant::now();
+        let serving = qmarc_proto::state::Phase::Moving.code();
+        loop {
+            let status = CommandClient::connect(&self.location)
+                .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Status)).map(|s| (c, s)));
+            match status {
+                Ok((c, s)) if s.phase == serving => return Ok(c),
+                _ if started.elapsed() < Duration::from_secs(20) => {
+                    std::thread::sleep(Duration::from_millis(20))
+                }
+                Ok(_) => anyhow::bail!("the serving session did not start its loop"),
+                Err(e) => return Err(e).context("the serving session did not start"),
+            }
+        }
+    }
+
+    /// Quits the session and waits for it; an error unless it ended cleanly.
+    pub fn quit(mut self) -> anyhow::Result<()> {
+        let _ = CommandClient::connect(&self.location)
+            .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Quit)));
+        let ended = self.child.wait();
+        let _ = std::fs::remove_dir_all(&self.scratch);
+        anyhow::ensure!(
+            ended.is_ok_and(|s| s.success()),
+            "the serving session did not end cleanly"
+        );
+        Ok(())
+    }
+}
