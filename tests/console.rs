@@ -643,3 +643,77 @@ fn the_console_jogs_a_motor_with_its_keys() {
     drop(tmux);
     run.assert_clean();
 }
+
+/// Issue 30: the console's Cartesian jog keys, go-to and gripper toggle: Ctrl-↓ past the
+/// motors chooses the effector's axes (z), Ctrl-→ jogs it `[jog] mm` up on a line; Ctrl-G
+/// asks for a point and goes there (`move --xyz`); Ctrl-O closes the gripper where the robot
+/// is. Each is a move of its own, with its results.
+#[test]
+fn the_console_jogs_the_effector_goes_to_a_point_and_grips() {
+    let run = TestRun::new("consxyz");
+    let config = run.config_with(&[]);
+    let text = std::fs::read_to_string(&config).expect("settings");
+    let out = format!("{:?}", run.out("out").display().to_string());
+    let text: Vec<String> = text
+        .lines()
+        .map(|l| if l.starts_with("out_dir =") { format!("out_dir = {out}") } else { l.into() })
+        .collect();
+    std::fs::write(&config, text.join("\n") + "\n").expect("settings");
+    let robot = qmarc_config::Settings::load(&config, &qmarc_config::Names::any())
+        .expect("settings")
+        .robot()
+        .expect("[robot]");
+    let summary_json = run.out("out").join("summary.json");
+    let modified = || std::fs::metadata(&summary_json).and_then(|m| m.modified()).ok();
+    // The next move's results: a summary newer than the last one, and the page drawn.
+    let next_results = |tmux: &Tmux, before: Option<std::time::SystemTime>| {
+        tmux.wait_for("the move's results", Duration::from_secs(60), |s| {
+            results_drawn(s) && modified() != before
+        });
+        let (header, rows) = qmarc_tests::read_gather(&run.out("out"));
+        let col = |name: &str| header.iter().position(|h| h == name).expect("column");
+        let last = rows.last().expect("rows").clone();
+        let cmd = [last[col("cmd1")], last[col("cmd2")], last[col("cmd3")]];
+        let first = [rows[0][col("cmd1")], rows[0][col("cmd2")], rows[0][col("cmd3")]];
+        (
+            robot.point_of(&first).unwrap() * 1e3,
+            robot.point_of(&cmd).unwrap() * 1e3,
+            last[col("grip")],
+        )
+    };
+    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
+    tmux.wait_for("the setup screen", Duration::from_secs(30), setup_drawn);
+    tmux.keys(&["F4"]);
+    tmux.wait_for("the results page", Duration::from_secs(10), |s| s.contains("No move yet"));
+    for _ in 0..5 {
+        tmux.keys(&["C-Down"]);
+    }
+    tmux.wait_for("z chosen", Duration::from_secs(10), |s| {
+        s.contains("jog: the effector along z (Ctrl-← / Ctrl-→ move it ∓5 mm)")
+    });
+    let before = modified();
+    tmux.keys(&["C-Right"]);
+    let (from, to, _) = next_results(&tmux, before);
+    assert!(((to - from).z - 5.0).abs() < 1e-6 && (to - from).xy().norm() < 1e-6, "{from} → {to}");
+    assert_eq!(qmarc_tests::read_summary(&run.out("out")).mode.to_string(), "jog");
+    // Go to a point.
+    tmux.keys(&["C-g"]);
+    tmux.wait_for("the question", Duration::from_secs(10), |s| s.contains("go to X Y Z (mm)"));
+    tmux.type_text("20 -10 -640");
+    tmux.wait_for("the point typed", Duration::from_secs(10), |s| s.contains("20 -10 -640"));
+    let before = modified();
+    tmux.keys(&["Enter"]);
+    let (_, to, grip) = next_results(&tmux, before);
+    assert!((to - qmarc_kinematics::Point::new(20.0, -10.0, -640.0)).norm() < 1e-6, "{to}");
+    assert_eq!(grip, 0.0, "open");
+    // Close the gripper where the robot is.
+    let before = modified();
+    tmux.keys(&["C-o"]);
+    let (from, to, grip) = next_results(&tmux, before);
+    assert_eq!((from, grip), (to, 2.0), "closed, in place");
+    tmux.keys(&["F12"]);
+    let (status, s) = tmux.wait_exit(Duration::from_secs(20));
+    assert_eq!(status, 0, "{s}");
+    drop(tmux);
+    run.assert_clean();
+}

@@ -145,6 +145,51 @@ fn jog_moves_one_motor_within_the_soft_limits_and_slower_unhomed() {
     run.assert_clean();
 }
 
+/// `jog --axis z --mm 5` (issue 30, the console's Cartesian keys): the effector goes 5 mm up
+/// on a straight line from where it is, x and y held; a wrong axis or distance is refused by
+/// its flag, and an unhomed robot by the generator, before anything moves.
+#[test]
+fn a_cartesian_jog_moves_the_effector_along_its_axis() {
+    let run = TestRun::new("jogxyz");
+    let config = run.config_with(&[]);
+    let robot = qmarc_config::Settings::load(&config, &qmarc_config::Names::any())
+        .unwrap()
+        .robot()
+        .unwrap();
+    let out = run.out("z");
+    let r = starter(&run, &config, &out, &["--deterministic", "jog", "--axis=z", "--mm=5"]);
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    assert_eq!(read_summary(&out).mode.to_string(), "jog");
+    let (header, rows) = read_gather(&out);
+    let cmd = |r: &Vec<f64>| [1, 2, 3].map(|m| r[col(&header, &format!("cmd{m}"))]);
+    let at = |r: &Vec<f64>| robot.point_of(&cmd(r)).unwrap() * 1e3;
+    let (first, last) = (at(&rows[0]), at(rows.last().unwrap()));
+    assert!(((last - first).z - 5.0).abs() < 1e-6, "{first} → {last}");
+    for r in &rows {
+        let p = at(r);
+        assert!((p.x - first.x).abs() < 0.1 && (p.y - first.y).abs() < 0.1, "off the line: {p}");
+    }
+    let refused = |args: &[&str], says: &str| {
+        let mut all = vec!["--deterministic", "jog"];
+        all.extend_from_slice(args);
+        let r = starter(&run, &config, &run.out("refused"), &all);
+        assert_eq!(r.code.map(|c| c == 3 || c == 64), Some(true), "{args:?}: {}", r.stderr);
+        assert!(r.stderr.contains(says), "{args:?}: {}", r.stderr);
+    };
+    refused(&["--axis=w"], "--axis: `w` is not an axis: x, y or z");
+    refused(&["--axis=x", "--mm=0"], "--mm: a Cartesian jog must be");
+    refused(&["--axis=x", "--motor=1"], "cannot be used with");
+    let unhomed = run.config_as(
+        "unhomed.toml",
+        &qmarc_tests::default_config(),
+        &[("homed", "false"), ("state_file", "\"\"")],
+    );
+    let r = starter(&run, &unhomed, &run.out("unhomed"), &["--deterministic", "jog", "--axis=y"]);
+    assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stderr.contains("a Cartesian jog moves in the homed frame"), "{}", r.stderr);
+    run.assert_clean();
+}
+
 /// `check`: with the loop open, each motor in turn gets `[check] volts`; a robot whose motors
 /// count up as they should passes, on the simulator and through the 626 backend on the fake
 /// card; a motor whose amplifier is wired backwards (`sim.reversed_motor`) fails the check

@@ -63,6 +63,19 @@ fn a_move_closes_the_gripper_at_its_end_on_the_simulated_robot() {
     assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
     assert_eq!(states(&grip_column(&back)), [0]);
     assert!(read_summary(&back).cycles > 0);
+    // `--grip on` alone: in place, the move ends once it is closed.
+    let here = run.out("here");
+    let o = format!("--out={}", here.display());
+    let r = run.starter(&[&c, &o, "--deterministic", "move", "--grip=on"], TIMEOUT);
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    assert_eq!(states(&grip_column(&here)), [0, 1, 2], "told in the first cycle");
+    assert_eq!(grip_column(&here)[..2], [0, 1], "closing from the second read on");
+    let (header, rows) = read_gather(&here);
+    assert!(rows.iter().all(|r| r[header.iter().position(|h| h == "cmd1").unwrap()] == 0.0));
+    // Nothing at all to do: refused, saying what is missing.
+    let r = run.starter(&[&c, &o, "--deterministic", "move"], TIMEOUT);
+    assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stderr.contains("move: where to? --to C1,C2,C3 or --xyz X,Y,Z"), "{}", r.stderr);
     run.assert_clean();
 }
 

@@ -46,7 +46,7 @@ pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
 pub use hwserver::{BackendKind, ExplicitTiming, HwServerSettings, HwWait, TimingDefaults};
-pub use jog::{JogSettings, MAX_JOG_COUNTS};
+pub use jog::{AXES, JogSettings, MAX_JOG_COUNTS, MAX_JOG_MM};
 pub use motion::{MAX_TARGET_COUNTS, MoveSettings, MoveTarget, TargetError};
 pub use motor::{MotorGains, MotorSafety, effective_gains_problem, gains_problem};
 pub use robot::{RobotSettings, WORK_CENTRE_M};
@@ -522,6 +522,32 @@ impl Settings {
             .map_err(|message| ConfigLoadError::Override { flag: "--counts", message })?;
         self.jog.motor = motor;
         self.jog.counts = counts;
+        Ok(())
+    }
+
+    /// Makes the jog a Cartesian one (`--axis x|y|z`, `--mm D`): the effector along that
+    /// axis by `mm` (default `jog.mm`), a straight line; the `[robot]` table must describe
+    /// the robot.
+    pub fn set_jog_axis(&mut self, axis: &str, mm: Option<f64>) -> Result<(), ConfigLoadError> {
+        let refused = |flag, message| ConfigLoadError::Override { flag, message };
+        let a = jog::AXES
+            .iter()
+            .position(|n| *n == axis)
+            .ok_or_else(|| refused("--axis", format!("`{axis}` is not an axis: x, y or z")))?;
+        if self.robot().is_none() {
+            return Err(refused(
+                "--axis",
+                format!(
+                    "{} has no [robot] table for 3 motors: a Cartesian jog needs the Delta's \
+                     geometry",
+                    self.source.display()
+                ),
+            ));
+        }
+        let mm = mm.unwrap_or(self.jog.mm);
+        jog::check_jog_mm(mm).map_err(|m| refused("--mm", m))?;
+        self.jog.axis = Some(a);
+        self.jog.mm = mm;
         Ok(())
     }
 

@@ -74,8 +74,12 @@ pub struct App {
     pub history: Vec<HistoryEntry>,
     /// The motor the charts show (0-based).
     pub chart_motor: usize,
-    /// The motor the jog keys move (1-based).
+    /// What the jog keys move: motor 1‥n, then n + 1‥n + 3 the effector along x, y, z.
     pub jog_motor: usize,
+    /// "Go to X Y Z" being typed (Ctrl-G): its text.
+    pub prompt: Option<String>,
+    /// What the gripper was last told from here (Ctrl-O toggles it).
+    pub grip_closed: bool,
     /// Set when the console should end.
     pub quit: Option<Quit>,
     /// `qmarc-starter`.
@@ -107,6 +111,8 @@ impl App {
             history: Vec::new(),
             chart_motor: 0,
             jog_motor: 1,
+            prompt: None,
+            grip_closed: false,
             quit: None,
             starter,
             starter_args: Vec::new(),
@@ -250,7 +256,9 @@ impl App {
             // It runs the path.
             Mode::Tune => Action::Run,
             // As homing: the settings, and no knot file.
-            Mode::Jog { .. } => Action::Home,
+            Mode::Jog { .. } | Mode::JogAxis { .. } | Mode::GoTo { .. } | Mode::Grip { .. } => {
+                Action::Home
+            }
         };
         if let Some((field, e)) = self.form.blocking(action) {
             if let Some(i) = field {
@@ -274,8 +282,10 @@ impl App {
                 r.out_dir = self.out_dir();
                 r.gains = self.gains();
                 if mode != Mode::Tune {
+                    let robot = self.form.checked.as_ref().and_then(|s| s.robot());
                     let live =
-                        crate::live::Live::for_move(&self.starter_args, &self.iox_root, r.pid());
+                        crate::live::Live::for_move(&self.starter_args, &self.iox_root, r.pid())
+                            .with_robot(robot);
                     self.live = Some(live);
                 }
                 self.log.push(format!("── {} ──", mode.arg()));
@@ -368,6 +378,9 @@ impl App {
         }
         match MoveResult::load_for(&r.out_dir, r.pid()) {
             Ok(result) => {
+                if let (Mode::Grip { close }, None) = (r.mode, &result.summary.fault) {
+                    self.grip_closed = close;
+                }
                 if let Some(t) = &mut self.tuned {
                     t.latest = false;
                 }
@@ -429,6 +442,9 @@ impl App {
 
     fn handle_key(&mut self, key: KeyEvent) {
         let ctrl = key.modifiers.contains(KeyModifiers::CONTROL);
+        if self.prompt.is_some() && !(ctrl && key.code == KeyCode::Char('c')) {
+            return self.on_prompt_key(key.code);
+        }
         match key.code {
             KeyCode::Char('c') if ctrl => {
                 if self.running.is_some() {
@@ -454,6 +470,8 @@ impl App {
             KeyCode::Up if ctrl && self.jog_page() => self.jog_motor_by(-1),
             KeyCode::Down if ctrl && self.jog_page() => self.jog_motor_by(1),
             KeyCode::Char('a') if ctrl => self.apply_tuned(),
+            KeyCode::Char('g') if ctrl => self.open_prompt(),
+            KeyCode::Char('o') if ctrl => self.toggle_gripper(),
             KeyCode::F(10) => {
                 if self.running.is_some() {
                     return self.say("a move is running: F9 aborts it first", true);

@@ -34,6 +34,12 @@ pub struct Live {
     /// Homing's motor and stage as the CLI says them: `homing motor 2: backing off the top
     /// switch`.
     pub stage: Option<String>,
+    /// The robot's geometry, to show where the effector is (none: not a Delta).
+    robot: Option<qmarc_kinematics::Robot>,
+    /// Where the effector is, mm, by the last sample (through the forward kinematics).
+    pub effector_mm: Option<[f64; 3]>,
+    /// The gripper, by the last sample.
+    pub gripper: qmarc_proto::Gripper,
 }
 
 impl std::fmt::Debug for Live {
@@ -63,7 +69,29 @@ impl Live {
             progress: None,
             stage: None,
             lost: 0,
+            robot: None,
+            effector_mm: None,
+            gripper: qmarc_proto::Gripper(qmarc_proto::Gripper::ABSENT),
         }
+    }
+
+    /// Shows where the effector of `robot` is, as the samples come.
+    pub fn with_robot(mut self, robot: Option<qmarc_kinematics::Robot>) -> Live {
+        self.robot = robot;
+        self
+    }
+
+    /// Where the effector is and the gripper, for the title bar: ` · effector -12.3 4.5
+    /// -650.0 mm · gripper closed` (empty before the first sample).
+    pub fn whereabouts(&self) -> String {
+        let mut s = String::new();
+        if let Some([x, y, z]) = self.effector_mm {
+            s.push_str(&format!(" · effector {x:.1} {y:.1} {z:.1} mm"));
+        }
+        if self.gripper.code() >= 0 {
+            s.push_str(&format!(" · gripper {}", self.gripper.name()));
+        }
+        s
     }
 
     /// The live view of the move the starter `starter_pid` runs with `starter_args` (its
@@ -120,6 +148,12 @@ impl Live {
 
     /// Adds sample `s` and drops what is older than the window.
     fn push(&mut self, s: &qmarc_proto::telemetry::TelemetrySample) {
+        if let Some(robot) = &self.robot
+            && let Ok(p) = robot.point_of(&[s.act[0], s.act[1], s.act[2]])
+        {
+            self.effector_mm = Some([p.x * 1e3, p.y * 1e3, p.z * 1e3]);
+        }
+        self.gripper = qmarc_proto::Gripper(s.gripper);
         let n = (s.n_motors as usize).min(s.cmd.len());
         let series = &mut self.series;
         series.cmd.resize_with(n, Vec::new);
@@ -153,6 +187,37 @@ impl Live {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 30: the effector's place (through the forward kinematics of the samples' actual
+    /// positions) and the gripper, for the title bar; nothing before a sample or without a
+    /// Delta.
+    #[test]
+    fn the_effector_and_the_gripper_are_shown_from_the_samples() {
+        let s = qmarc_config::Settings::load(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml"),
+            &qmarc_config::Names::any(),
+        )
+        .unwrap();
+        let robot = s.robot().unwrap();
+        let location = IpcLocation::new("qmarc_livexyz_", "/tmp/iceoryx2");
+        let mut live = Live::new(location.clone()).with_robot(Some(robot));
+        assert_eq!(live.whereabouts(), "");
+        let counts = robot.counts_of(&qmarc_kinematics::Point::new(0.02, -0.01, -0.64)).unwrap();
+        let sample = qmarc_proto::telemetry::TelemetrySample {
+            act: [counts[0], counts[1], counts[2], 0.0],
+            n_motors: 3,
+            gripper: qmarc_proto::Gripper::CLOSE,
+            ..Default::default()
+        };
+        live.push(&sample);
+        assert_eq!(live.whereabouts(), " · effector 20.0 -10.0 -640.0 mm · gripper closing");
+        let mut plain = Live::new(location);
+        plain.push(&qmarc_proto::telemetry::TelemetrySample {
+            gripper: qmarc_proto::Gripper::ABSENT,
+            ..sample
+        });
+        assert_eq!(plain.whereabouts(), "", "no Delta, no gripper");
+    }
 
     /// Issue 28, item 9: while homing runs, the console has its motor and stage from the
     /// run's progress page, as the CLI's status line (before: only "home running 11 s").

@@ -17,7 +17,7 @@ use std::sync::mpsc::{Receiver, Sender, channel};
 use std::time::{Duration, Instant};
 
 /// What to run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Mode {
     /// `home`.
     Home,
@@ -34,6 +34,23 @@ pub enum Mode {
         /// How far, counts.
         counts: i64,
     },
+    /// `jog --axis A --mm D`: the effector along x, y or z.
+    JogAxis {
+        /// 0 x, 1 y, 2 z.
+        axis: usize,
+        /// How far, mm.
+        mm: f64,
+    },
+    /// `move --xyz X,Y,Z`: go to a point (mm).
+    GoTo {
+        /// The point, mm.
+        xyz: [f64; 3],
+    },
+    /// `move --grip on|off`: close or open the gripper where the robot is.
+    Grip {
+        /// Close it.
+        close: bool,
+    },
 }
 
 impl Mode {
@@ -44,7 +61,8 @@ impl Mode {
             Mode::Run => "run",
             Mode::Step => "step",
             Mode::Tune => "tune",
-            Mode::Jog { .. } => "jog",
+            Mode::Jog { .. } | Mode::JogAxis { .. } => "jog",
+            Mode::GoTo { .. } | Mode::Grip { .. } => "move",
         }
     }
 
@@ -62,6 +80,16 @@ impl Mode {
                     format!("--motor={motor}"),
                     format!("--counts={counts}"),
                 ];
+            }
+            Mode::JogAxis { axis, mm } => {
+                let axis = qmarc_config::AXES[axis.min(2)];
+                return vec!["jog".into(), format!("--axis={axis}"), format!("--mm={mm}")];
+            }
+            Mode::GoTo { xyz: [x, y, z] } => {
+                return vec!["move".into(), format!("--xyz={x},{y},{z}")];
+            }
+            Mode::Grip { close } => {
+                return vec!["move".into(), format!("--grip={}", if close { "on" } else { "off" })];
             }
         };
         fixed.iter().map(|a| a.to_string()).collect()

@@ -34,7 +34,9 @@ pub fn draw(f: &mut Frame, app: &App) {
         // Homing says which motor and what it does, as the CLI's status line.
         let stage = app.live.as_ref().and_then(|l| l.stage.as_deref());
         let stage = stage.map(|s| format!(" · {s}")).unwrap_or_default();
-        format!(" — {} running {:.1} s{stage}", r.mode.arg(), r.started.elapsed().as_secs_f64())
+        // Where the effector is, live.
+        let at = app.live.as_ref().map(crate::live::Live::whereabouts).unwrap_or_default();
+        format!(" — {} running {:.1} s{stage}{at}", r.mode.arg(), r.started.elapsed().as_secs_f64())
     });
     f.render_widget(
         Line::from(vec![
@@ -60,9 +62,11 @@ pub fn draw(f: &mut Frame, app: &App) {
     }
     let (msg, err) = &app.status;
     let style = if *err { Style::new().fg(Color::Red).bold() } else { Style::new() };
-    f.render_widget(Line::styled(format!(" {msg}"), style), status);
+    // The point being typed (Ctrl-G) follows its question, with a cursor.
+    let typed = app.prompt.as_ref().map(|t| format!(" {t}▏")).unwrap_or_default();
+    f.render_widget(Line::styled(format!(" {msg}{typed}"), style), status);
     f.render_widget(
-        Line::from(" F2 Home  F5 Run  F6 Step  ^T Tune  F9 Abort  F10 Exit (save)  F12 Cancel")
+        Line::from(" F2 Home F5 Run F6 Step ^T Tune ^G Go to ^O Grip F9 Abort F10 Exit F12 Cancel")
             .style(Style::new().dim()),
         keys,
     );

@@ -442,7 +442,8 @@ pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: b
         limits,
         require_homed: !homing && !unhomed && !matches!(mode, Mode::Jog | Mode::Check),
         // Homing and jog watch the switches themselves (a motor may rest on one).
-        monitor_switches: !homing && mode != Mode::Jog,
+        // A Cartesian jog is a line in the homed frame: the switches are watched.
+        monitor_switches: !(homing || mode == Mode::Jog && settings.jog.axis.is_none()),
         gripper_mask: settings.s626.gripper_dio.map_or(0, |c| 1 << c),
         ..MovePlan::new(mode, settings.n_motors, settings.period_ns())
     }

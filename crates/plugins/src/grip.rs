@@ -20,6 +20,44 @@ pub fn at_end(s: &Settings, inner: Box<dyn TrajectoryGenerator>) -> Box<dyn Traj
     }
 }
 
+/// The path of `move --grip on|off` without a target: one sample, where the robot is.
+#[derive(Debug, Default)]
+pub struct Here {
+    at: [f64; MAX_MOTORS],
+}
+
+impl TrajectoryGenerator for Here {
+    fn name(&self) -> &'static str {
+        "move"
+    }
+
+    fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+        self.at = *start;
+        Ok(())
+    }
+
+    fn samples(&self) -> Option<u64> {
+        Some(1)
+    }
+
+    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
+        Some(self.at.map(|c| (c, c)))
+    }
+
+    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        Some([0.0; MAX_MOTORS])
+    }
+
+    #[inline]
+    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+        if n > 0 {
+            return Sample::Done;
+        }
+        *cmd = self.at;
+        Sample::Ready
+    }
+}
+
 /// A move's generator with the gripper closed (or opened) at the path's end.
 pub struct GripAtEnd {
     inner: Box<dyn TrajectoryGenerator>,

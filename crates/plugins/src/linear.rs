@@ -15,7 +15,7 @@ use crate::source::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::{MoveTarget, Settings};
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of};
 use qmarc_kinematics::{ARMS, Point, Robot};
-use qmarc_proto::MAX_MOTORS;
+use qmarc_proto::{MAX_MOTORS, MotorFlags};
 
 /// How close to the joint limits the line is played: the worst sampled ratio lands in
 /// `[LINE_FILL, 1]`.
@@ -28,6 +28,10 @@ const LINE_POINTS: usize = 400;
 pub struct LinearMove {
     robot: Robot,
     to_mm: [f64; 3],
+    /// `to_mm` is a distance from where the effector is, not a point (a Cartesian jog).
+    relative: bool,
+    /// A Cartesian jog: the robot's frame must be homed, which `observe` sees.
+    jog: Option<bool>,
     period_s: f64,
     limits: MotionLimits,
     queue: Vec<[f64; MAX_MOTORS]>,
@@ -36,7 +40,19 @@ pub struct LinearMove {
 impl LinearMove {
     /// A line to `to_mm` for `robot`, under `limits`, one sample every `period_s`.
     pub fn new(robot: Robot, to_mm: [f64; 3], period_s: f64, limits: MotionLimits) -> LinearMove {
-        LinearMove { robot, to_mm, period_s, limits, queue: Vec::new() }
+        LinearMove { robot, to_mm, relative: false, jog: None, period_s, limits, queue: Vec::new() }
+    }
+
+    /// The Cartesian jog of the settings (`jog --axis A --mm D`): the effector `jog.mm` along
+    /// the axis from where it is, a straight line at `jog.speed` of the motors' limits, in
+    /// the homed frame only.
+    pub fn jog(s: &Settings) -> Result<LinearMove, TrajBuildError> {
+        let axis = s.jog.axis.unwrap_or(0).min(2);
+        let mut by = [0.0; 3];
+        by[axis] = s.jog.mm;
+        let limits = MotionLimits::of(s).at_speed(s.jog.speed);
+        let line = LinearMove::new(robot_of(s)?, by, s.period_s(), limits);
+        Ok(LinearMove { relative: true, jog: Some(false), ..line })
     }
 
     /// The line of the settings' `move` target at its `--speed`.
@@ -44,14 +60,8 @@ impl LinearMove {
         let MoveTarget::Xyz { mm, .. } = s.motion.target else {
             return Err(TrajBuildError::Line("a straight line needs an --xyz target".into()));
         };
-        let robot = s.robot().ok_or_else(|| {
-            TrajBuildError::Line(format!(
-                "{} has no [robot] table for 3 motors: a line needs the Delta's geometry",
-                s.source.display()
-            ))
-        })?;
         let limits = MotionLimits::of(s).at_speed(s.motion.speed);
-        Ok(LinearMove::new(robot, mm, s.period_s(), limits))
+        Ok(LinearMove::new(robot_of(s)?, mm, s.period_s(), limits))
     }
 
     /// After [`TrajectoryGenerator::start`]: its samples, one per period.
@@ -81,7 +91,10 @@ impl LinearMove {
         here.copy_from_slice(&start[..ARMS]);
         let a = self.robot.point_of(&here).map_err(|e| format!("where the effector is: {e}"))?;
         let [x, y, z] = self.to_mm;
-        let b = Point::new(x / 1e3, y / 1e3, z / 1e3);
+        let mut b = Point::new(x / 1e3, y / 1e3, z / 1e3);
+        if self.relative {
+            b += a;
+        }
         if (b - a).norm() < 1e-9 {
             return Ok(vec![*start]);
         }
@@ -153,12 +166,37 @@ impl LinearMove {
     }
 }
 
+/// The robot of the settings, or why a line cannot be made.
+fn robot_of(s: &Settings) -> Result<Robot, TrajBuildError> {
+    s.robot().ok_or_else(|| {
+        TrajBuildError::Line(format!(
+            "{} has no [robot] table for 3 motors: a line needs the Delta's geometry",
+            s.source.display()
+        ))
+    })
+}
+
 impl TrajectoryGenerator for LinearMove {
     fn name(&self) -> &'static str {
-        "linear"
+        if self.jog.is_some() { "jog" } else { "linear" }
+    }
+
+    /// A jog's robot must be homed: the first observation (before `start`) says.
+    #[inline]
+    fn observe(&mut self, _: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
+        if self.jog == Some(false) && flags[..ARMS].iter().all(|f| f.homed()) {
+            self.jog = Some(true);
+        }
     }
 
     fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+        if self.jog == Some(false) {
+            return Err(TrajStartError::Generator(Box::new(TrajBuildError::Line(
+                "a Cartesian jog moves in the homed frame: home the robot first (qmarc-starter \
+                 home), or jog one motor (--motor, --counts)"
+                    .into(),
+            ))));
+        }
         self.queue = self
             .plan(start)
             .map_err(|e| TrajStartError::Generator(Box::new(TrajBuildError::Line(e))))?;

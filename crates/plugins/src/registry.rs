@@ -3,6 +3,7 @@
 //! choose from these tables (see `docs/extending.md`).
 
 use crate::check::Check;
+use crate::grip::Here;
 use crate::homing::Homing;
 use crate::linear::LinearMove;
 use crate::moveto::Jog;
@@ -78,13 +79,20 @@ pub const GENERATORS: &[GeneratorEntry] = &[
         name: "jog",
         description: "one motor by [jog] counts, jerk-limited from rest to rest (Ruckig)",
         needs_knots: false,
-        build: |s| Ok(Box::new(Jog::from_settings(s)?)),
+        build: |s| match s.jog.axis {
+            Some(_) => Ok(Box::new(LinearMove::jog(s)?)),
+            None => Ok(Box::new(Jog::from_settings(s)?)),
+        },
     },
     GeneratorEntry {
         name: "move",
         description: "to a target from where the motors are, jerk-limited and time-optimal (online Ruckig)",
         needs_knots: false,
-        build: |s| Ok(crate::grip::at_end(s, Box::new(OnlineMove::from_settings(s)?))),
+        build: |s| match s.motion.target.counts() {
+            // `move --grip on|off` alone: where the robot is.
+            [] if s.motion.grip.is_some() => Ok(crate::grip::at_end(s, Box::<Here>::default())),
+            _ => Ok(crate::grip::at_end(s, Box::new(OnlineMove::from_settings(s)?))),
+        },
     },
     GeneratorEntry {
         name: "linear",

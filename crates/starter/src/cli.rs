@@ -118,7 +118,7 @@ pub enum Command {
 
 /// Options of `move`.
 #[derive(Debug, Clone, PartialEq, Args, Default)]
-#[command(group(clap::ArgGroup::new("target").required(true).args(["to", "xyz"])))]
+#[command(group(clap::ArgGroup::new("target").args(["to", "xyz"])))]
 pub struct MoveArgs {
     /// The target in joint counts, one per motor: `--to 1000,-500,250`.
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "C1,C2,C3")]
@@ -136,7 +136,7 @@ pub struct MoveArgs {
     #[arg(long, value_name = "F")]
     pub speed: Option<f64>,
     /// Close (`on`) or open (`off`) the gripper at the end of the move; the move ends once
-    /// it is there.
+    /// it is there. Without --to or --xyz: where the robot is.
     #[arg(long, value_name = "on|off", value_parser = parse_on_off)]
     pub grip: Option<bool>,
 }
@@ -153,6 +153,14 @@ pub fn parse_on_off(v: &str) -> Result<bool, String> {
 impl MoveArgs {
     /// Applies the move's target, line and speed to `s`.
     pub fn apply(&self, s: &mut Settings) -> Result<(), ConfigLoadError> {
+        if self.to.is_none() && self.xyz.is_none() && self.grip.is_none() {
+            return Err(ConfigLoadError::Override {
+                flag: "move",
+                message: "where to? --to C1,C2,C3 or --xyz X,Y,Z (or --grip on|off alone, in \
+                          place)"
+                    .into(),
+            });
+        }
         if let Some(to) = &self.to {
             s.set_move_to(to)?;
         }
@@ -181,11 +189,17 @@ impl MoveArgs {
 #[derive(Debug, Clone, PartialEq, Args, Default)]
 pub struct JogArgs {
     /// The motor, 1-based (default: `jog.motor`).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "axis")]
     pub motor: Option<usize>,
     /// How far, counts, either way (default: `jog.counts`).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, allow_negative_numbers = true, conflicts_with = "axis")]
     pub counts: Option<i64>,
+    /// The effector along `x`, `y` or `z` instead: a straight line, in the homed frame.
+    #[arg(long, value_name = "x|y|z")]
+    pub axis: Option<String>,
+    /// How far along --axis, mm, either way (default: `jog.mm`).
+    #[arg(long, allow_negative_numbers = true, requires = "axis")]
+    pub mm: Option<f64>,
 }
 
 /// Options of `run`.
@@ -250,9 +264,12 @@ impl Command {
                 }
                 s.trajectory.approach |= a.approach;
             }
-            Command::Jog(a) => {
-                s.set_jog(a.motor.unwrap_or(s.jog.motor), a.counts.unwrap_or(s.jog.counts))?
-            }
+            Command::Jog(a) => match &a.axis {
+                Some(axis) => s.set_jog_axis(axis, a.mm)?,
+                None => {
+                    s.set_jog(a.motor.unwrap_or(s.jog.motor), a.counts.unwrap_or(s.jog.counts))?
+                }
+            },
             Command::Move(a) => a.apply(s)?,
             Command::Home | Command::Check | Command::Serve => {}
         }

@@ -10,11 +10,13 @@ impl App {
         let keys = match self.page {
             Page::Setup => return self.field_hint(),
             Page::Log => {
-                "↑↓ PgUp PgDn scroll · Home: first line · End: follow the output · ^←/^→ jog"
+                "↑↓ PgUp PgDn scroll · Home: first line · End: follow the output · ^←/^→ jog, \
+                 ^↑/^↓ motor or axis"
             }
             Page::Charts => "←/→ or 1–4: the motor charted",
             Page::Results | Page::History => {
-                "↑↓ PgUp PgDn Home End scroll · F7 charts · F8 history · ^←/^→ jog, ^↑/^↓ motor"
+                "↑↓ PgUp PgDn Home End scroll · F7 charts · F8 history · ^←/^→ jog, ^↑/^↓ motor \
+                 or axis"
             }
         };
         self.status = (keys.to_string(), false);

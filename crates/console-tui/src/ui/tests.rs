@@ -391,16 +391,72 @@ fn the_jog_keys_choose_a_motor_and_jog_it_through_the_starter() {
     app.on_key(ctrl(KeyCode::Down));
     assert_eq!(app.jog_motor, 1, "no jog key on the setup page");
     app.on_key(key(KeyCode::F(4)));
+    for _ in 0..2 {
+        app.on_key(ctrl(KeyCode::Down));
+    }
+    assert_eq!(app.status.0, "jog: motor 3 (Ctrl-← / Ctrl-→ move it ∓100 counts)");
+    // Issue 30: past the motors, the effector's axes (the shipped settings describe a Delta).
     for _ in 0..5 {
         app.on_key(ctrl(KeyCode::Down));
     }
-    assert_eq!(app.jog_motor, 3, "three motors in use");
-    assert_eq!(app.status.0, "jog: motor 3 (Ctrl-← / Ctrl-→ move it ∓100 counts)");
-    app.on_key(ctrl(KeyCode::Up));
+    assert_eq!(app.jog_motor, 6, "three motors in use, then x, y, z");
+    assert_eq!(app.status.0, "jog: the effector along z (Ctrl-← / Ctrl-→ move it ∓5 mm)");
+    app.on_key(ctrl(KeyCode::Right));
+    assert!(app.status.0.starts_with("cannot start jog (qmarc-starter): "), "{:?}", app.status);
+    assert_eq!(
+        Mode::JogAxis { axis: 2, mm: 5.0 }.args(),
+        ["jog", "--axis=z", "--mm=5"],
+        "a Cartesian jog"
+    );
+    for _ in 0..4 {
+        app.on_key(ctrl(KeyCode::Up));
+    }
     assert_eq!(app.jog_motor, 2);
     app.on_key(ctrl(KeyCode::Left));
     // The test's starter is not on the PATH: the jog was tried, by name.
     assert!(app.status.0.starts_with("cannot start jog (qmarc-starter): "), "{:?}", app.status);
     assert_eq!(Mode::Jog { motor: 2, counts: -100 }.args(), ["jog", "--motor=2", "--counts=-100"]);
     assert_eq!(Mode::Run.args(), ["run", "--approach"], "the console's Run approaches the path");
+}
+
+/// Issue 30: Ctrl-G asks for a point and goes there through `move --xyz`; Esc cancels, a
+/// malformed point is said and kept for correction; Ctrl-O closes the gripper where the robot
+/// is (`move --grip on`), the next opens it once a close has succeeded.
+#[test]
+fn go_to_asks_for_a_point_and_the_gripper_key_grips() {
+    use crate::starter_process::Mode;
+    use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+    let ctrl = |code| KeyEvent::new(code, KeyModifiers::CONTROL);
+    let (_d, mut app) = app();
+    app.on_key(key(KeyCode::F(4)));
+    app.on_key(ctrl(KeyCode::Char('g')));
+    assert_eq!(app.prompt.as_deref(), Some(""));
+    assert!(app.status.0.starts_with("go to X Y Z (mm)"));
+    for c in "20 -10 -64q0".chars() {
+        app.on_key(key(KeyCode::Char(c)));
+    }
+    assert_eq!(app.prompt.as_deref(), Some("20 -10 -640"), "only what a number holds");
+    app.on_key(key(KeyCode::Backspace));
+    assert_eq!(app.prompt.as_deref(), Some("20 -10 -64"));
+    app.on_key(key(KeyCode::Esc));
+    assert_eq!((app.prompt.as_deref(), app.status.0.as_str()), (None, "go to: cancelled"));
+    app.on_key(ctrl(KeyCode::Char('g')));
+    for c in "20 -10".chars() {
+        app.on_key(key(KeyCode::Char(c)));
+    }
+    app.on_key(key(KeyCode::Enter));
+    assert_eq!(app.status, ("go to X Y Z (mm): three numbers, found 2".into(), true));
+    assert!(app.prompt.is_some(), "kept for correction");
+    for c in " -640".chars() {
+        app.on_key(key(KeyCode::Char(c)));
+    }
+    app.on_key(key(KeyCode::Enter));
+    assert_eq!(app.prompt, None);
+    assert!(app.status.0.starts_with("cannot start move (qmarc-starter): "), "{:?}", app.status);
+    assert_eq!(Mode::GoTo { xyz: [20.0, -10.0, -640.0] }.args(), ["move", "--xyz=20,-10,-640"]);
+    app.on_key(ctrl(KeyCode::Char('o')));
+    assert!(app.status.0.starts_with("cannot start move (qmarc-starter): "), "{:?}", app.status);
+    assert!(!app.grip_closed, "not closed: the move did not run");
+    assert_eq!(Mode::Grip { close: true }.args(), ["move", "--grip=on"]);
+    assert_eq!(Mode::Grip { close: false }.args(), ["move", "--grip=off"]);
 }
