@@ -41,26 +41,19 @@ impl GripperModel {
         }
     }
 
-    /// The output's bit (0: no gripper).
-    pub fn mask(&self) -> u32 {
-        self.mask
-    }
-
     /// How far closed at `now_ns`, 0 ‥ 1.
     fn closedness(&self, now_ns: u64) -> f64 {
         let moved = now_ns.saturating_sub(self.since_ns) as f64 / self.travel_ns as f64;
         if self.close { (self.from + moved).min(1.0) } else { (self.from - moved).max(0.0) }
     }
 
-    /// The outputs are `outputs` from `now_ns` on: the jaws turn round where they are when
-    /// the gripper's bit changes.
+    /// The outputs are `outputs` from `now_ns` on: the jaws go on from where they are, toward
+    /// closed while the gripper's bit is on, else toward open (the ramp taken up again from
+    /// its point now is the same ramp when the bit did not change).
     pub fn set(&mut self, outputs: u32, now_ns: u64) {
-        let close = outputs & self.mask != 0;
-        if self.mask != 0 && close != self.close {
-            self.from = self.closedness(now_ns);
-            self.since_ns = now_ns;
-            self.close = close;
-        }
+        self.from = self.closedness(now_ns);
+        self.since_ns = now_ns;
+        self.close = outputs & self.mask != 0;
     }
 
     /// The state at `now_ns`.
@@ -120,6 +113,5 @@ mod tests {
         let mut none = GripperModel::NONE;
         none.set(u32::MAX, 5);
         assert_eq!(none.state(10).name(), "none");
-        assert_eq!(none.mask(), 0);
     }
 }

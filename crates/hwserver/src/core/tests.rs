@@ -298,6 +298,13 @@ fn the_gripper_closes_in_its_time_and_reads_back() {
     send(&mut c, HwMsg::write_outputs(1 << 7, 1 << 7));
     let names: Vec<&str> = (0..25).map(|_| state(&mut c)).collect();
     assert_eq!(names[22..24], ["opening", "open"], "{names:?}");
+    // A bit the backend keeps for itself (an amplifier enable) is no gripper, nor is none.
+    for mask in [1 << 0, 0] {
+        let s = SimParams { n_motors: 3, lockstep: true, ..SimParams::default() };
+        let mut c = core_with(s).with_gripper(mask, 0.01);
+        let r = send(&mut c, HwMsg::read_all_encoders());
+        assert_eq!(qmarc_proto::Gripper(r.gripper).name(), "none", "{mask:#x}");
+    }
     let mut none = core(3);
     assert_eq!(
         qmarc_proto::Gripper(send(&mut none, HwMsg::read_all_encoders()).gripper).name(),

@@ -31,6 +31,24 @@ impl TrajectoryGenerator for TestPath {
     fn gripper(&mut self, _: Gripper) -> Option<bool> {
         Some(false)
     }
+    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
+        Some([(-3.0, self.0 as f64); MAX_MOTORS])
+    }
+    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        Some([0.5, 0.25, 0.0, 0.0])
+    }
+    fn observe(&mut self, act: &[f64; MAX_MOTORS], _: &[MotorFlags; MAX_MOTORS]) {
+        self.0 = act[0] as u64;
+    }
+    fn progress(&self) -> u32 {
+        7
+    }
+    fn first_command(&mut self) -> Result<Option<[f64; MAX_MOTORS]>, TrajStartError> {
+        Ok(Some([2.0; MAX_MOTORS]))
+    }
+    fn lead_in(&self) -> u64 {
+        12
+    }
 }
 
 /// Runs `g` against a gripper that is there `after` cycles after it is told (never: `None`);
@@ -105,4 +123,38 @@ fn no_gripper_wired_fails_at_the_path_end() {
     }
     assert_eq!(g.sample(10, &mut cmd), Sample::Failed);
     assert!(g.failure().unwrap().contains("no gripper is wired"), "{:?}", g.failure());
+}
+
+/// What the wrapped path says of itself, the wrapper says: its bounds, end velocity, progress,
+/// first command and lead-in, and it sees what the loop observes.
+#[test]
+fn the_path_is_the_wrapped_generators() {
+    let mut g = GripAtEnd::new(path(10), true, 0.05, 0.0004);
+    assert_eq!(g.first_command().unwrap(), Some([2.0; MAX_MOTORS]));
+    g.observe(&[40.0, 0.0, 0.0, 0.0], &[MotorFlags::default(); MAX_MOTORS]);
+    g.start(&[0.0; MAX_MOTORS]).unwrap();
+    assert_eq!(g.samples(), Some(40 + 250 + 10), "the observed path's length");
+    assert_eq!(g.path_bounds(), Some([(-3.0, 40.0); MAX_MOTORS]));
+    assert_eq!(g.end_velocity(), Some([0.5, 0.25, 0.0, 0.0]));
+    assert_eq!((g.progress(), g.lead_in()), (7, 12));
+}
+
+/// `move --grip on|off` alone: one sample, where the robot is, at rest.
+#[test]
+fn here_is_one_sample_where_the_robot_is() {
+    let mut h = Here::default();
+    let at = [100.0, -200.0, 300.0, 0.0];
+    h.start(&at).unwrap();
+    assert_eq!((h.name(), h.samples()), ("move", Some(1)));
+    assert_eq!(
+        h.path_bounds(),
+        Some([(100.0, 100.0), (-200.0, -200.0), (300.0, 300.0), (0.0, 0.0)])
+    );
+    assert_eq!(h.end_velocity(), Some([0.0; MAX_MOTORS]));
+    let mut cmd = [f64::NAN; MAX_MOTORS];
+    assert_eq!(h.sample(0, &mut cmd), Sample::Ready);
+    assert_eq!(cmd, at);
+    let mut after = [f64::NAN; MAX_MOTORS];
+    assert_eq!(h.sample(1, &mut after), Sample::Done);
+    assert!(after[0].is_nan(), "nothing written after the end");
 }
