@@ -70,6 +70,7 @@ const LAYERS: &[&str] = &[
     "telemetry",
     "plugins",
     "report",
+    "bridge",
     "waypoints",
     "plots",
     "controller-process",

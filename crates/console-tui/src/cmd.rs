@@ -6,10 +6,10 @@
 //! printed), 1 no serving controller or no answer, 64 bad options.
 
 use clap::{Parser, Subcommand};
-use qmarc_config::{Mode, RunSpec};
 use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandResponse};
-use qmarc_proto::service::{IpcLocation, run_file};
+use qmarc_proto::service::IpcLocation;
 use qmarc_proto::state::{FaultKind, Phase};
+use qmarc_telemetry::reader::{serving, serving_session};
 use std::ffi::OsString;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -81,33 +81,12 @@ fn parse_on_off(v: &str) -> Result<bool, String> {
     }
 }
 
-/// The run of `prefix` while it is a serving session (its run file says so). No iceoryx2
-/// node is made otherwise: a node under a prefix whose run has ended would leave iceoryx2's
-/// files of that prefix behind.
-fn serving(prefix: &str) -> Option<RunSpec> {
-    RunSpec::read(&run_file(prefix)).ok().filter(|s| s.mode == Mode::Serve)
-}
-
 /// The location of the serving session, `--iox-prefix`'s, else the newest of yours, and its
 /// motors.
 fn session(args: &CmdArgs) -> anyhow::Result<(IpcLocation, usize)> {
-    if let Some(prefix) = &args.iox_prefix {
-        let spec = serving(prefix).ok_or_else(|| {
-            anyhow::anyhow!(
-                "no serving session under iceoryx2 prefix `{prefix}` (its run file {} is not a \
-                 running `qmarc-starter serve`'s)",
-                run_file(prefix).display()
-            )
-        })?;
-        let location = qmarc_telemetry::reader::location_of(prefix, args.iox_root.as_deref());
-        return Ok((location, spec.settings.n_motors));
-    }
-    qmarc_telemetry::reader::runs(args.iox_root.as_deref())
-        .into_iter()
-        .find_map(|r| serving(&r.location.prefix).map(|s| (r.location, s.settings.n_motors)))
-        .ok_or_else(|| {
-            anyhow::anyhow!("no serving controller found in /dev/shm: start `qmarc-starter serve`")
-        })
+    let (location, spec) = serving_session(args.iox_prefix.as_deref(), args.iox_root.as_deref())
+        .map_err(|e| anyhow::anyhow!(e))?;
+    Ok((location, spec.settings.n_motors))
 }
 
 /// The words of a status.

@@ -113,7 +113,18 @@ pub enum Command {
     /// over the iceoryx2 service `qmarc/command` and from `qmarc cmd move|stop|wait|status|
     /// quit`. Ends on `qmarc cmd quit` (or Ctrl-C) as any move ends, its data files written
     /// (the last `gather.stream_max_s` of it). Needs a homed frame (or --unhomed).
-    Serve,
+    Serve(ServeArgs),
+}
+
+/// Options of `serve`.
+#[derive(Debug, Clone, PartialEq, Args, Default)]
+pub struct ServeArgs {
+    /// Start `qmarc-bridge` beside the controller and the hwserver, and stop it with them: the
+    /// session as a ROS 2 node over Zenoh, on rmw_zenoh's defaults (a peer connecting to a
+    /// router at tcp/localhost:7447, domain 0, no namespace; run `qmarc-bridge` yourself for
+    /// others). Its end, or its death, ends nothing else.
+    #[arg(long)]
+    pub bridge: bool,
 }
 
 /// Options of `move`.
@@ -240,7 +251,7 @@ impl Command {
             Command::Jog(_) => Mode::Jog,
             Command::Check => Mode::Check,
             Command::Move(_) => Mode::Move,
-            Command::Serve => Mode::Serve,
+            Command::Serve(_) => Mode::Serve,
         }
     }
 
@@ -271,7 +282,7 @@ impl Command {
                 }
             },
             Command::Move(a) => a.apply(s)?,
-            Command::Home | Command::Check | Command::Serve => {}
+            Command::Home | Command::Check | Command::Serve(_) => {}
         }
         Ok(())
     }

@@ -12,6 +12,7 @@
 //! ```
 #![deny(missing_docs)]
 
+mod bridge;
 pub mod cli;
 mod lost;
 pub mod moves;

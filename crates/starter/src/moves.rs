@@ -87,6 +87,8 @@ pub struct Prepared {
     pub hwserver_bin: PathBuf,
     /// The controller's program.
     pub controller_bin: PathBuf,
+    /// `qmarc-bridge`, when `serve --bridge` starts one beside them.
+    pub bridge_bin: Option<PathBuf>,
     /// The iceoryx2 prefix was given (`--iox-prefix`): an earlier run's files under it are
     /// removed before this one starts.
     pub own_prefix: bool,
@@ -136,6 +138,18 @@ fn programs(bin_dir: Option<&Path>) -> Result<(PathBuf, PathBuf), Failure> {
     Ok((hwserver, controller))
 }
 
+/// `qmarc-bridge`, beside the children's programs.
+fn bridge_program(hwserver_bin: &Path) -> Result<PathBuf, Failure> {
+    let bridge = hwserver_bin.with_file_name("qmarc-bridge");
+    if !bridge.is_file() {
+        return Err(internal(anyhow!(
+            "{} not found: build the workspace first (`cargo build --release`)",
+            bridge.display()
+        )));
+    }
+    Ok(bridge)
+}
+
 /// Everything is checked before anything starts: the settings, the programs, the iceoryx2
 /// location, the hardware, the path, the gather budget and the output folder. Starts
 /// nothing, writes nothing.
@@ -143,6 +157,10 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     let settings = settings_of(req)?;
     let mode = req.command.mode();
     let (hwserver_bin, controller_bin) = programs(req.bin_dir)?;
+    let bridge_bin = match req.command {
+        crate::cli::Command::Serve(a) if a.bridge => Some(bridge_program(&hwserver_bin)?),
+        _ => None,
+    };
     let prefix = req.iox_prefix.map_or_else(default_prefix, str::to_string);
     let root = req.iox_root.unwrap_or(DEFAULT_ROOT);
     let location = IpcLocation::checked(&prefix, root).map_err(|e| refused(anyhow!(e)))?;
@@ -176,7 +194,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     qmarc_hwserver::backends::check(settings, spec.deterministic).map_err(refused)?;
     check_path(settings, mode)?;
     let own_prefix = req.iox_prefix.is_some();
-    Ok(Prepared { spec, location, hwserver_bin, controller_bin, own_prefix })
+    Ok(Prepared { spec, location, hwserver_bin, controller_bin, bridge_bin, own_prefix })
 }
 
 /// The path: knot files are read and checked now (streams are the controller's to read: it
@@ -285,6 +303,8 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
         say!("qmarc-starter: warning: cannot keep off the real-time CPUs ({e})");
     }
     let mut children = spawn_both(p, &child_args, log)?;
+    let mut bridge =
+        p.bridge_bin.as_ref().map(|b| crate::bridge::Bridge::start(b, &p.location, log));
     let status = std::cell::RefCell::new(StatusLine::new(progress.as_ref()));
     let said = |s: &Supervised| {
         status.borrow_mut().clear();
@@ -297,7 +317,15 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
         }
     };
     let limit = stall_limit(&p.spec);
-    supervise::wait_all(&mut children, stop, limit, said, || status.borrow_mut().update());
+    supervise::wait_all(&mut children, stop, limit, said, || {
+        status.borrow_mut().update();
+        if let Some(b) = bridge.as_mut() {
+            b.watch(&mut status.borrow_mut());
+        }
+    });
+    if let Some(b) = bridge {
+        b.stop();
+    }
     status.borrow_mut().clear();
     let reached = progress.as_ref().map(Progress::read);
     drop(progress);

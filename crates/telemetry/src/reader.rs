@@ -163,6 +163,37 @@ pub fn location_of(prefix: &str, root: Option<&str>) -> IpcLocation {
     IpcLocation::new(prefix, &root)
 }
 
+/// The run of `prefix` while it is a serving session (`qmarc-starter serve`): its run file
+/// says so. A client makes no iceoryx2 node otherwise: a node under a prefix whose run has
+/// ended would leave iceoryx2's files of that prefix behind.
+pub fn serving(prefix: &str) -> Option<qmarc_config::RunSpec> {
+    qmarc_config::RunSpec::read(&run_file(prefix))
+        .ok()
+        .filter(|s| s.mode == qmarc_config::Mode::Serve)
+}
+
+/// The serving session a client is for: `prefix`'s, else the caller's newest (under `root`,
+/// if given), with its run; or why there is none.
+pub fn serving_session(
+    prefix: Option<&str>,
+    root: Option<&str>,
+) -> Result<(IpcLocation, qmarc_config::RunSpec), String> {
+    if let Some(prefix) = prefix {
+        let spec = serving(prefix).ok_or_else(|| {
+            format!(
+                "no serving session under iceoryx2 prefix `{prefix}` (its run file {} is not a \
+                 running `qmarc-starter serve`'s)",
+                run_file(prefix).display()
+            )
+        })?;
+        return Ok((location_of(prefix, root), spec));
+    }
+    runs(root)
+        .into_iter()
+        .find_map(|r| serving(&r.location.prefix).map(|s| (r.location, s)))
+        .ok_or_else(|| "no serving session in /dev/shm: start `qmarc-starter serve`".to_string())
+}
+
 /// A run found by its run file in `/dev/shm`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FoundRun {

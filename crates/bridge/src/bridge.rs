@@ -1,0 +1,284 @@
+//! The bridge's loop: the robot's telemetry out as ROS 2 topics, ROS 2 targets and service
+//! calls in as the serve mode's commands — one thread, the iceoryx2 ends (which are not
+//! `Send`) and the Zenoh queues polled in turn, `--rate` times a second.
+//!
+//! Nothing from the network reaches the controller unchecked: a payload is bounded and fully
+//! decoded, its numbers finite and near; the controller checks the rest (reach, soft limits,
+//! homing) and refuses with a reason, which the bridge logs and puts in `/diagnostics`.
+
+use crate::convert::{Converter, SessionState, target_mm};
+use crate::msgs::{PointStamped, SetBoolRequest, SuccessResponse, Time, TriggerRequest};
+use crate::node::{Node, RosPublisher, RosService, payload_of, session_config};
+use crate::ros2::{self, Qos};
+use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandResponse};
+use qmarc_proto::service::IpcLocation;
+use qmarc_proto::telemetry::TelemetrySample;
+use qmarc_telemetry::reader::TelemetryReader;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// Farthest a target may be from the base, m (the serve mode refuses what the robot cannot
+/// reach; this only keeps absurd numbers off the wire to it).
+pub const TARGET_LIMIT_M: f64 = 10.0;
+
+/// What the bridge serves.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// The serving session's iceoryx2 files.
+    pub location: IpcLocation,
+    /// ROS namespace (`""` or `/robot1`).
+    pub namespace: String,
+    /// ROS domain id.
+    pub domain: u32,
+    /// Joint states a second.
+    pub rate_hz: f64,
+    /// A Zenoh configuration file instead of rmw_zenoh's defaults.
+    pub zenoh_config: Option<PathBuf>,
+    /// The robot, from the session's settings.
+    pub converter: Converter,
+    /// The hardware the diagnostics name (`sim`, `s626`).
+    pub hardware_id: String,
+}
+
+/// The node's entities.
+struct Entities {
+    joint_states: RosPublisher,
+    effector: RosPublisher,
+    diagnostics: RosPublisher,
+    target: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    stop: RosService,
+    gripper: RosService,
+}
+
+impl Entities {
+    fn declare(node: &mut Node) -> Result<Entities, crate::node::ZenohError> {
+        Ok(Entities {
+            joint_states: node.publisher("joint_states", &ros2::JOINT_STATE, &Qos::DEFAULT)?,
+            effector: node.publisher("qmarc/effector", &ros2::POINT_STAMPED, &Qos::DEFAULT)?,
+            diagnostics: node.publisher("/diagnostics", &ros2::DIAGNOSTIC_ARRAY, &Qos::DEFAULT)?,
+            target: node.subscription("qmarc/target", &ros2::POINT_STAMPED, &Qos::DEFAULT)?,
+            stop: node.service("qmarc/stop", &ros2::TRIGGER)?,
+            gripper: node.service("qmarc/gripper", &ros2::SET_BOOL)?,
+        })
+    }
+}
+
+/// The bridge's state between turns.
+struct Bridge {
+    opts: Options,
+    e: Entities,
+    client: CommandClient,
+    reader: TelemetryReader,
+    last: Option<TelemetrySample>,
+    homed: bool,
+    refused: String,
+    said: Option<SessionState>,
+    said_at: Option<Instant>,
+    status_at: Option<Instant>,
+}
+
+/// Serves until the session ends (`Ok`) or `stop` is set.
+pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
+    let mut node = Node::open(
+        session_config(opts.zenoh_config.as_deref())?,
+        opts.domain,
+        &opts.namespace,
+        "qmarc",
+    )?;
+    let e = Entities::declare(&mut node)?;
+    let Some((client, reader)) = attach(&opts.location, stop)? else { return Ok(()) };
+    eprintln!(
+        "qmarc-bridge: serving {} as ROS 2 node {}qmarc, domain {}",
+        opts.location.prefix,
+        if node.namespace() == "/" { "/".to_string() } else { format!("{}/", node.namespace()) },
+        opts.domain
+    );
+    let period = Duration::from_secs_f64(1.0 / opts.rate_hz);
+    let mut b = Bridge {
+        opts,
+        e,
+        client,
+        reader,
+        last: None,
+        homed: false,
+        refused: String::new(),
+        said: None,
+        said_at: None,
+        status_at: None,
+    };
+    let mut next = Instant::now();
+    while !stop.load(Ordering::Relaxed) {
+        if b.turn()? {
+            return Ok(());
+        }
+        next += period;
+        let now = Instant::now();
+        if next > now {
+            std::thread::sleep(next - now);
+        } else {
+            next = now;
+        }
+    }
+    Ok(())
+}
+
+/// How long a session that is starting may take to serve.
+const ATTACH_WAIT: Duration = Duration::from_secs(30);
+
+/// The session's command client and telemetry reader, once it serves (it may be starting:
+/// `serve --bridge` starts the bridge with it); `None` if a stop signal came first.
+fn attach(
+    location: &IpcLocation,
+    stop: &AtomicBool,
+) -> anyhow::Result<Option<(CommandClient, TelemetryReader)>> {
+    let since = Instant::now();
+    loop {
+        let client = CommandClient::connect(location).map_err(anyhow::Error::from);
+        let reader = TelemetryReader::open_run(location)
+            .map_err(|e| anyhow::anyhow!("the session's telemetry: {e:?}"));
+        match (client, reader) {
+            (Ok(c), Ok(r)) => return Ok(Some((c, r))),
+            (Err(e), _) | (_, Err(e)) if since.elapsed() > ATTACH_WAIT => return Err(e),
+            _ if stop.load(Ordering::Relaxed) => return Ok(None),
+            _ => std::thread::sleep(Duration::from_millis(50)),
+        }
+    }
+}
+
+impl Bridge {
+    /// One turn: telemetry out, commands in, diagnostics when due. True once the session
+    /// has ended.
+    fn turn(&mut self) -> anyhow::Result<bool> {
+        let mut newest = None;
+        while let Some(s) = self.reader.receive().map_err(|e| anyhow::anyhow!(e))? {
+            newest = Some(s);
+        }
+        let stamp = Time::now();
+        if let Some(s) = newest {
+            let c = self.opts.converter;
+            let js = c.joint_state(&s, self.last.as_ref(), stamp);
+            self.last = Some(s);
+            publish(&mut self.e.joint_states, &js);
+            if let Some(p) = c.effector(&s, stamp) {
+                publish(&mut self.e.effector, &p);
+            }
+        }
+        self.commands();
+        let ended = self.reader.end();
+        self.diagnose(stamp, ended.is_some());
+        Ok(ended.is_some())
+    }
+
+    /// A command to the controller; its refusal, if refused, logged and kept for the
+    /// diagnostics.
+    fn command(&mut self, r: CommandRequest, what: &str) -> Result<CommandResponse, String> {
+        let answer = self.client.send(r).map_err(|e| format!("{what}: {e}"))?;
+        match answer.refused() {
+            None => {
+                self.refused.clear();
+                Ok(answer)
+            }
+            Some(refusal) => {
+                let why = format!("{what}: {} ({})", answer.reason(), refusal.name());
+                eprintln!("qmarc-bridge: refused: {why}");
+                self.refused = why.clone();
+                Err(why)
+            }
+        }
+    }
+
+    /// The targets and service calls that arrived.
+    fn commands(&mut self) {
+        while let Ok(Some(sample)) = self.e.target.try_recv() {
+            let bytes = payload_of(Some(sample.payload()));
+            let target = ros2::from_cdr::<PointStamped>(&bytes, "geometry_msgs/msg/PointStamped")
+                .map_err(|e| e.to_string())
+                .and_then(|p| target_mm(&p.point, TARGET_LIMIT_M));
+            match target {
+                Ok(mm) => {
+                    let _ = self.command(CommandRequest::move_xyz(mm, false, 1.0), "qmarc/target");
+                }
+                Err(why) => self.bad_input("qmarc/target", &why),
+            }
+        }
+        while let Some(q) = self.e.stop.try_recv() {
+            let reply = match ros2::from_cdr::<TriggerRequest>(&payload_of(q.payload()), "Trigger")
+            {
+                Err(e) => failure(&e.to_string()),
+                Ok(_) => match self.command(CommandRequest::of(CommandKind::Stop), "qmarc/stop") {
+                    Ok(_) => SuccessResponse { success: true, message: "stopping".into() },
+                    Err(why) => failure(&why),
+                },
+            };
+            reply_with(&self.e.stop, &q, &reply);
+        }
+        while let Some(q) = self.e.gripper.try_recv() {
+            let reply = match ros2::from_cdr::<SetBoolRequest>(&payload_of(q.payload()), "SetBool")
+            {
+                Err(e) => failure(&e.to_string()),
+                Ok(r) => match self.command(CommandRequest::grip(r.data), "qmarc/gripper") {
+                    Ok(_) => SuccessResponse {
+                        success: true,
+                        message: if r.data { "closing" } else { "opening" }.into(),
+                    },
+                    Err(why) => failure(&why),
+                },
+            };
+            reply_with(&self.e.gripper, &q, &reply);
+        }
+    }
+
+    /// Input from the network that is not a command: logged, in the diagnostics, never sent.
+    fn bad_input(&mut self, topic: &str, why: &str) {
+        eprintln!("qmarc-bridge: {topic}: not taken: {why}");
+        self.refused = format!("{topic}: {why}");
+    }
+
+    /// `/diagnostics`: once a second, and at once when the state changes.
+    fn diagnose(&mut self, stamp: Time, ended: bool) {
+        if self.status_at.is_none_or(|t| t.elapsed() >= Duration::from_secs(1)) {
+            self.status_at = Some(Instant::now());
+            if let Ok(s) = self.client.send(CommandRequest::of(CommandKind::Status)) {
+                let all = (1u32 << self.opts.converter.n_motors) - 1;
+                self.homed = s.homed & all == all;
+            }
+        }
+        let Some(last) = self.last else { return };
+        let mut state = SessionState::of(&last, self.homed, &self.refused);
+        if ended && state.fault.is_empty() {
+            state.phase = "ended".into();
+        }
+        let due = self.said_at.is_none_or(|t| t.elapsed() >= Duration::from_secs(1));
+        if due || self.said.as_ref() != Some(&state) {
+            publish(&mut self.e.diagnostics, &state.diagnostics(&self.opts.hardware_id, stamp));
+            self.said = Some(state);
+            self.said_at = Some(Instant::now());
+        }
+    }
+}
+
+/// A failed call's response.
+fn failure(why: &str) -> SuccessResponse {
+    SuccessResponse { success: false, message: why.to_string() }
+}
+
+/// Publishes `value`; a failure is said, never fatal (the network is not the robot's).
+fn publish<T: serde::Serialize>(p: &mut RosPublisher, value: &T) {
+    let sent = ros2::to_cdr(value)
+        .map_err(|e| e.to_string())
+        .and_then(|b| p.put(b).map_err(|e| e.to_string()));
+    if let Err(e) = sent {
+        eprintln!("qmarc-bridge: {}: {e}", p.keyexpr);
+    }
+}
+
+/// Answers a call; a failure is said.
+fn reply_with<T: serde::Serialize>(service: &RosService, q: &zenoh::query::Query, value: &T) {
+    let sent = ros2::to_cdr(value)
+        .map_err(|e| e.to_string())
+        .and_then(|b| service.reply(q, b).map_err(|e| e.to_string()));
+    if let Err(e) = sent {
+        eprintln!("qmarc-bridge: {}: {e}", service.keyexpr);
+    }
+}

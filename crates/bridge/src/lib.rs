@@ -1,0 +1,14 @@
+//! `qmarc-bridge`: a serving QMARC (`qmarc-starter serve`) as a ROS 2 participant over Eclipse
+//! Zenoh, as ROS 2 Jazzy's rmw_zenoh makes one, with no ROS 2 installed: ROS 2 tools and MoveIt
+//! see the robot, command it and watch it (thesis 6.2.4, QMARC in an existing system).
+//!
+//! The bridge is a process of its own. It talks to the controller only through the iceoryx2
+//! services every client uses (telemetry, `qmarc/command`), so the servo loop never waits on
+//! the network. [`ros2`] is rmw_zenoh's wire conventions, [`msgs`] the messages.
+#![deny(missing_docs)]
+
+pub mod bridge;
+pub mod convert;
+pub mod msgs;
+pub mod node;
+pub mod ros2;

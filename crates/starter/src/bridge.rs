@@ -1,0 +1,75 @@
+//! `serve --bridge`: `qmarc-bridge` beside the controller and the hwserver. It is not one of
+//! the run's children: its end, or its death (kill -9), ends nothing, and is said once; the
+//! session's end stops it (SIGTERM, then SIGKILL after 3 s). Like every child it ends if the
+//! starter dies (its parent-death signal).
+
+use crate::status::StatusLine;
+use crate::supervise::{self, Exit, describe_exit};
+use qmarc_proto::service::IpcLocation;
+use std::path::Path;
+use std::process::Child;
+use std::time::{Duration, Instant};
+
+/// The bridge of a serving session.
+pub(crate) struct Bridge {
+    child: Option<Child>,
+}
+
+impl Bridge {
+    /// Starts `program` on the session at `location` (its messages to `log`, if given).
+    pub(crate) fn start(
+        program: &Path,
+        location: &IpcLocation,
+        log: Option<&std::fs::File>,
+    ) -> Bridge {
+        let args =
+            [format!("--iox-prefix={}", location.prefix), format!("--iox-root={}", location.root)];
+        match supervise::spawn_logged(program, &args, log) {
+            Ok(child) => Bridge { child: Some(child) },
+            Err(e) => {
+                eprintln!(
+                    "qmarc-starter: cannot start {}: {e}; serving without it",
+                    program.display()
+                );
+                Bridge { child: None }
+            }
+        }
+    }
+
+    /// Notes, once, that the bridge has ended while the session goes on.
+    pub(crate) fn watch(&mut self, status: &mut StatusLine<'_>) {
+        let Some(child) = self.child.as_mut() else { return };
+        if let Ok(Some(s)) = child.try_wait() {
+            status.clear();
+            eprintln!(
+                "qmarc-starter: {}; the session goes on",
+                describe_exit("qmarc-bridge", exit_of(s))
+            );
+            self.child = None;
+        }
+    }
+
+    /// The session has ended: the bridge ends too.
+    pub(crate) fn stop(mut self) {
+        let Some(child) = self.child.as_mut() else { return };
+        supervise::send(child, nix::sys::signal::Signal::SIGTERM);
+        let since = Instant::now();
+        while since.elapsed() < Duration::from_secs(3) {
+            if let Ok(Some(_)) = child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let _ = child.kill();
+        let _ = child.wait();
+    }
+}
+
+fn exit_of(s: std::process::ExitStatus) -> Exit {
+    use std::os::unix::process::ExitStatusExt;
+    match (s.code(), s.signal()) {
+        (Some(code), _) => Exit::Code(code),
+        (None, Some(sig)) => Exit::Signal(sig),
+        _ => Exit::Code(-1),
+    }
+}

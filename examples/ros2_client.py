@@ -1,0 +1,172 @@
+#!/usr/bin/env python3
+"""A ROS 2 client of qmarc-bridge over Zenoh, as rmw_zenoh (ROS 2 Jazzy) speaks it, with no ROS 2
+installed: PyPI's eclipse-zenoh for the transport, rosbags for the CDR and the type hashes.
+
+    ros2_client.py [--connect tcp/HOST:PORT] [--namespace /robot1] [--domain 0] COMMAND
+
+Commands (each prints JSON lines):
+    joint-states N      the next N joint states (name, position, velocity, effort, stamp)
+    effector N          the next N effector points (m)
+    diagnostics N       the next N diagnostics
+    target X Y Z        an online move to the point (m), published on qmarc/target
+    raw-target N        N bytes of garbage on qmarc/target (what the bridge must refuse)
+    stop                calls qmarc/stop (std_srvs/srv/Trigger)
+    gripper on|off      calls qmarc/gripper (std_srvs/srv/SetBool)
+    hashes              the RIHS01 hashes rosbags computes for the message types
+
+Without --connect it connects as a ROS 2 node does: to the Zenoh router at tcp/localhost:7447.
+With --listen ENDPOINT it listens there instead (standing in for the router a bridge on
+rmw_zenoh's defaults connects to).
+"""
+
+import argparse
+import json
+import sys
+import time
+
+import zenoh
+from zenoh.ext import Int64, z_deserialize, z_serialize
+from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
+STORE = get_typestore(Stores.ROS2_JAZZY)
+# Services are not in rosbags' Jazzy store, and its RIHS01 of a service is not rosidl's (it
+# counts a char as rosidl does not): these two are rosidl's, as rmw_zenoh puts them in keys.
+SERVICE_HASHES = {
+    "std_srvs/srv/Trigger": "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f",
+    "std_srvs/srv/SetBool": "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a",
+}
+# (rosbags registers message types only: the response is named as one.)
+# Trigger's and SetBool's response (rosbags registers message types only: named as one).
+STORE.register(get_types_from_msg("bool success\nstring message", "std_srvs/msg/Trigger_Response"))
+GID = bytes(range(16, 32))
+
+
+def dds_name(typename):
+    parts = typename.split("/")
+    return "::".join(parts[:-1]) + "::dds_::" + parts[-1] + "_"
+
+
+def keyexpr(domain, namespace, name, typename, rihs=None):
+    full = name if name.startswith("/") else namespace.rstrip("/") + "/" + name
+    rihs = rihs or STORE.hash_rihs01(typename)
+    return f"{domain}/{full.strip('/')}/{dds_name(typename)}/{rihs}"
+
+
+def attachment(seq):
+    return z_serialize((Int64(seq), Int64(time.time_ns()), GID))
+
+
+def open_session(connect, listen):
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    if listen:
+        conf.insert_json5("listen/endpoints", json.dumps([listen]))
+    else:
+        conf.insert_json5("connect/endpoints", json.dumps([connect]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+def take(session, key, typename, n, timeout_s, show):
+    sub = session.declare_subscriber(key)
+    deadline = time.monotonic() + timeout_s
+    got = 0
+    while got < n and time.monotonic() < deadline:
+        sample = sub.try_recv()
+        if sample is None:
+            time.sleep(0.001)
+            continue
+        seq, stamp_ns, gid = z_deserialize(tuple[Int64, Int64, bytes], sample.attachment)
+        msg = STORE.deserialize_cdr(bytes(sample.payload.to_bytes()), typename)
+        print(json.dumps(dict(show(msg), seq=int(seq), received_ns=time.time_ns())), flush=True)
+        got += 1
+    sub.undeclare()
+    return got == n
+
+
+def call(session, key, payload, typename):
+    replies = session.get(key, payload=payload, attachment=attachment(1), timeout=10.0)
+    for reply in replies:
+        if reply.ok is None:
+            print(json.dumps({"error": str(reply.err.payload.to_string())}), flush=True)
+            return False
+        seq, _, gid = z_deserialize(tuple[Int64, Int64, bytes], reply.ok.attachment)
+        msg = STORE.deserialize_cdr(bytes(reply.ok.payload.to_bytes()), typename)
+        print(json.dumps({"success": bool(msg.success), "message": msg.message,
+                          "seq": int(seq), "gid_echoed": bytes(gid) == GID}), flush=True)
+        return bool(msg.success)
+    print(json.dumps({"error": "no reply"}), flush=True)
+    return False
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--connect", default="tcp/localhost:7447")
+    p.add_argument("--listen", default=None)
+    p.add_argument("--namespace", default="")
+    p.add_argument("--domain", type=int, default=0)
+    p.add_argument("--timeout", type=float, default=20.0)
+    p.add_argument("command")
+    p.add_argument("args", nargs="*")
+    a = p.parse_args()
+    if a.command == "hashes":
+        for t in ["sensor_msgs/msg/JointState", "geometry_msgs/msg/PointStamped",
+                  "diagnostic_msgs/msg/DiagnosticArray", "trajectory_msgs/msg/JointTrajectory"]:
+            print(json.dumps({"type": t, "rihs01": STORE.hash_rihs01(t)}))
+        return 0
+    session = open_session(a.connect, a.listen)
+    key = lambda name, t, rihs=None: keyexpr(a.domain, a.namespace, name, t, rihs)
+    ok = True
+    if a.command == "joint-states":
+        ok = take(session, key("joint_states", "sensor_msgs/msg/JointState"),
+                  "sensor_msgs/msg/JointState", int(a.args[0]), a.timeout,
+                  lambda m: {"name": list(m.name), "position": list(map(float, m.position)),
+                             "velocity": list(map(float, m.velocity)),
+                             "effort": list(map(float, m.effort)),
+                             "stamp_ns": m.header.stamp.sec * 10**9 + m.header.stamp.nanosec})
+    elif a.command == "effector":
+        ok = take(session, key("qmarc/effector", "geometry_msgs/msg/PointStamped"),
+                  "geometry_msgs/msg/PointStamped", int(a.args[0]), a.timeout,
+                  lambda m: {"frame": m.header.frame_id,
+                             "point": [m.point.x, m.point.y, m.point.z]})
+    elif a.command == "diagnostics":
+        ok = take(session, key("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
+                  "diagnostic_msgs/msg/DiagnosticArray", int(a.args[0]), a.timeout,
+                  lambda m: {"level": int(m.status[0].level), "message": m.status[0].message,
+                             "values": {kv.key: kv.value for kv in m.status[0].values}})
+    elif a.command == "target":
+        t = STORE.types
+        msg = t["geometry_msgs/msg/PointStamped"](
+            header=t["std_msgs/msg/Header"](
+                stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="base"),
+            point=t["geometry_msgs/msg/Point"](*map(float, a.args[:3])))
+        payload = bytes(STORE.serialize_cdr(msg, "geometry_msgs/msg/PointStamped"))
+        k = key("qmarc/target", "geometry_msgs/msg/PointStamped")
+        # A publisher declared first, so the bridge's subscription has matched it.
+        pub = session.declare_publisher(k)
+        time.sleep(1.0)
+        pub.put(payload, attachment=attachment(1))
+        time.sleep(0.5)
+        print(json.dumps({"published": k}), flush=True)
+    elif a.command == "raw-target":
+        k = key("qmarc/target", "geometry_msgs/msg/PointStamped")
+        pub = session.declare_publisher(k)
+        time.sleep(1.0)
+        pub.put(bytes([0x00, 0x01, 0x00, 0x00]) + bytes(int(a.args[0])), attachment=attachment(1))
+        time.sleep(0.5)
+        print(json.dumps({"published": k, "bytes": int(a.args[0]) + 4}), flush=True)
+    elif a.command == "stop":
+        ok = call(session, key("qmarc/stop", "std_srvs/srv/Trigger", SERVICE_HASHES["std_srvs/srv/Trigger"]),
+                  b"\x00\x01\x00\x00\x00", "std_srvs/msg/Trigger_Response")
+    elif a.command == "gripper":
+        on = {"on": 1, "off": 0}[a.args[0]]
+        ok = call(session, key("qmarc/gripper", "std_srvs/srv/SetBool", SERVICE_HASHES["std_srvs/srv/SetBool"]),
+                  b"\x00\x01\x00\x00" + bytes([on]), "std_srvs/msg/Trigger_Response")
+    else:
+        p.error(f"unknown command {a.command}")
+    session.close()
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
