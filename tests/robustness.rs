@@ -286,14 +286,19 @@ fn only_the_servo_thread_runs_real_time() {
         "--method=pvt",
         &format!("--knots={}", path.display()),
     ]);
-    // Feed the knots slowly, so that the reader thread lives while we look.
+    // Feed the knots slowly, so that the reader thread lives while we look: the first 20
+    // (400 ms of path) at once, then one every 15 ms (each is 20 ms of path), so that the
+    // stream keeps a lead of 400 ms and more over the loop — a host stall of this writer
+    // under load (2 CPU hogs and a build: 275 ms seen) does not starve the path.
     let text = std::fs::read_to_string(qmarc_tests::knots("pvt-3motors.txt")).unwrap();
     let writer = std::thread::spawn(move || {
         use std::io::Write;
         let mut f = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
-        for l in text.lines() {
+        for (i, l) in text.lines().enumerate() {
             let _ = writeln!(f, "{l}");
-            std::thread::sleep(Duration::from_millis(15));
+            if i >= 20 {
+                std::thread::sleep(Duration::from_millis(15));
+            }
         }
     });
     let ctl = pid_of(&run, "qmarc-controller");
