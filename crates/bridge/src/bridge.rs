@@ -265,20 +265,23 @@ fn failure(why: &str) -> SuccessResponse {
 
 /// Publishes `value`; a failure is said, never fatal (the network is not the robot's).
 fn publish<T: serde::Serialize>(p: &mut RosPublisher, value: &T) {
-    let sent = ros2::to_cdr(value)
-        .map_err(|e| e.to_string())
-        .and_then(|b| p.put(b).map_err(|e| e.to_string()));
-    if let Err(e) = sent {
+    if let Err(e) = send_cdr(value, |b| p.put(b)) {
         eprintln!("qmarc-bridge: {}: {e}", p.keyexpr);
     }
 }
 
 /// Answers a call; a failure is said.
 fn reply_with<T: serde::Serialize>(service: &RosService, q: &zenoh::query::Query, value: &T) {
-    let sent = ros2::to_cdr(value)
-        .map_err(|e| e.to_string())
-        .and_then(|b| service.reply(q, b).map_err(|e| e.to_string()));
-    if let Err(e) = sent {
+    if let Err(e) = send_cdr(value, |b| service.reply(q, b)) {
         eprintln!("qmarc-bridge: {}: {e}", service.keyexpr);
     }
+}
+
+/// `value` as CDR, handed to `send`; what failed, in words.
+fn send_cdr<T: serde::Serialize>(
+    value: &T,
+    send: impl FnOnce(Vec<u8>) -> Result<(), crate::node::ZenohError>,
+) -> Result<(), String> {
+    let bytes = ros2::to_cdr(value).map_err(|e| e.to_string())?;
+    send(bytes).map_err(|e| e.to_string())
 }

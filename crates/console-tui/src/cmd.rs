@@ -57,7 +57,7 @@ enum Cmd {
     /// Close (`on`) or open (`off`) the gripper now; `wait` then waits until it is there.
     Grip {
         /// `on` closes it, `off` opens it.
-        #[arg(value_name = "on|off", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+        #[arg(value_name = "on|off", value_parser = qmarc_starter::cli::parse_on_off, action = clap::ArgAction::Set)]
         close: bool,
     },
     /// Wait until the robot is at rest at the end of the last move accepted.
@@ -70,15 +70,6 @@ enum Cmd {
     Status,
     /// Stop, then end the session as a move ends (data files written).
     Quit,
-}
-
-/// `on` or `off`.
-fn parse_on_off(v: &str) -> Result<bool, String> {
-    match v {
-        "on" => Ok(true),
-        "off" => Ok(false),
-        _ => Err(format!("`{v}` is not on or off")),
-    }
 }
 
 /// The location of the serving session, `--iox-prefix`'s, else the newest of yours, and its

@@ -197,7 +197,7 @@ impl TrajectoryGenerator for GripAtEnd {
             return self.inner.gripper(state);
         }
         self.absent = state.0 & Gripper::ABSENT != 0;
-        self.arrived |= state.told_to_close() == self.close && state.arrived();
+        self.arrived |= state.reached(self.close);
         Some(self.close)
     }
 }

@@ -28,9 +28,8 @@ const LINE_POINTS: usize = 400;
 pub struct LinearMove {
     robot: Robot,
     to_mm: [f64; 3],
-    /// `to_mm` is a distance from where the effector is, not a point (a Cartesian jog).
-    relative: bool,
-    /// A Cartesian jog: the robot's frame must be homed, which `observe` sees.
+    /// A Cartesian jog (`Some`): `to_mm` is a distance from where the effector is, not a
+    /// point, and the robot's frame must be homed — whether it is, `observe` sees.
     jog: Option<bool>,
     period_s: f64,
     limits: MotionLimits,
@@ -40,7 +39,7 @@ pub struct LinearMove {
 impl LinearMove {
     /// A line to `to_mm` for `robot`, under `limits`, one sample every `period_s`.
     pub fn new(robot: Robot, to_mm: [f64; 3], period_s: f64, limits: MotionLimits) -> LinearMove {
-        LinearMove { robot, to_mm, relative: false, jog: None, period_s, limits, queue: Vec::new() }
+        LinearMove { robot, to_mm, jog: None, period_s, limits, queue: Vec::new() }
     }
 
     /// The Cartesian jog of the settings (`jog --axis A --mm D`): the effector `jog.mm` along
@@ -52,7 +51,7 @@ impl LinearMove {
         by[axis] = s.jog.mm;
         let limits = MotionLimits::of(s).at_speed(s.jog.speed);
         let line = LinearMove::new(robot_of(s)?, by, s.period_s(), limits);
-        Ok(LinearMove { relative: true, jog: Some(false), ..line })
+        Ok(LinearMove { jog: Some(false), ..line })
     }
 
     /// The line of the settings' `move` target at its `--speed`.
@@ -92,7 +91,7 @@ impl LinearMove {
         let a = self.robot.point_of(&here).map_err(|e| format!("where the effector is: {e}"))?;
         let [x, y, z] = self.to_mm;
         let mut b = Point::new(x / 1e3, y / 1e3, z / 1e3);
-        if self.relative {
+        if self.jog.is_some() {
             b += a;
         }
         if (b - a).norm() < 1e-9 {

@@ -321,8 +321,7 @@ impl TrajectoryGenerator for ServeMove {
     fn gripper(&mut self, state: Gripper) -> Option<bool> {
         self.shared.gripper.store(state.0, Ordering::Release);
         // Told and there: the order settles with the next sample at rest.
-        self.grip_arrived |=
-            self.grip.is_some_and(|c| state.told_to_close() == c && state.arrived());
+        self.grip_arrived |= self.grip.is_some_and(|c| state.reached(c));
         self.grip
     }
 

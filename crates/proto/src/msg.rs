@@ -145,6 +145,12 @@ impl Gripper {
         self.0 & want != 0
     }
 
+    /// Told to close (`close`) or to open, and there: fully closed, or fully open.
+    #[inline]
+    pub fn reached(self, close: bool) -> bool {
+        self.told_to_close() == close && self.arrived()
+    }
+
     /// The state as gather.csv's `grip` column writes it: 0 open, 1 closing, 2 closed,
     /// 3 opening (−1: no gripper).
     #[inline]
@@ -319,6 +325,9 @@ mod tests {
         ];
         for (state, code, name, arrived) in cases {
             assert_eq!((state.code(), state.name(), state.arrived()), (code, name, arrived));
+            let close = state.told_to_close();
+            assert_eq!(state.reached(close), arrived, "{name}");
+            assert!(!state.reached(!close), "{name}: not where the other order puts it");
         }
     }
 
