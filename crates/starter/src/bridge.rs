@@ -1,7 +1,7 @@
 //! `serve --bridge`: `qmarc-bridge` beside the controller and the hwserver. It is not one of
-//! the run's children: its end, or its death (kill -9), ends nothing, and is said once; the
-//! session's end stops it (SIGTERM, then SIGKILL after 3 s). Like every child it ends if the
-//! starter dies (its parent-death signal).
+//! the run's children: its end, or its death (kill -9), ends nothing, and a death is said
+//! once; the session's end stops it (SIGTERM, then SIGKILL after 3 s). Like every child it
+//! ends if the starter dies (its parent-death signal).
 
 use crate::status::StatusLine;
 use crate::supervise::{self, Exit, describe_exit};
@@ -40,11 +40,12 @@ impl Bridge {
     pub(crate) fn watch(&mut self, status: &mut StatusLine<'_>) {
         let Some(child) = self.child.as_mut() else { return };
         if let Ok(Some(s)) = child.try_wait() {
-            status.clear();
-            eprintln!(
-                "qmarc-starter: {}; the session goes on",
-                describe_exit("qmarc-bridge", exit_of(s))
-            );
+            // A bridge that ends by itself (exit 0) saw the session end: nothing to say.
+            if !s.success() {
+                status.clear();
+                let how = describe_exit("qmarc-bridge", exit_of(s));
+                eprintln!("qmarc-starter: {how}; the session goes on");
+            }
             self.child = None;
         }
     }
