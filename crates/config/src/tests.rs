@@ -378,6 +378,10 @@ fn the_626_wiring_is_checked_when_it_is_the_backend() {
     let s = parse(&format!("[s626]\ngripper_dio = 6\n{motors}")).unwrap();
     assert_eq!(s.s626.free_outputs(3), 1 << 5 | 1 << 6 | 1 << 7);
     assert_eq!(s.s626.free_outputs(2), 1 << 5 | 1 << 6 | 1 << 7 | 1 << 3 | 1 << 13 | 1 << 15);
+    // A channel named twice (the simulator does not check the card's wiring) is kept once
+    // taken, not freed again.
+    let twice = S626Settings { reserved_dio: vec![0, 2, 8, 14], ..s.s626.clone() };
+    assert_eq!(twice.free_outputs(3), 1 << 5 | 1 << 6 | 1 << 7);
     // The switching to the 626 checks the rest of the wiring.
     let text = format!("[s626]\nenable_dio = [0, 1]\n{motors}");
     let mut s = parse(&text).unwrap();

@@ -518,9 +518,13 @@ fn the_gripper_output_is_one_masked_write_that_the_cycle_leaves_alone() {
         assert_eq!(locked(&fake).runs(), runs, "nothing reached the card");
     }
     assert!(locked(&fake).pin_low(6) && locked(&fake).pin_low(0), "gripper and enable on");
+    // Another free output, on: the gripper's write leaves it as it is.
+    core.handle(&HwMsg::write_outputs(1 << 7, 1 << 7));
     core.handle(&HwMsg::write_outputs(1 << 6, 0));
     assert!(!locked(&fake).pin_low(6));
+    assert!(locked(&fake).pin_low(7), "DIO7 kept");
     assert!(locked(&fake).pin_low(0), "motor 1 still enabled");
+    core.handle(&HwMsg::write_outputs(1 << 7, 0));
     // A new server finds the gripper where the card holds it (an earlier one closed it).
     let mut card = wired_fake(&w, 3, &FakePlant::ideal(6_250.0), 400e-6);
     let mut close = InsnList::new(&[Insn::bits(SUBDEV_DIO0)]);
