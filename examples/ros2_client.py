@@ -10,6 +10,9 @@ Commands (each prints JSON lines):
     diagnostics N       the next N diagnostics
     target X Y Z        an online move to the point (m), published on qmarc/target
     raw-target N        N bytes of garbage on qmarc/target (what the bridge must refuse)
+    trajectory JSON     a trajectory_msgs/msg/JointTrajectory on qmarc/joint_trajectory:
+                        {"names": ["motor1", ...], "points": [{"t": 0.5, "positions": [...],
+                        "velocities": [...]}, ...]} (rad, rad/s, s from the start)
     stop                calls qmarc/stop (std_srvs/srv/Trigger)
     gripper on|off      calls qmarc/gripper (std_srvs/srv/SetBool)
     hashes              the RIHS01 hashes rosbags computes for the message types
@@ -24,6 +27,7 @@ import json
 import sys
 import time
 
+import numpy
 import zenoh
 from zenoh.ext import Int64, z_deserialize, z_serialize
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
@@ -99,6 +103,34 @@ def call(session, key, payload, typename):
     return False
 
 
+def publish(session, key, payload):
+    """Publishes one sample on key, after its publisher has had time to match the bridge."""
+    pub = session.declare_publisher(key)
+    time.sleep(1.0)
+    pub.put(payload, attachment=attachment(1))
+    time.sleep(0.5)
+
+
+def joint_trajectory(spec):
+    """The JointTrajectory of a JSON spec, as CDR."""
+    t = STORE.types
+    points = []
+    for p in spec["points"]:
+        sec = int(p["t"])
+        points.append(t["trajectory_msgs/msg/JointTrajectoryPoint"](
+            positions=numpy.array(p["positions"], dtype=numpy.float64),
+            velocities=numpy.array(p.get("velocities", []), dtype=numpy.float64),
+            accelerations=numpy.array([], dtype=numpy.float64),
+            effort=numpy.array([], dtype=numpy.float64),
+            time_from_start=t["builtin_interfaces/msg/Duration"](
+                sec=sec, nanosec=int(round((p["t"] - sec) * 1e9)))))
+    msg = t["trajectory_msgs/msg/JointTrajectory"](
+        header=t["std_msgs/msg/Header"](
+            stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""),
+        joint_names=list(spec["names"]), points=points)
+    return bytes(STORE.serialize_cdr(msg, "trajectory_msgs/msg/JointTrajectory"))
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--connect", default="tcp/localhost:7447")
@@ -142,19 +174,16 @@ def main():
             point=t["geometry_msgs/msg/Point"](*map(float, a.args[:3])))
         payload = bytes(STORE.serialize_cdr(msg, "geometry_msgs/msg/PointStamped"))
         k = key("qmarc/target", "geometry_msgs/msg/PointStamped")
-        # A publisher declared first, so the bridge's subscription has matched it.
-        pub = session.declare_publisher(k)
-        time.sleep(1.0)
-        pub.put(payload, attachment=attachment(1))
-        time.sleep(0.5)
+        publish(session, k, payload)
         print(json.dumps({"published": k}), flush=True)
     elif a.command == "raw-target":
         k = key("qmarc/target", "geometry_msgs/msg/PointStamped")
-        pub = session.declare_publisher(k)
-        time.sleep(1.0)
-        pub.put(bytes([0x00, 0x01, 0x00, 0x00]) + bytes(int(a.args[0])), attachment=attachment(1))
-        time.sleep(0.5)
+        publish(session, k, bytes([0x00, 0x01, 0x00, 0x00]) + bytes(int(a.args[0])))
         print(json.dumps({"published": k, "bytes": int(a.args[0]) + 4}), flush=True)
+    elif a.command == "trajectory":
+        k = key("qmarc/joint_trajectory", "trajectory_msgs/msg/JointTrajectory")
+        publish(session, k, joint_trajectory(json.loads(a.args[0])))
+        print(json.dumps({"published": k}), flush=True)
     elif a.command == "stop":
         ok = call(session, key("qmarc/stop", "std_srvs/srv/Trigger", SERVICE_HASHES["std_srvs/srv/Trigger"]),
                   b"\x00\x01\x00\x00\x00", "std_srvs/msg/Trigger_Response")

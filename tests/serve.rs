@@ -166,3 +166,46 @@ fn serve_ends_as_any_move_does_under_ctrl_c_and_kill_9() {
         run.assert_clean();
     }
 }
+
+/// `qmarc cmd path FILE` (`qmarc/path`, what the bridge's joint trajectories use): the robot
+/// follows a PVT knot file from rest, through every knot at its time; a path while it moves,
+/// one that does not start where it rests and a malformed file are refused, saying why.
+#[test]
+fn serve_follows_a_path_through_its_knots_at_their_times() {
+    let run = TestRun::new("servepath");
+    let config = run.config_with(&[]);
+    let s = settings(&config);
+    let child = serve(&run, &config, &[]);
+    let file = run.out("step.pvt");
+    std::fs::write(&file, qmarc_tests::smooth_step_pvt(2000.0, 8)).unwrap();
+    let file = file.display().to_string();
+    assert!(accepted(&run, &["path", &file]).starts_with("accepted (path 1)"));
+    let r = cmd(&run, &["path", &file]);
+    assert_eq!(r.code, Some(3), "{}", r.stdout);
+    assert!(r.stdout.starts_with("refused (moving): a path starts from rest"), "{}", r.stdout);
+    let done = accepted(&run, &["wait"]);
+    assert_eq!(numbers_after(&done, "command"), [2000.0, 0.0, 0.0], "{done}");
+    // From where it rests now, the same path's first knot is 2000 counts away.
+    let r = cmd(&run, &["path", &file]);
+    assert_eq!(r.code, Some(3), "{}", r.stdout);
+    assert!(r.stdout.contains("point 1: at time 0 the robot is where it rests"), "{}", r.stdout);
+    std::fs::write(&file, "X 0 0 50 Y 0 0 50 Z 0 0 50\nX 10 0 50 Y 0 zero 50 Z 0 0 50\n").unwrap();
+    let r = cmd(&run, &["path", &file]);
+    assert_eq!(r.code, Some(1), "{}", r.stdout);
+    assert!(r.stderr.contains(&format!("{file}:2:")), "file and line: {}", r.stderr);
+    accepted(&run, &["quit"]);
+    let r = qmarc_tests::wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    // The path in gather.csv: from rest at 0, through each knot at its time, to rest.
+    let cmds = commands(&run.out("out"));
+    let start = cmds.iter().position(|c| c[0] != 0.0).expect("the path ran") - 1;
+    let knot_every = (0.05 / s.period_s()).round() as usize;
+    for (i, line) in qmarc_tests::smooth_step_pvt(2000.0, 8).lines().enumerate() {
+        let p: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
+        let at = cmds[start + i * knot_every];
+        assert!((at[0] - p).abs() < 1e-6 && at[1] == 0.0, "knot {i}: {p} but {at:?}");
+    }
+    let ratio = sampled_ratio(&cmds, 3, s.period_s(), &MotionLimits::of(&s));
+    assert!(ratio <= 1.0 + ROUNDING, "the path exceeds a limit: ratio {ratio}");
+    run.assert_clean();
+}

@@ -7,10 +7,13 @@
 //! homing) and refuses with a reason, which the bridge logs and puts in `/diagnostics`.
 
 use crate::convert::{Converter, SessionState, target_mm};
-use crate::msgs::{PointStamped, SetBoolRequest, SuccessResponse, Time, TriggerRequest};
+use crate::msgs::{
+    JointTrajectory, PointStamped, SetBoolRequest, SuccessResponse, Time, TriggerRequest,
+};
 use crate::node::{Node, RosPublisher, RosService, payload_of, session_config};
 use crate::ros2::{self, Qos};
 use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandResponse};
+use qmarc_proto::path::PathRequest;
 use qmarc_proto::service::IpcLocation;
 use qmarc_proto::telemetry::TelemetrySample;
 use qmarc_telemetry::reader::TelemetryReader;
@@ -41,12 +44,17 @@ pub struct Options {
     pub hardware_id: String,
 }
 
+/// A subscription's queue.
+type Subscription =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
 /// The node's entities.
 struct Entities {
     joint_states: RosPublisher,
     effector: RosPublisher,
     diagnostics: RosPublisher,
-    target: zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    target: Subscription,
+    trajectory: Subscription,
     stop: RosService,
     gripper: RosService,
 }
@@ -58,6 +66,11 @@ impl Entities {
             effector: node.publisher("qmarc/effector", &ros2::POINT_STAMPED, &Qos::DEFAULT)?,
             diagnostics: node.publisher("/diagnostics", &ros2::DIAGNOSTIC_ARRAY, &Qos::DEFAULT)?,
             target: node.subscription("qmarc/target", &ros2::POINT_STAMPED, &Qos::DEFAULT)?,
+            trajectory: node.subscription(
+                "qmarc/joint_trajectory",
+                &ros2::JOINT_TRAJECTORY,
+                &Qos::DEFAULT,
+            )?,
             stop: node.service("qmarc/stop", &ros2::TRIGGER)?,
             gripper: node.service("qmarc/gripper", &ros2::SET_BOOL)?,
         })
@@ -173,7 +186,19 @@ impl Bridge {
     /// A command to the controller; its refusal, if refused, logged and kept for the
     /// diagnostics.
     fn command(&mut self, r: CommandRequest, what: &str) -> Result<CommandResponse, String> {
-        let answer = self.client.send(r).map_err(|e| format!("{what}: {e}"))?;
+        let answer = self.client.send(r).map_err(|e| format!("{what}: {e}"));
+        self.answered(answer, what)
+    }
+
+    /// The controller's answer to `what`: its refusal, if refused, logged and kept.
+    fn answered(
+        &mut self,
+        answer: Result<CommandResponse, String>,
+        what: &str,
+    ) -> Result<CommandResponse, String> {
+        let answer = answer.inspect_err(|why| {
+            eprintln!("qmarc-bridge: not sent: {why}");
+        })?;
         match answer.refused() {
             None => {
                 self.refused.clear();
@@ -188,6 +213,12 @@ impl Bridge {
         }
     }
 
+    /// A path to the controller; refused, logged and kept for the diagnostics.
+    fn send_path(&mut self, path: &PathRequest, what: &str) -> Result<CommandResponse, String> {
+        let answer = self.client.send_path(path).map_err(|e| format!("{what}: {e}"));
+        self.answered(answer, what)
+    }
+
     /// The targets and service calls that arrived.
     fn commands(&mut self) {
         while let Ok(Some(sample)) = self.e.target.try_recv() {
@@ -200,6 +231,18 @@ impl Bridge {
                     let _ = self.command(CommandRequest::move_xyz(mm, false, 1.0), "qmarc/target");
                 }
                 Err(why) => self.bad_input("qmarc/target", &why),
+            }
+        }
+        while let Ok(Some(sample)) = self.e.trajectory.try_recv() {
+            let bytes = payload_of(Some(sample.payload()));
+            let path = ros2::from_cdr::<JointTrajectory>(&bytes, ros2::JOINT_TRAJECTORY.name)
+                .map_err(|e| e.to_string())
+                .and_then(|t| self.opts.converter.path(&t));
+            match path {
+                Ok(path) => {
+                    let _ = self.send_path(&path, "qmarc/joint_trajectory");
+                }
+                Err(why) => self.bad_input("qmarc/joint_trajectory", &why),
             }
         }
         while let Some(q) = self.e.stop.try_recv() {

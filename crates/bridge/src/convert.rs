@@ -4,8 +4,10 @@
 //! the serve mode's move.
 
 use crate::msgs::{
-    DiagnosticArray, DiagnosticStatus, Header, JointState, KeyValue, Point, PointStamped, Time,
+    DiagnosticArray, DiagnosticStatus, Header, JointState, JointTrajectory, KeyValue, Point,
+    PointStamped, Time,
 };
+use qmarc_proto::path::{MAX_PATH_KNOTS, PathKnot, PathRequest};
 use qmarc_proto::telemetry::TelemetrySample;
 use qmarc_proto::{DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, Status};
 
@@ -55,6 +57,84 @@ impl Converter {
                 .map(|m| f64::from(s.dac[m]) * DAC_FULL_SCALE_V / f64::from(DAC_MAX))
                 .collect(),
         }
+    }
+
+    /// The motor each of `names` is (0-based), if they are `motor1`…`motorN`, each once, in
+    /// any order.
+    pub fn joints_of(&self, names: &[String]) -> Result<Vec<usize>, String> {
+        let expected = self.names().join(", ");
+        let wrong = || format!("joint_names must be {expected}, each once; found {names:?}");
+        if names.len() != self.n_motors {
+            return Err(wrong());
+        }
+        let mut seen = vec![false; self.n_motors];
+        let mut motors = Vec::with_capacity(names.len());
+        for name in names {
+            let m = name
+                .strip_prefix("motor")
+                .and_then(|k| k.parse::<usize>().ok())
+                .filter(|&k| (1..=self.n_motors).contains(&k) && name == &format!("motor{k}"))
+                .ok_or_else(wrong)?
+                - 1;
+            if std::mem::replace(&mut seen[m], true) {
+                return Err(wrong());
+            }
+            motors.push(m);
+        }
+        Ok(motors)
+    }
+
+    /// A ROS joint trajectory (rad, rad/s, time from its start) as the path the controller
+    /// follows (counts, counts/s): its joints checked, its sizes bounded, its numbers finite.
+    /// The controller checks the rest (times rising, the limits, the end at rest).
+    pub fn path(&self, t: &JointTrajectory) -> Result<Box<PathRequest>, String> {
+        let motors = self.joints_of(&t.joint_names)?;
+        let n = motors.len();
+        if t.points.is_empty() || t.points.len() > MAX_PATH_KNOTS {
+            return Err(format!(
+                "a trajectory has 1 to {MAX_PATH_KNOTS} points, found {}",
+                t.points.len()
+            ));
+        }
+        let velocities = !t.points[0].velocities.is_empty();
+        let mut knots = Vec::with_capacity(t.points.len());
+        for (i, p) in t.points.iter().enumerate() {
+            let point = i + 1;
+            let sizes_ok = p.positions.len() == n
+                && p.velocities.len() == if velocities { n } else { 0 }
+                && (p.accelerations.is_empty() || p.accelerations.len() == n);
+            if !sizes_ok {
+                return Err(format!(
+                    "point {point}: {n} positions, {n} velocities on every point or on none, \
+                     {n} accelerations or none; found {}, {}, {}",
+                    p.positions.len(),
+                    p.velocities.len(),
+                    p.accelerations.len()
+                ));
+            }
+            if let Some(v) = p.positions.iter().chain(&p.velocities).find(|v| !v.is_finite()) {
+                return Err(format!("point {point}: the numbers must be finite, found {v}"));
+            }
+            let d = p.time_from_start;
+            if d.sec < 0 || d.nanosec >= 1_000_000_000 {
+                return Err(format!(
+                    "point {point}: time_from_start must be ≥ 0 with nanosec < 1e9, found {} s {} ns",
+                    d.sec, d.nanosec
+                ));
+            }
+            let mut k = PathKnot {
+                t_s: f64::from(d.sec) + f64::from(d.nanosec) * 1e-9,
+                ..PathKnot::default()
+            };
+            for (j, &m) in motors.iter().enumerate() {
+                k.pos[m] = p.positions[j] * self.counts_per_rad;
+                if velocities {
+                    k.vel[m] = p.velocities[j] * self.counts_per_rad;
+                }
+            }
+            knots.push(k);
+        }
+        PathRequest::new(&knots, velocities).ok_or_else(|| "too many points".to_string())
     }
 
     /// Where the effector of `s` is, m, in the base frame (none: not a Delta, or no point).
@@ -147,6 +227,7 @@ pub fn target_mm(p: &Point, limit_m: f64) -> Result<[f64; 3], String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::msgs::{Duration, JointTrajectoryPoint};
 
     fn converter() -> Converter {
         let s = qmarc_config::Settings::load(
@@ -206,6 +287,99 @@ mod tests {
         let d = fault.diagnostics("sim", Time::default());
         assert_eq!((d.status[0].level, d.status[0].message.as_str()), (2, "fault: limit_switch"));
         assert_eq!(d.status[0].values[3], KeyValue { key: "estop".into(), value: "true".into() });
+    }
+
+    fn point(
+        positions: &[f64],
+        velocities: &[f64],
+        sec: i32,
+        nanosec: u32,
+    ) -> JointTrajectoryPoint {
+        JointTrajectoryPoint {
+            positions: positions.to_vec(),
+            velocities: velocities.to_vec(),
+            time_from_start: Duration { sec, nanosec },
+            ..JointTrajectoryPoint::default()
+        }
+    }
+
+    fn trajectory(names: &[&str], points: Vec<JointTrajectoryPoint>) -> JointTrajectory {
+        JointTrajectory {
+            joint_names: names.iter().map(|n| n.to_string()).collect(),
+            points,
+            ..JointTrajectory::default()
+        }
+    }
+
+    #[test]
+    fn a_joint_trajectory_is_a_path_in_counts_in_motor_order() {
+        let c = converter();
+        let k = c.counts_per_rad;
+        let t = trajectory(
+            &["motor3", "motor1", "motor2"],
+            vec![
+                point(&[0.1, 0.2, 0.3], &[1.0, 0.0, -1.0], 0, 500_000_000),
+                point(&[0.0; 3], &[0.0; 3], 1, 0),
+            ],
+        );
+        let p = c.path(&t).unwrap();
+        assert!(p.has_velocities());
+        assert_eq!(p.knots().len(), 2);
+        let first = p.knots()[0];
+        assert_eq!(first.t_s, 0.5);
+        assert_eq!(first.pos[..3], [0.2 * k, 0.3 * k, 0.1 * k], "motor3's column is motor 3's");
+        assert_eq!(first.vel[..3], [0.0, -k, k]);
+        assert_eq!(p.knots()[1].t_s, 1.0);
+        let no_velocities =
+            trajectory(&["motor1", "motor2", "motor3"], vec![point(&[0.1, 0.2, 0.3], &[], 2, 1)]);
+        let p = c.path(&no_velocities).unwrap();
+        assert!(!p.has_velocities());
+        assert_eq!(p.knots()[0].t_s, 2.000000001);
+    }
+
+    #[test]
+    fn a_joint_trajectory_that_is_not_one_is_refused_saying_why() {
+        let c = converter();
+        let names = ["motor1", "motor2", "motor3"];
+        let ok = || point(&[0.1, 0.2, 0.3], &[], 1, 0);
+        let why = |t: JointTrajectory| c.path(&t).unwrap_err();
+        for bad in [
+            &["motor1", "motor2"][..],
+            &["motor1", "motor2", "motor2"],
+            &["motor1", "motor2", "motor4"],
+            &["motor1", "motor2", "motor03"],
+            &["a", "b", "c"],
+        ] {
+            assert!(
+                why(trajectory(bad, vec![ok()]))
+                    .contains("joint_names must be motor1, motor2, motor3, each once"),
+                "{bad:?}"
+            );
+        }
+        assert!(why(trajectory(&names, vec![])).contains("1 to 1024 points, found 0"));
+        assert!(why(trajectory(&names, vec![ok(); 1025])).contains("found 1025"));
+        let short = point(&[0.1, 0.2], &[], 1, 0);
+        assert!(why(trajectory(&names, vec![short])).contains("point 1: 3 positions"));
+        let some_velocities = vec![point(&[0.1, 0.2, 0.3], &[0.0; 3], 1, 0), ok()];
+        assert!(
+            why(trajectory(&names, some_velocities))
+                .contains("point 2: 3 positions, 3 velocities on every point or on none")
+        );
+        let accelerations = JointTrajectoryPoint { accelerations: vec![0.0], ..ok() };
+        assert!(why(trajectory(&names, vec![accelerations])).contains("found 3, 0, 1"));
+        let nan = point(&[0.1, f64::NAN, 0.3], &[], 1, 0);
+        assert!(
+            why(trajectory(&names, vec![nan]))
+                .contains("point 1: the numbers must be finite, found NaN")
+        );
+        assert!(
+            why(trajectory(&names, vec![ok(), point(&[0.0; 3], &[], -1, 0)]))
+                .contains("point 2: time_from_start must be ≥ 0")
+        );
+        assert!(
+            why(trajectory(&names, vec![point(&[0.0; 3], &[], 0, 1_000_000_000)]))
+                .contains("nanosec < 1e9")
+        );
     }
 
     #[test]

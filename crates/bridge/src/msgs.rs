@@ -134,3 +134,38 @@ pub struct SetBoolRequest {
     /// On (true) or off.
     pub data: bool,
 }
+
+/// `builtin_interfaces/msg/Duration`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Duration {
+    /// Seconds.
+    pub sec: i32,
+    /// Nanoseconds, 0‥1e9.
+    pub nanosec: u32,
+}
+
+/// `trajectory_msgs/msg/JointTrajectoryPoint`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct JointTrajectoryPoint {
+    /// rad, one per joint.
+    pub positions: Vec<f64>,
+    /// rad/s: one per joint, or none.
+    pub velocities: Vec<f64>,
+    /// rad/s²: one per joint, or none.
+    pub accelerations: Vec<f64>,
+    /// One per joint, or none.
+    pub effort: Vec<f64>,
+    /// When, from the trajectory's start.
+    pub time_from_start: Duration,
+}
+
+/// `trajectory_msgs/msg/JointTrajectory`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct JointTrajectory {
+    /// Stamp (when to start; zero: now) and frame.
+    pub header: Header,
+    /// The joints the points' columns are.
+    pub joint_names: Vec<String>,
+    /// The points, their times rising.
+    pub points: Vec<JointTrajectoryPoint>,
+}

@@ -226,6 +226,8 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     assert!(log.contains("more than the 1048576 taken"), "{log}");
     let after = client.send(CommandRequest::of(CommandKind::Status)).unwrap();
     assert_eq!(after.accepted, before, "nothing reached the controller");
+    let knots = joint_trajectories(&cell, &mut client, after.command);
+
     // kill -9 of the bridge mid-move: the move goes on to its end.
     let r = client.send(CommandRequest::move_xyz([-30.0, 20.0, -650.0], false, 0.2)).unwrap();
     assert_eq!(r.ok, 1);
@@ -242,6 +244,74 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     assert!(close(x, -30.0, 1e-6) && close(y, 20.0, 1e-6) && close(z, -650.0, 1e-6));
     drop(client);
     assert!(cell.quit().success());
+    // What the robot did: the trajectory's knots are commands of gather.csv, exactly.
+    let (header, rows) = qmarc_tests::read_gather(&cell.dir.join("out"));
+    let col = |m: usize| header.iter().position(|h| *h == format!("cmd{}", m + 1)).unwrap();
+    for knot in knots {
+        let hit = rows.iter().any(|r| (0..3).all(|m| close(r[col(m)], knot[m], 1e-6)));
+        assert!(hit, "no command at the knot {knot:?}");
+    }
+}
+
+/// A joint trajectory from where the robot rests (`rest`, counts): followed through its
+/// knots, each in rad from home; one with a wrong joint is not taken by the bridge, one too
+/// fast is refused by the controller, both said. The knots, counts.
+fn joint_trajectories(cell: &Cell, client: &mut CommandClient, rest: [f64; 4]) -> Vec<[f64; 3]> {
+    let per_rad = settings().counts_per_rad();
+    let rad = |m: usize, by: f64| rest[m] / per_rad + by;
+    let knots =
+        [[rad(0, 0.05), rad(1, -0.03), rad(2, 0.02)], [rad(0, 0.1), rad(1, 0.0), rad(2, 0.0)]];
+    let spec = serde_json::json!({
+        "names": ["motor2", "motor1", "motor3"],
+        "points": [
+            {"t": 0.3, "positions": [knots[0][1], knots[0][0], knots[0][2]]},
+            {"t": 0.6, "positions": [knots[1][1], knots[1][0], knots[1][2]]},
+        ],
+    });
+    let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted;
+    cell.lines(&["trajectory", &spec.to_string()]);
+    let s = client.wait(Duration::from_secs(30)).unwrap();
+    assert_eq!(
+        (s.accepted, s.settled, s.fault),
+        (before + 1, before + 1, 0),
+        "{}",
+        cell.bridge_log()
+    );
+    let counts = knots.map(|k| k.map(|r| r * per_rad));
+    for m in 0..3 {
+        assert!(close(s.command[m], counts[1][m], 1e-6), "{:?} {:?}", s.command, counts[1]);
+    }
+    // Not motor1…motor3: not taken. Too fast for the motors: the controller says why.
+    let wrong = serde_json::json!({"names": ["motor1", "motor2", "elbow"], "points": [{"t": 1.0, "positions": [0.0, 0.0, 0.0]}]});
+    cell.lines(&["trajectory", &wrong.to_string()]);
+    let fast = serde_json::json!({"names": ["motor1", "motor2", "motor3"], "points": [{"t": 0.01, "positions": [1.0, 0.0, 0.0]}]});
+    cell.lines(&["trajectory", &fast.to_string()]);
+    let log = cell.bridge_log();
+    assert!(
+        log.contains(
+            "qmarc/joint_trajectory: not taken: joint_names must be motor1, motor2, motor3"
+        ),
+        "{log}"
+    );
+    let diag = cell.lines(&["diagnostics", "2"]);
+    assert!(
+        diag.iter().any(|d| d["values"]["refused"]
+            .as_str()
+            .unwrap()
+            .contains("max_velocity_counts_per_s")),
+        "{diag:?}"
+    );
+    assert_eq!(client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted, before + 1);
+    counts.to_vec()
+}
+
+/// The shipped settings.
+fn settings() -> qmarc_config::Settings {
+    qmarc_config::Settings::load(
+        &workspace().join("config/qmarc.toml"),
+        &qmarc_config::Names::any(),
+    )
+    .unwrap()
 }
 
 /// `qmarc-starter serve --bridge`: the bridge starts with the session, on rmw_zenoh's

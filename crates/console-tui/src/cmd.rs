@@ -1,4 +1,4 @@
-//! `qmarc cmd move|stop|grip|wait|status|quit`: one command to a serving controller
+//! `qmarc cmd move|path|stop|grip|wait|status|quit`: one command to a serving controller
 //! (`qmarc-starter serve`) over `qmarc/command`, its answer printed. The session is the one of
 //! `--iox-prefix`, or your newest serving run found in /dev/shm.
 //!
@@ -7,6 +7,7 @@
 
 use clap::{Parser, Subcommand};
 use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandResponse};
+use qmarc_proto::path::{MAX_PATH_KNOTS, PathKnot, PathRequest};
 use qmarc_proto::service::IpcLocation;
 use qmarc_proto::state::{FaultKind, Phase};
 use qmarc_telemetry::reader::{serving, serving_session};
@@ -52,6 +53,13 @@ enum Cmd {
         #[arg(long, default_value_t = 1.0)]
         speed: f64,
     },
+    /// Follow a PVT knot file (thesis A.2.3.2) from rest: its first knot is where the robot
+    /// rests (time 0), each next one the previous knot's time on. Checked as `move --knots`
+    /// checks it, then by the controller as any path (`qmarc/path`, at most 1024 knots).
+    Path {
+        /// The PVT knot file.
+        file: std::path::PathBuf,
+    },
     /// A jerk-limited stop to rest.
     Stop,
     /// Close (`on`) or open (`off`) the gripper now; `wait` then waits until it is there.
@@ -74,10 +82,36 @@ enum Cmd {
 
 /// The location of the serving session, `--iox-prefix`'s, else the newest of yours, and its
 /// motors.
-fn session(args: &CmdArgs) -> anyhow::Result<(IpcLocation, usize)> {
+fn session(args: &CmdArgs) -> anyhow::Result<(IpcLocation, qmarc_config::Settings)> {
     let (location, spec) = serving_session(args.iox_prefix.as_deref(), args.iox_root.as_deref())
         .map_err(|e| anyhow::anyhow!(e))?;
-    Ok((location, spec.settings.n_motors))
+    Ok((location, spec.settings))
+}
+
+/// The path request of the PVT knot file `file`, checked by the session's `settings`.
+fn path_request(
+    file: &std::path::Path,
+    settings: &qmarc_config::Settings,
+) -> anyhow::Result<Box<PathRequest>> {
+    use qmarc_plugins::knots::{KnotRules, parse_pvt, read_knot_file};
+    let text = read_knot_file(file)?;
+    let knots = parse_pvt(&file.display().to_string(), &text, &KnotRules::from_settings(settings))?;
+    let mut t_s = 0.0;
+    let path: Vec<PathKnot> = knots
+        .iter()
+        .map(|k| {
+            let knot = PathKnot { t_s, pos: k.pos, vel: k.vel };
+            t_s += k.dt_s;
+            knot
+        })
+        .collect();
+    PathRequest::new(&path, true).ok_or_else(|| {
+        anyhow::anyhow!(
+            "{}: {} knots: a path sent to a session has at most {MAX_PATH_KNOTS}",
+            file.display(),
+            path.len()
+        )
+    })
 }
 
 /// The words of a status.
@@ -134,7 +168,8 @@ fn move_request(
 }
 
 fn run(args: &CmdArgs) -> anyhow::Result<u8> {
-    let (location, n) = session(args)?;
+    let (location, settings) = session(args)?;
+    let n = settings.n_motors;
     let mut client = match CommandClient::connect(&location) {
         Ok(c) => c,
         Err(e) => {
@@ -145,11 +180,16 @@ fn run(args: &CmdArgs) -> anyhow::Result<u8> {
             return Err(e.into());
         }
     };
+    if let Cmd::Path { file } = &args.command {
+        let answer = client.send_path(&*path_request(file, &settings)?)?;
+        return Ok(said(&answer, false));
+    }
     let request = match &args.command {
         Cmd::Move { to, xyz, linear, speed } => move_request(to, xyz, *linear, *speed)?,
         Cmd::Stop => CommandRequest::of(CommandKind::Stop),
         Cmd::Grip { close } => CommandRequest::grip(*close),
         Cmd::Quit => CommandRequest::of(CommandKind::Quit),
+        Cmd::Path { .. } => unreachable!("sent above"),
         Cmd::Status => CommandRequest::of(CommandKind::Status),
         Cmd::Wait { timeout } => {
             let s = client.wait(Duration::from_secs_f64(timeout.max(0.0)))?;
@@ -166,16 +206,27 @@ fn run(args: &CmdArgs) -> anyhow::Result<u8> {
         }
     };
     let answer = client.send(request)?;
-    match (answer.refused(), &args.command) {
-        (None, Cmd::Status) => println!("{}", describe(&answer, n)),
-        (Some(_), Cmd::Status) => println!("{} (the session has ended)", describe(&answer, n)),
-        (None, _) => println!("accepted (move {})", answer.accepted),
-        (Some(r), _) => {
+    if let Cmd::Status = args.command {
+        let ended = if answer.refused().is_some() { " (the session has ended)" } else { "" };
+        println!("{}{ended}", describe(&answer, n));
+        return Ok(0);
+    }
+    Ok(said(&answer, true))
+}
+
+/// Prints whether `answer` accepted the order (a `move` if `is_move`, else a path); its exit
+/// code.
+fn said(answer: &CommandResponse, is_move: bool) -> u8 {
+    match answer.refused() {
+        None => {
+            println!("accepted ({} {})", if is_move { "move" } else { "path" }, answer.accepted);
+            0
+        }
+        Some(r) => {
             println!("refused ({}): {}", r.name(), answer.reason());
-            return Ok(qmarc_proto::exit::REFUSED);
+            qmarc_proto::exit::REFUSED
         }
     }
-    Ok(0)
 }
 
 /// `qmarc cmd ARGS…`.

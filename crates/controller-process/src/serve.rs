@@ -1,5 +1,5 @@
 //! `qmarc-starter serve`: the command thread. It serves `qmarc/command`
-//! ([`qmarc_proto::command`]) beside the servo thread: it checks each command — the target
+//! ([`qmarc_proto::command`]) and `qmarc/path` ([`qmarc_proto::path`]) beside the servo thread: it checks each command — the target
 //! reachable, inside the soft limits, the frame homed, the loop still serving — and answers
 //! at once, then hands what it accepted to the loop's [`ServeMove`] through a wait-free queue.
 //! It plans straight lines itself (from rest; [`LinearMove`]) and frees the loop's spent ones.
@@ -10,11 +10,13 @@ use qmarc_config::{Settings, TargetError};
 use qmarc_controller::traj::TrajectoryGenerator;
 use qmarc_plugins::linear::LinearMove;
 use qmarc_plugins::moveto::MotionLimits;
+use qmarc_plugins::path::path_queue;
 use qmarc_plugins::serve::{Order, ServeHandle, ServeMove, ServeShared};
 use qmarc_proto::MAX_MOTORS;
 use qmarc_proto::command::{
     CommandKind, CommandRequest, CommandResponse, Refusal, open_command_service,
 };
+use qmarc_proto::path::{PATH_SERVICE, PathRequest, open_path_service};
 use qmarc_proto::progress::Progress;
 use qmarc_proto::service::{IpcLocation, ServiceError, create_node};
 use std::sync::Arc;
@@ -99,16 +101,21 @@ impl CommandThread {
                 let ports = (|| {
                     let node = create_node::<ipc::Service>("qmarc-commands", &location)?;
                     let (service, event) = open_command_service(&node, true)?;
+                    let paths = open_path_service(&node, true)?;
                     let port = |what: &str, e: &dyn std::fmt::Debug| {
                         ServiceError::new(what, "qmarc/command", e)
                     };
                     let server =
                         service.server_builder().create().map_err(|e| port("server", &e))?;
+                    let path_server = paths
+                        .server_builder()
+                        .create()
+                        .map_err(|e| ServiceError::new("server", PATH_SERVICE, e))?;
                     let listener =
                         event.listener_builder().create().map_err(|e| port("listener", &e))?;
-                    Ok((node, server, listener))
+                    Ok((node, server, path_server, listener))
                 })();
-                let (_node, server, listener) = match ports {
+                let (_node, server, path_server, listener) = match ports {
                     Ok(p) => {
                         let _ = ready.send(Ok(()));
                         p
@@ -122,6 +129,10 @@ impl CommandThread {
                     let _ = listener.timed_wait(|_| {}, POLL);
                     while let Ok(Some(active)) = server.receive() {
                         let answer = commands.answer(active.payload());
+                        let _ = active.send_copy(answer);
+                    }
+                    while let Ok(Some(active)) = path_server.receive() {
+                        let answer = commands.answer_path(active.payload());
                         let _ = active.send_copy(answer);
                     }
                     // The loop's spent lines are freed here, not on the servo thread.
@@ -162,45 +173,56 @@ impl Commands {
         &self.handle.shared
     }
 
-    /// The answer to `req`.
-    fn answer(&mut self, req: &CommandRequest) -> CommandResponse {
-        let received_ns = qmarc_timer::clock::monotonic_now_ns();
-        let mut r = CommandResponse { received_ns, ..self.status() };
-        r.id = req.id;
-        let outcome = match CommandKind::from_wire(req.kind) {
-            None => Err((Refusal::BadRequest, format!("unknown command {}", req.kind))),
-            Some(CommandKind::Status) => Ok(()),
-            Some(_) if self.ended.ended.load(Ordering::Acquire) => {
-                Err((Refusal::NotServing, "the session has ended".to_string()))
-            }
-            Some(_) if !self.shared().started.load(Ordering::Acquire) => Err((
+    /// Whether the loop serves orders: not ended, and begun.
+    fn serving(&self) -> Result<(), (Refusal, String)> {
+        if self.ended.ended.load(Ordering::Acquire) {
+            return Err((Refusal::NotServing, "the session has ended".to_string()));
+        }
+        if !self.shared().started.load(Ordering::Acquire) {
+            return Err((
                 Refusal::Busy,
                 "the session is starting: its loop has not begun (qmarc cmd status says when)"
                     .to_string(),
-            )),
-            Some(CommandKind::Move) => self.move_to(req),
-            Some(CommandKind::Stop) => {
-                let limits = MotionLimits::of(&self.settings);
-                self.give(|id| Order::Stop { id, limits }).map(|id| self.accepted = id)
-            }
-            Some(CommandKind::Quit) => {
-                let limits = MotionLimits::of(&self.settings);
-                self.give(|_| Order::Quit { limits }).map(|_| ())
-            }
-            Some(CommandKind::Grip) if self.settings.s626.gripper_dio.is_none() => Err((
-                Refusal::NoGripper,
-                "no gripper is wired: set [s626] gripper_dio to its output".to_string(),
-            )),
-            Some(CommandKind::Grip) => {
-                let close = req.flags & CommandRequest::CLOSE != 0;
-                self.give(|id| Order::Grip { id, close }).map(|id| self.accepted = id)
-            }
+            ));
+        }
+        Ok(())
+    }
+
+    /// The answer to `req`.
+    fn answer(&mut self, req: &CommandRequest) -> CommandResponse {
+        let received_ns = qmarc_timer::clock::monotonic_now_ns();
+        let kind = CommandKind::from_wire(req.kind);
+        let outcome = match kind {
+            None => Err((Refusal::BadRequest, format!("unknown command {}", req.kind))),
+            Some(CommandKind::Status) => Ok(()),
+            Some(k) => self.serving().and_then(|()| self.order(k, req)),
         };
+        self.respond(req.id, received_ns, kind != Some(CommandKind::Status), outcome)
+    }
+
+    /// The answer to the path `req`: checked, sampled, queued.
+    fn answer_path(&mut self, req: &PathRequest) -> CommandResponse {
+        let received_ns = qmarc_timer::clock::monotonic_now_ns();
+        let outcome = self.serving().and_then(|()| self.path(req));
+        self.respond(req.id, received_ns, true, outcome)
+    }
+
+    /// The response to request `id`, read at `received_ns`, with `outcome` (`order`: it was
+    /// one, and the response says when it was queued).
+    fn respond(
+        &self,
+        id: u64,
+        received_ns: u64,
+        order: bool,
+        outcome: Result<(), (Refusal, String)>,
+    ) -> CommandResponse {
+        let mut r = CommandResponse { received_ns, ..self.status() };
+        r.id = id;
         match outcome {
             Ok(()) => {
                 r.ok = 1;
                 r.accepted = self.accepted;
-                if req.kind != CommandKind::Status as u32 {
+                if order {
                     r.received_cycle = self.queued_at;
                 }
             }
@@ -210,6 +232,70 @@ impl Commands {
             }
         }
         r
+    }
+
+    /// An order of `kind` (not a status) to the serving loop.
+    fn order(&mut self, kind: CommandKind, req: &CommandRequest) -> Result<(), (Refusal, String)> {
+        match kind {
+            CommandKind::Status => Ok(()),
+            CommandKind::Move => self.move_to(req),
+            CommandKind::Stop => {
+                let limits = MotionLimits::of(&self.settings);
+                self.give(|id| Order::Stop { id, limits }).map(|id| self.accepted = id)
+            }
+            CommandKind::Quit => {
+                let limits = MotionLimits::of(&self.settings);
+                self.give(|_| Order::Quit { limits }).map(|_| ())
+            }
+            CommandKind::Grip if self.settings.s626.gripper_dio.is_none() => Err((
+                Refusal::NoGripper,
+                "no gripper is wired: set [s626] gripper_dio to its output".to_string(),
+            )),
+            CommandKind::Grip => {
+                let close = req.flags & CommandRequest::CLOSE != 0;
+                self.give(|id| Order::Grip { id, close }).map(|id| self.accepted = id)
+            }
+        }
+    }
+
+    /// A path: from rest, in the homed frame (unless `--unhomed`), checked as a knot file is.
+    fn path(&mut self, req: &PathRequest) -> Result<(), (Refusal, String)> {
+        if !self.unhomed {
+            self.homed()?;
+        }
+        self.at_rest("a path")?;
+        let start = self.shared().command();
+        let queue = path_queue(req, &start, &self.settings, !self.unhomed)?;
+        let id = self.give(|id| Order::Line { id, queue: queue.into_boxed_slice() })?;
+        self.accepted = id;
+        Ok(())
+    }
+
+    /// Every motor's frame is homed.
+    fn homed(&self) -> Result<(), (Refusal, String)> {
+        let homed = self.shared().homed.load(Ordering::Acquire);
+        match (0..self.settings.n_motors).find(|m| homed & (1 << m) == 0) {
+            None => Ok(()),
+            Some(m) => Err((
+                Refusal::NotHomed,
+                format!("motor {} is not homed: home the robot first (qmarc-starter home)", m + 1),
+            )),
+        }
+    }
+
+    /// The robot rests at the end of every order given: `what` starts from rest.
+    fn at_rest(&self, what: &str) -> Result<(), (Refusal, String)> {
+        let shared = self.shared();
+        let at_rest = !shared.moving.load(Ordering::Acquire)
+            && shared.settled.load(Ordering::Acquire) >= self.accepted
+            && shared.taken.load(Ordering::Acquire) >= self.seq;
+        if at_rest {
+            return Ok(());
+        }
+        Err((
+            Refusal::Moving,
+            format!("{what} starts from rest: wait for the move to end (qmarc cmd wait)"),
+        ))
     }
 
     /// Queues the order `make(id)` for the loop under a new id.
@@ -273,12 +359,8 @@ impl Commands {
             return Err(bad("a straight line needs a Cartesian target (xyz)".into()));
         }
         // A point needs the homed frame the kinematics count from, --unhomed or not.
-        let homed = self.shared().homed.load(Ordering::Acquire);
-        if let Some(m) = (0..n).find(|m| homed & (1 << m) == 0).filter(|_| xyz || !self.unhomed) {
-            return Err((
-                Refusal::NotHomed,
-                format!("motor {} is not homed: home the robot first (qmarc-starter home)", m + 1),
-            ));
+        if xyz || !self.unhomed {
+            self.homed()?;
         }
         let mut target = [0.0; MAX_MOTORS];
         if xyz {
@@ -305,17 +387,8 @@ impl Commands {
         mm: [f64; 3],
         limits: &MotionLimits,
     ) -> Result<qmarc_plugins::serve::LineQueue, (Refusal, String)> {
+        self.at_rest("a straight line")?;
         let shared = self.shared();
-        let at_rest = !shared.moving.load(Ordering::Acquire)
-            && shared.settled.load(Ordering::Acquire) >= self.accepted
-            && shared.taken.load(Ordering::Acquire) >= self.seq;
-        if !at_rest {
-            return Err((
-                Refusal::Moving,
-                "a straight line starts from rest: wait for the move to end (qmarc cmd wait)"
-                    .into(),
-            ));
-        }
         let robot = self.settings.robot().ok_or((
             Refusal::BadRequest,
             "no [robot] table for 3 motors: a line needs the Delta's geometry".to_string(),

@@ -23,6 +23,7 @@ pub mod knots;
 pub mod linear;
 pub mod moveto;
 pub mod online;
+pub mod path;
 pub mod pidff;
 pub mod pvt;
 pub mod registry;

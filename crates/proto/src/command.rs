@@ -11,6 +11,7 @@
 //! which a client notifies after each request; the client polls for its response.
 
 use crate::MAX_MOTORS;
+use crate::path::{PathRequest, PathService, open_path_service};
 use crate::service::{IpcLocation, ServiceError, create_node};
 use iceoryx2::port::client::Client;
 use iceoryx2::prelude::*;
@@ -330,13 +331,18 @@ pub enum CommandError {
     Timeout(Duration),
 }
 
+/// A client port of the path service.
+type PathClient = Client<ipc::Service, PathRequest, (), CommandResponse, ()>;
+
 /// The client end of the command service.
 pub struct CommandClient {
-    _node: Node<ipc::Service>,
+    node: Node<ipc::Service>,
     service: CommandService,
     client: Client<ipc::Service, CommandRequest, (), CommandResponse, ()>,
     notifier: iceoryx2::port::notifier::Notifier<ipc::Service>,
     next_id: u64,
+    /// The path service's client, opened by the first path sent.
+    path: Option<(PathService, PathClient)>,
 }
 
 /// How long a command waits for its answer.
@@ -355,29 +361,34 @@ impl CommandClient {
         let ipc = |e: &dyn std::fmt::Debug| CommandError::Ipc(format!("{e:?}"));
         let client = service.client_builder().create().map_err(|e| ipc(&e))?;
         let notifier = event.notifier_builder().create().map_err(|e| ipc(&e))?;
-        Ok(CommandClient { _node: node, service, client, notifier, next_id: 1 })
+        Ok(CommandClient { node, service, client, notifier, next_id: 1, path: None })
     }
 
     /// Sends `request` (its id set here) and returns the answer.
     pub fn send(&mut self, mut request: CommandRequest) -> Result<CommandResponse, CommandError> {
         request.id = self.next_id;
         self.next_id += 1;
-        let ipc = |e: &dyn std::fmt::Debug| CommandError::Ipc(format!("{e:?}"));
         let pending = self.client.send_copy(request).map_err(|e| ipc(&e))?;
         self.notifier.notify().map_err(|e| ipc(&e))?;
-        let started = Instant::now();
-        loop {
-            if let Some(r) = pending.receive().map_err(|e| ipc(&e))? {
-                return Ok(*r.payload());
-            }
-            if started.elapsed() > ANSWER_WAIT {
-                return Err(CommandError::Timeout(ANSWER_WAIT));
-            }
-            if self.service.dynamic_config().number_of_servers() == 0 {
-                return Err(CommandError::Ipc("the serving controller has gone".into()));
-            }
-            std::thread::sleep(Duration::from_micros(100));
+        answer_of(|| pending.receive().map(|r| r.map(|r| *r.payload())), &self.service)
+    }
+
+    /// Sends the path `request` (its id set here) on `qmarc/path` and returns the answer.
+    pub fn send_path(&mut self, request: &PathRequest) -> Result<CommandResponse, CommandError> {
+        if self.path.is_none() {
+            let service = open_path_service(&self.node, false)?;
+            let client = service.client_builder().create().map_err(|e| ipc(&e))?;
+            self.path = Some((service, client));
         }
+        let Some((_, client)) = &self.path else { unreachable!("opened above") };
+        let mut loan = client.loan_uninit().map_err(|e| ipc(&e))?;
+        let r = loan.payload_mut().write(*request);
+        r.id = self.next_id;
+        self.next_id += 1;
+        // SAFETY: the payload was written whole just above.
+        let pending = unsafe { loan.assume_init() }.send().map_err(|e| ipc(&e))?;
+        self.notifier.notify().map_err(|e| ipc(&e))?;
+        answer_of(|| pending.receive().map(|r| r.map(|r| *r.payload())), &self.service)
     }
 
     /// Polls the status until the robot is at rest at the end of the last move accepted (or
@@ -396,6 +407,32 @@ impl CommandClient {
             }
             std::thread::sleep(Duration::from_millis(2));
         }
+    }
+}
+
+/// An iceoryx2 failure, in words.
+fn ipc(e: &dyn std::fmt::Debug) -> CommandError {
+    CommandError::Ipc(format!("{e:?}"))
+}
+
+/// Polls `receive` for the answer to a request sent, for at most [`ANSWER_WAIT`] and while
+/// the command service's server lives.
+fn answer_of<E: std::fmt::Debug>(
+    mut receive: impl FnMut() -> Result<Option<CommandResponse>, E>,
+    service: &CommandService,
+) -> Result<CommandResponse, CommandError> {
+    let started = Instant::now();
+    loop {
+        if let Some(r) = receive().map_err(|e| ipc(&e))? {
+            return Ok(r);
+        }
+        if started.elapsed() > ANSWER_WAIT {
+            return Err(CommandError::Timeout(ANSWER_WAIT));
+        }
+        if service.dynamic_config().number_of_servers() == 0 {
+            return Err(CommandError::Ipc("the serving controller has gone".into()));
+        }
+        std::thread::sleep(Duration::from_micros(100));
     }
 }
 

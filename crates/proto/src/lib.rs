@@ -26,6 +26,7 @@ pub mod command;
 pub mod exit;
 pub mod link;
 pub mod msg;
+pub mod path;
 pub mod progress;
 pub mod service;
 pub mod state;

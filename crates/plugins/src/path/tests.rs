@@ -1,0 +1,161 @@
+//! A sent path's samples: through every knot at its time, from where the robot rests to the
+//! path's end at rest; chosen velocities that never overshoot a turn; and every malformed or
+//! impossible path refused, saying which point and why.
+
+use super::*;
+use std::path::Path;
+
+fn settings() -> Settings {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
+    Settings::load(&path, &qmarc_config::Names::any()).unwrap()
+}
+
+fn knot(t_s: f64, pos: [f64; 3], vel: [f64; 3]) -> PathKnot {
+    PathKnot { t_s, pos: [pos[0], pos[1], pos[2], 0.0], vel: [vel[0], vel[1], vel[2], 0.0] }
+}
+
+const START: [f64; MAX_MOTORS] = [100.0, -200.0, 300.0, 0.0];
+
+fn refusal(r: Result<Vec<[f64; MAX_MOTORS]>, PathRefusal>) -> (Refusal, String) {
+    r.expect_err("refused")
+}
+
+#[test]
+fn a_path_passes_every_knot_at_its_time_from_rest_to_rest() {
+    let s = settings();
+    let period = s.period_s();
+    let knots = [
+        knot(0.2, [1100.0, -700.0, 300.0], [4000.0, -2000.0, 0.0]),
+        knot(0.4, [1500.0, -1200.0, 800.0], [0.0, 0.0, 0.0]),
+    ];
+    let q = path_queue(&PathRequest::new(&knots, true).unwrap(), &START, &s, true).unwrap();
+    assert_eq!(q.len(), (0.4 / period).round() as usize + 1);
+    assert_eq!(q[0], START, "it starts where the robot rests");
+    for k in &knots {
+        let at = q[(k.t_s / period).round() as usize];
+        for m in 0..3 {
+            assert!((at[m] - k.pos[m]).abs() < 1e-6, "{at:?} at {} s", k.t_s);
+        }
+    }
+    assert_eq!(q[q.len() - 1], knots[1].pos);
+    // The velocity given at the first knot is the path's there (a backward difference).
+    let i = (0.2 / period).round() as usize;
+    let v = (q[i + 1][0] - q[i - 1][0]) / (2.0 * period);
+    assert!((v - 4000.0).abs() < 5.0, "{v}");
+    // The motors beyond the robot's stay where they are.
+    assert!(q.iter().all(|c| c[3] == 0.0));
+}
+
+#[test]
+fn chosen_velocities_never_overshoot_a_turn_and_end_at_rest() {
+    let s = settings();
+    // Up, further up, then back down: the middle knot turns motor 1.
+    let knots = [
+        knot(0.1, [400.0, -200.0, 300.0], [0.0; 3]),
+        knot(0.2, [900.0, -200.0, 300.0], [0.0; 3]),
+        knot(0.35, [200.0, -200.0, 300.0], [0.0; 3]),
+    ];
+    let q = path_queue(&PathRequest::new(&knots, false).unwrap(), &START, &s, true).unwrap();
+    let peak = q.iter().map(|c| c[0]).fold(f64::MIN, f64::max);
+    assert!((peak - 900.0).abs() < 1e-9, "the turn is the highest point: {peak}");
+    let low = q.iter().map(|c| c[0]).fold(f64::MAX, f64::min);
+    assert!((low - 100.0).abs() < 1e-9, "nothing below the start: {low}");
+    // Rising through the first knot: its velocity is the parabola's, not 0.
+    let i = (0.1 / s.period_s()).round() as usize;
+    assert!(q[i + 1][0] - q[i - 1][0] > 1.0, "moving through knot 1");
+    let n = q.len();
+    assert!((q[n - 1][0] - q[n - 2][0]).abs() < 0.1, "at rest at the end");
+    assert_eq!(inner_velocity(2.0, 1.0, 4.0, 1.0), 3.0);
+    assert_eq!(inner_velocity(2.0, 1.0, 4.0, 3.0), 2.5);
+    assert_eq!(
+        (inner_velocity(2.0, 1.0, -4.0, 1.0), inner_velocity(0.0, 1.0, 4.0, 1.0)),
+        (0.0, 0.0)
+    );
+}
+
+#[test]
+fn a_point_at_time_zero_is_where_the_robot_rests() {
+    let s = settings();
+    let here = knot(0.0, [130.0, -200.0, 300.0], [0.0; 3]);
+    let then = knot(0.2, [500.0, -200.0, 300.0], [0.0; 3]);
+    let q = path_queue(&PathRequest::new(&[here, then], true).unwrap(), &START, &s, true).unwrap();
+    assert_eq!(q[0], START);
+    let away = knot(0.0, [300.0, -200.0, 300.0], [0.0; 3]);
+    let (r, why) =
+        refusal(path_queue(&PathRequest::new(&[away, then], true).unwrap(), &START, &s, true));
+    assert_eq!(r, Refusal::BadRequest);
+    assert!(why.contains("point 1: at time 0") && why.contains("motor 1"), "{why}");
+    let moving = knot(0.0, [100.0, -200.0, 300.0], [10.0, 0.0, 0.0]);
+    assert!(
+        path_queue(&PathRequest::new(&[moving, then], true).unwrap(), &START, &s, true).is_err()
+    );
+}
+
+#[test]
+fn malformed_and_impossible_paths_are_refused_naming_the_point() {
+    let s = settings();
+    let ok = knot(0.2, [500.0, -200.0, 300.0], [0.0; 3]);
+    let check = |knots: &[PathKnot], given: bool| {
+        refusal(path_queue(&PathRequest::new(knots, given).unwrap(), &START, &s, true))
+    };
+    let (r, why) = check(&[], false);
+    assert_eq!(r, Refusal::BadRequest);
+    assert!(why.contains("1 to 1024 points, found 0"), "{why}");
+    let lying = PathRequest { n_knots: MAX_PATH_KNOTS as u32 + 1, ..PathRequest::default() };
+    assert!(path_queue(&lying, &START, &s, true).unwrap_err().1.contains("found 1025"));
+    let (_, why) = check(&[ok, knot(0.2, [600.0, -200.0, 300.0], [0.0; 3])], false);
+    assert!(
+        why.contains("point 2: time_from_start 0.2 s is not after the point before's"),
+        "{why}"
+    );
+    let (_, why) = check(&[knot(f64::NAN, [0.0; 3], [0.0; 3])], false);
+    assert!(why.contains("point 1: time_from_start must be ≥ 0 s, found NaN"), "{why}");
+    let (_, why) = check(&[ok, knot(0.3, [f64::INFINITY, 0.0, 0.0], [0.0; 3])], false);
+    assert!(why.contains("point 2: the numbers must be finite, found inf"), "{why}");
+    let (_, why) = check(&[ok, knot(0.3, [0.0; 3], [0.0, f64::NAN, 0.0])], true);
+    assert!(why.contains("point 2: the numbers must be finite"), "{why}");
+    // Velocities not given are not looked at.
+    check_ok(&s, &[ok, knot(0.4, [0.0; 3], [f64::NAN, 0.0, 0.0])], false);
+    let (_, why) = check(&[knot(0.2, [500.0, -200.0, 300.0], [100.0, 0.0, 0.0])], true);
+    assert!(
+        why.contains("point 1: a path ends at rest") && why.contains("motor 1's is 100"),
+        "{why}"
+    );
+    // 9000 counts in 0.1 s: 135 000 counts/s at the segment's middle, over motor 1's 80 000.
+    let (_, why) = check(&[knot(0.1, [9100.0, -200.0, 300.0], [0.0; 3])], false);
+    assert!(
+        why.contains("point 1: motor 1: the path moves at")
+            && why.contains("max_velocity_counts_per_s = 80000"),
+        "{why}"
+    );
+    let (r, why) = check(
+        &[
+            knot(1.0, [100.0, -200.0, 9900.0], [0.0; 3]),
+            knot(2.0, [100.0, -200.0, 10_300.0], [0.0; 3]),
+        ],
+        false,
+    );
+    assert_eq!(r, Refusal::SoftLimits, "{why}");
+    assert!(
+        why.contains("the path takes motor 3 to")
+            && why.contains("outside its soft limits [-9000, 10000]"),
+        "{why}"
+    );
+    // Unhomed (--unhomed), the soft limits do not hold.
+    let q = path_queue(
+        &PathRequest::new(&[knot(1.0, [100.0, -200.0, 10_300.0], [0.0; 3])], false).unwrap(),
+        &START,
+        &s,
+        false,
+    );
+    assert!(q.is_ok());
+    let mut short = s.clone();
+    short.trajectory.max_duration_s = 0.1;
+    let r = path_queue(&PathRequest::new(&[ok], false).unwrap(), &START, &short, true);
+    assert!(r.unwrap_err().1.contains("the path lasts 0.2 s: longer than the longest path"));
+}
+
+fn check_ok(s: &Settings, knots: &[PathKnot], given: bool) {
+    let r = path_queue(&PathRequest::new(knots, given).unwrap(), &START, s, true);
+    assert!(r.is_ok(), "{r:?}");
+}
