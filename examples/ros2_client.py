@@ -2,7 +2,7 @@
 """A ROS 2 client of qmarc-bridge over Zenoh, as rmw_zenoh (ROS 2 Jazzy) speaks it, with no ROS 2
 installed: PyPI's eclipse-zenoh for the transport, rosbags for the CDR and the type hashes.
 
-    ros2_client.py [--connect tcp/HOST:PORT] [--namespace /robot1] [--domain 0] COMMAND
+    ros2_client.py [--connect tcp/HOST:PORT] [--mode peer|client] [--namespace /robot1] [--domain 0] COMMAND
 
 Commands (each prints JSON lines):
     joint-states N      the next N joint states (name, position, velocity, effort, stamp)
@@ -13,17 +13,24 @@ Commands (each prints JSON lines):
     trajectory JSON     a trajectory_msgs/msg/JointTrajectory on qmarc/joint_trajectory:
                         {"names": ["motor1", ...], "points": [{"t": 0.5, "positions": [...],
                         "velocities": [...]}, ...]} (rad, rad/s, s from the start)
+    follow JSON         the qmarc/follow_joint_trajectory action (control_msgs/action/
+                        FollowJointTrajectory): the trajectory's JSON as above, and optionally
+                        "path_tolerance" / "goal_tolerance" ({"motor1": rad, ...}), "goal_time"
+                        (s), "cancel_after" (s); prints whether it was accepted, the feedback
+                        received, and the result
     stop                calls qmarc/stop (std_srvs/srv/Trigger)
     gripper on|off      calls qmarc/gripper (std_srvs/srv/SetBool)
     hashes              the RIHS01 hashes rosbags computes for the message types
 
 Without --connect it connects as a ROS 2 node does: to the Zenoh router at tcp/localhost:7447.
 With --listen ENDPOINT it listens there instead (standing in for the router a bridge on
-rmw_zenoh's defaults connects to).
+rmw_zenoh's defaults connects to). --mode client makes it a Zenoh client: everything through
+the router it connects to (a host that reaches only the router).
 """
 
 import argparse
 import json
+import os
 import sys
 import time
 
@@ -42,7 +49,51 @@ SERVICE_HASHES = {
 # (rosbags registers message types only: the response is named as one.)
 # Trigger's and SetBool's response (rosbags registers message types only: named as one).
 STORE.register(get_types_from_msg("bool success\nstring message", "std_srvs/msg/Trigger_Response"))
+# FollowJointTrajectory (control_msgs 5.x, every Jazzy release) and action_msgs' CancelGoal,
+# which rosbags' store lacks: their wire types, registered here (the names only look them up),
+# and rosidl's hashes of the action's services and feedback, as rmw_zenoh puts them in keys.
+ACTION_HASHES = {
+    "send_goal": "RIHS01_b13789dddc325a7a962825c45e28c77d37237ec129dd0c34dc5994562938c57f",
+    "get_result": "RIHS01_e3ceb38e3e1867c8dc0f46014df26e90eb93422f27e9e97f936e07f94be4bc8b",
+    "feedback": "RIHS01_80398fcb9674a79081a9906e2ccf0c804dd7cb15e22e362e606ee87186beab71",
+    "cancel_goal": "RIHS01_573d8b0a534451d7bc2ac8c5ffde8ac14b8593b7001175d0cd6516dcbeb8689a",
+}
+for name, text in [
+    ("control_msgs/msg/JointTolerance",
+     "string name\nfloat64 position\nfloat64 velocity\nfloat64 acceleration"),
+    ("control_msgs/msg/JointComponentTolerance",
+     "string joint_name\nuint16 component\nfloat64 position\nfloat64 velocity\nfloat64 acceleration"),
+    ("control_msgs/msg/FjtGoal",
+     "trajectory_msgs/msg/JointTrajectory trajectory\n"
+     "trajectory_msgs/msg/MultiDOFJointTrajectory multi_dof_trajectory\n"
+     "control_msgs/msg/JointTolerance[] path_tolerance\n"
+     "control_msgs/msg/JointComponentTolerance[] component_path_tolerance\n"
+     "control_msgs/msg/JointTolerance[] goal_tolerance\n"
+     "control_msgs/msg/JointComponentTolerance[] component_goal_tolerance\n"
+     "builtin_interfaces/msg/Duration goal_time_tolerance"),
+    ("control_msgs/msg/FjtSendGoalRequest",
+     "unique_identifier_msgs/msg/UUID goal_id\ncontrol_msgs/msg/FjtGoal goal"),
+    ("control_msgs/msg/FjtSendGoalResponse", "bool accepted\nbuiltin_interfaces/msg/Time stamp"),
+    ("control_msgs/msg/FjtGetResultRequest", "unique_identifier_msgs/msg/UUID goal_id"),
+    ("control_msgs/msg/FjtResult", "int32 error_code\nstring error_string"),
+    ("control_msgs/msg/FjtGetResultResponse", "int8 status\ncontrol_msgs/msg/FjtResult result"),
+    ("control_msgs/msg/FjtFeedback",
+     "std_msgs/msg/Header header\nstring[] joint_names\n"
+     "trajectory_msgs/msg/JointTrajectoryPoint desired\n"
+     "trajectory_msgs/msg/JointTrajectoryPoint actual\n"
+     "trajectory_msgs/msg/JointTrajectoryPoint error\nstring[] multi_dof_joint_names\n"
+     "trajectory_msgs/msg/MultiDOFJointTrajectoryPoint multi_dof_desired\n"
+     "trajectory_msgs/msg/MultiDOFJointTrajectoryPoint multi_dof_actual\n"
+     "trajectory_msgs/msg/MultiDOFJointTrajectoryPoint multi_dof_error"),
+    ("control_msgs/msg/FjtFeedbackMessage",
+     "unique_identifier_msgs/msg/UUID goal_id\ncontrol_msgs/msg/FjtFeedback feedback"),
+    ("action_msgs/msg/CancelGoalRequest", "action_msgs/msg/GoalInfo goal_info"),
+    ("action_msgs/msg/CancelGoalResponse",
+     "int8 return_code\naction_msgs/msg/GoalInfo[] goals_canceling"),
+]:
+    STORE.register(get_types_from_msg(text, name))
 GID = bytes(range(16, 32))
+SEQ = iter(range(1, 1 << 62))
 
 
 def dds_name(typename):
@@ -56,13 +107,14 @@ def keyexpr(domain, namespace, name, typename, rihs=None):
     return f"{domain}/{full.strip('/')}/{dds_name(typename)}/{rihs}"
 
 
-def attachment(seq):
+def attachment(seq=None):
+    seq = next(SEQ) if seq is None else seq
     return z_serialize((Int64(seq), Int64(time.time_ns()), GID))
 
 
-def open_session(connect, listen):
+def open_session(connect, listen, mode="peer"):
     conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("mode", json.dumps(mode))
     if listen:
         conf.insert_json5("listen/endpoints", json.dumps([listen]))
     else:
@@ -88,8 +140,79 @@ def take(session, key, typename, n, timeout_s, show):
     return got == n
 
 
+def call_raw(session, key, payload, typename, timeout=10.0):
+    """Calls the service at key; its response, decoded, or None."""
+    replies = session.get(key, payload=payload, attachment=attachment(), timeout=timeout)
+    for reply in replies:
+        if reply.ok is None:
+            return None
+        return STORE.deserialize_cdr(bytes(reply.ok.payload.to_bytes()), typename)
+    return None
+
+
+def follow(session, key, spec, timeout):
+    """Runs the FollowJointTrajectory action on spec; what happened, as a dict."""
+    t = STORE.types
+    uuid = t["unique_identifier_msgs/msg/UUID"](uuid=numpy.frombuffer(os.urandom(16), dtype=numpy.uint8))
+    tolerances = lambda which: [
+        t["control_msgs/msg/JointTolerance"](name=n, position=float(v), velocity=0.0, acceleration=0.0)
+        for n, v in spec.get(which, {}).items()]
+    goal_time = float(spec.get("goal_time", 0.0))
+    empty_dof = t["trajectory_msgs/msg/MultiDOFJointTrajectory"](
+        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""),
+        joint_names=[], points=[])
+    goal = t["control_msgs/msg/FjtGoal"](
+        trajectory=STORE.deserialize_cdr(joint_trajectory(spec), "trajectory_msgs/msg/JointTrajectory"),
+        multi_dof_trajectory=empty_dof, path_tolerance=tolerances("path_tolerance"),
+        component_path_tolerance=[], goal_tolerance=tolerances("goal_tolerance"),
+        component_goal_tolerance=[],
+        goal_time_tolerance=t["builtin_interfaces/msg/Duration"](
+            sec=int(goal_time), nanosec=int(round((goal_time - int(goal_time)) * 1e9))))
+    action = "qmarc/follow_joint_trajectory/_action/"
+    feedback = []
+    fb_key = key(action + "feedback", "control_msgs/action/FollowJointTrajectory_FeedbackMessage",
+                 ACTION_HASHES["feedback"])
+    sub = session.declare_subscriber(fb_key, lambda s: feedback.append(
+        STORE.deserialize_cdr(bytes(s.payload.to_bytes()), "control_msgs/msg/FjtFeedbackMessage")))
+    time.sleep(1.0)
+    request = t["control_msgs/msg/FjtSendGoalRequest"](goal_id=uuid, goal=goal)
+    answer = call_raw(
+        session, key(action + "send_goal", "control_msgs/action/FollowJointTrajectory_SendGoal",
+                     ACTION_HASHES["send_goal"]),
+        bytes(STORE.serialize_cdr(request, "control_msgs/msg/FjtSendGoalRequest")),
+        "control_msgs/msg/FjtSendGoalResponse")
+    out = {"accepted": bool(answer and answer.accepted)}
+    if not out["accepted"]:
+        sub.undeclare()
+        return out
+    if "cancel_after" in spec:
+        time.sleep(float(spec["cancel_after"]))
+        info = t["action_msgs/msg/GoalInfo"](goal_id=uuid, stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0))
+        cancel = call_raw(
+            session, key(action + "cancel_goal", "action_msgs/srv/CancelGoal", ACTION_HASHES["cancel_goal"]),
+            bytes(STORE.serialize_cdr(t["action_msgs/msg/CancelGoalRequest"](goal_info=info),
+                                      "action_msgs/msg/CancelGoalRequest")),
+            "action_msgs/msg/CancelGoalResponse")
+        out["cancel_return_code"] = int(cancel.return_code) if cancel else None
+    result = call_raw(
+        session, key(action + "get_result", "control_msgs/action/FollowJointTrajectory_GetResult",
+                     ACTION_HASHES["get_result"]),
+        bytes(STORE.serialize_cdr(t["control_msgs/msg/FjtGetResultRequest"](goal_id=uuid),
+                                  "control_msgs/msg/FjtGetResultRequest")),
+        "control_msgs/msg/FjtGetResultResponse", timeout=timeout)
+    sub.undeclare()
+    mine = [f for f in feedback if bytes(f.goal_id.uuid) == bytes(uuid.uuid)]
+    out.update(status=int(result.status) if result else None,
+               error_code=int(result.result.error_code) if result else None,
+               error_string=result.result.error_string if result else None,
+               feedback=len(mine),
+               joint_names=list(mine[-1].feedback.joint_names) if mine else [],
+               max_error=max((abs(float(e)) for f in mine for e in f.feedback.error.positions), default=0.0))
+    return out
+
+
 def call(session, key, payload, typename):
-    replies = session.get(key, payload=payload, attachment=attachment(1), timeout=10.0)
+    replies = session.get(key, payload=payload, attachment=attachment(), timeout=10.0)
     for reply in replies:
         if reply.ok is None:
             print(json.dumps({"error": str(reply.err.payload.to_string())}), flush=True)
@@ -135,6 +258,7 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--connect", default="tcp/localhost:7447")
     p.add_argument("--listen", default=None)
+    p.add_argument("--mode", default="peer", choices=["peer", "client"])
     p.add_argument("--namespace", default="")
     p.add_argument("--domain", type=int, default=0)
     p.add_argument("--timeout", type=float, default=20.0)
@@ -146,7 +270,7 @@ def main():
                   "diagnostic_msgs/msg/DiagnosticArray", "trajectory_msgs/msg/JointTrajectory"]:
             print(json.dumps({"type": t, "rihs01": STORE.hash_rihs01(t)}))
         return 0
-    session = open_session(a.connect, a.listen)
+    session = open_session(a.connect, a.listen, a.mode)
     key = lambda name, t, rihs=None: keyexpr(a.domain, a.namespace, name, t, rihs)
     ok = True
     if a.command == "joint-states":
@@ -184,6 +308,10 @@ def main():
         k = key("qmarc/joint_trajectory", "trajectory_msgs/msg/JointTrajectory")
         publish(session, k, joint_trajectory(json.loads(a.args[0])))
         print(json.dumps({"published": k}), flush=True)
+    elif a.command == "follow":
+        out = follow(session, key, json.loads(a.args[0]), a.timeout)
+        print(json.dumps(out), flush=True)
+        ok = not out["accepted"] or out.get("status") is not None
     elif a.command == "stop":
         ok = call(session, key("qmarc/stop", "std_srvs/srv/Trigger", SERVICE_HASHES["std_srvs/srv/Trigger"]),
                   b"\x00\x01\x00\x00\x00", "std_srvs/msg/Trigger_Response")

@@ -6,6 +6,7 @@
 //! decoded, its numbers finite and near; the controller checks the rest (reach, soft limits,
 //! homing) and refuses with a reason, which the bridge logs and puts in `/diagnostics`.
 
+use crate::action::{ActionEntities, Actions};
 use crate::convert::{Converter, SessionState, target_mm};
 use crate::msgs::{
     JointTrajectory, PointStamped, SetBoolRequest, SuccessResponse, Time, TriggerRequest,
@@ -49,7 +50,7 @@ type Subscription =
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 
 /// The node's entities.
-struct Entities {
+pub(crate) struct Entities {
     joint_states: RosPublisher,
     effector: RosPublisher,
     diagnostics: RosPublisher,
@@ -57,6 +58,7 @@ struct Entities {
     trajectory: Subscription,
     stop: RosService,
     gripper: RosService,
+    pub(crate) action: ActionEntities,
 }
 
 impl Entities {
@@ -73,17 +75,21 @@ impl Entities {
             )?,
             stop: node.service("qmarc/stop", &ros2::TRIGGER)?,
             gripper: node.service("qmarc/gripper", &ros2::SET_BOOL)?,
+            action: ActionEntities::declare(node, "qmarc/follow_joint_trajectory")?,
         })
     }
 }
 
 /// The bridge's state between turns.
-struct Bridge {
-    opts: Options,
-    e: Entities,
-    client: CommandClient,
+pub(crate) struct Bridge {
+    pub(crate) opts: Options,
+    pub(crate) e: Entities,
+    pub(crate) client: CommandClient,
     reader: TelemetryReader,
-    last: Option<TelemetrySample>,
+    /// The newest sample, and the one before it.
+    pub(crate) last: Option<TelemetrySample>,
+    pub(crate) before_last: Option<TelemetrySample>,
+    pub(crate) actions: Actions,
     homed: bool,
     refused: String,
     said: Option<SessionState>,
@@ -114,6 +120,8 @@ pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
         client,
         reader,
         last: None,
+        before_last: None,
+        actions: Actions::default(),
         homed: false,
         refused: String::new(),
         said: None,
@@ -171,13 +179,14 @@ impl Bridge {
         if let Some(s) = newest {
             let c = self.opts.converter;
             let js = c.joint_state(&s, self.last.as_ref(), stamp);
-            self.last = Some(s);
+            self.before_last = self.last.replace(s);
             publish(&mut self.e.joint_states, &js);
             if let Some(p) = c.effector(&s, stamp) {
                 publish(&mut self.e.effector, &p);
             }
         }
         self.commands();
+        self.actions(stamp);
         let ended = self.reader.end();
         self.diagnose(stamp, ended.is_some());
         Ok(ended.is_some())
@@ -185,7 +194,11 @@ impl Bridge {
 
     /// A command to the controller; its refusal, if refused, logged and kept for the
     /// diagnostics.
-    fn command(&mut self, r: CommandRequest, what: &str) -> Result<CommandResponse, String> {
+    pub(crate) fn command(
+        &mut self,
+        r: CommandRequest,
+        what: &str,
+    ) -> Result<CommandResponse, String> {
         let answer = self.client.send(r).map_err(|e| format!("{what}: {e}"));
         self.answered(answer, what)
     }
@@ -214,7 +227,11 @@ impl Bridge {
     }
 
     /// A path to the controller; refused, logged and kept for the diagnostics.
-    fn send_path(&mut self, path: &PathRequest, what: &str) -> Result<CommandResponse, String> {
+    pub(crate) fn send_path(
+        &mut self,
+        path: &PathRequest,
+        what: &str,
+    ) -> Result<CommandResponse, String> {
         let answer = self.client.send_path(path).map_err(|e| format!("{what}: {e}"));
         self.answered(answer, what)
     }
@@ -273,7 +290,7 @@ impl Bridge {
     }
 
     /// Input from the network that is not a command: logged, in the diagnostics, never sent.
-    fn bad_input(&mut self, topic: &str, why: &str) {
+    pub(crate) fn bad_input(&mut self, topic: &str, why: &str) {
         eprintln!("qmarc-bridge: {topic}: not taken: {why}");
         self.refused = format!("{topic}: {why}");
     }
@@ -307,14 +324,18 @@ fn failure(why: &str) -> SuccessResponse {
 }
 
 /// Publishes `value`; a failure is said, never fatal (the network is not the robot's).
-fn publish<T: serde::Serialize>(p: &mut RosPublisher, value: &T) {
+pub(crate) fn publish<T: serde::Serialize>(p: &mut RosPublisher, value: &T) {
     if let Err(e) = send_cdr(value, |b| p.put(b)) {
         eprintln!("qmarc-bridge: {}: {e}", p.keyexpr);
     }
 }
 
 /// Answers a call; a failure is said.
-fn reply_with<T: serde::Serialize>(service: &RosService, q: &zenoh::query::Query, value: &T) {
+pub(crate) fn reply_with<T: serde::Serialize>(
+    service: &RosService,
+    q: &zenoh::query::Query,
+    value: &T,
+) {
     if let Err(e) = send_cdr(value, |b| service.reply(q, b)) {
         eprintln!("qmarc-bridge: {}: {e}", service.keyexpr);
     }

@@ -64,6 +64,32 @@ pub const SET_BOOL: RosType = RosType {
     hash: "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a",
 };
 
+/// `control_msgs/action/FollowJointTrajectory`'s goal service (`_action/send_goal`).
+pub const FJT_SEND_GOAL: RosType = RosType {
+    name: "control_msgs/action/FollowJointTrajectory_SendGoal",
+    hash: "RIHS01_b13789dddc325a7a962825c45e28c77d37237ec129dd0c34dc5994562938c57f",
+};
+/// Its result service (`_action/get_result`).
+pub const FJT_GET_RESULT: RosType = RosType {
+    name: "control_msgs/action/FollowJointTrajectory_GetResult",
+    hash: "RIHS01_e3ceb38e3e1867c8dc0f46014df26e90eb93422f27e9e97f936e07f94be4bc8b",
+};
+/// Its feedback topic (`_action/feedback`).
+pub const FJT_FEEDBACK: RosType = RosType {
+    name: "control_msgs/action/FollowJointTrajectory_FeedbackMessage",
+    hash: "RIHS01_80398fcb9674a79081a9906e2ccf0c804dd7cb15e22e362e606ee87186beab71",
+};
+/// Every action's cancel service (`_action/cancel_goal`).
+pub const CANCEL_GOAL: RosType = RosType {
+    name: "action_msgs/srv/CancelGoal",
+    hash: "RIHS01_573d8b0a534451d7bc2ac8c5ffde8ac14b8593b7001175d0cd6516dcbeb8689a",
+};
+/// Every action's status topic (`_action/status`).
+pub const GOAL_STATUS_ARRAY: RosType = RosType {
+    name: "action_msgs/msg/GoalStatusArray",
+    hash: "RIHS01_6c1684b00f177d37438febe6e709fc4e2b0d4248dca4854946f9ed8b30cda83e",
+};
+
 /// What kind of entity a liveliness token announces.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum EntityKind {
@@ -104,6 +130,8 @@ impl Qos {
     pub const DEFAULT: Qos = Qos { reliable: true, transient_local: false, depth: 10 };
     /// The sensor-data profile: best effort, volatile, keep last 5 (joint states at 250 Hz).
     pub const SENSOR_DATA: Qos = Qos { reliable: false, transient_local: false, depth: 5 };
+    /// An action's status topic (rcl_action's): reliable, transient local, keep last 1.
+    pub const ACTION_STATUS: Qos = Qos { reliable: true, transient_local: true, depth: 1 };
 
     /// The token's QoS string: `R:D:H,depth:deadline:lifespan:liveliness`, each field empty
     /// where it is rmw_zenoh's default (reliable, volatile, keep last, depth 42, infinite

@@ -38,8 +38,8 @@ fn python() -> PathBuf {
 }
 
 /// A scratch folder of test `name` with the shipped settings in it, the simulated robot's
-/// homed frame kept nowhere (tests never share /dev/shm/qmarc-sim.state): the folder and the
-/// settings file.
+/// homed frame kept nowhere (tests never share /dev/shm/qmarc-sim.state), the commands
+/// gathered for five minutes: the folder and the settings file.
 fn scratch(name: &str) -> (PathBuf, PathBuf) {
     let dir = std::env::temp_dir().join(format!("qmarc-bridge-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -47,7 +47,13 @@ fn scratch(name: &str) -> (PathBuf, PathBuf) {
     let shipped = std::fs::read_to_string(workspace().join("config/qmarc.toml")).unwrap();
     let own: Vec<&str> = shipped
         .lines()
-        .map(|l| if l.starts_with("state_file = ") { "state_file = \"\"" } else { l })
+        .map(|l| match l.split(" = ").next() {
+            Some("state_file") => "state_file = \"\"",
+            // The commands, for five minutes: a loaded machine's session keeps its path.
+            Some("fields") => "fields = [\"time\", \"cmd\"]",
+            Some("stream_max_s") => "stream_max_s = 300.0",
+            _ => l,
+        })
         .collect();
     let config = dir.join("qmarc.toml");
     std::fs::write(&config, own.join("\n") + "\n").unwrap();
@@ -66,6 +72,14 @@ struct Cell {
 
 impl Cell {
     fn start(name: &str, namespace: &str) -> Cell {
+        let peer = "{ mode: \"peer\", listen: { endpoints: [\"LISTEN\"] }, \
+                    scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }";
+        Cell::start_with(name, namespace, peer)
+    }
+
+    /// A cell whose bridge has the Zenoh configuration `zenoh`, `LISTEN` in it replaced by a
+    /// free endpoint on loopback (the cell's `endpoint`).
+    fn start_with(name: &str, namespace: &str, zenoh_config: &str) -> Cell {
         let (dir, config) = scratch(name);
         let prefix = format!("qmarc_bridge{name}_{}_", std::process::id());
         let starter = bridge_bin().with_file_name("qmarc-starter");
@@ -80,17 +94,9 @@ impl Cell {
             .stderr(Stdio::null())
             .spawn()
             .unwrap();
-        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let endpoint = format!("tcp/127.0.0.1:{}", free_port());
         let zenoh = dir.join("zenoh.json5");
-        std::fs::write(
-            &zenoh,
-            format!(
-                "{{ mode: \"peer\", listen: {{ endpoints: [\"{endpoint}\"] }}, \
-                 scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }} }}"
-            ),
-        )
-        .unwrap();
+        std::fs::write(&zenoh, zenoh_config.replace("LISTEN", &endpoint)).unwrap();
         let mut cell = Cell {
             dir,
             prefix,
@@ -173,6 +179,11 @@ impl Drop for Cell {
     }
 }
 
+/// A TCP port free on loopback now.
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
 fn close(a: f64, b: f64, tol: f64) -> bool {
     (a - b).abs() <= tol
 }
@@ -226,7 +237,6 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     assert!(log.contains("more than the 1048576 taken"), "{log}");
     let after = client.send(CommandRequest::of(CommandKind::Status)).unwrap();
     assert_eq!(after.accepted, before, "nothing reached the controller");
-    let knots = joint_trajectories(&cell, &mut client, after.command);
 
     // kill -9 of the bridge mid-move: the move goes on to its end.
     let r = client.send(CommandRequest::move_xyz([-30.0, 20.0, -650.0], false, 0.2)).unwrap();
@@ -242,6 +252,19 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     assert_eq!((s.fault, s.settled, s.moving), (0, r.accepted, 0), "the move ended as sent");
     let [x, y, z] = s.effector_mm;
     assert!(close(x, -30.0, 1e-6) && close(y, 20.0, 1e-6) && close(z, -650.0, 1e-6));
+    drop(client);
+    assert!(cell.quit().success());
+}
+
+/// `qmarc/joint_trajectory`: the robot follows a joint trajectory through its knots (its
+/// joints out of order), as gather.csv shows; one with a wrong joint is not taken, one too
+/// fast is refused, both said.
+#[test]
+fn a_joint_trajectory_is_followed_through_its_knots() {
+    let mut cell = Cell::start("traj", "/robot1");
+    let mut client = cell.client();
+    let rest = client.send(CommandRequest::of(CommandKind::Status)).unwrap().command;
+    let knots = joint_trajectories(&cell, &mut client, rest);
     drop(client);
     assert!(cell.quit().success());
     // What the robot did: the trajectory's knots are commands of gather.csv, exactly.
@@ -314,6 +337,96 @@ fn settings() -> qmarc_config::Settings {
     .unwrap()
 }
 
+/// MoveIt's action, `qmarc/follow_joint_trajectory`: a goal followed to its end with feedback
+/// and a successful result; a path tolerance the robot breaks aborts it with the robot
+/// stopped; a goal tolerance it cannot meet in time aborts it once the path ends; a cancel
+/// stops it; a goal with joints the robot has not is rejected.
+#[test]
+fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
+    let mut cell = Cell::start("fjt", "");
+    let mut client = cell.client();
+    let per_rad = settings().counts_per_rad();
+    let rest = client.send(CommandRequest::of(CommandKind::Status)).unwrap().command;
+    let rad = |m: usize, by_counts: f64| (rest[m] + by_counts) / per_rad;
+    let goal = |by: [f64; 3], t: f64, extra: serde_json::Value| {
+        let mut spec = serde_json::json!({
+            "names": ["motor1", "motor2", "motor3"],
+            "points": [{"t": t, "positions": [rad(0, by[0]), rad(1, by[1]), rad(2, by[2])]}],
+        });
+        spec.as_object_mut().unwrap().extend(extra.as_object().unwrap().clone());
+        let out = cell.lines(&["follow", &spec.to_string()]);
+        out[0].clone()
+    };
+    let ok = goal(
+        [400.0, -300.0, 200.0],
+        0.4,
+        serde_json::json!({"goal_tolerance": {"motor1": 0.01}, "goal_time": 1.0}),
+    );
+    assert_eq!(
+        (ok["accepted"].as_bool(), ok["status"].as_i64(), ok["error_code"].as_i64()),
+        (Some(true), Some(4), Some(0)),
+        "{ok}\n{}",
+        cell.bridge_log()
+    );
+    assert!(ok["feedback"].as_i64().unwrap() >= 5, "{ok}");
+    assert_eq!(ok["joint_names"], serde_json::json!(["motor1", "motor2", "motor3"]));
+    assert!(ok["max_error"].as_f64().unwrap() < 0.05, "{ok}");
+    let s = client.wait(Duration::from_secs(30)).unwrap();
+    assert!(close(s.command[0], rest[0] + 400.0, 1e-6), "{:?}", s.command);
+    // A path tolerance no servo meets: aborted, the robot stopped, the session unharmed.
+    let tight = goal([0.0, 0.0, 0.0], 0.5, serde_json::json!({"path_tolerance": {"motor1": 1e-7}}));
+    assert_eq!(
+        (tight["status"].as_i64(), tight["error_code"].as_i64()),
+        (Some(6), Some(-4)),
+        "{tight}"
+    );
+    assert!(
+        tight["error_string"].as_str().unwrap().starts_with("path tolerance violated: motor1 is"),
+        "{tight}"
+    );
+    let s = client.wait(Duration::from_secs(30)).unwrap();
+    assert_eq!((s.fault, s.moving), (0, 0));
+    assert!(s.accepted > 2 && s.settled == s.accepted, "the stop was the last order, done");
+    // Half a count from the goal, which a motor at whole counts never is.
+    let rest = s.command;
+    let rad = |m: usize, by_counts: f64| (rest[m] + by_counts) / per_rad;
+    let spec = serde_json::json!({
+        "names": ["motor1", "motor2", "motor3"],
+        "points": [{"t": 0.3, "positions": [rad(0, 0.0), rad(1, 200.5), rad(2, 0.0)]}],
+        "goal_tolerance": {"motor2": 1e-9}, "goal_time": 0.2,
+    });
+    let late = cell.lines(&["follow", &spec.to_string()])[0].clone();
+    assert_eq!(
+        (late["status"].as_i64(), late["error_code"].as_i64()),
+        (Some(6), Some(-5)),
+        "{late}"
+    );
+    assert!(
+        late["error_string"].as_str().unwrap().contains("goal tolerance violated: motor2"),
+        "{late}"
+    );
+    // Canceled mid-way (10 s of margin for a loaded machine): the robot stops short of the end.
+    let spec = serde_json::json!({
+        "names": ["motor1", "motor2", "motor3"],
+        "points": [{"t": 10.0, "positions": [rad(0, 3000.0), rad(1, 0.0), rad(2, 0.0)]}],
+        "cancel_after": 0.5,
+    });
+    let canceled = cell.lines(&["follow", &spec.to_string()])[0].clone();
+    assert_eq!(
+        (canceled["cancel_return_code"].as_i64(), canceled["status"].as_i64()),
+        (Some(0), Some(5)),
+        "{canceled}"
+    );
+    let s = client.wait(Duration::from_secs(30)).unwrap();
+    assert!(s.command[0] < rest[0] + 2900.0, "stopped short: {:?}", s.command);
+    let wrong = serde_json::json!({"names": ["motor1", "motor2", "wrist"], "points": [{"t": 1.0, "positions": [0.0, 0.0, 0.0]}]});
+    let rejected = cell.lines(&["follow", &wrong.to_string()])[0].clone();
+    assert_eq!(rejected["accepted"], false);
+    assert!(cell.bridge_log().contains("follow_joint_trajectory: not taken: joint_names must be"));
+    drop(client);
+    assert!(cell.quit().success());
+}
+
 /// `qmarc-starter serve --bridge`: the bridge starts with the session, on rmw_zenoh's
 /// defaults (it connects to a router at tcp/localhost:7447, which the client stands in for);
 /// kill -9 of it changes nothing in the session, which says so; the session's end leaves no
@@ -368,4 +481,113 @@ fn serve_with_bridge_starts_it_and_outlives_its_death() {
     assert!(bridges().is_empty(), "no bridge left");
     location.remove_files();
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A network namespace joined to this one by a veth pair (10.231.S.1 here, .2 there): a
+/// second host for the test; deleted, with its link, on drop.
+struct Netns {
+    name: String,
+    /// This side's address.
+    here: String,
+}
+
+impl Netns {
+    fn new() -> Netns {
+        assert!(
+            nix::unistd::geteuid().is_root(),
+            "the two-host cell makes a network namespace (ip netns): run the tests as root"
+        );
+        let pid = std::process::id();
+        let subnet = format!("10.231.{}", pid % 200 + 20);
+        let (name, a, b) = (format!("qmarc{pid}"), format!("qv{pid}a"), format!("qv{pid}b"));
+        let ns = Netns { name: name.clone(), here: format!("{subnet}.1") };
+        let ip = |args: &[&str]| {
+            let out = Command::new("ip").args(args).output().expect("ip (iproute2)");
+            assert!(out.status.success(), "ip {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        };
+        ip(&["netns", "add", &name]);
+        ip(&["link", "add", &a, "type", "veth", "peer", "name", &b]);
+        ip(&["link", "set", &b, "netns", &name]);
+        ip(&["addr", "add", &format!("{subnet}.1/24"), "dev", &a]);
+        ip(&["link", "set", &a, "up"]);
+        ip(&["-n", &name, "addr", "add", &format!("{subnet}.2/24"), "dev", &b]);
+        ip(&["-n", &name, "link", "set", &b, "up"]);
+        ip(&["-n", &name, "link", "set", "lo", "up"]);
+        ns
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        // The veth pair goes with the namespace.
+        let _ = Command::new("ip").args(["netns", "del", &self.name]).status();
+    }
+}
+
+/// Two robots on one PC, bridged under /robot1 and /robot2; the first bridge is the cell's
+/// Zenoh router, reachable from a second host (a network namespace); a ROS 2 client there
+/// sees both robots' joint states and commands each, and each command reaches its robot only.
+#[test]
+fn two_robots_are_seen_and_commanded_from_another_host_through_a_router() {
+    let host = Netns::new();
+    let router_port = free_port();
+    let lan = format!("tcp/{}:{router_port}", host.here);
+    let router = format!(
+        "{{ mode: \"router\", listen: {{ endpoints: [\"LISTEN\", \"{lan}\"] }}, \
+         scouting: {{ multicast: {{ enabled: false }} }} }}"
+    );
+    let mut robot1 = Cell::start_with("cell1", "/robot1", &router);
+    let peer = format!(
+        "{{ mode: \"peer\", connect: {{ endpoints: [\"{}\"] }}, listen: {{ endpoints: [\"LISTEN\"] }}, \
+         scouting: {{ multicast: {{ enabled: false }} }} }}",
+        robot1.endpoint
+    );
+    let mut robot2 = Cell::start_with("cell2", "/robot2", &peer);
+    // The client on the other host, connected to the router only.
+    let remote = |namespace: &str, args: &[&str]| -> Vec<serde_json::Value> {
+        let out = Command::new("ip")
+            .args(["netns", "exec", &host.name])
+            .arg(python())
+            .arg(workspace().join("examples/ros2_client.py"))
+            .args([
+                "--mode=client",
+                &format!("--connect={lan}"),
+                &format!("--namespace={namespace}"),
+            ])
+            .args(args)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "{namespace} {args:?}: {text}\n{}\nbridge 1: {}\nbridge 2: {}",
+            String::from_utf8_lossy(&out.stderr),
+            robot1.bridge_log(),
+            robot2.bridge_log()
+        );
+        text.lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+    };
+    for ns in ["/robot1", "/robot2"] {
+        let js = remote(ns, &["joint-states", "5"]);
+        assert_eq!(js.len(), 5, "{ns}");
+        assert_eq!(js[0]["name"], serde_json::json!(["motor1", "motor2", "motor3"]));
+    }
+    // A target to robot 2 moves robot 2 only; robot 1's gripper service answers robot 1.
+    let mut c1 = robot1.client();
+    let mut c2 = robot2.client();
+    let before = c1.send(CommandRequest::of(CommandKind::Status)).unwrap();
+    remote("/robot2", &["target", "0.02", "-0.01", "-0.64"]);
+    let s = c2.wait(Duration::from_secs(30)).unwrap();
+    assert!(close(s.effector_mm[0], 20.0, 1e-6) && close(s.effector_mm[2], -640.0, 1e-6), "{s:?}");
+    let r = remote("/robot1", &["gripper", "on"]);
+    assert_eq!(r[0]["success"], true, "{r:?}");
+    let after = c1.send(CommandRequest::of(CommandKind::Status)).unwrap();
+    assert_eq!(
+        (after.command, after.accepted),
+        (before.command, before.accepted + 1),
+        "robot 1 gripped, unmoved"
+    );
+    drop((c1, c2));
+    assert!(robot2.quit().success());
+    assert!(robot1.quit().success());
 }
