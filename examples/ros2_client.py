@@ -9,6 +9,8 @@ Commands (each prints JSON lines):
     effector N          the next N effector points (m)
     diagnostics N       the next N diagnostics
     target X Y Z        an online move to the point (m), published on qmarc/target
+    targets N S P1 P2   N targets S seconds apart, alternating between the points P1 and P2
+                        (X Y Z each, m); prints each one's send time (the benchmark's)
     raw-target N        N bytes of garbage on qmarc/target (what the bridge must refuse)
     trajectory JSON     a trajectory_msgs/msg/JointTrajectory on qmarc/joint_trajectory:
                         {"names": ["motor1", ...], "points": [{"t": 0.5, "positions": [...],
@@ -31,6 +33,7 @@ the router it connects to (a host that reaches only the router).
 import argparse
 import json
 import os
+import threading
 import sys
 import time
 
@@ -124,20 +127,26 @@ def open_session(connect, listen, mode="peer"):
 
 
 def take(session, key, typename, n, timeout_s, show):
-    sub = session.declare_subscriber(key)
-    deadline = time.monotonic() + timeout_s
-    got = 0
-    while got < n and time.monotonic() < deadline:
-        sample = sub.try_recv()
-        if sample is None:
-            time.sleep(0.001)
-            continue
+    """Prints the next n samples on key, each with its sequence number and when it arrived
+    (taken in Zenoh's callback, on the system clock); true if n arrived within timeout_s."""
+    got = []
+    done = threading.Event()
+
+    def arrived(sample):
+        received_ns = time.time_ns()
+        if len(got) < n:
+            got.append((received_ns, sample))
+            if len(got) == n:
+                done.set()
+
+    sub = session.declare_subscriber(key, arrived)
+    done.wait(timeout_s)
+    sub.undeclare()
+    for received_ns, sample in got[:n]:
         seq, stamp_ns, gid = z_deserialize(tuple[Int64, Int64, bytes], sample.attachment)
         msg = STORE.deserialize_cdr(bytes(sample.payload.to_bytes()), typename)
-        print(json.dumps(dict(show(msg), seq=int(seq), received_ns=time.time_ns())), flush=True)
-        got += 1
-    sub.undeclare()
-    return got == n
+        print(json.dumps(dict(show(msg), seq=int(seq), received_ns=received_ns)), flush=True)
+    return len(got) >= n
 
 
 def call_raw(session, key, payload, typename, timeout=10.0):
@@ -300,6 +309,24 @@ def main():
         k = key("qmarc/target", "geometry_msgs/msg/PointStamped")
         publish(session, k, payload)
         print(json.dumps({"published": k}), flush=True)
+    elif a.command == "targets":
+        # N targets, every S seconds, alternating between two points: each one's time sent.
+        n, every = int(a.args[0]), float(a.args[1])
+        points = [list(map(float, a.args[2:5])), list(map(float, a.args[5:8]))]
+        t = STORE.types
+        k = key("qmarc/target", "geometry_msgs/msg/PointStamped")
+        pub = session.declare_publisher(k)
+        time.sleep(1.0)
+        for i in range(n):
+            msg = t["geometry_msgs/msg/PointStamped"](
+                header=t["std_msgs/msg/Header"](
+                    stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="base"),
+                point=t["geometry_msgs/msg/Point"](*points[i % 2]))
+            payload = bytes(STORE.serialize_cdr(msg, "geometry_msgs/msg/PointStamped"))
+            sent = time.time_ns()
+            pub.put(payload, attachment=attachment())
+            print(json.dumps({"published_ns": sent}), flush=True)
+            time.sleep(every)
     elif a.command == "raw-target":
         k = key("qmarc/target", "geometry_msgs/msg/PointStamped")
         publish(session, k, bytes([0x00, 0x01, 0x00, 0x00]) + bytes(int(a.args[0])))

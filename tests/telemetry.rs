@@ -118,17 +118,37 @@ fn a_reader_that_never_reads_or_is_killed_changes_nothing_of_the_move() {
     run.starter_ok(&[&c, &format!("--out={}", alone.display()), "step"]);
 
     let out = run.out("deaf");
-    let reader = scope(&run, &[]);
+    let mut reader = scope(&run, &[]);
+    // Its lines as they come: it is stopped once it says it attached.
+    let (said, lines) = std::sync::mpsc::channel();
+    let stdout = reader.stdout.take().expect("stdout");
+    let printed = std::thread::spawn(move || {
+        use std::io::BufRead;
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stdout).lines().map_while(Result::ok) {
+            all.push_str(&line);
+            all.push('\n');
+            let _ = said.send(line);
+        }
+        all
+    });
     let starter = run.spawn_starter(&[&c, &format!("--out={}", out.display()), "step"]);
     qmarc_tests::wait_until_moving(&run.prefix, Duration::from_secs(60));
-    // Attached (it polls every 50 ms), then stopped: its queue fills and overflows.
-    std::thread::sleep(Duration::from_millis(300));
+    // Attached (it polls every 50 ms; a loaded machine takes longer), then stopped: its queue
+    // fills and overflows.
+    let attached = std::time::Instant::now() + Duration::from_secs(60);
+    while !lines
+        .recv_timeout(attached.saturating_duration_since(std::time::Instant::now()))
+        .expect("the scope attached to the move")
+        .contains("attached to the move")
+    {}
     send_signal(reader.id(), nix::sys::signal::Signal::SIGSTOP);
     std::thread::sleep(Duration::from_millis(900));
     send_signal(reader.id(), nix::sys::signal::Signal::SIGKILL);
-    let killed = wait_with_timeout(reader, Duration::from_secs(10));
-    assert_eq!(killed.code, None, "killed by a signal");
-    assert!(killed.stdout.contains("attached to the move"), "{}", killed.stdout);
+    let killed = reader.wait().expect("wait");
+    assert_eq!(killed.code(), None, "killed by a signal");
+    let printed = printed.join().unwrap();
+    assert!(printed.contains("attached to the move"), "{printed}");
     let moved = wait_with_timeout(starter, Duration::from_secs(120));
     assert_eq!(moved.code, Some(0), "{}{}", moved.stdout, moved.stderr);
 

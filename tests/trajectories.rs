@@ -141,8 +141,10 @@ fn feed(
                 return;
             }
             let _ = stdin.flush();
-            if i >= 2 {
-                std::thread::sleep(Duration::from_millis(5)); // a 20 ms knot every 5 ms
+            // A 200 ms lead, then a 20 ms knot every 5 ms: the lead outlasts the stalls of a
+            // loaded machine's writer.
+            if i >= 10 {
+                std::thread::sleep(Duration::from_millis(5));
             }
         }
         if !close {

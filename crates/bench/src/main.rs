@@ -9,10 +9,13 @@
 //! - `cycle`: the per-cycle compute of every registered generator × law for 1–4 motors.
 //! - `command`: a serving session's move commands, from sent to the loop's first new command.
 //! - `pick`: the Delta pick-and-place cycle through a serving session, with the gripper.
+//! - `bridge`: the ROS 2 bridge — the loop's p99 with it and two subscribers against without,
+//!   joint states over 60 s (loss, latency from the servo sample), a target to the loop.
 //!
 //! Figures are printed (and written as JSON with `--json`), never asserted: the machine decides.
 
 mod baselines;
+mod bridge;
 mod command;
 mod cycle;
 mod ipc;
@@ -50,6 +53,9 @@ enum BenchCommand {
     /// The Delta pick-and-place cycle through a serving session: cycle time, picks per
     /// minute, tracking error, beside the thesis' X-Z path.
     Pick(pick::PickArgs),
+    /// The ROS 2 bridge: the loop with it and two subscribers against without (p99 ratio),
+    /// joint states' loss and latency, a published target to the loop's first command.
+    Bridge(bridge::BridgeArgs),
 }
 
 fn main() -> ExitCode {
@@ -60,6 +66,7 @@ fn main() -> ExitCode {
         BenchCommand::Cycle(a) => cycle::run(a),
         BenchCommand::Command(a) => command::run(a),
         BenchCommand::Pick(a) => pick::run(a),
+        BenchCommand::Bridge(a) => bridge::run(a),
     };
     let outcome = result.map(|()| ExitCode::SUCCESS).map_err(|e| (qmarc_proto::exit::INTERNAL, e));
     qmarc_config::program::conclude("qmarc-bench", outcome)

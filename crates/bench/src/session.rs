@@ -54,15 +54,25 @@ impl Session {
     }
 
     /// Quits the session and waits for it; an error unless it ended cleanly.
-    pub fn quit(mut self) -> anyhow::Result<()> {
+    pub fn quit(self) -> anyhow::Result<()> {
+        self.quit_with_summary().map(|_| ())
+    }
+
+    /// Quits the session and waits for it: its summary.json (the loop's timing), or an error
+    /// unless it ended cleanly.
+    pub fn quit_with_summary(self) -> anyhow::Result<qmarc_report::Summary> {
         let _ = CommandClient::connect(&self.location)
             .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Quit)));
-        let ended = self.child.wait();
+        let ended = self.child.wait_with_output();
+        let summary = qmarc_report::Summary::read(&self.scratch).map_err(anyhow::Error::msg);
         let _ = std::fs::remove_dir_all(&self.scratch);
+        let said = ended.as_ref().map_or(String::new(), |o| {
+            String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or_default().to_string()
+        });
         anyhow::ensure!(
-            ended.is_ok_and(|s| s.success()),
-            "the serving session did not end cleanly"
+            ended.is_ok_and(|o| o.status.success()),
+            "the serving session did not end cleanly: {said}"
         );
-        Ok(())
+        summary.context("the serving session left no summary")
     }
 }

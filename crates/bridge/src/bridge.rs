@@ -15,9 +15,11 @@ use crate::node::{Node, RosPublisher, RosService, payload_of, session_config};
 use crate::ros2::{self, Qos};
 use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandResponse};
 use qmarc_proto::path::PathRequest;
+use qmarc_proto::progress::Progress;
 use qmarc_proto::service::IpcLocation;
 use qmarc_proto::telemetry::TelemetrySample;
-use qmarc_telemetry::reader::TelemetryReader;
+use qmarc_telemetry::reader::{End, TelemetryReader};
+use qmarc_timer::clock::monotonic_now_ns;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -86,6 +88,8 @@ pub(crate) struct Bridge {
     pub(crate) e: Entities,
     pub(crate) client: CommandClient,
     reader: TelemetryReader,
+    /// The session's progress page: when its tick 0 was (none: stamps are the bridge's).
+    progress: Option<Progress>,
     /// The newest sample, and the one before it.
     pub(crate) last: Option<TelemetrySample>,
     pub(crate) before_last: Option<TelemetrySample>,
@@ -114,11 +118,13 @@ pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
         opts.domain
     );
     let period = Duration::from_secs_f64(1.0 / opts.rate_hz);
+    let progress = Progress::open(&Progress::path(&opts.location.prefix)).ok();
     let mut b = Bridge {
         opts,
         e,
         client,
         reader,
+        progress,
         last: None,
         before_last: None,
         actions: Actions::default(),
@@ -178,18 +184,31 @@ impl Bridge {
         let stamp = Time::now();
         if let Some(s) = newest {
             let c = self.opts.converter;
-            let js = c.joint_state(&s, self.last.as_ref(), stamp);
+            let taken = self.sample_time(&s).unwrap_or(stamp);
+            let js = c.joint_state(&s, self.last.as_ref(), taken);
             self.before_last = self.last.replace(s);
             publish(&mut self.e.joint_states, &js);
-            if let Some(p) = c.effector(&s, stamp) {
+            if let Some(p) = c.effector(&s, taken) {
                 publish(&mut self.e.effector, &p);
             }
         }
         self.commands();
         self.actions(stamp);
         let ended = self.reader.end();
-        self.diagnose(stamp, ended.is_some());
+        self.diagnose(stamp, ended.as_ref());
         Ok(ended.is_some())
+    }
+
+    /// When the loop took sample `s`, on the system clock (ROS time): its tick's time from the
+    /// session's tick 0 — if the session runs in real time, which a sample less than a second
+    /// old says (a lock-step session's time is simulated).
+    fn sample_time(&self, s: &TelemetrySample) -> Option<Time> {
+        let t0 = self.progress.as_ref()?.read().t0_ns;
+        let now_mono = monotonic_now_ns();
+        let now = Time::now();
+        let age = now_mono.checked_sub(t0.checked_add(s.time_ns)?)?;
+        let now_ns = u64::try_from(now.sec).ok()? * 1_000_000_000 + u64::from(now.nanosec);
+        (t0 != 0 && age < 1_000_000_000).then(|| Time::from_ns(now_ns - age))
     }
 
     /// A command to the controller; its refusal, if refused, logged and kept for the
@@ -295,8 +314,9 @@ impl Bridge {
         self.refused = format!("{topic}: {why}");
     }
 
-    /// `/diagnostics`: once a second, and at once when the state changes.
-    fn diagnose(&mut self, stamp: Time, ended: bool) {
+    /// `/diagnostics`: once a second, and at once when the state changes (the session's end
+    /// included: a controller whose telemetry stopped without its last sample died).
+    fn diagnose(&mut self, stamp: Time, ended: Option<&End>) {
         if self.status_at.is_none_or(|t| t.elapsed() >= Duration::from_secs(1)) {
             self.status_at = Some(Instant::now());
             if let Ok(s) = self.client.send(CommandRequest::of(CommandKind::Status)) {
@@ -306,8 +326,15 @@ impl Bridge {
         }
         let Some(last) = self.last else { return };
         let mut state = SessionState::of(&last, self.homed, &self.refused);
-        if ended && state.fault.is_empty() {
-            state.phase = "ended".into();
+        match ended {
+            Some(End::Gone) if state.fault.is_empty() => {
+                state.phase = "gone".into();
+                state.fault = "controller_lost: the controller stopped without its last sample \
+                               (it died)"
+                    .into();
+            }
+            Some(_) if state.fault.is_empty() => state.phase = "ended".into(),
+            _ => {}
         }
         let due = self.said_at.is_none_or(|t| t.elapsed() >= Duration::from_secs(1));
         if due || self.said.as_ref() != Some(&state) {

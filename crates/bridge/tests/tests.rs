@@ -427,6 +427,73 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
     assert!(cell.quit().success());
 }
 
+/// A bridge that finds no router keeps retrying and still serves its own peers; SIGSTOP of it
+/// mid-move changes nothing in the move, and after SIGCONT it goes on where the robot is.
+#[test]
+fn a_stopped_or_routerless_bridge_changes_nothing_in_a_move() {
+    let nowhere = format!("tcp/127.0.0.1:{}", free_port());
+    let lonely = format!(
+        "{{ mode: \"peer\", connect: {{ endpoints: [\"{nowhere}\"] }}, \
+         listen: {{ endpoints: [\"LISTEN\"] }}, \
+         scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }} }}"
+    );
+    let mut cell = Cell::start_with("stop", "", &lonely);
+    let js = cell.lines(&["joint-states", "3"]);
+    assert_eq!(js.len(), 3, "served with no router");
+    let mut client = cell.client();
+    let r = client.send(CommandRequest::move_xyz([25.0, 15.0, -655.0], false, 0.2)).unwrap();
+    assert_eq!(r.ok, 1, "{}", r.reason());
+    let pid = nix::unistd::Pid::from_raw(cell.bridge.as_ref().unwrap().id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGSTOP).unwrap();
+    let s = client.wait(Duration::from_secs(30)).unwrap();
+    assert_eq!((s.fault, s.settled, s.moving), (0, r.accepted, 0), "the move ended as sent");
+    let [x, y, z] = s.effector_mm;
+    assert!(close(x, 25.0, 1e-6) && close(y, 15.0, 1e-6) && close(z, -655.0, 1e-6));
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGCONT).unwrap();
+    let fx = cell.lines(&["effector", "1"]);
+    let p = fx[0]["point"].as_array().unwrap();
+    assert!(close(p[0].as_f64().unwrap(), 0.025, 1e-4), "where the robot is now: {fx:?}");
+    assert!(cell.bridge.as_mut().unwrap().try_wait().unwrap().is_none(), "still running");
+    drop(client);
+    assert!(cell.quit().success());
+}
+
+/// kill -9 of the hwserver or the controller while the bridge serves: the session ends with
+/// the motors disabled, `/diagnostics` says the fault, and the bridge ends by itself.
+#[test]
+fn a_robot_process_killed_is_said_in_the_diagnostics_and_ends_the_bridge() {
+    for victim in ["qmarc-hwserver", "qmarc-controller"] {
+        let mut cell = Cell::start(&format!("kill{}", victim.len()), "");
+        cell.lines(&["joint-states", "1"]);
+        let listener = Command::new(python())
+            .arg(workspace().join("examples/ros2_client.py"))
+            .arg(format!("--connect={}", cell.endpoint))
+            .args(["--timeout=20", "diagnostics", "1000"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(2500));
+        let starter = cell.session.as_ref().unwrap().id();
+        let pgrep = Command::new("pgrep").args(["-P", &starter.to_string(), "-f", victim]).output();
+        let pid: i32 = String::from_utf8_lossy(&pgrep.unwrap().stdout).trim().parse().unwrap();
+        nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid), nix::sys::signal::Signal::SIGKILL)
+            .unwrap();
+        let ended = cell.session.take().unwrap().wait().unwrap();
+        assert_eq!(ended.code(), Some(2), "{victim}: the session ends with a fault");
+        let bridge = cell.bridge.as_mut().unwrap().wait().unwrap();
+        assert!(bridge.success(), "{victim}: the bridge ends by itself: {}", cell.bridge_log());
+        let out = listener.wait_with_output().unwrap();
+        let said: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter_map(|l| serde_json::from_str(l).ok())
+            .collect();
+        let fault = said.iter().find(|d| d["level"] == 2);
+        let fault = fault.unwrap_or_else(|| panic!("{victim}: no fault said: {said:?}"));
+        assert!(!fault["values"]["fault"].as_str().unwrap().is_empty(), "{fault}");
+    }
+}
+
 /// `qmarc-starter serve --bridge`: the bridge starts with the session, on rmw_zenoh's
 /// defaults (it connects to a router at tcp/localhost:7447, which the client stands in for);
 /// kill -9 of it changes nothing in the session, which says so; the session's end leaves no

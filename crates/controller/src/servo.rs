@@ -319,6 +319,9 @@ impl Servo {
     /// Marks when tick 0 is due (the origin of gathered time in real-time runs).
     pub fn set_t0(&mut self, t0_ns: u64) {
         self.t0_ns = t0_ns;
+        if let Some(p) = &self.progress {
+            p.set_t0(t0_ns);
+        }
     }
 
     /// One servo cycle for `tick`. Allocates nothing, locks nothing, formats nothing.

@@ -13,7 +13,7 @@ use std::ptr::NonNull;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 /// Tells a progress file from anything else at its path.
-const MAGIC: u64 = 0x514d_4152_4350_5231; // "QMARCPR1"
+const MAGIC: u64 = 0x514d_4152_4350_5232; // "QMARCPR2"
 
 #[repr(C)]
 struct Block {
@@ -21,6 +21,7 @@ struct Block {
     phase: AtomicU32,
     detail: AtomicU32,
     cycle: AtomicU64,
+    t0_ns: AtomicU64,
 }
 
 /// What the progress file says.
@@ -32,6 +33,9 @@ pub struct Snapshot {
     pub detail: u32,
     /// Servo cycles executed.
     pub cycle: u64,
+    /// When tick 0 was due, ns of `CLOCK_MONOTONIC` (0 before the loop began): a telemetry
+    /// sample's `time_ns` counts from it in a real-time run.
+    pub t0_ns: u64,
 }
 
 /// A mapped progress file.
@@ -121,6 +125,11 @@ impl Progress {
         b.detail.store(detail, Ordering::Relaxed);
     }
 
+    /// Records when tick 0 is due, ns of `CLOCK_MONOTONIC`.
+    pub fn set_t0(&self, t0_ns: u64) {
+        self.block().t0_ns.store(t0_ns, Ordering::Relaxed);
+    }
+
     /// What the file says now.
     pub fn read(&self) -> Snapshot {
         let b = self.block();
@@ -128,6 +137,7 @@ impl Progress {
             phase: b.phase.load(Ordering::Relaxed),
             detail: b.detail.load(Ordering::Relaxed),
             cycle: b.cycle.load(Ordering::Relaxed),
+            t0_ns: b.t0_ns.load(Ordering::Relaxed),
         }
     }
 }
@@ -151,8 +161,10 @@ mod tests {
         let controller = Progress::open(&path).unwrap();
         controller.set_phase(3);
         controller.set_cycle(1234, 0x0203);
+        controller.set_t0(987_654_321);
         drop(controller);
-        assert_eq!(starter.read(), Snapshot { phase: 3, detail: 0x0203, cycle: 1234 });
+        let read = starter.read();
+        assert_eq!(read, Snapshot { phase: 3, detail: 0x0203, cycle: 1234, t0_ns: 987_654_321 });
         std::fs::write(&path, [0u8; 64]).unwrap();
         assert!(Progress::open(&path).is_err(), "no magic");
         let _ = std::fs::remove_file(&path);
