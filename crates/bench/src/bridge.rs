@@ -24,7 +24,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Options of `bridge`.
-#[derive(Debug, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct BridgeArgs {
     /// Interleaved rounds (each a session alone and one with the bridge and two subscribers).
     #[arg(long, default_value_t = 5)]
@@ -51,6 +51,11 @@ pub struct BridgeArgs {
     /// The ROS 2 client.
     #[arg(long, default_value = "examples/ros2_client.py")]
     pub client: PathBuf,
+    /// The servo thread and the hwserver on CPU 0 (`timer.servo_cpu`, `timer.hwserver_cpu`),
+    /// everything else — the bridge, its subscribers, the starter — off it: a servo PC's
+    /// deployment (docs/ros2.md).
+    #[arg(long)]
+    pub pin: bool,
 }
 
 /// The bridge's joint-state rate, Hz (its default `--rate`).
@@ -147,18 +152,41 @@ fn segment(a: &BridgeArgs, bridged: bool, name: &str) -> anyhow::Result<(f64, f6
     Ok((s.timing.wake_latency_us.p99, s.timing.output_latency_us.p99))
 }
 
+/// The settings the sessions run on: `--config`, with `--pin`'s CPUs.
+fn pinned_config(a: &BridgeArgs) -> anyhow::Result<BridgeArgs> {
+    let text = std::fs::read_to_string(&a.config)
+        .with_context(|| format!("cannot read {}", a.config.display()))?;
+    let mut doc: toml_edit::DocumentMut =
+        text.parse().with_context(|| format!("{}", a.config.display()))?;
+    doc["timer"]["servo_cpu"] = toml_edit::value(0);
+    doc["timer"]["hwserver_cpu"] = toml_edit::value(0);
+    let path = std::env::temp_dir().join(format!("qmarc-bench-bridge-{}.toml", std::process::id()));
+    std::fs::write(&path, doc.to_string())?;
+    qmarc_timer::cpus::keep_off(&[0])?;
+    Ok(BridgeArgs { config: path, pin: false, ..a.clone() })
+}
+
 /// Runs `bridge`.
 pub fn run(a: &BridgeArgs) -> anyhow::Result<()> {
+    if a.pin {
+        let pinned = pinned_config(a)?;
+        let result = run(&pinned);
+        let _ = std::fs::remove_file(&pinned.config);
+        return result;
+    }
     anyhow::ensure!(a.rounds >= 1 && a.targets >= 1, "--rounds and --targets must be ≥ 1");
     anyhow::ensure!(
         a.client.is_file(),
         "{}: no such client (run from the workspace)",
         a.client.display()
     );
+    let pinned = std::fs::read_to_string(&a.config).is_ok_and(|t| t.contains("servo_cpu = 0"));
     println!(
         "qmarc-bench bridge: {} interleaved rounds of {} s: a serving session alone, and with \
-         qmarc-bridge and 2 Python subscribers of joint_states over Zenoh (loopback)",
-        a.rounds, a.segment_s
+         qmarc-bridge and 2 Python subscribers of joint_states over Zenoh (loopback){}",
+        a.rounds,
+        a.segment_s,
+        if pinned { "; servo and hwserver on CPU 0, the rest off it" } else { "" }
     );
     println!("  round   alone: wake p99  output p99    bridged: wake p99  output p99   (µs)");
     let (mut wake, mut output) = (Vec::new(), Vec::new());
