@@ -18,7 +18,7 @@ Commands (each prints JSON lines):
     follow JSON         the qmarc/follow_joint_trajectory action (control_msgs/action/
                         FollowJointTrajectory): the trajectory's JSON as above, and optionally
                         "path_tolerance" / "goal_tolerance" ({"motor1": rad, ...}), "goal_time"
-                        (s), "cancel_after" (s); prints whether it was accepted, the feedback
+                        (s), "grip_after" (s: close the gripper then), "cancel_after" (s); prints whether it was accepted, the feedback
                         received, and the result
     stop                calls qmarc/stop (std_srvs/srv/Trigger)
     gripper on|off      calls qmarc/gripper (std_srvs/srv/SetBool)
@@ -194,6 +194,13 @@ def follow(session, key, spec, timeout):
     if not out["accepted"]:
         sub.undeclare()
         return out
+    if "grip_after" in spec:
+        # The gripper closed on the way (a pick on the fly): the goal goes on.
+        time.sleep(float(spec["grip_after"]))
+        grip = call_raw(session, key("qmarc/gripper", "std_srvs/srv/SetBool",
+                                     SERVICE_HASHES["std_srvs/srv/SetBool"]),
+                        b"\x00\x01\x00\x00\x01", "std_srvs/msg/Trigger_Response")
+        out["grip_success"] = bool(grip and grip.success)
     if "cancel_after" in spec:
         time.sleep(float(spec["cancel_after"]))
         info = t["action_msgs/msg/GoalInfo"](goal_id=uuid, stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0))

@@ -10,7 +10,8 @@ use std::time::{Duration, Instant};
 
 /// A running `qmarc-starter serve`.
 pub struct Session {
-    child: Child,
+    /// The starter (taken by a quit).
+    child: Option<Child>,
     /// Where its services are.
     pub location: IpcLocation,
     scratch: PathBuf,
@@ -32,7 +33,11 @@ impl Session {
             .stderr(Stdio::piped())
             .spawn()
             .with_context(|| format!("cannot run {}", starter.display()))?;
-        Ok(Session { child, location: IpcLocation::new(&prefix, DEFAULT_ROOT), scratch })
+        Ok(Session {
+            child: Some(child),
+            location: IpcLocation::new(&prefix, DEFAULT_ROOT),
+            scratch,
+        })
     }
 
     /// A client, once the session's loop serves (within 20 s).
@@ -60,10 +65,11 @@ impl Session {
 
     /// Quits the session and waits for it: its summary.json (the loop's timing), or an error
     /// unless it ended cleanly.
-    pub fn quit_with_summary(self) -> anyhow::Result<qmarc_report::Summary> {
+    pub fn quit_with_summary(mut self) -> anyhow::Result<qmarc_report::Summary> {
         let _ = CommandClient::connect(&self.location)
             .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Quit)));
-        let ended = self.child.wait_with_output();
+        let child = self.child.take().context("the session was quit already")?;
+        let ended = child.wait_with_output();
         let summary = qmarc_report::Summary::read(&self.scratch).map_err(anyhow::Error::msg);
         let _ = std::fs::remove_dir_all(&self.scratch);
         let said = ended.as_ref().map_or(String::new(), |o| {
@@ -74,5 +80,23 @@ impl Session {
             "the serving session did not end cleanly: {said}"
         );
         summary.context("the serving session left no summary")
+    }
+}
+
+impl Drop for Session {
+    /// A session a benchmark leaves on an error is quit (killed if it will not), and its
+    /// files go: no serving robot outlives its benchmark.
+    fn drop(&mut self) {
+        let Some(mut child) = self.child.take() else { return };
+        let _ = CommandClient::connect(&self.location)
+            .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Quit)));
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while child.try_wait().ok().flatten().is_none() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = child.kill();
+        let _ = child.wait();
+        self.location.remove_files();
+        let _ = std::fs::remove_dir_all(&self.scratch);
     }
 }

@@ -12,7 +12,9 @@
 //! the path's end, each joint has `goal_time_tolerance` to be within its goal tolerance
 //! (`GOAL_TOLERANCE_VIOLATED` if not). The tolerances bound positions: 0 (or none given) is
 //! not checked, and velocity and acceleration bounds never are. A cancel stops the robot (jerk-limited) and the goal ends
-//! canceled once it rests; a fault, the session's end or another command ends it aborted.
+//! canceled once it rests; a fault, the session's end or another motion (a move, a stop — a
+//! grip on the way is none) ends it aborted. A `goal_time_tolerance` of 0 is
+//! [`DEFAULT_GOAL_TIME`].
 
 use crate::action_msgs::{
     CancelGoalRequest, CancelGoalResponse, FeedbackMessage, FjtFeedback, FjtResult,
@@ -29,6 +31,10 @@ use std::time::{Duration, Instant};
 
 /// Ended goals the server still answers for (the oldest forgotten first).
 const KEPT_GOALS: usize = 16;
+
+/// How long after the path's end the joints have to be within the goal tolerance when the
+/// goal leaves `goal_time_tolerance` 0 (the server's default, as the message's comment says).
+pub const DEFAULT_GOAL_TIME: Duration = Duration::from_secs(1);
 
 /// Feedback messages a second, at most.
 const FEEDBACK_HZ: f64 = 50.0;
@@ -206,7 +212,10 @@ impl Bridge {
             end: path.knots()[path.knots().len() - 1].pos,
             path_tolerance,
             goal_tolerance,
-            goal_time: Duration::new(d.sec.max(0) as u64, d.nanosec.min(999_999_999)),
+            goal_time: match Duration::new(d.sec.max(0) as u64, d.nanosec.min(999_999_999)) {
+                Duration::ZERO => DEFAULT_GOAL_TIME,
+                t => t,
+            },
             ended_at: None,
             taken: false,
             stopping_with: None,
@@ -277,8 +286,9 @@ impl Bridge {
         };
         let canceled =
             FjtResult { error_code: FjtResult::SUCCESSFUL, error_string: "canceled".into() };
-        self.stop_goal(i, GoalStatus::CANCELED, canceled);
+        // Canceling until the robot rests (at once canceled if the stop cannot be sent).
         self.actions.goals[i].status = GoalStatus::CANCELING;
+        self.stop_goal(i, GoalStatus::CANCELED, canceled);
         CancelGoalResponse {
             return_code: CancelGoalResponse::ERROR_NONE,
             goals_canceling: vec![self.actions.goals[i].info],
@@ -459,7 +469,7 @@ fn aborted(error_code: i32, error_string: String) -> FjtResult {
 }
 
 /// What ended the path `path` other than its own end, if anything did: the session's end or
-/// fault, the loop not taking it, or another command.
+/// fault, the loop not taking it, or another motion (a move, a line, a stop; a grip is none).
 fn ended_by(s: &CommandResponse, path: u64) -> Option<FjtResult> {
     if s.refused() == Some(Refusal::NotServing) || s.fault != 0 {
         let fault = qmarc_proto::state::FaultKind::from_wire(s.fault)
@@ -469,8 +479,8 @@ fn ended_by(s: &CommandResponse, path: u64) -> Option<FjtResult> {
     if s.not_taken >= path {
         return Some(aborted(FjtResult::INVALID_GOAL, "the loop did not take the path".into()));
     }
-    if s.accepted > path {
-        let why = format!("another command (move {}) took over the robot", s.accepted);
+    if s.motion > path {
+        let why = format!("another command (move {}) took over the robot", s.motion);
         return Some(aborted(FjtResult::INVALID_GOAL, why));
     }
     None

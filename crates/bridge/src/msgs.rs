@@ -162,7 +162,7 @@ pub struct JointTrajectoryPoint {
 /// `trajectory_msgs/msg/JointTrajectory`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct JointTrajectory {
-    /// Stamp (when to start; zero: now) and frame.
+    /// Stamp and frame (not waited for: a trajectory starts when it arrives).
     pub header: Header,
     /// The joints the points' columns are.
     pub joint_names: Vec<String>,

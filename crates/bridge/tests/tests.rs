@@ -373,6 +373,13 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
     assert!(ok["max_error"].as_f64().unwrap() < 0.05, "{ok}");
     let s = client.wait(Duration::from_secs(30)).unwrap();
     assert!(close(s.command[0], rest[0] + 400.0, 1e-6), "{:?}", s.command);
+    // The gripper closed on the way is no other motion: the goal goes on to its end.
+    let gripped = goal([800.0, -300.0, 200.0], 2.0, serde_json::json!({"grip_after": 0.3}));
+    assert_eq!(
+        (gripped["grip_success"].as_bool(), gripped["status"].as_i64()),
+        (Some(true), Some(4)),
+        "{gripped}"
+    );
     // A path tolerance no servo meets: aborted, the robot stopped, the session unharmed.
     let tight = goal([0.0, 0.0, 0.0], 0.5, serde_json::json!({"path_tolerance": {"motor1": 1e-7}}));
     assert_eq!(

@@ -128,11 +128,11 @@ impl CommandThread {
                 while !commands.ended.stop.load(Ordering::Acquire) {
                     let _ = listener.timed_wait(|_| {}, POLL);
                     while let Ok(Some(active)) = server.receive() {
-                        let answer = commands.answer(active.payload());
+                        let answer = commands.guarded(|c| c.answer(active.payload()));
                         let _ = active.send_copy(answer);
                     }
                     while let Ok(Some(active)) = path_server.receive() {
-                        let answer = commands.answer_path(active.payload());
+                        let answer = commands.guarded(|c| c.answer_path(active.payload()));
                         let _ = active.send_copy(answer);
                     }
                     // The loop's spent lines are freed here, not on the servo thread.
@@ -171,6 +171,22 @@ impl Drop for CommandThread {
 impl Commands {
     fn shared(&self) -> &ServeShared {
         &self.handle.shared
+    }
+
+    /// `answer(self)`, or — should a check panic on a request no one foresaw — a refusal that
+    /// says so: the thread, and with it every client's way to stop the robot, goes on.
+    fn guarded(
+        &mut self,
+        answer: impl FnOnce(&mut Commands) -> CommandResponse,
+    ) -> CommandResponse {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| answer(self))).unwrap_or_else(
+            |_| {
+                let mut r = self.status();
+                r.refusal = Refusal::BadRequest as u32;
+                r.set_reason("the controller could not check this request (an internal error)");
+                r
+            },
+        )
     }
 
     /// Whether the loop serves orders: not ended, and begun.
@@ -321,6 +337,7 @@ impl Commands {
             taken_ns: shared.taken_ns.load(Ordering::Acquire),
             taken_cycle: shared.taken_cycle.load(Ordering::Acquire),
             not_taken: shared.not_taken.load(Ordering::Acquire),
+            motion: shared.motion.load(Ordering::Acquire),
             received_cycle: shared.cycles.load(Ordering::Acquire),
             command: shared.command(),
             actual: shared.actual(),

@@ -33,18 +33,20 @@ fn inner_velocity(s0: f64, h0: f64, s1: f64, h1: f64) -> f64 {
 }
 
 /// The path's knots from `start` (its first, at rest at time 0), checked for their form:
-/// times finite and rising, numbers finite, the end at rest.
+/// times finite and rising, numbers finite, the end at rest; and each knot's point number in
+/// the request (the start's 0).
 fn knots_from(
     req: &PathRequest,
     start: &[f64; MAX_MOTORS],
     n: usize,
     tolerance: f64,
-) -> Result<Vec<PathKnot>, PathRefusal> {
+) -> Result<(Vec<PathKnot>, Vec<usize>), PathRefusal> {
     if req.n_knots == 0 || req.n_knots as usize > MAX_PATH_KNOTS {
         return Err(bad(format!("a path has 1 to {MAX_PATH_KNOTS} points, found {}", req.n_knots)));
     }
     let given = req.has_velocities();
     let mut knots = vec![PathKnot { t_s: 0.0, pos: *start, vel: [0.0; MAX_MOTORS] }];
+    let mut points = vec![0];
     for (i, k) in req.knots().iter().enumerate() {
         let point = i + 1;
         let prev = knots[knots.len() - 1].t_s;
@@ -88,6 +90,7 @@ fn knots_from(
         k.vel[n..].fill(0.0);
         k.pos[n..].copy_from_slice(&start[n..]);
         knots.push(k);
+        points.push(point);
     }
     let last = knots.len() - 1;
     if given {
@@ -110,7 +113,7 @@ fn knots_from(
             }
         }
     }
-    Ok(knots)
+    Ok((knots, points))
 }
 
 /// The samples, one per servo period, of the path `req` from `start` (where the command
@@ -123,7 +126,11 @@ pub fn path_queue(
     soft: bool,
 ) -> Result<Vec<[f64; MAX_MOTORS]>, PathRefusal> {
     let n = settings.n_motors;
-    let knots = knots_from(req, start, n, settings.trajectory.start_tolerance_counts)?;
+    let (knots, points) = knots_from(req, start, n, settings.trajectory.start_tolerance_counts)?;
+    if knots.len() == 1 {
+        // Only a point at time 0, where the robot rests: nothing to follow, at once done.
+        return Ok(vec![*start]);
+    }
     let end = knots[knots.len() - 1].t_s;
     let max = settings.trajectory.max_duration_s;
     if end > max {
@@ -149,7 +156,7 @@ pub fn path_queue(
             let (a0, a1) =
                 hermite_end_accelerations(w[0].pos[m], w[0].vel[m], w[1].pos[m], w[1].vel[m], h);
             check_segment(&rules, m, (w[0].vel[m], a0, a1, h))
-                .map_err(|e| bad(format!("point {}: {}", i + 1, e.describe())))?;
+                .map_err(|e| bad(format!("point {}: {}", points[i + 1], e.describe())))?;
         }
     }
     let mut queue = Vec::with_capacity(samples as usize);

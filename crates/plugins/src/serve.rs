@@ -84,6 +84,8 @@ pub struct ServeShared {
     pub cycles: AtomicU64,
     /// The last move the loop could not take (no profile, or one leaving the soft limits).
     pub not_taken: AtomicU64,
+    /// The last motion order the loop took (a move, a line, a stop; not a grip).
+    pub motion: AtomicU64,
     /// The command moves.
     pub moving: AtomicBool,
     /// The command, counts (f64 bits).
@@ -229,12 +231,14 @@ impl ServeMove {
                             }
                         }
                     }
+                    self.shared.motion.store(id, Ordering::Release);
                     self.took(id);
                 }
                 Order::Stop { id, limits } => {
                     self.leave_line();
                     let _ = self.online.stop(&limits);
                     self.current = id;
+                    self.shared.motion.store(id, Ordering::Release);
                     self.took(id);
                 }
                 Order::Line { id, queue } => {
@@ -252,6 +256,7 @@ impl ServeMove {
                         // Its first sample (where the robot rests) is this cycle's.
                         self.line = Some(Line { queue, from_n: n });
                         self.current = id;
+                        self.shared.motion.store(id, Ordering::Release);
                     }
                     self.took(id);
                 }

@@ -170,7 +170,7 @@ impl CommandRequest {
 
 /// The answer to a command: accepted or refused, and where the robot is.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("qmarc.CommandResponse.v2")]
+#[type_name("qmarc.CommandResponse.v3")]
 #[repr(C)]
 pub struct CommandResponse {
     /// The request's id.
@@ -208,6 +208,9 @@ pub struct CommandResponse {
     /// The last move the loop could not take (its profile from the state the command was in
     /// would leave the soft limits, or there was none): the command went on as it was.
     pub not_taken: u64,
+    /// The last motion order the loop took — a move, a line (a path), a stop: what the robot
+    /// follows now (a grip is no motion: a path goes on through it).
+    pub motion: u64,
     /// The command, counts.
     pub command: [f64; MAX_MOTORS],
     /// The motors' positions, counts.
@@ -240,6 +243,7 @@ impl Default for CommandResponse {
             taken_ns: 0,
             taken_cycle: 0,
             not_taken: 0,
+            motion: 0,
             command: [0.0; MAX_MOTORS],
             actual: [0.0; MAX_MOTORS],
             effector_mm: [f64::NAN; 3],
@@ -457,7 +461,7 @@ mod tests {
     #[test]
     fn the_messages_are_fixed_size_plain_data() {
         assert_eq!(std::mem::size_of::<CommandRequest>(), 56);
-        assert_eq!(std::mem::size_of::<CommandResponse>(), 392);
+        assert_eq!(std::mem::size_of::<CommandResponse>(), 400);
         assert_eq!(std::mem::align_of::<CommandResponse>(), 8);
     }
 

@@ -85,6 +85,13 @@ fn a_point_at_time_zero_is_where_the_robot_rests() {
         refusal(path_queue(&PathRequest::new(&[away, then], true).unwrap(), &START, &s, true));
     assert_eq!(r, Refusal::BadRequest);
     assert!(why.contains("point 1: at time 0") && why.contains("motor 1"), "{why}");
+    // Only that point: nothing to follow, the path is where the robot rests.
+    let q = path_queue(&PathRequest::new(&[here], false).unwrap(), &START, &s, true).unwrap();
+    assert_eq!(q, vec![START]);
+    // A refusal names the request's point, the one at time 0 counted.
+    let fast = knot(0.3, [9100.0, -200.0, 300.0], [0.0; 3]);
+    let r = path_queue(&PathRequest::new(&[here, then, fast], false).unwrap(), &START, &s, true);
+    assert!(r.unwrap_err().1.starts_with("point 3: motor 1"), "the third point");
     let moving = knot(0.0, [100.0, -200.0, 300.0], [10.0, 0.0, 0.0]);
     assert!(
         path_queue(&PathRequest::new(&[moving, then], true).unwrap(), &START, &s, true).is_err()

@@ -243,3 +243,35 @@ fn a_grip_is_told_at_once_and_settles_when_the_gripper_is_there() {
     g.sample(n + 24, &mut cmd);
     assert_eq!(load(&h.shared.settled), 3);
 }
+
+/// `motion` is the last motion order taken — a line, a stop, a move — and a grip is none: a
+/// path goes on through a grip, and a client watching it (the bridge's action) sees so.
+#[test]
+fn a_grip_is_no_motion_a_line_a_stop_and_a_move_are() {
+    let (mut g, h, limits, _) = serving([0.0; MAX_MOTORS]);
+    let mut h = h;
+    let mut cmds = Vec::new();
+    run(&mut g, 0..2, &mut cmds);
+    let queue: LineQueue = (0..50)
+        .map(|k| {
+            let mut c = [0.0; MAX_MOTORS];
+            c[0] = f64::from(k);
+            c
+        })
+        .collect();
+    assert!(h.orders.push(Order::Line { id: 1, queue }).is_ok());
+    run(&mut g, 2..5, &mut cmds);
+    assert_eq!(load(&h.shared.motion), 1);
+    assert!(h.orders.push(Order::Grip { id: 2, close: true }).is_ok());
+    run(&mut g, 5..8, &mut cmds);
+    assert_eq!(load(&h.shared.motion), 1, "the line goes on through a grip");
+    assert_eq!(cmds.last().unwrap()[0], 5.0, "still on the line");
+    assert!(h.orders.push(Order::Stop { id: 3, limits }).is_ok());
+    run(&mut g, 8..9, &mut cmds);
+    assert_eq!(load(&h.shared.motion), 3);
+    let mut target = [0.0; MAX_MOTORS];
+    target[0] = 10.0;
+    assert!(h.orders.push(Order::Move { id: 4, target, limits }).is_ok());
+    run(&mut g, 9..10, &mut cmds);
+    assert_eq!(load(&h.shared.motion), 4);
+}
