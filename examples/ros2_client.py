@@ -129,24 +129,27 @@ def open_session(connect, listen, mode="peer"):
 def take(session, key, typename, n, timeout_s, show):
     """Prints the next n samples on key, each with its sequence number and when it arrived
     (taken in Zenoh's callback, on the system clock); true if n arrived within timeout_s."""
-    got = []
+    got = [0]
     done = threading.Event()
+    lock = threading.Lock()
 
     def arrived(sample):
         received_ns = time.time_ns()
-        if len(got) < n:
-            got.append((received_ns, sample))
-            if len(got) == n:
+        with lock:
+            if got[0] >= n:
+                return
+            got[0] += 1
+            if got[0] == n:
                 done.set()
+            seq, stamp_ns, gid = z_deserialize(tuple[Int64, Int64, bytes], sample.attachment)
+            msg = STORE.deserialize_cdr(bytes(sample.payload.to_bytes()), typename)
+            print(json.dumps(dict(show(msg), seq=int(seq), received_ns=received_ns)), flush=True)
 
     sub = session.declare_subscriber(key, arrived)
     done.wait(timeout_s)
     sub.undeclare()
-    for received_ns, sample in got[:n]:
-        seq, stamp_ns, gid = z_deserialize(tuple[Int64, Int64, bytes], sample.attachment)
-        msg = STORE.deserialize_cdr(bytes(sample.payload.to_bytes()), typename)
-        print(json.dumps(dict(show(msg), seq=int(seq), received_ns=received_ns)), flush=True)
-    return len(got) >= n
+    with lock:
+        return got[0] >= n
 
 
 def call_raw(session, key, payload, typename, timeout=10.0):
@@ -242,12 +245,18 @@ def call(session, key, payload, typename):
     return False
 
 
-def publish(session, key, payload):
-    """Publishes one sample on key, after its publisher has had time to match the bridge."""
-    pub = session.declare_publisher(key)
+def publisher(session, key):
+    """A reliable publisher on key (it waits rather than drop on a busy link, as a reliable
+    ROS 2 publisher's history does), once it has had time to match the bridge."""
+    pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
     time.sleep(1.0)
-    pub.put(payload, attachment=attachment(1))
-    time.sleep(0.5)
+    return pub
+
+
+def publish(session, key, payload):
+    """Publishes one sample on key, and gives it time to leave before the session closes."""
+    publisher(session, key).put(payload, attachment=attachment())
+    time.sleep(1.0)
 
 
 def joint_trajectory(spec):
@@ -322,8 +331,7 @@ def main():
         points = [list(map(float, a.args[2:5])), list(map(float, a.args[5:8]))]
         t = STORE.types
         k = key("qmarc/target", "geometry_msgs/msg/PointStamped")
-        pub = session.declare_publisher(k)
-        time.sleep(1.0)
+        pub = publisher(session, k)
         for i in range(n):
             msg = t["geometry_msgs/msg/PointStamped"](
                 header=t["std_msgs/msg/Header"](

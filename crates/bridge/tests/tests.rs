@@ -161,6 +161,15 @@ impl Cell {
         std::fs::read_to_string(self.dir.join("bridge.log")).unwrap_or_default()
     }
 
+    /// Waits (30 s at most: a loaded machine delivers late) until the bridge has logged `text`.
+    fn log_says(&self, text: &str) {
+        let started = Instant::now();
+        while !self.bridge_log().contains(text) {
+            assert!(started.elapsed() < Duration::from_secs(30), "{text}: {}", self.bridge_log());
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
     /// Quits the session; its exit status.
     fn quit(&mut self) -> std::process::ExitStatus {
         let _ = self.client().send(CommandRequest::of(CommandKind::Quit));
@@ -232,9 +241,8 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     // Garbage and an oversized payload: not taken, nothing sent on.
     cell.lines(&["raw-target", "3"]);
     cell.lines(&["raw-target", "2000000"]);
-    let log = cell.bridge_log();
-    assert!(log.contains("qmarc/target: not taken: not a geometry_msgs/msg/PointStamped"), "{log}");
-    assert!(log.contains("more than the 1048576 taken"), "{log}");
+    cell.log_says("qmarc/target: not taken: not a geometry_msgs/msg/PointStamped");
+    cell.log_says("more than the 1048576 taken");
     let after = client.send(CommandRequest::of(CommandKind::Status)).unwrap();
     assert_eq!(after.accepted, before, "nothing reached the controller");
 
@@ -309,13 +317,7 @@ fn joint_trajectories(cell: &Cell, client: &mut CommandClient, rest: [f64; 4]) -
     cell.lines(&["trajectory", &wrong.to_string()]);
     let fast = serde_json::json!({"names": ["motor1", "motor2", "motor3"], "points": [{"t": 0.01, "positions": [1.0, 0.0, 0.0]}]});
     cell.lines(&["trajectory", &fast.to_string()]);
-    let log = cell.bridge_log();
-    assert!(
-        log.contains(
-            "qmarc/joint_trajectory: not taken: joint_names must be motor1, motor2, motor3"
-        ),
-        "{log}"
-    );
+    cell.log_says("qmarc/joint_trajectory: not taken: joint_names must be motor1, motor2, motor3");
     let diag = cell.lines(&["diagnostics", "2"]);
     assert!(
         diag.iter().any(|d| d["values"]["refused"]
@@ -429,7 +431,7 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
     let wrong = serde_json::json!({"names": ["motor1", "motor2", "wrist"], "points": [{"t": 1.0, "positions": [0.0, 0.0, 0.0]}]});
     let rejected = cell.lines(&["follow", &wrong.to_string()])[0].clone();
     assert_eq!(rejected["accepted"], false);
-    assert!(cell.bridge_log().contains("follow_joint_trajectory: not taken: joint_names must be"));
+    cell.log_says("follow_joint_trajectory: not taken: joint_names must be");
     drop(client);
     assert!(cell.quit().success());
 }
@@ -472,15 +474,24 @@ fn a_robot_process_killed_is_said_in_the_diagnostics_and_ends_the_bridge() {
     for victim in ["qmarc-hwserver", "qmarc-controller"] {
         let mut cell = Cell::start(&format!("kill{}", victim.len()), "");
         cell.lines(&["joint-states", "1"]);
-        let listener = Command::new(python())
+        let mut listener = Command::new(python())
             .arg(workspace().join("examples/ros2_client.py"))
             .arg(format!("--connect={}", cell.endpoint))
-            .args(["--timeout=20", "diagnostics", "1000"])
+            .args(["--timeout=120", "diagnostics", "1000"])
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
             .unwrap();
-        std::thread::sleep(Duration::from_millis(2500));
+        // Its lines as they come: subscribed once it has said the first (once a second).
+        let (heard, said) = std::sync::mpsc::channel();
+        let stdout = listener.stdout.take().unwrap();
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(stdout).lines().map_while(Result::ok) {
+                let _ = heard.send(line);
+            }
+        });
+        let first = said.recv_timeout(Duration::from_secs(60)).expect("the listener hears");
         let starter = cell.session.as_ref().unwrap().id();
         let pgrep = Command::new("pgrep").args(["-P", &starter.to_string(), "-f", victim]).output();
         let pid: i32 = String::from_utf8_lossy(&pgrep.unwrap().stdout).trim().parse().unwrap();
@@ -490,11 +501,16 @@ fn a_robot_process_killed_is_said_in_the_diagnostics_and_ends_the_bridge() {
         assert_eq!(ended.code(), Some(2), "{victim}: the session ends with a fault");
         let bridge = cell.bridge.as_mut().unwrap().wait().unwrap();
         assert!(bridge.success(), "{victim}: the bridge ends by itself: {}", cell.bridge_log());
-        let out = listener.wait_with_output().unwrap();
-        let said: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
-            .lines()
-            .filter_map(|l| serde_json::from_str(l).ok())
-            .collect();
+        // What it heard after the kill, until it has been quiet for a while (it would hear
+        // nothing more: the bridge is gone).
+        let mut lines = vec![first];
+        while let Ok(line) = said.recv_timeout(Duration::from_secs(5)) {
+            lines.push(line);
+        }
+        let _ = listener.kill();
+        let _ = listener.wait();
+        let said: Vec<serde_json::Value> =
+            lines.iter().filter_map(|l| serde_json::from_str(l).ok()).collect();
         let fault = said.iter().find(|d| d["level"] == 2);
         let fault = fault.unwrap_or_else(|| panic!("{victim}: no fault said: {said:?}"));
         assert!(!fault["values"]["fault"].as_str().unwrap().is_empty(), "{fault}");

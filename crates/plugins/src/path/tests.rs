@@ -67,6 +67,7 @@ fn chosen_velocities_never_overshoot_a_turn_and_end_at_rest() {
     assert!((q[n - 1][0] - q[n - 2][0]).abs() < 0.1, "at rest at the end");
     assert_eq!(inner_velocity(2.0, 1.0, 4.0, 1.0), 3.0);
     assert_eq!(inner_velocity(2.0, 1.0, 4.0, 3.0), 2.5);
+    assert_eq!(inner_velocity(2.0, 1.0, 0.0, 1.0), 0.0, "a stop after a rise is a turn too");
     assert_eq!(
         (inner_velocity(2.0, 1.0, -4.0, 1.0), inner_velocity(0.0, 1.0, 4.0, 1.0)),
         (0.0, 0.0)
@@ -108,6 +109,11 @@ fn malformed_and_impossible_paths_are_refused_naming_the_point() {
     let (r, why) = check(&[], false);
     assert_eq!(r, Refusal::BadRequest);
     assert!(why.contains("1 to 1024 points, found 0"), "{why}");
+    // As many points as a request holds: taken.
+    let full: Vec<PathKnot> = (1..=MAX_PATH_KNOTS)
+        .map(|i| knot(i as f64 * 1e-3, [100.0, -200.0, 300.0], [0.0; 3]))
+        .collect();
+    check_ok(&s, &full, false);
     let lying = PathRequest { n_knots: MAX_PATH_KNOTS as u32 + 1, ..PathRequest::default() };
     assert!(path_queue(&lying, &START, &s, true).unwrap_err().1.contains("found 1025"));
     let (_, why) = check(&[ok, knot(0.2, [600.0, -200.0, 300.0], [0.0; 3])], false);
@@ -165,4 +171,40 @@ fn malformed_and_impossible_paths_are_refused_naming_the_point() {
 fn check_ok(s: &Settings, knots: &[PathKnot], given: bool) {
     let r = path_queue(&PathRequest::new(knots, given).unwrap(), &START, s, true);
     assert!(r.is_ok(), "{r:?}");
+}
+
+/// Without velocities, each inner knot's is the parabola's through it and its neighbours:
+/// (s₀h₁ + s₁h₀)/(h₀ + h₁) of the slopes s and lengths h of the segments either side — here
+/// unequal, so each term counts — and the path moves at it through the knot.
+#[test]
+fn a_chosen_velocity_is_the_parabolas_through_the_knot() {
+    let s = settings();
+    let period = s.period_s();
+    let knots = [
+        knot(0.1, [400.0, -200.0, 300.0], [0.0; 3]),
+        knot(0.3, [1400.0, -200.0, 300.0], [0.0; 3]),
+        knot(0.4, [1600.0, -200.0, 300.0], [0.0; 3]),
+        knot(0.6, [1600.0, -200.0, 300.0], [0.0; 3]),
+    ];
+    let q = path_queue(&PathRequest::new(&knots, false).unwrap(), &START, &s, true).unwrap();
+    // The velocity through a knot, from the samples either side (a knot joins two cubics
+    // whose accelerations differ: the difference is off by a quarter period of that step).
+    let through = |t: f64| {
+        let i = (t / period).round() as usize;
+        (q[i + 1][0] - q[i - 1][0]) / (2.0 * period)
+    };
+    // At 0.1 s: s₀ = 300 / 0.1 = 3000, s₁ = 1000 / 0.2 = 5000 counts/s.
+    let expected = (3000.0 * 0.2 + 5000.0 * 0.1) / 0.3;
+    assert!((through(0.1) - expected).abs() < 50.0, "{} ≠ {expected}", through(0.1));
+    // At 0.3 s: s₀ = 5000 over 0.2 s, s₁ = 200 / 0.1 = 2000 over 0.1 s.
+    let expected = (5000.0 * 0.1 + 2000.0 * 0.2) / 0.3;
+    assert!((through(0.3) - expected).abs() < 50.0, "{} ≠ {expected}", through(0.3));
+    // At 0.4 s the path stops (a turn): 0.
+    assert!(through(0.4).abs() < 50.0, "{}", through(0.4));
+    // A point at time 0 exactly the start tolerance away is still where the robot rests.
+    let edge = knot(0.0, [200.0, -200.0, 300.0], [0.0; 3]);
+    let tol = s.trajectory.start_tolerance_counts;
+    assert_eq!(tol, 100.0, "the shipped tolerance this point sits on");
+    let then = knot(0.2, [500.0, -200.0, 300.0], [0.0; 3]);
+    assert!(path_queue(&PathRequest::new(&[edge, then], false).unwrap(), &START, &s, true).is_ok());
 }
