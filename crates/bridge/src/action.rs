@@ -63,9 +63,25 @@ impl ActionEntities {
 }
 
 /// A running goal's position bounds, counts, per motor (0: unchecked).
-#[derive(Debug, Clone, Copy, Default)]
-struct Tolerances {
-    position: [f64; MAX_MOTORS],
+type Tolerances = [f64; MAX_MOTORS];
+
+/// The first motor (of `n`) further from `want` than its tolerance in `tol` (0: unchecked).
+fn beyond(
+    tol: &Tolerances,
+    want: &[f64; MAX_MOTORS],
+    got: &[f64; MAX_MOTORS],
+    n: usize,
+) -> Option<usize> {
+    (0..n).find(|&m| tol[m] > 0.0 && (want[m] - got[m]).abs() > tol[m])
+}
+
+/// The stop a cancel or a violation sent: the goal ends with `status` and `result` once the
+/// robot rests.
+#[derive(Debug)]
+struct Stopping {
+    id: u64,
+    status: i8,
+    result: FjtResult,
 }
 
 /// What a running goal waits for.
@@ -73,8 +89,8 @@ struct Tolerances {
 struct Run {
     /// The controller's id of its path.
     path: u64,
-    /// The stop a cancel or a violation sent (the goal ends once it rests).
-    stop: Option<u64>,
+    /// The stop under way, if any.
+    stopping: Option<Stopping>,
     /// The path's end, counts.
     end: [f64; MAX_MOTORS],
     path_tolerance: Tolerances,
@@ -82,10 +98,6 @@ struct Run {
     goal_time: Duration,
     /// When the command came to rest at the end.
     ended_at: Option<Instant>,
-    /// When the loop took the path (the telemetry before it is the last move's).
-    taken: bool,
-    /// The result the stop ends it with, and its status.
-    stopping_with: Option<(i8, FjtResult)>,
 }
 
 /// A goal the server knows.
@@ -183,22 +195,16 @@ impl Bridge {
 
     /// A new goal: true if the robot took it.
     fn send_goal(&mut self, r: &SendGoalRequest, stamp: Time) -> bool {
-        let why = if self.actions.running().is_some() {
+        let checked = if self.actions.running().is_some() {
             Err("a goal is running: cancel it first".to_string())
         } else if self.actions.goals.iter().any(|g| g.info.goal_id == r.goal_id) {
             Err("a goal with this id exists".to_string())
         } else {
             self.goal_bounds(r)
+                .and_then(|t| self.opts.converter.path(&r.goal.trajectory).map(|p| (t, p)))
         };
-        let (path_tolerance, goal_tolerance) = match why {
-            Ok(t) => t,
-            Err(why) => {
-                self.bad_input("follow_joint_trajectory", &why);
-                return false;
-            }
-        };
-        let path = match self.opts.converter.path(&r.goal.trajectory) {
-            Ok(p) => p,
+        let ((path_tolerance, goal_tolerance), path) = match checked {
+            Ok(c) => c,
             Err(why) => {
                 self.bad_input("follow_joint_trajectory", &why);
                 return false;
@@ -208,7 +214,7 @@ impl Bridge {
         let d = r.goal.goal_time_tolerance;
         let run = Run {
             path: answer.accepted,
-            stop: None,
+            stopping: None,
             end: path.knots()[path.knots().len() - 1].pos,
             path_tolerance,
             goal_tolerance,
@@ -217,8 +223,6 @@ impl Bridge {
                 t => t,
             },
             ended_at: None,
-            taken: false,
-            stopping_with: None,
         };
         if self.actions.goals.len() >= KEPT_GOALS
             && let Some(i) = self.actions.goals.iter().position(|g| ended(g.status))
@@ -249,19 +253,17 @@ impl Bridge {
         }
         let per_rad = self.opts.converter.counts_per_rad;
         let of = |list: &[JointTolerance], what: &str| -> Result<Tolerances, String> {
-            let mut t = Tolerances::default();
+            let mut t: Tolerances = [0.0; MAX_MOTORS];
             for j in list {
                 let m = self
                     .opts
                     .converter
-                    .names()
-                    .iter()
-                    .position(|n| *n == j.name)
+                    .motor_of(&j.name)
                     .ok_or_else(|| format!("{what}: no joint {:?}", j.name))?;
                 if !j.position.is_finite() {
                     return Err(format!("{what}: {}: the position must be finite", j.name));
                 }
-                t.position[m] = j.position.max(0.0) * per_rad;
+                t[m] = j.position.max(0.0) * per_rad;
             }
             Ok(t)
         };
@@ -274,7 +276,7 @@ impl Bridge {
         let known = self.actions.goals.iter().any(|g| all || g.info.goal_id == info.goal_id);
         let target = self.actions.goals.iter().position(|g| {
             (all || g.info.goal_id == info.goal_id)
-                && g.run.as_ref().is_some_and(|r| r.stop.is_none())
+                && g.run.as_ref().is_some_and(|r| r.stopping.is_none())
         });
         let Some(i) = target else {
             let return_code = if known || all {
@@ -302,8 +304,7 @@ impl Bridge {
         match stop {
             Ok(answer) => {
                 if let Some(run) = self.actions.goals[i].run.as_mut() {
-                    run.stop = Some(answer.accepted);
-                    run.stopping_with = Some((status, result));
+                    run.stopping = Some(Stopping { id: answer.accepted, status, result });
                 }
             }
             Err(_) => self.finish(i, status, result),
@@ -340,32 +341,28 @@ impl Bridge {
         let n = self.opts.converter.n_motors;
         let per_rad = self.opts.converter.counts_per_rad;
         let Some(run) = self.actions.goals[i].run.as_mut() else { return };
-        if let Some(stop) = run.stop {
-            let rested = status.settled >= stop && status.moving == 0;
+        if let Some(stop) = &run.stopping {
+            let rested = status.settled >= stop.id && status.moving == 0;
             let gone = status.refused() == Some(Refusal::NotServing);
             if rested || gone {
-                let (st, result) = run.stopping_with.take().unwrap_or_default();
-                self.finish(i, st, result);
+                let Some(Stopping { status, result, .. }) = run.stopping.take() else { return };
+                self.finish(i, status, result);
             }
             return;
         }
         if let Some(outcome) = ended_by(&status, run.path) {
             return self.finish(i, GoalStatus::ABORTED, outcome);
         }
-        run.taken |= status.taken >= run.path;
-        // The path's samples: feedback, and the path tolerance.
-        if let (Some(s), true) = (self.last, run.taken) {
-            let off = (0..n).find(|&m| {
-                let t = run.path_tolerance.position[m];
-                t > 0.0 && (s.cmd[m] - s.act[m]).abs() > t
-            });
-            if let Some(m) = off {
+        // The path's samples (once the loop took it: the telemetry before is the last move's):
+        // feedback, and the path tolerance.
+        if let (Some(s), true) = (self.last, status.taken >= run.path) {
+            if let Some(m) = beyond(&run.path_tolerance, &s.cmd, &s.act, n) {
                 let why = format!(
                     "path tolerance violated: motor{} is {:.5} rad from its command (tolerance \
                      {:.5} rad)",
                     m + 1,
                     (s.cmd[m] - s.act[m]).abs() / per_rad,
-                    run.path_tolerance.position[m] / per_rad
+                    run.path_tolerance[m] / per_rad
                 );
                 let result = aborted(FjtResult::PATH_TOLERANCE_VIOLATED, why);
                 return self.stop_goal(i, GoalStatus::ABORTED, result);
@@ -387,11 +384,7 @@ impl Bridge {
         }
         // At rest at the end: within the goal tolerance, in goal_time_tolerance.
         let ended_at = *run.ended_at.get_or_insert_with(Instant::now);
-        let off = (0..n).find(|&m| {
-            let t = run.goal_tolerance.position[m];
-            t > 0.0 && (status.actual[m] - run.end[m]).abs() > t
-        });
-        match off {
+        match beyond(&run.goal_tolerance, &run.end, &status.actual, n) {
             None => {
                 let done =
                     FjtResult { error_code: FjtResult::SUCCESSFUL, error_string: String::new() };
@@ -404,7 +397,7 @@ impl Bridge {
                     m + 1,
                     (status.actual[m] - run.end[m]).abs() / per_rad,
                     ended_at.elapsed().as_secs_f64(),
-                    run.goal_tolerance.position[m] / per_rad
+                    run.goal_tolerance[m] / per_rad
                 );
                 self.finish(
                     i,

@@ -204,10 +204,8 @@ impl Bridge {
     /// old says (a lock-step session's time is simulated).
     fn sample_time(&self, s: &TelemetrySample) -> Option<Time> {
         let t0 = self.progress.as_ref()?.read().t0_ns;
-        let now_mono = monotonic_now_ns();
-        let now = Time::now();
-        let age = now_mono.checked_sub(t0.checked_add(s.time_ns)?)?;
-        let now_ns = u64::try_from(now.sec).ok()? * 1_000_000_000 + u64::from(now.nanosec);
+        let age = monotonic_now_ns().checked_sub(t0.checked_add(s.time_ns)?)?;
+        let now_ns = u64::try_from(crate::node::now_ns()).ok()?;
         (t0 != 0 && age < 1_000_000_000).then(|| Time::from_ns(now_ns - age))
     }
 

@@ -59,6 +59,14 @@ impl Converter {
         }
     }
 
+    /// The motor (0-based) the joint `name` is: `motor1` … `motorN`, exactly.
+    pub fn motor_of(&self, name: &str) -> Option<usize> {
+        name.strip_prefix("motor")
+            .and_then(|k| k.parse::<usize>().ok())
+            .filter(|&k| (1..=self.n_motors).contains(&k) && name == format!("motor{k}"))
+            .map(|k| k - 1)
+    }
+
     /// The motor each of `names` is (0-based), if they are `motor1`…`motorN`, each once, in
     /// any order.
     pub fn joints_of(&self, names: &[String]) -> Result<Vec<usize>, String> {
@@ -70,12 +78,7 @@ impl Converter {
         let mut seen = vec![false; self.n_motors];
         let mut motors = Vec::with_capacity(names.len());
         for name in names {
-            let m = name
-                .strip_prefix("motor")
-                .and_then(|k| k.parse::<usize>().ok())
-                .filter(|&k| (1..=self.n_motors).contains(&k) && name == &format!("motor{k}"))
-                .ok_or_else(wrong)?
-                - 1;
+            let m = self.motor_of(name).ok_or_else(wrong)?;
             if std::mem::replace(&mut seen[m], true) {
                 return Err(wrong());
             }

@@ -10,7 +10,7 @@ use qmarc_config::{Settings, TargetError};
 use qmarc_controller::traj::TrajectoryGenerator;
 use qmarc_plugins::linear::LinearMove;
 use qmarc_plugins::moveto::MotionLimits;
-use qmarc_plugins::path::path_queue;
+use qmarc_plugins::path::{outside_soft_limits, path_queue};
 use qmarc_plugins::serve::{Order, ServeHandle, ServeMove, ServeShared};
 use qmarc_proto::MAX_MOTORS;
 use qmarc_proto::command::{
@@ -414,20 +414,17 @@ impl Commands {
         let start = shared.command();
         line.start(&start).map_err(|e| (Refusal::Unreachable, e.to_string()))?;
         let queue = line.into_queue();
-        for (m, s) in self.settings.safety.iter().enumerate().take(self.settings.n_motors) {
-            let [lo, hi] = s.soft_limits;
-            if let Some(c) = queue.iter().map(|c| c[m]).find(|c| !(lo..=hi).contains(c))
-                && !self.unhomed
-            {
-                return Err((
-                    Refusal::SoftLimits,
-                    format!(
-                        "the line takes motor {} to {c:.0} counts, outside its soft limits \
-                         [{lo}, {hi}]",
-                        m + 1
-                    ),
-                ));
-            }
+        if let Some((m, k, [lo, hi])) =
+            outside_soft_limits(&queue, &self.settings).filter(|_| !self.unhomed)
+        {
+            return Err((
+                Refusal::SoftLimits,
+                format!(
+                    "the line takes motor {} to {:.0} counts, outside its soft limits [{lo}, {hi}]",
+                    m + 1,
+                    queue[k][m]
+                ),
+            ));
         }
         Ok(queue.into_boxed_slice())
     }

@@ -177,24 +177,32 @@ pub fn path_queue(
     queue[0] = *start;
     let last = queue.len() - 1;
     queue[last] = knots[knots.len() - 1].pos;
-    if soft {
-        for (m, s) in settings.safety.iter().enumerate().take(n) {
-            let [lo, hi] = s.soft_limits;
-            if let Some(k) = queue.iter().position(|c| !(lo..=hi).contains(&c[m])) {
-                return Err((
-                    Refusal::SoftLimits,
-                    format!(
-                        "the path takes motor {} to {:.0} counts at {:.3} s, outside its soft \
-                         limits [{lo}, {hi}]",
-                        m + 1,
-                        queue[k][m],
-                        k as f64 * period
-                    ),
-                ));
-            }
-        }
+    if let Some((m, k, [lo, hi])) = outside_soft_limits(&queue, settings).filter(|_| soft) {
+        return Err((
+            Refusal::SoftLimits,
+            format!(
+                "the path takes motor {} to {:.0} counts at {:.3} s, outside its soft limits \
+                 [{lo}, {hi}]",
+                m + 1,
+                queue[k][m],
+                k as f64 * period
+            ),
+        ));
     }
     Ok(queue)
+}
+
+/// The first motor (by number) some sample of `queue` takes outside its soft limits in
+/// `settings`: the motor, the sample's index and the limits. A serving session's sampled
+/// moves (a path, a straight line) are checked with it before the loop gets them.
+pub fn outside_soft_limits(
+    queue: &[[f64; MAX_MOTORS]],
+    settings: &Settings,
+) -> Option<(usize, usize, [f64; 2])> {
+    settings.safety.iter().enumerate().take(settings.n_motors).find_map(|(m, s)| {
+        let [lo, hi] = s.soft_limits;
+        queue.iter().position(|c| !(lo..=hi).contains(&c[m])).map(|k| (m, k, s.soft_limits))
+    })
 }
 
 #[cfg(test)]

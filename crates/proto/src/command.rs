@@ -362,7 +362,6 @@ impl CommandClient {
         if service.dynamic_config().number_of_servers() == 0 {
             return Err(no_server());
         }
-        let ipc = |e: &dyn std::fmt::Debug| CommandError::Ipc(format!("{e:?}"));
         let client = service.client_builder().create().map_err(|e| ipc(&e))?;
         let notifier = event.notifier_builder().create().map_err(|e| ipc(&e))?;
         Ok(CommandClient { node, service, client, notifier, next_id: 1, path: None })
