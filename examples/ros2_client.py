@@ -8,6 +8,8 @@ Commands (each prints JSON lines):
     joint-states N      the next N joint states (name, position, velocity, effort, stamp)
     effector N          the next N effector points (m)
     diagnostics N       the next N diagnostics
+    goal-status N       the next N statuses of the follow_joint_trajectory action's goals (its
+                        transient-local status topic: the first is the last one published)
     target X Y Z        an online move to the point (m), published on qmarc/target
     targets N S P1 P2   N targets S seconds apart, alternating between the points P1 and P2
                         (X Y Z each, m); prints each one's send time (the benchmark's)
@@ -17,9 +19,10 @@ Commands (each prints JSON lines):
                         "velocities": [...]}, ...]} (rad, rad/s, s from the start)
     follow JSON         the qmarc/follow_joint_trajectory action (control_msgs/action/
                         FollowJointTrajectory): the trajectory's JSON as above, and optionally
-                        "path_tolerance" / "goal_tolerance" ({"motor1": rad, ...}), "goal_time"
-                        (s), "grip_after" (s: close the gripper then), "cancel_after" (s); prints whether it was accepted, the feedback
-                        received, and the result
+                        "path_tolerance" / "goal_tolerance" ({"motor1": rad, ...} or
+                        {"motor1": {"position": rad, "velocity": rad/s}, ...}), "goal_time"
+                        (s), "grip_after" (s: close the gripper then), "cancel_after" (s);
+                        prints whether it was accepted, the feedback received, and the result
     stop                calls qmarc/stop (std_srvs/srv/Trigger)
     gripper on|off      calls qmarc/gripper (std_srvs/srv/SetBool)
     hashes              the RIHS01 hashes rosbags computes for the message types
@@ -126,9 +129,11 @@ def open_session(connect, listen, mode="peer"):
     return zenoh.open(conf)
 
 
-def take(session, key, typename, n, timeout_s, show):
+def take(session, key, typename, n, timeout_s, show, transient_local=False):
     """Prints the next n samples on key, each with its sequence number and when it arrived
-    (taken in Zenoh's callback, on the system clock); true if n arrived within timeout_s."""
+    (taken in Zenoh's callback, on the system clock); true if n arrived within timeout_s.
+    transient_local: subscribed as rmw_zenoh subscribes with that durability (an advanced
+    subscriber that asks the publishers' caches for the last sample each kept)."""
     got = [0]
     done = threading.Event()
     lock = threading.Lock()
@@ -145,7 +150,11 @@ def take(session, key, typename, n, timeout_s, show):
             msg = STORE.deserialize_cdr(bytes(sample.payload.to_bytes()), typename)
             print(json.dumps(dict(show(msg), seq=int(seq), received_ns=received_ns)), flush=True)
 
-    sub = session.declare_subscriber(key, arrived)
+    if transient_local:
+        history = zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1)
+        sub = zenoh.ext.declare_advanced_subscriber(session, key, arrived, history=history)
+    else:
+        sub = session.declare_subscriber(key, arrived)
     done.wait(timeout_s)
     sub.undeclare()
     with lock:
@@ -166,13 +175,15 @@ def follow(session, key, spec, timeout):
     """Runs the FollowJointTrajectory action on spec; what happened, as a dict."""
     t = STORE.types
     uuid = t["unique_identifier_msgs/msg/UUID"](uuid=numpy.frombuffer(os.urandom(16), dtype=numpy.uint8))
+    bound = lambda v, what: float(v.get(what, 0.0) if isinstance(v, dict) else (v if what == "position" else 0.0))
     tolerances = lambda which: [
-        t["control_msgs/msg/JointTolerance"](name=n, position=float(v), velocity=0.0, acceleration=0.0)
+        t["control_msgs/msg/JointTolerance"](
+            name=n, position=bound(v, "position"), velocity=bound(v, "velocity"),
+            acceleration=bound(v, "acceleration"))
         for n, v in spec.get(which, {}).items()]
     goal_time = float(spec.get("goal_time", 0.0))
     empty_dof = t["trajectory_msgs/msg/MultiDOFJointTrajectory"](
-        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""),
-        joint_names=[], points=[])
+        header=header(), joint_names=[], points=[])
     goal = t["control_msgs/msg/FjtGoal"](
         trajectory=STORE.deserialize_cdr(joint_trajectory(spec), "trajectory_msgs/msg/JointTrajectory"),
         multi_dof_trajectory=empty_dof, path_tolerance=tolerances("path_tolerance"),
@@ -259,6 +270,21 @@ def publish(session, key, payload):
     time.sleep(1.0)
 
 
+def header(frame_id=""):
+    """A std_msgs/msg/Header stamped 0 (the bridge does not wait for a stamp)."""
+    t = STORE.types
+    return t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0),
+                                    frame_id=frame_id)
+
+
+def point_stamped(xyz):
+    """A geometry_msgs/msg/PointStamped of the point xyz (m) in the base frame, as CDR."""
+    t = STORE.types
+    msg = t["geometry_msgs/msg/PointStamped"](
+        header=header("base"), point=t["geometry_msgs/msg/Point"](*map(float, xyz)))
+    return bytes(STORE.serialize_cdr(msg, "geometry_msgs/msg/PointStamped"))
+
+
 def joint_trajectory(spec):
     """The JointTrajectory of a JSON spec, as CDR."""
     t = STORE.types
@@ -273,9 +299,7 @@ def joint_trajectory(spec):
             time_from_start=t["builtin_interfaces/msg/Duration"](
                 sec=sec, nanosec=int(round((p["t"] - sec) * 1e9)))))
     msg = t["trajectory_msgs/msg/JointTrajectory"](
-        header=t["std_msgs/msg/Header"](
-            stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""),
-        joint_names=list(spec["names"]), points=points)
+        header=header(), joint_names=list(spec["names"]), points=points)
     return bytes(STORE.serialize_cdr(msg, "trajectory_msgs/msg/JointTrajectory"))
 
 
@@ -310,34 +334,29 @@ def main():
                   "geometry_msgs/msg/PointStamped", int(a.args[0]), a.timeout,
                   lambda m: {"frame": m.header.frame_id,
                              "point": [m.point.x, m.point.y, m.point.z]})
+    elif a.command == "goal-status":
+        ok = take(session, key("qmarc/follow_joint_trajectory/_action/status",
+                               "action_msgs/msg/GoalStatusArray"),
+                  "action_msgs/msg/GoalStatusArray", int(a.args[0]), a.timeout,
+                  lambda m: {"status": [int(g.status) for g in m.status_list]},
+                  transient_local=True)
     elif a.command == "diagnostics":
         ok = take(session, key("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
                   "diagnostic_msgs/msg/DiagnosticArray", int(a.args[0]), a.timeout,
                   lambda m: {"level": int(m.status[0].level), "message": m.status[0].message,
                              "values": {kv.key: kv.value for kv in m.status[0].values}})
     elif a.command == "target":
-        t = STORE.types
-        msg = t["geometry_msgs/msg/PointStamped"](
-            header=t["std_msgs/msg/Header"](
-                stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="base"),
-            point=t["geometry_msgs/msg/Point"](*map(float, a.args[:3])))
-        payload = bytes(STORE.serialize_cdr(msg, "geometry_msgs/msg/PointStamped"))
         k = key("qmarc/target", "geometry_msgs/msg/PointStamped")
-        publish(session, k, payload)
+        publish(session, k, point_stamped(a.args[:3]))
         print(json.dumps({"published": k}), flush=True)
     elif a.command == "targets":
         # N targets, every S seconds, alternating between two points: each one's time sent.
         n, every = int(a.args[0]), float(a.args[1])
         points = [list(map(float, a.args[2:5])), list(map(float, a.args[5:8]))]
-        t = STORE.types
         k = key("qmarc/target", "geometry_msgs/msg/PointStamped")
         pub = publisher(session, k)
         for i in range(n):
-            msg = t["geometry_msgs/msg/PointStamped"](
-                header=t["std_msgs/msg/Header"](
-                    stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="base"),
-                point=t["geometry_msgs/msg/Point"](*points[i % 2]))
-            payload = bytes(STORE.serialize_cdr(msg, "geometry_msgs/msg/PointStamped"))
+            payload = point_stamped(points[i % 2])
             sent = time.time_ns()
             pub.put(payload, attachment=attachment())
             print(json.dumps({"published_ns": sent}), flush=True)

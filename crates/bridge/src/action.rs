@@ -1,20 +1,24 @@
 //! `NS/qmarc/follow_joint_trajectory`: the `control_msgs/action/FollowJointTrajectory` server
 //! MoveIt drives arms with, as rcl_action lays an action out on rmw_zenoh — three services
 //! (`_action/send_goal`, `_action/cancel_goal`, `_action/get_result`) and two topics
-//! (`_action/feedback`, `_action/status`).
+//! (`_action/feedback`, `_action/status`; the status on every change, transient local: a
+//! client that joins later gets the last from the publisher's cache).
 //!
 //! A goal is the path of its trajectory (`qmarc/path`, as `qmarc/joint_trajectory` sends it):
 //! accepted when the controller takes the path, rejected with the reason logged and in
 //! `/diagnostics` when it or the bridge refuses it, or while another goal runs. While it
 //! runs, the feedback is the loop's command (desired), the motors (actual) and their
 //! difference, from the telemetry; a joint further from its command than its path tolerance
-//! stops the robot and aborts the goal (`PATH_TOLERANCE_VIOLATED`). Once the command rests at
+//! in any telemetry sample the bridge receives (however late it turns: the telemetry queues
+//! 1024 samples, 1.6 s by default), or moving off its command's velocity by more than its tolerance, stops the robot
+//! and aborts the goal (`PATH_TOLERANCE_VIOLATED`). Once the command rests at
 //! the path's end, each joint has `goal_time_tolerance` to be within its goal tolerance
-//! (`GOAL_TOLERANCE_VIOLATED` if not). The tolerances bound positions: 0 (or none given) is
-//! not checked, and velocity and acceleration bounds never are. A cancel stops the robot (jerk-limited) and the goal ends
-//! canceled once it rests; a fault, the session's end or another motion (a move, a stop — a
-//! grip on the way is none) ends it aborted. A `goal_time_tolerance` of 0 is
-//! [`DEFAULT_GOAL_TIME`].
+//! (`GOAL_TOLERANCE_VIOLATED` if not). The tolerances bound positions and velocities (the
+//! change since the telemetry sample before; at the goal, from rest): 0 or −1 (or none given)
+//! is not checked, and acceleration bounds never are. A cancel stops the robot
+//! (jerk-limited) and the goal ends canceled once it rests; a fault, the session's end or
+//! another motion (a move, a stop — a grip on the way is none) ends it aborted. A
+//! `goal_time_tolerance` of 0 is [`DEFAULT_GOAL_TIME`].
 
 use crate::action_msgs::{
     CancelGoalRequest, CancelGoalResponse, FeedbackMessage, FjtFeedback, FjtResult,
@@ -22,11 +26,13 @@ use crate::action_msgs::{
     SendGoalRequest, SendGoalResponse, Uuid,
 };
 use crate::bridge::{Bridge, publish, reply_with};
+use crate::convert::{rate, seconds_between};
 use crate::msgs::{Header, JointTrajectoryPoint, Time};
 use crate::node::{Node, RosPublisher, RosService, ZenohError, payload_of};
 use crate::ros2::{self, Qos};
 use qmarc_proto::MAX_MOTORS;
 use qmarc_proto::command::{CommandKind, CommandRequest, CommandResponse, Refusal};
+use qmarc_proto::telemetry::TelemetrySample;
 use std::time::{Duration, Instant};
 
 /// Ended goals the server still answers for (the oldest forgotten first).
@@ -62,17 +68,71 @@ impl ActionEntities {
     }
 }
 
-/// A running goal's position bounds, counts, per motor (0: unchecked).
-type Tolerances = [f64; MAX_MOTORS];
+/// Where each motor is and how fast it goes: counts and counts/s.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Motion {
+    position: [f64; MAX_MOTORS],
+    velocity: [f64; MAX_MOTORS],
+}
 
-/// The first motor (of `n`) further from `want` than its tolerance in `tol` (0: unchecked).
-fn beyond(
-    tol: &Tolerances,
-    want: &[f64; MAX_MOTORS],
-    got: &[f64; MAX_MOTORS],
-    n: usize,
-) -> Option<usize> {
-    (0..n).find(|&m| tol[m] > 0.0 && (want[m] - got[m]).abs() > tol[m])
+/// A running goal's bounds on how far the motors may be from where they should be and how
+/// fast they should go (counts, counts/s), per motor (0: unchecked).
+type Tolerances = Motion;
+
+impl Motion {
+    /// At `position`, at rest.
+    fn at(position: [f64; MAX_MOTORS]) -> Motion {
+        Motion { position, ..Motion::default() }
+    }
+
+    /// As two tolerances: its positions alone, and its velocities alone.
+    fn split(&self) -> (Tolerances, Tolerances) {
+        (Motion::at(self.position), Motion { velocity: self.velocity, ..Motion::default() })
+    }
+}
+
+/// What of a motor is beyond its tolerance: the motor (0-based), "position" or "velocity",
+/// how far it is and the tolerance (counts or counts/s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Violation {
+    motor: usize,
+    what: &'static str,
+    off: f64,
+    tolerance: f64,
+}
+
+impl Violation {
+    /// Its words, in rad (rad/s) through `per_rad` counts a radian.
+    fn words(&self, per_rad: f64) -> String {
+        let unit = if self.what == "velocity" { "rad/s" } else { "rad" };
+        format!(
+            "motor{}'s {} is {:.5} {unit} off (tolerance {:.5} {unit})",
+            self.motor + 1,
+            self.what,
+            self.off / per_rad,
+            self.tolerance / per_rad
+        )
+    }
+}
+
+/// The first motor (of `n`) whose position, then velocity, is further from `want` than its
+/// tolerance in `tol` (0: unchecked).
+fn beyond(tol: &Tolerances, want: &Motion, got: &Motion, n: usize) -> Option<Violation> {
+    let kinds = [
+        ("position", &tol.position, &want.position, &got.position),
+        ("velocity", &tol.velocity, &want.velocity, &got.velocity),
+    ];
+    (0..n).find_map(|motor| {
+        kinds.iter().find_map(|&(what, tol, want, got)| {
+            let off = (want[motor] - got[motor]).abs();
+            (tol[motor] > 0.0 && off > tol[motor]).then_some(Violation {
+                motor,
+                what,
+                off,
+                tolerance: tol[motor],
+            })
+        })
+    })
 }
 
 /// The stop a cancel or a violation sent: the goal ends with `status` and `result` once the
@@ -91,8 +151,11 @@ struct Run {
     path: u64,
     /// The stop under way, if any.
     stopping: Option<Stopping>,
-    /// The path's end, counts.
-    end: [f64; MAX_MOTORS],
+    /// The first cycle whose sample came after the goal was accepted (the robot rested then,
+    /// and rests until the loop takes the path).
+    from_cycle: u64,
+    /// The path's end, counts, at rest.
+    end: Motion,
     path_tolerance: Tolerances,
     goal_tolerance: Tolerances,
     goal_time: Duration,
@@ -113,7 +176,6 @@ struct Goal {
 #[derive(Default)]
 pub struct Actions {
     goals: Vec<Goal>,
-    status_at: Option<Instant>,
     feedback_at: Option<Instant>,
     changed: bool,
 }
@@ -179,8 +241,9 @@ impl Bridge {
             }
         }
         self.watch(stamp);
-        let due = self.actions.status_at.is_none_or(|t| t.elapsed() >= Duration::from_secs(1));
-        if self.actions.changed || (due && !self.actions.goals.is_empty()) {
+        // On every change, as rcl_action does: a client that joins later has the last from
+        // the publisher's cache (transient local).
+        if self.actions.changed {
             let list = self
                 .actions
                 .goals
@@ -188,7 +251,6 @@ impl Bridge {
                 .map(|g| GoalStatus { goal_info: g.info, status: g.status })
                 .collect();
             publish(&mut self.e.action.status, &GoalStatusArray { status_list: list });
-            self.actions.status_at = Some(Instant::now());
             self.actions.changed = false;
         }
     }
@@ -215,7 +277,8 @@ impl Bridge {
         let run = Run {
             path: answer.accepted,
             stopping: None,
-            end: path.knots()[path.knots().len() - 1].pos,
+            from_cycle: self.last.map_or(0, |s| s.cycle + 1),
+            end: Motion::at(path.knots()[path.knots().len() - 1].pos),
             path_tolerance,
             goal_tolerance,
             goal_time: match Duration::new(d.sec.max(0) as u64, d.nanosec.min(999_999_999)) {
@@ -253,17 +316,19 @@ impl Bridge {
         }
         let per_rad = self.opts.converter.counts_per_rad;
         let of = |list: &[JointTolerance], what: &str| -> Result<Tolerances, String> {
-            let mut t: Tolerances = [0.0; MAX_MOTORS];
+            let mut t = Tolerances::default();
             for j in list {
                 let m = self
                     .opts
                     .converter
                     .motor_of(&j.name)
                     .ok_or_else(|| format!("{what}: no joint {:?}", j.name))?;
-                if !j.position.is_finite() {
-                    return Err(format!("{what}: {}: the position must be finite", j.name));
+                if !(j.position.is_finite() && j.velocity.is_finite()) {
+                    return Err(format!("{what}: {}: the numbers must be finite", j.name));
                 }
-                t[m] = j.position.max(0.0) * per_rad;
+                // (-1, "none", and 0, "the default", are both unchecked here.)
+                t.position[m] = j.position.max(0.0) * per_rad;
+                t.velocity[m] = j.velocity.max(0.0) * per_rad;
             }
             Ok(t)
         };
@@ -340,6 +405,7 @@ impl Bridge {
         };
         let n = self.opts.converter.n_motors;
         let per_rad = self.opts.converter.counts_per_rad;
+        let (desired, actual) = self.motions();
         let Some(run) = self.actions.goals[i].run.as_mut() else { return };
         if let Some(stop) = &run.stopping {
             let rested = status.settled >= stop.id && status.moving == 0;
@@ -354,16 +420,19 @@ impl Bridge {
             return self.finish(i, GoalStatus::ABORTED, outcome);
         }
         // The path's samples (once the loop took it: the telemetry before is the last move's):
-        // feedback, and the path tolerance.
-        if let (Some(s), true) = (self.last, status.taken >= run.path) {
-            if let Some(m) = beyond(&run.path_tolerance, &s.cmd, &s.act, n) {
-                let why = format!(
-                    "path tolerance violated: motor{} is {:.5} rad from its command (tolerance \
-                     {:.5} rad)",
-                    m + 1,
-                    (s.cmd[m] - s.act[m]).abs() / per_rad,
-                    run.path_tolerance[m] / per_rad
-                );
+        // the path tolerance — positions in every sample received, velocities in the newest
+        // (against the newest of the turn before: a velocity over one sample is too coarse) —
+        // and feedback.
+        if self.last.is_some() && status.taken >= run.path {
+            let (positions, velocities) = run.path_tolerance.split();
+            let broken = self
+                .fresh
+                .iter()
+                .filter(|s| s.cycle >= run.from_cycle)
+                .find_map(|s| beyond(&positions, &Motion::at(s.cmd), &Motion::at(s.act), n))
+                .or_else(|| beyond(&velocities, &desired, &actual, n));
+            if let Some(v) = broken {
+                let why = format!("path tolerance violated: {} from its command", v.words(per_rad));
                 let result = aborted(FjtResult::PATH_TOLERANCE_VIOLATED, why);
                 return self.stop_goal(i, GoalStatus::ABORTED, result);
             }
@@ -374,7 +443,7 @@ impl Bridge {
             if due {
                 self.actions.feedback_at = Some(Instant::now());
                 let goal_id = self.actions.goals[i].info.goal_id;
-                let feedback = self.feedback(goal_id, &s, stamp);
+                let feedback = self.feedback(goal_id, stamp);
                 publish(&mut self.e.action.feedback, &feedback);
             }
         }
@@ -384,20 +453,18 @@ impl Bridge {
         }
         // At rest at the end: within the goal tolerance, in goal_time_tolerance.
         let ended_at = *run.ended_at.get_or_insert_with(Instant::now);
-        match beyond(&run.goal_tolerance, &run.end, &status.actual, n) {
+        let at = Motion { position: status.actual, velocity: actual.velocity };
+        match beyond(&run.goal_tolerance, &run.end, &at, n) {
             None => {
                 let done =
                     FjtResult { error_code: FjtResult::SUCCESSFUL, error_string: String::new() };
                 self.finish(i, GoalStatus::SUCCEEDED, done);
             }
-            Some(m) if ended_at.elapsed() > run.goal_time => {
+            Some(v) if ended_at.elapsed() > run.goal_time => {
                 let why = format!(
-                    "goal tolerance violated: motor{} is {:.6} rad from the goal {:.3} s after \
-                     the path's end (tolerance {:.6} rad)",
-                    m + 1,
-                    (status.actual[m] - run.end[m]).abs() / per_rad,
+                    "goal tolerance violated: {} from the goal {:.3} s after the path's end",
+                    v.words(per_rad),
                     ended_at.elapsed().as_secs_f64(),
-                    run.goal_tolerance[m] / per_rad
                 );
                 self.finish(
                     i,
@@ -409,37 +476,31 @@ impl Bridge {
         }
     }
 
-    /// The feedback of sample `s`: desired (the command), actual, and their difference, rad
-    /// and rad/s.
-    fn feedback(
-        &self,
-        goal_id: Uuid,
-        s: &qmarc_proto::telemetry::TelemetrySample,
-        stamp: Time,
-    ) -> FeedbackMessage {
-        let c = self.opts.converter;
-        let n = c.n_motors;
-        let velocity = |v: &[f64; MAX_MOTORS],
-                        prev: Option<&[f64; MAX_MOTORS]>,
-                        dt: f64|
-         -> Vec<f64> {
-            (0..n).map(|m| prev.map_or(0.0, |p| (v[m] - p[m]) / c.counts_per_rad / dt)).collect()
-        };
+    /// The loop's command (desired) and the motors (actual) in its newest telemetry sample:
+    /// positions and their rates since the sample before (0 without one).
+    fn motions(&self) -> (Motion, Motion) {
+        let Some(s) = self.last.as_ref() else { return Default::default() };
         let prev = self.before_last.as_ref();
-        let dt =
-            prev.map_or(1.0, |p| (s.time_ns.saturating_sub(p.time_ns) as f64 * 1e-9).max(1e-9));
-        let point =
-            |pos: &[f64; MAX_MOTORS], prev_pos: Option<&[f64; MAX_MOTORS]>| JointTrajectoryPoint {
-                positions: (0..n).map(|m| pos[m] / c.counts_per_rad).collect(),
-                velocities: velocity(pos, prev_pos, dt),
-                ..JointTrajectoryPoint::default()
-            };
-        let desired = point(&s.cmd, prev.map(|p| &p.cmd));
-        let actual = point(&s.act, prev.map(|p| &p.act));
-        let minus = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(a, b)| a - b).collect();
-        let error = JointTrajectoryPoint {
-            positions: minus(&desired.positions, &actual.positions),
-            velocities: minus(&desired.velocities, &actual.velocities),
+        let dt = seconds_between(s, prev);
+        let motion = |of: fn(&TelemetrySample) -> &[f64; MAX_MOTORS]| Motion {
+            position: *of(s),
+            velocity: rate(of(s), prev.map(of), dt),
+        };
+        (motion(|s| &s.cmd), motion(|s| &s.act))
+    }
+
+    /// The feedback of the newest sample: desired (the command), actual, and their
+    /// difference, rad and rad/s.
+    fn feedback(&self, goal_id: Uuid, stamp: Time) -> FeedbackMessage {
+        let c = self.opts.converter;
+        let (desired, actual) = self.motions();
+        let error = Motion {
+            position: std::array::from_fn(|m| desired.position[m] - actual.position[m]),
+            velocity: std::array::from_fn(|m| desired.velocity[m] - actual.velocity[m]),
+        };
+        let point = |m: &Motion| JointTrajectoryPoint {
+            positions: c.rad(&m.position),
+            velocities: c.rad(&m.velocity),
             ..JointTrajectoryPoint::default()
         };
         FeedbackMessage {
@@ -447,9 +508,9 @@ impl Bridge {
             feedback: FjtFeedback {
                 header: Header { stamp, frame_id: String::new() },
                 joint_names: c.names(),
-                desired,
-                actual,
-                error,
+                desired: point(&desired),
+                actual: point(&actual),
+                error: point(&error),
                 ..FjtFeedback::default()
             },
         }
@@ -478,3 +539,6 @@ fn ended_by(s: &CommandResponse, path: u64) -> Option<FjtResult> {
     }
     None
 }
+
+#[cfg(test)]
+mod tests;

@@ -90,9 +90,12 @@ pub(crate) struct Bridge {
     reader: TelemetryReader,
     /// The session's progress page: when its tick 0 was (none: stamps are the bridge's).
     progress: Option<Progress>,
-    /// The newest sample, and the one before it.
+    /// The newest sample, and the one before it (the newest of the turn before).
     pub(crate) last: Option<TelemetrySample>,
     pub(crate) before_last: Option<TelemetrySample>,
+    /// Every sample this turn received, oldest first (a running goal's path tolerance holds
+    /// in each, however late the bridge turned).
+    pub(crate) fresh: Vec<TelemetrySample>,
     pub(crate) actions: Actions,
     homed: bool,
     refused: String,
@@ -127,6 +130,7 @@ pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
         progress,
         last: None,
         before_last: None,
+        fresh: Vec::with_capacity(qmarc_proto::telemetry::TELEMETRY_BUFFER),
         actions: Actions::default(),
         homed: false,
         refused: String::new(),
@@ -177,12 +181,12 @@ impl Bridge {
     /// One turn: telemetry out, commands in, diagnostics when due. True once the session
     /// has ended.
     fn turn(&mut self) -> anyhow::Result<bool> {
-        let mut newest = None;
+        self.fresh.clear();
         while let Some(s) = self.reader.receive().map_err(|e| anyhow::anyhow!(e))? {
-            newest = Some(s);
+            self.fresh.push(s);
         }
         let stamp = Time::now();
-        if let Some(s) = newest {
+        if let Some(&s) = self.fresh.last() {
             let c = self.opts.converter;
             let taken = self.sample_time(&s).unwrap_or(stamp);
             let js = c.joint_state(&s, self.last.as_ref(), taken);

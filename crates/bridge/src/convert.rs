@@ -40,23 +40,20 @@ impl Converter {
         stamp: Time,
     ) -> JointState {
         let n = self.n_motors.min(MAX_MOTORS);
-        let rad = |c: f64| c / self.counts_per_rad;
-        let dt = prev.map_or(0.0, |p| s.time_ns.saturating_sub(p.time_ns) as f64 * 1e-9);
-        let velocity = (0..n)
-            .map(|m| match prev {
-                Some(p) if dt > 0.0 => rad(s.act[m] - p.act[m]) / dt,
-                _ => 0.0,
-            })
-            .collect();
         JointState {
             header: Header { stamp, frame_id: String::new() },
             name: self.names(),
-            position: (0..n).map(|m| rad(s.act[m])).collect(),
-            velocity,
+            position: self.rad(&s.act),
+            velocity: self.rad(&rate(&s.act, prev.map(|p| &p.act), seconds_between(s, prev))),
             effort: (0..n)
                 .map(|m| f64::from(s.dac[m]) * DAC_FULL_SCALE_V / f64::from(DAC_MAX))
                 .collect(),
         }
+    }
+
+    /// The first `n_motors` of `counts` (or counts/s), in rad (or rad/s).
+    pub fn rad(&self, counts: &[f64; MAX_MOTORS]) -> Vec<f64> {
+        counts[..self.n_motors.min(MAX_MOTORS)].iter().map(|c| c / self.counts_per_rad).collect()
     }
 
     /// The motor (0-based) the joint `name` is: `motor1` … `motorN`, exactly.
@@ -150,6 +147,24 @@ impl Converter {
             header: Header { stamp, frame_id: BASE_FRAME.into() },
             point: Point { x: p.x, y: p.y, z: p.z },
         })
+    }
+}
+
+/// Seconds from sample `prev` to `s` (0: none before, or not before).
+pub fn seconds_between(s: &TelemetrySample, prev: Option<&TelemetrySample>) -> f64 {
+    prev.map_or(0.0, |p| s.time_ns.saturating_sub(p.time_ns) as f64 * 1e-9)
+}
+
+/// How fast each of `now` changed since `prev`, `dt` seconds before: per second (0 without
+/// a `prev` or a time between).
+pub fn rate(
+    now: &[f64; MAX_MOTORS],
+    prev: Option<&[f64; MAX_MOTORS]>,
+    dt: f64,
+) -> [f64; MAX_MOTORS] {
+    match prev {
+        Some(p) if dt > 0.0 => std::array::from_fn(|m| (now[m] - p[m]) / dt),
+        _ => [0.0; MAX_MOTORS],
     }
 }
 
@@ -269,6 +284,8 @@ mod tests {
         let no_delta = Converter { robot: None, ..c };
         assert_eq!(no_delta.effector(&prev, Time::default()), None);
         assert_eq!(no_delta.joint_state(&s, None, Time::default()).velocity, [0.0; 3]);
+        // A sample no later than the one before: no rate.
+        assert_eq!(c.joint_state(&prev, Some(&s), Time::default()).velocity, [0.0; 3]);
     }
 
     #[test]

@@ -54,9 +54,21 @@ pub struct Node {
     tokens: Vec<LivelinessToken>,
 }
 
+/// How often a reliable transient-local publisher says what it last sent (rmw_zenoh's
+/// sporadic heartbeat), so that a subscriber that missed it asks the cache.
+const MISS_HEARTBEAT: std::time::Duration = std::time::Duration::from_millis(500);
+
+/// A Zenoh publisher as rmw_zenoh declares it for a QoS: plain for a volatile topic; for a
+/// transient-local one, zenoh-ext's advanced publisher, whose cache of the last `depth`
+/// samples a subscriber that joins later queries.
+enum ZenohPublisher {
+    Volatile(Publisher<'static>),
+    TransientLocal(zenoh_ext::AdvancedPublisher<'static>),
+}
+
 /// A publisher and what each of its samples carries.
 pub struct RosPublisher {
-    publisher: Publisher<'static>,
+    publisher: ZenohPublisher,
     gid: [u8; 16],
     sequence: i64,
     /// The data key expression.
@@ -68,11 +80,11 @@ impl RosPublisher {
     pub fn put(&mut self, payload: Vec<u8>) -> Result<(), ZenohError> {
         self.sequence += 1;
         let attachment = ros2::attachment(self.sequence, now_ns(), &self.gid);
-        self.publisher
-            .put(payload)
-            .attachment(attachment)
-            .wait()
-            .map_err(failed(format!("publishing on {}", self.keyexpr)))
+        match &self.publisher {
+            ZenohPublisher::Volatile(p) => p.put(payload).attachment(attachment).wait(),
+            ZenohPublisher::TransientLocal(p) => p.put(payload).attachment(attachment).wait(),
+        }
+        .map_err(failed(format!("publishing on {}", self.keyexpr)))
     }
 }
 
@@ -164,20 +176,35 @@ impl Node {
         )
     }
 
-    /// A publisher of `t` on `name` (relative to the namespace, or absolute).
+    /// A publisher of `t` on `name` (relative to the namespace, or absolute), declared as
+    /// rmw_zenoh declares one for `qos`: dropping samples rather than waiting on a busy link;
+    /// if transient local, detectable, with a cache of `depth` samples, and (if reliable)
+    /// sporadic heartbeats for the subscribers' miss detection.
     pub fn publisher(
         &mut self,
         name: &str,
         t: &RosType,
         qos: &Qos,
     ) -> Result<RosPublisher, ZenohError> {
+        use zenoh_ext::{AdvancedPublisherBuilderExt, CacheConfig, MissDetectionConfig};
         let (keyexpr, token) = self.entity(EntityKind::Publisher, name, t, qos);
-        let publisher = self
+        let declared = || failed(format!("a publisher on {keyexpr}"));
+        let builder = self
             .session
             .declare_publisher(keyexpr.clone())
-            .congestion_control(zenoh::qos::CongestionControl::Drop)
-            .wait()
-            .map_err(failed(format!("a publisher on {keyexpr}")))?;
+            .congestion_control(zenoh::qos::CongestionControl::Drop);
+        let publisher = if qos.transient_local {
+            let mut advanced = builder
+                .cache(CacheConfig::default().max_samples(qos.depth.max(1)))
+                .publisher_detection();
+            if qos.reliable {
+                let heartbeat = MissDetectionConfig::default().sporadic_heartbeat(MISS_HEARTBEAT);
+                advanced = advanced.sample_miss_detection(heartbeat);
+            }
+            ZenohPublisher::TransientLocal(advanced.wait().map_err(declared())?)
+        } else {
+            ZenohPublisher::Volatile(builder.wait().map_err(declared())?)
+        };
         self.announce(&token)?;
         Ok(RosPublisher { publisher, gid: ros2::gid_of(&token), sequence: 0, keyexpr })
     }

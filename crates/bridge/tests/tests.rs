@@ -370,7 +370,7 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
         "{ok}\n{}",
         cell.bridge_log()
     );
-    assert!(ok["feedback"].as_i64().unwrap() >= 5, "{ok}");
+    assert!(ok["feedback"].as_i64().unwrap() >= 1, "{ok}");
     assert_eq!(ok["joint_names"], serde_json::json!(["motor1", "motor2", "motor3"]));
     assert!(ok["max_error"].as_f64().unwrap() < 0.05, "{ok}");
     let s = client.wait(Duration::from_secs(30)).unwrap();
@@ -382,6 +382,8 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
         (Some(true), Some(4)),
         "{gripped}"
     );
+    // Feedback along its 2 s (50 a second at most; a loaded machine's bridge turns late).
+    assert!(gripped["feedback"].as_i64().unwrap() >= 2, "{gripped}");
     // A path tolerance no servo meets: aborted, the robot stopped, the session unharmed.
     let tight = goal([0.0, 0.0, 0.0], 0.5, serde_json::json!({"path_tolerance": {"motor1": 1e-7}}));
     assert_eq!(
@@ -390,9 +392,28 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
         "{tight}"
     );
     assert!(
-        tight["error_string"].as_str().unwrap().starts_with("path tolerance violated: motor1 is"),
+        tight["error_string"]
+            .as_str()
+            .unwrap()
+            .starts_with("path tolerance violated: motor1's position is"),
         "{tight}"
     );
+    // A velocity no servo keeps to a millionth of a radian a second: aborted the same way.
+    let tolerance = serde_json::json!({"motor2": {"position": 1.0, "velocity": 1e-6}});
+    let tight = goal([0.0, 300.0, 0.0], 0.5, serde_json::json!({ "path_tolerance": tolerance }));
+    assert_eq!(
+        (tight["status"].as_i64(), tight["error_code"].as_i64()),
+        (Some(6), Some(-4)),
+        "{tight}"
+    );
+    assert!(
+        tight["error_string"]
+            .as_str()
+            .unwrap()
+            .starts_with("path tolerance violated: motor2's velocity is"),
+        "{tight}"
+    );
+    client.wait(Duration::from_secs(30)).unwrap();
     let s = client.wait(Duration::from_secs(30)).unwrap();
     assert_eq!((s.fault, s.moving), (0, 0));
     assert!(s.accepted > 2 && s.settled == s.accepted, "the stop was the last order, done");
@@ -432,6 +453,10 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
     let rejected = cell.lines(&["follow", &wrong.to_string()])[0].clone();
     assert_eq!(rejected["accepted"], false);
     cell.log_says("follow_joint_trajectory: not taken: joint_names must be");
+    // A client that joins now hears the goals' last status at once, from the status topic's
+    // cache (transient local: it is published on changes only, and nothing changes now).
+    let late = cell.lines(&["goal-status", "1"]);
+    assert_eq!(late[0]["status"], serde_json::json!([4, 4, 6, 6, 6, 5]), "{late:?}");
     drop(client);
     assert!(cell.quit().success());
 }
@@ -467,11 +492,18 @@ fn a_stopped_or_routerless_bridge_changes_nothing_in_a_move() {
     assert!(cell.quit().success());
 }
 
-/// kill -9 of the hwserver or the controller while the bridge serves: the session ends with
-/// the motors disabled, `/diagnostics` says the fault, and the bridge ends by itself.
+/// kill -9 of the hwserver, the controller or the starter while the bridge serves: the
+/// session ends with the motors disabled (a killed starter's children stop on the signal its
+/// death sends them), `/diagnostics` says the fault, and the bridge ends by itself.
 #[test]
 fn a_robot_process_killed_is_said_in_the_diagnostics_and_ends_the_bridge() {
-    for victim in ["qmarc-hwserver", "qmarc-controller"] {
+    // Each death and the fault it is said as.
+    let deaths = [
+        ("qmarc-hwserver", "hwserver_lost"),
+        ("qmarc-controller", "controller_lost"),
+        ("qmarc-starter", "aborted"),
+    ];
+    for (victim, words) in deaths {
         let mut cell = Cell::start(&format!("kill{}", victim.len()), "");
         cell.lines(&["joint-states", "1"]);
         let mut listener = Command::new(python())
@@ -493,12 +525,29 @@ fn a_robot_process_killed_is_said_in_the_diagnostics_and_ends_the_bridge() {
         });
         let first = said.recv_timeout(Duration::from_secs(60)).expect("the listener hears");
         let starter = cell.session.as_ref().unwrap().id();
-        let pgrep = Command::new("pgrep").args(["-P", &starter.to_string(), "-f", victim]).output();
-        let pid: i32 = String::from_utf8_lossy(&pgrep.unwrap().stdout).trim().parse().unwrap();
+        let pid: i32 = if victim == "qmarc-starter" {
+            starter as i32
+        } else {
+            let pgrep =
+                Command::new("pgrep").args(["-P", &starter.to_string(), "-f", victim]).output();
+            String::from_utf8_lossy(&pgrep.unwrap().stdout).trim().parse().unwrap()
+        };
+        let pgrep = Command::new("pgrep").args(["-P", &starter.to_string()]).output();
+        let orphans = String::from_utf8_lossy(&pgrep.unwrap().stdout).into_owned();
         nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid), nix::sys::signal::Signal::SIGKILL)
             .unwrap();
         let ended = cell.session.take().unwrap().wait().unwrap();
-        assert_eq!(ended.code(), Some(2), "{victim}: the session ends with a fault");
+        if victim == "qmarc-starter" {
+            assert_eq!(ended.code(), None, "killed");
+            // Its children, reparented, stop by themselves.
+            let started = Instant::now();
+            while orphans.lines().any(|p| std::path::Path::new(&format!("/proc/{p}")).exists()) {
+                assert!(started.elapsed() < Duration::from_secs(30), "children left: {orphans}");
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        } else {
+            assert_eq!(ended.code(), Some(2), "{victim}: the session ends with a fault");
+        }
         let bridge = cell.bridge.as_mut().unwrap().wait().unwrap();
         assert!(bridge.success(), "{victim}: the bridge ends by itself: {}", cell.bridge_log());
         // What it heard after the kill, until it has been quiet for a while (it would hear
@@ -513,7 +562,7 @@ fn a_robot_process_killed_is_said_in_the_diagnostics_and_ends_the_bridge() {
             lines.iter().filter_map(|l| serde_json::from_str(l).ok()).collect();
         let fault = said.iter().find(|d| d["level"] == 2);
         let fault = fault.unwrap_or_else(|| panic!("{victim}: no fault said: {said:?}"));
-        assert!(!fault["values"]["fault"].as_str().unwrap().is_empty(), "{fault}");
+        assert!(fault["values"]["fault"].as_str().unwrap().starts_with(words), "{fault}");
     }
 }
 

@@ -163,9 +163,7 @@ pub fn path_queue(
     let mut seg = 0;
     for k in 0..samples {
         let t = (k as f64 * period).min(end);
-        while seg + 2 < knots.len() && t > knots[seg + 1].t_s {
-            seg += 1;
-        }
+        seg = segment_of(&knots, seg, t);
         let (a, b) = (&knots[seg], &knots[seg + 1]);
         let mut c = *start;
         for (m, c) in c.iter_mut().enumerate().take(n) {
@@ -190,6 +188,16 @@ pub fn path_queue(
         ));
     }
     Ok(queue)
+}
+
+/// The segment time `t` (at most the last knot's) falls in, from segment `seg` on: the one
+/// whose end is the first at or after `t`. (At a knot's time either segment gives the
+/// knot: the one before at its end, the next at its start.)
+fn segment_of(knots: &[PathKnot], mut seg: usize, t: f64) -> usize {
+    while seg + 2 < knots.len() && t > knots[seg + 1].t_s {
+        seg += 1;
+    }
+    seg
 }
 
 /// The first motor (by number) some sample of `queue` takes outside its soft limits in

@@ -44,6 +44,18 @@ fn a_path_passes_every_knot_at_its_time_from_rest_to_rest() {
     assert!((v - 4000.0).abs() < 5.0, "{v}");
     // The motors beyond the robot's stay where they are.
     assert!(q.iter().all(|c| c[3] == 0.0));
+    // Many segments: each knot is passed in its own (not the one before, carried on).
+    let zigzag: Vec<PathKnot> = (1..=7)
+        .map(|i| {
+            let up = if i % 2 == 0 { 400.0 } else { 0.0 };
+            knot(0.1 * i as f64, [100.0 + up, -200.0 - up, 300.0 + up], [0.0; 3])
+        })
+        .collect();
+    let q = path_queue(&PathRequest::new(&zigzag, false).unwrap(), &START, &s, true).unwrap();
+    for k in &zigzag {
+        let at = q[(k.t_s / period).round() as usize];
+        assert!((0..3).all(|m| (at[m] - k.pos[m]).abs() < 1e-6), "{at:?} at {} s", k.t_s);
+    }
 }
 
 #[test]
@@ -166,6 +178,9 @@ fn malformed_and_impossible_paths_are_refused_naming_the_point() {
     short.trajectory.max_duration_s = 0.1;
     let r = path_queue(&PathRequest::new(&[ok], false).unwrap(), &START, &short, true);
     assert!(r.unwrap_err().1.contains("the path lasts 0.2 s: longer than the longest path"));
+    // A path exactly as long as the longest allowed: taken.
+    short.trajectory.max_duration_s = 0.2;
+    check_ok(&short, &[ok], false);
 }
 
 fn check_ok(s: &Settings, knots: &[PathKnot], given: bool) {
@@ -207,4 +222,28 @@ fn a_chosen_velocity_is_the_parabolas_through_the_knot() {
     assert_eq!(tol, 100.0, "the shipped tolerance this point sits on");
     let then = knot(0.2, [500.0, -200.0, 300.0], [0.0; 3]);
     assert!(path_queue(&PathRequest::new(&[edge, then], false).unwrap(), &START, &s, true).is_ok());
+}
+
+/// A path may take at most the queue's budget (256 MiB of samples, 3355 s at 2.5 kHz) even
+/// where `trajectory.max_duration_s` allows more: one sample more is refused, saying so.
+#[test]
+fn a_path_longer_than_the_queue_holds_is_refused() {
+    let mut s = settings();
+    s.trajectory.max_duration_s = 1e6;
+    let per_sample = std::mem::size_of::<[f64; MAX_MOTORS]>() as u64;
+    let most = (crate::source::QUEUE_BUDGET_BYTES / per_sample) as f64;
+    // `most` samples: the start and most − 1 periods.
+    let end = (most - 1.0) * s.period_s();
+    let rest = [START[0], START[1], START[2]];
+    let full = path_queue(
+        &PathRequest::new(&[knot(end, rest, [0.0; 3])], false).unwrap(),
+        &START,
+        &s,
+        true,
+    );
+    assert_eq!(full.map(|q| q.len() as f64), Ok(most));
+    let over = knot(end + s.period_s(), rest, [0.0; 3]);
+    let (_, why) =
+        refusal(path_queue(&PathRequest::new(&[over], false).unwrap(), &START, &s, true));
+    assert!(why.contains("more than the 256 MiB a path may take"), "{why}");
 }

@@ -1,0 +1,106 @@
+//! The action's tolerance checks: which motor, which of its position or velocity, and the
+//! boundary (exactly at the tolerance is within it).
+
+use super::{Motion, Tolerances, Violation, beyond, ended, ended_by};
+use crate::action_msgs::{FjtResult, GoalStatus};
+use qmarc_proto::MAX_MOTORS;
+use qmarc_proto::command::{CommandResponse, Refusal};
+use qmarc_proto::state::FaultKind;
+
+fn motion(position: [f64; 3], velocity: [f64; 3]) -> Motion {
+    let mut m = Motion::default();
+    m.position[..3].copy_from_slice(&position);
+    m.velocity[..3].copy_from_slice(&velocity);
+    m
+}
+
+#[test]
+fn a_motor_beyond_its_position_or_velocity_tolerance_is_named_the_boundary_within() {
+    let want = motion([100.0, 200.0, 300.0], [1000.0, 0.0, -500.0]);
+    let tol = motion([10.0, 10.0, 10.0], [50.0, 50.0, 50.0]);
+    // Exactly at each tolerance: within.
+    let edge = motion([110.0, 190.0, 310.0], [1050.0, -50.0, -450.0]);
+    assert_eq!(beyond(&tol, &want, &edge, 3), None);
+    // Motor 2's position a count further.
+    let far = motion([110.0, 189.0, 300.0], [1000.0, 0.0, -500.0]);
+    let v = Violation { motor: 1, what: "position", off: 11.0, tolerance: 10.0 };
+    assert_eq!(beyond(&tol, &want, &far, 3), Some(v));
+    // Motor 3's velocity 51 counts/s off, its position within.
+    let fast = motion([100.0, 200.0, 300.0], [1000.0, 0.0, -449.0]);
+    let v = Violation { motor: 2, what: "velocity", off: 51.0, tolerance: 50.0 };
+    assert_eq!(beyond(&tol, &want, &fast, 3), Some(v));
+    // The first motor beyond is named; of one motor, its position before its velocity.
+    let both = motion([100.0, 250.0, 400.0], [1000.0, 100.0, 0.0]);
+    assert_eq!(beyond(&tol, &want, &both, 3).unwrap().motor, 1);
+    assert_eq!(beyond(&tol, &want, &both, 3).unwrap().what, "position");
+    // Only the first n motors count.
+    assert_eq!(beyond(&tol, &want, &both, 1), None);
+}
+
+#[test]
+fn a_tolerance_of_zero_is_not_checked() {
+    let want = motion([100.0, 200.0, 300.0], [0.0; 3]);
+    let got = motion([-900.0, 200.0, 300.0], [0.0, 5000.0, 0.0]);
+    assert_eq!(beyond(&Tolerances::default(), &want, &got, 3), None);
+    let only_velocity = motion([0.0; 3], [0.0, 10.0, 0.0]);
+    assert_eq!(
+        beyond(&only_velocity, &want, &got, 3).map(|v| (v.motor, v.what)),
+        Some((1, "velocity"))
+    );
+    let mut only_position = Tolerances::default();
+    only_position.position[0] = 10.0;
+    assert_eq!(beyond(&only_position, &want, &got, MAX_MOTORS).map(|v| v.off), Some(1000.0));
+}
+
+#[test]
+fn a_violation_is_said_in_radians() {
+    let v = Violation { motor: 2, what: "velocity", off: 200.0, tolerance: 100.0 };
+    assert_eq!(v.words(1000.0), "motor3's velocity is 0.20000 rad/s off (tolerance 0.10000 rad/s)");
+    let v = Violation { motor: 0, what: "position", off: 5.0, tolerance: 2.0 };
+    assert_eq!(v.words(1000.0), "motor1's position is 0.00500 rad off (tolerance 0.00200 rad)");
+}
+
+/// What ends a running path other than its end: the session's end, a fault, the loop not
+/// taking it, another motion; a grip (no motion) and the path itself do not.
+#[test]
+fn a_path_is_ended_by_a_fault_the_sessions_end_or_another_motion_only() {
+    let path = 7;
+    let running = CommandResponse { ok: 1, accepted: path, motion: path, ..Default::default() };
+    assert_eq!(ended_by(&running, path), None);
+    // The loop has not taken it yet: still its own.
+    assert_eq!(ended_by(&CommandResponse { motion: path - 1, ..running }, path), None);
+    let gone = CommandResponse { ok: 0, refusal: Refusal::NotServing as u32, ..running };
+    let r = ended_by(&gone, path).unwrap();
+    assert_eq!(
+        (r.error_code, r.error_string.as_str()),
+        (FjtResult::INVALID_GOAL, "the session ended")
+    );
+    // Any other refusal of the status is no end.
+    let busy = CommandResponse { ok: 0, refusal: Refusal::Busy as u32, ..running };
+    assert_eq!(ended_by(&busy, path), None);
+    let fault =
+        CommandResponse { fault: FaultKind::wire(Some(FaultKind::FollowingError)), ..running };
+    let r = ended_by(&fault, path).unwrap();
+    assert!(r.error_string.starts_with("fault: following_error"), "{}", r.error_string);
+    let dropped = CommandResponse { not_taken: path, ..running };
+    assert_eq!(ended_by(&dropped, path).unwrap().error_string, "the loop did not take the path");
+    assert_eq!(ended_by(&CommandResponse { not_taken: path - 1, ..running }, path), None);
+    let taken_over = CommandResponse { motion: path + 1, ..running };
+    let r = ended_by(&taken_over, path).unwrap();
+    assert_eq!(r.error_string, "another command (move 8) took over the robot");
+}
+
+#[test]
+fn only_succeeded_canceled_and_aborted_goals_have_ended() {
+    let all = [
+        GoalStatus::UNKNOWN,
+        1, // ACCEPTED
+        GoalStatus::EXECUTING,
+        GoalStatus::CANCELING,
+        GoalStatus::SUCCEEDED,
+        GoalStatus::CANCELED,
+        GoalStatus::ABORTED,
+    ];
+    let over: Vec<i8> = all.into_iter().filter(|&s| ended(s)).collect();
+    assert_eq!(over, [GoalStatus::SUCCEEDED, GoalStatus::CANCELED, GoalStatus::ABORTED]);
+}
