@@ -8,17 +8,17 @@
 //! accepted when the controller takes the path, rejected with the reason logged and in
 //! `/diagnostics` when it or the bridge refuses it, or while another goal runs. While it
 //! runs, the feedback is the loop's command (desired), the motors (actual) and their
-//! difference, from the telemetry; a joint further from its command than its path tolerance
+//! difference, from the telemetry. A joint further from its command than its path tolerance
 //! in any telemetry sample the bridge receives (however late it turns: the telemetry queues
-//! 1024 samples, 1.6 s by default), or moving off its command's velocity by more than its tolerance, stops the robot
-//! and aborts the goal (`PATH_TOLERANCE_VIOLATED`). Once the command rests at
-//! the path's end, each joint has `goal_time_tolerance` to be within its goal tolerance
-//! (`GOAL_TOLERANCE_VIOLATED` if not). The tolerances bound positions and velocities (the
-//! change since the telemetry sample before; at the goal, from rest): 0 or −1 (or none given)
-//! is not checked, and acceleration bounds never are. A cancel stops the robot
-//! (jerk-limited) and the goal ends canceled once it rests; a fault, the session's end or
-//! another motion (a move, a stop — a grip on the way is none) ends it aborted. A
-//! `goal_time_tolerance` of 0 is [`DEFAULT_GOAL_TIME`].
+//! 1024 samples, 1.6 s by default), or off its command's velocity by more than its tolerance
+//! (velocities over the last 20 ms of telemetry), stops the robot and aborts the goal
+//! (`PATH_TOLERANCE_VIOLATED`). Once the command rests at the path's end, in the status and
+//! in the telemetry, each joint has `goal_time_tolerance` to be within its goal tolerance
+//! (position from the end, velocity from rest; `GOAL_TOLERANCE_VIOLATED` if not). A bound
+//! of 0 or −1 (or none given) is not checked, and acceleration bounds never are. A cancel
+//! stops the robot (jerk-limited) and the goal ends canceled once it rests; a fault, the
+//! session's end or another motion (a move, a stop — a grip on the way is none) ends it
+//! aborted. A `goal_time_tolerance` of 0 is [`DEFAULT_GOAL_TIME`].
 
 use crate::action_msgs::{
     CancelGoalRequest, CancelGoalResponse, FeedbackMessage, FjtFeedback, FjtResult,
@@ -41,6 +41,10 @@ const KEPT_GOALS: usize = 16;
 /// How long after the path's end the joints have to be within the goal tolerance when the
 /// goal leaves `goal_time_tolerance` 0 (the server's default, as the message's comment says).
 pub const DEFAULT_GOAL_TIME: Duration = Duration::from_secs(1);
+
+/// How near the path's end (counts) a sample's command is at it: the loop's last sample of a
+/// path is the end's numbers exactly.
+const END_MATCH_COUNTS: f64 = 1e-6;
 
 /// Feedback messages a second, at most.
 const FEEDBACK_HZ: f64 = 50.0;
@@ -405,7 +409,7 @@ impl Bridge {
         };
         let n = self.opts.converter.n_motors;
         let per_rad = self.opts.converter.counts_per_rad;
-        let (desired, actual) = self.motions();
+        let (desired, actual, since) = self.motions();
         let Some(run) = self.actions.goals[i].run.as_mut() else { return };
         if let Some(stop) = &run.stopping {
             let rested = status.settled >= stop.id && status.moving == 0;
@@ -420,9 +424,9 @@ impl Bridge {
             return self.finish(i, GoalStatus::ABORTED, outcome);
         }
         // The path's samples (once the loop took it: the telemetry before is the last move's):
-        // the path tolerance — positions in every sample received, velocities in the newest
-        // (against the newest of the turn before: a velocity over one sample is too coarse) —
-        // and feedback.
+        // the path tolerance — positions in every sample received, velocities over the last
+        // VELOCITY_WINDOW_NS (a velocity over one sample is too coarse), once all of it is the
+        // goal's — and feedback.
         if self.last.is_some() && status.taken >= run.path {
             let (positions, velocities) = run.path_tolerance.split();
             let broken = self
@@ -430,7 +434,11 @@ impl Bridge {
                 .iter()
                 .filter(|s| s.cycle >= run.from_cycle)
                 .find_map(|s| beyond(&positions, &Motion::at(s.cmd), &Motion::at(s.act), n))
-                .or_else(|| beyond(&velocities, &desired, &actual, n));
+                .or_else(|| {
+                    (since >= run.from_cycle)
+                        .then(|| beyond(&velocities, &desired, &actual, n))
+                        .flatten()
+                });
             if let Some(v) = broken {
                 let why = format!("path tolerance violated: {} from its command", v.words(per_rad));
                 let result = aborted(FjtResult::PATH_TOLERANCE_VIOLATED, why);
@@ -449,6 +457,15 @@ impl Bridge {
         }
         let Some(run) = self.actions.goals[i].run.as_mut() else { return };
         if status.settled < run.path || status.moving != 0 {
+            return;
+        }
+        // The telemetry shows the command at the end too (its last samples have been checked
+        // against the path tolerance: they come later than the status, through a relay).
+        let at_end = |s: &TelemetrySample| {
+            s.cycle >= run.from_cycle
+                && (0..n).all(|m| (s.cmd[m] - run.end.position[m]).abs() <= END_MATCH_COUNTS)
+        };
+        if !self.last.as_ref().is_none_or(at_end) {
             return;
         }
         // At rest at the end: within the goal tolerance, in goal_time_tolerance.
@@ -477,23 +494,25 @@ impl Bridge {
     }
 
     /// The loop's command (desired) and the motors (actual) in its newest telemetry sample:
-    /// positions and their rates since the sample before (0 without one).
-    fn motions(&self) -> (Motion, Motion) {
-        let Some(s) = self.last.as_ref() else { return Default::default() };
-        let prev = self.before_last.as_ref();
-        let dt = seconds_between(s, prev);
+    /// positions, and velocities over the last [`crate::bridge::VELOCITY_WINDOW_NS`] (0
+    /// without two samples); and the cycle of the sample they are measured from.
+    fn motions(&self) -> (Motion, Motion, u64) {
+        let (Some(first), Some(s)) = (self.recent.front(), self.recent.back()) else {
+            return Default::default();
+        };
+        let dt = seconds_between(s, Some(first));
         let motion = |of: fn(&TelemetrySample) -> &[f64; MAX_MOTORS]| Motion {
             position: *of(s),
-            velocity: rate(of(s), prev.map(of), dt),
+            velocity: rate(of(s), Some(of(first)), dt),
         };
-        (motion(|s| &s.cmd), motion(|s| &s.act))
+        (motion(|s| &s.cmd), motion(|s| &s.act), first.cycle)
     }
 
     /// The feedback of the newest sample: desired (the command), actual, and their
     /// difference, rad and rad/s.
     fn feedback(&self, goal_id: Uuid, stamp: Time) -> FeedbackMessage {
         let c = self.opts.converter;
-        let (desired, actual) = self.motions();
+        let (desired, actual, _) = self.motions();
         let error = Motion {
             position: std::array::from_fn(|m| desired.position[m] - actual.position[m]),
             velocity: std::array::from_fn(|m| desired.velocity[m] - actual.velocity[m]),

@@ -17,9 +17,10 @@ use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandRe
 use qmarc_proto::path::PathRequest;
 use qmarc_proto::progress::Progress;
 use qmarc_proto::service::IpcLocation;
-use qmarc_proto::telemetry::TelemetrySample;
+use qmarc_proto::telemetry::{TELEMETRY_BUFFER, TelemetrySample};
 use qmarc_telemetry::reader::{End, TelemetryReader};
 use qmarc_timer::clock::monotonic_now_ns;
+use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -90,9 +91,11 @@ pub(crate) struct Bridge {
     reader: TelemetryReader,
     /// The session's progress page: when its tick 0 was (none: stamps are the bridge's).
     progress: Option<Progress>,
-    /// The newest sample, and the one before it (the newest of the turn before).
+    /// The newest sample.
     pub(crate) last: Option<TelemetrySample>,
-    pub(crate) before_last: Option<TelemetrySample>,
+    /// The samples of the last [`VELOCITY_WINDOW_NS`] and the newest one before: the
+    /// action's velocities are measured from the first to the last.
+    pub(crate) recent: VecDeque<TelemetrySample>,
     /// Every sample this turn received, oldest first (a running goal's path tolerance holds
     /// in each, however late the bridge turned).
     pub(crate) fresh: Vec<TelemetrySample>,
@@ -103,6 +106,10 @@ pub(crate) struct Bridge {
     said_at: Option<Instant>,
     status_at: Option<Instant>,
 }
+
+/// The shortest time a velocity the action checks is measured over: one encoder count in it
+/// is 50 counts/s (at 4 ms, a velocity would be 250 counts/s coarse).
+pub(crate) const VELOCITY_WINDOW_NS: u64 = 20_000_000;
 
 /// Serves until the session ends (`Ok`) or `stop` is set.
 pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
@@ -129,8 +136,8 @@ pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
         reader,
         progress,
         last: None,
-        before_last: None,
-        fresh: Vec::with_capacity(qmarc_proto::telemetry::TELEMETRY_BUFFER),
+        recent: VecDeque::with_capacity(TELEMETRY_BUFFER),
+        fresh: Vec::with_capacity(TELEMETRY_BUFFER),
         actions: Actions::default(),
         homed: false,
         refused: String::new(),
@@ -184,13 +191,20 @@ impl Bridge {
         self.fresh.clear();
         while let Some(s) = self.reader.receive().map_err(|e| anyhow::anyhow!(e))? {
             self.fresh.push(s);
+            self.recent.push_back(s);
+            while self.recent.len() > TELEMETRY_BUFFER
+                || (self.recent.len() > 2
+                    && s.time_ns.saturating_sub(self.recent[1].time_ns) >= VELOCITY_WINDOW_NS)
+            {
+                self.recent.pop_front();
+            }
         }
         let stamp = Time::now();
         if let Some(&s) = self.fresh.last() {
             let c = self.opts.converter;
             let taken = self.sample_time(&s).unwrap_or(stamp);
             let js = c.joint_state(&s, self.last.as_ref(), taken);
-            self.before_last = self.last.replace(s);
+            self.last = Some(s);
             publish(&mut self.e.joint_states, &js);
             if let Some(p) = c.effector(&s, taken) {
                 publish(&mut self.e.effector, &p);

@@ -179,7 +179,9 @@ impl Node {
     /// A publisher of `t` on `name` (relative to the namespace, or absolute), declared as
     /// rmw_zenoh declares one for `qos`: dropping samples rather than waiting on a busy link;
     /// if transient local, detectable, with a cache of `depth` samples, and (if reliable)
-    /// sporadic heartbeats for the subscribers' miss detection.
+    /// sporadic heartbeats for the subscribers' miss detection. (A best-effort
+    /// transient-local topic's cache orders samples by timestamp, which the session's
+    /// `timestamping` must then enable: the bridge has no such topic.)
     pub fn publisher(
         &mut self,
         name: &str,

@@ -118,12 +118,24 @@ fn knots_from(
 
 /// The samples, one per servo period, of the path `req` from `start` (where the command
 /// rests) under `settings`: its first sample `start`, its last the path's end. `soft`: the
-/// frame is homed and every sample must be within the soft limits.
+/// frame is homed and every sample must be within the soft limits. The samples take at most
+/// [`QUEUE_BUDGET_BYTES`].
 pub fn path_queue(
     req: &PathRequest,
     start: &[f64; MAX_MOTORS],
     settings: &Settings,
     soft: bool,
+) -> Result<Vec<[f64; MAX_MOTORS]>, PathRefusal> {
+    path_queue_within(req, start, settings, soft, QUEUE_BUDGET_BYTES)
+}
+
+/// [`path_queue`], its samples taking at most `budget` bytes.
+fn path_queue_within(
+    req: &PathRequest,
+    start: &[f64; MAX_MOTORS],
+    settings: &Settings,
+    soft: bool,
+    budget: u64,
 ) -> Result<Vec<[f64; MAX_MOTORS]>, PathRefusal> {
     let n = settings.n_motors;
     let (knots, points) = knots_from(req, start, n, settings.trajectory.start_tolerance_counts)?;
@@ -143,10 +155,10 @@ pub fn path_queue(
     // (A path a whole number of periods long is that many periods, not one more for rounding.)
     let samples = (end / period - 1e-9).ceil() as u64 + 1;
     let bytes = samples * std::mem::size_of::<[f64; MAX_MOTORS]>() as u64;
-    if bytes > QUEUE_BUDGET_BYTES {
+    if bytes > budget {
         return Err(bad(format!(
-            "the path lasts {end} s: {samples} samples, more than the {} MiB a path may take",
-            QUEUE_BUDGET_BYTES >> 20
+            "the path lasts {end} s: {samples} samples, more than the {:.1} MiB a path may take",
+            budget as f64 / f64::from(1 << 20)
         )));
     }
     let rules = KnotRules::from_settings(settings);

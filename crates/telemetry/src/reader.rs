@@ -10,6 +10,7 @@ use qmarc_proto::telemetry::{
     TELEMETRY_BUFFER, TELEMETRY_SERVICE, TelemetryOpenError, TelemetrySample, TelemetryService,
     open_telemetry_service,
 };
+use std::collections::VecDeque;
 
 /// Node name of a reader.
 pub const READER_NODE: &str = "qmarc-scope";
@@ -24,6 +25,8 @@ pub struct TelemetryReader {
     count: SeqCount,
     last: Option<TelemetrySample>,
     publisher_seen: bool,
+    /// Samples still queued when the publisher was found gone, not yet received.
+    pending: VecDeque<TelemetrySample>,
 }
 
 /// Samples received and lost, from their numbers (0, 1, 2… over the move).
@@ -85,6 +88,7 @@ impl TelemetryReader {
             count: SeqCount::default(),
             last: None,
             publisher_seen: false,
+            pending: VecDeque::new(),
         })
     }
 
@@ -102,10 +106,13 @@ impl TelemetryReader {
     /// The next sample queued for this reader, if any; counted, and a gap in the numbers
     /// counted as lost.
     pub fn receive(&mut self) -> Result<Option<TelemetrySample>, String> {
-        let s = match self.subscriber.receive() {
-            Ok(Some(s)) => *s.payload(),
-            Ok(None) => return Ok(None),
-            Err(e) => return Err(format!("cannot read qmarc/telemetry: {e:?}")),
+        let s = match self.pending.pop_front() {
+            Some(s) => s,
+            None => match self.subscriber.receive() {
+                Ok(Some(s)) => *s.payload(),
+                Ok(None) => return Ok(None),
+                Err(e) => return Err(format!("cannot read qmarc/telemetry: {e:?}")),
+            },
         };
         self.count.see(s.seq);
         if is_last(&s) {
@@ -139,14 +146,26 @@ impl TelemetryReader {
     }
 
     /// How the move ended, once it did: its last sample was received, or its publisher,
-    /// once there, is gone.
+    /// once there, is gone and every sample it published has been received.
     pub fn end(&mut self) -> Option<End> {
         if let Some(s) = self.last {
             return Some(End::Last(s));
         }
+        if !self.pending.is_empty() {
+            return None;
+        }
         let publishers = self.publishers();
         self.publisher_seen |= publishers > 0;
-        (self.publisher_seen && publishers == 0).then_some(End::Gone)
+        if !(self.publisher_seen && publishers == 0) {
+            return None;
+        }
+        // Gone — but what it published before it went (after the caller last received) may
+        // still be queued, its last sample among it: kept for `receive`, and the end said
+        // once they have been received.
+        while let Ok(Some(s)) = self.subscriber.receive() {
+            self.pending.push_back(*s.payload());
+        }
+        self.pending.is_empty().then_some(End::Gone)
     }
 
     /// Publishers of the service now (0 once the move's controller let go of it).
@@ -232,4 +251,47 @@ pub fn runs(root: Option<&str>) -> Vec<FoundRun> {
 pub fn own_first(mut found: Vec<(std::time::SystemTime, FoundRun)>, me: u32) -> Vec<FoundRun> {
     found.sort_by_key(|(when, run)| (run.uid != me, std::cmp::Reverse(*when)));
     found.into_iter().map(|(_, r)| r).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::relay::TelemetryPublisher;
+
+    fn sample(seq: u64, phase: Phase) -> TelemetrySample {
+        TelemetrySample { seq, phase: phase.code(), ..TelemetrySample::default() }
+    }
+
+    /// A publisher that sends its last samples and goes between the reader's receiving and
+    /// its asking how the move ended: the move ended with its last sample (it was said to
+    /// have died, "controller_lost", when a loaded machine ran the two in that order).
+    #[test]
+    fn the_last_samples_of_a_publisher_gone_meanwhile_are_received_before_the_end() {
+        let location =
+            IpcLocation::new(&format!("qmarc_readerend_{}_", std::process::id()), DEFAULT_ROOT);
+        let publisher = TelemetryPublisher::open(&location).unwrap();
+        let mut reader = TelemetryReader::open(&location).unwrap();
+        assert_eq!(reader.end(), None, "its publisher is there");
+        assert!(publisher.publish(sample(0, Phase::Moving)));
+        assert!(publisher.publish(sample(1, Phase::Done)));
+        drop(publisher);
+        assert_eq!(reader.end(), None, "two samples to receive first");
+        assert_eq!(reader.receive().unwrap().map(|s| s.seq), Some(0));
+        assert_eq!(reader.receive().unwrap().map(|s| s.seq), Some(1));
+        assert_eq!(reader.receive().unwrap(), None);
+        assert_eq!(reader.end(), Some(End::Last(sample(1, Phase::Done))));
+        assert_eq!((reader.received(), reader.lost()), (2, 0));
+        drop(reader);
+        // A publisher gone without its last sample: gone, once what it sent is received.
+        let publisher = TelemetryPublisher::open(&location).unwrap();
+        let mut reader = TelemetryReader::open(&location).unwrap();
+        assert_eq!(reader.end(), None);
+        assert!(publisher.publish(sample(0, Phase::Moving)));
+        drop(publisher);
+        assert_eq!(reader.end(), None);
+        assert_eq!(reader.receive().unwrap().map(|s| s.seq), Some(0));
+        assert_eq!(reader.end(), Some(End::Gone));
+        drop(reader);
+        location.remove_files();
+    }
 }

@@ -224,26 +224,31 @@ fn a_chosen_velocity_is_the_parabolas_through_the_knot() {
     assert!(path_queue(&PathRequest::new(&[edge, then], false).unwrap(), &START, &s, true).is_ok());
 }
 
-/// A path may take at most the queue's budget (256 MiB of samples, 3355 s at 2.5 kHz) even
-/// where `trajectory.max_duration_s` allows more: one sample more is refused, saying so.
+/// A path may take at most the queue's budget (256 MiB of samples, 3355 s at 2.5 kHz, here
+/// 1000 samples) even where `trajectory.max_duration_s` allows more: one sample more is
+/// refused, saying so.
 #[test]
 fn a_path_longer_than_the_queue_holds_is_refused() {
     let mut s = settings();
     s.trajectory.max_duration_s = 1e6;
     let per_sample = std::mem::size_of::<[f64; MAX_MOTORS]>() as u64;
-    let most = (crate::source::QUEUE_BUDGET_BYTES / per_sample) as f64;
-    // `most` samples: the start and most − 1 periods.
-    let end = (most - 1.0) * s.period_s();
+    let budget = 1000 * per_sample;
+    // 1000 samples: the start and 999 periods.
+    let end = 999.0 * s.period_s();
     let rest = [START[0], START[1], START[2]];
-    let full = path_queue(
-        &PathRequest::new(&[knot(end, rest, [0.0; 3])], false).unwrap(),
+    let queue = |t: f64| {
+        let req = PathRequest::new(&[knot(t, rest, [0.0; 3])], false).unwrap();
+        path_queue_within(&req, &START, &s, true, budget)
+    };
+    assert_eq!(queue(end).map(|q| q.len()), Ok(1000));
+    let (_, why) = refusal(queue(end + s.period_s()));
+    assert!(why.contains("1001 samples, more than the 0.0 MiB a path may take"), "{why}");
+    // The real budget, in MiB.
+    let (_, why) = refusal(path_queue(
+        &PathRequest::new(&[knot(3400.0, rest, [0.0; 3])], false).unwrap(),
         &START,
         &s,
         true,
-    );
-    assert_eq!(full.map(|q| q.len() as f64), Ok(most));
-    let over = knot(end + s.period_s(), rest, [0.0; 3]);
-    let (_, why) =
-        refusal(path_queue(&PathRequest::new(&[over], false).unwrap(), &START, &s, true));
-    assert!(why.contains("more than the 256 MiB a path may take"), "{why}");
+    ));
+    assert!(why.contains("more than the 256.0 MiB a path may take"), "{why}");
 }
