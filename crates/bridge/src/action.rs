@@ -409,7 +409,7 @@ impl Bridge {
         };
         let n = self.opts.converter.n_motors;
         let per_rad = self.opts.converter.counts_per_rad;
-        let (desired, actual, since) = self.motions();
+        let (_, actual) = self.motions();
         let Some(run) = self.actions.goals[i].run.as_mut() else { return };
         if let Some(stop) = &run.stopping {
             let rested = status.settled >= stop.id && status.moving == 0;
@@ -424,21 +424,21 @@ impl Bridge {
             return self.finish(i, GoalStatus::ABORTED, outcome);
         }
         // The path's samples (once the loop took it: the telemetry before is the last move's):
-        // the path tolerance — positions in every sample received, velocities over the last
-        // VELOCITY_WINDOW_NS (a velocity over one sample is too coarse), once all of it is the
-        // goal's — and feedback.
+        // the path tolerance in every sample received — positions, and velocities over the
+        // VELOCITY_WINDOW_NS before it (a velocity over one sample is too coarse) once all of
+        // it is the goal's — and feedback.
         if self.last.is_some() && status.taken >= run.path {
             let (positions, velocities) = run.path_tolerance.split();
-            let broken = self
-                .fresh
-                .iter()
-                .filter(|s| s.cycle >= run.from_cycle)
-                .find_map(|s| beyond(&positions, &Motion::at(s.cmd), &Motion::at(s.act), n))
-                .or_else(|| {
-                    (since >= run.from_cycle)
-                        .then(|| beyond(&velocities, &desired, &actual, n))
-                        .flatten()
-                });
+            let broken = self.fresh.iter().filter(|(_, s)| s.cycle >= run.from_cycle).find_map(
+                |(first, s)| {
+                    beyond(&positions, &Motion::at(s.cmd), &Motion::at(s.act), n).or_else(|| {
+                        let (desired, actual) = motions(first, s);
+                        (first.cycle >= run.from_cycle)
+                            .then(|| beyond(&velocities, &desired, &actual, n))
+                            .flatten()
+                    })
+                },
+            );
             if let Some(v) = broken {
                 let why = format!("path tolerance violated: {} from its command", v.words(per_rad));
                 let result = aborted(FjtResult::PATH_TOLERANCE_VIOLATED, why);
@@ -495,24 +495,19 @@ impl Bridge {
 
     /// The loop's command (desired) and the motors (actual) in its newest telemetry sample:
     /// positions, and velocities over the last [`crate::bridge::VELOCITY_WINDOW_NS`] (0
-    /// without two samples); and the cycle of the sample they are measured from.
-    fn motions(&self) -> (Motion, Motion, u64) {
-        let (Some(first), Some(s)) = (self.recent.front(), self.recent.back()) else {
-            return Default::default();
-        };
-        let dt = seconds_between(s, Some(first));
-        let motion = |of: fn(&TelemetrySample) -> &[f64; MAX_MOTORS]| Motion {
-            position: *of(s),
-            velocity: rate(of(s), Some(of(first)), dt),
-        };
-        (motion(|s| &s.cmd), motion(|s| &s.act), first.cycle)
+    /// without two samples).
+    fn motions(&self) -> (Motion, Motion) {
+        match (self.recent.front(), self.recent.back()) {
+            (Some(first), Some(s)) => motions(first, s),
+            _ => Default::default(),
+        }
     }
 
     /// The feedback of the newest sample: desired (the command), actual, and their
     /// difference, rad and rad/s.
     fn feedback(&self, goal_id: Uuid, stamp: Time) -> FeedbackMessage {
         let c = self.opts.converter;
-        let (desired, actual, _) = self.motions();
+        let (desired, actual) = self.motions();
         let error = Motion {
             position: std::array::from_fn(|m| desired.position[m] - actual.position[m]),
             velocity: std::array::from_fn(|m| desired.velocity[m] - actual.velocity[m]),
@@ -534,6 +529,17 @@ impl Bridge {
             },
         }
     }
+}
+
+/// The loop's command (desired) and the motors (actual) in sample `s`: positions, and
+/// velocities since sample `first` (0 if it is no earlier).
+fn motions(first: &TelemetrySample, s: &TelemetrySample) -> (Motion, Motion) {
+    let dt = seconds_between(s, Some(first));
+    let motion = |of: fn(&TelemetrySample) -> &[f64; MAX_MOTORS]| Motion {
+        position: *of(s),
+        velocity: rate(of(s), Some(of(first)), dt),
+    };
+    (motion(|s| &s.cmd), motion(|s| &s.act))
 }
 
 /// An aborted goal's result.

@@ -96,9 +96,10 @@ pub(crate) struct Bridge {
     /// The samples of the last [`VELOCITY_WINDOW_NS`] and the newest one before: the
     /// action's velocities are measured from the first to the last.
     pub(crate) recent: VecDeque<TelemetrySample>,
-    /// Every sample this turn received, oldest first (a running goal's path tolerance holds
-    /// in each, however late the bridge turned).
-    pub(crate) fresh: Vec<TelemetrySample>,
+    /// Every sample this turn received, oldest first, each with the first of its
+    /// [`VELOCITY_WINDOW_NS`] (a running goal's path tolerance holds in each, however late
+    /// the bridge turned).
+    pub(crate) fresh: Vec<(TelemetrySample, TelemetrySample)>,
     pub(crate) actions: Actions,
     homed: bool,
     refused: String,
@@ -190,7 +191,6 @@ impl Bridge {
     fn turn(&mut self) -> anyhow::Result<bool> {
         self.fresh.clear();
         while let Some(s) = self.reader.receive().map_err(|e| anyhow::anyhow!(e))? {
-            self.fresh.push(s);
             self.recent.push_back(s);
             while self.recent.len() > TELEMETRY_BUFFER
                 || (self.recent.len() > 2
@@ -198,9 +198,10 @@ impl Bridge {
             {
                 self.recent.pop_front();
             }
+            self.fresh.push((self.recent[0], s));
         }
         let stamp = Time::now();
-        if let Some(&s) = self.fresh.last() {
+        if let Some(&(_, s)) = self.fresh.last() {
             let c = self.opts.converter;
             let taken = self.sample_time(&s).unwrap_or(stamp);
             let js = c.joint_state(&s, self.last.as_ref(), taken);
