@@ -11,7 +11,7 @@
 //! difference, from the telemetry. A joint further from its command than its path tolerance
 //! in any telemetry sample the bridge receives (however late it turns: the telemetry queues
 //! 1024 samples, 1.6 s by default), or off its command's velocity by more than its tolerance
-//! (velocities over the last 20 ms of telemetry), stops the robot and aborts the goal
+//! (in any sample too, over the 20 ms before it), stops the robot and aborts the goal
 //! (`PATH_TOLERANCE_VIOLATED`). Once the command rests at the path's end, in the status and
 //! in the telemetry, each joint has `goal_time_tolerance` to be within its goal tolerance
 //! (position from the end, velocity from rest; `GOAL_TOLERANCE_VIOLATED` if not). A bound
