@@ -269,6 +269,14 @@ mod tests {
     fn the_last_samples_of_a_publisher_gone_meanwhile_are_received_before_the_end() {
         let location =
             IpcLocation::new(&format!("qmarc_readerend_{}_", std::process::id()), DEFAULT_ROOT);
+        // Its files removed however the test ends.
+        struct Removed(IpcLocation);
+        impl Drop for Removed {
+            fn drop(&mut self) {
+                self.0.remove_files();
+            }
+        }
+        let _removed = Removed(location.clone());
         let publisher = TelemetryPublisher::open(&location).unwrap();
         let mut reader = TelemetryReader::open(&location).unwrap();
         assert_eq!(reader.end(), None, "its publisher is there");
@@ -291,7 +299,5 @@ mod tests {
         assert_eq!(reader.end(), None);
         assert_eq!(reader.receive().unwrap().map(|s| s.seq), Some(0));
         assert_eq!(reader.end(), Some(End::Gone));
-        drop(reader);
-        location.remove_files();
     }
 }
