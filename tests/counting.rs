@@ -252,13 +252,15 @@ fn homing_at_1x_passes_over_the_amplifier_gain_range() {
             "fake.toml",
             &s626_config(),
             &[
-                ("kv", &kv),
-                ("top_switch_counts", "-400"),
-                ("home_offset_counts", "400.0"),
-                ("hwserver.watchdog_periods", "2500"),
-                ("hwserver.response_timeout_periods", "2500"),
-                ("safety.max_missed_in_row", "2500"),
-            ],
+                [
+                    ("kv", kv.as_str()),
+                    ("top_switch_counts", "-400"),
+                    ("home_offset_counts", "400.0"),
+                ]
+                .as_slice(),
+                &qmarc_tests::VM_TIMING,
+            ]
+            .concat(),
         );
         home_ok(&run, &fake, &run.out(&format!("fake-{kv}")), Some("fake"));
     }

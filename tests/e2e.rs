@@ -442,7 +442,8 @@ fn threads_that_are_not_real_time_keep_off_the_pinned_cpu() {
     // On a one-CPU machine there is nowhere else to go: nothing changes.
     let rest = if others.is_empty() { mine.clone() } else { others };
     let out = run.out("out");
-    // A 2 s PVT path streamed on standard input, kept open: its knot thread stays alive.
+    // A 2 s PVT path streamed on standard input, held open (at rest where it ends) while
+    // the test looks: its knot thread stays alive.
     let mut child = run.spawn_starter(&[
         &format!("--config={}", cfg.display()),
         &format!("--out={}", out.display()),
@@ -451,9 +452,9 @@ fn threads_that_are_not_real_time_keep_off_the_pinned_cpu() {
         "--method=pvt",
         "--knots=-",
     ]);
-    let mut stdin = child.stdin.take().unwrap();
     let path = qmarc_tests::smooth_step_pvt(2_000.0, 40);
-    std::io::Write::write_all(&mut stdin, path.as_bytes()).unwrap();
+    let stream =
+        qmarc_tests::HeldStream::feed(child.stdin.take().unwrap(), &run.prefix, 400e-6, &path);
     qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
     let mut seen = Vec::new();
     for (pid, cmd) in run.processes() {
@@ -464,7 +465,7 @@ fn threads_that_are_not_real_time_keep_off_the_pinned_cpu() {
             seen.push(name);
         }
     }
-    drop(stdin);
+    stream.end();
     let r = qmarc_tests::wait_with_timeout(child, TIMEOUT);
     assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
     for name in ["qmarc-starter", "qmarc-hwserver", "qmarc-servo", "qmarc-knots", "qmarc-telemetry"]

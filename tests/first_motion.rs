@@ -228,15 +228,7 @@ fn check_finds_a_motor_wired_backwards_and_says_what_to_change() {
     // period of the clock: under a loaded host's missed periods it moves less than the time
     // says, so its speed against the feed-forward's is not judged here; on the simulator
     // above it is.)
-    let card = run.config_as(
-        "card.toml",
-        &qmarc_tests::s626_config(),
-        &[
-            ("hwserver.watchdog_periods", "2500"),
-            ("hwserver.response_timeout_periods", "2500"),
-            ("safety.max_missed_in_row", "2500"),
-        ],
-    );
+    let card = run.config_as("card.toml", &qmarc_tests::s626_config(), &qmarc_tests::VM_TIMING);
     let out = run.out("card");
     let r = starter(&run, &card, &out, &["--device=fake", "check"]);
     assert!(matches!(r.code, Some(0 | 2)), "{}\n{}", r.stdout, r.stderr);

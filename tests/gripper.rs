@@ -85,14 +85,7 @@ fn a_move_closes_the_gripper_at_its_end_on_the_simulated_robot() {
 #[test]
 fn a_move_closes_the_gripper_at_its_end_on_the_626_backend() {
     let run = TestRun::new("grip626");
-    let config = run.config_from(
-        &qmarc_tests::s626_config(),
-        &[
-            ("hwserver.watchdog_periods", "2500"),
-            ("hwserver.response_timeout_periods", "2500"),
-            ("safety.max_missed_in_row", "2500"),
-        ],
-    );
+    let config = run.config_from(&qmarc_tests::s626_config(), &qmarc_tests::VM_TIMING);
     let out = run.out("on");
     let (c, o) = (format!("--config={}", config.display()), format!("--out={}", out.display()));
     let r =

@@ -76,10 +76,7 @@ fn a_step_runs_through_the_626_backend_against_the_fake_card() {
     let out = run.out("out");
     // The 626 keeps the hardware bounds (10 and 25 periods); this VM's stalls are not the
     // backend's to survive, so this test raises them in its own settings.
-    let config = run.config_from(
-        &s626_config(),
-        &[("hwserver.watchdog_periods", "250"), ("safety.max_missed_in_row", "250")],
-    );
+    let config = run.config_from(&s626_config(), &qmarc_tests::VM_TIMING);
     let r = run.starter(
         &[
             &format!("--config={}", config.display()),

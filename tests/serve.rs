@@ -76,10 +76,9 @@ fn serve_takes_moves_and_new_targets_mid_motion_within_the_limits() {
     let s = settings(&config);
     let child = serve(&run, &config, &[]);
     assert!(accepted(&run, &["status"]).starts_with("at rest"));
-    // A slow move (over a second: a status under load still finds it moving), replaced while
-    // it runs by one the other way at full speed.
-    assert!(accepted(&run, &["move", "--to=3000,-2000,1000", "--speed=0.05"]).contains("move 1"));
-    std::thread::sleep(Duration::from_millis(30));
+    // A slow move (over five seconds: a status command that starts late on a loaded machine
+    // still finds it moving), replaced while it runs by one the other way at full speed.
+    assert!(accepted(&run, &["move", "--to=3000,-2000,1000", "--speed=0.01"]).contains("move 1"));
     let moving = accepted(&run, &["status"]);
     assert!(moving.starts_with("moving"), "{moving}");
     accepted(&run, &["move", "--to=-1500,2500,500"]);
@@ -176,13 +175,27 @@ fn serve_follows_a_path_through_its_knots_at_their_times() {
     let config = run.config_with(&[]);
     let s = settings(&config);
     let child = serve(&run, &config, &[]);
+    // The step (0.4 s), then held where it ends for longer than any command can take to
+    // start (issue 48: a second command that started after a 0.4 s path had ended was
+    // refused for another reason): the path runs until the test stops it.
+    let step = qmarc_tests::smooth_step_pvt(2000.0, 8);
+    let (knots, last) = step.trim_end().rsplit_once('\n').unwrap();
+    let held =
+        format!("{knots}\n{}\nX 2000 0 50 Y 0 0 50 Z 0 0 50\n", last.replace(" 50", " 120000"));
     let file = run.out("step.pvt");
-    std::fs::write(&file, qmarc_tests::smooth_step_pvt(2000.0, 8)).unwrap();
+    std::fs::write(&file, held).unwrap();
     let file = file.display().to_string();
     assert!(accepted(&run, &["path", &file]).starts_with("accepted (path 1)"));
     let r = cmd(&run, &["path", &file]);
     assert_eq!(r.code, Some(3), "{}", r.stdout);
     assert!(r.stdout.starts_with("refused (moving): a path starts from rest"), "{}", r.stdout);
+    // Stopped in its hold (once the step is done), it rests where the step ended.
+    let started = Instant::now();
+    while numbers_after(&accepted(&run, &["status"]), "command")[0] != 2000.0 {
+        assert!(started.elapsed() < TIMEOUT, "the step did not end");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    accepted(&run, &["stop"]);
     let done = accepted(&run, &["wait"]);
     assert_eq!(numbers_after(&done, "command"), [2000.0, 0.0, 0.0], "{done}");
     // From where it rests now, the same path's first knot is 2000 counts away.

@@ -23,6 +23,38 @@ fn scope(run: &TestRun, args: &[&str]) -> Child {
         .expect("spawn qmarc scope")
 }
 
+/// [`scope`], with its standard output's lines as they come (the receiver) and all of them
+/// once it ends (the thread's result).
+fn scope_lines(
+    run: &TestRun,
+    args: &[&str],
+) -> (Child, std::sync::mpsc::Receiver<String>, std::thread::JoinHandle<String>) {
+    let mut child = scope(run, args);
+    let (said, lines) = std::sync::mpsc::channel();
+    let stdout = child.stdout.take().expect("stdout");
+    let printed = std::thread::spawn(move || {
+        use std::io::BufRead;
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stdout).lines().map_while(Result::ok) {
+            all.push_str(&line);
+            all.push('\n');
+            let _ = said.send(line);
+        }
+        all
+    });
+    (child, lines, printed)
+}
+
+/// Waits (a minute at most) for a line containing `text` among `lines`.
+fn wait_for_line(lines: &std::sync::mpsc::Receiver<String>, text: &str) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    while !lines
+        .recv_timeout(deadline.saturating_duration_since(std::time::Instant::now()))
+        .unwrap_or_else(|_| panic!("no line saying {text:?}"))
+        .contains(text)
+    {}
+}
+
 /// The rows of a scope's CSV file: header, rows.
 fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
     let text = std::fs::read_to_string(path).expect("scope CSV");
@@ -70,9 +102,11 @@ fn scope_records_a_move_started_before_or_during_it_and_its_samples_are_gathered
     let run = TestRun::new("scope");
     let config = run.config_with(&[("duration_s", "3.0")]);
     let (before_csv, during_csv) = (run.out("before.csv"), run.out("during.csv"));
-    // Started before the move: it says no move runs, then waits.
-    let before = scope(&run, &["--csv", before_csv.to_str().unwrap()]);
-    std::thread::sleep(Duration::from_millis(300));
+    // Started before the move: it says no move runs, then waits — the move starts once it
+    // said so (issue 48: a fixed delay guessed at when it had started).
+    let (before, before_lines, before_printed) =
+        scope_lines(&run, &["--csv", before_csv.to_str().unwrap()]);
+    wait_for_line(&before_lines, "no move is running under");
     let out = run.out("out");
     let starter = run.spawn_starter(&[
         &format!("--config={}", config.display()),
@@ -84,8 +118,11 @@ fn scope_records_a_move_started_before_or_during_it_and_its_samples_are_gathered
     let during = scope(&run, &["--csv", during_csv.to_str().unwrap(), "--every", "2"]);
     let moved = wait_with_timeout(starter, Duration::from_secs(120));
     assert_eq!(moved.code, Some(0), "{}{}", moved.stdout, moved.stderr);
-    for (name, child, csv) in [("before", before, &before_csv), ("during", during, &during_csv)] {
-        let s = wait_with_timeout(child, Duration::from_secs(30));
+    let before = wait_with_timeout(before, Duration::from_secs(30));
+    let before =
+        qmarc_tests::Finished { stdout: before_printed.join().unwrap() + &before.stdout, ..before };
+    let during = wait_with_timeout(during, Duration::from_secs(30));
+    for (name, s, csv) in [("before", before, &before_csv), ("during", during, &during_csv)] {
         assert_eq!(s.code, Some(0), "scope {name}: {}{}", s.stdout, s.stderr);
         assert!(s.stdout.contains("detached: the move is done"), "scope {name}: {}", s.stdout);
         let matched = assert_rows_are_gathered(csv, &out);
@@ -93,8 +130,10 @@ fn scope_records_a_move_started_before_or_during_it_and_its_samples_are_gathered
         println!("scope {name}: {matched} samples, each a gather.csv row\n{}", s.stdout);
         assert!(matched > 100, "scope {name}: only {matched} samples");
         if name == "before" {
-            assert!(s.stdout.contains("no move is running under"), "{}", s.stdout);
-            assert!(matched > 1_500, "scope {name} missed most of the move: {matched}");
+            // Waiting when the move began, it attached in its first half (3 s: 1875 samples).
+            let (_, rows) = read_csv(csv);
+            let first: u64 = rows[0][0].parse().unwrap();
+            assert!(first < 900, "scope {name} missed the move's first half: from sample {first}");
         }
     }
     // The one started during the move saw it from its middle on, every 2nd sample.
@@ -118,30 +157,13 @@ fn a_reader_that_never_reads_or_is_killed_changes_nothing_of_the_move() {
     run.starter_ok(&[&c, &format!("--out={}", alone.display()), "step"]);
 
     let out = run.out("deaf");
-    let mut reader = scope(&run, &[]);
     // Its lines as they come: it is stopped once it says it attached.
-    let (said, lines) = std::sync::mpsc::channel();
-    let stdout = reader.stdout.take().expect("stdout");
-    let printed = std::thread::spawn(move || {
-        use std::io::BufRead;
-        let mut all = String::new();
-        for line in std::io::BufReader::new(stdout).lines().map_while(Result::ok) {
-            all.push_str(&line);
-            all.push('\n');
-            let _ = said.send(line);
-        }
-        all
-    });
+    let (mut reader, lines, printed) = scope_lines(&run, &[]);
     let starter = run.spawn_starter(&[&c, &format!("--out={}", out.display()), "step"]);
     qmarc_tests::wait_until_moving(&run.prefix, Duration::from_secs(60));
     // Attached (it polls every 50 ms; a loaded machine takes longer), then stopped: its queue
     // fills and overflows.
-    let attached = std::time::Instant::now() + Duration::from_secs(60);
-    while !lines
-        .recv_timeout(attached.saturating_duration_since(std::time::Instant::now()))
-        .expect("the scope attached to the move")
-        .contains("attached to the move")
-    {}
+    wait_for_line(&lines, "attached to the move");
     send_signal(reader.id(), nix::sys::signal::Signal::SIGSTOP);
     std::thread::sleep(Duration::from_millis(900));
     send_signal(reader.id(), nix::sys::signal::Signal::SIGKILL);

@@ -127,18 +127,18 @@ fn thesis_examples_run_on_two_motors() {
 }
 
 /// Feeds PVT knots into a running starter's standard input: the first three at once, the
-/// rest paced while the robot moves. With `close` false the pipe is held open after them,
-/// so the stream runs dry.
+/// rest paced while the robot moves. With `close` false the pipe is held open after them
+/// until the thread is joined (its result holds it), so the stream runs dry.
 fn feed(
     stdin: std::process::ChildStdin,
     lines: Vec<String>,
     close: bool,
-) -> std::thread::JoinHandle<()> {
+) -> std::thread::JoinHandle<Option<std::process::ChildStdin>> {
     std::thread::spawn(move || {
         let mut stdin = stdin;
         for (i, l) in lines.iter().enumerate() {
             if stdin.write_all(l.as_bytes()).and_then(|()| stdin.write_all(b"\n")).is_err() {
-                return;
+                return None;
             }
             let _ = stdin.flush();
             // A 200 ms lead, then a 20 ms knot every 5 ms: the lead outlasts the stalls of a
@@ -147,9 +147,7 @@ fn feed(
                 std::thread::sleep(Duration::from_millis(5));
             }
         }
-        if !close {
-            std::thread::sleep(Duration::from_secs(3));
-        }
+        (!close).then_some(stdin)
     })
 }
 

@@ -50,6 +50,16 @@ pub fn s626_config() -> PathBuf {
     workspace().join("config/s626.toml")
 }
 
+/// Timing bounds for a test on the 626's path (the fake card) in real time: the card's
+/// shipped bounds (10 and 25 periods) are a PREEMPT_RT machine's, and this VM stalls for up
+/// to 100 ms under load — not the backend's to survive, so such a test raises them (1 s)
+/// in its own settings.
+pub const VM_TIMING: [(&str, &str); 3] = [
+    ("hwserver.watchdog_periods", "2500"),
+    ("hwserver.response_timeout_periods", "2500"),
+    ("safety.max_missed_in_row", "2500"),
+];
+
 /// The settings the end-to-end tests run with: the shipped file. Its simulated robot rides
 /// out the multi-millisecond host stalls of a loaded VM without PREEMPT_RT (the backend's
 /// timing defaults, `config::TimingDefaults`), which the tests meet running in parallel; the
@@ -241,30 +251,35 @@ pub fn send_signal(pid: u32, sig: nix::sys::signal::Signal) {
     let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), sig);
 }
 
-/// Waits until a move of the run with iceoryx2 prefix `prefix` is under way: its hwserver has
-/// blocked and woken at least 200 times (a couple per servo cycle; before the move it answers a
-/// handful of requests). An observable start, where a fixed delay would guess wrong on a
-/// loaded machine. Panics after `timeout`.
+/// Waits until a move of the run with iceoryx2 prefix `prefix` is under way: its progress
+/// page says it is homing, moving, holding or settling (or already past them: the caller's
+/// own check then says what it finds). An observable start, where a fixed delay would guess
+/// wrong on a loaded machine. Panics after `timeout`.
 pub fn wait_until_moving(prefix: &str, timeout: Duration) {
-    let start = Instant::now();
-    loop {
-        let hw = processes_matching(prefix).into_iter().find(|(_, c)| c.contains("qmarc-hwserver"));
-        if let Some((pid, _)) = hw
-            && voluntary_switches(pid) >= 200
-        {
-            return;
-        }
-        assert!(start.elapsed() < timeout, "no move under way within {timeout:?}");
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    use qmarc_proto::state::Phase;
+    wait_for_progress(prefix, timeout, "a move under way", |s| s.phase >= Phase::Homing.code());
 }
 
-/// Voluntary context switches of all threads of `pid` (0 if it is gone).
-fn voluntary_switches(pid: u32) -> u64 {
-    thread_statuses(pid)
-        .iter()
-        .filter_map(|s| status_field(s, "voluntary_ctxt_switches")?.parse::<u64>().ok())
-        .sum()
+/// Waits until the progress page of the run with iceoryx2 prefix `prefix` (the controller's
+/// phase and cycle) satisfies `done`; panics after `timeout`, naming `what`.
+pub fn wait_for_progress(
+    prefix: &str,
+    timeout: Duration,
+    what: &str,
+    done: impl Fn(&qmarc_proto::progress::Snapshot) -> bool,
+) -> qmarc_proto::progress::Snapshot {
+    use qmarc_proto::progress::Progress;
+    let page = Progress::path(prefix);
+    let start = Instant::now();
+    loop {
+        if let Ok(s) = Progress::open(&page).map(|p| p.read())
+            && done(&s)
+        {
+            return s;
+        }
+        assert!(start.elapsed() < timeout, "no {what} within {timeout:?}");
+        std::thread::sleep(Duration::from_millis(2));
+    }
 }
 
 /// `/proc/<pid>/task/*/status` of every thread of `pid` (none if it is gone).
@@ -290,6 +305,76 @@ pub fn smooth_step_pvt(distance: f64, segments: u32) -> String {
             format!("X {p} {v:.3} 50 Y 0 0 50 Z 0 0 50\n")
         })
         .collect()
+}
+
+/// A PVT stream that never runs dry while a test looks at the run: [`HeldStream::feed`]
+/// writes a path, then keeps adding knots at rest where it ended, a second or more ahead of
+/// the loop (the run's progress page), until [`HeldStream::end`] closes the stream. However
+/// late a loaded machine runs the test, the stream neither starves nor ends before it says.
+pub struct HeldStream {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: std::thread::JoinHandle<()>,
+}
+
+impl HeldStream {
+    /// Writes the PVT knot lines `path` into `sink`, the stream of the run with iceoryx2
+    /// prefix `prefix` and servo period `period_s`, then holds its last position.
+    pub fn feed(
+        mut sink: impl std::io::Write + Send + 'static,
+        prefix: &str,
+        period_s: f64,
+        path: &str,
+    ) -> HeldStream {
+        use std::sync::atomic::AtomicBool;
+        let last = path.lines().last().expect("a path").split_whitespace().collect::<Vec<_>>();
+        // Per motor: label, position, velocity, time to the next knot (ms).
+        let hold: String = last
+            .chunks(4)
+            .map(|m| format!("{} {} 0 20 ", m[0], m[1]))
+            .collect::<String>()
+            .trim_end()
+            .to_string();
+        let ms = |line: &str| line.split_whitespace().nth(3).map_or(0.0, |t| t.parse().unwrap());
+        let mut lines = path.lines();
+        let first = lines.next().expect("a path");
+        // The path's time up to its last knot written, s.
+        let mut written_s = 0.0;
+        let mut next_ms = ms(first);
+        sink.write_all(format!("{first}\n").as_bytes()).expect("the stream");
+        for line in lines {
+            written_s += next_ms / 1e3;
+            next_ms = ms(line);
+            sink.write_all(format!("{line}\n").as_bytes()).expect("the stream");
+        }
+        let _ = sink.flush();
+        let stop = std::sync::Arc::new(AtomicBool::new(false));
+        let page = qmarc_proto::progress::Progress::path(prefix);
+        let thread = std::thread::spawn({
+            let stop = stop.clone();
+            move || {
+                while !stop.load(Ordering::Acquire) {
+                    let cycle =
+                        qmarc_proto::progress::Progress::open(&page).map_or(0, |p| p.read().cycle);
+                    while written_s < cycle as f64 * period_s + 1.0 {
+                        written_s += next_ms / 1e3;
+                        next_ms = 20.0;
+                        if sink.write_all(format!("{hold}\n").as_bytes()).is_err() {
+                            return;
+                        }
+                    }
+                    let _ = sink.flush();
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+            }
+        });
+        HeldStream { stop, thread }
+    }
+
+    /// Closes the stream: the path ends at the last knot written.
+    pub fn end(self) {
+        self.stop.store(true, Ordering::Release);
+        self.thread.join().expect("the feeder");
+    }
 }
 
 /// Processes (pid, command line) whose command line contains `needle`, except this one.
@@ -346,18 +431,18 @@ pub fn run_with_timeout(cmd: &mut Command, timeout: Duration) -> Finished {
 /// Waits for `child` (spawned with piped stdout and stderr), capturing its output; kills it
 /// and panics after `timeout`.
 pub fn wait_with_timeout(mut child: std::process::Child, timeout: Duration) -> Finished {
-    let mut out = child.stdout.take().expect("stdout");
-    let mut err = child.stderr.take().expect("stderr");
-    let out_reader = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = out.read_to_string(&mut s);
-        s
-    });
-    let err_reader = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = err.read_to_string(&mut s);
-        s
-    });
+    // A pipe the caller took to read itself reads here as empty.
+    let read = |pipe: Option<Box<dyn Read + Send>>| {
+        std::thread::spawn(move || {
+            let mut s = String::new();
+            if let Some(mut pipe) = pipe {
+                let _ = pipe.read_to_string(&mut s);
+            }
+            s
+        })
+    };
+    let out_reader = read(child.stdout.take().map(|p| Box::new(p) as Box<dyn Read + Send>));
+    let err_reader = read(child.stderr.take().map(|p| Box::new(p) as Box<dyn Read + Send>));
     let started = Instant::now();
     let status = loop {
         if let Some(s) = child.try_wait().expect("wait") {

@@ -158,7 +158,9 @@ fn pick_runs_the_delta_cycle_through_a_serving_session() {
     let t = serving_bench("pick", &["pick", "--cycles=2", "--blend-mm=3"]);
     assert!(t.contains("qmarc-bench pick: 2 cycles at (-150, 0, -600) mm"), "{t}");
     assert!(t.contains("picks/min") && t.contains("thesis X-Z path"), "{t}");
-    assert!(t.contains("tracking error") && t.contains(" 0 lost"), "{t}");
+    // How many telemetry samples a loaded machine's reader lost is the benchmark's figure,
+    // not this test's (issue 48): the line says it.
+    assert!(t.contains("tracking error (") && t.contains(" lost): effector max"), "{t}");
 }
 
 /// Runs `qmarc-bench ARGS` (a subcommand that serves a session under the prefix of `name`)

@@ -170,6 +170,18 @@ impl Cell {
         }
     }
 
+    /// Diagnostics messages until one satisfies `found` (30 s at most: the bridge forwards
+    /// and the controller answers when a loaded machine lets them); that one.
+    fn diagnostics_until(&self, found: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
+        let started = Instant::now();
+        loop {
+            if let Some(d) = self.lines(&["diagnostics", "1"]).into_iter().find(|d| found(d)) {
+                return d;
+            }
+            assert!(started.elapsed() < Duration::from_secs(30), "{}", self.bridge_log());
+        }
+    }
+
     /// Quits the session; its exit status.
     fn quit(&mut self) -> std::process::ExitStatus {
         let _ = self.client().send(CommandRequest::of(CommandKind::Quit));
@@ -186,6 +198,21 @@ impl Drop for Cell {
         IpcLocation::new(&self.prefix, DEFAULT_ROOT).remove_files();
         let _ = std::fs::remove_dir_all(&self.dir);
     }
+}
+
+/// Waits until the controller has accepted an order after the `before`-th (the bridge
+/// forwarded what a client published; 30 s at most), then until it is done: the status then.
+/// A bare [`CommandClient::wait`] would return at once, on the orders before it.
+fn wait_for_order_after(
+    client: &mut CommandClient,
+    before: u64,
+) -> qmarc_proto::command::CommandResponse {
+    let started = Instant::now();
+    while client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted <= before {
+        assert!(started.elapsed() < Duration::from_secs(30), "no order reached the controller");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    client.wait(Duration::from_secs(30)).unwrap()
 }
 
 /// Whether process `pid` runs (a zombie, dead but not yet reaped, does not).
@@ -232,19 +259,16 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     let r = cell.lines(&["stop"]);
     assert_eq!(r[0]["success"], true, "{r:?}");
     // A target the robot goes to.
-    cell.lines(&["target", "0.02", "-0.01", "-0.64"]);
     let mut client = cell.client();
-    let s = client.wait(Duration::from_secs(30)).unwrap();
+    let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted;
+    cell.lines(&["target", "0.02", "-0.01", "-0.64"]);
+    let s = wait_for_order_after(&mut client, before);
     let [x, y, z] = s.effector_mm;
     assert!(close(x, 20.0, 1e-6) && close(y, -10.0, 1e-6) && close(z, -640.0, 1e-6), "{x} {y} {z}");
     // An unreachable one: the controller refuses it, the bridge says why.
     let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted;
     cell.lines(&["target", "0", "0", "-0.2"]);
-    let diag = cell.lines(&["diagnostics", "2"]);
-    assert!(
-        diag.iter().any(|d| d["values"]["refused"].as_str().unwrap().contains("unreachable")),
-        "{diag:?}"
-    );
+    cell.diagnostics_until(|d| d["values"]["refused"].as_str().unwrap().contains("unreachable"));
     // Garbage and an oversized payload: not taken, nothing sent on.
     cell.lines(&["raw-target", "3"]);
     cell.lines(&["raw-target", "2000000"]);
@@ -308,7 +332,7 @@ fn joint_trajectories(cell: &Cell, client: &mut CommandClient, rest: [f64; 4]) -
     });
     let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted;
     cell.lines(&["trajectory", &spec.to_string()]);
-    let s = client.wait(Duration::from_secs(30)).unwrap();
+    let s = wait_for_order_after(client, before);
     assert_eq!(
         (s.accepted, s.settled, s.fault),
         (before + 1, before + 1, 0),
@@ -325,14 +349,9 @@ fn joint_trajectories(cell: &Cell, client: &mut CommandClient, rest: [f64; 4]) -
     let fast = serde_json::json!({"names": ["motor1", "motor2", "motor3"], "points": [{"t": 0.01, "positions": [1.0, 0.0, 0.0]}]});
     cell.lines(&["trajectory", &fast.to_string()]);
     cell.log_says("qmarc/joint_trajectory: not taken: joint_names must be motor1, motor2, motor3");
-    let diag = cell.lines(&["diagnostics", "2"]);
-    assert!(
-        diag.iter().any(|d| d["values"]["refused"]
-            .as_str()
-            .unwrap()
-            .contains("max_velocity_counts_per_s")),
-        "{diag:?}"
-    );
+    cell.diagnostics_until(|d| {
+        d["values"]["refused"].as_str().unwrap().contains("max_velocity_counts_per_s")
+    });
     assert_eq!(client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted, before + 1);
     counts.to_vec()
 }
@@ -613,7 +632,6 @@ fn serve_with_bridge_starts_it_and_outlives_its_death() {
         .unwrap();
     let location = IpcLocation::new(&prefix, DEFAULT_ROOT);
     let mut client = CommandClient::connect(&location).unwrap();
-    std::thread::sleep(Duration::from_millis(300));
     let r = client.send(CommandRequest::move_to(&[500.0, -500.0, 250.0], 1.0)).unwrap();
     assert_eq!(r.ok, 1, "still serving: {}", r.reason());
     let s = client.wait(Duration::from_secs(30)).unwrap();

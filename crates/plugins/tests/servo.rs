@@ -789,12 +789,15 @@ fn a_telemetry_publish_allocates_exactly_its_loan_and_the_relay_delivers_every_s
     let (cycles, reader) = {
         let (mut tx, rx) = qmarc_controller::telemetry::ring(1);
         let relay = spawn(ipc.location.clone(), rx).unwrap();
-        let mut reader = (0..200)
-            .find_map(|_| {
-                std::thread::sleep(Duration::from_millis(10));
-                TelemetryReader::open(&ipc.location).ok()
-            })
-            .expect("the relay's service");
+        // Once the relay serves (30 s at most: a loaded machine starts its thread late).
+        let opening = std::time::Instant::now();
+        let mut reader = loop {
+            if let Ok(r) = TelemetryReader::open(&ipc.location) {
+                break r;
+            }
+            assert!(opening.elapsed() < Duration::from_secs(30), "the relay's service");
+            std::thread::sleep(Duration::from_millis(10));
+        };
         for k in 0..1_000 {
             tx.offer(TelemetrySample { cycle: k, ..TelemetrySample::default() });
         }

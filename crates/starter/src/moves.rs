@@ -323,7 +323,9 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
             b.watch(&mut status.borrow_mut());
         }
     });
-    if let Some(b) = bridge {
+    if let Some(mut b) = bridge {
+        // A death between the last look and the session's end is said too.
+        b.watch(&mut status.borrow_mut());
         b.stop();
     }
     status.borrow_mut().clear();

@@ -276,7 +276,17 @@ mod tests {
     fn survivors_are_terminated_after_the_grace_time() {
         let sh = Path::new("/bin/sh");
         let quick = spawn(sh, &["-c".into(), "exit 4".into()]).unwrap();
-        let stubborn = spawn(sh, &["-c".into(), "trap '' TERM; exec sleep 30".into()]).unwrap();
+        // It says when it ignores SIGTERM: the test goes on only then (a shell that had not
+        // run its `trap` yet would die of the SIGTERM).
+        let ready = std::env::temp_dir().join(format!("qmarc-stubborn-{}", std::process::id()));
+        let script = format!("trap '' TERM; : > {}; exec sleep 30", ready.display());
+        let stubborn = spawn(sh, &["-c".into(), script]).unwrap();
+        let waiting = Instant::now();
+        while !ready.exists() {
+            assert!(waiting.elapsed() < Duration::from_secs(60), "the shell did not start");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let _ = std::fs::remove_file(&ready);
         let ms = Duration::from_millis;
         let mut kids = vec![
             Supervised::new("quick", quick, ms(50), ms(50)),
