@@ -113,7 +113,7 @@ fn serve_grips_on_command_and_refuses_without_a_gripper() {
         run_with_timeout(&mut c, TIMEOUT)
     };
     let started = Instant::now();
-    while !cmd(&["status"]).stdout.contains("loop moving") {
+    while !cmd(&["status"]).stdout.contains("loop serving") {
         assert!(started.elapsed() < TIMEOUT, "the session did not start serving");
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -146,7 +146,7 @@ fn serve_grips_on_command_and_refuses_without_a_gripper() {
     assert!(!read_gather(&run.out("none")).0.contains(&"grip".to_string()));
     let child = run.spawn_starter(&[&c, &o, "--deterministic", "serve"]);
     let started = Instant::now();
-    while !cmd(&["status"]).stdout.contains("loop moving") {
+    while !cmd(&["status"]).stdout.contains("loop serving") {
         assert!(started.elapsed() < TIMEOUT, "the session did not start serving");
         std::thread::sleep(Duration::from_millis(20));
     }

@@ -25,7 +25,7 @@ fn serve(run: &TestRun, config: &Path, extra: &[&str]) -> Child {
     args.push("serve");
     let child = run.spawn_starter(&args);
     let started = Instant::now();
-    while !cmd(run, &["status"]).stdout.contains("loop moving") {
+    while !cmd(run, &["status"]).stdout.contains("loop serving") {
         assert!(started.elapsed() < TIMEOUT, "the session did not start serving");
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -220,5 +220,160 @@ fn serve_follows_a_path_through_its_knots_at_their_times() {
     }
     let ratio = sampled_ratio(&cmds, 3, s.period_s(), &MotionLimits::of(&s));
     assert!(ratio <= 1.0 + ROUNDING, "the path exceeds a limit: ratio {ratio}");
+    run.assert_clean();
+}
+
+/// Issue 42, item 1: a second session on a live session's iceoryx2 prefix is refused before
+/// it touches anything, naming the live one (its pid, its command, its output folder), and
+/// the live one goes on answering as before, its files all there.
+#[test]
+fn a_live_sessions_prefix_is_refused_and_the_session_goes_on() {
+    let run = TestRun::new("liveprefix");
+    let config = run.config_with(&[]);
+    let child = serve(&run, &config, &[]);
+    let files = run.location().files();
+    let run_file = qmarc_proto::service::run_file(&run.prefix);
+    assert!(files.contains(&run_file), "{files:?}");
+    let config_arg = format!("--config={}", config.display());
+    for what in [&["serve"][..], &["home"], &["move", "--to", "-100,0,0"]] {
+        let other = run.out("other");
+        let mut args = vec![config_arg.as_str(), "--deterministic"];
+        let out = format!("--out={}", other.display());
+        args.push(&out);
+        args.extend_from_slice(what);
+        let r = run.starter(&args, TIMEOUT);
+        assert_eq!(r.code, Some(3), "{what:?}: {}\n{}", r.stdout, r.stderr);
+        let said = format!(
+            "iceoryx2 prefix `{}` belongs to a live serving session: pid {} (",
+            run.prefix,
+            child.id()
+        );
+        assert!(r.stderr.contains(&said), "{what:?}: {}", r.stderr);
+        assert!(r.stderr.contains(&format!("output folder {}", run.out("out").display())));
+        assert!(r.stderr.contains(" serve), "), "its command: {}", r.stderr);
+        assert!(!other.exists(), "nothing of the refused run was made");
+    }
+    // Every file of the live session is still there, and it answers as before.
+    let left = run.location().files();
+    assert!(files.iter().all(|f| left.contains(f)), "{files:?}\n{left:?}");
+    let status = accepted(&run, &["status"]);
+    assert!(status.starts_with("at rest; loop serving"), "{status}");
+    accepted(&run, &["quit"]);
+    let r = qmarc_tests::wait_with_timeout(child, TIMEOUT);
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    // It said, once serving, where it was and how to command it.
+    let said = format!(
+        "qmarc-starter: serving under iceoryx2 prefix {}, data to {}\n  command it: qmarc cmd \
+         --iox-prefix {} status",
+        run.prefix,
+        run.out("out").display(),
+        run.prefix
+    );
+    assert!(r.stderr.contains(&said), "{}", r.stderr);
+    run.assert_clean();
+}
+
+/// Issue 42, items 2, 4 and 5: with two serving sessions and no prefix, `qmarc cmd` refuses
+/// and lists them; every answer names the session it addressed; negative coordinates are
+/// typed as they are; what the starter would refuse is refused at once in its words, with its
+/// exit code; quit says what it does.
+#[test]
+fn qmarc_cmd_names_its_session_and_refuses_what_the_starter_refuses() {
+    let run = TestRun::new("twosess");
+    let config = run.config_with(&[]);
+    let first = serve(&run, &config, &[]);
+    // A second session under the same iceoryx2 root, another prefix (not one that starts
+    // with the first's: a run removes the files that start with its prefix).
+    let second_prefix = format!("qu{}", &run.prefix[2..]);
+    let second = Command::new(bin_dir().join("qmarc-starter"))
+        .args([
+            format!("--iox-prefix={second_prefix}"),
+            format!("--iox-root={}", run.root()),
+            format!("--config={}", config.display()),
+            format!("--out={}", run.out("second").display()),
+            "--deterministic".into(),
+            "serve".into(),
+        ])
+        .current_dir(qmarc_tests::workspace())
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let root = format!("--iox-root={}", run.root());
+    let anyone = |args: &[&str]| {
+        let mut c = Command::new(bin_dir().join("qmarc"));
+        c.arg("cmd").arg(&root).args(args);
+        run_with_timeout(&mut c, TIMEOUT)
+    };
+    let started = Instant::now();
+    let r = loop {
+        let r = anyone(&["status"]);
+        if r.stderr.contains(&second_prefix) {
+            break r;
+        }
+        assert!(started.elapsed() < TIMEOUT, "the second session did not serve: {}", r.stderr);
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
+    assert!(
+        r.stderr.contains("2 serving sessions run; say which with --iox-prefix"),
+        "{}",
+        r.stderr
+    );
+    for (prefix, pid, out) in [
+        (&run.prefix, first.id(), run.out("out")),
+        (&second_prefix, second.id(), run.out("second")),
+    ] {
+        let line = format!("--iox-prefix {prefix}   pid {pid} (");
+        assert!(r.stderr.contains(&line), "{line} in {}", r.stderr);
+        assert!(r.stderr.contains(&format!("output folder {}, started ", out.display())));
+    }
+    assert!(r.stdout.is_empty(), "nothing was sent: {}", r.stdout);
+    // Every answer names its session.
+    let named = format!(
+        "  session {}: pid {}, output folder {}",
+        run.prefix,
+        first.id(),
+        run.out("out").display()
+    );
+    let moved = accepted(&run, &["move", "--xyz", "-60,0,-650", "--speed", "0.5"]);
+    assert!(moved.starts_with("accepted (move 1)\n") && moved.contains(&named), "{moved}");
+    let done = accepted(&run, &["wait"]);
+    assert!(done.contains(&named), "{done}");
+    assert!((numbers_after(&done, "effector")[0] + 60.0).abs() < 0.01, "{done}");
+    // What the starter refuses, in its words and with its code (3), before anything is sent.
+    let starter = run.starter(
+        &[&format!("--config={}", config.display()), "--print-settings", "move", "--to", "1,2,3,4"],
+        TIMEOUT,
+    );
+    let words = "--to: one position per motor in use: 3 numbers, found 4";
+    assert!(starter.code == Some(3) && starter.stderr.contains(words), "{}", starter.stderr);
+    let r = cmd(&run, &["move", "--to", "1,2,3,4"]);
+    assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
+    let refused = format!("refused (bad_request): {words}\n{named}");
+    assert!(r.stdout.starts_with(&refused), "{}", r.stdout);
+    let r = cmd(&run, &["move", "--to", "100,0,0", "--speed", "1e-300"]);
+    assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
+    assert!(
+        r.stdout
+            .starts_with("refused (bad_request): no jerk-limited profile from the command's state"),
+        "{}",
+        r.stdout
+    );
+    let status = accepted(&run, &["status"]);
+    assert!(status.contains("moves accepted 1, settled 1"), "nothing else was taken: {status}");
+    // Quit says what it does.
+    for (prefix, child) in [(run.prefix.clone(), first), (second_prefix.clone(), second)] {
+        let r = anyone(&[&format!("--iox-prefix={prefix}"), "quit"]);
+        assert!(
+            r.stdout.starts_with("accepted (quit): the robot stops, then the session ends"),
+            "{}\n{}",
+            r.stdout,
+            r.stderr
+        );
+        let end = qmarc_tests::wait_with_timeout(child, TIMEOUT);
+        assert_eq!(end.code, Some(0), "{}\n{}", end.stdout, end.stderr);
+    }
     run.assert_clean();
 }

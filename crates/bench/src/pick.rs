@@ -31,12 +31,7 @@ pub struct PickArgs {
     #[arg(long, default_value_t = 10)]
     pub cycles: u32,
     /// The pick point, mm (x, y, z in the base frame): the thesis path's start.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        allow_negative_numbers = true,
-        default_value = "-150,0,-600"
-    )]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "-150,0,-600")]
     pub at: Vec<f64>,
     /// How far the place point is along x, mm.
     #[arg(long, default_value_t = 300.0)]

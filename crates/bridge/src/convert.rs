@@ -189,7 +189,7 @@ impl SessionState {
     pub fn of(s: &TelemetrySample, homed: bool, refused: &str) -> SessionState {
         use qmarc_proto::state::{FaultKind, Phase};
         SessionState {
-            phase: Phase::from_code(s.phase).map_or("unknown", Phase::name).to_string(),
+            phase: Phase::from_code(s.phase).map_or("unknown", Phase::name_serving).to_string(),
             fault: FaultKind::from_wire(s.fault).map_or(String::new(), |f| f.to_string()),
             homed,
             estop: Status(s.status).intersects(Status::ESTOP),
@@ -290,9 +290,9 @@ mod tests {
 
     #[test]
     fn the_diagnostics_say_the_worst_first() {
-        let ok = SessionState { phase: "moving".into(), homed: true, ..SessionState::default() };
+        let ok = SessionState { phase: "serving".into(), homed: true, ..SessionState::default() };
         let d = ok.diagnostics("sim", Time::default());
-        assert_eq!((d.status[0].level, d.status[0].message.as_str()), (0, "moving"));
+        assert_eq!((d.status[0].level, d.status[0].message.as_str()), (0, "serving"));
         let unhomed = SessionState { homed: false, ..ok.clone() };
         assert_eq!(unhomed.diagnostics("sim", Time::default()).status[0].level, 1);
         let refused = SessionState { refused: "unreachable: 0, 0, 0 mm".into(), ..ok.clone() };

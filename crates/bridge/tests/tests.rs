@@ -251,7 +251,7 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     let fx = cell.lines(&["effector", "1"]);
     assert_eq!(fx[0]["frame"], "base");
     let diag = cell.lines(&["diagnostics", "1"]);
-    assert_eq!(diag[0]["values"]["phase"], "moving", "{diag:?}");
+    assert_eq!(diag[0]["values"]["phase"], "serving", "{diag:?}");
     assert_eq!(diag[0]["values"]["homed"], "true");
     // The services.
     let r = cell.lines(&["gripper", "on"]);

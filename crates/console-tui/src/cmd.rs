@@ -10,7 +10,8 @@ use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandRe
 use qmarc_proto::path::{MAX_PATH_KNOTS, PathKnot, PathRequest};
 use qmarc_proto::service::IpcLocation;
 use qmarc_proto::state::{FaultKind, Phase};
-use qmarc_telemetry::reader::{serving, serving_session};
+use qmarc_telemetry::reader::{SessionFindError, serving, serving_session};
+use qmarc_telemetry::session::LiveRun;
 use std::ffi::OsString;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -35,13 +36,13 @@ enum Cmd {
     /// in the next servo cycle, without a jump.
     Move {
         /// Joint counts, one per motor: `--to 1000,-500,250`.
-        #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "C1,C2,C3")]
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_name = "C1,C2,C3")]
         to: Option<Vec<f64>>,
         /// The effector's point in mm: `--xyz 0,50,-650`.
         #[arg(
             long,
             value_delimiter = ',',
-            allow_negative_numbers = true,
+            allow_hyphen_values = true,
             value_name = "X,Y,Z",
             conflicts_with = "to"
         )]
@@ -80,12 +81,30 @@ enum Cmd {
     Quit,
 }
 
-/// The location of the serving session, `--iox-prefix`'s, else the newest of yours, and its
-/// motors.
-fn session(args: &CmdArgs) -> anyhow::Result<(IpcLocation, qmarc_config::Settings)> {
-    let (location, spec) = serving_session(args.iox_prefix.as_deref(), args.iox_root.as_deref())
-        .map_err(|e| anyhow::anyhow!(e))?;
-    Ok((location, spec.settings))
+/// The serving session `qmarc cmd` addresses: where, its settings, and how to name it.
+struct Session {
+    location: IpcLocation,
+    settings: qmarc_config::Settings,
+    /// What runs it, when its processes were found.
+    live: Option<LiveRun>,
+}
+
+impl Session {
+    /// The session of `--iox-prefix`, else the only one that serves; several serving and no
+    /// prefix to choose is refused (the error lists them).
+    fn find(args: &CmdArgs) -> Result<Session, SessionFindError> {
+        let (location, spec, live) =
+            serving_session(args.iox_prefix.as_deref(), args.iox_root.as_deref())?;
+        Ok(Session { location, settings: spec.settings, live })
+    }
+
+    /// The line that names it, printed under every answer.
+    fn named(&self) -> String {
+        match &self.live {
+            Some(run) => format!("  session {}: {}", self.location.prefix, run.brief()),
+            None => format!("  session {}", self.location.prefix),
+        }
+    }
 }
 
 /// The path request of the PVT knot file `file`, checked by the session's `settings`.
@@ -116,7 +135,7 @@ fn path_request(
 
 /// The words of a status.
 fn describe(s: &CommandResponse, n: usize) -> String {
-    let phase = Phase::from_code(s.phase).map_or("?", Phase::name);
+    let phase = Phase::from_code(s.phase).map_or("?", Phase::name_serving);
     let fault = FaultKind::from_wire(s.fault).map_or(String::new(), |f| format!(", fault {f}"));
     let counts = |v: &[f64]| v[..n].iter().map(|c| format!("{c:.1}")).collect::<Vec<_>>().join(" ");
     let mut out = format!(
@@ -167,10 +186,23 @@ fn move_request(
     }
 }
 
-fn run(args: &CmdArgs) -> anyhow::Result<u8> {
-    let (location, settings) = session(args)?;
+/// What the wire cannot carry, checked here by the starter's own check (its words): a
+/// request holds up to [`qmarc_proto::MAX_MOTORS`] joint targets, so one per motor of the
+/// session's must be given. Everything else of a move the controller checks, in the same
+/// words (the same settings' checks).
+fn check_as_the_starter(args: &CmdArgs, settings: &qmarc_config::Settings) -> Result<(), String> {
+    if let Cmd::Move { to: Some(to), .. } = &args.command
+        && to.len() != settings.n_motors
+    {
+        settings.clone().set_move_to(to).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn run(args: &CmdArgs, session: &Session) -> anyhow::Result<u8> {
+    let (location, settings) = (&session.location, &session.settings);
     let n = settings.n_motors;
-    let mut client = match CommandClient::connect(&location) {
+    let mut client = match CommandClient::connect(location) {
         Ok(c) => c,
         Err(e) => {
             // The session ended meanwhile: what the node made goes with the run's files.
@@ -181,8 +213,8 @@ fn run(args: &CmdArgs) -> anyhow::Result<u8> {
         }
     };
     if let Cmd::Path { file } = &args.command {
-        let answer = client.send_path(&*path_request(file, &settings)?)?;
-        return Ok(said(&answer, false));
+        let answer = client.send_path(&*path_request(file, settings)?)?;
+        return Ok(said(&answer, "path"));
     }
     let request = match &args.command {
         Cmd::Move { to, xyz, linear, speed } => move_request(to, xyz, *linear, *speed)?,
@@ -196,9 +228,9 @@ fn run(args: &CmdArgs) -> anyhow::Result<u8> {
             println!("{}", describe(&s, n));
             if s.not_taken >= s.accepted && s.accepted > 0 {
                 println!(
-                    "move {} was not taken: from the state the robot was in, its way would \
-                     leave the soft limits (or had no profile); the robot went on as it was",
-                    s.accepted
+                    "move {} was not taken: {}; the robot went on as it was",
+                    s.accepted,
+                    s.reason()
                 );
                 return Ok(qmarc_proto::exit::REFUSED);
             }
@@ -211,15 +243,25 @@ fn run(args: &CmdArgs) -> anyhow::Result<u8> {
         println!("{}{ended}", describe(&answer, n));
         return Ok(0);
     }
-    Ok(said(&answer, true))
+    let what = match &args.command {
+        Cmd::Stop => "stop",
+        Cmd::Grip { .. } => "grip",
+        Cmd::Quit => "quit",
+        _ => "move",
+    };
+    Ok(said(&answer, what))
 }
 
-/// Prints whether `answer` accepted the order (a `move` if `is_move`, else a path); its exit
-/// code.
-fn said(answer: &CommandResponse, is_move: bool) -> u8 {
+/// Prints whether `answer` accepted the order `what` (`move`, `path`, `stop`, `grip`, `quit`)
+/// and the id it has (a quit has none: the session ends); its exit code.
+fn said(answer: &CommandResponse, what: &str) -> u8 {
     match answer.refused() {
+        None if what == "quit" => {
+            println!("accepted (quit): the robot stops, then the session ends");
+            0
+        }
         None => {
-            println!("accepted ({} {})", if is_move { "move" } else { "path" }, answer.accepted);
+            println!("accepted ({what} {})", answer.accepted);
             0
         }
         Some(r) => {
@@ -239,7 +281,26 @@ pub fn main(args: &[OsString]) -> ExitCode {
             return ExitCode::from(if e.use_stderr() { qmarc_proto::exit::USAGE } else { 0 });
         }
     };
-    match run(&args) {
+    let session = match Session::find(&args) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("qmarc cmd: {e}");
+            // Several sessions and none chosen: refused (nothing was sent); none: no session.
+            let code = match e {
+                SessionFindError::Ambiguous(_) => qmarc_proto::exit::REFUSED,
+                _ => qmarc_proto::exit::INTERNAL,
+            };
+            return ExitCode::from(code);
+        }
+    };
+    if let Err(e) = check_as_the_starter(&args, &session.settings) {
+        println!("refused (bad_request): {e}");
+        println!("{}", session.named());
+        return ExitCode::from(qmarc_proto::exit::REFUSED);
+    }
+    let outcome = run(&args, &session);
+    println!("{}", session.named());
+    match outcome {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
             eprintln!("qmarc cmd: {e:#}");

@@ -10,8 +10,9 @@ use qmarc_config::{Settings, TargetError};
 use qmarc_controller::traj::TrajectoryGenerator;
 use qmarc_plugins::linear::LinearMove;
 use qmarc_plugins::moveto::MotionLimits;
+use qmarc_plugins::online::{MotionState, Profile};
 use qmarc_plugins::path::{outside_soft_limits, path_queue};
-use qmarc_plugins::serve::{Order, ServeHandle, ServeMove, ServeShared};
+use qmarc_plugins::serve::{NotTaken, Order, ServeHandle, ServeMove, ServeShared};
 use qmarc_proto::MAX_MOTORS;
 use qmarc_proto::command::{
     CommandKind, CommandRequest, CommandResponse, Refusal, open_command_service,
@@ -355,6 +356,13 @@ impl Commands {
         if self.ended.ended.load(Ordering::Acquire) {
             r.refusal = Refusal::NotServing as u32;
         }
+        // The last order not taken, and why (`qmarc cmd wait` says it).
+        if r.not_taken >= r.accepted && r.accepted > 0 {
+            let why = NotTaken::from_code(shared.not_taken_why.load(Ordering::Acquire));
+            r.set_reason(
+                &why.map_or_else(|| "the loop did not take it".to_string(), NotTaken::words),
+            );
+        }
         r
     }
 
@@ -388,6 +396,16 @@ impl Commands {
             s.check_target(&target[..n]).map_err(refusal_of)?;
         }
         let limits = MotionLimits::of(s).at_speed(req.speed);
+        if !linear {
+            // What the loop will plan, planned from where the command is now (at rest there, if
+            // it moves): a move with no profile (a speed so small that its limits vanish) is
+            // refused now, in the words the starter's move gives, not accepted and never taken.
+            let start = self.shared().command();
+            let mut profile = Profile::new(n, start);
+            profile
+                .plan(&MotionState::at_rest(start), &target, &limits)
+                .map_err(|e| bad(e.to_string()))?;
+        }
         let id = if linear {
             let queue = self.line_to([req.target[0], req.target[1], req.target[2]], &limits)?;
             self.give(|id| Order::Line { id, queue })?

@@ -8,7 +8,7 @@
 //! servo thread never frees memory.
 
 use crate::moveto::MotionLimits;
-use crate::online::{MotionState, OnlineMove};
+use crate::online::{MotionState, OnlineMove, RetargetError};
 use qmarc_config::Settings;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_proto::{Gripper, MAX_MOTORS, MotorFlags};
@@ -66,6 +66,58 @@ pub enum Order {
     },
 }
 
+/// Why the loop did not take an order it was given: the state the robot was in when it
+/// arrived is the command thread's to guess, not to know.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NotTaken {
+    /// No jerk-limited profile from the command's state to the target.
+    NoProfile,
+    /// The way there would carry motor `.0` (1-based) outside its soft limits.
+    SoftLimits(u32),
+    /// A line or path starts from rest where the command rests: the robot moved, or rested
+    /// elsewhere, when it arrived.
+    NotFromRest,
+}
+
+impl NotTaken {
+    /// Its number in [`ServeShared::not_taken_why`].
+    pub fn code(self) -> u32 {
+        match self {
+            NotTaken::NoProfile => 1,
+            NotTaken::SoftLimits(m) => 2 | m << 8,
+            NotTaken::NotFromRest => 3,
+        }
+    }
+
+    /// The reason of number `code`, if it is one.
+    pub fn from_code(code: u32) -> Option<NotTaken> {
+        match code & 0xff {
+            1 => Some(NotTaken::NoProfile),
+            2 => Some(NotTaken::SoftLimits(code >> 8)),
+            3 => Some(NotTaken::NotFromRest),
+            _ => None,
+        }
+    }
+
+    /// What it says to the user.
+    pub fn words(self) -> String {
+        match self {
+            NotTaken::NoProfile => {
+                "there was no jerk-limited profile from the command's state to the target".into()
+            }
+            NotTaken::SoftLimits(m) => format!(
+                "from the state the robot was in, its way would have carried motor {m} outside \
+                 its soft limits"
+            ),
+            NotTaken::NotFromRest => {
+                "it starts from rest where the command rests, and the robot was moving or \
+                 elsewhere when it arrived"
+                    .into()
+            }
+        }
+    }
+}
+
 /// What the loop is doing, for the command thread: written by the servo thread with atomic
 /// stores only.
 #[derive(Debug, Default)]
@@ -84,6 +136,8 @@ pub struct ServeShared {
     pub cycles: AtomicU64,
     /// The last move the loop could not take (no profile, or one leaving the soft limits).
     pub not_taken: AtomicU64,
+    /// Why it could not ([`NotTaken::code`]).
+    pub not_taken_why: AtomicU32,
     /// The last motion order the loop took (a move, a line, a stop; not a grip).
     pub motion: AtomicU64,
     /// The command moves.
@@ -224,7 +278,14 @@ impl ServeMove {
                     self.leave_line();
                     match self.online.retarget(&target, &limits) {
                         Ok(()) => self.current = id,
-                        Err(_) => {
+                        Err(e) => {
+                            let why = match e {
+                                RetargetError::NoProfile(_) => NotTaken::NoProfile,
+                                RetargetError::SoftLimits { motor, .. } => {
+                                    NotTaken::SoftLimits(motor as u32)
+                                }
+                            };
+                            self.shared.not_taken_why.store(why.code(), Ordering::Release);
                             self.shared.not_taken.store(id, Ordering::Release);
                             if line {
                                 let _ = self.online.stop(&limits);
@@ -250,6 +311,8 @@ impl ServeMove {
                         (0..self.n_motors).any(|m| (q[m] - now.p[m]).abs() > LINE_START_COUNTS)
                     });
                     if off || self.online.moving() {
+                        let why = NotTaken::NotFromRest.code();
+                        self.shared.not_taken_why.store(why, Ordering::Release);
                         self.shared.not_taken.store(id, Ordering::Release);
                         let _ = self.spent.push(queue);
                     } else {

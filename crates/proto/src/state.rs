@@ -64,6 +64,15 @@ impl Phase {
             Phase::Fault => "fault",
         }
     }
+
+    /// What it is called in a serving session's messages: its loop's moving phase is the
+    /// session serving, whether the robot moves or rests.
+    pub fn name_serving(self) -> &'static str {
+        match self {
+            Phase::Moving => "serving",
+            p => p.name(),
+        }
+    }
 }
 
 /// What ended a move early. In `summary.json` it is the snake-case name

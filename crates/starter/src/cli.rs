@@ -132,11 +132,11 @@ pub struct ServeArgs {
 #[command(group(clap::ArgGroup::new("target").args(["to", "xyz"])))]
 pub struct MoveArgs {
     /// The target in joint counts, one per motor: `--to 1000,-500,250`.
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "C1,C2,C3")]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_name = "C1,C2,C3")]
     pub to: Option<Vec<f64>>,
     /// The target effector point in mm (the base frame of `[robot]`): `--xyz 0,50,-600`;
     /// a joint-space move to the inverse kinematics' counts, or a straight line with --linear.
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "X,Y,Z")]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_name = "X,Y,Z")]
     pub xyz: Option<Vec<f64>>,
     /// A straight line in Cartesian space to the --xyz point, jerk-limited along the line,
     /// every joint within its limits.
@@ -337,5 +337,17 @@ mod tests {
         assert_eq!(before.command, after.command);
         assert_eq!(after.command, Command::Step(StepArgs { size: Some(-250), duration: None }));
         assert_eq!(after.command.mode(), Mode::Step);
+    }
+
+    /// Issue 42, item 4: a comma list of numbers may start with a minus, as typed (before,
+    /// clap took `-150,0,-600` for a flag).
+    #[test]
+    fn negative_coordinates_are_values_not_flags() {
+        let xyz = T::try_parse_from(["x", "move", "--xyz", "-150,0,-600", "--linear"]).unwrap();
+        let Command::Move(m) = xyz.command else { panic!("a move") };
+        assert_eq!((m.xyz, m.linear), (Some(vec![-150.0, 0.0, -600.0]), true));
+        let to = T::try_parse_from(["x", "move", "--to", "-100,0,0"]).unwrap();
+        let Command::Move(m) = to.command else { panic!("a move") };
+        assert_eq!(m.to, Some(vec![-100.0, 0.0, 0.0]));
     }
 }

@@ -27,8 +27,7 @@ pub use supervise::{Exit, describe_exit};
 use qmarc_config::Names;
 use qmarc_proto::service::IpcLocation;
 
-/// Prefix of the starter's default iceoryx2 prefixes (`qmarc_<pid>_`).
-pub const PREFIX_STEM: &str = "qmarc_";
+pub use qmarc_telemetry::session::PREFIX_STEM;
 
 /// The default iceoryx2 prefix of this starter: unique per run, so runs never meet and
 /// leftovers can be traced to a dead starter.

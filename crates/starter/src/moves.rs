@@ -166,6 +166,17 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     let location = IpcLocation::checked(&prefix, root).map_err(|e| refused(anyhow!(e)))?;
     check_iox_root(&location.root, req.iox_root.is_some()).map_err(|e| refused(anyhow!(e)))?;
     location.config().map_err(refused)?;
+    // A prefix in use by a live run is that run's: refused before anything of it is touched
+    // (a second run would fail on its services, and then remove its files).
+    if let Some(live) = qmarc_telemetry::session::live_run(&location.prefix) {
+        return Err(refused(anyhow!(
+            "iceoryx2 prefix `{}` belongs to a live {}: {live}; end it first (qmarc cmd \
+             --iox-prefix {} quit, or Ctrl-C where it runs) or choose another --iox-prefix",
+            location.prefix,
+            if live.serving { "serving session" } else { "run" },
+            location.prefix
+        )));
+    }
     let spec = RunSpec {
         settings,
         mode,
@@ -220,6 +231,20 @@ fn check_path(settings: &Settings, mode: Mode) -> Result<(), Failure> {
         qmarc_report::output::estimate_bytes(rows, settings.n_motors),
     )
     .map_err(refused)
+}
+
+/// What a serving session says once it serves: its prefix, its output folder, how to
+/// command it.
+fn serving_words(p: &Prepared) -> String {
+    let out = p.out_dir();
+    let out = std::path::absolute(out).unwrap_or_else(|_| out.to_path_buf());
+    let prefix = &p.location.prefix;
+    format!(
+        "qmarc-starter: serving under iceoryx2 prefix {prefix}, data to {}\n  command it: \
+         qmarc cmd --iox-prefix {prefix} status | move --xyz X,Y,Z | path FILE | grip on|off | \
+         stop | quit (Ctrl-C here ends it too)",
+        out.display()
+    )
 }
 
 /// How the two children ended.
@@ -317,7 +342,14 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
         }
     };
     let limit = stall_limit(&p.spec);
+    // A serving session says, once its loop serves, where it is and how to command it.
+    let mut announce = (p.spec.mode == Mode::Serve).then(|| serving_words(p));
     supervise::wait_all(&mut children, stop, limit, said, || {
+        let serving = progress.as_ref().is_some_and(|pg| pg.read().phase == Phase::Moving.code());
+        if serving && let Some(words) = announce.take() {
+            status.borrow_mut().clear();
+            say!("{words}");
+        }
         status.borrow_mut().update();
         if let Some(b) = bridge.as_mut() {
             b.watch(&mut status.borrow_mut());

@@ -68,7 +68,7 @@ fn main() -> ExitCode {
     }
     let outcome = (|| {
         let stop = qmarc_timer::stop::install()?;
-        let (location, spec) = qmarc_telemetry::reader::serving_session(
+        let (location, spec, _) = qmarc_telemetry::reader::serving_session(
             args.iox_prefix.as_deref(),
             args.iox_root.as_deref(),
         )

@@ -1,0 +1,227 @@
+//! Which runs are alive: a run's processes are found by what their command lines say (the
+//! starter's `--iox-prefix`, or the pid in its default prefix `qmarc_<pid>_`; the children's
+//! `--settings=` run file), so that a second run is never started on a live run's files,
+//! and a client that was told no prefix says which of several sessions it could mean.
+
+use qmarc_proto::service::run_file;
+use std::path::{Path, PathBuf};
+use std::time::SystemTime;
+
+/// The programs a run is made of (a bridge, a scope or a `qmarc cmd` under the same prefix
+/// is a client of the run, not the run).
+const RUN_PROGRAMS: [&str; 3] = ["qmarc-starter", "qmarc-hwserver", "qmarc-controller"];
+
+/// Prefix of the starter's default iceoryx2 prefixes (`qmarc_<pid>_`).
+pub const PREFIX_STEM: &str = "qmarc_";
+
+/// A run whose processes are alive.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LiveRun {
+    /// Its iceoryx2 prefix.
+    pub prefix: String,
+    /// The process that stands for it: its starter, else (a starter killed, its children
+    /// still ending) one of its children.
+    pub pid: u32,
+    /// That process's command line.
+    pub command: String,
+    /// Where its data go (absolute), as its run file says; `None` before the file is written.
+    pub out_dir: Option<PathBuf>,
+    /// When its run file was written.
+    pub started: Option<SystemTime>,
+    /// Its run file says it serves (`qmarc-starter serve`).
+    pub serving: bool,
+}
+
+impl std::fmt::Display for LiveRun {
+    /// `pid 4242 (qmarc-starter --iox-prefix t4a_ serve), output folder /home/u/A, started
+    /// 20:51:03 UTC (2 min 5 s ago)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "pid {} ({})", self.pid, self.command)?;
+        if let Some(out) = &self.out_dir {
+            write!(f, ", output folder {}", out.display())?;
+        }
+        if let Some(started) = self.started {
+            write!(f, ", started {}", describe_time(started, SystemTime::now()))?;
+        }
+        Ok(())
+    }
+}
+
+impl LiveRun {
+    /// The short form: `pid 4242, output folder /home/u/A`.
+    pub fn brief(&self) -> String {
+        match &self.out_dir {
+            Some(out) => format!("pid {}, output folder {}", self.pid, out.display()),
+            None => format!("pid {}", self.pid),
+        }
+    }
+}
+
+/// `at` as `HH:MM:SS UTC (N min S s ago)` seen at `now`.
+pub fn describe_time(at: SystemTime, now: SystemTime) -> String {
+    let secs = at.duration_since(SystemTime::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+    let (h, m, s) = (secs / 3600 % 24, secs / 60 % 60, secs % 60);
+    let ago = now.duration_since(at).map_or(0, |d| d.as_secs());
+    let ago = match ago {
+        0..60 => format!("{ago} s ago"),
+        60..3600 => format!("{} min {} s ago", ago / 60, ago % 60),
+        _ => format!("{} h {} min ago", ago / 3600, ago / 60 % 60),
+    };
+    format!("{h:02}:{m:02}:{s:02} UTC ({ago})")
+}
+
+/// One process: pid, arguments.
+type Process = (u32, Vec<String>);
+
+/// Every process but this one, with its arguments (a zombie has none, and is not listed).
+fn processes() -> Vec<Process> {
+    let me = std::process::id();
+    let Ok(entries) = std::fs::read_dir("/proc") else { return Vec::new() };
+    entries
+        .flatten()
+        .filter_map(|e| {
+            let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+            let raw = std::fs::read(e.path().join("cmdline")).ok()?;
+            let args: Vec<String> = raw
+                .split(|&b| b == 0)
+                .filter(|a| !a.is_empty())
+                .map(|a| String::from_utf8_lossy(a).into_owned())
+                .collect();
+            (pid != me && !args.is_empty()).then_some((pid, args))
+        })
+        .collect()
+}
+
+/// The program of `args` (its file name) if it is one a run is made of.
+fn run_program(args: &[String]) -> Option<&'static str> {
+    let name = Path::new(args.first()?).file_name()?.to_str()?;
+    RUN_PROGRAMS.into_iter().find(|p| *p == name)
+}
+
+/// The value of option `--name` in `args` (`--name=V` or `--name V`).
+fn option<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
+    let flag = format!("--{name}");
+    args.iter().enumerate().find_map(|(i, a)| match a.strip_prefix(&flag) {
+        Some("") => args.get(i + 1).map(String::as_str),
+        Some(v) => v.strip_prefix('='),
+        None => None,
+    })
+}
+
+/// The iceoryx2 prefix of the run process `pid` with arguments `args` belongs to.
+fn prefix_of(pid: u32, args: &[String]) -> Option<String> {
+    match run_program(args)? {
+        "qmarc-starter" => Some(
+            option(args, "iox-prefix")
+                .map_or_else(|| format!("{PREFIX_STEM}{pid}_"), str::to_string),
+        ),
+        _ => {
+            let settings = option(args, "settings")?;
+            let name = Path::new(settings).file_name()?.to_str()?;
+            let prefix = name.strip_suffix("run.json")?;
+            (run_file(prefix) == Path::new(settings)).then(|| prefix.to_string())
+        }
+    }
+}
+
+/// The run with iceoryx2 prefix `prefix` if one of its processes is alive (other than this
+/// one): what its starter (or a child of it) and its run file say.
+pub fn live_run(prefix: &str) -> Option<LiveRun> {
+    live_in(&processes(), prefix)
+}
+
+fn live_in(procs: &[Process], prefix: &str) -> Option<LiveRun> {
+    let mut mine: Vec<&Process> = procs
+        .iter()
+        .filter(|(pid, args)| prefix_of(*pid, args).as_deref() == Some(prefix))
+        .collect();
+    // The starter first.
+    mine.sort_by_key(|(pid, args)| (run_program(args) != Some("qmarc-starter"), *pid));
+    let (pid, args) = mine.first()?;
+    let run = run_file(prefix);
+    let spec = qmarc_config::RunSpec::read(&run).ok();
+    let out_dir = spec.as_ref().map(|s| {
+        let out = &s.settings.gather.out_dir;
+        if out.is_absolute() {
+            out.clone()
+        } else {
+            // Relative to the starter's working directory.
+            std::fs::read_link(format!("/proc/{pid}/cwd")).map_or(out.clone(), |cwd| cwd.join(out))
+        }
+    });
+    Some(LiveRun {
+        prefix: prefix.to_string(),
+        pid: *pid,
+        command: args.iter().map(|a| shell_word(a)).collect::<Vec<_>>().join(" "),
+        out_dir,
+        started: std::fs::metadata(&run).and_then(|m| m.modified()).ok(),
+        serving: spec.is_some_and(|s| s.mode == qmarc_config::Mode::Serve),
+    })
+}
+
+/// `word` as a shell would need it written (quoted where it holds a space or a quote).
+fn shell_word(word: &str) -> String {
+    let plain = word.bytes().all(|b| b.is_ascii_alphanumeric() || b"-_=./,:@%+".contains(&b));
+    if plain && !word.is_empty() {
+        word.to_string()
+    } else {
+        format!("'{}'", word.replace('\'', r"'\''"))
+    }
+}
+
+/// Every live serving session (under the iceoryx2 root `root` only, if given), found by
+/// their run files: the caller's own first, newest first within each.
+pub fn serving_sessions(root: Option<&str>) -> Vec<LiveRun> {
+    let procs = processes();
+    crate::reader::runs(root)
+        .into_iter()
+        .filter_map(|r| live_in(&procs, &r.location.prefix))
+        .filter(|r| r.serving)
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(words: &str) -> Vec<String> {
+        words.split_whitespace().map(str::to_string).collect()
+    }
+
+    #[test]
+    fn a_runs_processes_are_found_by_their_prefix() {
+        let procs = vec![
+            (10, args("/x/qmarc-starter --iox-prefix t4a_ --out A serve")),
+            (11, args("/x/qmarc-hwserver --settings=/dev/shm/t4a_run.json")),
+            (12, args("/x/qmarc-controller --settings=/dev/shm/t4a_run.json")),
+            (20, args("target/debug/qmarc-starter step")),
+            (21, args("/x/qmarc-controller --settings /dev/shm/qmarc_20_run.json")),
+            // Clients of a run are not the run; a prefix that only ends like another is not it.
+            (30, args("/x/qmarc cmd --iox-prefix=t4a_ status")),
+            (31, args("/x/qmarc-bridge --iox-prefix=t4a_")),
+            (32, args("/x/qmarc-starter --iox-prefix=xt4a_ serve")),
+        ];
+        let run = live_in(&procs, "t4a_").expect("t4a_ is live");
+        assert_eq!(
+            (run.pid, run.command.as_str()),
+            (10, "/x/qmarc-starter --iox-prefix t4a_ --out A serve")
+        );
+        assert_eq!(live_in(&procs, "qmarc_20_").map(|r| r.pid), Some(20));
+        // Its starter gone, a child still ending stands for it.
+        assert_eq!(live_in(&procs[1..], "t4a_").map(|r| r.pid), Some(11));
+        assert_eq!(live_in(&procs[5..7], "t4a_"), None, "only clients");
+        assert_eq!(live_in(&procs, "t4_"), None);
+    }
+
+    #[test]
+    fn times_and_words_are_said_as_a_person_reads_them() {
+        let at = SystemTime::UNIX_EPOCH
+            + std::time::Duration::from_secs(86_400 * 365 + 20 * 3600 + 51 * 60 + 3);
+        let later = |s| at + std::time::Duration::from_secs(s);
+        assert_eq!(describe_time(at, later(125)), "20:51:03 UTC (2 min 5 s ago)");
+        assert_eq!(describe_time(at, later(7)), "20:51:03 UTC (7 s ago)");
+        assert_eq!(describe_time(at, later(3 * 3600 + 60)), "20:51:03 UTC (3 h 1 min ago)");
+        assert_eq!(shell_word("--out=my dir"), "'--out=my dir'");
+        assert_eq!(shell_word("-150,0,-600"), "-150,0,-600");
+    }
+}
