@@ -171,7 +171,7 @@ def call_raw(session, key, payload, typename, timeout=10.0):
     return None
 
 
-def follow(session, key, spec, timeout):
+def follow(session, a, key, spec, timeout):
     """Runs the FollowJointTrajectory action on spec; what happened, as a dict."""
     t = STORE.types
     uuid = t["unique_identifier_msgs/msg/UUID"](uuid=numpy.frombuffer(os.urandom(16), dtype=numpy.uint8))
@@ -197,7 +197,12 @@ def follow(session, key, spec, timeout):
                  ACTION_HASHES["feedback"])
     sub = session.declare_subscriber(fb_key, lambda s: feedback.append(
         STORE.deserialize_cdr(bytes(s.payload.to_bytes()), "control_msgs/msg/FjtFeedbackMessage")))
-    time.sleep(1.0)
+    # Once the action's server and its feedback publisher are known (their tokens), as
+    # rclcpp's wait_for_action_server.
+    for kind, entity in [("SS", "send_goal"), ("SS", "get_result"), ("MP", "feedback")]:
+        if not wait_for_entity(session, a.domain, a.namespace, kind, action + entity, timeout):
+            sub.undeclare()
+            return {"accepted": False, "error": f"no {action + entity} within {timeout} s"}
     request = t["control_msgs/msg/FjtSendGoalRequest"](goal_id=uuid, goal=goal)
     answer = call_raw(
         session, key(action + "send_goal", "control_msgs/action/FollowJointTrajectory_SendGoal",
@@ -241,6 +246,25 @@ def follow(session, key, spec, timeout):
     return out
 
 
+def mangle(name):
+    return name.replace("/", "%")
+
+
+def wait_for_entity(session, domain, namespace, kind, name, timeout_s):
+    """Waits until the ROS graph has an entity of kind (SS a service server, MS a
+    subscription, MP a publisher) on name, as rmw_zenoh's graph cache learns it: from the
+    liveliness tokens its session has been told of (a liveliness subscriber with history).
+    True if it came within timeout_s. What rmw_zenoh's service_server_is_available and a
+    publisher's matching do: a call made before the server is known goes nowhere."""
+    full = name if name.startswith("/") else namespace.rstrip("/") + "/" + name
+    pattern = f"@ros2_lv/{domain}/*/*/*/{kind}/*/*/*/{mangle(full)}/**"
+    seen = threading.Event()
+    sub = session.liveliness().declare_subscriber(pattern, lambda s: seen.set(), history=True)
+    found = seen.wait(timeout_s)
+    sub.undeclare()
+    return found
+
+
 def call(session, key, payload, typename):
     replies = session.get(key, payload=payload, attachment=attachment(), timeout=10.0)
     for reply in replies:
@@ -256,11 +280,14 @@ def call(session, key, payload, typename):
     return False
 
 
-def publisher(session, key):
+def publisher(session, key, timeout_s=20.0):
     """A reliable publisher on key (it waits rather than drop on a busy link, as a reliable
-    ROS 2 publisher's history does), once it has had time to match the bridge."""
+    ROS 2 publisher's history does), once it matches a subscriber (the bridge's), or
+    timeout_s has passed."""
     pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-    time.sleep(1.0)
+    deadline = time.monotonic() + timeout_s
+    while not pub.matching_status.matching and time.monotonic() < deadline:
+        time.sleep(0.01)
     return pub
 
 
@@ -304,22 +331,38 @@ def joint_trajectory(spec):
 
 
 def main():
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--connect", default="tcp/localhost:7447")
     p.add_argument("--listen", default=None)
     p.add_argument("--mode", default="peer", choices=["peer", "client"])
     p.add_argument("--namespace", default="")
     p.add_argument("--domain", type=int, default=0)
     p.add_argument("--timeout", type=float, default=20.0)
-    p.add_argument("command")
-    p.add_argument("args", nargs="*")
+    p.add_argument("--repeat", type=int, default=1,
+                   help="stop, gripper: make the call this many times, each from a new session")
+    p.add_argument("command", choices=COMMANDS, metavar="COMMAND",
+                   help="one of: " + ", ".join(COMMANDS))
+    # The command's arguments as typed: a coordinate such as -1e9 is one, not an option.
+    p.add_argument("args", nargs=argparse.REMAINDER)
     a = p.parse_args()
     if a.command == "hashes":
         for t in ["sensor_msgs/msg/JointState", "geometry_msgs/msg/PointStamped",
                   "diagnostic_msgs/msg/DiagnosticArray", "trajectory_msgs/msg/JointTrajectory"]:
             print(json.dumps({"type": t, "rihs01": STORE.hash_rihs01(t)}))
         return 0
-    session = open_session(a.connect, a.listen, a.mode)
+    wanted = ARGUMENTS[a.command]
+    if len(a.args) != wanted:
+        p.error(f"{a.command} takes {wanted} argument{'s' * (wanted != 1)}, found {len(a.args)}")
+    if a.command in ("target", "targets"):
+        try:
+            [float(v) for v in a.args]
+        except ValueError as e:
+            p.error(f"{a.command}: {e}")
+    if a.command in ("stop", "gripper"):
+        ok = all(service_call(a) for _ in range(max(a.repeat, 1)))
+        return 0 if ok else 1
+    session = opened(a)
     key = lambda name, t, rihs=None: keyexpr(a.domain, a.namespace, name, t, rihs)
     ok = True
     if a.command == "joint-states":
@@ -370,20 +413,51 @@ def main():
         publish(session, k, joint_trajectory(json.loads(a.args[0])))
         print(json.dumps({"published": k}), flush=True)
     elif a.command == "follow":
-        out = follow(session, key, json.loads(a.args[0]), a.timeout)
+        out = follow(session, a, key, json.loads(a.args[0]), a.timeout)
         print(json.dumps(out), flush=True)
         ok = not out["accepted"] or out.get("status") is not None
-    elif a.command == "stop":
-        ok = call(session, key("qmarc/stop", "std_srvs/srv/Trigger", SERVICE_HASHES["std_srvs/srv/Trigger"]),
-                  b"\x00\x01\x00\x00\x00", "std_srvs/msg/Trigger_Response")
-    elif a.command == "gripper":
-        on = {"on": 1, "off": 0}[a.args[0]]
-        ok = call(session, key("qmarc/gripper", "std_srvs/srv/SetBool", SERVICE_HASHES["std_srvs/srv/SetBool"]),
-                  b"\x00\x01\x00\x00" + bytes([on]), "std_srvs/msg/Trigger_Response")
-    else:
-        p.error(f"unknown command {a.command}")
     session.close()
     return 0 if ok else 1
+
+
+def opened(a):
+    """The session of the command line's options, or an exit saying why there is none."""
+    try:
+        return open_session(a.connect, a.listen, a.mode)
+    except zenoh.ZError as e:
+        where = a.listen or a.connect
+        print(json.dumps({"error": f"cannot open a Zenoh session with {where}: {e}"}), flush=True)
+        sys.exit(1)
+
+
+def service_call(a):
+    """One call of the stop or gripper service from a session of its own, made once the
+    service's server is known (its liveliness token); true if it succeeded."""
+    session = opened(a)
+    try:
+        if a.command == "stop":
+            name, typename, payload = "qmarc/stop", "std_srvs/srv/Trigger", b"\x00\x01\x00\x00\x00"
+        else:
+            if a.args[0] not in ("on", "off"):
+                print(json.dumps({"error": f"gripper takes on or off, found {a.args[0]}"}), flush=True)
+                return False
+            name, typename = "qmarc/gripper", "std_srvs/srv/SetBool"
+            payload = b"\x00\x01\x00\x00" + bytes([a.args[0] == "on"])
+        if not wait_for_entity(session, a.domain, a.namespace, "SS", name, a.timeout):
+            print(json.dumps({"error": f"no server of {name} within {a.timeout} s"}), flush=True)
+            return False
+        k = keyexpr(a.domain, a.namespace, name, typename, SERVICE_HASHES[typename])
+        return call(session, k, payload, "std_srvs/msg/Trigger_Response")
+    finally:
+        session.close()
+
+
+# Every command and how many arguments it takes.
+ARGUMENTS = {"joint-states": 1, "effector": 1, "diagnostics": 1, "goal-status": 1, "target": 3,
+             "targets": 8, "raw-target": 1, "trajectory": 1, "follow": 1, "stop": 0,
+             "gripper": 1, "hashes": 0}
+COMMANDS = list(ARGUMENTS)
+
 
 
 if __name__ == "__main__":

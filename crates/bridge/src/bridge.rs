@@ -93,6 +93,10 @@ pub(crate) struct Bridge {
     progress: Option<Progress>,
     /// The newest sample.
     pub(crate) last: Option<TelemetrySample>,
+    /// The sample of the last joint state published (its velocity is measured from it).
+    published: Option<TelemetrySample>,
+    /// The sample time the next joint state is due at, ns.
+    next_joint_state_ns: Option<u64>,
     /// The samples of the last [`VELOCITY_WINDOW_NS`] and the newest one before: the
     /// action's velocities are measured from the first to the last.
     pub(crate) recent: VecDeque<TelemetrySample>,
@@ -137,6 +141,8 @@ pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
         reader,
         progress,
         last: None,
+        published: None,
+        next_joint_state_ns: None,
         recent: VecDeque::with_capacity(TELEMETRY_BUFFER),
         fresh: Vec::with_capacity(TELEMETRY_BUFFER),
         actions: Actions::default(),
@@ -151,11 +157,13 @@ pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
         if b.turn()? {
             return Ok(());
         }
+        // Paced by an absolute clock: a late turn is followed by the next one on time, not a
+        // period after it (only a stall of many periods starts the schedule again).
         next += period;
         let now = Instant::now();
         if next > now {
             std::thread::sleep(next - now);
-        } else {
+        } else if now - next > 10 * period {
             next = now;
         }
     }
@@ -201,21 +209,45 @@ impl Bridge {
             self.fresh.push((self.recent[0], s));
         }
         let stamp = Time::now();
-        if let Some(&(_, s)) = self.fresh.last() {
-            let c = self.opts.converter;
-            let taken = self.sample_time(&s).unwrap_or(stamp);
-            let js = c.joint_state(&s, self.last.as_ref(), taken);
-            self.last = Some(s);
-            publish(&mut self.e.joint_states, &js);
-            if let Some(p) = c.effector(&s, taken) {
-                publish(&mut self.e.effector, &p);
+        // Joint states on a grid of the samples' own time, `--rate` a second of it: the
+        // first sample at or after each grid point, however the samples arrive in batches
+        // and however late a turn comes (issue 42: one a turn with fresh samples gave 196 Hz
+        // of 250).
+        for k in 0..self.fresh.len() {
+            let s = self.fresh[k].1;
+            if self.joint_state_due(&s) {
+                let c = self.opts.converter;
+                let taken = self.sample_time(&s).unwrap_or(stamp);
+                let js = c.joint_state(&s, self.published.as_ref(), taken);
+                self.published = Some(s);
+                publish(&mut self.e.joint_states, &js);
+                if let Some(p) = c.effector(&s, taken) {
+                    publish(&mut self.e.effector, &p);
+                }
             }
+        }
+        if let Some(&(_, s)) = self.fresh.last() {
+            self.last = Some(s);
         }
         self.commands();
         self.actions(stamp);
         let ended = self.reader.end();
         self.diagnose(stamp, ended.as_ref());
         Ok(ended.is_some())
+    }
+
+    /// Whether sample `s` is the next joint state's: the first at or after the grid point
+    /// due. After a gap of more than a period (samples lost, the session paused) the grid
+    /// starts again from `s`.
+    fn joint_state_due(&mut self, s: &TelemetrySample) -> bool {
+        let period_ns = (1e9 / self.opts.rate_hz) as u64;
+        let next = match self.next_joint_state_ns {
+            Some(due) if s.time_ns < due => return false,
+            Some(due) if s.time_ns < due + period_ns => due + period_ns,
+            _ => s.time_ns + period_ns,
+        };
+        self.next_joint_state_ns = Some(next);
+        true
     }
 
     /// When the loop took sample `s`, on the system clock (ROS time): its tick's time from the

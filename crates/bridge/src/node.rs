@@ -22,6 +22,43 @@ pub struct ZenohError {
     pub why: String,
 }
 
+/// The node could not be opened.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum NodeOpenError {
+    /// Zenoh failed.
+    #[error(transparent)]
+    Zenoh(#[from] ZenohError),
+    /// A node of the same name is alive in the domain (its liveliness token says so): two
+    /// would be one node to ROS, their topics interleaved and every command reaching both.
+    #[error(
+        "a ROS node {node} is already alive in domain {domain} (its liveliness token \
+         {token}): give this bridge another --namespace (or --domain)"
+    )]
+    Alive {
+        /// The node's fully qualified name.
+        node: String,
+        /// The domain id.
+        domain: u32,
+        /// The live node's token.
+        token: String,
+    },
+}
+
+/// How long the bridge asks the network for a live node of its name before it announces its
+/// own: the router answers at once with what it knows; a peer's link may take a moment.
+const ALIVE_QUERY: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// How long the bridge waits for its session to reach a router or peer it connects to
+/// (rmw_zenoh's default router may not run: it then goes on, retrying, as rmw_zenoh does).
+const LINK_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Whether `session` has reached a router or a peer.
+fn linked(session: &zenoh::Session) -> bool {
+    let info = session.info();
+    info.routers_zid().wait().next().is_some() || info.peers_zid().wait().next().is_some()
+}
+
 fn failed(what: impl Into<String>) -> impl FnOnce(zenoh::Error) -> ZenohError {
     let what = what.into();
     move |e| ZenohError { what, why: e.to_string() }
@@ -134,8 +171,17 @@ impl Node {
         domain: u32,
         namespace: &str,
         name: &str,
-    ) -> Result<Node, ZenohError> {
+    ) -> Result<Node, NodeOpenError> {
+        // Whom it connects to: until it has reached one of them, nobody could say whether a
+        // node of its name is alive.
+        let connects = config
+            .get_json("connect/endpoints")
+            .is_ok_and(|j| j.trim() != "[]" && !j.trim().is_empty());
         let session = zenoh::open(config).wait().map_err(failed("opening the session"))?;
+        let since = std::time::Instant::now();
+        while connects && !linked(&session) && since.elapsed() < LINK_WAIT {
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
         let info = NodeInfo {
             domain,
             zid: session.zid().to_string(),
@@ -143,6 +189,25 @@ impl Node {
             namespace: if namespace.is_empty() { "/".into() } else { namespace.into() },
             name: name.into(),
         };
+        // A node of this name alive in the domain: refused, naming it.
+        let alive = info.same_node_tokens();
+        let replies = session
+            .liveliness()
+            .get(alive.as_str())
+            .timeout(ALIVE_QUERY)
+            .wait()
+            .map_err(failed(format!("asking for {alive}")))?;
+        if let Some(token) = replies
+            .iter()
+            .filter_map(|r| r.result().ok().map(|s| s.key_expr().to_string()))
+            .find(|t| !t.contains(&format!("/{}/", info.zid)))
+        {
+            return Err(NodeOpenError::Alive {
+                node: ros2::qualified(&info.namespace, name),
+                domain,
+                token,
+            });
+        }
         let mut node = Node { session, info, next_id: 1, tokens: Vec::new() };
         let token = node.info.node_token();
         node.announce(&token)?;

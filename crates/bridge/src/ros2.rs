@@ -206,6 +206,18 @@ impl NodeInfo {
         )
     }
 
+    /// The key expression of every node's token with this node's domain, namespace and
+    /// name, whichever session and id announced it.
+    pub fn same_node_tokens(&self) -> String {
+        format!(
+            "@ros2_lv/{}/*/*/*/{}/*/{}/{}",
+            self.domain,
+            EntityKind::Node.code(),
+            mangle(&self.namespace),
+            self.name
+        )
+    }
+
     fn token_head(&self, id: u32, kind: EntityKind) -> String {
         format!(
             "@ros2_lv/{}/{}/{}/{id}/{}/%/{}/{}",

@@ -256,8 +256,12 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     // The services.
     let r = cell.lines(&["gripper", "on"]);
     assert_eq!((r[0]["success"].as_bool(), r[0]["gid_echoed"].as_bool()), (Some(true), Some(true)));
-    let r = cell.lines(&["stop"]);
-    assert_eq!(r[0]["success"], true, "{r:?}");
+    // Issue 42, item 7: each call from a session of its own, in peer mode, the first of its
+    // session: every one answered (the client waits for the service's token, as rmw_zenoh's
+    // clients wait for the server).
+    let r = cell.lines(&["--repeat=20", "stop"]);
+    assert_eq!(r.len(), 20, "{r:?}");
+    assert!(r.iter().all(|c| c["success"] == true), "{r:?}");
     // A target the robot goes to.
     let mut client = cell.client();
     let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted;
@@ -754,4 +758,138 @@ fn two_robots_are_seen_and_commanded_from_another_host_through_a_router() {
     drop((c1, c2));
     assert!(robot2.quit().success());
     assert!(robot1.quit().success());
+}
+
+/// A `qmarc-starter serve --bridge ARGS` session of scratch folder `dir` with settings
+/// `config` under iceoryx2 prefix `prefix`; its standard error's lines as they come.
+fn serve_bridged(
+    dir: &Path,
+    config: &Path,
+    prefix: &str,
+    args: &[&str],
+) -> (Child, std::sync::mpsc::Receiver<String>) {
+    let mut session = Command::new(bridge_bin().with_file_name("qmarc-starter"))
+        .arg(format!("--config={}", config.display()))
+        .arg(format!("--out={}", dir.join(prefix).display()))
+        .arg(format!("--iox-prefix={prefix}"))
+        .args(["--deterministic", "serve", "--bridge"])
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (said, lines) = std::sync::mpsc::channel();
+    let stderr = session.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in std::io::BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = said.send(line);
+        }
+    });
+    (session, lines)
+}
+
+/// Serving sessions a test started (child, iceoryx2 prefix): killed and their files removed
+/// on drop, should the test fail before it quits them.
+struct Sessions(Vec<(Child, String)>);
+
+impl Drop for Sessions {
+    fn drop(&mut self) {
+        for (child, prefix) in &mut self.0 {
+            let _ = child.kill();
+            let _ = child.wait();
+            IpcLocation::new(prefix, DEFAULT_ROOT).remove_files();
+        }
+    }
+}
+
+/// Waits (60 s at most) for a line of `lines` containing `text`; the lines until it.
+fn said(lines: &std::sync::mpsc::Receiver<String>, text: &str) -> String {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut all = String::new();
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match lines.recv_timeout(left) {
+            Ok(line) => {
+                all.push_str(&line);
+                all.push('\n');
+                if line.contains(text) {
+                    return all;
+                }
+            }
+            Err(_) => panic!("no line saying {text:?} in:\n{all}"),
+        }
+    }
+}
+
+/// Issue 42, item 3: a second bridge of the same node name in the same domain refuses to
+/// start, naming the first (two would be one ROS node: joint states interleaved, a target
+/// reaching both robots); its session goes on without it. `serve --bridge` forwards
+/// `--namespace`, `--domain` and `--zenoh-config`: under another namespace it serves.
+#[test]
+fn a_second_bridge_of_one_node_name_is_refused_and_its_session_goes_on() {
+    let (dir, config) = scratch("twins");
+    let router = format!("tcp/127.0.0.1:{}", free_port());
+    let files = |name: &str, text: String| {
+        let f = dir.join(name);
+        std::fs::write(&f, text).unwrap();
+        f.display().to_string()
+    };
+    let quiet = "scouting: { multicast: { enabled: false }, gossip: { enabled: false } }";
+    let as_router = files(
+        "router.json5",
+        format!("{{ mode: \"router\", listen: {{ endpoints: [\"{router}\"] }}, {quiet} }}"),
+    );
+    let as_peer = files(
+        "peer.json5",
+        format!("{{ mode: \"peer\", connect: {{ endpoints: [\"{router}\"] }}, {quiet} }}"),
+    );
+    let pid = std::process::id();
+    let prefixes = [format!("qbtwa{pid}_"), format!("qbtwb{pid}_"), format!("qbtwc{pid}_")];
+    let mut sessions = Sessions(Vec::new());
+    let mut start = |k: usize, args: &[&str]| {
+        let (child, lines) = serve_bridged(&dir, &config, &prefixes[k], args);
+        sessions.0.push((child, prefixes[k].clone()));
+        lines
+    };
+    let first = start(0, &[&format!("--zenoh-config={as_router}")]);
+    said(&first, "as ROS 2 node /qmarc, domain 0");
+    // The same name, the same domain: refused, naming the first; the session serves on.
+    let second = start(1, &[&format!("--zenoh-config={as_peer}")]);
+    let words = said(&second, "qmarc-bridge exited with code 3 (refused); the session goes on");
+    assert!(
+        words.contains(
+            "qmarc-bridge: error: a ROS node /qmarc is already alive in domain 0 (its liveliness \
+             token @ros2_lv/0/"
+        ),
+        "{words}"
+    );
+    let mut client = CommandClient::connect(&IpcLocation::new(&prefixes[1], DEFAULT_ROOT)).unwrap();
+    let s = client.send(CommandRequest::of(CommandKind::Status)).unwrap();
+    assert_eq!(s.refusal, 0, "the second session serves: {}", s.reason());
+    drop(client);
+    // Another namespace (forwarded by serve --bridge): a node of its own.
+    let third =
+        start(2, &[&format!("--zenoh-config={as_peer}"), "--namespace=/robot2", "--domain=0"]);
+    said(&third, "as ROS 2 node /robot2/qmarc, domain 0");
+    let js = Command::new(python())
+        .arg(workspace().join("examples/ros2_client.py"))
+        .args([&format!("--connect={router}"), "--mode=client", "--namespace=/robot2"])
+        .args(["joint-states", "3"])
+        .output()
+        .unwrap();
+    assert!(js.status.success(), "{}", String::from_utf8_lossy(&js.stderr));
+    assert_eq!(String::from_utf8_lossy(&js.stdout).lines().count(), 3);
+    // Each quit in turn; those not yet quit stay in the guard.
+    for lines in [first, second, third] {
+        let (mut session, prefix) = sessions.0.remove(0);
+        let location = IpcLocation::new(&prefix, DEFAULT_ROOT);
+        let _ = CommandClient::connect(&location)
+            .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Quit)));
+        let status = session.wait().unwrap();
+        let rest: String = lines.try_iter().map(|l| l + "\n").collect();
+        location.remove_files();
+        assert!(status.success(), "{prefix}: {status}\n{rest}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -38,3 +38,30 @@ pub fn conclude<E: std::fmt::Display>(program: &str, outcome: Outcome<E>) -> Exi
         }
     }
 }
+
+/// Checks a ROS namespace as given on a command line (`qmarc-bridge --namespace`, `serve
+/// --bridge --namespace`): empty, or `/` then names of letters, digits and `_` (not starting
+/// with a digit) joined by `/`, without a trailing `/`.
+pub fn check_ros_namespace(ns: &str) -> Result<(), String> {
+    let valid = ns.is_empty()
+        || ns.starts_with('/')
+            && !ns.ends_with('/')
+            && ns[1..].split('/').all(|p| {
+                p.chars().next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+                    && p.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            });
+    if valid { Ok(()) } else { Err(format!("`{ns}` is not a ROS namespace (/robot1)")) }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn ros_namespaces_are_checked() {
+        for ok in ["", "/robot1", "/cell_a/robot_2"] {
+            assert_eq!(super::check_ros_namespace(ok), Ok(()), "{ok}");
+        }
+        for bad in ["robot1", "/robot1/", "/1robot", "/ro-bot", "/a//b"] {
+            assert!(super::check_ros_namespace(bad).is_err(), "{bad}");
+        }
+    }
+}

@@ -16,14 +16,19 @@ pub(crate) struct Bridge {
 }
 
 impl Bridge {
-    /// Starts `program` on the session at `location` (its messages to `log`, if given).
+    /// Starts `program` with its options `own` on the session at `location` (its messages to
+    /// `log`, if given).
     pub(crate) fn start(
         program: &Path,
+        own: &[String],
         location: &IpcLocation,
         log: Option<&std::fs::File>,
     ) -> Bridge {
-        let args =
-            [format!("--iox-prefix={}", location.prefix), format!("--iox-root={}", location.root)];
+        let mut args = vec![
+            format!("--iox-prefix={}", location.prefix),
+            format!("--iox-root={}", location.root),
+        ];
+        args.extend_from_slice(own);
         match supervise::spawn_logged(program, &args, log) {
             Ok(child) => Bridge { child: Some(child) },
             Err(e) => {

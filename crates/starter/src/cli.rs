@@ -122,9 +122,42 @@ pub struct ServeArgs {
     /// Start `qmarc-bridge` beside the controller and the hwserver, and stop it with them: the
     /// session as a ROS 2 node over Zenoh, on rmw_zenoh's defaults (a peer connecting to a
     /// router at tcp/localhost:7447, domain 0, no namespace; run `qmarc-bridge` yourself for
-    /// others). Its end, or its death, ends nothing else.
+    /// others, or give the three options below). Its end, or its death, ends nothing else;
+    /// a bridge that cannot serve (a node of its name alive in its domain) says why and the
+    /// session goes on without it.
     #[arg(long)]
     pub bridge: bool,
+    /// The bridge's ROS namespace: `/robot1` (qmarc-bridge --namespace).
+    #[arg(long, requires = "bridge", value_parser = ros_namespace)]
+    pub namespace: Option<String>,
+    /// The bridge's ROS domain id, 0‥232 (qmarc-bridge --domain).
+    #[arg(long, requires = "bridge", value_parser = clap::value_parser!(u32).range(0..=232))]
+    pub domain: Option<u32>,
+    /// The bridge's Zenoh configuration file, JSON5 (qmarc-bridge --zenoh-config).
+    #[arg(long, requires = "bridge")]
+    pub zenoh_config: Option<PathBuf>,
+}
+
+impl ServeArgs {
+    /// The bridge's own options, as `qmarc-bridge` takes them.
+    pub fn bridge_args(&self) -> Vec<String> {
+        let mut args = Vec::new();
+        if let Some(ns) = &self.namespace {
+            args.push(format!("--namespace={ns}"));
+        }
+        if let Some(d) = self.domain {
+            args.push(format!("--domain={d}"));
+        }
+        if let Some(f) = &self.zenoh_config {
+            args.push(format!("--zenoh-config={}", f.display()));
+        }
+        args
+    }
+}
+
+/// A ROS namespace (`qmarc_config::program::check_ros_namespace`).
+fn ros_namespace(v: &str) -> Result<String, String> {
+    qmarc_config::program::check_ros_namespace(v).map(|()| v.to_string())
 }
 
 /// Options of `move`.

@@ -87,8 +87,8 @@ pub struct Prepared {
     pub hwserver_bin: PathBuf,
     /// The controller's program.
     pub controller_bin: PathBuf,
-    /// `qmarc-bridge`, when `serve --bridge` starts one beside them.
-    pub bridge_bin: Option<PathBuf>,
+    /// `qmarc-bridge` and its own options, when `serve --bridge` starts one beside them.
+    pub bridge: Option<(PathBuf, Vec<String>)>,
     /// The iceoryx2 prefix was given (`--iox-prefix`): an earlier run's files under it are
     /// removed before this one starts.
     pub own_prefix: bool,
@@ -157,8 +157,16 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     let settings = settings_of(req)?;
     let mode = req.command.mode();
     let (hwserver_bin, controller_bin) = programs(req.bin_dir)?;
-    let bridge_bin = match req.command {
-        crate::cli::Command::Serve(a) if a.bridge => Some(bridge_program(&hwserver_bin)?),
+    let bridge = match req.command {
+        crate::cli::Command::Serve(a) if a.bridge => {
+            if let Some(f) = a.zenoh_config.as_ref().filter(|f| !f.is_file()) {
+                return Err(refused(anyhow!(
+                    "--zenoh-config {}: no such file (a Zenoh configuration, JSON5)",
+                    f.display()
+                )));
+            }
+            Some((bridge_program(&hwserver_bin)?, a.bridge_args()))
+        }
         _ => None,
     };
     let prefix = req.iox_prefix.map_or_else(default_prefix, str::to_string);
@@ -205,7 +213,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     qmarc_hwserver::backends::check(settings, spec.deterministic).map_err(refused)?;
     check_path(settings, mode)?;
     let own_prefix = req.iox_prefix.is_some();
-    Ok(Prepared { spec, location, hwserver_bin, controller_bin, bridge_bin, own_prefix })
+    Ok(Prepared { spec, location, hwserver_bin, controller_bin, bridge, own_prefix })
 }
 
 /// The path: knot files are read and checked now (streams are the controller's to read: it
@@ -329,7 +337,7 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
     }
     let mut children = spawn_both(p, &child_args, log)?;
     let mut bridge =
-        p.bridge_bin.as_ref().map(|b| crate::bridge::Bridge::start(b, &p.location, log));
+        p.bridge.as_ref().map(|(b, args)| crate::bridge::Bridge::start(b, args, &p.location, log));
     let status = std::cell::RefCell::new(StatusLine::new(progress.as_ref()));
     let said = |s: &Supervised| {
         status.borrow_mut().clear();

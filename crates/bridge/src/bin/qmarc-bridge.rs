@@ -3,11 +3,13 @@
 //! `--iox-prefix` it serves your newest serving session (`qmarc-starter serve`).
 //!
 //! Exit codes: 0 the session ended (or a stop signal), 1 no serving session, the network or
-//! the session failed, 64 bad options.
+//! the session failed, 3 refused (a ROS node of its name is already alive in its domain; or
+//! several serving sessions and no `--iox-prefix`), 64 bad options.
 
 use clap::Parser;
 use qmarc_bridge::bridge::{Options, run};
 use qmarc_bridge::convert::Converter;
+use qmarc_bridge::node::NodeOpenError;
 use qmarc_proto::service::run_file;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -41,25 +43,10 @@ struct Args {
     zenoh_config: Option<PathBuf>,
 }
 
-fn namespace_ok(ns: &str) -> Result<(), String> {
-    let valid = ns.is_empty()
-        || ns.starts_with('/')
-            && !ns.ends_with('/')
-            && ns[1..].split('/').all(|p| {
-                p.chars().next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
-                    && p.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-            });
-    if valid {
-        Ok(())
-    } else {
-        Err(format!("--namespace: `{ns}` is not a ROS namespace (/robot1)"))
-    }
-}
-
 fn main() -> ExitCode {
     let args: Args = qmarc_config::program::parse_or_exit();
-    if let Err(e) = namespace_ok(&args.namespace) {
-        eprintln!("qmarc-bridge: {e}");
+    if let Err(e) = qmarc_config::program::check_ros_namespace(&args.namespace) {
+        eprintln!("qmarc-bridge: --namespace: {e}");
         return ExitCode::from(qmarc_proto::exit::USAGE);
     }
     if !(args.rate.is_finite() && (1.0..=2000.0).contains(&args.rate)) {
@@ -72,7 +59,7 @@ fn main() -> ExitCode {
             args.iox_prefix.as_deref(),
             args.iox_root.as_deref(),
         )
-        .map_err(|e| anyhow::anyhow!(e))?;
+        .map_err(anyhow::Error::from)?;
         let s = &spec.settings;
         let opts = Options {
             location,
@@ -99,6 +86,10 @@ fn main() -> ExitCode {
     })();
     qmarc_config::program::conclude(
         "qmarc-bridge",
-        outcome.map_err(|e| (qmarc_proto::exit::INTERNAL, e)),
+        outcome.map_err(|e| {
+            // A node of its name already alive: refused, not failed.
+            let alive = matches!(e.downcast_ref(), Some(NodeOpenError::Alive { .. }));
+            (if alive { qmarc_proto::exit::REFUSED } else { qmarc_proto::exit::INTERNAL }, e)
+        }),
     )
 }

@@ -53,6 +53,30 @@ fn liveliness_tokens_are_rmw_zenohs() {
         node.node_token(),
         "@ros2_lv/2/aac3178e146ba6f1fc6e6a4085e77f21/0/0/NN/%/%/listener"
     );
+    // Issue 42, item 3: what a second node of this name looks for matches the first's token,
+    // from any session, and no other node's.
+    let alive = zenoh::key_expr::KeyExpr::try_from(node.same_node_tokens()).unwrap();
+    let token = |t: String| zenoh::key_expr::KeyExpr::try_from(t).unwrap();
+    let other_session = NodeInfo { zid: "1234".into(), id: 3, ..node.clone() };
+    assert!(alive.intersects(&token(other_session.node_token())));
+    for other in [
+        NodeInfo { name: "talker".into(), ..node.clone() },
+        NodeInfo { namespace: "/robot2".into(), ..node.clone() },
+        NodeInfo { domain: 3, ..node.clone() },
+    ] {
+        assert!(!alive.intersects(&token(other.node_token())), "{other:?}");
+    }
+    let string_sub = node.entity_token(
+        10,
+        EntityKind::Subscription,
+        "/chatter",
+        &RosType {
+            name: "std_msgs/msg/String",
+            hash: "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
+        },
+        &Qos::DEFAULT,
+    );
+    assert!(!alive.intersects(&token(string_sub)), "an entity's token is not the node's");
     let string = RosType {
         name: "std_msgs/msg/String",
         hash: "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
