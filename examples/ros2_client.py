@@ -346,6 +346,21 @@ def main():
     # The command's arguments as typed: a coordinate such as -1e9 is one, not an option.
     p.add_argument("args", nargs=argparse.REMAINDER)
     a = p.parse_args()
+    # Options given after the command are options still (`joint-states 10 --timeout=30`);
+    # the rest are the command's arguments as typed.
+    options = {o for action in p._actions for o in action.option_strings}
+    rest, later = [], []
+    words = iter(a.args)
+    for word in words:
+        if word.split("=")[0] in options:
+            later.append(word)
+            if "=" not in word:
+                later.append(next(words, ""))
+        else:
+            rest.append(word)
+    if later:
+        p.parse_args(later + [a.command], namespace=a)
+    a.args = rest
     if a.command == "hashes":
         for t in ["sensor_msgs/msg/JointState", "geometry_msgs/msg/PointStamped",
                   "diagnostic_msgs/msg/DiagnosticArray", "trajectory_msgs/msg/JointTrajectory"]:

@@ -228,12 +228,21 @@ fn stream_and_targets(a: &BridgeArgs) -> anyhow::Result<()> {
     let mut latency: Vec<u64> =
         lines.iter().map(|l| (num(l, "received_ns") - num(l, "stamp_ns")).max(0) as u64).collect();
     let l = percentiles_us(&mut latency);
+    // The rate as the subscriber sees it: messages received over the time between the first
+    // and the last (issue 42: a rate read from the setting hid 196 Hz of 250).
+    let received: Vec<i64> = lines.iter().map(|l| num(l, "received_ns")).collect();
+    let elapsed_s = received.iter().max().zip(received.iter().min()).map_or(0.0, |(hi, lo)| {
+        (hi - lo) as f64 * 1e-9
+    });
+    let rate = if elapsed_s > 0.0 { (received.len() - 1) as f64 / elapsed_s } else { 0.0 };
     println!(
-        "joint_states for {} s at {RATE_HZ} Hz: {} received of {n} ({} lost: gaps in the \
-         sequence); servo sample → Python subscriber p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
+        "joint_states for {} s at --rate {RATE_HZ} Hz: {} received of {n} ({} lost: gaps in the \
+         sequence), {rate:.2} Hz received ({} messages over {elapsed_s:.3} s, first to last); \
+         servo sample → Python subscriber p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
         a.stream_s,
         lines.len(),
         span - lines.len() as i64,
+        received.len(),
         l.p50 / 1e3,
         l.p99 / 1e3,
         l.max / 1e3
