@@ -129,3 +129,50 @@ fn a_step_runs_through_the_626_backend_against_the_fake_card() {
     assert!(r.stderr.contains("--deterministic runs the simulated robot only"), "{}", r.stderr);
     run.assert_clean();
 }
+
+/// Issue 42, item 8: the fake card rehearses what the card will see — the e-stop chain
+/// opening mid-move (`sim.estop_open_s`, on the chain's input `[s626] estop_dio`), a
+/// seized motor (`sim.stall_motor`: a following error), each ending the move as on the
+/// simulated robot; without the chain's input wired, the e-stop is refused, saying so.
+#[test]
+fn the_fake_card_plays_the_simulators_fault_injection() {
+    let run = TestRun::new("fakefault");
+    let out = run.out("out");
+    let step = |config: &std::path::Path| {
+        run.starter(
+            &[
+                &format!("--config={}", config.display()),
+                &format!("--out={}", out.display()),
+                "--backend=s626",
+                "--device=fake",
+                "step",
+                "--duration=1",
+            ],
+            TIMEOUT,
+        )
+    };
+    let with = |name: &str, edits: &[(&str, &str)]| {
+        run.config_as(name, &s626_config(), &[&qmarc_tests::VM_TIMING[..], edits].concat())
+    };
+    let r = step(&with("estop.toml", &[("sim.estop_open_s", "[0.5, 0.6]")]));
+    assert_eq!(r.code, Some(i32::from(exit::FAULT)), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stdout.contains("FAULT emergency_stop: EMERGENCY STOP"), "{}", r.stdout);
+    let fault = read_summary(&out).fault.expect("a fault");
+    assert_eq!(fault.kind.name(), "emergency_stop");
+    assert!(fault.message.ends_with("all motors disabled"), "{}", fault.message);
+    let r = step(&with("stall.toml", &[("sim.stall_motor", "2")]));
+    assert_eq!(r.code, Some(i32::from(exit::FAULT)), "{}\n{}", r.stdout, r.stderr);
+    let fault = read_summary(&out).fault.expect("a fault");
+    assert_eq!(fault.kind.name(), "following_error", "{}", fault.message);
+    assert!(fault.message.contains("motor 2"), "{}", fault.message);
+    let unwired =
+        with("unwired.toml", &[("sim.estop_open_s", "[0.5, 0.6]"), ("s626.estop_dio", "-1")]);
+    let r = step(&unwired);
+    assert_eq!(r.code, Some(i32::from(exit::REFUSED)), "{}\n{}", r.stdout, r.stderr);
+    assert!(
+        r.stderr.contains("sim.estop_open_s: the fake card sees the emergency-stop chain only on its input, [s626] estop_dio"),
+        "{}",
+        r.stderr
+    );
+    run.assert_clean();
+}

@@ -231,9 +231,11 @@ fn stream_and_targets(a: &BridgeArgs) -> anyhow::Result<()> {
     // The rate as the subscriber sees it: messages received over the time between the first
     // and the last (issue 42: a rate read from the setting hid 196 Hz of 250).
     let received: Vec<i64> = lines.iter().map(|l| num(l, "received_ns")).collect();
-    let elapsed_s = received.iter().max().zip(received.iter().min()).map_or(0.0, |(hi, lo)| {
-        (hi - lo) as f64 * 1e-9
-    });
+    let elapsed_s = received
+        .iter()
+        .max()
+        .zip(received.iter().min())
+        .map_or(0.0, |(hi, lo)| (hi - lo) as f64 * 1e-9);
     let rate = if elapsed_s > 0.0 { (received.len() - 1) as f64 / elapsed_s } else { 0.0 };
     println!(
         "joint_states for {} s at --rate {RATE_HZ} Hz: {} received of {n} ({} lost: gaps in the \

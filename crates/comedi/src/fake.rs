@@ -64,6 +64,8 @@ pub struct SwitchWire {
     /// A closed switch pulls its input to 0 V (wired to ground, reading 1); else it leaves
     /// it open when closed and pulls it low when tripped.
     pub closed_low: bool,
+    /// Once tripped it stays open, wherever the motor goes (a stuck switch: fault injection).
+    pub sticks: bool,
 }
 
 impl SwitchWire {
@@ -118,6 +120,13 @@ pub struct FakeS626 {
     last_len: usize,
     plant: [Option<Wire>; 4],
     period_s: f64,
+    /// The plant's time, s: one period per list that reads counters.
+    elapsed_s: f64,
+    /// Inputs of sticking switches that have tripped (DIO bank 0 bits).
+    stuck_open: u32,
+    /// An input opened for a while (fault injection): its DIO, whether closed pulls it low,
+    /// and from when to when of the plant's time it is open, s.
+    opens: Option<(u32, bool, [f64; 2])>,
 }
 
 impl Default for FakeS626 {
@@ -150,7 +159,18 @@ impl FakeS626 {
             last_len: 0,
             plant: [None; 4],
             period_s: 400e-6,
+            elapsed_s: 0.0,
+            stuck_open: 0,
+            opens: None,
         }
+    }
+
+    /// Opens input `chan` (a normally-closed chain: closed, it is pulled low if
+    /// `closed_low`) from `during[0]` to `during[1]` s of the plant's time, closed before and
+    /// after — an emergency-stop button pressed, then released.
+    pub fn open_input_during(&mut self, chan: u32, closed_low: bool, during: [f64; 2]) {
+        self.opens = Some((chan, closed_low, during));
+        self.update_inputs();
     }
 
     /// The same, but its devinfo names `driver` (a device that is not a 626).
@@ -170,7 +190,7 @@ impl FakeS626 {
     pub fn wire(&mut self, motor: usize, wire: Wire, period_s: f64) {
         self.plant[motor] = Some(wire);
         self.period_s = period_s;
-        self.update_switches();
+        self.update_inputs();
     }
 
     /// Puts the motor of counter `chan` at `position` counts, at rest, its counter reading
@@ -180,7 +200,7 @@ impl FakeS626 {
         self.position[chan] = position;
         self.velocity[chan] = 0.0;
         self.set_counter(chan, count);
-        self.update_switches();
+        self.update_inputs();
     }
 
     /// Where the motor of counter `chan` is, counts.
@@ -273,17 +293,28 @@ impl FakeS626 {
                 self.velocity[c] = target;
             }
         }
-        self.update_switches();
+        self.elapsed_s += dt;
+        self.update_inputs();
     }
 
-    /// Opens and closes the switches the plant drives, for where their motors are.
-    fn update_switches(&mut self) {
+    /// Opens and closes the switches the plant drives, for where their motors are (a
+    /// sticking one stays open once tripped), and an input opened for a while.
+    fn update_inputs(&mut self) {
         for w in self.plant {
             let Some(w) = w else { continue };
             for s in [w.top, w.bottom].into_iter().flatten() {
-                let closed = !s.tripped(self.position[w.counter as usize]);
+                let bit = 1 << s.dio;
+                if s.sticks && s.tripped(self.position[w.counter as usize]) {
+                    self.stuck_open |= bit;
+                }
+                let closed =
+                    !s.tripped(self.position[w.counter as usize]) && self.stuck_open & bit == 0;
                 self.set_input_low(s.dio, closed == s.closed_low);
             }
+        }
+        if let Some((chan, closed_low, [from, to])) = self.opens {
+            let open = (from..to).contains(&self.elapsed_s);
+            self.set_input_low(chan, closed_low != open);
         }
     }
 
@@ -433,7 +464,8 @@ mod tests {
     #[test]
     fn a_wired_motor_moves_its_counter_and_opens_its_switch_where_it_passes() {
         let mut fake = FakeS626::new();
-        let top = SwitchWire { dio: 9, at_counts: -100.0, toward: -1.0, closed_low: true };
+        let top =
+            SwitchWire { dio: 9, at_counts: -100.0, toward: -1.0, closed_low: true, sticks: false };
         let wire = Wire {
             dac: 0,
             counter: 0,
@@ -473,6 +505,51 @@ mod tests {
         let rest = fake.position(0);
         fake.run(&mut list).unwrap();
         assert!((fake.position(0) - rest).abs() < 1e-6, "at rest");
+    }
+
+    /// Fault injection on the card's path (issue 42): a sticking switch stays open once
+    /// tripped, wherever its motor goes; an input opened for a while of the plant's time
+    /// (the e-stop chain) is open then only.
+    #[test]
+    fn a_stuck_switch_stays_open_and_an_input_opens_for_its_while() {
+        let mut fake = FakeS626::new();
+        let top =
+            SwitchWire { dio: 9, at_counts: 50.0, toward: 1.0, closed_low: true, sticks: true };
+        let wire = Wire {
+            dac: 0,
+            counter: 0,
+            enable_dio: 0,
+            enable_bit: 1,
+            counts_per_s_per_volt: 10_000.0,
+            lag_s: 0.0,
+            top: Some(top),
+            bottom: None,
+        };
+        fake.wire(0, wire, 0.001);
+        fake.open_input_during(5, true, [0.010, 0.020]);
+        let mut list = InsnList::new(&[
+            Insn::one(INSN_WRITE, SUBDEV_AO, 0),
+            Insn::bits(SUBDEV_DIO0),
+            Insn::one(INSN_READ, SUBDEV_COUNTER, 0),
+        ]);
+        list.data_mut(0)[0] = crate::s626::dac_sample(819); // ≈ +1 V: ≈ +10 000 counts/s
+        list.data_mut(1).copy_from_slice(&[1, 1]);
+        let mut chain = Vec::new();
+        for _ in 0..25 {
+            fake.run(&mut list).unwrap();
+            chain.push(fake.pin_low(5));
+        }
+        // Closed (low) for 10 ms, open for 10, closed again: one list per millisecond.
+        let open: Vec<usize> = (0..25).filter(|&k| !chain[k]).collect();
+        assert_eq!((open.first(), open.last(), open.len()), (Some(&9), Some(&18), 10), "{chain:?}");
+        assert!(fake.position(0) > 50.0 && !fake.pin_low(9), "tripped");
+        // Back below the switch: it stays open.
+        list.data_mut(0)[0] = crate::s626::dac_sample(-819 * 4);
+        for _ in 0..20 {
+            fake.run(&mut list).unwrap();
+        }
+        assert!(fake.position(0) < 0.0, "{}", fake.position(0));
+        assert!(!fake.pin_low(9), "a stuck switch stays open");
     }
 
     #[test]

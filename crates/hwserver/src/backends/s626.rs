@@ -151,7 +151,20 @@ impl S626 {
         Wiring::of(&s.s626, s.n_motors)?;
         let device = s.s626.device.display().to_string();
         if device != FAKE_DEVICE {
+            if let Some(key) = injected_fault(s) {
+                return Err(BackendOpenError::Invalid(format!(
+                    "sim.{key} is the simulator's fault injection, for the simulated robot and \
+                     the fake card (--device fake): not on the card {device}; set it off"
+                )));
+            }
             S626::check_card(s, &device)?;
+        } else if s.sim.plant.estop_open_s.is_some() && s.s626.estop_dio.is_none() {
+            return Err(BackendOpenError::Invalid(
+                "sim.estop_open_s: the fake card sees the emergency-stop chain only on its \
+                 input, [s626] estop_dio, which is -1 (none): wire it (config/s626.toml has \
+                 DIO5) to rehearse the e-stop"
+                    .into(),
+            ));
         }
         match s.s626_counts_problem() {
             Some(problem) => Err(BackendOpenError::Invalid(problem)),
@@ -498,6 +511,20 @@ impl Drop for S626 {
         // Best effort: nothing resets the DACs when the process is gone.
         self.safe_state();
     }
+}
+
+/// The simulator's fault injection the settings turn on, if any (its `[sim]` key): the fake
+/// card plays each; a real card can play none.
+fn injected_fault(s: &Settings) -> Option<&'static str> {
+    let p = &s.sim.plant;
+    [
+        ("stall_motor", p.stall_motor.is_some()),
+        ("stuck_top_motor", p.stuck_top_motor.is_some()),
+        ("reversed_motor", p.reversed_motor.is_some()),
+        ("estop_open_s", p.estop_open_s.is_some()),
+    ]
+    .into_iter()
+    .find_map(|(key, on)| on.then_some(key))
 }
 
 mod fake;

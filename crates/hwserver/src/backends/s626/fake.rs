@@ -26,6 +26,13 @@ pub struct FakePlant {
     pub switches: Option<(f64, f64)>,
     /// A motor (0-based) whose amplifier is wired the other way round (`sim.reversed_motor`).
     pub reversed: Option<usize>,
+    /// A motor (0-based) that does not move, whatever it is told (`sim.stall_motor`).
+    pub stalled: Option<usize>,
+    /// A motor (0-based) whose top switch sticks once tripped (`sim.stuck_top_motor`).
+    pub stuck_top: Option<usize>,
+    /// The emergency-stop chain is open from the first to the second time, s of the plant's
+    /// time (`sim.estop_open_s`; on `[s626] estop_dio`).
+    pub estop_open_s: Option<[f64; 2]>,
 }
 
 impl FakePlant {
@@ -42,6 +49,9 @@ impl FakePlant {
             start_counts,
             switches: Some((s.sim.plant.top_switch_counts, s.sim.plant.bottom_switch_counts)),
             reversed: s.sim.plant.reversed_motor.and_then(|m| m.checked_sub(1)),
+            stalled: s.sim.plant.stall_motor.and_then(|m| m.checked_sub(1)),
+            stuck_top: s.sim.plant.stuck_top_motor.and_then(|m| m.checked_sub(1)),
+            estop_open_s: s.sim.plant.estop_open_s,
         }
     }
 
@@ -53,6 +63,9 @@ impl FakePlant {
             start_counts: [0.0; MAX_MOTORS],
             switches: None,
             reversed: None,
+            stalled: None,
+            stuck_top: None,
+            estop_open_s: None,
         }
     }
 }
@@ -70,15 +83,15 @@ pub fn wired_fake(w: &S626Settings, n_motors: usize, plant: &FakePlant, period_s
     let closed_low = w.switch_closed_bit == 1;
     for m in 0..n_motors.min(MAX_MOTORS) {
         let at = |v: &[u32]| v.get(m).copied().unwrap_or(0);
-        let switch = |dio: u32, at_counts: f64, toward: f64| {
-            Some(SwitchWire { dio, at_counts, toward, closed_low })
+        let switch = |dio: u32, at_counts: f64, toward: f64, sticks: bool| {
+            Some(SwitchWire { dio, at_counts, toward, closed_low, sticks })
         };
         let (top, bottom) = match plant.switches {
             Some((top, bottom)) => {
                 let toward_top = if top < bottom { -1.0 } else { 1.0 };
                 (
-                    switch(at(&w.limit_top_dio), top, toward_top),
-                    switch(at(&w.limit_bottom_dio), bottom, -toward_top),
+                    switch(at(&w.limit_top_dio), top, toward_top, plant.stuck_top == Some(m)),
+                    switch(at(&w.limit_bottom_dio), bottom, -toward_top, false),
                 )
             }
             None => (None, None),
@@ -90,6 +103,7 @@ pub fn wired_fake(w: &S626Settings, n_motors: usize, plant: &FakePlant, period_s
             enable_bit: w.enable_bit,
             counts_per_s_per_volt: plant.kv
                 * if plant.reversed == Some(m) { -1.0 } else { 1.0 }
+                * if plant.stalled == Some(m) { 0.0 } else { 1.0 }
                 * f64::from(w.dac_sign.get(m).copied().unwrap_or(1))
                 * f64::from(w.counter_sign.get(m).copied().unwrap_or(1)),
             lag_s: plant.lag_s,
@@ -109,9 +123,12 @@ pub fn wired_fake(w: &S626Settings, n_motors: usize, plant: &FakePlant, period_s
             }
         }
     }
-    // The emergency-stop chain, closed.
+    // The emergency-stop chain, closed — or opened for a while (fault injection).
     if let Some(chan) = w.estop_dio {
         fake.set_input_low(chan, closed_low);
+        if let Some(during) = plant.estop_open_s {
+            fake.open_input_during(chan, closed_low, during);
+        }
     }
     fake
 }
