@@ -223,7 +223,7 @@ fn home_ok(run: &TestRun, config: &Path, out: &Path, device: Option<&str>) {
     let mut args =
         vec![format!("--config={}", config.display()), format!("--out={}", out.display())];
     args.extend(match device {
-        Some(d) => vec![format!("--device={d}")],
+        Some(d) => vec![format!("--device={d}"), qmarc_tests::rehearsal_bounds()],
         None => vec!["--backend=sim".to_string(), "--unpaced".to_string()],
     });
     args.push("home".to_string());
@@ -245,22 +245,14 @@ fn homing_at_1x_passes_over_the_amplifier_gain_range() {
         home_ok(&run, &sim, &run.out(&format!("sim-{kv}")), None);
         // The fake card, in real time: its plant is the settings' (kv, the lag tau_s, the
         // switches) in 1× counts. Its switches are brought nearer than the shipped robot's
-        // (the loop is the same, the homing shorter); the card's timing bounds are raised to
-        // a second for this VM's stalls under the parallel tests (100 ms seen), which are not
-        // the backend's to survive: its plant advances a period per read, whatever the host.
+        // (the loop is the same, the homing shorter); the card's timing bounds are the
+        // rehearsal's (`home_ok`: a second) for this VM's stalls under the parallel tests
+        // (100 ms seen), which are not the backend's to survive: its plant advances a period
+        // per read, whatever the host.
         let fake = run.config_as(
             "fake.toml",
             &s626_config(),
-            &[
-                [
-                    ("kv", kv.as_str()),
-                    ("top_switch_counts", "-400"),
-                    ("home_offset_counts", "400.0"),
-                ]
-                .as_slice(),
-                &qmarc_tests::VM_TIMING,
-            ]
-            .concat(),
+            &[("kv", kv.as_str()), ("top_switch_counts", "-400"), ("home_offset_counts", "400.0")],
         );
         home_ok(&run, &fake, &run.out(&format!("fake-{kv}")), Some("fake"));
     }

@@ -228,12 +228,64 @@ fn check_finds_a_motor_wired_backwards_and_says_what_to_change() {
     // period of the clock: under a loaded host's missed periods it moves less than the time
     // says, so its speed against the feed-forward's is not judged here; on the simulator
     // above it is.)
-    let card = run.config_as("card.toml", &qmarc_tests::s626_config(), &qmarc_tests::VM_TIMING);
+    let card = qmarc_tests::s626_config();
     let out = run.out("card");
-    let r = starter(&run, &card, &out, &["--device=fake", "check"]);
+    let r =
+        starter(&run, &card, &out, &["--device=fake", &qmarc_tests::rehearsal_bounds(), "check"]);
     assert!(matches!(r.code, Some(0 | 2)), "{}\n{}", r.stdout, r.stderr);
     let check = read_summary(&out).check.expect("the check's report");
     assert!(check.iter().all(|m| m.moved_counts > 0.0 && m.other_moved_counts == 0.0), "{check:?}");
     assert!(!r.stdout.contains("counted DOWN"), "{}", r.stdout);
+    run.assert_clean();
+}
+
+/// Issue 42, item 9: the first-motion sequence of docs/hardware.md — check, home, a small
+/// step — rehearsed on the fake card with the card's own settings and the explicit
+/// rehearsal bounds of `config/rehearse-without-rt.toml` (never a widened shipped bound),
+/// which the starter says it uses; a real device refuses them.
+#[test]
+fn the_first_motion_is_rehearsed_on_the_fake_card_with_the_rehearsal_bounds() {
+    let run = TestRun::new("rehearse");
+    let card = qmarc_tests::s626_config();
+    let bounds = qmarc_tests::workspace().join("config/rehearse-without-rt.toml");
+    let o = qmarc_tests::rehearsal_bounds();
+    // The card's settings as shipped but for where the homed frame is kept (the test's own
+    // folder) and nearer switches (a shorter homing: the loop is the same).
+    let state_dir = format!("{:?}", run.dir.display().to_string());
+    let config = run.config_from(
+        &card,
+        &[
+            ("s626.state_dir", state_dir.as_str()),
+            ("top_switch_counts", "-400"),
+            ("home_offset_counts", "400.0"),
+        ],
+    );
+    for (step, args) in
+        [("check", &["check"][..]), ("home", &["home"]), ("step", &["step", "--size", "50"])]
+    {
+        let out = run.out(step);
+        let mut all = vec!["--device=fake", o.as_str()];
+        all.extend_from_slice(args);
+        let r = starter(&run, &config, &out, &all);
+        assert_eq!(r.code, Some(0), "{step}: {}\n{}", r.stdout, r.stderr);
+        assert!(
+            r.stderr.contains(&format!(
+                "timing bounds from {}: hwserver.watchdog_periods = 2500, \
+                 hwserver.response_timeout_periods = 2500, safety.max_missed_in_row = 2500 (a \
+                 rehearsal's, not the robot's)",
+                bounds.display()
+            )),
+            "{step}: {}",
+            r.stderr
+        );
+        let s = read_summary(&out);
+        assert!(s.ok && s.fault.is_none(), "{step}: {:?}", s.fault);
+    }
+    // The shipped card settings are untouched, and a device that drives a robot refuses them.
+    let shipped = std::fs::read_to_string(&card).unwrap();
+    assert!(!shipped.contains("watchdog_periods = 2500"), "the card's bounds are its own");
+    let r = starter(&run, &card, &run.out("real"), &["--device=/dev/null", &o, "step"]);
+    assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stderr.contains("is for a rehearsal on the fake card"), "{}", r.stderr);
     run.assert_clean();
 }

@@ -85,11 +85,14 @@ fn a_move_closes_the_gripper_at_its_end_on_the_simulated_robot() {
 #[test]
 fn a_move_closes_the_gripper_at_its_end_on_the_626_backend() {
     let run = TestRun::new("grip626");
-    let config = run.config_from(&qmarc_tests::s626_config(), &qmarc_tests::VM_TIMING);
+    let config = qmarc_tests::s626_config();
     let out = run.out("on");
     let (c, o) = (format!("--config={}", config.display()), format!("--out={}", out.display()));
-    let r =
-        run.starter(&[&c, &o, "--device=fake", "move", "--to=800,-400,200", "--grip=on"], TIMEOUT);
+    let bounds = qmarc_tests::rehearsal_bounds();
+    let r = run.starter(
+        &[&c, &o, "--device=fake", &bounds, "move", "--to=800,-400,200", "--grip=on"],
+        TIMEOUT,
+    );
     assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
     let grip = grip_column(&out);
     assert_eq!(states(&grip), [0, 1, 2], "open, closing, closed");

@@ -75,12 +75,13 @@ fn a_step_runs_through_the_626_backend_against_the_fake_card() {
     let run = TestRun::new("fakecard");
     let out = run.out("out");
     // The 626 keeps the hardware bounds (10 and 25 periods); this VM's stalls are not the
-    // backend's to survive, so this test raises them in its own settings.
-    let config = run.config_from(&s626_config(), &qmarc_tests::VM_TIMING);
+    // backend's to survive: the rehearsal's bounds (docs/hardware.md).
+    let config = s626_config();
     let r = run.starter(
         &[
             &format!("--config={}", config.display()),
             &format!("--out={}", out.display()),
+            &qmarc_tests::rehearsal_bounds(),
             "--backend=s626",
             "--device=fake",
             "step",
@@ -145,15 +146,14 @@ fn the_fake_card_plays_the_simulators_fault_injection() {
                 &format!("--out={}", out.display()),
                 "--backend=s626",
                 "--device=fake",
+                &qmarc_tests::rehearsal_bounds(),
                 "step",
                 "--duration=1",
             ],
             TIMEOUT,
         )
     };
-    let with = |name: &str, edits: &[(&str, &str)]| {
-        run.config_as(name, &s626_config(), &[&qmarc_tests::VM_TIMING[..], edits].concat())
-    };
+    let with = |name: &str, edits: &[(&str, &str)]| run.config_as(name, &s626_config(), edits);
     let r = step(&with("estop.toml", &[("sim.estop_open_s", "[0.5, 0.6]")]));
     assert_eq!(r.code, Some(i32::from(exit::FAULT)), "{}\n{}", r.stdout, r.stderr);
     assert!(r.stdout.contains("FAULT emergency_stop: EMERGENCY STOP"), "{}", r.stdout);

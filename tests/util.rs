@@ -50,15 +50,13 @@ pub fn s626_config() -> PathBuf {
     workspace().join("config/s626.toml")
 }
 
-/// Timing bounds for a test on the 626's path (the fake card) in real time: the card's
-/// shipped bounds (10 and 25 periods) are a PREEMPT_RT machine's, and this VM stalls for up
-/// to 100 ms under load — not the backend's to survive, so such a test raises them (1 s)
-/// in its own settings.
-pub const VM_TIMING: [(&str, &str); 3] = [
-    ("hwserver.watchdog_periods", "2500"),
-    ("hwserver.response_timeout_periods", "2500"),
-    ("safety.max_missed_in_row", "2500"),
-];
+/// The option that gives a run on the 626's path (the fake card) in real time the timing
+/// bounds of `config/rehearse-without-rt.toml`: the card's shipped bounds (10 and 25
+/// periods) are a PREEMPT_RT machine's, and this VM stalls for up to 100 ms under load —
+/// not the backend's to survive; a rehearsal's explicit bounds, as docs/hardware.md says.
+pub fn rehearsal_bounds() -> String {
+    format!("--timing-overrides={}", workspace().join("config/rehearse-without-rt.toml").display())
+}
 
 /// The settings the end-to-end tests run with: the shipped file. Its simulated robot rides
 /// out the multi-millisecond host stalls of a loaded VM without PREEMPT_RT (the backend's

@@ -29,6 +29,7 @@ mod hwserver;
 mod jog;
 mod motion;
 mod motor;
+mod overrides;
 pub mod program;
 mod robot;
 mod run;
@@ -49,6 +50,7 @@ pub use hwserver::{BackendKind, ExplicitTiming, HwServerSettings, HwWait, Timing
 pub use jog::{AXES, JogSettings, MAX_JOG_COUNTS, MAX_JOG_MM};
 pub use motion::{MAX_TARGET_COUNTS, MoveSettings, MoveTarget, TargetError};
 pub use motor::{MotorGains, MotorSafety, effective_gains_problem, gains_problem};
+pub use overrides::TimingOverrides;
 pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
 pub use s626::{S626_DIO_CHANNELS, S626Settings};

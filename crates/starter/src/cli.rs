@@ -51,6 +51,12 @@ pub struct MoveOptions {
     /// `nanosleep` or `timerfd-periodic`.
     #[arg(long, global = true)]
     pub timer: Option<qmarc_config::TimerMethod>,
+    /// A file of timing bounds over the settings' (`[hwserver] watchdog_periods`,
+    /// `response_timeout_periods`, `[safety] max_missed_in_row` only): to rehearse on the
+    /// fake card (--device fake) on a machine without PREEMPT_RT
+    /// (config/rehearse-without-rt.toml); refused on a card that drives a robot.
+    #[arg(long, global = true, value_name = "FILE")]
+    pub timing_overrides: Option<PathBuf>,
 }
 
 impl MoveOptions {
@@ -62,6 +68,7 @@ impl MoveOptions {
     /// Loads the settings file and applies the overrides, the names it accepts from `names`.
     pub fn load(&self, names: &Names) -> Result<Settings, ConfigLoadError> {
         let mut s = Settings::load(&self.config, names)?;
+        let timing = self.timing_overrides.as_deref().map(qmarc_config::TimingOverrides::load);
         if let Some(p) = self.period_us {
             s.set_period_us(p)?;
         }
@@ -82,6 +89,14 @@ impl MoveOptions {
         }
         if let Some(t) = self.timer {
             s.timer.method = t;
+        }
+        if let Some(o) = timing.transpose()? {
+            s.apply_timing_overrides(&o)?;
+            eprintln!(
+                "qmarc-starter: timing bounds from {}: {} (a rehearsal's, not the robot's)",
+                o.file.display(),
+                o.describe()
+            );
         }
         Ok(s)
     }
