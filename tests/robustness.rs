@@ -522,9 +522,19 @@ fn a_dead_controller_is_reported_with_what_is_known() {
         fault.message
     );
     assert!(r.stdout.contains(&format!("3 motors, {} cycles of 400 µs", s.cycles)), "{}", r.stdout);
-    assert!(r.stdout.contains("no data files"), "no file that does not exist: {}", r.stdout);
-    assert!(!r.stdout.contains("gather.csv"), "{}", r.stdout);
-    assert!(!out.join("gather.csv").exists(), "the good run's data beside the dead run's summary");
+    // Issue 42, item 10: its gathered rows outlived it (its gather page): written, every cycle
+    // from the first to its last, marked cut short, beside its summary.
+    let (_, rows) = qmarc_tests::read_gather(&out);
+    let cycles: Vec<u64> = rows.iter().map(|r| r[0] as u64).collect();
+    assert_eq!(cycles[0], 0);
+    assert!(cycles.windows(2).all(|w| w[1] == w[0] + 1), "every cycle gathered");
+    let last = *cycles.last().unwrap();
+    assert!(last + 3 >= s.cycles && last <= s.cycles, "to its last cycle: {last} of {}", s.cycles);
+    assert_eq!(s.gathered_rows, rows.len() as u64);
+    let cut = s.warnings.iter().find(|w| w.kind == qmarc_report::summary::WarningKind::CutShort);
+    let cut = cut.expect("the data are said to be cut short");
+    assert!(cut.message.contains(&format!("to cycle {last}")), "{}", cut.message);
+    assert!(r.stdout.contains(&out.join("gather.csv").display().to_string()), "{}", r.stdout);
     let previous = out.join(qmarc_report::output::PREVIOUS_DIR);
     assert_eq!(std::fs::read_to_string(previous.join("summary.json")).unwrap(), good_summary);
     assert!(previous.join("gather.csv").is_file() && previous.join("gather.m").is_file());

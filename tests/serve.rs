@@ -150,6 +150,17 @@ fn serve_ends_as_any_move_does_under_ctrl_c_and_kill_9() {
                     "{}",
                     r.stderr
                 );
+                // Issue 42, item 10: the session's data outlive its killed controller, up to
+                // its last cycle (its move to 4000 counts begun).
+                let out = run.out("out");
+                let (_, rows) = read_gather(&out);
+                assert!(rows.iter().any(|r| r[2] > 0.0), "{victim}: the move is in gather.csv");
+                let s = read_summary(&out);
+                assert_eq!(s.gathered_rows, rows.len() as u64, "{victim}");
+                if name == "qmarc-controller" {
+                    let cut = qmarc_report::summary::WarningKind::CutShort;
+                    assert!(s.warnings.iter().any(|w| w.kind == cut), "{:?}", s.warnings);
+                }
             }
         }
         // Nothing serves any more, and nothing is left (the children of a killed starter stop

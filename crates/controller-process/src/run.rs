@@ -144,7 +144,10 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     let progress = Progress::open(&Progress::path(&location.prefix)).ok();
     let (telemetry, relay) = telemetry_for(settings, &location);
     let (servo, serving) = build_serving(spec, progress)?;
-    let servo = servo.with_telemetry(telemetry);
+    // The rows in shared memory beside the run's other files: a killed controller leaves
+    // them to its starter.
+    let page = qmarc_proto::gather_page::GatherPage::path(&location.prefix);
+    let servo = servo.with_telemetry(telemetry).with_gather_page(page);
     // Serving: the command thread, answering from before the loop starts until this returns.
     let commands = match serving {
         Some(h) => Some(
@@ -186,7 +189,9 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
         summary.homing = Some(homing_report(&record, homed_read, settings.n_motors));
     }
     warn(&mut summary, spec, &record, relayed.and_then(|r| r.error));
-    write_results(&settings.gather.out_dir, &record.gather, &mut summary)?;
+    // The rescue folder is named after the run's starter, this process's parent.
+    let starter = std::os::unix::process::parent_id();
+    write_results(&settings.gather.out_dir, &record.gather, &mut summary, starter)?;
     Ok(summary)
 }
 

@@ -1,12 +1,18 @@
 //! Data gathering (thesis 3.4, 4.2): every N-th sample's time, command, actual position and
 //! DAC per motor, into a buffer sized before the move (`qmarc-report` writes it to files
-//! after it).
+//! after it). The buffer is the run's gather page ([`GatherPage`], shared memory) when the
+//! move has one, so that a controller killed mid-move leaves its rows to its starter
+//! ([`Gather::salvage`]); else the heap.
 
 use qmarc_config::GatherFields;
 use qmarc_proto::MAX_MOTORS;
+use qmarc_proto::gather_page::GatherPage;
+use std::sync::atomic::Ordering;
 
-/// One gathered servo cycle.
+/// One gathered servo cycle: plain numbers in a fixed layout (`repr(C)`), as the gather page
+/// holds them.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[repr(C)]
 pub struct GatherRow {
     /// Servo sample index n.
     pub cycle: u64,
@@ -54,11 +60,22 @@ pub fn check_budget(samples: u64, every: u32) -> Result<(), GatherBudgetError> {
     Ok(())
 }
 
+/// Where the rows are: the heap, or a gather page (shared memory that outlives this process).
+enum Rows {
+    /// Every slot allocated when the buffer is made.
+    Heap(Vec<GatherRow>),
+    /// The run's gather page.
+    Page(GatherPage),
+}
+
 /// The gather buffer. Its capacity is fixed when it is made; [`Gather::push`] never
 /// allocates and drops (and counts) rows beyond it, so it can never overflow mid-move.
-#[derive(Debug, Clone, PartialEq)]
 pub struct Gather {
-    rows: Vec<GatherRow>,
+    rows: Rows,
+    /// Rows written.
+    len: usize,
+    /// Rows it has room for.
+    capacity: usize,
     every: u32,
     /// The sample index the next row is due at: the next multiple of `every`.
     next_due: u64,
@@ -69,13 +86,86 @@ pub struct Gather {
     ring: Option<usize>,
 }
 
+impl std::fmt::Debug for Gather {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Gather")
+            .field("rows", &self.len)
+            .field("capacity", &self.capacity)
+            .field("in_page", &matches!(self.rows, Rows::Page(_)))
+            .field("every", &self.every)
+            .field("dropped", &self.dropped)
+            .finish()
+    }
+}
+
+impl Clone for Gather {
+    /// A copy on the heap (a page's rows copied out).
+    fn clone(&self) -> Gather {
+        let mut rows = self.rows().to_vec();
+        rows.resize(self.capacity, GatherRow::default());
+        Gather { rows: Rows::Heap(rows), ..*self }
+    }
+}
+
+impl PartialEq for Gather {
+    /// The same rows and the same shape, wherever they are.
+    fn eq(&self, other: &Gather) -> bool {
+        self.rows() == other.rows()
+            && (self.capacity, self.every, self.next_due, self.n_motors, self.dropped)
+                == (other.capacity, other.every, other.next_due, other.n_motors, other.dropped)
+            && (self.fields, self.ring) == (other.fields, other.ring)
+    }
+}
+
+/// The fields as the gather page keeps them: one bit each.
+fn field_bits(f: GatherFields) -> u32 {
+    [f.time, f.cmd, f.act, f.dac, f.grip]
+        .iter()
+        .enumerate()
+        .map(|(k, &on)| u32::from(on) << k)
+        .sum()
+}
+
+/// The fields of `bits` ([`field_bits`]).
+fn fields_of(bits: u32) -> GatherFields {
+    let on = |k: u32| bits >> k & 1 == 1;
+    GatherFields { time: on(0), cmd: on(1), act: on(2), dac: on(3), grip: on(4) }
+}
+
 impl Gather {
     /// A buffer for a move of `samples` servo cycles gathered every `every` cycles.
     pub fn for_move(samples: u64, every: u32, n_motors: usize) -> Gather {
         let every = every.max(1);
-        let rows = samples.div_ceil(u64::from(every)) as usize;
+        let capacity = samples.div_ceil(u64::from(every)) as usize;
+        Gather::with_rows(
+            Rows::Heap(vec![GatherRow::default(); capacity]),
+            capacity,
+            every,
+            n_motors,
+        )
+    }
+
+    /// The same, its rows in a new gather page at `path` (the run's, [`GatherPage::path`]):
+    /// they outlive this process. Made before the move (it maps and touches every page).
+    pub fn in_page(
+        path: &std::path::Path,
+        samples: u64,
+        every: u32,
+        n_motors: usize,
+    ) -> std::io::Result<Gather> {
+        let every = every.max(1);
+        let capacity = samples.div_ceil(u64::from(every)) as usize;
+        let page = GatherPage::create(path, std::mem::size_of::<GatherRow>(), capacity)?;
+        let g = Gather::with_rows(Rows::Page(page), capacity, every, n_motors);
+        g.publish_shape();
+        Ok(g)
+    }
+
+    fn with_rows(rows: Rows, capacity: usize, every: u32, n_motors: usize) -> Gather {
         Gather {
-            rows: Vec::with_capacity(rows),
+            rows,
+            len: 0,
+            capacity,
             every,
             next_due: 0,
             n_motors: n_motors.min(MAX_MOTORS),
@@ -86,22 +176,79 @@ impl Gather {
         }
     }
 
+    /// The rows a dead controller left in the gather page at `path`, oldest first, on the
+    /// heap; `None` if there is no such page (or it is not one this build reads).
+    pub fn salvage(path: &std::path::Path) -> Option<Gather> {
+        let page = GatherPage::open(path, std::mem::size_of::<GatherRow>()).ok()?;
+        let h = page.header();
+        let len = (h.len.load(Ordering::Acquire) as usize).min(page.capacity());
+        // SAFETY: the page holds `capacity` rows of GatherRow's size, 64-byte aligned; its
+        // writer is dead, and GatherRow is plain numbers (any bit pattern is one).
+        let written =
+            unsafe { std::slice::from_raw_parts(page.rows().as_ptr().cast::<GatherRow>(), len) };
+        let mut g = Gather::with_rows(Rows::Heap(written.to_vec()), len, 1, 0);
+        g.len = len;
+        g.every = h.every.load(Ordering::Acquire).max(1);
+        g.n_motors = (h.n_motors.load(Ordering::Acquire) as usize).min(MAX_MOTORS);
+        g.dropped = h.dropped.load(Ordering::Acquire);
+        g.fields = fields_of(h.fields.load(Ordering::Acquire));
+        let oldest = (h.oldest.load(Ordering::Acquire) as usize).min(len);
+        g.ring = (h.ring.load(Ordering::Acquire) == 1).then_some(oldest);
+        g.in_order();
+        Some(g)
+    }
+
+    /// The page's header says the buffer's shape (a reader after a crash needs it).
+    fn publish_shape(&self) {
+        if let Rows::Page(p) = &self.rows {
+            let h = p.header();
+            h.every.store(self.every, Ordering::Relaxed);
+            h.n_motors.store(self.n_motors as u32, Ordering::Relaxed);
+            h.fields.store(field_bits(self.fields), Ordering::Relaxed);
+            h.ring.store(u32::from(self.ring.is_some()), Ordering::Release);
+        }
+    }
+
+    /// Whether the rows are in a gather page.
+    pub fn in_a_page(&self) -> bool {
+        matches!(self.rows, Rows::Page(_))
+    }
+
+    /// Every slot, written or not.
+    #[inline]
+    fn slots(&mut self) -> &mut [GatherRow] {
+        match &mut self.rows {
+            Rows::Heap(v) => v,
+            // SAFETY: the page holds `capacity` rows of GatherRow's size, 64-byte aligned,
+            // mapped while `self` lives; only this buffer writes them.
+            Rows::Page(p) => unsafe {
+                std::slice::from_raw_parts_mut(p.rows().as_ptr().cast::<GatherRow>(), self.capacity)
+            },
+        }
+    }
+
     /// When full, keeps the last rows (a ring), counting the ones it overwrites as dropped.
     pub fn keeping_last(mut self, keep_last: bool) -> Gather {
         self.ring = keep_last.then_some(0);
+        self.publish_shape();
         self
     }
 
     /// Puts a ring's rows in order, oldest first (after the move: it moves memory).
     pub fn in_order(&mut self) {
         if let Some(oldest) = self.ring.replace(0) {
-            self.rows.rotate_left(oldest);
+            let len = self.len;
+            self.slots()[..len].rotate_left(oldest);
+            if let Rows::Page(p) = &self.rows {
+                p.header().oldest.store(0, Ordering::Release);
+            }
         }
     }
 
     /// Writes only `fields` (every row keeps all of them in memory).
     pub fn with_fields(mut self, fields: GatherFields) -> Gather {
         self.fields = fields;
+        self.publish_shape();
         self
     }
 
@@ -130,20 +277,36 @@ impl Gather {
     pub fn push(&mut self, row: GatherRow) {
         let every = u64::from(self.every);
         self.next_due = (row.cycle / every).saturating_add(1).saturating_mul(every);
-        if self.rows.len() < self.rows.capacity() {
-            self.rows.push(row);
-            return;
+        if self.len < self.capacity {
+            let k = self.len;
+            self.slots()[k] = row;
+            self.len += 1;
+        } else {
+            self.dropped += 1;
+            if let Some(mut oldest) = self.ring.filter(|_| self.len > 0) {
+                self.slots()[oldest] = row;
+                oldest = (oldest + 1) % self.len;
+                self.ring = Some(oldest);
+            }
         }
-        self.dropped += 1;
-        if let Some(oldest) = self.ring.as_mut().filter(|_| !self.rows.is_empty()) {
-            self.rows[*oldest] = row;
-            *oldest = (*oldest + 1) % self.rows.len();
+        // What a reader after a crash needs: stores only, no system call.
+        if let Rows::Page(p) = &self.rows {
+            let h = p.header();
+            h.oldest.store(self.ring.unwrap_or(0) as u64, Ordering::Relaxed);
+            h.dropped.store(self.dropped, Ordering::Relaxed);
+            h.len.store(self.len as u64, Ordering::Release);
         }
     }
 
     /// The gathered rows (a ring's in memory order until [`Gather::in_order`]).
     pub fn rows(&self) -> &[GatherRow] {
-        &self.rows
+        match &self.rows {
+            Rows::Heap(v) => &v[..self.len],
+            // SAFETY: as in `slots`; the first `len` rows are written.
+            Rows::Page(p) => unsafe {
+                std::slice::from_raw_parts(p.rows().as_ptr().cast::<GatherRow>(), self.len)
+            },
+        }
     }
 
     /// Rows that did not fit, or that a ring overwrote (0 unless the move ran longer than
@@ -196,6 +359,35 @@ mod tests {
         assert_eq!((g.rows().len(), g.dropped()), (3, 0));
         g.push(row(99));
         assert_eq!((g.rows().len(), g.dropped()), (3, 1), "full: dropped, not grown");
+    }
+
+    /// Issue 42, item 10: rows in a gather page outlive their writer — what another process
+    /// reads there after it died is every row written, a ring's oldest first, with the
+    /// buffer's shape.
+    #[test]
+    fn a_pages_rows_are_salvaged_as_written() {
+        let path = std::env::temp_dir().join(format!("qmarc-gather-{}", std::process::id()));
+        let fields = GatherFields { dac: false, ..GatherFields::default() };
+        let mut g = Gather::in_page(&path, 3, 1, 2).unwrap().with_fields(fields).keeping_last(true);
+        assert!(g.in_a_page());
+        for c in 0..5 {
+            g.push(row(c));
+        }
+        let expected = {
+            let mut heap = g.clone();
+            heap.in_order();
+            heap
+        };
+        std::mem::forget(g); // as if killed: nothing of the writer runs after its last row
+        let salvaged = Gather::salvage(&path).expect("the page");
+        let cycles: Vec<u64> = salvaged.rows().iter().map(|r| r.cycle).collect();
+        assert_eq!(cycles, [2, 3, 4], "the last three, oldest first");
+        assert_eq!(salvaged.rows(), expected.rows());
+        assert_eq!((salvaged.dropped(), salvaged.every(), salvaged.n_motors()), (2, 1, 2));
+        assert_eq!(salvaged.fields(), fields);
+        assert_eq!(salvaged.rows()[0], row(2), "every number as written");
+        let _ = std::fs::remove_file(&path);
+        assert!(Gather::salvage(&path).is_none(), "no page, nothing salvaged");
     }
 
     /// Issue 10, item 13: with `--gather-every N`, rows follow the sample index, not the

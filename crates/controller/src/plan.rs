@@ -66,6 +66,9 @@ pub struct MovePlan {
     pub monitor_switches: bool,
     /// The gripper's output bit (bit c: DIO channel c, `s626.gripper_dio`); 0: no gripper.
     pub gripper_mask: u32,
+    /// The gather page the rows go into (shared memory that outlives the controller,
+    /// `qmarc_proto::gather_page`); `None`: the heap.
+    pub gather_page: Option<std::path::PathBuf>,
 }
 
 impl MovePlan {
@@ -87,6 +90,7 @@ impl MovePlan {
             require_homed: false,
             monitor_switches: true,
             gripper_mask: 0,
+            gather_page: None,
         }
     }
 }

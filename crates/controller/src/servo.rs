@@ -139,6 +139,13 @@ impl Servo {
         }
     }
 
+    /// Gathers into the gather page at `path` (`qmarc_proto::gather_page`), made when the
+    /// move starts: the rows outlive this process.
+    pub fn with_gather_page(mut self, path: std::path::PathBuf) -> Servo {
+        self.plan.gather_page = Some(path);
+        self
+    }
+
     /// Hands a live sample to `telemetry` every few cycles ([`crate::telemetry`]).
     pub fn with_telemetry(mut self, telemetry: Option<crate::telemetry::Telemetry>) -> Servo {
         self.telemetry = telemetry;
@@ -287,7 +294,20 @@ impl Servo {
         let samples = self.planned_samples.unwrap_or(self.plan.stream_gather_samples)
             + self.plan.settle_cycles;
         crate::gather::check_budget(samples, self.plan.gather_every)?;
-        self.gather = Gather::for_move(samples, self.plan.gather_every, self.plan.n_motors)
+        let (every, n) = (self.plan.gather_every, self.plan.n_motors);
+        let buffer = match &self.plan.gather_page {
+            Some(page) => Gather::in_page(page, samples, every, n).unwrap_or_else(|e| {
+                // Before the move: the data then live only here, as they did before pages.
+                eprintln!(
+                    "qmarc-controller: warning: no gather page {} ({e}): a controller killed \
+                     mid-move would lose its data",
+                    page.display()
+                );
+                Gather::for_move(samples, every, n)
+            }),
+            None => Gather::for_move(samples, every, n),
+        };
+        self.gather = buffer
             .with_fields(GatherFields {
                 grip: self.plan.gather_fields.grip && self.plan.gripper_mask != 0,
                 ..self.plan.gather_fields

@@ -144,10 +144,19 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
     let limits = MotionLimits::of(&s);
     let soft = [(-9_000.0, 10_000.0); MAX_MOTORS];
     let (serve, mut handle) = ServeMove::new(&s, Some(soft));
-    // With the gripper on DIO6: a grip's third exchange is in the counted cycles too.
-    let plan = MovePlan { gripper_mask: 1 << 6, ..plan(3) };
+    // With the gripper on DIO6: a grip's third exchange is in the counted cycles too. The
+    // rows in a gather page (shared memory, as a serving controller keeps them), a ring of
+    // 1000 that wraps three times in the cycles counted.
+    let plan = MovePlan {
+        gripper_mask: 1 << 6,
+        stream_gather_samples: 1_000,
+        gather_keeps_last: true,
+        ..plan(3)
+    };
+    let page = std::env::temp_dir().join(format!("qmarc-servo-page-{}", std::process::id()));
     let mut servo =
-        Servo::new(plan, Box::new(serve), (LAWS[0].build)(&s), Box::new(MockClock::new(0)));
+        Servo::new(plan, Box::new(serve), (LAWS[0].build)(&s), Box::new(MockClock::new(0)))
+            .with_gather_page(page.clone());
     let mut link = sim_core(lockstep()).with_gripper(1 << 6, 0.05);
     let mut ticker = ManualTicker::new(400_000);
     servo.prepare(&mut link).unwrap();
@@ -185,6 +194,13 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
     // The last grip (id 12: close) was written and the gripper has closed.
     let gripper = qmarc_proto::Gripper(handle.shared.gripper.load(Ordering::Acquire));
     assert_eq!(gripper.name(), "closed");
+    // The rows went into the page (the last 1000), as another process would read them.
+    assert!(servo.gather().in_a_page());
+    let salvaged = qmarc_controller::gather::Gather::salvage(&page).expect("the page");
+    let last: Vec<u64> = salvaged.rows().iter().map(|r| r.cycle).collect();
+    assert_eq!((last.len(), last.last()), (1_000, Some(&3_009)), "the ring's last rows, in order");
+    assert!(last.windows(2).all(|w| w[1] == w[0] + 1));
+    let _ = std::fs::remove_file(&page);
 }
 
 /// The online planner refuses what it cannot plan — a state that is not finite, a limit that

@@ -6,8 +6,9 @@
 //! thesis section 3.6, and the digital outputs its section 6.2.2 asks for, are [`MsgType`]; what went wrong is named by the bits of [`Status`].
 //! [`service`] opens the iceoryx2 services both sides use, with identical QoS; [`telemetry`]
 //! is the live sample a move publishes for its readers, [`state`] the words of a move on the wire
-//! (its phase, the fault that ended it) and [`progress`] the page the starter and console read
-//! while a move runs.
+//! (its phase, the fault that ended it), [`progress`] the page the starter and console read
+//! while a move runs and [`gather_page`] the file its gathered rows live in, which outlives a
+//! killed controller.
 //!
 //! ```
 //! use qmarc_proto::{HwMsg, MsgType, Status};
@@ -24,6 +25,7 @@
 
 pub mod command;
 pub mod exit;
+pub mod gather_page;
 pub mod link;
 pub mod msg;
 pub mod path;

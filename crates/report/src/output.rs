@@ -322,9 +322,14 @@ fn write_json(summary: &Summary, w: &mut dyn Write) -> std::io::Result<()> {
 /// The stop that ended the move does not cut the writing short; a further stop signal while
 /// the rows are written abandons the data files at once (the summary is still written, with a
 /// warning, and the folder keeps the previous data files, if any: never a half-written set);
-/// a failure writes everything to the rescue folder instead, with a warning, and says so on
-/// standard error.
-pub fn write_results(dir: &Path, gather: &Gather, summary: &mut Summary) -> Result<(), WriteError> {
+/// a failure writes everything to the rescue folder of the run whose starter is `run_pid`
+/// instead ([`rescue_dir`]), with a warning, and says so on standard error.
+pub fn write_results(
+    dir: &Path,
+    gather: &Gather,
+    summary: &mut Summary,
+    run_pid: u32,
+) -> Result<(), WriteError> {
     let csv = |w: &mut dyn Write| crate::files::write_csv(gather, w);
     let octave = |w: &mut dyn Write| crate::files::write_octave(gather, w);
     let attempt = |dir: &Path, summary: &mut Summary, data: bool| {
@@ -349,9 +354,12 @@ pub fn write_results(dir: &Path, gather: &Gather, summary: &mut Summary) -> Resu
         attempt(dir, summary, false)?;
         return Ok(());
     }
-    let rescue = rescue_dir(nix::unistd::getppid().as_raw() as u32);
+    let rescue = rescue_dir(run_pid);
     let warning = format!("{e}; the data of this move are in {} instead", rescue.display());
-    let _ = writeln!(std::io::stderr(), "qmarc-controller: {warning}");
+    let program = std::env::current_exe()
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()));
+    let _ = writeln!(std::io::stderr(), "{}: {warning}", program.as_deref().unwrap_or("qmarc"));
     summary.warnings.push(Warning::new(WarningKind::Rescued, warning));
     attempt(&rescue, summary, true)?;
     Ok(())

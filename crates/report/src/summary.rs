@@ -186,6 +186,9 @@ pub enum WarningKind {
     Rescued,
     /// Figures that are not numbers.
     NotNumbers,
+    /// The controller died mid-move: the data files hold the rows it had gathered, from its
+    /// gather page, cut short at its last cycle.
+    CutShort,
     /// A warning of a `summary.json` written before warnings had kinds (a plain string).
     Unsorted,
 }

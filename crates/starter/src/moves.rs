@@ -263,6 +263,8 @@ pub struct Ended {
     pub reached: Option<Snapshot>,
     /// The user's stop flag (Ctrl-C, SIGTERM, the terminal gone).
     pub stop: &'static AtomicBool,
+    /// The rows a controller that did not end well left in its gather page, oldest first.
+    pub salvaged: Option<qmarc_controller::gather::Gather>,
 }
 
 impl Ended {
@@ -371,8 +373,20 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
     status.borrow_mut().clear();
     let reached = progress.as_ref().map(Progress::read);
     drop(progress);
+    // A controller that did not end well (killed, a panic) left its rows in the gather page:
+    // taken before the run's files go.
+    let controller_ended_well = children
+        .iter()
+        .any(|c| c.name == "qmarc-controller" && c.exit.is_some_and(|x| x.success()));
+    let salvaged = (!controller_ended_well)
+        .then(|| {
+            qmarc_controller::gather::Gather::salvage(&qmarc_proto::gather_page::GatherPage::path(
+                &p.location.prefix,
+            ))
+        })
+        .flatten();
     p.location.remove_files();
-    Ok(Ended { children, reached, stop })
+    Ok(Ended { children, reached, stop, salvaged })
 }
 
 /// The hwserver, then the controller. The hwserver has nothing to save: 3 s to end by
@@ -433,7 +447,25 @@ pub fn conclude(p: &Prepared, e: &Ended) -> Option<(Summary, PathBuf)> {
         if let Some((name, u)) = unresponsive {
             stopped_responding(&mut s, name, u);
         }
-        if let Err(err) = qmarc_report::output::write_summary_set(out_dir, &s) {
+        let written = match e.salvaged.as_ref().filter(|g| !g.rows().is_empty()) {
+            // Its rows up to its last cycle, from the gather page it left: marked cut short.
+            Some(g) => {
+                let last = g.rows().last().map_or(0, |r| r.cycle);
+                s.gather_every = g.every();
+                s.gathered_rows = g.rows().len() as u64;
+                s.warnings.push(qmarc_report::summary::Warning::new(
+                    qmarc_report::summary::WarningKind::CutShort,
+                    format!(
+                        "cut short: the controller died; gather.csv and gather.m hold the {} \
+                         rows it had gathered, to cycle {last}, from its gather page",
+                        g.rows().len()
+                    ),
+                ));
+                qmarc_report::output::write_results(out_dir, g, &mut s, std::process::id())
+            }
+            None => qmarc_report::output::write_summary_set(out_dir, &s).map(|_| ()),
+        };
+        if let Err(err) = written {
             say!("qmarc-starter: {err}");
         }
         return Some((s, out_dir.to_path_buf()));

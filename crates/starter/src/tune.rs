@@ -174,6 +174,11 @@ fn write_local(
     s.gather.out_dir = dir.to_path_buf();
     let spec = RunSpec { settings: s, mode: Mode::Run, ..spec.clone() };
     let mut done = qmarc_tune::local::run_local(&spec, &AtomicBool::new(false))?;
-    qmarc_report::output::write_results(dir, &done.record.gather, &mut done.summary)?;
+    qmarc_report::output::write_results(
+        dir,
+        &done.record.gather,
+        &mut done.summary,
+        std::process::id(),
+    )?;
     Ok(dir.to_path_buf())
 }
