@@ -213,6 +213,14 @@ fn serve_follows_a_path_through_its_knots_at_their_times() {
     let r = cmd(&run, &["path", &file]);
     assert_eq!(r.code, Some(3), "{}", r.stdout);
     assert!(r.stdout.contains("point 1: at time 0 the robot is where it rests"), "{}", r.stdout);
+    // Issue 42: with --approach, first a jerk-limited move to its first knot (back to 0),
+    // then the path (README's example).
+    let step = run.out("step2.pvt");
+    std::fs::write(&step, qmarc_tests::smooth_step_pvt(2000.0, 8)).unwrap();
+    let step = step.display().to_string();
+    assert!(accepted(&run, &["path", "--approach", &step]).starts_with("accepted (path 3)"));
+    let done = accepted(&run, &["wait"]);
+    assert_eq!(numbers_after(&done, "command"), [2000.0, 0.0, 0.0], "{done}");
     std::fs::write(&file, "X 0 0 50 Y 0 0 50 Z 0 0 50\nX 10 0 50 Y 0 zero 50 Z 0 0 50\n").unwrap();
     let r = cmd(&run, &["path", &file]);
     assert_eq!(r.code, Some(1), "{}", r.stdout);

@@ -210,7 +210,8 @@ fn a_scope_with_a_duration_and_no_move_says_so_and_leaves_nothing() {
     let started = std::time::Instant::now();
     let idle = wait_with_timeout(scope(&run, &["--duration", "0.6"]), Duration::from_secs(30));
     let waited = started.elapsed();
-    assert_eq!(idle.code, Some(0), "{}{}", idle.stdout, idle.stderr);
+    // Issue 42: nothing recorded is no success.
+    assert_eq!(idle.code, Some(1), "{}{}", idle.stdout, idle.stderr);
     let prefix = &run.prefix;
     assert!(
         idle.stdout.contains(&format!("no move is running under {prefix}; waiting for one")),

@@ -3,6 +3,7 @@
 //! the settings file: the target is the move's own, checked here before anything starts.
 
 use crate::{ConfigLoadError, Settings};
+use qmarc_kinematics::mm;
 use serde::{Deserialize, Serialize};
 
 /// Where a move goes.
@@ -95,7 +96,7 @@ pub enum TargetError {
         motors: usize,
     },
     /// The point is out of the arms' reach.
-    #[error("{x:.1}, {y:.1}, {z:.1} mm is unreachable: {why}")]
+    #[error("{}, {}, {} mm is unreachable: {why}", mm(*x), mm(*y), mm(*z))]
     Unreachable {
         /// The point, mm.
         x: f64,

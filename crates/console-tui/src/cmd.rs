@@ -55,11 +55,16 @@ enum Cmd {
         speed: f64,
     },
     /// Follow a PVT knot file (thesis A.2.3.2) from rest: its first knot is where the robot
-    /// rests (time 0), each next one the previous knot's time on. Checked as `move --knots`
-    /// checks it, then by the controller as any path (`qmarc/path`, at most 1024 knots).
+    /// rests (time 0), each next one the previous knot's time on. Checked as `qmarc-starter
+    /// run --method pvt --knots FILE` checks it, then by the controller as any path
+    /// (`qmarc/path`, at most 1024 knots).
     Path {
         /// The PVT knot file.
         file: std::path::PathBuf,
+        /// First a jerk-limited move from where the robot rests to the path's first knot
+        /// (`trajectory.approach_speed` of the limits), as `run --approach`.
+        #[arg(long)]
+        approach: bool,
     },
     /// A jerk-limited stop to rest.
     Stop,
@@ -212,8 +217,12 @@ fn run(args: &CmdArgs, session: &Session) -> anyhow::Result<u8> {
             return Err(e.into());
         }
     };
-    if let Cmd::Path { file } = &args.command {
-        let answer = client.send_path(&*path_request(file, settings)?)?;
+    if let Cmd::Path { file, approach } = &args.command {
+        let mut request = path_request(file, settings)?;
+        if *approach {
+            request.flags |= PathRequest::APPROACH;
+        }
+        let answer = client.send_path(&*request)?;
         return Ok(said(&answer, "path"));
     }
     let request = match &args.command {

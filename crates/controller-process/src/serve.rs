@@ -9,7 +9,7 @@ use iceoryx2::prelude::ipc;
 use qmarc_config::{Settings, TargetError};
 use qmarc_controller::traj::TrajectoryGenerator;
 use qmarc_plugins::linear::LinearMove;
-use qmarc_plugins::moveto::MotionLimits;
+use qmarc_plugins::moveto::{MotionLimits, rest_to_rest};
 use qmarc_plugins::online::{MotionState, Profile};
 use qmarc_plugins::path::{outside_soft_limits, path_queue};
 use qmarc_plugins::serve::{NotTaken, Order, ServeHandle, ServeMove, ServeShared};
@@ -282,7 +282,34 @@ impl Commands {
         }
         self.at_rest("a path")?;
         let start = self.shared().command();
-        let queue = path_queue(req, &start, &self.settings, !self.unhomed)?;
+        let (mut queue, from) = match req.knots().first().filter(|_| req.approached()) {
+            // `--approach`: first to the path's first knot, as `run --approach` goes.
+            Some(first) => {
+                let s = &self.settings;
+                let mut to = start;
+                to[..s.n_motors].copy_from_slice(&first.pos[..s.n_motors]);
+                let limits = MotionLimits::of(s).at_speed(s.trajectory.approach_speed);
+                let mut way = rest_to_rest(&start, &to, s.n_motors, &limits, s.period_s())
+                    .map_err(|e| (Refusal::BadRequest, format!("the approach: {e}")))?;
+                if let Some((m, k, [lo, hi])) =
+                    outside_soft_limits(&way, s).filter(|_| !self.unhomed)
+                {
+                    return Err((
+                        Refusal::SoftLimits,
+                        format!(
+                            "the approach takes motor {} to {:.0} counts, outside its soft \
+                             limits [{lo}, {hi}]",
+                            m + 1,
+                            way[k][m]
+                        ),
+                    ));
+                }
+                way.pop(); // its last sample is the path's first
+                (way, to)
+            }
+            None => (Vec::new(), start),
+        };
+        queue.extend(path_queue(req, &from, &self.settings, !self.unhomed)?);
         let id = self.give(|id| Order::Line { id, queue: queue.into_boxed_slice() })?;
         self.accepted = id;
         Ok(())

@@ -47,14 +47,28 @@ pub const SINGULAR_COSINE: f64 = 1e-3;
 /// the effector can move across their plane with the arms still.
 pub const COPLANAR_SINE: f64 = 1e-3;
 
+/// A length in mm as a person reads it: to a tenth, or in exponent notation where that would
+/// be a wall of digits (1e308 is 309 of them).
+pub fn mm(x: f64) -> String {
+    if x.is_finite() && x.abs() >= 1e7 {
+        let short = format!("{x:.3e}");
+        match short.split_once('e') {
+            Some((m, e)) => format!("{}e{e}", m.trim_end_matches('0').trim_end_matches('.')),
+            None => short,
+        }
+    } else {
+        format!("{x:.1}")
+    }
+}
+
 /// A point or pose the kinematics cannot answer. Arms are 1-based.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum KinematicsError {
     /// No arm angle puts the effector there: the point is out of the arm's reach.
     #[error(
-        "arm {arm} cannot reach ({:.1}, {:.1}, {:.1}) mm: the point is out of its reach",
-        point[0] * 1e3, point[1] * 1e3, point[2] * 1e3
+        "arm {arm} cannot reach ({}, {}, {}) mm: the point is out of its reach",
+        mm(point[0] * 1e3), mm(point[1] * 1e3), mm(point[2] * 1e3)
     )]
     Unreachable {
         /// 1-based arm.

@@ -162,3 +162,11 @@ proptest! {
         }
     }
 }
+
+/// Issue 42: a point far out of reach is said in a few digits, not 309.
+#[test]
+fn a_point_far_out_of_reach_is_said_shortly() {
+    assert_eq!(crate::mm(1e308), "1e308");
+    assert_eq!(crate::mm(-2.5e9), "-2.5e9");
+    assert_eq!(crate::mm(-600.04), "-600.0");
+}

@@ -59,6 +59,11 @@ impl PathRequest {
     /// `qmarc_plugins::path`).
     pub const VELOCITIES: u32 = 1;
 
+    /// First a jerk-limited move from where the robot rests to the first knot (the run's
+    /// `--approach`), then the path from there: its first knot need not be where the robot
+    /// rests.
+    pub const APPROACH: u32 = 2;
+
     /// The request of `knots`, with their velocities if `velocities`; `None` for more than
     /// [`MAX_PATH_KNOTS`].
     pub fn new(knots: &[PathKnot], velocities: bool) -> Option<Box<PathRequest>> {
@@ -80,6 +85,11 @@ impl PathRequest {
     /// The knots' velocities are given.
     pub fn has_velocities(&self) -> bool {
         self.flags & PathRequest::VELOCITIES != 0
+    }
+
+    /// The path is approached from where the robot rests ([`PathRequest::APPROACH`]).
+    pub fn approached(&self) -> bool {
+        self.flags & PathRequest::APPROACH != 0
     }
 }
 

@@ -3,6 +3,9 @@
 //! found), prints a compact live line per motor or records every sample into a CSV file, and
 //! detaches when the move ends, after `--duration` seconds or on Ctrl-C. Started before a
 //! move, it says that none runs and waits for one.
+//!
+//! Exit codes: 0 it recorded a move, 1 no move ran within `--duration` (nothing recorded) or
+//! the telemetry failed, 130 Ctrl-C before a move, 64 bad options.
 
 use crate::reader::{End, FoundRun, TelemetryReader, is_last, location_of, runs};
 use anyhow::Context;
@@ -102,8 +105,10 @@ pub fn run(args: &ScopeArgs) -> anyhow::Result<u8> {
             break found;
         }
         if over() {
+            // Nothing recorded: not a success (a script waiting for a move learns it did not
+            // come).
             println!("qmarc scope: no move ran within {} s", args.duration.unwrap_or(0.0));
-            return Ok(exit::OK);
+            return Ok(exit::INTERNAL);
         }
         if !said {
             let which = args.iox_prefix.as_ref().map_or(String::new(), |p| format!(" under {p}"));
