@@ -202,9 +202,9 @@ fn one_physical_move_gives_the_same_loop_at_4x_and_1x_counting() {
     let (r4, r1) = (s4.homing.expect("homing at 4×"), s1.homing.expect("homing at 1×"));
     for (m4, m1) in r4.motors.iter().zip(&r1.motors) {
         for (x4, x1) in [
-            (m4.switch_found_counts, m1.switch_found_counts),
-            (m4.switch_cleared_counts, m1.switch_cleared_counts),
-            (m4.home_counts, m1.home_counts),
+            (m4.switch_found_counts.unwrap(), m1.switch_found_counts.unwrap()),
+            (m4.switch_cleared_counts.unwrap(), m1.switch_cleared_counts.unwrap()),
+            (m4.home_counts.unwrap(), m1.home_counts.unwrap()),
         ] {
             assert!((x4 / 4.0 - x1).abs() <= 1.0, "motor {}: {m4:?} at 4×, {m1:?} at 1×", m4.motor);
         }

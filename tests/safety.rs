@@ -462,10 +462,20 @@ fn homing_from_several_start_positions_finds_every_switch() {
         for (m, rep) in motors.iter().enumerate() {
             assert!(rep.home, "{start}: motor {} {rep:?}", m + 1);
             // The counters read 5000 off the homed frame: the switch at −9500 reads −4500.
-            assert!((rep.switch_found_counts - -4_500.0).abs() <= 10.0, "{start}: {rep:?}");
-            assert!((rep.switch_cleared_counts - -4_500.0).abs() <= 10.0, "{start}: {rep:?}");
+            assert!(
+                (rep.switch_found_counts.unwrap() - -4_500.0).abs() <= 10.0,
+                "{start}: {rep:?}"
+            );
+            assert!(
+                (rep.switch_cleared_counts.unwrap() - -4_500.0).abs() <= 10.0,
+                "{start}: {rep:?}"
+            );
             // Home: 2000 counts below where the switch cleared, away from it.
-            assert_eq!(rep.home_counts, rep.switch_cleared_counts + 2_000.0, "{start}: {rep:?}");
+            assert_eq!(
+                rep.home_counts.unwrap(),
+                rep.switch_cleared_counts.unwrap() + 2_000.0,
+                "{start}: {rep:?}"
+            );
             // Afterwards home reads 0: the motor reads how far it stands from home.
             let stands = after.positions_counts[m];
             assert!(

@@ -344,13 +344,14 @@ fn move_lines(r: &crate::results::MoveResult) -> Vec<Line<'static>> {
     if let Some(homing) = &s.homing {
         lines.push(Line::styled("homing (counts before homing)", Style::new().bold()));
         for m in &homing.motors {
+            let at = |v: Option<f64>| v.map_or("not reached".to_string(), |c| format!("{c:.0}"));
             lines.push(Line::from(format!(
-                "M{} switch found {:.0}, cleared {:.0}, home {:.0}{}",
+                "M{} switch found {}, cleared {}, home {}{}",
                 m.motor,
-                m.switch_found_counts,
-                m.switch_cleared_counts,
-                m.home_counts,
-                if m.home { " ✓ reads 0" } else { " — not reached" }
+                at(m.switch_found_counts),
+                at(m.switch_cleared_counts),
+                at(m.home_counts),
+                if m.home { " ✓ reads 0" } else { "" }
             )));
         }
     }

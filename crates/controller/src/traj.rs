@@ -228,14 +228,17 @@ pub struct MotorCheckReport {
 pub struct MotorHome {
     /// 1-based motor.
     pub motor: usize,
-    /// Where the top switch was first seen active.
-    pub switch_found_counts: f64,
-    /// Where it cleared while backing off.
-    pub switch_cleared_counts: f64,
-    /// Home: the home offset from where the switch cleared. It reads 0 afterwards.
-    pub home_counts: f64,
-    /// Where the motor stood when the next one started (it reads `ended − home` afterwards).
-    pub ended_counts: f64,
+    /// Where the top switch was first seen active (`None`: not reached — the homing ended
+    /// before it found the switch).
+    pub switch_found_counts: Option<f64>,
+    /// Where it cleared while backing off (`None`: not reached).
+    pub switch_cleared_counts: Option<f64>,
+    /// Home: the home offset from where the switch cleared. It reads 0 afterwards (`None`:
+    /// not reached).
+    pub home_counts: Option<f64>,
+    /// Where the motor stood when the next one started (it reads `ended − home` afterwards;
+    /// `None`: it did not get there).
+    pub ended_counts: Option<f64>,
     /// The motor was already on its top switch when its homing began.
     pub started_on_switch: bool,
     /// It got home (false: homing failed on this motor).

@@ -261,7 +261,7 @@ impl Homing {
         if self.flags[m].top() {
             // Stop where it is and back off from there. The switch tripped somewhere since it
             // was last seen open: a period's travel after that, or here if that is nearer.
-            self.reports[m].switch_found_counts = self.act[m];
+            self.reports[m].switch_found_counts = Some(self.act[m]);
             let earliest = self.open_seen + dir * step;
             self.trip = if (self.act[m] - earliest) * dir < 0.0 { self.act[m] } else { earliest };
             self.cmd[m] = self.act[m];
@@ -280,9 +280,9 @@ impl Homing {
     /// Off the switch at the creep velocity until it clears: home is the offset from there.
     fn back_off(&mut self, m: usize, dir: f64, periods: u64) -> Result<(), HomingFailure> {
         if !self.flags[m].top() {
-            self.reports[m].switch_cleared_counts = self.act[m];
+            self.reports[m].switch_cleared_counts = Some(self.act[m]);
             self.target = self.act[m] - dir * self.motors[m].home_offset_counts;
-            self.reports[m].home_counts = self.target;
+            self.reports[m].home_counts = Some(self.target);
             self.phase = Phase::ToOffset;
             // A host stall (periods missed before this sample) can carry the motor past its
             // command (it runs on its last output meanwhile): the move home then starts where
@@ -304,7 +304,7 @@ impl Homing {
     /// (or done).
     fn settle(&mut self, m: usize, periods: u64) {
         if self.settle_left == 0 {
-            self.reports[m].ended_counts = self.act[m];
+            self.reports[m].ended_counts = Some(self.act[m]);
             self.reports[m].home = true;
             if m + 1 < self.n_motors {
                 self.begin(m + 1);
@@ -411,7 +411,7 @@ impl TrajectoryGenerator for Homing {
     fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
         let mut home = [0.0; MAX_MOTORS];
         for (h, r) in home.iter_mut().zip(&self.reports).take(self.n_motors) {
-            *h = r.home_counts;
+            *h = r.home_counts.unwrap_or(0.0);
         }
         (self.phase == Phase::Done).then_some(home)
     }

@@ -81,19 +81,22 @@ fn homing_lines(t: &mut String, homing: &crate::summary::HomingReport) {
     // homing that failed, or a frame that could not be kept, leaves it unhomed).
     let homed_after =
         |i: usize| homing.after.as_ref().and_then(|a| a.homed.get(i)).copied().unwrap_or(false);
+    // A count homing did not get to is said so, not read as 0.
+    let at = |v: Option<f64>| v.map_or("not reached".to_string(), |c| format!("at {c:.0}"));
     for (i, r) in homing.motors.iter().enumerate() {
         let _ = writeln!(
             t,
-            "  motor {}: top switch found at {:.0}{}, cleared at {:.0}; home at {:.0}{}",
+            "  motor {}: top switch found {}{}, cleared {}; home {}{}",
             r.motor,
-            r.switch_found_counts,
+            at(r.switch_found_counts),
             if r.started_on_switch { " (started on it)" } else { "" },
-            r.switch_cleared_counts,
-            r.home_counts,
+            at(r.switch_cleared_counts),
+            at(r.home_counts),
             match (r.home, homed_after(i)) {
                 (true, true) => ", reads 0 from now on",
                 (true, false) => ", reached, but its frame is not homed (see the fault)",
-                (false, _) => " — not reached",
+                (false, _) if r.home_counts.is_some() => " — not reached",
+                (false, _) => "",
             },
         );
     }
@@ -305,6 +308,34 @@ fn aligned(t: &mut String, rows: &[Vec<String>]) {
 mod tests {
     use super::*;
     use qmarc_config::Mode;
+
+    /// Issue 42: a homing that ended before a motor's switch was found says so, not "found
+    /// at 0".
+    #[test]
+    fn what_homing_did_not_reach_is_said_not_reached() {
+        use crate::summary::{HomingReport, MotorHome};
+        let done = MotorHome {
+            motor: 1,
+            switch_found_counts: Some(-4500.0),
+            switch_cleared_counts: Some(-4498.0),
+            home_counts: Some(-2498.0),
+            ended_counts: Some(-2498.0),
+            started_on_switch: false,
+            home: true,
+        };
+        let begun = MotorHome { motor: 3, ..MotorHome::default() };
+        let mut t = String::new();
+        homing_lines(&mut t, &HomingReport { motors: vec![done, begun], after: None });
+        assert!(t.contains("motor 1: top switch found at -4500, cleared at -4498; home at -2498"));
+        assert!(
+            t.contains(
+                "motor 3: top switch found not reached, cleared not reached; home not reached\n"
+            ),
+            "{t}"
+        );
+        let json = serde_json::to_string(&begun).unwrap();
+        assert!(json.contains("\"switch_found_counts\":null"), "{json}");
+    }
 
     #[test]
     fn durations_are_in_human_units() {

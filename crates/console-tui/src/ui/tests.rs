@@ -280,10 +280,10 @@ fn charts_have_legends_and_homing_results_show_the_switches() {
     r.summary.homing = Some(qmarc_report::summary::HomingReport {
         motors: vec![qmarc_report::summary::MotorHome {
             motor: 1,
-            switch_found_counts: -9500.0,
-            switch_cleared_counts: -9498.0,
-            home_counts: -7498.0,
-            ended_counts: -7498.0,
+            switch_found_counts: Some(-9500.0),
+            switch_cleared_counts: Some(-9498.0),
+            home_counts: Some(-7498.0),
+            ended_counts: Some(-7498.0),
             started_on_switch: false,
             home: true,
         }],

@@ -48,11 +48,14 @@ fn finds_the_switch_backs_off_and_goes_to_the_offset() {
     let (end, cmds) = drive(&mut h, -200.0, false);
     assert_eq!(end, Sample::Done);
     let r = h.reports()[0];
-    assert_eq!(r.switch_found_counts, -200.0, "1 count per sample at 2500 counts/s");
-    assert!(r.switch_cleared_counts > -200.0 && r.switch_cleared_counts < -199.0, "{r:?}");
-    assert_eq!(r.home_counts, r.switch_cleared_counts + 300.0);
-    assert!((r.ended_counts - r.home_counts).abs() < 1e-9, "{r:?}");
-    assert_eq!(h.homed_frame().unwrap()[0], r.home_counts);
+    assert_eq!(r.switch_found_counts.unwrap(), -200.0, "1 count per sample at 2500 counts/s");
+    assert!(
+        r.switch_cleared_counts.unwrap() > -200.0 && r.switch_cleared_counts.unwrap() < -199.0,
+        "{r:?}"
+    );
+    assert_eq!(r.home_counts.unwrap(), r.switch_cleared_counts.unwrap() + 300.0);
+    assert!((r.ended_counts.unwrap() - r.home_counts.unwrap()).abs() < 1e-9, "{r:?}");
+    assert_eq!(h.homed_frame().unwrap()[0], r.home_counts.unwrap());
     assert!(!r.started_on_switch);
     assert!(cmds.iter().all(|&c| c >= -200.0), "never past the switch");
 }
@@ -65,7 +68,7 @@ fn starting_deep_on_the_switch_leaves_it_and_comes_back_to_its_edge() {
     assert_eq!(end, Sample::Done);
     let r = h.reports()[0];
     assert!(r.started_on_switch);
-    assert_eq!(r.switch_found_counts, 40.0, "found again at its edge");
+    assert_eq!(r.switch_found_counts.unwrap(), 40.0, "found again at its edge");
 }
 
 #[test]
@@ -270,12 +273,12 @@ fn homes_three_motors_from_anywhere_at_each_phases_speed() {
         assert_eq!(r.motor, m + 1);
         assert!(r.home, "{r:?}");
         assert_eq!(r.started_on_switch, m == 1, "{r:?}");
-        assert_eq!(r.switch_found_counts, top, "two counts a sample from an even count");
+        assert_eq!(r.switch_found_counts.unwrap(), top, "two counts a sample from an even count");
         // Cleared one creep step (1/8 count) back from the trip.
-        assert_eq!(r.switch_cleared_counts, top - dir * 0.125, "{r:?}");
-        assert_eq!(r.home_counts, r.switch_cleared_counts - dir * 300.0, "{r:?}");
-        assert_eq!(r.ended_counts, r.home_counts, "{r:?}");
-        home[m] = r.home_counts;
+        assert_eq!(r.switch_cleared_counts.unwrap(), top - dir * 0.125, "{r:?}");
+        assert_eq!(r.home_counts.unwrap(), r.switch_cleared_counts.unwrap() - dir * 300.0, "{r:?}");
+        assert_eq!(r.ended_counts.unwrap(), r.home_counts.unwrap(), "{r:?}");
+        home[m] = r.home_counts.unwrap();
     }
     assert_eq!(h.homed_frame(), Some(home));
 
@@ -520,9 +523,9 @@ fn homing_keeps_pace_through_a_host_stall() {
     let (end, _) = drive_through_a_stall(&mut h, -200.0, false, (150, 100));
     assert_eq!(end, Sample::Done, "{:?}", h.failure());
     let r = h.reports()[0];
-    assert_eq!(r.switch_found_counts, -250.0);
-    assert_eq!(r.switch_cleared_counts, -199.0, "the first open position");
-    assert_eq!(r.home_counts, r.switch_cleared_counts + 300.0);
+    assert_eq!(r.switch_found_counts.unwrap(), -250.0);
+    assert_eq!(r.switch_cleared_counts.unwrap(), -199.0, "the first open position");
+    assert_eq!(r.home_counts.unwrap(), r.switch_cleared_counts.unwrap() + 300.0);
     // A switch that sticks is still refused within 10 counts of where it can have tripped
     // (a period after it was last seen open, at −149: −150).
     let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
@@ -576,14 +579,14 @@ fn a_lagging_motor_is_judged_from_where_it_tripped() {
     let mut h = Homing::new(1, 0.0004, fast, safety(300.0));
     let (end, _) = drive_through_stalls(&mut h, -2.0, false, &[], 0.5);
     assert_eq!(end, Sample::Done, "{:?}", h.failure());
-    let found = h.reports()[0].switch_found_counts;
+    let found = h.reports()[0].switch_found_counts.unwrap();
     assert_eq!(found, -2.5);
     assert_eq!(h.trip, found);
     // Passed during a stall: a period after where it was last seen open.
     let mut h = Homing::new(1, 0.0004, settings(), safety(300.0));
     let (end, _) = drive_through_stalls(&mut h, -200.0, false, &[(150, 100)], 1.0);
     assert_eq!(end, Sample::Done, "{:?}", h.failure());
-    assert_eq!((h.reports()[0].switch_found_counts, h.trip), (-250.0, -150.0));
+    assert_eq!((h.reports()[0].switch_found_counts.unwrap(), h.trip), (-250.0, -150.0));
 }
 
 /// A host stall while backing off that carries the motor off the switch and past its command
