@@ -222,7 +222,7 @@ fn run(args: &CmdArgs, session: &Session) -> anyhow::Result<u8> {
         if *approach {
             request.flags |= PathRequest::APPROACH;
         }
-        let answer = client.send_path(&*request)?;
+        let answer = client.send_path(&request)?;
         return Ok(said(&answer, "path"));
     }
     let request = match &args.command {
