@@ -572,6 +572,10 @@ fn a_stalled_motor_is_never_ok() {
     );
     assert!(!r.stdout.starts_with("QMARC step: ok"), "{}", r.stdout);
     assert!(r.stdout.contains("2 DID NOT FOLLOW"), "{}", r.stdout);
+    // Issue 42: the fault's words once, in the table, not again by the controller.
+    let fault = s.fault.expect("a following error");
+    let said = format!("{}{}", r.stdout, r.stderr).matches(fault.message.as_str()).count();
+    assert_eq!(said, 1, "{}\n{}", r.stdout, r.stderr);
     run.assert_clean();
 }
 

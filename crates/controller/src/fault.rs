@@ -118,8 +118,22 @@ impl Fault {
             "the hwserver did not acknowledge disabling the motors (on hardware the charge-pump \
              relay drops them when the hwserver stops)"
         };
+        // Only where a stall can be why: the plant ran on its last output (an error, a
+        // switch or a limit passed), or a process waited too long for the other. Not for a
+        // stop signal, the emergency stop or the hardware's own faults — nor an overrun,
+        // which is the stall itself.
+        let stall_can_cause = matches!(
+            self.kind,
+            FaultKind::FollowingError
+                | FaultKind::SoftwareLimit
+                | FaultKind::LimitSwitch
+                | FaultKind::TooMuchTravel
+                | FaultKind::HomingFailed
+                | FaultKind::Watchdog
+                | FaultKind::HwserverLost
+        );
         let stall = match self.stall {
-            Some(st) if self.kind != FaultKind::Overrun => format!(
+            Some(st) if stall_can_cause => format!(
                 " ({} servo periods went by without a cycle {} cycles before: a host stall, the \
                  motors running on their last output meanwhile; without PREEMPT_RT a loaded \
                  host stalls like that)",
@@ -411,6 +425,13 @@ mod tests {
             Fault { stall, value: 30.0, limit: 25.0, ..Fault::new(FaultKind::Overrun, 9) };
         assert!(!overrun.message().contains("host stall 40"), "{}", overrun.message());
         assert!(!overrun.message().contains(said), "{}", overrun.message());
+        // Issue 42: a stop signal or the emergency stop is no stall's doing.
+        for kind in [FaultKind::Aborted, FaultKind::EmergencyStop, FaultKind::HardwareFault] {
+            let f = Fault { stall, ..Fault::new(kind, 9) };
+            assert!(!f.message().contains("servo periods went by"), "{}", f.message());
+        }
+        let lost = Fault { stall, ..Fault::new(FaultKind::Watchdog, 9) };
+        assert!(lost.message().contains(said), "{}", lost.message());
         let homing = |status| Fault { status, ..Fault::new(FaultKind::HomingFailed, 3) }.message();
         assert!(
             homing(Status::NOT_KEPT).starts_with("homing set the frame, but it could not be kept")

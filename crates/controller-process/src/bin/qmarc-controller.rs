@@ -50,10 +50,10 @@ fn run(args: &ControllerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
             exit::RESCUED
         }
         None => exit::OK,
-        Some(f) => {
-            eprintln!("qmarc-controller: fault ({}): {}", f.kind, f.message);
-            if f.kind == FaultKind::Aborted { exit::INTERRUPTED } else { exit::FAULT }
-        }
+        // The fault is said once, by the summary (the starter's table, the console): not here
+        // too.
+        Some(f) if f.kind == FaultKind::Aborted => exit::INTERRUPTED,
+        Some(_) => exit::FAULT,
     }))
 }
 
