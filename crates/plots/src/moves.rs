@@ -10,6 +10,7 @@ use qmarc_kinematics::{ARMS, Robot};
 use qmarc_report::Summary;
 use qmarc_report::output::PLOT_FILES;
 use qmarc_report::series::Series;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 const TIME: &str = "time, s";
@@ -37,8 +38,19 @@ pub fn move_plots(
     let mut done = Vec::new();
     let n = s.n_motors();
     if n > 0 {
-        done.push(figure(&arms_png, 260, n, &title, |p| arms(p, &s))?);
-        done.push(figure(&error_png, 420, 1, &title, |p| error(&p[0], &s, summary))?);
+        // Where things happen, when that is a small part of the move (a step's response in
+        // its first tenth): the arms zoom on it, the error gets a detail panel.
+        let errors: Vec<Vec<(f64, f64)>> = (0..n).map(|m| s.error(m)).collect();
+        let detail = active_window(&s.t, &errors);
+        done.push(figure(&arms_png, 260, n, &title, |p| arms(p, &s, detail.clone()))?);
+        let panels = if detail.is_some() { 2 } else { 1 };
+        done.push(figure(&error_png, 420, panels, &title, |p| {
+            error(&p[0], &s, summary, None)?;
+            match &detail {
+                Some(w) => error(&p[1], &s, summary, Some(w.clone())),
+                None => Ok(()),
+            }
+        })?);
         let nominal: Vec<f64> = s.cycle.iter().map(|c| c * period_s).collect();
         done.push(figure(&velocity_png, 360, 2, &title, |p| velocity(p, &s, &nominal))?);
     }
@@ -55,17 +67,52 @@ pub fn move_plots(
     Ok(done)
 }
 
-/// One panel per motor: command and actual position, counts.
-fn arms(panels: &[Panel<'_, '_>], s: &Series) -> Drawn {
+/// The stretch of a move where its following error is more than 2 % of its largest (from a
+/// little before the first such row to a fifth of the stretch after the last), if it is less
+/// than a quarter of the move: the rest is holding still, and drawn whole it would squeeze
+/// the dynamics into a sliver.
+pub(crate) fn active_window(t: &[f64], errors: &[Vec<(f64, f64)>]) -> Option<Range<f64>> {
+    let (t0, t1) = (*t.first()?, *t.last()?);
+    let peak = errors.iter().flatten().map(|p| p.1.abs()).fold(0.0, f64::max);
+    if !(peak > 0.0 && t1 > t0) {
+        return None;
+    }
+    let busy: Vec<f64> =
+        errors.iter().flatten().filter(|p| p.1.abs() > 0.02 * peak).map(|p| p.0).collect();
+    let (first, last) =
+        (busy.iter().copied().fold(t1, f64::min), busy.iter().copied().fold(t0, f64::max));
+    let span = (last - first).max(0.01 * (t1 - t0));
+    let window = (first - 0.05 * span).max(t0)..(last + 0.2 * span).min(t1);
+    (window.end - window.start < 0.25 * (t1 - t0)).then_some(window)
+}
+
+/// `pts` within `w` (all of them without one).
+fn within(pts: &[(f64, f64)], w: Option<&Range<f64>>) -> Vec<(f64, f64)> {
+    pts.iter().filter(|p| w.is_none_or(|w| w.contains(&p.0))).copied().collect()
+}
+
+/// One panel per motor: command and actual position, counts — over `detail` only, where
+/// the move's dynamics are a small part of it.
+fn arms(panels: &[Panel<'_, '_>], s: &Series, detail: Option<Range<f64>>) -> Drawn {
+    let zoom = detail.as_ref().map_or(String::new(), |w| {
+        format!(
+            " (detail: {:.3}–{:.3} s of {:.3}–{:.3} s; the rest holds)",
+            w.start,
+            w.end,
+            s.t[0],
+            s.t[s.t.len() - 1]
+        )
+    });
     for (m, area) in panels.iter().enumerate() {
         let (cmd, act) = (s.points(s.cmd.get(m)), s.points(s.act.get(m)));
+        let (cmd, act) = (within(&cmd, detail.as_ref()), within(&act, detail.as_ref()));
         line_panel(
             area,
             &PanelSpec {
                 min_span: (0.0, 0.0),
                 integer_x: false,
                 from_zero: false,
-                title: format!("motor {}: command and actual position", m + 1),
+                title: format!("motor {}: command and actual position{zoom}", m + 1),
                 x: TIME,
                 y: "position, counts".into(),
                 traces: vec![
@@ -83,10 +130,16 @@ fn arms(panels: &[Panel<'_, '_>], s: &Series) -> Drawn {
     Ok(())
 }
 
-/// Every motor's following error, counts (with its size in rad at the arm in the caption).
-fn error(area: &Panel<'_, '_>, s: &Series, summary: &Summary) -> Drawn {
-    let errors: Vec<Vec<(f64, f64)>> = (0..s.n_motors()).map(|m| s.error(m)).collect();
+/// Every motor's following error, counts (with its size in rad at the arm in the caption);
+/// over `detail` only, if given.
+fn error(area: &Panel<'_, '_>, s: &Series, summary: &Summary, detail: Option<Range<f64>>) -> Drawn {
+    let errors: Vec<Vec<(f64, f64)>> =
+        (0..s.n_motors()).map(|m| within(&s.error(m), detail.as_ref())).collect();
     let per_rad = summary.counts_per_rad;
+    let what = match &detail {
+        Some(w) => format!("following error, detail {:.3}–{:.3} s", w.start, w.end),
+        None => "following error, command − actual".to_string(),
+    };
     line_panel(
         area,
         &PanelSpec {
@@ -94,9 +147,9 @@ fn error(area: &Panel<'_, '_>, s: &Series, summary: &Summary) -> Drawn {
             integer_x: false,
             from_zero: false,
             title: if per_rad > 0.0 {
-                format!("following error, command − actual (1 count = {:.3e} rad)", 1.0 / per_rad)
+                format!("{what} (1 count = {:.3e} rad)", 1.0 / per_rad)
             } else {
-                "following error, command − actual".into()
+                what
             },
             x: TIME,
             y: "error, counts".into(),
@@ -182,8 +235,19 @@ fn period(panels: &[Panel<'_, '_>], s: &Series, summary: &Summary) -> Drawn {
     let band = RGBColor(150, 150, 150);
     let every = summary.gather_every.max(1);
     let t = &summary.timing;
+    // A stall of milliseconds would stretch the axis until the ±40 µs band is a line: the
+    // axis keeps to the band's scale, and the periods beyond it are drawn at its edge and
+    // counted.
+    let axis = PeriodAxis::of(nominal, &s.period_us);
+    let beyond = match axis.beyond {
+        0 => String::new(),
+        k => format!(
+            "; {k} beyond ±{PERIOD_AXIS_US:.0} µs drawn at the edge, the longest {}",
+            qmarc_report::table::human_us(axis.longest_us)
+        ),
+    };
     let counted = format!(
-        "the loop counted {} periods off by > 40 µs, {} missed",
+        "the loop counted {} periods off by > 40 µs, {} missed{beyond}",
         t.outside_40us, t.missed_periods
     );
     line_panel(
@@ -206,7 +270,7 @@ fn period(panels: &[Panel<'_, '_>], s: &Series, summary: &Summary) -> Drawn {
                     name: "period".into(),
                     colour: motor_colour(2),
                     points: false,
-                    pts: &s.period_us,
+                    pts: &axis.pts,
                 },
                 Trace {
                     name: format!("{nominal} ± 40 µs"), colour: band, points: false, pts: &lo
@@ -228,6 +292,31 @@ fn period(panels: &[Panel<'_, '_>], s: &Series, summary: &Summary) -> Drawn {
             traces: per_motor("motor", &dac),
         },
     )
+}
+
+/// How far from the nominal period the period panel's axis reaches, µs (five times the
+/// ±40 µs band).
+pub(crate) const PERIOD_AXIS_US: f64 = 200.0;
+
+/// The periods as the panel draws them: within [`PERIOD_AXIS_US`] of the nominal, those
+/// beyond at the edge, counted, with the longest.
+pub(crate) struct PeriodAxis {
+    pub(crate) pts: Vec<(f64, f64)>,
+    pub(crate) beyond: usize,
+    pub(crate) longest_us: f64,
+}
+
+impl PeriodAxis {
+    pub(crate) fn of(nominal: f64, periods: &[(f64, f64)]) -> PeriodAxis {
+        let (lo, hi) = (nominal - PERIOD_AXIS_US, nominal + PERIOD_AXIS_US);
+        let out: Vec<f64> =
+            periods.iter().map(|p| p.1).filter(|v| !(lo..=hi).contains(v)).collect();
+        PeriodAxis {
+            pts: periods.iter().map(|&(t, v)| (t, v.clamp(lo, hi))).collect(),
+            beyond: out.len(),
+            longest_us: out.iter().copied().fold(0.0, f64::max),
+        }
+    }
 }
 
 /// The end-effector path through the forward kinematics, mm: rows whose command or actual
@@ -253,6 +342,9 @@ impl EffectorPath {
     }
 }
 
+/// The names of the 3-D plot's axes: x, y, z.
+pub(crate) const AXIS_NAMES: [&str; 3] = ["x, mm", "y, mm", "z, mm (up)"];
+
 /// The path in 3-D, command and actual (plotters' vertical axis is its y: z goes there).
 fn effector_3d(area: &Panel<'_, '_>, p: &EffectorPath) -> Drawn {
     let both = || p.cmd.iter().chain(&p.act);
@@ -266,7 +358,7 @@ fn effector_3d(area: &Panel<'_, '_>, p: &EffectorPath) -> Drawn {
         ChartBuilder::on(area)
             .caption("end-effector path, mm (x, y across; z up)", (FONT, 20))
             .margin(20)
-            .build_cartesian_3d(xs, zs, ys),
+            .build_cartesian_3d(xs.clone(), zs.clone(), ys.clone()),
     )?;
     chart.with_projection(|mut pb| {
         pb.yaw = 0.6;
@@ -285,6 +377,16 @@ fn effector_3d(area: &Panel<'_, '_>, p: &EffectorPath) -> Drawn {
             .max_light_lines(4)
             .draw(),
     )?;
+    // plotters' 3-D axes take no descriptions: each axis is named at its far end.
+    let named = (FONT, 16).into_font().color(&BLACK);
+    let (x_end, z_lo, y_lo) = (xs.end, zs.start, ys.start);
+    for (name, at) in [
+        (AXIS_NAMES[0], (x_end, z_lo, y_lo)),
+        (AXIS_NAMES[1], (xs.start, z_lo, ys.end)),
+        (AXIS_NAMES[2], (xs.start, zs.end, y_lo)),
+    ] {
+        text(chart.draw_series(std::iter::once(Text::new(name, at, named.clone()))))?;
+    }
     for (name, pts, colour, width) in
         [("command", &p.cmd, COMMAND, 1), ("actual", &p.act, motor_colour(0), 2)]
     {

@@ -244,3 +244,33 @@ fn trials_show_their_spread_from_zero() {
     assert!(spread < 20, "arm 1 spans {spread} px of the axis");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 42: a step's response (its first 0.15 s of 2 s) is drawn in a detail of its own; a
+/// move busy all along is not cut.
+#[test]
+fn where_a_move_is_busy_is_found_when_it_is_a_small_part_of_it() {
+    use crate::moves::active_window;
+    let t: Vec<f64> = (0..5000).map(|k| f64::from(k) * 4e-4).collect();
+    let step: Vec<(f64, f64)> =
+        t.iter().map(|&t| (t, if t < 0.15 { 1000.0 * (-t / 0.03).exp() } else { 0.0 })).collect();
+    let w = active_window(&t, &[step]).expect("a detail");
+    assert!(w.start == 0.0 && (0.1..0.25).contains(&w.end), "{w:?}");
+    let busy: Vec<(f64, f64)> = t.iter().map(|&t| (t, (t * 7.0).sin())).collect();
+    assert_eq!(active_window(&t, &[busy]), None);
+    assert_eq!(active_window(&t, &[t.iter().map(|&t| (t, 0.0)).collect()]), None);
+}
+
+/// Issue 42: one stall of 10 ms keeps the period axis at the band's scale, drawn at its edge
+/// and counted with its length.
+#[test]
+fn a_stall_does_not_hide_the_period_band() {
+    use crate::moves::{PERIOD_AXIS_US, PeriodAxis};
+    let periods: Vec<(f64, f64)> = (0..1000)
+        .map(|k| (f64::from(k) * 4e-4, if k == 500 { 10_400.0 } else { 400.0 + f64::from(k % 7) }))
+        .collect();
+    let axis = PeriodAxis::of(400.0, &periods);
+    assert_eq!((axis.beyond, axis.longest_us), (1, 10_400.0));
+    assert!(axis.pts.iter().all(|p| (p.1 - 400.0).abs() <= PERIOD_AXIS_US));
+    assert_eq!(axis.pts[500].1, 400.0 + PERIOD_AXIS_US);
+    assert_eq!(axis.pts[3], periods[3], "the rest as they were");
+}
