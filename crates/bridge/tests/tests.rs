@@ -215,6 +215,35 @@ fn wait_for_order_after(
     client.wait(Duration::from_secs(30)).unwrap()
 }
 
+/// Issue 42: the example client says what it can do, and a session it cannot open is said
+/// in its JSON, not a traceback.
+#[test]
+fn the_example_client_lists_its_commands_and_says_a_missing_router() {
+    let help = Command::new(python())
+        .arg(workspace().join("examples/ros2_client.py"))
+        .arg("--help")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&help.stdout);
+    assert!(help.status.success(), "{text}");
+    for command in ["joint-states N", "target X Y Z", "follow JSON", "stop", "gripper on|off"] {
+        assert!(text.contains(command), "{command} in {text}");
+    }
+    let nowhere = format!("--connect=tcp/127.0.0.1:{}", free_port());
+    let out = Command::new(python())
+        .arg(workspace().join("examples/ros2_client.py"))
+        .args([nowhere.as_str(), "--mode=client", "stop"])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{said}");
+    assert!(
+        said.starts_with("{\"error\": \"cannot open a Zenoh session with tcp/127.0.0.1:"),
+        "{said}"
+    );
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("Traceback"));
+}
+
 /// Whether process `pid` runs (a zombie, dead but not yet reaped, does not).
 fn alive(pid: &str) -> bool {
     let stat = std::fs::read_to_string(format!("/proc/{}/stat", pid.trim())).unwrap_or_default();
@@ -273,6 +302,12 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted;
     cell.lines(&["target", "0", "0", "-0.2"]);
     cell.diagnostics_until(|d| d["values"]["refused"].as_str().unwrap().contains("unreachable"));
+    // Issue 42: a coordinate typed as a negative number is one (not an option), and an
+    // absurd one is refused by the bridge, said in the diagnostics.
+    cell.lines(&["target", "0", "0", "-1e9"]);
+    cell.diagnostics_until(|d| {
+        d["values"]["refused"].as_str().unwrap().contains("numbers within ±10 m")
+    });
     // Garbage and an oversized payload: not taken, nothing sent on.
     cell.lines(&["raw-target", "3"]);
     cell.lines(&["raw-target", "2000000"]);

@@ -146,6 +146,31 @@ impl Servo {
         self
     }
 
+    /// The gather buffer of a move of `samples` cycles: in the plan's gather page if it has
+    /// one (a page that cannot be made is said, and the heap used), with the plan's fields and
+    /// a ring for a path of unknown length that keeps its last rows.
+    fn gather_buffer(&self, samples: u64) -> Gather {
+        let (every, n) = (self.plan.gather_every, self.plan.n_motors);
+        let buffer = match &self.plan.gather_page {
+            Some(page) => Gather::in_page(page, samples, every, n).unwrap_or_else(|e| {
+                // Before the move: the data then live only here, as they did before pages.
+                eprintln!(
+                    "qmarc-controller: warning: no gather page {} ({e}): a controller killed \
+                     mid-move would lose its data",
+                    page.display()
+                );
+                Gather::for_move(samples, every, n)
+            }),
+            None => Gather::for_move(samples, every, n),
+        };
+        buffer
+            .with_fields(GatherFields {
+                grip: self.plan.gather_fields.grip && self.plan.gripper_mask != 0,
+                ..self.plan.gather_fields
+            })
+            .keeping_last(self.plan.gather_keeps_last && self.planned_samples.is_none())
+    }
+
     /// Hands a live sample to `telemetry` every few cycles ([`crate::telemetry`]).
     pub fn with_telemetry(mut self, telemetry: Option<crate::telemetry::Telemetry>) -> Servo {
         self.telemetry = telemetry;
@@ -294,25 +319,7 @@ impl Servo {
         let samples = self.planned_samples.unwrap_or(self.plan.stream_gather_samples)
             + self.plan.settle_cycles;
         crate::gather::check_budget(samples, self.plan.gather_every)?;
-        let (every, n) = (self.plan.gather_every, self.plan.n_motors);
-        let buffer = match &self.plan.gather_page {
-            Some(page) => Gather::in_page(page, samples, every, n).unwrap_or_else(|e| {
-                // Before the move: the data then live only here, as they did before pages.
-                eprintln!(
-                    "qmarc-controller: warning: no gather page {} ({e}): a controller killed \
-                     mid-move would lose its data",
-                    page.display()
-                );
-                Gather::for_move(samples, every, n)
-            }),
-            None => Gather::for_move(samples, every, n),
-        };
-        self.gather = buffer
-            .with_fields(GatherFields {
-                grip: self.plan.gather_fields.grip && self.plan.gripper_mask != 0,
-                ..self.plan.gather_fields
-            })
-            .keeping_last(self.plan.gather_keeps_last && self.planned_samples.is_none());
+        self.gather = self.gather_buffer(samples);
         self.timing = TimingStats::new(self.plan.period_ns);
         self.errors = ErrorStats::default();
         self.settle_errors = ErrorStats::default();

@@ -14,6 +14,7 @@
 
 mod bridge;
 pub mod cli;
+pub mod ending;
 mod lost;
 pub mod moves;
 pub mod path;
