@@ -425,13 +425,22 @@ mod tests {
             Fault { stall, value: 30.0, limit: 25.0, ..Fault::new(FaultKind::Overrun, 9) };
         assert!(!overrun.message().contains("host stall 40"), "{}", overrun.message());
         assert!(!overrun.message().contains(said), "{}", overrun.message());
-        // Issue 42: a stop signal or the emergency stop is no stall's doing.
-        for kind in [FaultKind::Aborted, FaultKind::EmergencyStop, FaultKind::HardwareFault] {
+        // Issue 42: only a fault a stall can cause says it; a stop signal, the emergency stop
+        // or the hardware's own faults are no stall's doing.
+        let caused = [
+            FaultKind::FollowingError,
+            FaultKind::SoftwareLimit,
+            FaultKind::LimitSwitch,
+            FaultKind::TooMuchTravel,
+            FaultKind::HomingFailed,
+            FaultKind::Watchdog,
+            FaultKind::HwserverLost,
+        ];
+        for kind in FaultKind::ALL {
             let f = Fault { stall, ..Fault::new(kind, 9) };
-            assert!(!f.message().contains("servo periods went by"), "{}", f.message());
+            let says = f.message().contains("servo periods went by");
+            assert_eq!(says, caused.contains(&kind), "{kind:?}: {}", f.message());
         }
-        let lost = Fault { stall, ..Fault::new(FaultKind::Watchdog, 9) };
-        assert!(lost.message().contains(said), "{}", lost.message());
         let homing = |status| Fault { status, ..Fault::new(FaultKind::HomingFailed, 3) }.message();
         assert!(
             homing(Status::NOT_KEPT).starts_with("homing set the frame, but it could not be kept")

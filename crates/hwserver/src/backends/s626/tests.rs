@@ -441,6 +441,47 @@ fn open_and_check_take_the_device_the_settings_name() {
     assert!(!dir.exists(), "the fake keeps no frame");
 }
 
+/// Issue 42, item 8: the simulator's fault injection is the fake card's too — and none of it
+/// on a card that drives a robot; the fake's e-stop needs the chain's input wired.
+#[test]
+fn fault_injection_is_the_fake_cards_only() {
+    let dir = std::env::temp_dir().join(format!("qmarc-inject-{}", std::process::id()));
+    let real = Path::new("/dev/comedi-none");
+    for (key, value) in [
+        ("stall_motor", "2"),
+        ("stuck_top_motor", "1"),
+        ("reversed_motor", "3"),
+        ("estop_open_s", "[0.5, 0.6]"),
+    ] {
+        let sim = format!("[sim]\n{key} = {value}\n");
+        let on_card = card_settings(real, &dir, &format!("estop_dio = 5\n{sim}"));
+        let e = S626::check(&on_card, false).unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!("sim.{key} is the simulator's fault injection")),
+            "{key}: {e}"
+        );
+        assert!(e.contains("not on the card /dev/comedi-none"), "{e}");
+        let fake = card_settings(Path::new(FAKE_DEVICE), &dir, &format!("estop_dio = 5\n{sim}"));
+        S626::check(&fake, false).unwrap_or_else(|e| panic!("{key} on the fake: {e}"));
+    }
+    let unwired = card_settings(
+        Path::new(FAKE_DEVICE),
+        &dir,
+        "estop_dio = -1\n[sim]\nestop_open_s = [0.5, 0.6]\n",
+    );
+    let e = S626::check(&unwired, false).unwrap_err().to_string();
+    assert!(e.starts_with("sim.estop_open_s: the fake card sees the emergency-stop chain"), "{e}");
+    let plain = card_settings(Path::new(FAKE_DEVICE), &dir, "estop_dio = -1\n");
+    S626::check(&plain, false).unwrap();
+    // What the fake plays: a stalled motor's amplifier moves nothing, a stuck switch sticks.
+    let p = FakePlant::of(&card_settings(
+        Path::new(FAKE_DEVICE),
+        &dir,
+        "[sim]\nstall_motor = 2\nstuck_top_motor = 3\nestop_open_s = [1.0, 2.0]\n",
+    ));
+    assert_eq!((p.stalled, p.stuck_top, p.estop_open_s), (Some(1), Some(2), Some([1.0, 2.0])));
+}
+
 /// Issue 32: an ioctl's answer as a fault: a list that ran short says how far it got
 /// (−(instructions run) − 1), an errno is itself; the operation is named.
 #[test]
