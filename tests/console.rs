@@ -453,10 +453,14 @@ fn console_pages_are_usable_and_one_move_runs_at_a_time() {
     tmux.wait_for("the refusal of a second move", Duration::from_secs(10), |s| {
         message(s).contains("a move is running")
     });
-    // The log page's keys, not a stale hint; then abort.
+    // The log page's keys, not a stale hint (longer than a row at 80 columns: wrapped above
+    // the keys bar, not cut); then abort.
     tmux.keys(&["F3"]);
     tmux.wait_for("the log page's keys", Duration::from_secs(10), |s| {
-        message(s).starts_with("↑↓ PgUp PgDn scroll")
+        let rows: Vec<&str> = s.lines().rev().skip(1).take(2).map(str::trim).collect();
+        rows.len() == 2
+            && rows[1].starts_with("↑↓ PgUp PgDn scroll")
+            && rows[0].ends_with("motor or axis")
     });
     tmux.keys(&["F9"]);
     tmux.wait_for("the aborted run's results", Duration::from_secs(60), results_drawn);
@@ -711,6 +715,29 @@ fn the_console_jogs_the_effector_goes_to_a_point_and_grips() {
     tmux.keys(&["C-o"]);
     let (from, to, grip) = next_results(&tmux, before);
     assert_eq!((from, grip), (to, 2.0), "closed, in place");
+    // Issue 42, item 3: a go-to out of reach is refused before anything moves (the folder
+    // keeps the grip's results): F7 charts those, said to be an earlier move's, and does not
+    // say "No gathered data yet."
+    let before = modified();
+    tmux.keys(&["C-g"]);
+    tmux.wait_for("the question", Duration::from_secs(10), |s| s.contains("go to X Y Z (mm)"));
+    tmux.type_text("2000 -10 -640");
+    tmux.wait_for("the point typed", Duration::from_secs(10), |s| s.contains("2000 -10 -640"));
+    tmux.keys(&["Enter"]);
+    tmux.wait_for("the refusal", Duration::from_secs(60), |s| {
+        s.contains("move ended (exit status: 3) without results")
+    });
+    assert_eq!(modified(), before, "the refused move wrote nothing");
+    tmux.keys(&["F7"]);
+    let s = tmux.wait_for("the earlier move's charts", Duration::from_secs(10), |s| {
+        s.contains("command vs actual") && s.contains("The gathered data of an earlier move")
+    });
+    assert!(!s.contains("No gathered data yet"), "{s}");
+    // Issue 42, item 2: at rest, the setup page says where the robot is and whence.
+    tmux.keys(&["F1"]);
+    tmux.wait_for("the robot at rest", Duration::from_secs(10), |s| {
+        s.contains("At rest: M1 ") && s.contains("gripper open") && setup_drawn(s)
+    });
     tmux.keys(&["F12"]);
     let (status, s) = tmux.wait_exit(Duration::from_secs(20));
     assert_eq!(status, 0, "{s}");

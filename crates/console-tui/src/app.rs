@@ -2,10 +2,12 @@
 //! in `main.rs`. Everything here runs without a terminal, so the tests drive it directly.
 
 use crate::form::{Action, Form, Kind};
-use crate::results::{HistoryEntry, MoveResult};
+use crate::rest::Rest;
+use crate::results::{ChartsView, HistoryEntry, MoveResult};
 use crate::starter_process::{Mode, Running};
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
 use std::path::PathBuf;
+use std::time::{Duration, Instant, SystemTime};
 
 mod hints;
 mod jog;
@@ -37,6 +39,10 @@ pub enum Quit {
 /// Lines of starter output kept.
 pub const LOG_LINES: usize = 2_000;
 
+/// How often the robot at rest is read again while no move runs (its state file may change,
+/// and the settings with it).
+const REST_EVERY: Duration = Duration::from_secs(2);
+
 /// The console.
 #[derive(Debug)]
 pub struct App {
@@ -64,8 +70,19 @@ pub struct App {
     pub iox_root: String,
     /// A move in progress.
     pub running: Option<Running>,
-    /// The last move's outcome.
+    /// The last move's outcome; when the last move left none of its own (refused before
+    /// anything moved), the results an earlier move left in the output folder, which
+    /// [`App::results_note`] then says.
     pub last: Option<MoveResult>,
+    /// Why the results shown are not the last move's own (it left none: `last` holds the
+    /// output folder's, an earlier move's), or why there are none (the folder's files cannot
+    /// be read); `None` when `last` is the last move's, or when no move has written there.
+    pub results_note: Option<String>,
+    /// The robot at rest, as far as it is known (read again every [`REST_EVERY`] while no
+    /// move runs, and when one ends).
+    pub rest: Rest,
+    /// When `rest` was read.
+    rest_read: Option<Instant>,
     /// The last tuning's outcome (Ctrl-T).
     pub tuned: Option<crate::tuning::TuneResult>,
     /// The running move's live telemetry (the charts page while it runs).
@@ -106,6 +123,9 @@ impl App {
             iox_root: qmarc_proto::service::DEFAULT_ROOT.to_string(),
             running: None,
             last: None,
+            results_note: None,
+            rest: Rest::unknown("not known yet"),
+            rest_read: None,
             tuned: None,
             live: None,
             history: Vec::new(),
@@ -120,13 +140,81 @@ impl App {
         };
         // The last move's results, if its files are there: shown, and its timing is what a
         // new servo period is checked against.
-        if let Ok(r) = MoveResult::load(&app.out_dir()) {
-            app.form.last_cycle_work_us = r.cycle_work_us();
-            app.form.validate();
-            app.last = Some(r);
+        let out = app.out_dir();
+        match MoveResult::load(&out) {
+            Ok(r) => {
+                app.form.last_cycle_work_us = r.cycle_work_us();
+                app.form.validate();
+                app.last = Some(r);
+            }
+            Err(e) => app.results_note = crate::results::why_none(&out, &e),
         }
+        app.refresh_rest();
         app.hint();
         app
+    }
+
+    /// Reads the robot at rest again ([`Rest::of`]): the settings as they check now, the
+    /// starter's options and the last results.
+    pub fn refresh_rest(&mut self) {
+        self.rest = match &self.form.checked {
+            Some(s) => Rest::of(
+                s,
+                &self.starter_args,
+                &self.workdir,
+                self.last.as_ref(),
+                SystemTime::now(),
+            ),
+            None => Rest::unknown("not known: the settings do not validate"),
+        };
+        self.rest_read = Some(Instant::now());
+    }
+
+    /// What the charts page (F7) shows: the running move's live telemetry once it has
+    /// samples; else the gathered data of the last move — or of an earlier one, said so, when
+    /// the last left none of its own (a move refused before anything moved leaves the folder
+    /// as it was); else why there is nothing to chart.
+    pub fn charts_view(&self) -> ChartsView<'_> {
+        if let Some(live) =
+            self.live.as_ref().filter(|l| self.running.is_some() && !l.series.t.is_empty())
+        {
+            return ChartsView::Live(live);
+        }
+        let note = self.results_note.as_deref();
+        let Some(last) = &self.last else {
+            return ChartsView::Nothing(match note {
+                Some(why) => format!("Nothing to chart: {why}"),
+                None => format!(
+                    "No gathered data yet: no move has written {}.",
+                    self.out_dir().join("gather.csv").display()
+                ),
+            });
+        };
+        let whose = |what: &str| {
+            let age = last.age(SystemTime::now()).map(|a| format!(", {a}")).unwrap_or_default();
+            note.map(|why| {
+                format!("{what} of an earlier move ({}{age}) — {why}", last.summary.what())
+            })
+        };
+        match &last.series {
+            Ok(series) => {
+                ChartsView::Gathered { result: last, series, note: whose("The gathered data") }
+            }
+            Err(e) => {
+                // A set without data keeps the last complete one in `previous/`.
+                let previous = last.dir.join(qmarc_report::output::PREVIOUS_DIR);
+                let kept = if previous.join("gather.csv").is_file() {
+                    format!("; the last complete set is in {}", previous.display())
+                } else {
+                    String::new()
+                };
+                let what = whose("The results").map(|w| format!("{w}. ")).unwrap_or_default();
+                ChartsView::Nothing(format!(
+                    "{what}No gathered data to chart for the {} move: {e}{kept}",
+                    last.summary.what()
+                ))
+            }
+        }
     }
 
     pub(crate) fn say(&mut self, msg: impl Into<String>, error: bool) {
@@ -350,6 +438,9 @@ impl App {
         if let Some(l) = &mut self.live {
             l.poll();
         }
+        if self.running.is_none() && self.rest_read.is_none_or(|t| t.elapsed() > REST_EVERY) {
+            self.refresh_rest();
+        }
         let Some(r) = &mut self.running else { return };
         let mut fresh = r.drain();
         let ended = r.finished();
@@ -374,8 +465,15 @@ impl App {
             qmarc_starter::remove_stale_files(&self.iox_root);
         }
         if tuning {
-            return self.tune_ended(&r, status);
+            self.tune_ended(&r, status);
+            return self.refresh_rest();
         }
+        self.move_ended(&r, status);
+        self.refresh_rest();
+    }
+
+    /// The move `r` ended with `status`: its results shown, or why there are none.
+    fn move_ended(&mut self, r: &Running, status: std::process::ExitStatus) {
         match MoveResult::load_for(&r.out_dir, r.pid()) {
             Ok(result) => {
                 if let (Mode::Grip { close }, None) = (r.mode, &result.summary.fault) {
@@ -394,6 +492,7 @@ impl App {
                 // The period is checked again against what this move measured.
                 self.form.validate();
                 self.last = Some(result);
+                self.results_note = None;
                 self.show(Page::Results);
                 self.page_scroll = 0;
                 match fault {
@@ -404,8 +503,23 @@ impl App {
                 }
             }
             Err(e) => {
-                // The results pages must not show the move before as this one's.
-                self.last = None;
+                // The results pages must not show the move before as this one's: they show
+                // what the output folder holds (a move refused before anything moved leaves
+                // it as it was) as an earlier move's, and say why.
+                let why =
+                    format!("the last move ({}) left none of its own ({status})", r.mode.arg());
+                match MoveResult::load(&r.out_dir) {
+                    Ok(earlier) => {
+                        self.last = Some(earlier);
+                        self.results_note = Some(why);
+                    }
+                    Err(load) => {
+                        self.last = None;
+                        let folder = crate::results::why_none(&r.out_dir, &load)
+                            .unwrap_or_else(|| format!("{} holds no results", r.out_dir.display()));
+                        self.results_note = Some(format!("{why}; {folder}"));
+                    }
+                }
                 self.page = Page::Log;
                 self.say(format!("{} ended ({status}) without results: {e}", r.mode.arg()), true);
             }
@@ -540,7 +654,7 @@ impl App {
         let n = self
             .last
             .as_ref()
-            .and_then(|r| r.series.as_ref())
+            .and_then(|r| r.series.as_ref().ok())
             .map_or(1, |s| s.cmd.len().max(s.act.len()).max(1));
         match code {
             KeyCode::Right | KeyCode::Tab => self.chart_motor = (self.chart_motor + 1) % n,

@@ -4,8 +4,11 @@
 //! by spawning `qmarc-starter` and streaming its output ([`starter_process`]), and shows each move's
 //! error figures, timing, fault and charts right after it, with a history of the session's
 //! moves ([`results`]); Ctrl-T tunes the gains on the path and Ctrl-A takes the tuned ones
-//! ([`tuning`]). [`app`] holds the state and the keys, [`ui`] draws it; both work on
-//! ratatui's test backend, which is how the screens are tested.
+//! ([`tuning`]). While a move runs, a line of its own says what it does (homing's motor and
+//! stage, where the effector is, the gripper: [`live`]); at rest, the setup page says where the
+//! robot is, which motors are homed and the gripper, and where each comes from ([`rest`]).
+//! [`app`] holds the state and the keys, [`ui`] draws it; both work on ratatui's test backend,
+//! which is how the screens are tested.
 //!
 //! ```
 //! use qmarc_console::{app::App, form::Form, ui};
@@ -31,6 +34,7 @@ pub mod app;
 pub mod cmd;
 pub mod form;
 pub mod live;
+pub mod rest;
 pub mod results;
 pub mod starter_process;
 pub mod tuning;

@@ -1,9 +1,11 @@
 //! What the console shows after a move: the summary, the series for the charts from
-//! `gather.csv`, and the history of the session's moves.
+//! `gather.csv` and its last row (where the move left the motors and the gripper), what the
+//! charts page shows ([`ChartsView`]), and the history of the session's moves.
 
 use qmarc_report::Summary;
 pub use qmarc_report::series::Series;
-use std::path::Path;
+use std::io::{BufRead, Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
 
 /// Keeps at most about `n` points of `pts` (charts need no more than their width): of each
 /// run of k points, the one furthest from the run's first — so a single late period or an
@@ -24,26 +26,32 @@ pub fn thin(pts: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
 pub struct MoveResult {
     /// `summary.json`.
     pub summary: Summary,
-    /// The gathered data, if `gather.csv` could be read.
-    pub series: Option<Series>,
+    /// The gathered data, or why `gather.csv` could not be read.
+    pub series: Result<Series, String>,
+    /// The last row of `gather.csv`: where the move left the motors and the gripper, or why
+    /// it is not known.
+    pub end: Result<EndRow, String>,
     /// When `summary.json` was written.
     pub written: Option<std::time::SystemTime>,
     /// The move's PNG plots beside its data (the starter's `--plots`).
-    pub plots: Vec<std::path::PathBuf>,
+    pub plots: Vec<PathBuf>,
+    /// The folder the results were read from.
+    pub dir: PathBuf,
 }
 
 impl MoveResult {
     /// Reads `summary.json` and `gather.csv` from `out`.
     pub fn load(out: &Path) -> Result<MoveResult, String> {
         let summary = Summary::read(out)?;
-        let series = Series::read(out, f64::from(summary.period_us) * 1e-6).ok();
+        let series = Series::read(out, f64::from(summary.period_us) * 1e-6);
+        let end = EndRow::read(out);
         let written = std::fs::metadata(out.join("summary.json")).and_then(|m| m.modified()).ok();
         let plots = qmarc_report::output::PLOT_FILES
             .iter()
             .map(|f| out.join(f))
             .filter(|p| p.is_file())
             .collect();
-        Ok(MoveResult { summary, series, written, plots })
+        Ok(MoveResult { summary, series, end, written, plots, dir: out.to_path_buf() })
     }
 
     /// The work of one servo cycle of this move, µs: two exchanges with the hwserver (the
@@ -87,6 +95,116 @@ impl MoveResult {
     }
 }
 
+/// Why the output folder `out` shows no results, `load_error` being why
+/// [`MoveResult::load`] failed there; `None` when the folder holds neither data nor a summary
+/// (no move has written there yet).
+pub fn why_none(out: &Path, load_error: &str) -> Option<String> {
+    let gather = out.join("gather.csv");
+    if gather.is_file() {
+        Some(format!(
+            "{} is there, but not a summary to read with it: {load_error}",
+            gather.display()
+        ))
+    } else if out.join("summary.json").exists() {
+        Some(load_error.to_string())
+    } else {
+        None
+    }
+}
+
+/// The last row of a move's `gather.csv`: where the move left the motors and the gripper.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EndRow {
+    /// Its servo cycle.
+    pub cycle: u64,
+    /// Actual position per motor, counts (empty when `act` was not gathered).
+    pub act: Vec<f64>,
+    /// The gripper as the `grip` column writes it (0 open, 1 closing, 2 closed, 3 opening,
+    /// −1 none wired); `None` when it was not gathered.
+    pub grip: Option<i8>,
+}
+
+/// Bytes read from the end of `gather.csv` to find its last row: far more than a row.
+const TAIL_BYTES: u64 = 64 * 1024;
+
+impl EndRow {
+    /// The last row of `dir/gather.csv` (its header and its end are read, not the whole
+    /// file); the error names the file.
+    pub fn read(dir: &Path) -> Result<EndRow, String> {
+        let path = dir.join("gather.csv");
+        let named = |e: String| format!("{}: {e}", path.display());
+        let mut file = std::fs::File::open(&path).map_err(|e| named(e.to_string()))?;
+        let mut header = String::new();
+        std::io::BufReader::new(&mut file)
+            .take(TAIL_BYTES)
+            .read_line(&mut header)
+            .map_err(|e| named(e.to_string()))?;
+        let len = file.metadata().map_err(|e| named(e.to_string()))?.len();
+        file.seek(SeekFrom::Start(len.saturating_sub(TAIL_BYTES)))
+            .map_err(|e| named(e.to_string()))?;
+        let mut tail = Vec::new();
+        file.read_to_end(&mut tail).map_err(|e| named(e.to_string()))?;
+        let tail = String::from_utf8_lossy(&tail);
+        let last = tail.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or_default();
+        EndRow::parse(header.trim_end(), last).map_err(named)
+    }
+
+    /// The row `last` under the header `header` (`gather.csv`'s columns).
+    pub fn parse(header: &str, last: &str) -> Result<EndRow, String> {
+        let names: Vec<&str> = header.split(',').collect();
+        let values: Vec<&str> = last.split(',').collect();
+        if last.is_empty() || last == header {
+            return Err("no gathered row".into());
+        }
+        if values.len() != names.len() {
+            return Err(format!(
+                "its last row has {} fields, the header {}",
+                values.len(),
+                names.len()
+            ));
+        }
+        let value = |name: &str| -> Result<Option<f64>, String> {
+            match names.iter().position(|n| *n == name) {
+                None => Ok(None),
+                Some(i) => values[i]
+                    .trim()
+                    .parse::<f64>()
+                    .map(Some)
+                    .map_err(|e| format!("its last row's {name}: {e}")),
+            }
+        };
+        let cycle = value("cycle")?.ok_or("no cycle column")?;
+        let mut act = Vec::new();
+        for m in 1..=qmarc_proto::MAX_MOTORS {
+            match value(&format!("act{m}"))? {
+                Some(v) => act.push(v),
+                None => break,
+            }
+        }
+        let grip = value("grip")?.map(|g| g as i8);
+        Ok(EndRow { cycle: cycle as u64, act, grip })
+    }
+}
+
+/// What the charts page (F7) shows.
+#[derive(Debug)]
+pub enum ChartsView<'a> {
+    /// A running move's live telemetry.
+    Live(&'a crate::live::Live),
+    /// The gathered data of a move that ended.
+    Gathered {
+        /// Its results.
+        result: &'a MoveResult,
+        /// Its series.
+        series: &'a Series,
+        /// Whose they are when not the last move's: an earlier move's, the last having left
+        /// none of its own.
+        note: Option<String>,
+    },
+    /// Nothing to chart: why, in words.
+    Nothing(String),
+}
+
 /// One line of the history: what a move's accumulated errors were with which gains.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HistoryEntry {
@@ -105,6 +223,31 @@ pub struct HistoryEntry {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 42: the last gathered row is read from the end of the file (the motors' actual
+    /// positions and the gripper), and a file without rows says so.
+    #[test]
+    fn the_last_row_says_where_the_move_left_the_motors() {
+        let header = "cycle,time_s,cmd1,act1,dac1,cmd2,act2,dac2,grip";
+        let row = EndRow::parse(header, "7,0.0028,10,9.5,3,20,19,-4,2").unwrap();
+        assert_eq!(row, EndRow { cycle: 7, act: vec![9.5, 19.0], grip: Some(2) });
+        let row = EndRow::parse("cycle,dac1", "3,12").unwrap();
+        assert_eq!((row.act.len(), row.grip), (0, None), "neither act nor grip gathered");
+        assert_eq!(EndRow::parse(header, header), Err("no gathered row".into()));
+        let dir = std::env::temp_dir().join(format!("qmarc-endrow-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut csv = String::from("cycle,act1,grip\n");
+        for c in 0..20_000 {
+            csv.push_str(&format!("{c},{},0\n", c * 2));
+        }
+        std::fs::write(dir.join("gather.csv"), csv).unwrap();
+        let read = EndRow::read(&dir);
+        std::fs::write(dir.join("gather.csv"), "cycle,act1\n").unwrap();
+        let empty = EndRow::read(&dir);
+        let _ = std::fs::remove_dir_all(&dir);
+        assert_eq!(read, Ok(EndRow { cycle: 19_999, act: vec![39_998.0], grip: Some(0) }));
+        assert!(empty.unwrap_err().ends_with("gather.csv: no gathered row"));
+    }
 
     #[test]
     fn thinning_keeps_every_kth_point() {

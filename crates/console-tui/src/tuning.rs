@@ -66,6 +66,9 @@ impl App {
             .iter()
             .filter(|_| tuned_path)
             .find_map(|d| MoveResult::load(&dir.join(d)).ok());
+        self.results_note = self.last.is_none().then(|| {
+            format!("the tuning left no path run with the tuned gains in {}", dir.display())
+        });
         let (msg, error) = match &summary.ended_early {
             Some(why) => (
                 format!("tune ended early ({why}): Ctrl-A puts the last safe gains in the form"),

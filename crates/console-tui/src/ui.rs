@@ -1,9 +1,12 @@
 //! Drawing the console. Every page fits 80×24 and uses more room when there is more; nothing
-//! here can panic on a small or resized terminal (layouts shrink, text is clipped).
+//! here can panic on a small or resized terminal (layouts shrink, text is clipped). What the
+//! user must read is never cut at 80 columns: the message line wraps, and the robot — the
+//! running move (homing's motor and stage, the effector, the gripper) or the robot at rest —
+//! has rows of its own (on the setup page, the foot of its left column when it fits there).
 
 use crate::app::{App, Page};
 use crate::form::{Action, Field, GAIN_ROWS, Kind, Section};
-use crate::results::thin;
+use crate::results::{ChartsView, thin};
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
@@ -21,27 +24,40 @@ const PAGES: [(Page, &str); 5] = [
 
 /// Draws the whole console.
 pub fn draw(f: &mut Frame, app: &App) {
-    let [title, tabs, body, status, keys] = Layout::vertical([
-        Constraint::Length(1),
-        Constraint::Length(1),
-        Constraint::Min(0),
-        Constraint::Length(1),
-        Constraint::Length(1),
-    ])
-    .areas(f.area());
+    let area = f.area();
+    let width = usize::from(area.width);
+    // The message line, wrapped, so that it is read whole at 80 columns (at most a quarter of
+    // the screen; past that, its end is marked cut).
+    let message = message_rows(app, width.saturating_sub(1), usize::from(area.height / 4).max(1));
+    // The robot: the running move (homing's motor and stage, where the effector is, the
+    // gripper), or the robot at rest. On the setup page in the room its left column leaves,
+    // when it fits whole there; else on rows of its own above the message line (during a
+    // move on every page, at rest on the setup page only: the others show a move's data).
+    let robot = robot_view(app);
+    let layout = |strip: usize| {
+        Layout::vertical([
+            Constraint::Length(1),
+            Constraint::Length(1),
+            Constraint::Min(0),
+            Constraint::Length(u16::try_from(strip).unwrap_or(u16::MAX)),
+            Constraint::Length(u16::try_from(message.len()).unwrap_or(u16::MAX)),
+            Constraint::Length(1),
+        ])
+        .areas::<6>(area)
+    };
+    let [_, _, body, ..] = layout(0);
+    let column = (app.page == Page::Setup).then(|| setup_robot_column(app, &robot, body)).flatten();
+    let strip = if column.is_some() || (app.running.is_none() && app.page != Page::Setup) {
+        Vec::new()
+    } else {
+        robot_strip(&robot, width.saturating_sub(1))
+    };
+    let [title, tabs, body, strip_area, status, keys] = layout(strip.len());
     let modified = if app.form.dirty() { " [modified]" } else { "" };
-    let running = app.running.as_ref().map_or(String::new(), |r| {
-        // Homing says which motor and what it does, as the CLI's status line.
-        let stage = app.live.as_ref().and_then(|l| l.stage.as_deref());
-        let stage = stage.map(|s| format!(" · {s}")).unwrap_or_default();
-        // Where the effector is, live.
-        let at = app.live.as_ref().map(crate::live::Live::whereabouts).unwrap_or_default();
-        format!(" — {} running {:.1} s{stage}{at}", r.mode.arg(), r.started.elapsed().as_secs_f64())
-    });
     f.render_widget(
         Line::from(vec![
             Span::styled(" QMARC console ", Style::new().bold().reversed()),
-            Span::raw(format!(" {}{modified}{running}", app.form.path.display())),
+            Span::raw(format!(" {}{modified}", app.form.path.display())),
         ]),
         title,
     );
@@ -54,22 +70,187 @@ pub fn draw(f: &mut Frame, app: &App) {
         .collect();
     f.render_widget(Line::from(tab_spans), tabs);
     match app.page {
-        Page::Setup => draw_setup(f, app, body),
+        Page::Setup => draw_setup(f, app, body, column),
         Page::Log => draw_log(f, app, body),
         Page::Results => draw_results(f, app, body),
         Page::Charts => draw_charts(f, app, body),
         Page::History => history::draw_history(f, app, body),
     }
-    let (msg, err) = &app.status;
-    let style = if *err { Style::new().fg(Color::Red).bold() } else { Style::new() };
-    // The point being typed (Ctrl-G) follows its question, with a cursor.
-    let typed = app.prompt.as_ref().map(|t| format!(" {t}▏")).unwrap_or_default();
-    f.render_widget(Line::styled(format!(" {msg}{typed}"), style), status);
+    f.render_widget(Paragraph::new(indented(strip)), strip_area);
+    f.render_widget(Paragraph::new(indented(message)), status);
     f.render_widget(
         Line::from(" F2 Home F5 Run F6 Step ^T Tune ^G Go to ^O Grip F9 Abort F10 Exit F12 Cancel")
             .style(Style::new().dim()),
         keys,
     );
+}
+
+/// `rows` each after a space (the screen's left margin).
+fn indented(rows: Vec<Line<'static>>) -> Vec<Line<'static>> {
+    rows.into_iter()
+        .map(|mut l| {
+            l.spans.insert(0, Span::raw(" "));
+            l
+        })
+        .collect()
+}
+
+/// The message line's rows at `width`: the message and, while a point is typed (Ctrl-G), the
+/// point with a cursor — wrapped whole on up to `max_rows` rows, the last marked `…` if it
+/// had to be cut.
+fn message_rows(app: &App, width: usize, max_rows: usize) -> Vec<Line<'static>> {
+    let (msg, err) = &app.status;
+    let style = if *err { Style::new().fg(Color::Red).bold() } else { Style::new() };
+    let typed = app.prompt.as_ref().map(|t| format!(" {t}▏")).unwrap_or_default();
+    let mut rows = wrap_spans(&[(format!("{msg}{typed}"), style)], width);
+    if rows.len() > max_rows {
+        rows.truncate(max_rows);
+        if let Some(last) = rows.last_mut() {
+            let text: String = last.spans.iter().map(|s| s.content.as_ref()).collect();
+            let kept: String = text.chars().take(width.saturating_sub(1)).chain(['…']).collect();
+            *last = Line::styled(kept, style);
+        }
+    }
+    rows
+}
+
+/// What the console says about the robot.
+#[derive(Debug, Clone)]
+struct RobotView {
+    /// `At rest`, or the running move: `home running 3.2 s`.
+    head: String,
+    /// What is known (a `false` second: not known).
+    items: Vec<(String, bool)>,
+    /// Where it comes from.
+    source: String,
+}
+
+/// The robot now: the running move and what its progress page and telemetry say (homing's
+/// motor and stage, the effector, the gripper), or the robot at rest ([`crate::rest::Rest`]).
+fn robot_view(app: &App) -> RobotView {
+    let Some(r) = &app.running else {
+        return RobotView {
+            head: "At rest:".to_string(),
+            items: app.rest.items(),
+            source: app.rest.source(),
+        };
+    };
+    let mut items = Vec::new();
+    let mut source = String::new();
+    if let Some(live) = &app.live {
+        // Homing says which motor and what it does, as the CLI's status line.
+        items.extend(live.stage.clone().map(|s| (s, true)));
+        // Where the effector is, live.
+        let at = live.whereabouts();
+        items.extend(
+            at.split(" · ").filter(|s| !s.trim().is_empty()).map(|s| (s.to_string(), true)),
+        );
+        if live.samples > 0 {
+            source = "live, from its telemetry".to_string();
+        }
+    }
+    let aborting = if r.aborted.is_some() { " (aborting)" } else { "" };
+    RobotView {
+        head: format!(
+            "{} running {:.1} s{aborting}",
+            r.mode.arg(),
+            r.started.elapsed().as_secs_f64()
+        ),
+        items,
+        source,
+    }
+}
+
+/// A non-breaking space: inside an item, so that rows break between items.
+const NBSP: char = '\u{a0}';
+
+/// The segments of `robot`: its head, its items (one not known in yellow) by ` · `, and
+/// where they come from (dim) after `lead`.
+fn robot_segments(robot: &RobotView, lead: &str) -> Vec<(String, Style)> {
+    let glue = |t: &str| t.replace(' ', &NBSP.to_string());
+    let mut segments = vec![(format!("{} ", glue(&robot.head)), Style::new().bold())];
+    for (k, (item, known)) in robot.items.iter().enumerate() {
+        if k > 0 {
+            segments.push((" · ".to_string(), Style::new()));
+        }
+        let style = if *known { Style::new() } else { Style::new().fg(Color::Yellow) };
+        segments.push((glue(item), style));
+    }
+    if !robot.source.is_empty() {
+        segments.push((format!("{lead}({})", robot.source), Style::new().dim()));
+    }
+    segments
+}
+
+/// The robot on rows of their own, `width` wide.
+fn robot_strip(robot: &RobotView, width: usize) -> Vec<Line<'static>> {
+    wrap_spans(&robot_segments(robot, " "), width)
+}
+
+/// The robot in the room the setup page's left column leaves under its fields, if it fits
+/// there whole — with where it comes from, or, when the fields' messages leave too little
+/// room for that, without: its lines.
+fn setup_robot_column(app: &App, robot: &RobotView, body: Rect) -> Option<Vec<Line<'static>>> {
+    let [left, _] = setup_columns(body);
+    // A column of margin before the border.
+    let width = usize::from(left.width.saturating_sub(2));
+    let room = usize::from(left.height)
+        .saturating_sub(setup_lines(app, usize::from(left.width.saturating_sub(2))).len());
+    let full = wrap_spans(&robot_segments(robot, "\n"), width);
+    if full.len() <= room {
+        return Some(full);
+    }
+    let short = RobotView { source: String::new(), ..robot.clone() };
+    Some(wrap_spans(&robot_segments(&short, "\n"), width)).filter(|l| l.len() <= room)
+}
+
+/// `segments` (text and style) broken into rows of at most `width` characters: at spaces
+/// where it can, else at non-breaking spaces, else across a word; a `\n` breaks the row.
+/// Nothing is lost, and non-breaking spaces are shown as spaces.
+fn wrap_spans(segments: &[(String, Style)], width: usize) -> Vec<Line<'static>> {
+    let width = width.max(1);
+    let chars: Vec<(char, Style)> =
+        segments.iter().flat_map(|(t, s)| t.chars().map(move |c| (c, *s))).collect();
+    let mut rows: Vec<&[(char, Style)]> = Vec::new();
+    let mut start = 0;
+    while start < chars.len() {
+        if !rows.is_empty() {
+            // A row does not start with the space it was broken at.
+            while chars.get(start).is_some_and(|c| c.0 == ' ' || c.0 == NBSP) {
+                start += 1;
+            }
+        }
+        let end = (start + width).min(chars.len());
+        let cut = if let Some(nl) = (start..end).find(|&i| chars[i].0 == '\n') {
+            nl
+        } else if end == chars.len() {
+            end
+        } else {
+            let last = |c: char| (start + 1..=end).rev().find(|&i| chars[i].0 == c);
+            last(' ').or_else(|| last(NBSP)).unwrap_or(end)
+        };
+        rows.push(&chars[start..cut]);
+        start = if chars.get(cut).is_some_and(|c| c.0 == '\n') { cut + 1 } else { cut };
+    }
+    if rows.is_empty() {
+        return vec![Line::default()];
+    }
+    rows.into_iter()
+        .map(|row| {
+            let mut spans: Vec<Span<'static>> = Vec::new();
+            let mut text = String::new();
+            let mut style = row.first().map_or(Style::new(), |c| c.1);
+            for &(c, s) in row {
+                if s != style && !text.is_empty() {
+                    spans.push(Span::styled(std::mem::take(&mut text), style));
+                }
+                style = s;
+                text.push(if c == NBSP { ' ' } else { c });
+            }
+            spans.push(Span::styled(text, style));
+            Line::from(spans)
+        })
+        .collect()
 }
 
 fn value_style(app: &App, i: usize, f: &Field) -> Style {
@@ -95,12 +276,15 @@ fn section_title(s: Section) -> &'static str {
     }
 }
 
-fn draw_setup(f: &mut Frame, app: &App, area: Rect) {
-    let [left, right] =
-        Layout::horizontal([Constraint::Percentage(47), Constraint::Percentage(53)]).areas(area);
-    // Left: the sections with one value per line; an invalid value's message right under it.
+/// The setup page's two columns: the settings, and the gains and actions.
+fn setup_columns(area: Rect) -> [Rect; 2] {
+    Layout::horizontal([Constraint::Percentage(47), Constraint::Percentage(53)]).areas(area)
+}
+
+/// The setup page's left column, `width` wide: the sections with one value per line, an
+/// invalid value's message right under it.
+fn setup_lines(app: &App, width: usize) -> Vec<Line<'static>> {
     let mut lines: Vec<Line> = Vec::new();
-    let width = usize::from(left.width.saturating_sub(2));
     for section in [Section::General, Section::Trajectory, Section::Step, Section::Gathering] {
         lines.push(Line::styled(section_title(section), Style::new().bold().underlined()));
         for (i, fld) in app.form.fields.iter().enumerate() {
@@ -129,6 +313,19 @@ fn draw_setup(f: &mut Frame, app: &App, area: Rect) {
                 }
             }
         }
+    }
+    lines
+}
+
+/// The setup page; `robot`: the robot's lines, at the foot of its left column.
+fn draw_setup(f: &mut Frame, app: &App, area: Rect, robot: Option<Vec<Line<'static>>>) {
+    let [left, right] = setup_columns(area);
+    let mut lines = setup_lines(app, usize::from(left.width.saturating_sub(2)));
+    if let Some(robot) = robot {
+        // Under the settings, at the column's foot.
+        let gap = usize::from(left.height).saturating_sub(lines.len() + robot.len());
+        lines.extend(std::iter::repeat_n(Line::default(), gap));
+        lines.extend(robot);
     }
     f.render_widget(Paragraph::new(lines).block(Block::new().borders(Borders::RIGHT)), left);
 
@@ -289,8 +486,13 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
     let mut lines = tuned.map(crate::tuning::lines).unwrap_or_default();
     let title = match (tuned, &app.last) {
         (None, None) => {
+            let text = match &app.results_note {
+                Some(why) => format!("No results to show: {why}"),
+                None => "No move yet: F6 steps, F5 runs the trajectory, F2 homes.".to_string(),
+            };
             f.render_widget(
-                Paragraph::new("No move yet: F6 steps, F5 runs the trajectory, F2 homes.")
+                Paragraph::new(text)
+                    .wrap(Wrap { trim: true })
                     .block(Block::bordered().title(" Results ")),
                 area,
             );
@@ -302,10 +504,23 @@ fn draw_results(f: &mut Frame, app: &App, area: Rect) {
             }
             " Results of the last tuning ".to_string()
         }
-        (None, Some(r)) => match r.age(std::time::SystemTime::now()) {
-            Some(age) => format!(" Results of the last move ({age}) "),
-            None => " Results of the last move ".to_string(),
-        },
+        (None, Some(r)) => {
+            // The last move left none of its own: the folder's are an earlier move's.
+            let whose = match &app.results_note {
+                Some(why) => {
+                    lines.push(Line::styled(
+                        format!("An earlier move's results — {why}."),
+                        Style::new().fg(Color::Yellow),
+                    ));
+                    "an earlier move"
+                }
+                None => "the last move",
+            };
+            match r.age(std::time::SystemTime::now()) {
+                Some(age) => format!(" Results of {whose} ({age}) "),
+                None => format!(" Results of {whose} "),
+            }
+        }
     };
     if let Some(r) = &app.last {
         lines.extend(move_lines(r));
@@ -480,24 +695,36 @@ fn chart<'a>(title: impl Into<Line<'a>>, sets: Vec<Trace<'a>>) -> Chart<'a> {
 }
 
 fn draw_charts(f: &mut Frame, app: &App, area: Rect) {
-    // While a move runs: its live telemetry, the newest seconds.
-    if let Some(live) =
-        app.live.as_ref().filter(|l| app.running.is_some() && !l.series.t.is_empty())
-    {
-        let [area, note] =
-            Layout::vertical([Constraint::Min(6), Constraint::Length(1)]).areas(area);
-        f.render_widget(Line::styled(live.title(), Style::new().bold()), note);
-        return draw_series(f, app, &live.series, area);
-    }
-    let Some(last) = app.last.as_ref() else {
-        f.render_widget(
-            Paragraph::new("No gathered data yet.").block(Block::bordered().title(" Charts ")),
-            area,
-        );
-        return;
+    let (last, series, note) = match app.charts_view() {
+        // While a move runs: its live telemetry, the newest seconds.
+        ChartsView::Live(live) => {
+            let [area, note] =
+                Layout::vertical([Constraint::Min(6), Constraint::Length(1)]).areas(area);
+            f.render_widget(Line::styled(live.title(), Style::new().bold()), note);
+            return draw_series(f, app, &live.series, area);
+        }
+        ChartsView::Nothing(why) => {
+            f.render_widget(
+                Paragraph::new(why)
+                    .wrap(Wrap { trim: true })
+                    .block(Block::bordered().title(" Charts ")),
+                area,
+            );
+            return;
+        }
+        ChartsView::Gathered { result, series, note } => (result, series, note),
     };
-    // The PNG plots of the same move, on the last line.
-    let [area, files] = Layout::vertical([Constraint::Min(6), Constraint::Length(2)]).areas(area);
+    // Whose data they are, when not the last move's (wrapped whole), and the PNG plots of
+    // the same move, on the last lines.
+    let yellow = Style::new().fg(Color::Yellow);
+    let note = note.map_or_else(Vec::new, |n| wrap_spans(&[(n, yellow)], usize::from(area.width)));
+    let [note_area, area, files] = Layout::vertical([
+        Constraint::Length(u16::try_from(note.len()).unwrap_or(u16::MAX)),
+        Constraint::Min(6),
+        Constraint::Length(2),
+    ])
+    .areas(area);
+    f.render_widget(Paragraph::new(note), note_area);
     let names: Vec<String> = last.plots.iter().map(|p| p.display().to_string()).collect();
     f.render_widget(
         Paragraph::new(if names.is_empty() {
@@ -508,13 +735,6 @@ fn draw_charts(f: &mut Frame, app: &App, area: Rect) {
         .wrap(Wrap { trim: true }),
         files,
     );
-    let Some(series) = last.series.as_ref() else {
-        f.render_widget(
-            Paragraph::new("No gathered data yet.").block(Block::bordered().title(" Charts ")),
-            area,
-        );
-        return;
-    };
     draw_series(f, app, series, area);
 }
 

@@ -154,9 +154,14 @@ fn result(fault: bool) -> MoveResult {
         "cycle,time_s,cmd1,act1,dac1\n0,0,0,0,0\n1,0.0004,1000,3,8191\n2,0.0008,1000,20,500\n";
     MoveResult {
         summary,
-        series: Some(Series::parse(csv, 0.0004).unwrap()),
+        series: Ok(Series::parse(csv, 0.0004).unwrap()),
+        end: crate::results::EndRow::parse(
+            csv.lines().next().unwrap(),
+            csv.lines().last().unwrap(),
+        ),
         written: None,
         plots: vec!["out/arms.png".into(), "out/error.png".into()],
+        dir: "out".into(),
     }
 }
 
@@ -459,4 +464,261 @@ fn go_to_asks_for_a_point_and_the_gripper_key_grips() {
     assert!(!app.grip_closed, "not closed: the move did not run");
     assert_eq!(Mode::Grip { close: true }.args(), ["move", "--grip=on"]);
     assert_eq!(Mode::Grip { close: false }.args(), ["move", "--grip=off"]);
+}
+
+/// An executable shell script `name` in `dir` with `body`: a stand-in for `qmarc-starter`.
+fn script(dir: &std::path::Path, name: &str, body: &str) -> std::path::PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let path = dir.join(name);
+    std::fs::write(&path, format!("#!/bin/sh\n{body}\n")).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+    path
+}
+
+/// The rows of the screen from the one holding `first` on, each up to a column's border, joined
+/// without their margins: a wrapped text read back whole.
+fn unwrapped(b: &Buffer, first: &str) -> String {
+    let s = text(b);
+    let rows: Vec<&str> = s.lines().collect();
+    let at = rows.iter().position(|r| r.contains(first)).unwrap_or(rows.len());
+    rows[at..]
+        .iter()
+        .map(|r| r.split('│').next().unwrap_or_default().trim())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Issue 42, item 1: at 80 columns the message line wraps instead of being cut: a fault
+/// message and the log page's keys are read whole.
+#[test]
+fn the_message_line_wraps_whole_at_80_columns() {
+    use ratatui::crossterm::event::KeyCode;
+    let (_d, mut app) = app();
+    let fault = "FAULT limit_switch: motor 1 hit its top limit switch at cycle 12; all motors \
+                 disabled (the host stalled 3 times in the second before: 41 periods went by \
+                 without a cycle, the longest 12.3 ms) END";
+    app.say(fault, true);
+    app.page = Page::Results;
+    let b = render(&app, 80, 24);
+    assert!(unwrapped(&b, "FAULT limit_switch").contains(fault), "{}", text(&b));
+    let (x, y) = find(&b, "END").unwrap();
+    assert_eq!(b[(x, y)].fg, Color::Red, "an error in red on every row");
+    // The keys bar stays the last row.
+    assert!(text(&b).lines().last().unwrap().contains("F12 Cancel"), "{}", text(&b));
+    // The log page's keys: longer than a row.
+    app.on_key(key(KeyCode::F(3)));
+    assert!(app.status.0.chars().count() > 80, "{:?}", app.status);
+    let b = render(&app, 80, 24);
+    assert!(unwrapped(&b, "↑↓ PgUp PgDn").contains(&app.status.0), "{}", text(&b));
+    // However long, it never takes more than a quarter of the screen, its cut end marked.
+    app.say("word ".repeat(400), false);
+    let s = text(&render(&app, 80, 24));
+    let rows = s.lines().filter(|l| l.starts_with(" word")).count();
+    assert_eq!(rows, 6, "{s}");
+    let last = s.lines().rfind(|l| l.starts_with(" word")).unwrap();
+    assert!(last.trim_end().ends_with('…'), "{s}");
+}
+
+/// A move in progress for the tests: a stand-in starter that waits (stopped when dropped),
+/// with live homing progress, the effector and the gripper.
+fn homing_in_progress(app: &mut App, dir: &std::path::Path) {
+    use crate::starter_process::{Mode, Running};
+    let starter = script(dir, "waiting-starter", "exec sleep 30");
+    let r = Running::start(&starter, &[], &app.form.path, Mode::Home, dir).unwrap();
+    let mut live = crate::live::Live::new(qmarc_proto::service::IpcLocation::new(
+        "qmarc_uitest_",
+        &dir.display().to_string(),
+    ));
+    live.stage = Some("homing motor 2: approaching the top switch".into());
+    live.effector_mm = Some([12.5, -3.25, -612.0]);
+    live.gripper = qmarc_proto::Gripper(qmarc_proto::Gripper::CLOSE | qmarc_proto::Gripper::CLOSED);
+    app.running = Some(r);
+    app.live = Some(live);
+}
+
+/// Issue 42, item 1: homing's motor and stage, where the effector is and the gripper are shown
+/// whole at 80×24 on every page (they were at the end of the title bar, cut at 80 columns).
+#[test]
+fn homing_progress_is_shown_whole_at_80x24_on_every_page() {
+    let (d, mut app) = app();
+    homing_in_progress(&mut app, &d.0);
+    for page in [Page::Setup, Page::Log, Page::Results, Page::Charts, Page::History] {
+        app.page = page;
+        let b = render(&app, 80, 24);
+        let s = text(&b);
+        let whole = unwrapped(&b, "home running");
+        for want in [
+            "homing motor 2: approaching the top switch",
+            "effector 12.5 -3.2 -612.0 mm",
+            "gripper closed",
+        ] {
+            assert!(whole.contains(want), "{page:?}: {want:?} missing:\n{s}");
+        }
+        assert!(s.lines().last().unwrap().contains("F12 Cancel"), "{page:?}:\n{s}");
+    }
+    // The setup page keeps its actions whole: the move is in its left column.
+    app.page = Page::Setup;
+    let s = text(&render(&app, 80, 24));
+    assert!(s.contains("Cancel (leave without saving)"), "{s}");
+    app.running = None;
+}
+
+/// Issue 42, item 2: at rest the setup page says where the robot is (counts, and the effector
+/// through `[robot]`), which motors are homed and the gripper, with where that comes from —
+/// the simulated robot starts every move at `[sim] start_counts` — and its actions stay whole
+/// at 80×24.
+#[test]
+fn at_rest_the_setup_page_shows_where_the_robot_is() {
+    let (_d, app) = app();
+    let b = render(&app, 80, 24);
+    let s = text(&b);
+    let whole = unwrapped(&b, "At rest:");
+    for want in [
+        "At rest: M1 0 M2 0 M3 0 counts",
+        "effector 0.0 0.0 -600.0 mm",
+        "homed M1 M2 M3",
+        "gripper open",
+        "every move starts at [sim] start_counts",
+        "[sim] homed = true",
+    ] {
+        assert!(whole.replace("  ", " ").contains(want), "{want:?} missing:\n{s}");
+    }
+    assert!(s.contains("Cancel (leave without saving)"), "the actions whole:\n{s}");
+    // What is not known is said so, not shown as a number.
+    let mut app = app;
+    app.rest = crate::rest::Rest::unknown("not known: the settings do not validate");
+    let b = render(&app, 80, 24);
+    let s = text(&b);
+    assert!(
+        unwrapped(&b, "At rest:").starts_with("At rest: not known: the settings do not validate"),
+        "{s}"
+    );
+    assert!(!s.contains("M1 0"), "{s}");
+}
+
+/// A folder with the results of an earlier move (its starter's pid 1): a step's
+/// `summary.json` and `gather.csv`.
+fn earlier_results(out: &std::path::Path) {
+    std::fs::create_dir_all(out).unwrap();
+    let mut r = result(false);
+    r.summary.starter_pid = 1;
+    qmarc_report::output::amend_summary(out, &r.summary).unwrap();
+    std::fs::write(
+        out.join("gather.csv"),
+        "cycle,time_s,cmd1,act1,dac1\n0,0,0,0,0\n1,0.0004,1000,3,8191\n2,0.0008,1000,20,500\n",
+    )
+    .unwrap();
+}
+
+/// Issue 42, item 3: a go-to the starter refuses before anything moves (exit 3, the output
+/// folder left as it was) leaves F7 charting the gathered data that are there — an earlier
+/// move's, said so — not "No gathered data yet."; F4 says the same of the results.
+#[test]
+fn after_a_refused_go_to_f7_charts_the_data_that_are_there() {
+    use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+    let (d, app0) = app();
+    let out = app0.out_dir();
+    earlier_results(&out);
+    // The console opens on them.
+    let mut app = App::new(app0.form, d.0.join("starter"), app0.workdir);
+    app.iox_root = format!("{}/", d.0.display());
+    assert!(app.last.is_some() && app.results_note.is_none());
+    app.starter = script(
+        &d.0,
+        "refusing-starter",
+        "echo 'qmarc-starter: error: --xyz: 2000.0, -10.0, -640.0 mm is unreachable' >&2; exit 3",
+    );
+    app.on_key(KeyEvent::new(KeyCode::Char('g'), KeyModifiers::CONTROL));
+    for c in "2000 -10 -640".chars() {
+        app.on_key(key(KeyCode::Char(c)));
+    }
+    app.on_key(key(KeyCode::Enter));
+    assert!(app.running.is_some(), "{:?}", app.status);
+    let start = std::time::Instant::now();
+    while app.running.is_some() && start.elapsed() < std::time::Duration::from_secs(20) {
+        app.poll();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert!(
+        app.status.0.starts_with("move ended (exit status: 3) without results"),
+        "{:?}",
+        app.status
+    );
+    assert!(app.log.iter().any(|l| l.contains("is unreachable")), "{:?}", app.log);
+    app.on_key(key(KeyCode::F(7)));
+    let b = render(&app, 80, 24);
+    let s = text(&b);
+    assert!(!s.contains("No gathered data yet"), "{s}");
+    for want in ["command vs actual", "following error", "earlier move (step"] {
+        assert!(s.contains(want), "{want:?} missing:\n{s}");
+    }
+    let note = unwrapped(&b, "The gathered data of an earlier move");
+    assert!(note.contains("the last move (move) left none of its own (exit status: 3)"), "{s}");
+    app.on_key(key(KeyCode::F(4)));
+    let s = text(&render(&app, 80, 24));
+    assert!(s.contains("Results of an earlier move") && s.contains("step: ok"), "{s}");
+}
+
+/// Issue 42, item 3: what F7 shows, decided: a move's data; an earlier move's when the last
+/// left none, said so; and when there is nothing to chart, precisely why — a `gather.csv`
+/// without its summary, a summary whose data cannot be read (the complete set kept in
+/// `previous/` named), or no move yet.
+#[test]
+fn what_f7_shows_is_the_data_there_or_why_not() {
+    use crate::results::ChartsView;
+    let (_d, mut app) = app();
+    let out = app.out_dir();
+    let gather = out.join("gather.csv");
+    assert!(
+        matches!(app.charts_view(), ChartsView::Nothing(ref w)
+            if *w == format!("No gathered data yet: no move has written {}.", gather.display())),
+        "{:?}",
+        app.charts_view()
+    );
+    app.last = Some(result(false));
+    assert!(matches!(app.charts_view(), ChartsView::Gathered { note: None, .. }));
+    app.results_note = Some("the last move (move) left none of its own (exit status: 3)".into());
+    match app.charts_view() {
+        ChartsView::Gathered { note: Some(n), .. } => assert!(
+            n.starts_with("The gathered data of an earlier move (step)")
+                && n.ends_with("left none of its own (exit status: 3)"),
+            "{n}"
+        ),
+        other => panic!("{other:?}"),
+    }
+    // A gather.csv without a summary: the console opens on nothing, and says why.
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(&gather, "cycle,act1\n0,1\n").unwrap();
+    let mut fresh = App::new(app.form.clone(), "qmarc-starter".into(), app.workdir.clone());
+    assert!(fresh.last.is_none());
+    match fresh.charts_view() {
+        ChartsView::Nothing(w) => assert!(
+            w.starts_with(&format!(
+                "Nothing to chart: {} is there, but not a summary",
+                gather.display()
+            )),
+            "{w}"
+        ),
+        other => panic!("{other:?}"),
+    }
+    // A summary whose data cannot be read: why, and where the last complete set is.
+    let mut r = result(false);
+    r.series = Err(format!("{}: No such file or directory (os error 2)", gather.display()));
+    r.dir = out.clone();
+    std::fs::create_dir_all(out.join("previous")).unwrap();
+    std::fs::write(out.join("previous").join("gather.csv"), "cycle\n").unwrap();
+    fresh.last = Some(r);
+    fresh.results_note = None;
+    match fresh.charts_view() {
+        ChartsView::Nothing(w) => assert_eq!(
+            w,
+            format!(
+                "No gathered data to chart for the step move: {}: No such file or directory (os \
+                 error 2); the last complete set is in {}",
+                gather.display(),
+                out.join("previous").display()
+            )
+        ),
+        other => panic!("{other:?}"),
+    }
 }

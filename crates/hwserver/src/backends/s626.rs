@@ -324,7 +324,7 @@ fn safe_list() -> InsnList {
 }
 
 /// Where the settings' card keeps its homed frame: `<state_dir>/s626-<device name>.state`.
-fn state_file(s: &Settings) -> PathBuf {
+pub fn state_file(s: &Settings) -> PathBuf {
     let device = &s.s626.device;
     let name = device.file_name().map_or_else(|| "card".into(), |n| n.to_string_lossy());
     s.s626.state_dir.join(format!("s626-{name}.state"))
@@ -332,7 +332,7 @@ fn state_file(s: &Settings) -> PathBuf {
 
 /// What a kept frame belongs to: the device node (a reloaded driver makes a new one, with
 /// counters reset) and the counters and their directions.
-fn card_identity(device: &str, w: &S626Settings) -> String {
+pub fn card_identity(device: &str, w: &S626Settings) -> String {
     use std::os::unix::fs::MetadataExt;
     let node = std::fs::metadata(device).map_or_else(
         |_| "?".into(),

@@ -216,7 +216,7 @@ pub struct SimDeltabot {
 }
 
 /// What the simulated robot's state file says its frame belongs to.
-const SIM_IDENTITY: &str = "the simulated Deltabot";
+pub const SIM_IDENTITY: &str = "the simulated Deltabot";
 
 impl SimDeltabot {
     /// A robot at rest at its start positions, amplifiers off, DACs at 0 V.

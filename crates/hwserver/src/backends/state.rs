@@ -16,20 +16,34 @@ use std::path::Path;
 /// Which of `n_motors` motors `path` says are homed for `identity`; none when it cannot be
 /// read (a fresh machine), says nothing, or was written for something else.
 pub fn load_homed(path: &Path, n_motors: usize, identity: &str) -> [bool; MAX_MOTORS] {
+    read_homed(path, n_motors, identity).unwrap_or([false; MAX_MOTORS])
+}
+
+/// [`load_homed`], but a file that is there and cannot be read is an error naming it (what a
+/// reader that must not guess says: the console at rest); a missing file, none homed.
+pub fn read_homed(
+    path: &Path,
+    n_motors: usize,
+    identity: &str,
+) -> Result<[bool; MAX_MOTORS], String> {
     let mut homed = [false; MAX_MOTORS];
-    let text = qmarc_config::read_bounded(path, 4096).ok().flatten();
-    let Some(text) = text.and_then(|raw| String::from_utf8(raw).ok()) else { return homed };
+    let text = match qmarc_config::read_bounded(path, 4096) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(homed),
+        Err(e) => return Err(format!("{}: {e}", path.display())),
+    };
+    let Some(text) = text.and_then(|raw| String::from_utf8(raw).ok()) else { return Ok(homed) };
     let mut lines = text.lines();
     let flags = lines.next().and_then(|l| l.strip_prefix("homed"));
     let card = lines.next().and_then(|l| l.strip_prefix("card "));
     if card != Some(identity) {
-        return homed;
+        return Ok(homed);
     }
     let flags = flags.into_iter().flat_map(str::split_whitespace);
     for (h, flag) in homed.iter_mut().zip(flags).take(n_motors) {
         *h = flag == "1";
     }
-    homed
+    Ok(homed)
 }
 
 /// Checks, without touching a frame kept there, that `path` can keep one: not a folder, its
