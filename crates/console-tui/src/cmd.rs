@@ -336,4 +336,17 @@ mod tests {
         assert!(parse(&["cmd", "grip", "half"]).is_err());
         assert!(parse(&["cmd", "grip"]).is_err());
     }
+
+    /// Issue 42: `path --help` names the check that exists (`run --method pvt --knots`, not
+    /// a `move --knots` there is none of), and coordinates are typed as they are.
+    #[test]
+    fn the_help_names_real_commands_and_negative_numbers_are_values() {
+        let mut cmd = CmdArgs::command();
+        let help = cmd.find_subcommand_mut("path").expect("path").render_long_help().to_string();
+        assert!(help.contains("run --method pvt --knots FILE") && !help.contains("move --knots"));
+        assert!(help.contains("--approach"), "{help}");
+        let xyz = CmdArgs::try_parse_from(["cmd", "move", "--xyz", "-60,0,-650"]).unwrap();
+        let Cmd::Move { xyz, .. } = xyz.command else { panic!("a move") };
+        assert_eq!(xyz, Some(vec![-60.0, 0.0, -650.0]));
+    }
 }
