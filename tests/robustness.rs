@@ -504,8 +504,8 @@ fn a_dead_controller_is_reported_with_what_is_known() {
         "step",
         "--duration=30",
     ]);
-    qmarc_tests::wait_until_moving(&run.prefix, TIMEOUT);
-    std::thread::sleep(Duration::from_millis(300));
+    // Killed 300 cycles into its move, whenever a loaded machine gets there.
+    qmarc_tests::wait_for_progress(&run.prefix, TIMEOUT, "300 cycles", |s| s.cycle > 300);
     signal(pid_of(&run, "qmarc-controller"), Signal::SIGKILL);
     let r = wait_with_timeout(child, TIMEOUT);
     assert_eq!(r.code, Some(i32::from(exit::FAULT)), "{}\n{}", r.stdout, r.stderr);

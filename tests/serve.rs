@@ -79,8 +79,12 @@ fn serve_takes_moves_and_new_targets_mid_motion_within_the_limits() {
     // A slow move (over five seconds: a status command that starts late on a loaded machine
     // still finds it moving), replaced while it runs by one the other way at full speed.
     assert!(accepted(&run, &["move", "--to=3000,-2000,1000", "--speed=0.01"]).contains("move 1"));
-    let moving = accepted(&run, &["status"]);
-    assert!(moving.starts_with("moving"), "{moving}");
+    // Taken by the loop in its next cycle, whenever a loaded machine runs it.
+    let started = Instant::now();
+    while !accepted(&run, &["status"]).starts_with("moving") {
+        assert!(started.elapsed() < TIMEOUT, "the move was not taken");
+        std::thread::sleep(Duration::from_millis(10));
+    }
     accepted(&run, &["move", "--to=-1500,2500,500"]);
     let done = accepted(&run, &["wait"]);
     assert_eq!(numbers_after(&done, "command"), [-1500.0, 2500.0, 500.0], "{done}");
@@ -124,7 +128,12 @@ fn serve_ends_as_any_move_does_under_ctrl_c_and_kill_9() {
         let config = run.config_with(&[]);
         let child = serve(&run, &config, &[]);
         accepted(&run, &["move", "--to=4000,4000,4000", "--speed=0.05"]);
-        std::thread::sleep(Duration::from_millis(50));
+        // Killed once the move is under way (its command has left 0), however late.
+        let started = Instant::now();
+        while numbers_after(&accepted(&run, &["status"]), "command")[0] <= 0.0 {
+            assert!(started.elapsed() < TIMEOUT, "{victim}: the move did not begin");
+            std::thread::sleep(Duration::from_millis(10));
+        }
         let pid = match victim {
             "ctrl-c" | "qmarc-starter" => child.id(),
             name => run
@@ -223,8 +232,10 @@ fn serve_follows_a_path_through_its_knots_at_their_times() {
     assert_eq!(numbers_after(&done, "command"), [2000.0, 0.0, 0.0], "{done}");
     std::fs::write(&file, "X 0 0 50 Y 0 0 50 Z 0 0 50\nX 10 0 50 Y 0 zero 50 Z 0 0 50\n").unwrap();
     let r = cmd(&run, &["path", &file]);
-    assert_eq!(r.code, Some(1), "{}", r.stdout);
-    assert!(r.stderr.contains(&format!("{file}:2:")), "file and line: {}", r.stderr);
+    // Refused as the starter refuses a bad knot file (exit 3), naming file and line.
+    assert_eq!(r.code, Some(3), "{}", r.stdout);
+    assert!(r.stdout.starts_with("refused (bad_request): "), "{}", r.stdout);
+    assert!(r.stdout.contains(&format!("{file}:2:")), "file and line: {}", r.stdout);
     accepted(&run, &["quit"]);
     let r = qmarc_tests::wait_with_timeout(child, TIMEOUT);
     assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
@@ -272,6 +283,17 @@ fn a_live_sessions_prefix_is_refused_and_the_session_goes_on() {
         assert!(r.stderr.contains(" serve), "), "its command: {}", r.stderr);
         assert!(!other.exists(), "nothing of the refused run was made");
     }
+    // A prefix the live one starts with would take its files when its run ends: refused too.
+    let cut = run.prefix[..run.prefix.len() - 1].rfind('_').expect("a prefix of parts");
+    let short = &run.prefix[..=cut];
+    let mut c = Command::new(bin_dir().join("qmarc-starter"));
+    c.args([format!("--iox-prefix={short}"), format!("--iox-root={}", run.root())])
+        .args([config_arg.as_str(), "--deterministic", "step"])
+        .current_dir(qmarc_tests::workspace());
+    let r = run_with_timeout(&mut c, TIMEOUT);
+    assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
+    let said = format!("`{short}` would take the files of `{}`, which belongs to", run.prefix);
+    assert!(r.stderr.contains(&said), "{}", r.stderr);
     // The live session's own files are all still there (its run file, its progress and
     // gather pages, its services; a client's connection comes and goes), and it answers as
     // before.

@@ -100,7 +100,7 @@ fn assert_rows_are_gathered(csv: &Path, out: &Path) -> usize {
 #[test]
 fn scope_records_a_move_started_before_or_during_it_and_its_samples_are_gathered_rows() {
     let run = TestRun::new("scope");
-    let config = run.config_with(&[("duration_s", "3.0")]);
+    let config = run.config_with(&[("duration_s", "6.0")]);
     let (before_csv, during_csv) = (run.out("before.csv"), run.out("during.csv"));
     // Started before the move: it says no move runs, then waits — the move starts once it
     // said so (issue 48: a fixed delay guessed at when it had started).
@@ -113,8 +113,13 @@ fn scope_records_a_move_started_before_or_during_it_and_its_samples_are_gathered
         &format!("--out={}", out.display()),
         "step",
     ]);
-    qmarc_tests::wait_until_moving(&run.prefix, Duration::from_secs(60));
-    std::thread::sleep(Duration::from_millis(500));
+    // Half a second into the move (its progress page says so), a second scope.
+    qmarc_tests::wait_for_progress(
+        &run.prefix,
+        Duration::from_secs(60),
+        "0.5 s of the move",
+        |s| s.cycle > 1_250,
+    );
     let during = scope(&run, &["--csv", during_csv.to_str().unwrap(), "--every", "2"]);
     let moved = wait_with_timeout(starter, Duration::from_secs(120));
     assert_eq!(moved.code, Some(0), "{}{}", moved.stdout, moved.stderr);
@@ -126,14 +131,14 @@ fn scope_records_a_move_started_before_or_during_it_and_its_samples_are_gathered
         assert_eq!(s.code, Some(0), "scope {name}: {}{}", s.stdout, s.stderr);
         assert!(s.stdout.contains("detached: the move is done"), "scope {name}: {}", s.stdout);
         let matched = assert_rows_are_gathered(csv, &out);
-        // 3 s at 2.5 kHz, a sample every 4th cycle (every 8th for `--every 2`).
+        // 6 s at 2.5 kHz, a sample every 4th cycle (every 8th for `--every 2`).
         println!("scope {name}: {matched} samples, each a gather.csv row\n{}", s.stdout);
         assert!(matched > 100, "scope {name}: only {matched} samples");
         if name == "before" {
-            // Waiting when the move began, it attached in its first half (3 s: 1875 samples).
+            // Waiting when the move began, it attached in its first half (6 s: 3750 samples).
             let (_, rows) = read_csv(csv);
             let first: u64 = rows[0][0].parse().unwrap();
-            assert!(first < 900, "scope {name} missed the move's first half: from sample {first}");
+            assert!(first < 1_800, "scope {name} missed the move's first half: from {first}");
         }
     }
     // The one started during the move saw it from its middle on, every 2nd sample.

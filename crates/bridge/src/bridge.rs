@@ -242,6 +242,9 @@ impl Bridge {
     fn joint_state_due(&mut self, s: &TelemetrySample) -> bool {
         let period_ns = (1e9 / self.opts.rate_hz) as u64;
         let next = match self.next_joint_state_ns {
+            // A sample from before the grid's last point but one: time went back (another
+            // session's clock): the grid starts again from it.
+            Some(due) if s.time_ns.saturating_add(2 * period_ns) < due => s.time_ns + period_ns,
             Some(due) if s.time_ns < due => return false,
             Some(due) if s.time_ns < due + period_ns => due + period_ns,
             _ => s.time_ns + period_ns,

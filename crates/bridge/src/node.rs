@@ -33,7 +33,8 @@ pub enum NodeOpenError {
     /// would be one node to ROS, their topics interleaved and every command reaching both.
     #[error(
         "a ROS node {node} is already alive in domain {domain} (its liveliness token \
-         {token}): give this bridge another --namespace (or --domain)"
+         {token}; one that died keeps it for its session's lease, about 10 s): give this \
+         bridge another --namespace (or --domain), or start it again once the other is gone"
     )]
     Alive {
         /// The node's fully qualified name.

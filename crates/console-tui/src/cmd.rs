@@ -191,22 +191,50 @@ fn move_request(
     }
 }
 
-/// What the wire cannot carry, checked here by the starter's own check (its words): a
-/// request holds up to [`qmarc_proto::MAX_MOTORS`] joint targets, so one per motor of the
-/// session's must be given. Everything else of a move the controller checks, in the same
-/// words (the same settings' checks).
-fn check_as_the_starter(args: &CmdArgs, settings: &qmarc_config::Settings) -> Result<(), String> {
-    if let Cmd::Move { to: Some(to), .. } = &args.command
-        && to.len() != settings.n_motors
-    {
-        settings.clone().set_move_to(to).map_err(|e| e.to_string())?;
-    }
-    Ok(())
+/// What `qmarc cmd` sends, made from its command line before anything is sent.
+enum Outgoing {
+    /// A path request (`path`).
+    Path(Box<PathRequest>),
+    /// An order, and its word in the answer (`move`, `stop`, `grip`, `quit`).
+    Order(CommandRequest, &'static str),
+    /// `status`.
+    Status,
+    /// `wait`, giving up after this many seconds.
+    Wait(f64),
 }
 
-fn run(args: &CmdArgs, session: &Session) -> anyhow::Result<u8> {
-    let (location, settings) = (&session.location, &session.settings);
-    let n = settings.n_motors;
+/// The request of `args` for the session's `settings`: a knot file read and checked, a
+/// target of the session's motors. An error is the user's input, refused before anything is
+/// sent, in the starter's words where the starter checks the same (a `--to` of another
+/// length than the motors: the wire carries up to [`qmarc_proto::MAX_MOTORS`], so it is
+/// checked here; everything else of a move the controller checks, with the same settings'
+/// checks).
+fn outgoing(args: &CmdArgs, settings: &qmarc_config::Settings) -> anyhow::Result<Outgoing> {
+    Ok(match &args.command {
+        Cmd::Path { file, approach } => {
+            let mut request = path_request(file, settings)?;
+            if *approach {
+                request.flags |= PathRequest::APPROACH;
+            }
+            Outgoing::Path(request)
+        }
+        Cmd::Move { to, xyz, linear, speed } => {
+            if let Some(to) = to.as_ref().filter(|to| to.len() != settings.n_motors) {
+                settings.clone().set_move_to(to)?;
+            }
+            Outgoing::Order(move_request(to, xyz, *linear, *speed)?, "move")
+        }
+        Cmd::Stop => Outgoing::Order(CommandRequest::of(CommandKind::Stop), "stop"),
+        Cmd::Grip { close } => Outgoing::Order(CommandRequest::grip(*close), "grip"),
+        Cmd::Quit => Outgoing::Order(CommandRequest::of(CommandKind::Quit), "quit"),
+        Cmd::Status => Outgoing::Status,
+        Cmd::Wait { timeout } => Outgoing::Wait(*timeout),
+    })
+}
+
+/// Sends `out` to `session` and prints the answer; the exit code.
+fn run(session: &Session, out: Outgoing) -> anyhow::Result<u8> {
+    let (location, n) = (&session.location, session.settings.n_motors);
     let mut client = match CommandClient::connect(location) {
         Ok(c) => c,
         Err(e) => {
@@ -217,22 +245,16 @@ fn run(args: &CmdArgs, session: &Session) -> anyhow::Result<u8> {
             return Err(e.into());
         }
     };
-    if let Cmd::Path { file, approach } = &args.command {
-        let mut request = path_request(file, settings)?;
-        if *approach {
-            request.flags |= PathRequest::APPROACH;
+    match out {
+        Outgoing::Path(request) => Ok(said(&client.send_path(&request)?, "path")),
+        Outgoing::Order(request, what) => Ok(said(&client.send(request)?, what)),
+        Outgoing::Status => {
+            let answer = client.send(CommandRequest::of(CommandKind::Status))?;
+            let ended = if answer.refused().is_some() { " (the session has ended)" } else { "" };
+            println!("{}{ended}", describe(&answer, n));
+            Ok(0)
         }
-        let answer = client.send_path(&request)?;
-        return Ok(said(&answer, "path"));
-    }
-    let request = match &args.command {
-        Cmd::Move { to, xyz, linear, speed } => move_request(to, xyz, *linear, *speed)?,
-        Cmd::Stop => CommandRequest::of(CommandKind::Stop),
-        Cmd::Grip { close } => CommandRequest::grip(*close),
-        Cmd::Quit => CommandRequest::of(CommandKind::Quit),
-        Cmd::Path { .. } => unreachable!("sent above"),
-        Cmd::Status => CommandRequest::of(CommandKind::Status),
-        Cmd::Wait { timeout } => {
+        Outgoing::Wait(timeout) => {
             let s = client.wait(Duration::from_secs_f64(timeout.max(0.0)))?;
             println!("{}", describe(&s, n));
             if s.not_taken >= s.accepted && s.accepted > 0 {
@@ -243,22 +265,9 @@ fn run(args: &CmdArgs, session: &Session) -> anyhow::Result<u8> {
                 );
                 return Ok(qmarc_proto::exit::REFUSED);
             }
-            return Ok(if s.fault == 0 { 0 } else { qmarc_proto::exit::FAULT });
+            Ok(if s.fault == 0 { 0 } else { qmarc_proto::exit::FAULT })
         }
-    };
-    let answer = client.send(request)?;
-    if let Cmd::Status = args.command {
-        let ended = if answer.refused().is_some() { " (the session has ended)" } else { "" };
-        println!("{}{ended}", describe(&answer, n));
-        return Ok(0);
     }
-    let what = match &args.command {
-        Cmd::Stop => "stop",
-        Cmd::Grip { .. } => "grip",
-        Cmd::Quit => "quit",
-        _ => "move",
-    };
-    Ok(said(&answer, what))
 }
 
 /// Prints whether `answer` accepted the order `what` (`move`, `path`, `stop`, `grip`, `quit`)
@@ -302,12 +311,16 @@ pub fn main(args: &[OsString]) -> ExitCode {
             return ExitCode::from(code);
         }
     };
-    if let Err(e) = check_as_the_starter(&args, &session.settings) {
-        println!("refused (bad_request): {e}");
-        println!("{}", session.named());
-        return ExitCode::from(qmarc_proto::exit::REFUSED);
-    }
-    let outcome = run(&args, &session);
+    // Bad input is refused before anything is sent (exit 3, as the starter refuses it).
+    let out = match outgoing(&args, &session.settings) {
+        Ok(out) => out,
+        Err(e) => {
+            println!("refused (bad_request): {e:#}");
+            println!("{}", session.named());
+            return ExitCode::from(qmarc_proto::exit::REFUSED);
+        }
+    };
+    let outcome = run(&session, out);
     println!("{}", session.named());
     match outcome {
         Ok(code) => ExitCode::from(code),

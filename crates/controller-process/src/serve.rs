@@ -9,7 +9,7 @@ use iceoryx2::prelude::ipc;
 use qmarc_config::{Settings, TargetError};
 use qmarc_controller::traj::TrajectoryGenerator;
 use qmarc_plugins::linear::LinearMove;
-use qmarc_plugins::moveto::{MotionLimits, rest_to_rest};
+use qmarc_plugins::moveto::{MotionLimits, approach_queue};
 use qmarc_plugins::online::{MotionState, Profile};
 use qmarc_plugins::path::{outside_soft_limits, path_queue};
 use qmarc_plugins::serve::{NotTaken, Order, ServeHandle, ServeMove, ServeShared};
@@ -289,7 +289,7 @@ impl Commands {
                 let mut to = start;
                 to[..s.n_motors].copy_from_slice(&first.pos[..s.n_motors]);
                 let limits = MotionLimits::of(s).at_speed(s.trajectory.approach_speed);
-                let mut way = rest_to_rest(&start, &to, s.n_motors, &limits, s.period_s())
+                let way = approach_queue(&start, &to, s.n_motors, &limits, s.period_s())
                     .map_err(|e| (Refusal::BadRequest, format!("the approach: {e}")))?;
                 if let Some((m, k, [lo, hi])) =
                     outside_soft_limits(&way, s).filter(|_| !self.unhomed)
@@ -304,7 +304,6 @@ impl Commands {
                         ),
                     ));
                 }
-                way.pop(); // its last sample is the path's first
                 (way, to)
             }
             None => (Vec::new(), start),

@@ -103,6 +103,20 @@ pub fn double_s_duration(d: f64, v: f64, a: f64, j: f64) -> f64 {
     if ta >= 2.0 * tj { 2.0 * ta } else { 4.0 * (d / (2.0 * j)).cbrt() }
 }
 
+/// The way to a path's first knot `to` from `from`: [`rest_to_rest`] without its last
+/// sample, which is the path's first (`run --approach`, `qmarc cmd path --approach`).
+pub fn approach_queue(
+    from: &[f64; MAX_MOTORS],
+    to: &[f64; MAX_MOTORS],
+    n_motors: usize,
+    limits: &MotionLimits,
+    period_s: f64,
+) -> Result<Vec<[f64; MAX_MOTORS]>, MoveToError> {
+    let mut way = rest_to_rest(from, to, n_motors, limits, period_s)?;
+    way.pop();
+    Ok(way)
+}
+
 /// The command queue of the move of the first `n_motors` from `from` to `to`, at rest at both
 /// ends, under `limits`, one sample every `period_s`: sample 0 is `from`, the last is exactly
 /// `to` (a move of no distance is that one sample). Planned by the online generator's
@@ -325,9 +339,7 @@ impl TrajectoryGenerator for Approach {
             self.lead.clear();
             return self.path.start(start);
         };
-        let mut way = rest_to_rest(start, &first, self.n_motors, &self.limits, self.period_s)?;
-        way.pop(); // its last sample is the path's first
-        self.lead = way;
+        self.lead = approach_queue(start, &first, self.n_motors, &self.limits, self.period_s)?;
         self.path.start(&first)
     }
 

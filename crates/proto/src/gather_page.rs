@@ -79,6 +79,11 @@ impl GatherPage {
             .and_then(|b| b.checked_add(ROWS_OFFSET))
             .ok_or_else(|| std::io::Error::other("a gather page larger than memory"))?;
         file.set_len(len as u64)?;
+        // Every byte given its memory now: a tmpfs file is sparse, and a page the loop
+        // touched where /dev/shm had no room left would kill it with SIGBUS mid-move. Short
+        // of room, the making fails here, before the move (which then gathers on the heap).
+        nix::fcntl::posix_fallocate(&file, 0, len as i64)
+            .map_err(|e| std::io::Error::other(format!("reserving {len} bytes: {e}")))?;
         // Populated: the loop never takes a page fault on it.
         let page = GatherPage::map(&file, len, MapFlags::MAP_SHARED | MapFlags::MAP_POPULATE)?;
         let h = page.header();

@@ -48,11 +48,15 @@ pub fn conclude(p: &Prepared, e: &Ended) -> Option<(Summary, PathBuf)> {
                 let last = g.rows().last().map_or(0, |r| r.cycle);
                 s.gather_every = g.every();
                 s.gathered_rows = g.rows().len() as u64;
+                let overwritten = match g.dropped() {
+                    0 => String::new(),
+                    k => format!(" ({k} rows before them not kept: the ring's, or never fitted)"),
+                };
                 s.warnings.push(qmarc_report::summary::Warning::new(
                     qmarc_report::summary::WarningKind::CutShort,
                     format!(
                         "cut short: the controller died; gather.csv and gather.m hold the {} \
-                         rows it had gathered, to cycle {last}, from its gather page",
+                         rows it had gathered, to cycle {last}, from its gather page{overwritten}",
                         g.rows().len()
                     ),
                 ));

@@ -29,6 +29,7 @@ use qmarc_config::Names;
 use qmarc_proto::service::IpcLocation;
 
 pub use qmarc_telemetry::session::PREFIX_STEM;
+use qmarc_telemetry::session::any_process_mentions;
 
 /// The default iceoryx2 prefix of this starter: unique per run, so runs never meet and
 /// leftovers can be traced to a dead starter.
@@ -59,20 +60,6 @@ pub fn names() -> Names {
 }
 
 pub use qmarc_proto::service::run_file;
-
-/// True if a process other than this one whose command line mentions `needle` is running
-/// (the children of a starter carry its prefix in their arguments).
-fn any_process_mentions(needle: &str) -> bool {
-    let Ok(entries) = std::fs::read_dir("/proc") else {
-        return false;
-    };
-    let me = std::process::id().to_string();
-    entries.flatten().any(|e| {
-        e.file_name().to_str().is_some_and(|n| n.bytes().all(|b| b.is_ascii_digit()) && n != me)
-            && std::fs::read(e.path().join("cmdline"))
-                .is_ok_and(|c| c.windows(needle.len()).any(|w| w == needle.as_bytes()))
-    })
-}
 
 /// Removes what earlier starters under `root` left when they died without cleaning up: their
 /// prefix `qmarc_<pid>_` names a starter that no longer exists *and* no process (an orphaned

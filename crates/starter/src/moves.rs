@@ -176,13 +176,22 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     location.config().map_err(refused)?;
     // A prefix in use by a live run is that run's: refused before anything of it is touched
     // (a second run would fail on its services, and then remove its files).
-    if let Some(live) = qmarc_telemetry::session::live_run(&location.prefix) {
+    // (One whose prefix starts with this one's, or the other way round, counts: a run removes
+    // every file that starts with its prefix.)
+    if let Some(live) = qmarc_telemetry::session::live_run_overlapping(&location.prefix) {
+        let whose = if live.prefix == location.prefix {
+            format!("iceoryx2 prefix `{}` belongs to", location.prefix)
+        } else {
+            format!(
+                "iceoryx2 prefix `{}` would take the files of `{}`, which belongs to",
+                location.prefix, live.prefix
+            )
+        };
         return Err(refused(anyhow!(
-            "iceoryx2 prefix `{}` belongs to a live {}: {live}; end it first (qmarc cmd \
-             --iox-prefix {} quit, or Ctrl-C where it runs) or choose another --iox-prefix",
-            location.prefix,
+            "{whose} a live {}: {live}; end it first (qmarc cmd --iox-prefix {} quit, or \
+             Ctrl-C where it runs) or choose another --iox-prefix",
             if live.serving { "serving session" } else { "run" },
-            location.prefix
+            live.prefix
         )));
     }
     let spec = RunSpec {
@@ -373,12 +382,14 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
     status.borrow_mut().clear();
     let reached = progress.as_ref().map(Progress::read);
     drop(progress);
-    // A controller that did not end well (killed, a panic) left its rows in the gather page:
-    // taken before the run's files go.
-    let controller_ended_well = children
-        .iter()
-        .any(|c| c.name == "qmarc-controller" && c.exit.is_some_and(|x| x.success()));
-    let salvaged = (!controller_ended_well)
+    // A controller that died (a signal, a panic, an internal failure: no summary of its own)
+    // left its rows in the gather page: taken before the run's files go. One that ended with
+    // a code of the table (ok, a fault, refused, rescued, interrupted) wrote its own.
+    let died = children.iter().any(|c| {
+        c.name == "qmarc-controller"
+            && !matches!(c.exit, Some(Exit::Code(0 | 2 | 3 | 4 | 130)) | None)
+    });
+    let salvaged = died
         .then(|| {
             qmarc_controller::gather::Gather::salvage(&qmarc_proto::gather_page::GatherPage::path(
                 &p.location.prefix,

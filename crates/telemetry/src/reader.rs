@@ -233,7 +233,10 @@ pub fn serving_session(
         })?;
         return Ok((location_of(prefix, root), spec, crate::session::live_run(prefix)));
     }
-    let mut live = crate::session::serving_sessions(root);
+    // The caller's own sessions decide; another user's only where the caller has none.
+    let all = crate::session::serving_sessions(root);
+    let (mut own, others): (Vec<_>, Vec<_>) = all.into_iter().partition(|r| r.own);
+    let mut live = if own.is_empty() { others } else { std::mem::take(&mut own) };
     if live.len() > 1 {
         return Err(SessionFindError::Ambiguous(live));
     }

@@ -11,6 +11,10 @@ use std::time::SystemTime;
 /// is a client of the run, not the run).
 const RUN_PROGRAMS: [&str; 3] = ["qmarc-starter", "qmarc-hwserver", "qmarc-controller"];
 
+/// The subcommands with which `qmarc` runs a move itself, as the starter (`qmarc step …`).
+const QMARC_MOVES: [&str; 9] =
+    ["step", "run", "home", "jog", "check", "move", "serve", "tune", "trials"];
+
 /// Prefix of the starter's default iceoryx2 prefixes (`qmarc_<pid>_`).
 pub const PREFIX_STEM: &str = "qmarc_";
 
@@ -30,6 +34,8 @@ pub struct LiveRun {
     pub started: Option<SystemTime>,
     /// Its run file says it serves (`qmarc-starter serve`).
     pub serving: bool,
+    /// Its run file is the caller's (the same user's).
+    pub own: bool,
 }
 
 impl std::fmt::Display for LiveRun {
@@ -92,9 +98,22 @@ fn processes() -> Vec<Process> {
         .collect()
 }
 
-/// The program of `args` (its file name) if it is one a run is made of.
+/// Whether a process other than this one, alive, mentions `needle` in its command line (the
+/// children of a starter carry its prefix in their arguments).
+pub fn any_process_mentions(needle: &str) -> bool {
+    processes().iter().any(|(_, args)| args.iter().any(|a| a.contains(needle)))
+}
+
+/// The program of `args` (its file name) if it is one a run is made of: a starter is
+/// `qmarc-starter`, or `qmarc` running a move itself (`qmarc step …`; not `qmarc cmd` or
+/// `qmarc scope`, which are clients).
 fn run_program(args: &[String]) -> Option<&'static str> {
     let name = Path::new(args.first()?).file_name()?.to_str()?;
+    let words = || args.iter().skip(1).map(String::as_str);
+    if name == "qmarc" {
+        let client = words().any(|w| w == "cmd" || w == "scope");
+        return (!client && words().any(|w| QMARC_MOVES.contains(&w))).then_some("qmarc-starter");
+    }
     RUN_PROGRAMS.into_iter().find(|p| *p == name)
 }
 
@@ -130,6 +149,20 @@ pub fn live_run(prefix: &str) -> Option<LiveRun> {
     live_in(&processes(), prefix)
 }
 
+/// A live run whose files a run under `prefix` would touch: its prefix is `prefix`, or one
+/// starts with the other (a run removes every file that starts with its own prefix).
+pub fn live_run_overlapping(prefix: &str) -> Option<LiveRun> {
+    let procs = processes();
+    let mut prefixes: Vec<String> =
+        procs.iter().filter_map(|(pid, args)| prefix_of(*pid, args)).collect();
+    prefixes.sort();
+    prefixes.dedup();
+    prefixes
+        .iter()
+        .filter(|p| p.starts_with(prefix) || prefix.starts_with(p.as_str()))
+        .find_map(|p| live_in(&procs, p))
+}
+
 fn live_in(procs: &[Process], prefix: &str) -> Option<LiveRun> {
     let mut mine: Vec<&Process> = procs
         .iter()
@@ -149,13 +182,18 @@ fn live_in(procs: &[Process], prefix: &str) -> Option<LiveRun> {
             std::fs::read_link(format!("/proc/{pid}/cwd")).map_or(out.clone(), |cwd| cwd.join(out))
         }
     });
+    let meta = std::fs::metadata(&run).ok();
     Some(LiveRun {
         prefix: prefix.to_string(),
         pid: *pid,
         command: args.iter().map(|a| shell_word(a)).collect::<Vec<_>>().join(" "),
         out_dir,
-        started: std::fs::metadata(&run).and_then(|m| m.modified()).ok(),
+        started: meta.as_ref().and_then(|m| m.modified().ok()),
         serving: spec.is_some_and(|s| s.mode == qmarc_config::Mode::Serve),
+        own: meta.is_none_or(|m| {
+            use std::os::unix::fs::MetadataExt;
+            m.uid() == nix::unistd::geteuid().as_raw()
+        }),
     })
 }
 
@@ -202,6 +240,13 @@ mod tests {
             (32, args("/x/qmarc-starter --iox-prefix=xt4a_ serve")),
         ];
         let run = live_in(&procs, "t4a_").expect("t4a_ is live");
+        // A console's own move is a starter too; its `cmd` and `scope` are clients.
+        let console = [
+            (40, args("/x/qmarc --iox-prefix c1_ step")),
+            (41, args("/x/qmarc cmd --iox-prefix c2_ move --to 1,2,3")),
+        ];
+        assert_eq!(live_in(&console, "c1_").map(|r| r.pid), Some(40));
+        assert_eq!(live_in(&console, "c2_"), None);
         assert_eq!(
             (run.pid, run.command.as_str()),
             (10, "/x/qmarc-starter --iox-prefix t4a_ --out A serve")

@@ -87,9 +87,12 @@ fn main() -> ExitCode {
     qmarc_config::program::conclude(
         "qmarc-bridge",
         outcome.map_err(|e| {
-            // A node of its name already alive: refused, not failed.
-            let alive = matches!(e.downcast_ref(), Some(NodeOpenError::Alive { .. }));
-            (if alive { qmarc_proto::exit::REFUSED } else { qmarc_proto::exit::INTERNAL }, e)
+            // A node of its name already alive, or several sessions and none chosen: refused,
+            // not failed.
+            use qmarc_telemetry::reader::SessionFindError;
+            let refused = matches!(e.downcast_ref(), Some(NodeOpenError::Alive { .. }))
+                || matches!(e.downcast_ref(), Some(SessionFindError::Ambiguous(_)));
+            (if refused { qmarc_proto::exit::REFUSED } else { qmarc_proto::exit::INTERNAL }, e)
         }),
     )
 }
