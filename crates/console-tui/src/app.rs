@@ -78,7 +78,7 @@ pub struct App {
     /// output folder's, an earlier move's), or why there are none (the folder's files cannot
     /// be read); `None` when `last` is the last move's, or when no move has written there.
     pub results_note: Option<String>,
-    /// The robot at rest, as far as it is known (read again every [`REST_EVERY`] while no
+    /// The robot at rest, as far as it is known (read again every two seconds while no
     /// move runs, and when one ends).
     pub rest: Rest,
     /// When `rest` was read.

@@ -1,4 +1,4 @@
-//! The controller's telemetry thread: empties the loop's ring every [`RELAY_WAKE`] and
+//! The controller's telemetry thread: empties the loop's ring every `RELAY_WAKE` and
 //! publishes each sample on `qmarc/telemetry`. iceoryx2's work — a loan per sample (one
 //! allocation, iceoryx2 #101) and opening the connection to a reader that just arrived
 //! (shared memory, system calls) — runs here, never in the servo thread. It ends when the
