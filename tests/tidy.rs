@@ -69,6 +69,7 @@ const LAYERS: &[&str] = &[
     "hwserver",
     "telemetry",
     "plugins",
+    "session",
     "report",
     "bridge",
     "waypoints",

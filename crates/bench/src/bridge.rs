@@ -18,7 +18,8 @@
 use crate::session::Session;
 use crate::stats::{median, percentiles_us};
 use anyhow::Context;
-use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest};
+use qmarc_session::client::CommandClient;
+use qmarc_session::wire::{CommandKind, CommandRequest};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};

@@ -8,7 +8,8 @@
 
 use crate::session::Session;
 use crate::stats::percentiles_us;
-use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest};
+use qmarc_session::client::CommandClient;
+use qmarc_session::wire::{CommandKind, CommandRequest};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 

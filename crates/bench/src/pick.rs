@@ -12,8 +12,9 @@
 //! a cycle on the robot, 120 cycles a minute).
 
 use crate::session::Session;
-use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandResponse};
 use qmarc_proto::telemetry::TelemetrySample;
+use qmarc_session::client::{CommandClient, Fate, OrderLedger};
+use qmarc_session::wire::{CommandKind, CommandRequest, CommandResponse};
 use qmarc_telemetry::reader::TelemetryReader;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -160,7 +161,7 @@ impl Cell<'_> {
 
     /// Until the last command accepted has settled (at rest, the gripper there).
     fn settle(&mut self) -> anyhow::Result<()> {
-        self.poll(|s| s.settled >= s.accepted && s.moving == 0)
+        self.poll(|s| OrderLedger::of(s).fate(s.accepted) == Fate::Settled)
     }
 
     /// Polls the status (every 200 µs, reading the telemetry in between) until `done`.
@@ -170,7 +171,8 @@ impl Cell<'_> {
             self.drain()?;
             let s = self.send(CommandRequest::of(CommandKind::Status))?;
             anyhow::ensure!(s.fault == 0, "the session faulted (fault {})", s.fault);
-            anyhow::ensure!(s.not_taken < s.accepted, "move {} was not taken", s.accepted);
+            let not_taken = OrderLedger::of(&s).fate(s.accepted) == Fate::NotTaken;
+            anyhow::ensure!(!not_taken, "move {} was not taken", s.accepted);
             if done(&s) {
                 return Ok(());
             }

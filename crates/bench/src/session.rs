@@ -2,8 +2,9 @@
 //! time, under a prefix of its own; a client once its loop serves; quit and cleaned up after.
 
 use anyhow::Context;
-use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest};
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
+use qmarc_session::client::CommandClient;
+use qmarc_session::wire::{CommandKind, CommandRequest};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};

@@ -31,8 +31,9 @@ use crate::msgs::{Header, JointTrajectoryPoint, Time};
 use crate::node::{Node, RosPublisher, RosService, ZenohError, payload_of};
 use crate::ros2::{self, Qos};
 use qmarc_proto::MAX_MOTORS;
-use qmarc_proto::command::{CommandKind, CommandRequest, CommandResponse, Refusal};
 use qmarc_proto::telemetry::TelemetrySample;
+use qmarc_session::client::{Fate, OrderLedger};
+use qmarc_session::wire::{CommandKind, CommandRequest};
 use std::time::{Duration, Instant};
 
 /// Ended goals the server still answers for (the oldest forgotten first).
@@ -411,16 +412,15 @@ impl Bridge {
         let per_rad = self.opts.converter.counts_per_rad;
         let (_, actual) = self.motions();
         let Some(run) = self.actions.goals[i].run.as_mut() else { return };
+        let ledger = OrderLedger::of(&status);
         if let Some(stop) = &run.stopping {
-            let rested = status.settled >= stop.id && status.moving == 0;
-            let gone = status.refused() == Some(Refusal::NotServing);
-            if rested || gone {
+            if matches!(ledger.fate(stop.id), Fate::Settled | Fate::Ended(_)) {
                 let Some(Stopping { status, result, .. }) = run.stopping.take() else { return };
                 self.finish(i, status, result);
             }
             return;
         }
-        if let Some(outcome) = ended_by(&status, run.path) {
+        if let Some(outcome) = ended_by(ledger.fate(run.path)) {
             return self.finish(i, GoalStatus::ABORTED, outcome);
         }
         // The path's samples (once the loop took it: the telemetry before is the last move's):
@@ -456,7 +456,7 @@ impl Bridge {
             }
         }
         let Some(run) = self.actions.goals[i].run.as_mut() else { return };
-        if status.settled < run.path || status.moving != 0 {
+        if ledger.fate(run.path) != Fate::Settled {
             return;
         }
         // The telemetry shows the command at the end too (its last samples have been checked
@@ -547,22 +547,18 @@ fn aborted(error_code: i32, error_string: String) -> FjtResult {
     FjtResult { error_code, error_string }
 }
 
-/// What ended the path `path` other than its own end, if anything did: the session's end or
-/// fault, the loop not taking it, or another motion (a move, a line, a stop; a grip is none).
-fn ended_by(s: &CommandResponse, path: u64) -> Option<FjtResult> {
-    if s.refused() == Some(Refusal::NotServing) || s.fault != 0 {
-        let fault = qmarc_proto::state::FaultKind::from_wire(s.fault)
-            .map_or("the session ended".to_string(), |f| format!("fault: {f}"));
-        return Some(aborted(FjtResult::INVALID_GOAL, fault));
-    }
-    if s.not_taken >= path {
-        return Some(aborted(FjtResult::INVALID_GOAL, "the loop did not take the path".into()));
-    }
-    if s.motion > path {
-        let why = format!("another command (move {}) took over the robot", s.motion);
-        return Some(aborted(FjtResult::INVALID_GOAL, why));
-    }
-    None
+/// The goal's end if the path's `fate` ended it before it settled: the session ended, the
+/// loop did not take the path, or another command took over the robot.
+fn ended_by(fate: Fate) -> Option<FjtResult> {
+    let why = match fate {
+        Fate::Ended(fault) => {
+            fault.map_or("the session ended".to_string(), |f| format!("fault: {f}"))
+        }
+        Fate::NotTaken => "the loop did not take the path".into(),
+        Fate::Superseded(by) => format!("another command (move {by}) took over the robot"),
+        Fate::Queued | Fate::Running | Fate::Settled => return None,
+    };
+    Some(aborted(FjtResult::INVALID_GOAL, why))
 }
 
 #[cfg(test)]

@@ -13,11 +13,11 @@ use crate::msgs::{
 };
 use crate::node::{Node, RosPublisher, RosService, payload_of, session_config};
 use crate::ros2::{self, Qos};
-use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandResponse};
-use qmarc_proto::path::PathRequest;
 use qmarc_proto::progress::Progress;
 use qmarc_proto::service::IpcLocation;
 use qmarc_proto::telemetry::{TELEMETRY_BUFFER, TelemetrySample};
+use qmarc_session::client::CommandClient;
+use qmarc_session::wire::{CommandKind, CommandRequest, CommandResponse, PathRequest};
 use qmarc_telemetry::reader::{End, TelemetryReader};
 use qmarc_timer::clock::monotonic_now_ns;
 use std::collections::VecDeque;

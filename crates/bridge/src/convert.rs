@@ -7,9 +7,9 @@ use crate::msgs::{
     DiagnosticArray, DiagnosticStatus, Header, JointState, JointTrajectory, KeyValue, Point,
     PointStamped, Time,
 };
-use qmarc_proto::path::{MAX_PATH_KNOTS, PathKnot, PathRequest};
 use qmarc_proto::telemetry::TelemetrySample;
 use qmarc_proto::{DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, Status};
+use qmarc_session::wire::{MAX_PATH_KNOTS, PathKnot, PathRequest};
 
 /// The frame the effector's point is in: the Delta's base.
 pub const BASE_FRAME: &str = "base";

@@ -4,8 +4,9 @@
 //! the services, sends a target the robot goes to, and what is malformed never reaches the
 //! controller; kill -9 of the bridge mid-move changes nothing in the move.
 
-use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest};
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
+use qmarc_session::client::CommandClient;
+use qmarc_session::wire::{CommandKind, CommandRequest};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -206,7 +207,7 @@ impl Drop for Cell {
 fn wait_for_order_after(
     client: &mut CommandClient,
     before: u64,
-) -> qmarc_proto::command::CommandResponse {
+) -> qmarc_session::wire::CommandResponse {
     let started = Instant::now();
     while client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted <= before {
         assert!(started.elapsed() < Duration::from_secs(30), "no order reached the controller");

@@ -365,7 +365,7 @@ impl App {
             // Its children stop on their parent-death signal; what it could not remove goes
             // now (or with the next run) — only prefixes no live process uses.
             std::thread::sleep(std::time::Duration::from_millis(200));
-            qmarc_starter::remove_stale_files(&self.iox_root);
+            qmarc_session::discovery::remove_stale_files(&self.iox_root);
         }
         if tuning {
             self.tune_ended(&r, status);

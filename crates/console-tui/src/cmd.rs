@@ -6,12 +6,13 @@
 //! printed), 1 no serving controller or no answer, 64 bad options.
 
 use clap::{Parser, Subcommand};
-use qmarc_proto::command::{CommandClient, CommandKind, CommandRequest, CommandResponse};
-use qmarc_proto::path::{MAX_PATH_KNOTS, PathKnot, PathRequest};
 use qmarc_proto::service::IpcLocation;
 use qmarc_proto::state::{FaultKind, Phase};
-use qmarc_telemetry::reader::{SessionFindError, serving, serving_session};
-use qmarc_telemetry::session::LiveRun;
+use qmarc_session::client::{CommandClient, Fate, OrderLedger};
+use qmarc_session::discovery::{LiveRun, SessionFindError, serving, serving_session};
+use qmarc_session::wire::{
+    CommandKind, CommandRequest, CommandResponse, MAX_PATH_KNOTS, PathKnot, PathRequest,
+};
 use std::ffi::OsString;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -257,7 +258,7 @@ fn run(session: &Session, out: Outgoing) -> anyhow::Result<u8> {
         Outgoing::Wait(timeout) => {
             let s = client.wait(Duration::from_secs_f64(timeout.max(0.0)))?;
             println!("{}", describe(&s, n));
-            if s.not_taken >= s.accepted && s.accepted > 0 {
+            if OrderLedger::of(&s).fate(s.accepted) == Fate::NotTaken {
                 println!(
                     "move {} was not taken: {}; the robot went on as it was",
                     s.accepted,

@@ -17,4 +17,3 @@
 #![deny(missing_docs)]
 
 pub mod run;
-pub mod serve;

@@ -6,7 +6,6 @@
 //! thread then writes `gather.csv`, `gather.m` and `summary.json`. Formatting and file I/O
 //! happen only here, after the loop.
 
-use crate::serve;
 use qmarc_config::{Mode, RunSpec, Settings};
 use qmarc_controller::fault::Fault;
 use qmarc_controller::link::{HwLink, IoxLink, LinkConnectError, LinkTimeouts};
@@ -15,7 +14,6 @@ use qmarc_controller::record::MoveRecord;
 use qmarc_controller::servo::{MoveError, Servo, server_gone};
 use qmarc_controller::traj::TrajStartError;
 use qmarc_plugins::registry;
-use qmarc_plugins::serve::ServeHandle;
 use qmarc_plugins::source::TrajBuildError;
 use qmarc_proto::progress::Progress;
 use qmarc_proto::service::IpcLocation;
@@ -25,6 +23,8 @@ use qmarc_report::Summary;
 use qmarc_report::output::{WriteError, write_results};
 use qmarc_report::summarize::summarize;
 use qmarc_report::summary::{AfterHoming, HomingReport, Warning, WarningKind};
+use qmarc_session::generator::ServeHandle;
+use qmarc_session::server;
 use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
 use qmarc_timer::{MonotonicClock, Ticker, TickerKind, UnpacedTicker};
 use std::time::{Duration, Instant};
@@ -151,7 +151,7 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     // Serving: the command thread, answering from before the loop starts until this returns.
     let commands = match serving {
         Some(h) => Some(
-            serve::CommandThread::spawn(&location, settings, spec.unhomed, h)
+            server::CommandThread::spawn(&location, settings, spec.unhomed, h)
                 .map_err(|e| RunError::Location(e.to_string()))?,
         ),
         None => None,
@@ -279,7 +279,7 @@ pub fn build_serving(
     unhomed_jog.jog.speed = settings.jog.unhomed_speed;
     let settings = if spec.unhomed && spec.mode == Mode::Jog { &unhomed_jog } else { settings };
     let (mut path, serving) = if spec.mode == Mode::Serve {
-        let (generator, handle) = serve::generator(settings, spec.unhomed);
+        let (generator, handle) = server::generator(settings, spec.unhomed);
         (generator, Some(handle))
     } else {
         let name = generator_name(spec.mode, settings);

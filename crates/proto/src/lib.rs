@@ -23,12 +23,10 @@
 //! ```
 #![deny(missing_docs)]
 
-pub mod command;
 pub mod exit;
 pub mod gather_page;
 pub mod link;
 pub mod msg;
-pub mod path;
 pub mod progress;
 pub mod service;
 pub mod state;

@@ -26,16 +26,10 @@ pub mod tune;
 pub use supervise::{Exit, describe_exit};
 
 use qmarc_config::Names;
-use qmarc_proto::service::IpcLocation;
 
-pub use qmarc_telemetry::session::PREFIX_STEM;
-use qmarc_telemetry::session::any_process_mentions;
-
-/// The default iceoryx2 prefix of this starter: unique per run, so runs never meet and
-/// leftovers can be traced to a dead starter.
-pub fn default_prefix() -> String {
-    format!("{PREFIX_STEM}{}_", std::process::id())
-}
+pub use qmarc_session::discovery::{
+    PREFIX_STEM, default_prefix, remove_own_stale_files, remove_stale_files,
+};
 
 /// The directory holding the QMARC binaries: `explicit` (`--bin-dir`), else the one this
 /// program is in (where `cargo build` puts them all).
@@ -60,68 +54,6 @@ pub fn names() -> Names {
 }
 
 pub use qmarc_proto::service::run_file;
-
-/// Removes what earlier starters under `root` left when they died without cleaning up: their
-/// prefix `qmarc_<pid>_` names a starter that no longer exists *and* no process (an orphaned
-/// child still shutting down) uses it. iceoryx2 first removes the resources of the prefix's
-/// dead nodes itself (`Node::list`, `try_remove_stale_resources`); then every file left with
-/// the prefix goes (its global management segment among them). Returns how many files were
-/// removed.
-pub fn remove_stale_files(root: &str) -> usize {
-    let Ok(entries) = std::fs::read_dir(qmarc_proto::service::SHM_DIR) else {
-        return 0;
-    };
-    let mut stale: Vec<String> = entries
-        .flatten()
-        .filter_map(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            let pid: u32 = name.strip_prefix(PREFIX_STEM)?.split('_').next()?.parse().ok()?;
-            Some((pid, format!("{PREFIX_STEM}{pid}_")))
-        })
-        .filter(|(pid, prefix)| {
-            !std::path::Path::new(&format!("/proc/{pid}")).exists() && !any_process_mentions(prefix)
-        })
-        .map(|(_, prefix)| prefix)
-        .collect();
-    stale.sort();
-    stale.dedup();
-    stale
-        .iter()
-        .map(|p| {
-            let location = IpcLocation::new(p, root);
-            remove_dead_nodes(&location);
-            location.remove_files()
-        })
-        .sum()
-}
-
-/// Removes what an earlier run with this run's own prefix (`--iox-prefix`) left when it
-/// died, if no other process uses the prefix now (a run still going is refused later by
-/// iceoryx2 itself, its services being in use). Returns how many files were removed.
-pub fn remove_own_stale_files(location: &IpcLocation) -> usize {
-    if any_process_mentions(&location.prefix) {
-        return 0;
-    }
-    remove_dead_nodes(location);
-    location.remove_files()
-}
-
-/// Lets iceoryx2 remove the resources of every dead node at `location`.
-fn remove_dead_nodes(location: &IpcLocation) {
-    use iceoryx2::node::NodeView;
-    use iceoryx2::prelude::*;
-    let Ok(cfg) = location.config() else { return };
-    let _ = Node::<qmarc_proto::service::Link>::list(&cfg, |state| {
-        // Without its details iceoryx2 would clean up with its global configuration (which
-        // reads ./config/iceoryx2.toml): the files of such a node go by prefix below.
-        if let NodeState::Dead(view) = state
-            && view.details().is_some()
-        {
-            let _ = view.try_remove_stale_resources();
-        }
-        CallbackProgression::Continue
-    });
-}
 
 /// Checks the iceoryx2 root before a run. `explicit`: the user named it (`--iox-root`), and
 /// then it must exist — a mistyped folder is refused rather than created. The default

@@ -178,7 +178,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     // (a second run would fail on its services, and then remove its files).
     // (One whose prefix starts with this one's, or the other way round, counts: a run removes
     // every file that starts with its prefix.)
-    if let Some(live) = qmarc_telemetry::session::live_run_overlapping(&location.prefix) {
+    if let Some(live) = qmarc_session::discovery::live_run_overlapping(&location.prefix) {
         let whose = if live.prefix == location.prefix {
             format!("iceoryx2 prefix `{}` belongs to", location.prefix)
         } else {

@@ -182,69 +182,6 @@ pub fn location_of(prefix: &str, root: Option<&str>) -> IpcLocation {
     IpcLocation::new(prefix, &root)
 }
 
-/// The run of `prefix` while it is a serving session (`qmarc-starter serve`): its run file
-/// says so. A client makes no iceoryx2 node otherwise: a node under a prefix whose run has
-/// ended would leave iceoryx2's files of that prefix behind.
-pub fn serving(prefix: &str) -> Option<qmarc_config::RunSpec> {
-    qmarc_config::RunSpec::read(&run_file(prefix))
-        .ok()
-        .filter(|s| s.mode == qmarc_config::Mode::Serve)
-}
-
-/// Why a client has no session to address.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum SessionFindError {
-    /// The prefix given is no serving session's.
-    #[error(
-        "no serving session under iceoryx2 prefix `{prefix}` (its run file {run} is not a \
-         running `qmarc-starter serve`'s)"
-    )]
-    NotServing {
-        /// The prefix given.
-        prefix: String,
-        /// Its run file.
-        run: String,
-    },
-    /// No serving session runs.
-    #[error("no serving session in /dev/shm: start `qmarc-starter serve`")]
-    None,
-    /// Several serving sessions run and no prefix says which.
-    #[error(
-        "{} serving sessions run; say which with --iox-prefix:{}",
-        .0.len(),
-        .0.iter().map(|r| format!("\n  --iox-prefix {}   {r}", r.prefix)).collect::<String>()
-    )]
-    Ambiguous(Vec<crate::session::LiveRun>),
-}
-
-/// The serving session a client is for: `prefix`'s, else the only one that runs (under
-/// `root`, if given), with its run and what it is; or why there is none — several running
-/// without a prefix to choose are listed, never guessed at.
-pub fn serving_session(
-    prefix: Option<&str>,
-    root: Option<&str>,
-) -> Result<(IpcLocation, qmarc_config::RunSpec, Option<crate::session::LiveRun>), SessionFindError>
-{
-    if let Some(prefix) = prefix {
-        let spec = serving(prefix).ok_or_else(|| SessionFindError::NotServing {
-            prefix: prefix.to_string(),
-            run: run_file(prefix).display().to_string(),
-        })?;
-        return Ok((location_of(prefix, root), spec, crate::session::live_run(prefix)));
-    }
-    // The caller's own sessions decide; another user's only where the caller has none.
-    let all = crate::session::serving_sessions(root);
-    let (mut own, others): (Vec<_>, Vec<_>) = all.into_iter().partition(|r| r.own);
-    let mut live = if own.is_empty() { others } else { std::mem::take(&mut own) };
-    if live.len() > 1 {
-        return Err(SessionFindError::Ambiguous(live));
-    }
-    let run = live.pop().ok_or(SessionFindError::None)?;
-    let spec = serving(&run.prefix).ok_or(SessionFindError::None)?;
-    Ok((location_of(&run.prefix, root), spec, Some(run)))
-}
-
 /// A run found by its run file in `/dev/shm`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FoundRun {

@@ -1,11 +1,12 @@
 //! The action's tolerance checks: which motor, which of its position or velocity, and the
 //! boundary (exactly at the tolerance is within it).
 
-use super::{Motion, Tolerances, Violation, beyond, ended, ended_by};
+use super::{Motion, Tolerances, Violation, beyond, ended};
 use crate::action_msgs::{FjtResult, GoalStatus};
 use qmarc_proto::MAX_MOTORS;
-use qmarc_proto::command::{CommandResponse, Refusal};
 use qmarc_proto::state::FaultKind;
+use qmarc_session::client::OrderLedger;
+use qmarc_session::wire::{CommandResponse, Refusal};
 
 fn motion(position: [f64; 3], velocity: [f64; 3]) -> Motion {
     let mut m = Motion::default();
@@ -64,6 +65,7 @@ fn a_violation_is_said_in_radians() {
 /// taking it, another motion; a grip (no motion) and the path itself do not.
 #[test]
 fn a_path_is_ended_by_a_fault_the_sessions_end_or_another_motion_only() {
+    let ended_by = |s: &CommandResponse, path| super::ended_by(OrderLedger::of(s).fate(path));
     let path = 7;
     let running = CommandResponse { ok: 1, accepted: path, motion: path, ..Default::default() };
     assert_eq!(ended_by(&running, path), None);

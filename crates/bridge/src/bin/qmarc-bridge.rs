@@ -55,7 +55,7 @@ fn main() -> ExitCode {
     }
     let outcome = (|| {
         let stop = qmarc_timer::stop::install()?;
-        let (location, spec, _) = qmarc_telemetry::reader::serving_session(
+        let (location, spec, _) = qmarc_session::discovery::serving_session(
             args.iox_prefix.as_deref(),
             args.iox_root.as_deref(),
         )
@@ -89,7 +89,7 @@ fn main() -> ExitCode {
         outcome.map_err(|e| {
             // A node of its name already alive, or several sessions and none chosen: refused,
             // not failed.
-            use qmarc_telemetry::reader::SessionFindError;
+            use qmarc_session::discovery::SessionFindError;
             let refused = matches!(e.downcast_ref(), Some(NodeOpenError::Alive { .. }))
                 || matches!(e.downcast_ref(), Some(SessionFindError::Ambiguous(_)));
             (if refused { qmarc_proto::exit::REFUSED } else { qmarc_proto::exit::INTERNAL }, e)

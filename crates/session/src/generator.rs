@@ -7,10 +7,10 @@
 //! atomics ([`ServeShared`]); a line's spent queue goes back through a second queue, so the
 //! servo thread never frees memory.
 
-use crate::moveto::MotionLimits;
-use crate::online::{MotionState, OnlineMove, RetargetError};
 use qmarc_config::Settings;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_plugins::moveto::MotionLimits;
+use qmarc_plugins::online::{MotionState, OnlineMove, RetargetError};
 use qmarc_proto::{Gripper, MAX_MOTORS, MotorFlags};
 use rtrb::{Consumer, Producer, RingBuffer};
 use std::sync::Arc;
@@ -25,6 +25,34 @@ pub const LINE_START_COUNTS: f64 = 0.5;
 
 /// A command line's samples, one per servo period.
 pub type LineQueue = Box<[[f64; MAX_MOTORS]]>;
+
+/// The limits a serving session moves under, derived from its settings once: the command
+/// thread checks and plans every order by them, and they bound every profile the loop takes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServeLimits {
+    /// The motors' velocity, acceleration and jerk limits at full speed (`[[safety]]`).
+    pub motion: MotionLimits,
+    /// Each motor's soft limits, counts, while they hold (the frame homed); `None` when the
+    /// session runs `--unhomed`.
+    pub soft: Option<[(f64, f64); MAX_MOTORS]>,
+    /// The fraction of `motion` an approach runs at (`trajectory.approach_speed`).
+    pub approach_speed: f64,
+}
+
+impl ServeLimits {
+    /// The limits of `settings`; without soft limits if `unhomed`.
+    pub fn of(settings: &Settings, unhomed: bool) -> ServeLimits {
+        let mut soft = [(f64::NEG_INFINITY, f64::INFINITY); MAX_MOTORS];
+        for (m, s) in settings.safety.iter().enumerate().take(settings.n_motors) {
+            soft[m] = (s.soft_limits[0], s.soft_limits[1]);
+        }
+        ServeLimits {
+            motion: MotionLimits::of(settings),
+            soft: (!unhomed).then_some(soft),
+            approach_speed: settings.trajectory.approach_speed,
+        }
+    }
+}
 
 /// What the command thread asks of the loop.
 pub enum Order {
@@ -202,16 +230,16 @@ pub struct ServeMove {
 }
 
 impl ServeMove {
-    /// A serving generator for `settings` and its command thread's handle; `soft`, when the
-    /// frame is homed and the soft limits hold, bounds every profile it takes.
-    pub fn new(
-        settings: &Settings,
-        soft: Option<[(f64, f64); MAX_MOTORS]>,
-    ) -> (ServeMove, ServeHandle) {
-        let limits = MotionLimits::of(settings);
-        let mut online =
-            OnlineMove::new([0.0; MAX_MOTORS], settings.n_motors, settings.period_s(), limits);
-        if let Some(soft) = soft {
+    /// A serving generator for `settings` and its command thread's handle; `limits.soft`,
+    /// when the frame is homed and the soft limits hold, bounds every profile it takes.
+    pub fn new(settings: &Settings, limits: &ServeLimits) -> (ServeMove, ServeHandle) {
+        let mut online = OnlineMove::new(
+            [0.0; MAX_MOTORS],
+            settings.n_motors,
+            settings.period_s(),
+            limits.motion,
+        );
+        if let Some(soft) = limits.soft {
             online = online.with_soft_limits(soft);
         }
         let (orders_tx, orders) = RingBuffer::new(ORDER_QUEUE);
@@ -280,10 +308,10 @@ impl ServeMove {
                         Ok(()) => self.current = id,
                         Err(e) => {
                             let why = match e {
-                                RetargetError::NoProfile(_) => NotTaken::NoProfile,
                                 RetargetError::SoftLimits { motor, .. } => {
                                     NotTaken::SoftLimits(motor as u32)
                                 }
+                                _ => NotTaken::NoProfile,
                             };
                             self.shared.not_taken_why.store(why.code(), Ordering::Release);
                             self.shared.not_taken.store(id, Ordering::Release);

@@ -16,8 +16,9 @@ fn knot(t_s: f64, pos: [f64; 3], vel: [f64; 3]) -> PathKnot {
 
 const START: [f64; MAX_MOTORS] = [100.0, -200.0, 300.0, 0.0];
 
-fn refusal(r: Result<Vec<[f64; MAX_MOTORS]>, PathRefusal>) -> (Refusal, String) {
-    r.expect_err("refused")
+fn refusal(r: Result<Vec<[f64; MAX_MOTORS]>, Refused>) -> (Refusal, String) {
+    let refused = r.expect_err("refused");
+    (refused.kind, refused.why)
 }
 
 #[test]
@@ -104,7 +105,7 @@ fn a_point_at_time_zero_is_where_the_robot_rests() {
     // A refusal names the request's point, the one at time 0 counted.
     let fast = knot(0.3, [9100.0, -200.0, 300.0], [0.0; 3]);
     let r = path_queue(&PathRequest::new(&[here, then, fast], false).unwrap(), &START, &s, true);
-    assert!(r.unwrap_err().1.starts_with("point 3: motor 1"), "the third point");
+    assert!(r.unwrap_err().why.starts_with("point 3: motor 1"), "the third point");
     let moving = knot(0.0, [100.0, -200.0, 300.0], [10.0, 0.0, 0.0]);
     assert!(
         path_queue(&PathRequest::new(&[moving, then], true).unwrap(), &START, &s, true).is_err()
@@ -127,7 +128,7 @@ fn malformed_and_impossible_paths_are_refused_naming_the_point() {
         .collect();
     check_ok(&s, &full, false);
     let lying = PathRequest { n_knots: MAX_PATH_KNOTS as u32 + 1, ..PathRequest::default() };
-    assert!(path_queue(&lying, &START, &s, true).unwrap_err().1.contains("found 1025"));
+    assert!(path_queue(&lying, &START, &s, true).unwrap_err().why.contains("found 1025"));
     let (_, why) = check(&[ok, knot(0.2, [600.0, -200.0, 300.0], [0.0; 3])], false);
     assert!(
         why.contains("point 2: time_from_start 0.2 s is not after the point before's"),
@@ -177,7 +178,7 @@ fn malformed_and_impossible_paths_are_refused_naming_the_point() {
     let mut short = s.clone();
     short.trajectory.max_duration_s = 0.1;
     let r = path_queue(&PathRequest::new(&[ok], false).unwrap(), &START, &short, true);
-    assert!(r.unwrap_err().1.contains("the path lasts 0.2 s: longer than the longest path"));
+    assert!(r.unwrap_err().why.contains("the path lasts 0.2 s: longer than the longest path"));
     // A path exactly as long as the longest allowed: taken.
     short.trajectory.max_duration_s = 0.2;
     check_ok(&short, &[ok], false);

@@ -1,23 +1,25 @@
-//! `qmarc-starter serve`: the command thread. It serves `qmarc/command`
-//! ([`qmarc_proto::command`]) and `qmarc/path` ([`qmarc_proto::path`]) beside the servo thread: it checks each command — the target
+//! The command thread of a serving controller. It serves `qmarc/command` and `qmarc/path`
+//! ([`crate::wire`]) beside the servo thread: it checks each command — the target
 //! reachable, inside the soft limits, the frame homed, the loop still serving — and answers
 //! at once, then hands what it accepted to the loop's [`ServeMove`] through a wait-free queue.
 //! It plans straight lines itself (from rest; [`LinearMove`]) and frees the loop's spent ones.
 //! It is a SCHED_OTHER thread: nothing in it is on the loop's time.
 
+use crate::generator::{
+    LineQueue, NotTaken, Order, ServeHandle, ServeLimits, ServeMove, ServeShared,
+};
+use crate::path::{outside_soft_limits, path_queue};
+use crate::wire::{
+    COMMAND_SERVICE, CommandKind, CommandRequest, CommandResponse, PATH_SERVICE, PathRequest,
+    Refusal, Refused, Services,
+};
 use iceoryx2::prelude::ipc;
 use qmarc_config::{Settings, TargetError};
 use qmarc_controller::traj::TrajectoryGenerator;
 use qmarc_plugins::linear::LinearMove;
 use qmarc_plugins::moveto::{MotionLimits, approach_queue};
 use qmarc_plugins::online::{MotionState, Profile};
-use qmarc_plugins::path::{outside_soft_limits, path_queue};
-use qmarc_plugins::serve::{NotTaken, Order, ServeHandle, ServeMove, ServeShared};
 use qmarc_proto::MAX_MOTORS;
-use qmarc_proto::command::{
-    CommandKind, CommandRequest, CommandResponse, Refusal, open_command_service,
-};
-use qmarc_proto::path::{PATH_SERVICE, PathRequest, open_path_service};
 use qmarc_proto::progress::Progress;
 use qmarc_proto::service::{IpcLocation, ServiceError, create_node};
 use std::sync::Arc;
@@ -44,17 +46,15 @@ pub fn generator(
     settings: &Settings,
     unhomed: bool,
 ) -> (Box<dyn TrajectoryGenerator>, ServeHandle) {
-    let mut soft = [(f64::NEG_INFINITY, f64::INFINITY); MAX_MOTORS];
-    for (m, s) in settings.safety.iter().enumerate().take(settings.n_motors) {
-        soft[m] = (s.soft_limits[0], s.soft_limits[1]);
-    }
-    let (serve, handle) = ServeMove::new(settings, (!unhomed).then_some(soft));
+    let (serve, handle) = ServeMove::new(settings, &ServeLimits::of(settings, unhomed));
     (Box::new(serve), handle)
 }
 
 /// The command thread's state.
 struct Commands {
     settings: Settings,
+    /// The limits every order is checked and planned by.
+    limits: ServeLimits,
     unhomed: bool,
     handle: ServeHandle,
     ended: Arc<Ended>,
@@ -85,6 +85,7 @@ impl CommandThread {
         let ended = Arc::new(Ended::default());
         let mut commands = Commands {
             settings: settings.clone(),
+            limits: ServeLimits::of(settings, unhomed),
             unhomed,
             handle,
             ended: ended.clone(),
@@ -101,19 +102,25 @@ impl CommandThread {
             .spawn(move || {
                 let ports = (|| {
                     let node = create_node::<ipc::Service>("qmarc-commands", &location)?;
-                    let (service, event) = open_command_service(&node, true)?;
-                    let paths = open_path_service(&node, true)?;
+                    let services = Services::open(&node, true)?;
                     let port = |what: &str, e: &dyn std::fmt::Debug| {
-                        ServiceError::new(what, "qmarc/command", e)
+                        ServiceError::new(what, COMMAND_SERVICE, e)
                     };
-                    let server =
-                        service.server_builder().create().map_err(|e| port("server", &e))?;
-                    let path_server = paths
+                    let server = services
+                        .command
+                        .server_builder()
+                        .create()
+                        .map_err(|e| port("server", &e))?;
+                    let path_server = services
+                        .path
                         .server_builder()
                         .create()
                         .map_err(|e| ServiceError::new("server", PATH_SERVICE, e))?;
-                    let listener =
-                        event.listener_builder().create().map_err(|e| port("listener", &e))?;
+                    let listener = services
+                        .wake
+                        .listener_builder()
+                        .create()
+                        .map_err(|e| port("listener", &e))?;
                     Ok((node, server, path_server, listener))
                 })();
                 let (_node, server, path_server, listener) = match ports {
@@ -183,23 +190,22 @@ impl Commands {
         std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| answer(self))).unwrap_or_else(
             |_| {
                 let mut r = self.status();
-                r.refusal = Refusal::BadRequest as u32;
-                r.set_reason("the controller could not check this request (an internal error)");
+                let why = "the controller could not check this request (an internal error)";
+                r.refuse(&Refused::new(Refusal::BadRequest, why));
                 r
             },
         )
     }
 
     /// Whether the loop serves orders: not ended, and begun.
-    fn serving(&self) -> Result<(), (Refusal, String)> {
+    fn serving(&self) -> Result<(), Refused> {
         if self.ended.ended.load(Ordering::Acquire) {
-            return Err((Refusal::NotServing, "the session has ended".to_string()));
+            return Err(Refused::new(Refusal::NotServing, "the session has ended"));
         }
         if !self.shared().started.load(Ordering::Acquire) {
-            return Err((
+            return Err(Refused::new(
                 Refusal::Busy,
-                "the session is starting: its loop has not begun (qmarc cmd status says when)"
-                    .to_string(),
+                "the session is starting: its loop has not begun (qmarc cmd status says when)",
             ));
         }
         Ok(())
@@ -210,7 +216,7 @@ impl Commands {
         let received_ns = qmarc_timer::clock::monotonic_now_ns();
         let kind = CommandKind::from_wire(req.kind);
         let outcome = match kind {
-            None => Err((Refusal::BadRequest, format!("unknown command {}", req.kind))),
+            None => Err(Refused::new(Refusal::BadRequest, format!("unknown command {}", req.kind))),
             Some(CommandKind::Status) => Ok(()),
             Some(k) => self.serving().and_then(|()| self.order(k, req)),
         };
@@ -231,7 +237,7 @@ impl Commands {
         id: u64,
         received_ns: u64,
         order: bool,
-        outcome: Result<(), (Refusal, String)>,
+        outcome: Result<(), Refused>,
     ) -> CommandResponse {
         let mut r = CommandResponse { received_ns, ..self.status() };
         r.id = id;
@@ -243,30 +249,27 @@ impl Commands {
                     r.received_cycle = self.queued_at;
                 }
             }
-            Err((refusal, why)) => {
-                r.refusal = refusal as u32;
-                r.set_reason(&why);
-            }
+            Err(refused) => r.refuse(&refused),
         }
         r
     }
 
     /// An order of `kind` (not a status) to the serving loop.
-    fn order(&mut self, kind: CommandKind, req: &CommandRequest) -> Result<(), (Refusal, String)> {
+    fn order(&mut self, kind: CommandKind, req: &CommandRequest) -> Result<(), Refused> {
         match kind {
             CommandKind::Status => Ok(()),
             CommandKind::Move => self.move_to(req),
             CommandKind::Stop => {
-                let limits = MotionLimits::of(&self.settings);
+                let limits = self.limits.motion;
                 self.give(|id| Order::Stop { id, limits }).map(|id| self.accepted = id)
             }
             CommandKind::Quit => {
-                let limits = MotionLimits::of(&self.settings);
+                let limits = self.limits.motion;
                 self.give(|_| Order::Quit { limits }).map(|_| ())
             }
-            CommandKind::Grip if self.settings.s626.gripper_dio.is_none() => Err((
+            CommandKind::Grip if self.settings.s626.gripper_dio.is_none() => Err(Refused::new(
                 Refusal::NoGripper,
-                "no gripper is wired: set [s626] gripper_dio to its output".to_string(),
+                "no gripper is wired: set [s626] gripper_dio to its output",
             )),
             CommandKind::Grip => {
                 let close = req.flags & CommandRequest::CLOSE != 0;
@@ -276,7 +279,7 @@ impl Commands {
     }
 
     /// A path: from rest, in the homed frame (unless `--unhomed`), checked as a knot file is.
-    fn path(&mut self, req: &PathRequest) -> Result<(), (Refusal, String)> {
+    fn path(&mut self, req: &PathRequest) -> Result<(), Refused> {
         if !self.unhomed {
             self.homed()?;
         }
@@ -288,13 +291,13 @@ impl Commands {
                 let s = &self.settings;
                 let mut to = start;
                 to[..s.n_motors].copy_from_slice(&first.pos[..s.n_motors]);
-                let limits = MotionLimits::of(s).at_speed(s.trajectory.approach_speed);
+                let limits = self.limits.motion.at_speed(self.limits.approach_speed);
                 let way = approach_queue(&start, &to, s.n_motors, &limits, s.period_s())
-                    .map_err(|e| (Refusal::BadRequest, format!("the approach: {e}")))?;
+                    .map_err(|e| Refused::new(Refusal::BadRequest, format!("the approach: {e}")))?;
                 if let Some((m, k, [lo, hi])) =
                     outside_soft_limits(&way, s).filter(|_| !self.unhomed)
                 {
-                    return Err((
+                    return Err(Refused::new(
                         Refusal::SoftLimits,
                         format!(
                             "the approach takes motor {} to {:.0} counts, outside its soft \
@@ -315,11 +318,11 @@ impl Commands {
     }
 
     /// Every motor's frame is homed.
-    fn homed(&self) -> Result<(), (Refusal, String)> {
+    fn homed(&self) -> Result<(), Refused> {
         let homed = self.shared().homed.load(Ordering::Acquire);
         match (0..self.settings.n_motors).find(|m| homed & (1 << m) == 0) {
             None => Ok(()),
-            Some(m) => Err((
+            Some(m) => Err(Refused::new(
                 Refusal::NotHomed,
                 format!("motor {} is not homed: home the robot first (qmarc-starter home)", m + 1),
             )),
@@ -327,7 +330,7 @@ impl Commands {
     }
 
     /// The robot rests at the end of every order given: `what` starts from rest.
-    fn at_rest(&self, what: &str) -> Result<(), (Refusal, String)> {
+    fn at_rest(&self, what: &str) -> Result<(), Refused> {
         let shared = self.shared();
         let at_rest = !shared.moving.load(Ordering::Acquire)
             && shared.settled.load(Ordering::Acquire) >= self.accepted
@@ -335,17 +338,17 @@ impl Commands {
         if at_rest {
             return Ok(());
         }
-        Err((
+        Err(Refused::new(
             Refusal::Moving,
             format!("{what} starts from rest: wait for the move to end (qmarc cmd wait)"),
         ))
     }
 
     /// Queues the order `make(id)` for the loop under a new id.
-    fn give(&mut self, make: impl FnOnce(u64) -> Order) -> Result<u64, (Refusal, String)> {
+    fn give(&mut self, make: impl FnOnce(u64) -> Order) -> Result<u64, Refused> {
         let id = self.seq + 1;
         self.handle.orders.push(make(id)).map_err(|_| {
-            (Refusal::Busy, "the loop has not taken the last commands yet".to_string())
+            Refused::new(Refusal::Busy, "the loop has not taken the last commands yet")
         })?;
         self.queued_at = self.shared().cycles.load(Ordering::Acquire);
         self.seq = id;
@@ -393,10 +396,10 @@ impl Commands {
     }
 
     /// A move: checked, then queued.
-    fn move_to(&mut self, req: &CommandRequest) -> Result<(), (Refusal, String)> {
+    fn move_to(&mut self, req: &CommandRequest) -> Result<(), Refused> {
         let s = &self.settings;
         let n = s.n_motors;
-        let bad = |why: String| (Refusal::BadRequest, why);
+        let bad = |why: String| Refused::new(Refusal::BadRequest, why);
         if !(req.speed.is_finite() && req.speed > 0.0 && req.speed <= 1.0) {
             return Err(bad(format!("speed must be > 0 and ≤ 1, found {}", req.speed)));
         }
@@ -421,7 +424,7 @@ impl Commands {
             target[..n].copy_from_slice(&req.target[..n]);
             s.check_target(&target[..n]).map_err(refusal_of)?;
         }
-        let limits = MotionLimits::of(s).at_speed(req.speed);
+        let limits = self.limits.motion.at_speed(req.speed);
         if !linear {
             // What the loop will plan, planned from where the command is now (at rest there, if
             // it moves): a move with no profile (a speed so small that its limits vanish) is
@@ -443,25 +446,21 @@ impl Commands {
     }
 
     /// The straight line from where the robot rests to `mm`, sampled.
-    fn line_to(
-        &self,
-        mm: [f64; 3],
-        limits: &MotionLimits,
-    ) -> Result<qmarc_plugins::serve::LineQueue, (Refusal, String)> {
+    fn line_to(&self, mm: [f64; 3], limits: &MotionLimits) -> Result<LineQueue, Refused> {
         self.at_rest("a straight line")?;
         let shared = self.shared();
-        let robot = self.settings.robot().ok_or((
+        let robot = self.settings.robot().ok_or(Refused::new(
             Refusal::BadRequest,
-            "no [robot] table for 3 motors: a line needs the Delta's geometry".to_string(),
+            "no [robot] table for 3 motors: a line needs the Delta's geometry",
         ))?;
         let mut line = LinearMove::new(robot, mm, self.settings.period_s(), *limits);
         let start = shared.command();
-        line.start(&start).map_err(|e| (Refusal::Unreachable, e.to_string()))?;
+        line.start(&start).map_err(|e| Refused::new(Refusal::Unreachable, e.to_string()))?;
         let queue = line.into_queue();
         if let Some((m, k, [lo, hi])) =
             outside_soft_limits(&queue, &self.settings).filter(|_| !self.unhomed)
         {
-            return Err((
+            return Err(Refused::new(
                 Refusal::SoftLimits,
                 format!(
                     "the line takes motor {} to {:.0} counts, outside its soft limits [{lo}, {hi}]",
@@ -475,11 +474,11 @@ impl Commands {
 }
 
 /// The refusal a target's error stands for, with its words.
-fn refusal_of(e: TargetError) -> (Refusal, String) {
+fn refusal_of(e: TargetError) -> Refused {
     let kind = match e {
         TargetError::Unreachable { .. } => Refusal::Unreachable,
         TargetError::SoftLimits { .. } => Refusal::SoftLimits,
         _ => Refusal::BadRequest,
     };
-    (kind, e.to_string())
+    Refused::new(kind, e.to_string())
 }

@@ -1,22 +1,23 @@
-//! The command service of a serving controller (`qmarc-starter serve`): `qmarc/command`, an
-//! iceoryx2 request/response service of fixed-size [`CommandRequest`] and [`CommandResponse`],
-//! and its client end, [`CommandClient`] (`qmarc cmd`, the console, a pick-and-place cycle, a
-//! bridge).
+//! The wire of a serving session (`qmarc-starter serve`): two iceoryx2 request/response
+//! services and one event, all opened by [`Services::open`] with the QoS both sides use.
+//!
+//! - `qmarc/command`: a fixed-size [`CommandRequest`] (a move, a stop, a grip, a status, a
+//!   quit), answered with a [`CommandResponse`];
+//! - `qmarc/path`: a whole timed path, [`PathRequest`] (up to [`MAX_PATH_KNOTS`] knots of time,
+//!   position and optionally velocity per motor — what a ROS 2 `JointTrajectory` is), answered
+//!   the same way. The request is fixed-size (74 KiB): one copy into shared memory, no
+//!   allocation on either side's wire;
+//! - `qmarc/command/request`: the event a client notifies after each request of either, so
+//!   the server (the controller's command thread, [`crate::server`]) sleeps between them.
 //!
 //! Every request is answered at once: accepted, or refused with the reason. A move's end is
 //! not waited for on the wire; the response's `accepted` and `settled` move ids say where the
-//! robot is in the commands it was given ([`CommandClient::wait`] polls them).
-//!
-//! The server (the controller's command thread) waits on the event `qmarc/command/request`,
-//! which a client notifies after each request; the client polls for its response.
+//! robot is in the commands it was given ([`crate::client::OrderLedger`] reads them).
 
-use crate::MAX_MOTORS;
-use crate::path::{PathRequest, PathService, open_path_service};
-use crate::service::{IpcLocation, ServiceError, create_node};
-use iceoryx2::port::client::Client;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event, request_response};
-use std::time::{Duration, Instant};
+use qmarc_proto::MAX_MOTORS;
+use qmarc_proto::service::ServiceError;
 
 /// Name of the request/response service.
 pub const COMMAND_SERVICE: &str = "qmarc/command";
@@ -115,6 +116,23 @@ impl Refusal {
     }
 }
 
+/// A request refused: its [`Refusal`] on the wire and why, in the words the client prints.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{} ({})", .why, .kind.name())]
+pub struct Refused {
+    /// What kind of refusal.
+    pub kind: Refusal,
+    /// Why, for the user (cut to [`REASON_BYTES`] on the wire).
+    pub why: String,
+}
+
+impl Refused {
+    /// A refusal of `kind` for `why`.
+    pub fn new(kind: Refusal, why: impl Into<String>) -> Refused {
+        Refused { kind, why: why.into() }
+    }
+}
+
 /// A command.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("qmarc.CommandRequest.v2")]
@@ -184,9 +202,9 @@ pub struct CommandResponse {
     pub ok: u32,
     /// [`Refusal`] as its wire number (0 when accepted).
     pub refusal: u32,
-    /// The loop's [`crate::state::Phase`] as its wire number.
+    /// The loop's [`qmarc_proto::state::Phase`] as its wire number.
     pub phase: u32,
-    /// [`crate::state::FaultKind::wire`]: 0, or the fault's code + 1.
+    /// [`qmarc_proto::state::FaultKind::wire`]: 0, or the fault's code + 1.
     pub fault: u32,
     /// Bit m: motor m's frame is homed.
     pub homed: u32,
@@ -217,7 +235,7 @@ pub struct CommandResponse {
     pub actual: [f64; MAX_MOTORS],
     /// The effector's commanded point, mm (NaN without the robot's geometry).
     pub effector_mm: [f64; 3],
-    /// The gripper as the loop's last read found it ([`crate::Gripper`] bits).
+    /// The gripper as the loop's last read found it ([`qmarc_proto::Gripper`] bits).
     pub gripper: u32,
     /// Zero (keeps the layout free of padding).
     pub reserved: u32,
@@ -247,7 +265,7 @@ impl Default for CommandResponse {
             command: [0.0; MAX_MOTORS],
             actual: [0.0; MAX_MOTORS],
             effector_mm: [f64::NAN; 3],
-            gripper: crate::Gripper::ABSENT,
+            gripper: qmarc_proto::Gripper::ABSENT,
             reserved: 0,
             reason: [0; REASON_BYTES],
         }
@@ -271,9 +289,93 @@ impl CommandResponse {
         String::from_utf8_lossy(&self.reason[..end]).into_owned()
     }
 
+    /// Refuses: `refused`'s kind and words.
+    pub fn refuse(&mut self, refused: &Refused) {
+        self.ok = 0;
+        self.refusal = refused.kind as u32;
+        self.set_reason(&refused.why);
+    }
+
     /// The refusal, if refused.
     pub fn refused(&self) -> Option<Refusal> {
         (self.ok == 0).then(|| Refusal::from_wire(self.refusal).unwrap_or(Refusal::BadRequest))
+    }
+}
+
+/// Name of the request/response service.
+pub const PATH_SERVICE: &str = "qmarc/path";
+/// Most knots a path request carries.
+pub const MAX_PATH_KNOTS: usize = 1024;
+
+/// One knot of a path.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+pub struct PathKnot {
+    /// Time from the path's start (where the robot rests, at rest), s.
+    pub t_s: f64,
+    /// Position per motor, counts.
+    pub pos: [f64; MAX_MOTORS],
+    /// Velocity per motor, counts/s (with [`PathRequest::VELOCITIES`]; else ignored).
+    pub vel: [f64; MAX_MOTORS],
+}
+
+/// A timed path for the loop to follow from where the robot rests.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("qmarc.PathRequest.v1")]
+#[repr(C)]
+pub struct PathRequest {
+    /// The client's number for it, echoed in the response.
+    pub id: u64,
+    /// Knots used, 1‥[`MAX_PATH_KNOTS`].
+    pub n_knots: u32,
+    /// [`PathRequest::VELOCITIES`].
+    pub flags: u32,
+    /// The knots; those past `n_knots` are ignored.
+    pub knots: [PathKnot; MAX_PATH_KNOTS],
+}
+
+impl Default for PathRequest {
+    fn default() -> PathRequest {
+        PathRequest { id: 0, n_knots: 0, flags: 0, knots: [PathKnot::default(); MAX_PATH_KNOTS] }
+    }
+}
+
+impl PathRequest {
+    /// The knots' velocities are given (else the controller chooses them: see
+    /// [`crate::path`]).
+    pub const VELOCITIES: u32 = 1;
+
+    /// First a jerk-limited move from where the robot rests to the first knot (the run's
+    /// `--approach`), then the path from there: its first knot need not be where the robot
+    /// rests.
+    pub const APPROACH: u32 = 2;
+
+    /// The request of `knots`, with their velocities if `velocities`; `None` for more than
+    /// [`MAX_PATH_KNOTS`].
+    pub fn new(knots: &[PathKnot], velocities: bool) -> Option<Box<PathRequest>> {
+        if knots.len() > MAX_PATH_KNOTS {
+            return None;
+        }
+        let mut r = Box::<PathRequest>::default();
+        r.knots[..knots.len()].copy_from_slice(knots);
+        r.n_knots = knots.len() as u32;
+        r.flags = if velocities { PathRequest::VELOCITIES } else { 0 };
+        Some(r)
+    }
+
+    /// The knots used (at most [`MAX_PATH_KNOTS`], whatever `n_knots` says).
+    pub fn knots(&self) -> &[PathKnot] {
+        &self.knots[..(self.n_knots as usize).min(MAX_PATH_KNOTS)]
+    }
+
+    /// The knots' velocities are given.
+    pub fn has_velocities(&self) -> bool {
+        self.flags & PathRequest::VELOCITIES != 0
+    }
+
+    /// The path is approached from where the robot rests ([`PathRequest::APPROACH`]).
+    pub fn approached(&self) -> bool {
+        self.flags & PathRequest::APPROACH != 0
     }
 }
 
@@ -281,161 +383,66 @@ impl CommandResponse {
 pub type CommandService =
     request_response::PortFactory<ipc::Service, CommandRequest, (), CommandResponse, ()>;
 
-/// The command service and its wake-up event with the QoS both sides use: created by the
-/// server (`create`), only opened by a client (a client never leaves a service behind that
-/// nothing serves).
-pub fn open_command_service(
+/// The path service.
+pub type PathService =
+    request_response::PortFactory<ipc::Service, PathRequest, (), CommandResponse, ()>;
+
+/// A serving session's services: created by the server, only opened by a client (a client
+/// never leaves a service behind that nothing serves).
+pub struct Services {
+    /// `qmarc/command`.
+    pub command: CommandService,
+    /// `qmarc/path`.
+    pub path: PathService,
+    /// `qmarc/command/request`: a client notifies it after each request of either service.
+    pub wake: event::PortFactory<ipc::Service>,
+}
+
+impl Services {
+    /// The three services under `node`, created if `create` (the server), else opened.
+    pub fn open(node: &Node<ipc::Service>, create: bool) -> Result<Services, ServiceError> {
+        let command = order_service::<CommandRequest>(node, COMMAND_SERVICE, create)?;
+        let path = order_service::<PathRequest>(node, PATH_SERVICE, create)?;
+        let events =
+            node.service_builder(&service_name(COMMAND_EVENT)?).event().event_id_max_value(0);
+        let err = |e: &dyn std::fmt::Debug| ServiceError::new("service", COMMAND_EVENT, e);
+        let wake = if create {
+            events.open_or_create().map_err(|e| err(&e))?
+        } else {
+            events.open().map_err(|e| err(&e))?
+        };
+        Ok(Services { command, path, wake })
+    }
+}
+
+/// `name` as an iceoryx2 service name.
+fn service_name(name: &str) -> Result<ServiceName, ServiceError> {
+    ServiceName::new(name).map_err(|e| ServiceError::new("service name", name, e))
+}
+
+/// The request/response service `name` of `Request`s answered by a [`CommandResponse`], with
+/// the one QoS of both: ≤ [`MAX_COMMAND_CLIENTS`] clients, one server, one request in flight
+/// per client, one response buffered. Created if `create`, else opened.
+fn order_service<Request: std::fmt::Debug + ZeroCopySend>(
     node: &Node<ipc::Service>,
+    name: &str,
     create: bool,
-) -> Result<(CommandService, event::PortFactory<ipc::Service>), ServiceError> {
-    let name = |n: &str| ServiceName::new(n).map_err(|e| ServiceError::new("service name", n, e));
+) -> Result<
+    request_response::PortFactory<ipc::Service, Request, (), CommandResponse, ()>,
+    ServiceError,
+> {
     let builder = node
-        .service_builder(&name(COMMAND_SERVICE)?)
-        .request_response::<CommandRequest, CommandResponse>()
+        .service_builder(&service_name(name)?)
+        .request_response::<Request, CommandResponse>()
         .max_clients(MAX_COMMAND_CLIENTS)
         .max_servers(1)
         .max_active_requests_per_client(1)
         .max_response_buffer_size(1);
-    let err = |e: &dyn std::fmt::Debug| ServiceError::new("service", COMMAND_SERVICE, e);
-    let service = if create {
-        builder.open_or_create().map_err(|e| err(&e))?
+    let err = |e: &dyn std::fmt::Debug| ServiceError::new("service", name, e);
+    if create {
+        builder.open_or_create().map_err(|e| err(&e))
     } else {
-        builder.open().map_err(|e| err(&e))?
-    };
-    let events = node.service_builder(&name(COMMAND_EVENT)?).event().event_id_max_value(0);
-    let err = |e: &dyn std::fmt::Debug| ServiceError::new("service", COMMAND_EVENT, e);
-    let event = if create {
-        events.open_or_create().map_err(|e| err(&e))?
-    } else {
-        events.open().map_err(|e| err(&e))?
-    };
-    Ok((service, event))
-}
-
-/// A command could not be sent or was not answered.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum CommandError {
-    /// The service could not be opened.
-    #[error(transparent)]
-    Service(#[from] ServiceError),
-    /// Nothing serves commands under the prefix.
-    #[error(
-        "no serving controller under iceoryx2 prefix `{prefix}` (is `qmarc-starter serve` running?)"
-    )]
-    NoServer {
-        /// The prefix.
-        prefix: String,
-    },
-    /// iceoryx2 failed.
-    #[error("the command service: {0}")]
-    Ipc(String),
-    /// No answer in time.
-    #[error("no answer from the serving controller within {0:?}")]
-    Timeout(Duration),
-}
-
-/// A client port of the path service.
-type PathClient = Client<ipc::Service, PathRequest, (), CommandResponse, ()>;
-
-/// The client end of the command service.
-pub struct CommandClient {
-    node: Node<ipc::Service>,
-    service: CommandService,
-    client: Client<ipc::Service, CommandRequest, (), CommandResponse, ()>,
-    notifier: iceoryx2::port::notifier::Notifier<ipc::Service>,
-    next_id: u64,
-    /// The path service's client, opened by the first path sent.
-    path: Option<(PathService, PathClient)>,
-}
-
-/// How long a command waits for its answer.
-pub const ANSWER_WAIT: Duration = Duration::from_secs(2);
-
-impl CommandClient {
-    /// Connects to the serving controller at `location`.
-    pub fn connect(location: &IpcLocation) -> Result<CommandClient, CommandError> {
-        let node = create_node::<ipc::Service>("qmarc-cmd", location)?;
-        node.try_cleanup_dead_nodes();
-        let no_server = || CommandError::NoServer { prefix: location.prefix.clone() };
-        let (service, event) = open_command_service(&node, false).map_err(|_| no_server())?;
-        if service.dynamic_config().number_of_servers() == 0 {
-            return Err(no_server());
-        }
-        let client = service.client_builder().create().map_err(|e| ipc(&e))?;
-        let notifier = event.notifier_builder().create().map_err(|e| ipc(&e))?;
-        Ok(CommandClient { node, service, client, notifier, next_id: 1, path: None })
-    }
-
-    /// Sends `request` (its id set here) and returns the answer.
-    pub fn send(&mut self, mut request: CommandRequest) -> Result<CommandResponse, CommandError> {
-        request.id = self.next_id;
-        self.next_id += 1;
-        let pending = self.client.send_copy(request).map_err(|e| ipc(&e))?;
-        self.notifier.notify().map_err(|e| ipc(&e))?;
-        answer_of(|| pending.receive().map(|r| r.map(|r| *r.payload())), &self.service)
-    }
-
-    /// Sends the path `request` (its id set here) on `qmarc/path` and returns the answer.
-    pub fn send_path(&mut self, request: &PathRequest) -> Result<CommandResponse, CommandError> {
-        if self.path.is_none() {
-            let service = open_path_service(&self.node, false)?;
-            let client = service.client_builder().create().map_err(|e| ipc(&e))?;
-            self.path = Some((service, client));
-        }
-        let Some((_, client)) = &self.path else { unreachable!("opened above") };
-        let mut loan = client.loan_uninit().map_err(|e| ipc(&e))?;
-        let r = loan.payload_mut().write(*request);
-        r.id = self.next_id;
-        self.next_id += 1;
-        // SAFETY: the payload was written whole just above.
-        let pending = unsafe { loan.assume_init() }.send().map_err(|e| ipc(&e))?;
-        self.notifier.notify().map_err(|e| ipc(&e))?;
-        answer_of(|| pending.receive().map(|r| r.map(|r| *r.payload())), &self.service)
-    }
-
-    /// Polls the status until the robot is at rest at the end of the last move accepted (or
-    /// the loop has ended), for at most `timeout`; returns the last status.
-    pub fn wait(&mut self, timeout: Duration) -> Result<CommandResponse, CommandError> {
-        let started = Instant::now();
-        loop {
-            let s = self.send(CommandRequest::of(CommandKind::Status))?;
-            let ended = s.refused() == Some(Refusal::NotServing);
-            let dropped = s.not_taken >= s.accepted && s.accepted > 0;
-            if ended || dropped || (s.settled >= s.accepted && s.moving == 0) {
-                return Ok(s);
-            }
-            if started.elapsed() > timeout {
-                return Err(CommandError::Timeout(timeout));
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
-    }
-}
-
-/// An iceoryx2 failure, in words.
-fn ipc(e: &dyn std::fmt::Debug) -> CommandError {
-    CommandError::Ipc(format!("{e:?}"))
-}
-
-/// Polls `receive` for the answer to a request sent, for at most [`ANSWER_WAIT`] and while
-/// the command service's server lives.
-fn answer_of<E: std::fmt::Debug>(
-    mut receive: impl FnMut() -> Result<Option<CommandResponse>, E>,
-    service: &CommandService,
-) -> Result<CommandResponse, CommandError> {
-    let started = Instant::now();
-    loop {
-        if let Some(r) = receive().map_err(|e| ipc(&e))? {
-            return Ok(r);
-        }
-        if started.elapsed() > ANSWER_WAIT {
-            return Err(CommandError::Timeout(ANSWER_WAIT));
-        }
-        if service.dynamic_config().number_of_servers() == 0 {
-            return Err(CommandError::Ipc("the serving controller has gone".into()));
-        }
-        std::thread::sleep(Duration::from_micros(100));
+        builder.open().map_err(|e| err(&e))
     }
 }
 
@@ -474,5 +481,17 @@ mod tests {
         assert_eq!(r.reason().len(), REASON_BYTES);
         assert!(r.reason().chars().all(|c| c == 'é'));
         assert_eq!(r.refused(), Some(Refusal::BadRequest));
+    }
+
+    #[test]
+    fn a_request_carries_its_knots_and_no_more() {
+        let k = PathKnot { t_s: 0.5, pos: [1.0, 2.0, 3.0, 0.0], vel: [0.0; MAX_MOTORS] };
+        let r = PathRequest::new(&[k, k], true).unwrap();
+        assert_eq!((r.knots().len(), r.has_velocities()), (2, true));
+        assert!(!PathRequest::new(&[k], false).unwrap().has_velocities());
+        assert!(PathRequest::new(&vec![k; MAX_PATH_KNOTS + 1], false).is_none());
+        let lying = PathRequest { n_knots: u32::MAX, ..PathRequest::default() };
+        assert_eq!(lying.knots().len(), MAX_PATH_KNOTS, "a count past the array is cut");
+        assert_eq!(std::mem::size_of::<PathRequest>(), 16 + MAX_PATH_KNOTS * 72);
     }
 }

@@ -3,7 +3,8 @@
 //! `--settings=` run file), so that a second run is never started on a live run's files,
 //! and a client that was told no prefix says which of several sessions it could mean.
 
-use qmarc_proto::service::run_file;
+use qmarc_proto::service::{IpcLocation, run_file};
+use qmarc_telemetry::reader::location_of;
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
@@ -211,11 +212,141 @@ fn shell_word(word: &str) -> String {
 /// their run files: the caller's own first, newest first within each.
 pub fn serving_sessions(root: Option<&str>) -> Vec<LiveRun> {
     let procs = processes();
-    crate::reader::runs(root)
+    qmarc_telemetry::reader::runs(root)
         .into_iter()
         .filter_map(|r| live_in(&procs, &r.location.prefix))
         .filter(|r| r.serving)
         .collect()
+}
+
+/// The run of `prefix` while it is a serving session (`qmarc-starter serve`): its run file
+/// says so. A client makes no iceoryx2 node otherwise: a node under a prefix whose run has
+/// ended would leave iceoryx2's files of that prefix behind.
+pub fn serving(prefix: &str) -> Option<qmarc_config::RunSpec> {
+    qmarc_config::RunSpec::read(&run_file(prefix))
+        .ok()
+        .filter(|s| s.mode == qmarc_config::Mode::Serve)
+}
+
+/// Why a client has no session to address.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SessionFindError {
+    /// The prefix given is no serving session's.
+    #[error(
+        "no serving session under iceoryx2 prefix `{prefix}` (its run file {run} is not a \
+         running `qmarc-starter serve`'s)"
+    )]
+    NotServing {
+        /// The prefix given.
+        prefix: String,
+        /// Its run file.
+        run: String,
+    },
+    /// No serving session runs.
+    #[error("no serving session in /dev/shm: start `qmarc-starter serve`")]
+    None,
+    /// Several serving sessions run and no prefix says which.
+    #[error(
+        "{} serving sessions run; say which with --iox-prefix:{}",
+        .0.len(),
+        .0.iter().map(|r| format!("\n  --iox-prefix {}   {r}", r.prefix)).collect::<String>()
+    )]
+    Ambiguous(Vec<LiveRun>),
+}
+
+/// The serving session a client is for: `prefix`'s, else the only one that runs (under
+/// `root`, if given), with its run and what it is; or why there is none — several running
+/// without a prefix to choose are listed, never guessed at.
+pub fn serving_session(
+    prefix: Option<&str>,
+    root: Option<&str>,
+) -> Result<(IpcLocation, qmarc_config::RunSpec, Option<LiveRun>), SessionFindError> {
+    if let Some(prefix) = prefix {
+        let spec = serving(prefix).ok_or_else(|| SessionFindError::NotServing {
+            prefix: prefix.to_string(),
+            run: run_file(prefix).display().to_string(),
+        })?;
+        return Ok((location_of(prefix, root), spec, live_run(prefix)));
+    }
+    // The caller's own sessions decide; another user's only where the caller has none.
+    let all = serving_sessions(root);
+    let (mut own, others): (Vec<_>, Vec<_>) = all.into_iter().partition(|r| r.own);
+    let mut live = if own.is_empty() { others } else { std::mem::take(&mut own) };
+    if live.len() > 1 {
+        return Err(SessionFindError::Ambiguous(live));
+    }
+    let run = live.pop().ok_or(SessionFindError::None)?;
+    let spec = serving(&run.prefix).ok_or(SessionFindError::None)?;
+    Ok((location_of(&run.prefix, root), spec, Some(run)))
+}
+
+/// The default iceoryx2 prefix of this starter: unique per run, so runs never meet and
+/// leftovers can be traced to a dead starter.
+pub fn default_prefix() -> String {
+    format!("{PREFIX_STEM}{}_", std::process::id())
+}
+
+/// Removes what earlier starters under `root` left when they died without cleaning up: their
+/// prefix `qmarc_<pid>_` names a starter that no longer exists *and* no process (an orphaned
+/// child still shutting down) uses it. iceoryx2 first removes the resources of the prefix's
+/// dead nodes itself (`Node::list`, `try_remove_stale_resources`); then every file left with
+/// the prefix goes (its global management segment among them). Returns how many files were
+/// removed.
+pub fn remove_stale_files(root: &str) -> usize {
+    let Ok(entries) = std::fs::read_dir(qmarc_proto::service::SHM_DIR) else {
+        return 0;
+    };
+    let mut stale: Vec<String> = entries
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let pid: u32 = name.strip_prefix(PREFIX_STEM)?.split('_').next()?.parse().ok()?;
+            Some((pid, format!("{PREFIX_STEM}{pid}_")))
+        })
+        .filter(|(pid, prefix)| {
+            !std::path::Path::new(&format!("/proc/{pid}")).exists() && !any_process_mentions(prefix)
+        })
+        .map(|(_, prefix)| prefix)
+        .collect();
+    stale.sort();
+    stale.dedup();
+    stale
+        .iter()
+        .map(|p| {
+            let location = IpcLocation::new(p, root);
+            remove_dead_nodes(&location);
+            location.remove_files()
+        })
+        .sum()
+}
+
+/// Removes what an earlier run with this run's own prefix (`--iox-prefix`) left when it
+/// died, if no other process uses the prefix now (a run still going is refused later by
+/// iceoryx2 itself, its services being in use). Returns how many files were removed.
+pub fn remove_own_stale_files(location: &IpcLocation) -> usize {
+    if any_process_mentions(&location.prefix) {
+        return 0;
+    }
+    remove_dead_nodes(location);
+    location.remove_files()
+}
+
+/// Lets iceoryx2 remove the resources of every dead node at `location`.
+fn remove_dead_nodes(location: &IpcLocation) {
+    use iceoryx2::node::NodeView;
+    use iceoryx2::prelude::*;
+    let Ok(cfg) = location.config() else { return };
+    let _ = Node::<qmarc_proto::service::Link>::list(&cfg, |state| {
+        // Without its details iceoryx2 would clean up with its global configuration (which
+        // reads ./config/iceoryx2.toml): the files of such a node go by prefix below.
+        if let NodeState::Dead(view) = state
+            && view.details().is_some()
+        {
+            let _ = view.try_remove_stale_resources();
+        }
+        CallbackProgression::Continue
+    });
 }
 
 #[cfg(test)]

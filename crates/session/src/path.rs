@@ -10,20 +10,17 @@
 //! no velocities given, each inner knot's is the slope of the parabola through it and its
 //! neighbours (0 where the path turns, so no segment overshoots a turn), and the ends' 0.
 
-use crate::knots::KnotRules;
-use crate::knots::dynamics::{check_segment, hermite_end_accelerations};
-use crate::pvt::Hermite;
-use crate::source::QUEUE_BUDGET_BYTES;
+use crate::wire::{MAX_PATH_KNOTS, PathKnot, PathRequest, Refusal, Refused};
 use qmarc_config::Settings;
+use qmarc_plugins::knots::KnotRules;
+use qmarc_plugins::knots::dynamics::{check_segment, hermite_end_accelerations};
+use qmarc_plugins::pvt::Hermite;
+use qmarc_plugins::source::QUEUE_BUDGET_BYTES;
 use qmarc_proto::MAX_MOTORS;
-use qmarc_proto::command::Refusal;
-use qmarc_proto::path::{MAX_PATH_KNOTS, PathKnot, PathRequest};
 
-/// Why a path is refused, in words.
-pub type PathRefusal = (Refusal, String);
-
-fn bad(why: String) -> PathRefusal {
-    (Refusal::BadRequest, why)
+/// A path refused as a bad request, for `why`.
+fn bad(why: String) -> Refused {
+    Refused::new(Refusal::BadRequest, why)
 }
 
 /// The velocity at a knot between segments of slopes `s0` (length `h0`) and `s1` (`h1`): the
@@ -40,7 +37,7 @@ fn knots_from(
     start: &[f64; MAX_MOTORS],
     n: usize,
     tolerance: f64,
-) -> Result<(Vec<PathKnot>, Vec<usize>), PathRefusal> {
+) -> Result<(Vec<PathKnot>, Vec<usize>), Refused> {
     if req.n_knots == 0 || req.n_knots as usize > MAX_PATH_KNOTS {
         return Err(bad(format!("a path has 1 to {MAX_PATH_KNOTS} points, found {}", req.n_knots)));
     }
@@ -125,7 +122,7 @@ pub fn path_queue(
     start: &[f64; MAX_MOTORS],
     settings: &Settings,
     soft: bool,
-) -> Result<Vec<[f64; MAX_MOTORS]>, PathRefusal> {
+) -> Result<Vec<[f64; MAX_MOTORS]>, Refused> {
     path_queue_within(req, start, settings, soft, QUEUE_BUDGET_BYTES)
 }
 
@@ -136,7 +133,7 @@ fn path_queue_within(
     settings: &Settings,
     soft: bool,
     budget: u64,
-) -> Result<Vec<[f64; MAX_MOTORS]>, PathRefusal> {
+) -> Result<Vec<[f64; MAX_MOTORS]>, Refused> {
     let n = settings.n_motors;
     let (knots, points) = knots_from(req, start, n, settings.trajectory.start_tolerance_counts)?;
     if knots.len() == 1 {
@@ -188,7 +185,7 @@ fn path_queue_within(
     let last = queue.len() - 1;
     queue[last] = knots[knots.len() - 1].pos;
     if let Some((m, k, [lo, hi])) = outside_soft_limits(&queue, settings).filter(|_| soft) {
-        return Err((
+        return Err(Refused::new(
             Refusal::SoftLimits,
             format!(
                 "the path takes motor {} to {:.0} counts at {:.3} s, outside its soft limits \

@@ -3,7 +3,7 @@
 //! refuses a profile that would leave the soft limits, and ends only after a quit's stop.
 
 use super::*;
-use crate::online::sampled_ratio;
+use qmarc_plugins::online::sampled_ratio;
 use std::path::Path;
 
 /// The shipped settings.
@@ -17,7 +17,8 @@ const SOFT: [(f64, f64); MAX_MOTORS] = [(-9_000.0, 10_000.0); MAX_MOTORS];
 /// A serving generator started at `start`, and its handle.
 fn serving(start: [f64; MAX_MOTORS]) -> (ServeMove, ServeHandle, MotionLimits, f64) {
     let s = settings();
-    let (mut g, h) = ServeMove::new(&s, Some(SOFT));
+    let (mut g, h) =
+        ServeMove::new(&s, &ServeLimits { soft: Some(SOFT), ..ServeLimits::of(&s, true) });
     g.start(&start).unwrap();
     (g, h, MotionLimits::of(&s), s.period_s())
 }
@@ -133,7 +134,7 @@ fn a_line_is_followed_then_its_queue_handed_back_to_be_freed() {
     // A target while a line runs takes over from the line's state: a line at the limits
     // (a full-speed jerk-limited move's samples), left while it accelerates hardest, so a
     // velocity or an acceleration taken wrongly would break a limit.
-    let mut fast = crate::online::OnlineMove::new([3000.0, 20.0, 30.0, 0.0], 3, t, limits);
+    let mut fast = qmarc_plugins::online::OnlineMove::new([3000.0, 20.0, 30.0, 0.0], 3, t, limits);
     fast.start(&end).unwrap();
     let mut back = Vec::new();
     let mut cmd = [0.0; MAX_MOTORS];
