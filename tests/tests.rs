@@ -9,6 +9,7 @@ mod first_motion;
 mod gripper;
 mod hardware;
 mod online;
+mod readme;
 mod robustness;
 mod safety;
 mod serve;
