@@ -1,7 +1,7 @@
 //! The two ends of every QMARC program's `main`: reading its command line
 //! ([`parse_or_exit`]) and turning what it did into its exit code ([`conclude`]), so that
 //! `qmarc-starter`, `qmarc-hwserver`, `qmarc-controller`, `qmarc` and `qmarc-bench` all
-//! answer a wrong command line, `--help` and an error the same way (README "Exit codes",
+//! answer a wrong command line, `--help` and an error the same way (docs/usage.md "Exit codes",
 //! [`qmarc_proto::exit`]).
 
 use std::io::Write;

@@ -1,5 +1,5 @@
 //! The exit codes of every QMARC program: one table, shared by `qmarc-starter`, `qmarc`, and
-//! the two children the starter reads them from. README "Exit codes" is this table.
+//! the two children the starter reads them from. docs/usage.md "Exit codes" is this table.
 //!
 //! | code | meaning |
 //! |---|---|

@@ -1,5 +1,5 @@
 //! The output folder of a move (`--out`): checked before anything is enabled, locked for the
-//! run, and written so that no result is ever lost (README "The output folder").
+//! run, and written so that no result is ever lost (docs/usage.md "The output folder").
 //!
 //! - Before the move the starter checks that the folder exists or can be created, that it
 //!   can write there, and that its filesystem has room for the move's data ([`check`]), and

@@ -1,6 +1,6 @@
 //! How a move ended, from what its processes left: [`conclude`] finds (or writes) its
 //! summary — with the rows a dead controller left in its gather page — and [`exit_code`] is
-//! README's "Exit codes" table, a pure function of what ended.
+//! docs/usage.md's "Exit codes" table, a pure function of what ended.
 
 use crate::Exit;
 use crate::lost::{controller_lost_message, lost, stopped_by, stopped_responding};
@@ -104,7 +104,7 @@ pub struct Ending<'a> {
     pub stopped: bool,
 }
 
-/// The exit code of a move: README's "Exit codes" table ([`qmarc_proto::exit`]).
+/// The exit code of a move: docs/usage.md's "Exit codes" table ([`qmarc_proto::exit`]).
 pub fn exit_code(e: &Ending<'_>) -> u8 {
     let code_is = |c: u8| matches!(e.controller, Some(Exit::Code(x)) if x == i32::from(c));
     let fault_is = |s: &Summary, k| s.fault.as_ref().is_some_and(|f| f.kind == k);
@@ -154,7 +154,7 @@ mod tests {
         Ending { summary, controller, all_clean, unresponsive: false, stopped: false }
     }
 
-    /// README's "Exit codes", row by row, from what a move ended with.
+    /// docs/usage.md's "Exit codes", row by row, from what a move ended with.
     #[test]
     fn the_exit_codes_are_the_readme_table() {
         let ok = summary(true, None);

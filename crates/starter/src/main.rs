@@ -1,7 +1,7 @@
 //! `qmarc-starter`: runs one move (`home`, `step`, `run`) on the robot through the real
 //! process split.
 //!
-//! Exit codes: the table of [`qmarc_proto::exit`] (README "Exit codes") — 0 the move ran to
+//! Exit codes: the table of [`qmarc_proto::exit`] (docs/usage.md "Exit codes") — 0 the move ran to
 //! its end and both children exited cleanly, 2 a fault ended it, 3 refused before anything
 //! moved, 4 the results went to the rescue folder, 130 interrupted by a stop signal, 64 a bad
 //! command line, 1 anything else.

@@ -1,6 +1,6 @@
 //! One move through the process set, in steps: [`prepare`] checks everything and starts
 //! nothing; [`launch`] starts the two children and supervises them to their end;
-//! [`conclude`] finds (or writes) the move's summary; [`exit_code`] is README's "Exit codes"
+//! [`conclude`] finds (or writes) the move's summary; [`exit_code`] is docs/usage.md's "Exit codes"
 //! table, a pure function of what ended. [`one_move`] runs the four; `qmarc-starter`'s
 //! moves, trials and real tuning moves call it.
 
@@ -430,7 +430,7 @@ fn spawn_both(
 /// How a move ended: its exit code, its summary and the folder it is in, and the robot of
 /// its settings (for the end-effector plots).
 pub struct Outcome {
-    /// README's exit code.
+    /// docs/usage.md's exit code.
     pub code: u8,
     /// The summary and its folder.
     pub summary: Option<(Summary, PathBuf)>,

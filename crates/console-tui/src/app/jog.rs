@@ -2,7 +2,7 @@
 //! the effector along x, y and z (where the settings describe the Delta) — and Ctrl-←/→ jog
 //! it by `[jog] counts` or `[jog] mm` through the starter's `jog`; Ctrl-G goes to a point
 //! typed as `X Y Z` (mm, `move --xyz`); Ctrl-O closes or opens the gripper where the robot is
-//! (`move --grip on|off`). README, "Running moves".
+//! (`move --grip on|off`). docs/usage.md, "The commands".
 
 use super::{App, Page};
 use crate::starter_process::Mode;
