@@ -17,7 +17,7 @@ use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
-use util::{CountingAllocator, ThreadCounters, allocations, knots, settings, sim_core};
+use util::{CountingAllocator, ThreadCounters, allocations, knots, settings, sim_core, warmed_up};
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
@@ -100,14 +100,7 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
                     .with_telemetry(Some(telemetry));
             let mut link = sim_core(lockstep());
             let mut ticker = ManualTicker::new(400_000);
-            servo.prepare(&mut link).unwrap();
-            servo.set_t0(ticker.start().unwrap());
-            for _ in 0..10 {
-                assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
-            }
-            // What reading the counters costs by itself.
-            let (a, b) = (ThreadCounters::now(), ThreadCounters::now());
-            let reading = a.delta(b);
+            let reading = warmed_up(&mut servo, &mut link, &mut ticker);
             let kernel_before = ThreadCounters::now();
             let before = allocations();
             for k in 0..3_000 {

@@ -174,3 +174,22 @@ impl qmarc_controller::traj::TrajectoryGenerator for Ramp {
         qmarc_controller::traj::Sample::Ready
     }
 }
+
+/// Prepares `servo` on `link` and runs its first 10 cycles (what is allocated once is
+/// allocated then, before anything is counted); returns what reading the thread's counters
+/// costs by itself, which the counted cycles' syscalls are compared with.
+pub fn warmed_up(
+    servo: &mut qmarc_controller::servo::Servo,
+    link: &mut HwCore,
+    ticker: &mut qmarc_timer::ManualTicker,
+) -> ThreadCounters {
+    use qmarc_timer::Ticker;
+    servo.prepare(link).unwrap();
+    servo.set_t0(ticker.start().unwrap());
+    for _ in 0..10 {
+        let end = servo.cycle(link, &ticker.wait().unwrap());
+        assert_eq!(end, qmarc_controller::servo::CycleEnd::Continue);
+    }
+    let (a, b) = (ThreadCounters::now(), ThreadCounters::now());
+    a.delta(b)
+}

@@ -18,7 +18,7 @@ use qmarc_proto::MAX_MOTORS;
 use qmarc_session::generator::{Order, ServeLimits, ServeMove};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
 use std::sync::atomic::Ordering;
-use util::{CountingAllocator, ThreadCounters, allocations, settings, sim_core};
+use util::{CountingAllocator, ThreadCounters, allocations, settings, sim_core, warmed_up};
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
@@ -61,13 +61,7 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
             .with_gather_page(page.clone());
     let mut link = sim_core(lockstep()).with_gripper(1 << 6, 0.05);
     let mut ticker = ManualTicker::new(400_000);
-    servo.prepare(&mut link).unwrap();
-    servo.set_t0(ticker.start().unwrap());
-    for _ in 0..10 {
-        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
-    }
-    let (a, b) = (ThreadCounters::now(), ThreadCounters::now());
-    let reading = a.delta(b);
+    let reading = warmed_up(&mut servo, &mut link, &mut ticker);
     let kernel_before = ThreadCounters::now();
     let before = allocations();
     let mut id = 0;
