@@ -336,3 +336,136 @@ fn the_code_maps_table_is_the_manifests() {
         }
     }
 }
+
+/// The top-level modules of the crate at `src` that each one names (`crate::other…`) outside
+/// its tests: module → the modules it uses. A module is `src/<name>.rs` with its folder
+/// `src/<name>/`; `lib.rs` and `main.rs` (the root, which declares and re-exports) are none.
+fn module_uses(
+    src: &Path,
+) -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
+    let mut files = Vec::new();
+    rust_files(src, &mut files);
+    let module_of = |p: &Path| {
+        let rel = p.strip_prefix(src).unwrap();
+        let first = rel.components().next()?.as_os_str().to_string_lossy().into_owned();
+        let name = first.trim_end_matches(".rs").to_string();
+        (name != "lib" && name != "main" && name != "bin").then_some(name)
+    };
+    let modules: std::collections::BTreeSet<String> =
+        files.iter().filter_map(|p| module_of(p)).collect();
+    let mut uses: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> =
+        modules.iter().map(|m| (m.clone(), Default::default())).collect();
+    for file in &files {
+        let Some(module) = module_of(file) else { continue };
+        if file.file_name().is_some_and(|n| n == "tests.rs") {
+            continue;
+        }
+        let text = std::fs::read_to_string(file).unwrap();
+        // The code outside its tests, without comments (a doc link is no dependency).
+        let code: String = text
+            .split("#[cfg(test)]")
+            .next()
+            .unwrap_or("")
+            .lines()
+            .map(code_of)
+            .filter(|l| !l.trim_start().starts_with("//"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        for (at, _) in code.match_indices("crate::") {
+            let rest = &code[at + "crate::".len()..];
+            let name: String =
+                rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+            // `use crate::{a, b}` names several.
+            let named: Vec<String> = if let Some(list) = rest.strip_prefix('{') {
+                let list = list.split('}').next().unwrap_or("");
+                list.split(',')
+                    .map(|n| n.trim().split("::").next().unwrap_or("").to_string())
+                    .collect()
+            } else {
+                vec![name]
+            };
+            for n in named {
+                if n != module && modules.contains(&n) {
+                    uses.get_mut(&module).unwrap().insert(n);
+                }
+            }
+        }
+    }
+    uses
+}
+
+/// The circles among `uses`: each set of two or more modules that reach each other, sorted.
+fn circles(
+    uses: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>,
+) -> Vec<Vec<String>> {
+    let reach = |from: &String| {
+        let mut seen = std::collections::BTreeSet::new();
+        let mut todo = vec![from.clone()];
+        while let Some(m) = todo.pop() {
+            for n in uses.get(&m).into_iter().flatten() {
+                if seen.insert(n.clone()) {
+                    todo.push(n.clone());
+                }
+            }
+        }
+        seen
+    };
+    let reached: std::collections::BTreeMap<&String, _> =
+        uses.keys().map(|m| (m, reach(m))).collect();
+    let mut found: Vec<Vec<String>> = Vec::new();
+    for m in uses.keys() {
+        let mut circle: Vec<String> = uses
+            .keys()
+            .filter(|n| *n == m || (reached[m].contains(*n) && reached[*n].contains(m)))
+            .cloned()
+            .collect();
+        circle.sort();
+        if circle.len() > 1 && !found.contains(&circle) {
+            found.push(circle);
+        }
+    }
+    found
+}
+
+#[test]
+fn the_circle_finder_finds_a_circle_and_only_one() {
+    let uses = |pairs: &[(&str, &str)]| {
+        let mut u: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> =
+            Default::default();
+        for (a, b) in pairs {
+            u.entry(a.to_string()).or_default().insert(b.to_string());
+            u.entry(b.to_string()).or_default();
+        }
+        u
+    };
+    assert!(circles(&uses(&[("a", "b"), ("b", "c")])).is_empty());
+    let found = circles(&uses(&[("a", "b"), ("b", "c"), ("c", "a"), ("c", "d")]));
+    assert_eq!(found, [["a", "b", "c"].map(String::from).to_vec()]);
+}
+
+/// Inside a crate, files (top-level modules) depend on each other without circles, but for
+/// the ones ARCHITECTURE.md names as one thing in two files.
+#[test]
+fn no_crate_has_a_circle_of_files() {
+    // ARCHITECTURE.md's list, each to become the concept it hides (issue 43).
+    let allowed: &[&[&str]] = &[
+        &["moveto", "online"],
+        &["effector", "summary"],
+        &["action", "bridge"],
+        &["ending", "moves"],
+        &["app", "tuning"],
+        &["live", "results"],
+    ];
+    let mut problems = Vec::new();
+    for name in LAYERS {
+        let src = workspace().join("crates").join(name).join("src");
+        for circle in circles(&module_uses(&src)) {
+            let known =
+                allowed.iter().any(|a| a.iter().map(|s| s.to_string()).eq(circle.iter().cloned()));
+            if !known {
+                problems.push(format!("crates/{name}: {}", circle.join(" ⇄ ")));
+            }
+        }
+    }
+    assert!(problems.is_empty(), "circles of files:\n{}", problems.join("\n"));
+}
