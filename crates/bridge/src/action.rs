@@ -414,7 +414,8 @@ impl Bridge {
         let Some(run) = self.actions.goals[i].run.as_mut() else { return };
         let ledger = OrderLedger::of(&status);
         if let Some(stop) = &run.stopping {
-            if matches!(ledger.fate(stop.id), Fate::Settled | Fate::Ended(_)) {
+            // At rest past the stop (whatever was sent after it), or the session over.
+            if ledger.rests_past(stop.id) || ledger.ended.is_some() {
                 let Some(Stopping { status, result, .. }) = run.stopping.take() else { return };
                 self.finish(i, status, result);
             }

@@ -41,7 +41,7 @@ pub enum CommandError {
 
 /// The client end of the command service.
 pub struct CommandClient {
-    /// The node the ports are of (dropped last).
+    /// The node the ports are of.
     _node: Node<ipc::Service>,
     service: CommandService,
     client: Client<ipc::Service, CommandRequest, (), CommandResponse, ()>,
@@ -104,8 +104,9 @@ impl CommandClient {
         answer_of(|| pending.receive().map(|r| r.map(|r| *r.payload())), &self.service)
     }
 
-    /// Polls the status until the robot is at rest at the end of the last move accepted (or
-    /// the loop has ended), for at most `timeout`; returns the last status.
+    /// Polls the status until the last move accepted has a final [`Fate`] — the robot at rest
+    /// at its end, the move not taken, or the session ended (by its fault) — for at most
+    /// `timeout`; returns the last status.
     pub fn wait(&mut self, timeout: Duration) -> Result<CommandResponse, CommandError> {
         let started = Instant::now();
         loop {
@@ -129,7 +130,7 @@ pub enum Fate {
     /// The loop has taken it: the robot moves for it, or the gripper goes.
     Running,
     /// The robot rests at its end (a grip: the gripper there too). Order 0, none, is settled
-    /// once the robot rests.
+    /// once the robot rests, no motion having been taken.
     Settled,
     /// The loop could not take it: the robot went on as it was (the status's reason says
     /// why).
@@ -184,6 +185,12 @@ impl OrderLedger {
         }
     }
 
+    /// The robot rests at the end of order `id` or of a later one: every order up to it has
+    /// settled and the command does not move (a stop's end, whatever came after it).
+    pub fn rests_past(&self, id: u64) -> bool {
+        self.settled >= id && !self.moving
+    }
+
     /// What became of order `id`.
     pub fn fate(&self, id: u64) -> Fate {
         if let Some(fault) = self.ended {
@@ -195,7 +202,7 @@ impl OrderLedger {
         if self.motion > id {
             return Fate::Superseded(self.motion);
         }
-        if self.settled >= id && !self.moving {
+        if self.rests_past(id) {
             return Fate::Settled;
         }
         if self.taken < id { Fate::Queued } else { Fate::Running }
@@ -225,5 +232,47 @@ fn answer_of<E: std::fmt::Debug>(
             return Err(CommandError::Ipc("the serving controller has gone".into()));
         }
         std::thread::sleep(Duration::from_micros(100));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each fate from the move ids a status carries, the session's end first, and an order's
+    /// end told apart from a later one's.
+    #[test]
+    fn an_orders_fate_is_read_from_the_status_move_ids() {
+        let at = |settled, taken, not_taken, motion, moving, fault| {
+            let s = CommandResponse {
+                ok: 1,
+                accepted: 5,
+                settled,
+                taken,
+                not_taken,
+                motion,
+                moving: u32::from(moving),
+                fault,
+                ..CommandResponse::default()
+            };
+            OrderLedger::of(&s)
+        };
+        assert_eq!(at(4, 4, 0, 4, false, 0).fate(5), Fate::Queued);
+        assert_eq!(at(4, 5, 0, 5, true, 0).fate(5), Fate::Running);
+        assert_eq!(at(5, 5, 0, 5, false, 0).fate(5), Fate::Settled);
+        assert_eq!(at(5, 5, 0, 5, true, 0).fate(5), Fate::Running, "at rest only when still");
+        assert_eq!(at(4, 5, 5, 4, false, 0).fate(5), Fate::NotTaken);
+        assert_eq!(at(4, 5, 5, 4, false, 0).fate(4), Fate::Settled, "a later one not taken");
+        assert_eq!(at(4, 6, 0, 6, true, 0).fate(5), Fate::Superseded(6));
+        let fault = FaultKind::wire(Some(FaultKind::FollowingError));
+        let ended = at(4, 5, 0, 5, true, fault);
+        assert_eq!(ended.fate(5), Fate::Ended(Some(FaultKind::FollowingError)));
+        assert!(ended.fate(5).is_final() && !Fate::Running.is_final());
+        assert_eq!(at(0, 0, 0, 0, false, 0).fate(0), Fate::Settled, "no order, at rest");
+        // A stop (3) followed by a move (6): the robot rests past the stop only once the move
+        // has ended too, though the stop's fate is the move's from its taking on.
+        let moving = at(3, 6, 0, 6, true, 0);
+        assert!(!moving.rests_past(3));
+        assert!(at(6, 6, 0, 6, false, 0).rests_past(3));
     }
 }

@@ -311,6 +311,8 @@ impl ServeMove {
                                 RetargetError::SoftLimits { motor, .. } => {
                                     NotTaken::SoftLimits(motor as u32)
                                 }
+                                RetargetError::NoProfile(_) => NotTaken::NoProfile,
+                                // A reason the plug-ins add later: no profile the loop took.
                                 _ => NotTaken::NoProfile,
                             };
                             self.shared.not_taken_why.store(why.code(), Ordering::Release);
