@@ -368,7 +368,6 @@ fn module_uses(
             .unwrap_or("")
             .lines()
             .map(code_of)
-            .filter(|l| !l.trim_start().starts_with("//"))
             .collect::<Vec<_>>()
             .join("\n");
         for (at, _) in code.match_indices("crate::") {

@@ -17,7 +17,10 @@ use qmarc_proto::{HwMsg, MAX_MOTORS, MsgType};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
-use util::{CountingAllocator, ThreadCounters, allocations, knots, settings, sim_core, warmed_up};
+use util::{
+    CountingAllocator, ThreadCounters, allocations, knots, lockstep, plan, settings, sim_core,
+    warmed_up,
+};
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
@@ -66,13 +69,6 @@ fn example_settings(g: &qmarc_plugins::registry::GeneratorEntry) -> qmarc_config
     s
 }
 
-fn plan(n_motors: usize) -> MovePlan {
-    MovePlan {
-        starve_hold_cycles: 25,
-        ..MovePlan::new(qmarc_config::Mode::Step, n_motors, 400_000)
-    }
-}
-
 /// The step move with the PID feed-forward law, timed on a mock clock.
 fn step_servo(s: &qmarc_config::Settings) -> Servo {
     Servo::new(
@@ -81,10 +77,6 @@ fn step_servo(s: &qmarc_config::Settings) -> Servo {
         (LAWS[0].build)(s),
         Box::new(MockClock::new(0)),
     )
-}
-
-fn lockstep() -> SimParams {
-    SimParams { n_motors: 3, lockstep: true, ..SimParams::default() }
 }
 
 #[test]

@@ -193,3 +193,17 @@ pub fn warmed_up(
     let (a, b) = (ThreadCounters::now(), ThreadCounters::now());
     a.delta(b)
 }
+
+/// The plan of a move of `n_motors` on a 400 µs period that holds 25 cycles on a starved
+/// sample (what the loop's proofs run).
+pub fn plan(n_motors: usize) -> qmarc_controller::plan::MovePlan {
+    qmarc_controller::plan::MovePlan {
+        starve_hold_cycles: 25,
+        ..qmarc_controller::plan::MovePlan::new(qmarc_config::Mode::Step, n_motors, 400_000)
+    }
+}
+
+/// The simulated Deltabot answering in lockstep with the loop.
+pub fn lockstep() -> SimParams {
+    SimParams { n_motors: 3, lockstep: true, ..SimParams::default() }
+}

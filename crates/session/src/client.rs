@@ -153,8 +153,6 @@ impl Fate {
 /// motion it follows — what an order's fate is read from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct OrderLedger {
-    /// The last move accepted.
-    pub accepted: u64,
     /// The last order the robot has come to rest at the end of.
     pub settled: u64,
     /// The last order the loop took.
@@ -175,7 +173,6 @@ impl OrderLedger {
         let fault = FaultKind::from_wire(s.fault);
         let ended = s.refused() == Some(Refusal::NotServing) || fault.is_some();
         OrderLedger {
-            accepted: s.accepted,
             settled: s.settled,
             taken: s.taken,
             not_taken: s.not_taken,

@@ -26,6 +26,9 @@ pub const LINE_START_COUNTS: f64 = 0.5;
 /// A command line's samples, one per servo period.
 pub type LineQueue = Box<[[f64; MAX_MOTORS]]>;
 
+/// Each motor's soft limits, counts: (lowest, highest); a motor the robot has not, unbounded.
+pub type SoftLimits = [(f64, f64); MAX_MOTORS];
+
 /// The limits a serving session moves under, derived from its settings once: the command
 /// thread checks and plans every order by them, and they bound every profile the loop takes.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,7 +37,7 @@ pub struct ServeLimits {
     pub motion: MotionLimits,
     /// Each motor's soft limits, counts, while they hold (the frame homed); `None` when the
     /// session runs `--unhomed`.
-    pub soft: Option<[(f64, f64); MAX_MOTORS]>,
+    pub soft: Option<SoftLimits>,
     /// The fraction of `motion` an approach runs at (`trajectory.approach_speed`).
     pub approach_speed: f64,
 }

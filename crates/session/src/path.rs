@@ -10,6 +10,7 @@
 //! no velocities given, each inner knot's is the slope of the parabola through it and its
 //! neighbours (0 where the path turns, so no segment overshoots a turn), and the ends' 0.
 
+use crate::generator::SoftLimits;
 use crate::wire::{MAX_PATH_KNOTS, PathKnot, PathRequest, Refusal, Refused};
 use qmarc_config::Settings;
 use qmarc_plugins::knots::KnotRules;
@@ -115,13 +116,13 @@ fn knots_from(
 
 /// The samples, one per servo period, of the path `req` from `start` (where the command
 /// rests) under `settings`: its first sample `start`, its last the path's end. `soft`: the
-/// frame is homed and every sample must be within the soft limits. The samples take at most
+/// frame is homed and every sample must be within these soft limits. The samples take at most
 /// [`QUEUE_BUDGET_BYTES`].
 pub fn path_queue(
     req: &PathRequest,
     start: &[f64; MAX_MOTORS],
     settings: &Settings,
-    soft: bool,
+    soft: Option<SoftLimits>,
 ) -> Result<Vec<[f64; MAX_MOTORS]>, Refused> {
     path_queue_within(req, start, settings, soft, QUEUE_BUDGET_BYTES)
 }
@@ -131,7 +132,7 @@ fn path_queue_within(
     req: &PathRequest,
     start: &[f64; MAX_MOTORS],
     settings: &Settings,
-    soft: bool,
+    soft: Option<SoftLimits>,
     budget: u64,
 ) -> Result<Vec<[f64; MAX_MOTORS]>, Refused> {
     let n = settings.n_motors;
@@ -184,7 +185,7 @@ fn path_queue_within(
     queue[0] = *start;
     let last = queue.len() - 1;
     queue[last] = knots[knots.len() - 1].pos;
-    if let Some((m, k, [lo, hi])) = outside_soft_limits(&queue, settings).filter(|_| soft) {
+    if let Some((m, k, [lo, hi])) = soft.and_then(|soft| outside_soft_limits(&queue, &soft[..n])) {
         return Err(Refused::new(
             Refusal::SoftLimits,
             format!(
@@ -209,16 +210,15 @@ fn segment_of(knots: &[PathKnot], mut seg: usize, t: f64) -> usize {
     seg
 }
 
-/// The first motor (by number) some sample of `queue` takes outside its soft limits in
-/// `settings`: the motor, the sample's index and the limits. A serving session's sampled
-/// moves (a path, a straight line) are checked with it before the loop gets them.
+/// The first motor (by number) some sample of `queue` takes outside its `soft` limits (one
+/// per motor the robot has): the motor, the sample's index and the limits. A serving session's sampled moves (a path, a
+/// straight line, an approach) are checked with it before the loop gets them.
 pub fn outside_soft_limits(
     queue: &[[f64; MAX_MOTORS]],
-    settings: &Settings,
+    soft: &[(f64, f64)],
 ) -> Option<(usize, usize, [f64; 2])> {
-    settings.safety.iter().enumerate().take(settings.n_motors).find_map(|(m, s)| {
-        let [lo, hi] = s.soft_limits;
-        queue.iter().position(|c| !(lo..=hi).contains(&c[m])).map(|k| (m, k, s.soft_limits))
+    soft.iter().enumerate().find_map(|(m, &(lo, hi))| {
+        queue.iter().position(|c| !(lo..=hi).contains(&c[m])).map(|k| (m, k, [lo, hi]))
     })
 }
 

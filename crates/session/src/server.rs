@@ -295,7 +295,7 @@ impl Commands {
                 let way = approach_queue(&start, &to, s.n_motors, &limits, s.period_s())
                     .map_err(|e| Refused::new(Refusal::BadRequest, format!("the approach: {e}")))?;
                 if let Some((m, k, [lo, hi])) =
-                    outside_soft_limits(&way, s).filter(|_| !self.unhomed)
+                    self.limits.soft.and_then(|soft| outside_soft_limits(&way, &soft[..s.n_motors]))
                 {
                     return Err(Refused::new(
                         Refusal::SoftLimits,
@@ -311,7 +311,7 @@ impl Commands {
             }
             None => (Vec::new(), start),
         };
-        queue.extend(path_queue(req, &from, &self.settings, !self.unhomed)?);
+        queue.extend(path_queue(req, &from, &self.settings, self.limits.soft)?);
         let id = self.give(|id| Order::Line { id, queue: queue.into_boxed_slice() })?;
         self.accepted = id;
         Ok(())
@@ -457,8 +457,10 @@ impl Commands {
         let start = shared.command();
         line.start(&start).map_err(|e| Refused::new(Refusal::Unreachable, e.to_string()))?;
         let queue = line.into_queue();
-        if let Some((m, k, [lo, hi])) =
-            outside_soft_limits(&queue, &self.settings).filter(|_| !self.unhomed)
+        if let Some((m, k, [lo, hi])) = self
+            .limits
+            .soft
+            .and_then(|soft| outside_soft_limits(&queue, &soft[..self.settings.n_motors]))
         {
             return Err(Refused::new(
                 Refusal::SoftLimits,

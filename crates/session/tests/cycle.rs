@@ -11,30 +11,18 @@ mod util;
 
 use qmarc_controller::plan::MovePlan;
 use qmarc_controller::servo::{CycleEnd, Servo};
-use qmarc_hwserver::SimParams;
 use qmarc_plugins::moveto::MotionLimits;
 use qmarc_plugins::registry::LAWS;
 use qmarc_proto::MAX_MOTORS;
 use qmarc_session::generator::{Order, ServeLimits, ServeMove};
 use qmarc_timer::{ManualTicker, MockClock, Ticker};
 use std::sync::atomic::Ordering;
-use util::{CountingAllocator, ThreadCounters, allocations, settings, sim_core, warmed_up};
+use util::{
+    CountingAllocator, ThreadCounters, allocations, lockstep, plan, settings, sim_core, warmed_up,
+};
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
-
-/// The plan of a 3-motor move on a 400 µs period (as the plug-ins' proofs use).
-fn plan(n_motors: usize) -> MovePlan {
-    MovePlan {
-        starve_hold_cycles: 25,
-        ..MovePlan::new(qmarc_config::Mode::Step, n_motors, 400_000)
-    }
-}
-
-/// The simulated Deltabot answering in lockstep with the loop.
-fn lockstep() -> SimParams {
-    SimParams { n_motors: 3, lockstep: true, ..SimParams::default() }
-}
 
 /// Serving: a new target, a stop and a new target again arrive while the loop runs — each
 /// planned in the cycle it arrives — and the cycle still allocates nothing, makes no I/O and

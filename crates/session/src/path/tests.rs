@@ -3,6 +3,7 @@
 //! impossible path refused, saying which point and why.
 
 use super::*;
+use crate::generator::SoftLimits;
 use std::path::Path;
 
 fn settings() -> Settings {
@@ -15,6 +16,11 @@ fn knot(t_s: f64, pos: [f64; 3], vel: [f64; 3]) -> PathKnot {
 }
 
 const START: [f64; MAX_MOTORS] = [100.0, -200.0, 300.0, 0.0];
+
+/// The soft limits of `s`, the frame homed.
+fn homed(s: &Settings) -> Option<SoftLimits> {
+    crate::generator::ServeLimits::of(s, false).soft
+}
 
 fn refusal(r: Result<Vec<[f64; MAX_MOTORS]>, Refused>) -> (Refusal, String) {
     let refused = r.expect_err("refused");
@@ -29,7 +35,7 @@ fn a_path_passes_every_knot_at_its_time_from_rest_to_rest() {
         knot(0.2, [1100.0, -700.0, 300.0], [4000.0, -2000.0, 0.0]),
         knot(0.4, [1500.0, -1200.0, 800.0], [0.0, 0.0, 0.0]),
     ];
-    let q = path_queue(&PathRequest::new(&knots, true).unwrap(), &START, &s, true).unwrap();
+    let q = path_queue(&PathRequest::new(&knots, true).unwrap(), &START, &s, homed(&s)).unwrap();
     assert_eq!(q.len(), (0.4 / period).round() as usize + 1);
     assert_eq!(q[0], START, "it starts where the robot rests");
     for k in &knots {
@@ -52,7 +58,7 @@ fn a_path_passes_every_knot_at_its_time_from_rest_to_rest() {
             knot(0.1 * i as f64, [100.0 + up, -200.0 - up, 300.0 + up], [0.0; 3])
         })
         .collect();
-    let q = path_queue(&PathRequest::new(&zigzag, false).unwrap(), &START, &s, true).unwrap();
+    let q = path_queue(&PathRequest::new(&zigzag, false).unwrap(), &START, &s, homed(&s)).unwrap();
     for k in &zigzag {
         let at = q[(k.t_s / period).round() as usize];
         assert!((0..3).all(|m| (at[m] - k.pos[m]).abs() < 1e-6), "{at:?} at {} s", k.t_s);
@@ -68,7 +74,7 @@ fn chosen_velocities_never_overshoot_a_turn_and_end_at_rest() {
         knot(0.2, [900.0, -200.0, 300.0], [0.0; 3]),
         knot(0.35, [200.0, -200.0, 300.0], [0.0; 3]),
     ];
-    let q = path_queue(&PathRequest::new(&knots, false).unwrap(), &START, &s, true).unwrap();
+    let q = path_queue(&PathRequest::new(&knots, false).unwrap(), &START, &s, homed(&s)).unwrap();
     let peak = q.iter().map(|c| c[0]).fold(f64::MIN, f64::max);
     assert!((peak - 900.0).abs() < 1e-9, "the turn is the highest point: {peak}");
     let low = q.iter().map(|c| c[0]).fold(f64::MAX, f64::min);
@@ -92,23 +98,26 @@ fn a_point_at_time_zero_is_where_the_robot_rests() {
     let s = settings();
     let here = knot(0.0, [130.0, -200.0, 300.0], [0.0; 3]);
     let then = knot(0.2, [500.0, -200.0, 300.0], [0.0; 3]);
-    let q = path_queue(&PathRequest::new(&[here, then], true).unwrap(), &START, &s, true).unwrap();
+    let q =
+        path_queue(&PathRequest::new(&[here, then], true).unwrap(), &START, &s, homed(&s)).unwrap();
     assert_eq!(q[0], START);
     let away = knot(0.0, [300.0, -200.0, 300.0], [0.0; 3]);
     let (r, why) =
-        refusal(path_queue(&PathRequest::new(&[away, then], true).unwrap(), &START, &s, true));
+        refusal(path_queue(&PathRequest::new(&[away, then], true).unwrap(), &START, &s, homed(&s)));
     assert_eq!(r, Refusal::BadRequest);
     assert!(why.contains("point 1: at time 0") && why.contains("motor 1"), "{why}");
     // Only that point: nothing to follow, the path is where the robot rests.
-    let q = path_queue(&PathRequest::new(&[here], false).unwrap(), &START, &s, true).unwrap();
+    let q = path_queue(&PathRequest::new(&[here], false).unwrap(), &START, &s, homed(&s)).unwrap();
     assert_eq!(q, vec![START]);
     // A refusal names the request's point, the one at time 0 counted.
     let fast = knot(0.3, [9100.0, -200.0, 300.0], [0.0; 3]);
-    let r = path_queue(&PathRequest::new(&[here, then, fast], false).unwrap(), &START, &s, true);
+    let r =
+        path_queue(&PathRequest::new(&[here, then, fast], false).unwrap(), &START, &s, homed(&s));
     assert!(r.unwrap_err().why.starts_with("point 3: motor 1"), "the third point");
     let moving = knot(0.0, [100.0, -200.0, 300.0], [10.0, 0.0, 0.0]);
     assert!(
-        path_queue(&PathRequest::new(&[moving, then], true).unwrap(), &START, &s, true).is_err()
+        path_queue(&PathRequest::new(&[moving, then], true).unwrap(), &START, &s, homed(&s))
+            .is_err()
     );
 }
 
@@ -117,7 +126,7 @@ fn malformed_and_impossible_paths_are_refused_naming_the_point() {
     let s = settings();
     let ok = knot(0.2, [500.0, -200.0, 300.0], [0.0; 3]);
     let check = |knots: &[PathKnot], given: bool| {
-        refusal(path_queue(&PathRequest::new(knots, given).unwrap(), &START, &s, true))
+        refusal(path_queue(&PathRequest::new(knots, given).unwrap(), &START, &s, homed(&s)))
     };
     let (r, why) = check(&[], false);
     assert_eq!(r, Refusal::BadRequest);
@@ -128,7 +137,7 @@ fn malformed_and_impossible_paths_are_refused_naming_the_point() {
         .collect();
     check_ok(&s, &full, false);
     let lying = PathRequest { n_knots: MAX_PATH_KNOTS as u32 + 1, ..PathRequest::default() };
-    assert!(path_queue(&lying, &START, &s, true).unwrap_err().why.contains("found 1025"));
+    assert!(path_queue(&lying, &START, &s, homed(&s)).unwrap_err().why.contains("found 1025"));
     let (_, why) = check(&[ok, knot(0.2, [600.0, -200.0, 300.0], [0.0; 3])], false);
     assert!(
         why.contains("point 2: time_from_start 0.2 s is not after the point before's"),
@@ -172,12 +181,12 @@ fn malformed_and_impossible_paths_are_refused_naming_the_point() {
         &PathRequest::new(&[knot(1.0, [100.0, -200.0, 10_300.0], [0.0; 3])], false).unwrap(),
         &START,
         &s,
-        false,
+        None,
     );
     assert!(q.is_ok());
     let mut short = s.clone();
     short.trajectory.max_duration_s = 0.1;
-    let r = path_queue(&PathRequest::new(&[ok], false).unwrap(), &START, &short, true);
+    let r = path_queue(&PathRequest::new(&[ok], false).unwrap(), &START, &short, homed(&short));
     assert!(r.unwrap_err().why.contains("the path lasts 0.2 s: longer than the longest path"));
     // A path exactly as long as the longest allowed: taken.
     short.trajectory.max_duration_s = 0.2;
@@ -185,7 +194,7 @@ fn malformed_and_impossible_paths_are_refused_naming_the_point() {
 }
 
 fn check_ok(s: &Settings, knots: &[PathKnot], given: bool) {
-    let r = path_queue(&PathRequest::new(knots, given).unwrap(), &START, s, true);
+    let r = path_queue(&PathRequest::new(knots, given).unwrap(), &START, s, homed(s));
     assert!(r.is_ok(), "{r:?}");
 }
 
@@ -202,7 +211,7 @@ fn a_chosen_velocity_is_the_parabolas_through_the_knot() {
         knot(0.4, [1600.0, -200.0, 300.0], [0.0; 3]),
         knot(0.6, [1600.0, -200.0, 300.0], [0.0; 3]),
     ];
-    let q = path_queue(&PathRequest::new(&knots, false).unwrap(), &START, &s, true).unwrap();
+    let q = path_queue(&PathRequest::new(&knots, false).unwrap(), &START, &s, homed(&s)).unwrap();
     // The velocity through a knot, from the samples either side (a knot joins two cubics
     // whose accelerations differ: the difference is off by a quarter period of that step).
     let through = |t: f64| {
@@ -222,7 +231,9 @@ fn a_chosen_velocity_is_the_parabolas_through_the_knot() {
     let tol = s.trajectory.start_tolerance_counts;
     assert_eq!(tol, 100.0, "the shipped tolerance this point sits on");
     let then = knot(0.2, [500.0, -200.0, 300.0], [0.0; 3]);
-    assert!(path_queue(&PathRequest::new(&[edge, then], false).unwrap(), &START, &s, true).is_ok());
+    assert!(
+        path_queue(&PathRequest::new(&[edge, then], false).unwrap(), &START, &s, homed(&s)).is_ok()
+    );
 }
 
 /// A path may take at most the queue's budget (256 MiB of samples, 3355 s at 2.5 kHz, here
@@ -239,7 +250,7 @@ fn a_path_longer_than_the_queue_holds_is_refused() {
     let rest = [START[0], START[1], START[2]];
     let queue = |t: f64| {
         let req = PathRequest::new(&[knot(t, rest, [0.0; 3])], false).unwrap();
-        path_queue_within(&req, &START, &s, true, budget)
+        path_queue_within(&req, &START, &s, homed(&s), budget)
     };
     assert_eq!(queue(end).map(|q| q.len()), Ok(1000));
     let (_, why) = refusal(queue(end + s.period_s()));
@@ -249,7 +260,7 @@ fn a_path_longer_than_the_queue_holds_is_refused() {
         &PathRequest::new(&[knot(3400.0, rest, [0.0; 3])], false).unwrap(),
         &START,
         &s,
-        true,
+        homed(&s),
     ));
     assert!(why.contains("more than the 256.0 MiB a path may take"), "{why}");
 }
