@@ -1,7 +1,9 @@
 //! Which runs are alive: a run's processes are found by what their command lines say (the
 //! starter's `--iox-prefix`, or the pid in its default prefix `qmarc_<pid>_`; the children's
 //! `--settings=` run file), so that a second run is never started on a live run's files,
-//! and a client that was told no prefix says which of several sessions it could mean.
+//! and a client that was told no prefix says which of several sessions it could mean
+//! ([`serving_session`]); what dead runs left in `/dev/shm` is removed
+//! ([`remove_stale_files`]).
 
 use qmarc_proto::service::{IpcLocation, run_file};
 use qmarc_telemetry::reader::location_of;
@@ -102,7 +104,12 @@ fn processes() -> Vec<Process> {
 /// Whether a process other than this one, alive, mentions `needle` in its command line (the
 /// children of a starter carry its prefix in their arguments).
 pub fn any_process_mentions(needle: &str) -> bool {
-    processes().iter().any(|(_, args)| args.iter().any(|a| a.contains(needle)))
+    mentions(&processes(), needle)
+}
+
+/// Whether one of `procs` mentions `needle` in its command line.
+fn mentions(procs: &[Process], needle: &str) -> bool {
+    procs.iter().any(|(_, args)| args.iter().any(|a| a.contains(needle)))
 }
 
 /// The program of `args` (its file name) if it is one a run is made of: a starter is
@@ -297,6 +304,8 @@ pub fn remove_stale_files(root: &str) -> usize {
     let Ok(entries) = std::fs::read_dir(qmarc_proto::service::SHM_DIR) else {
         return 0;
     };
+    // One look at the processes for every prefix found.
+    let procs = processes();
     let mut stale: Vec<String> = entries
         .flatten()
         .filter_map(|e| {
@@ -305,7 +314,7 @@ pub fn remove_stale_files(root: &str) -> usize {
             Some((pid, format!("{PREFIX_STEM}{pid}_")))
         })
         .filter(|(pid, prefix)| {
-            !std::path::Path::new(&format!("/proc/{pid}")).exists() && !any_process_mentions(prefix)
+            !std::path::Path::new(&format!("/proc/{pid}")).exists() && !mentions(&procs, prefix)
         })
         .map(|(_, prefix)| prefix)
         .collect();
