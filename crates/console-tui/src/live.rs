@@ -149,9 +149,9 @@ impl Live {
     /// Adds sample `s` and drops what is older than the window.
     fn push(&mut self, s: &qmarc_proto::telemetry::TelemetrySample) {
         if let Some(robot) = &self.robot
-            && let Ok(p) = robot.point_of(&[s.act[0], s.act[1], s.act[2]])
+            && let Ok(mm) = robot.mm_of(&[s.act[0], s.act[1], s.act[2]])
         {
-            self.effector_mm = Some([p.x * 1e3, p.y * 1e3, p.z * 1e3]);
+            self.effector_mm = Some(mm);
         }
         self.gripper = qmarc_proto::Gripper(s.gripper);
         let n = (s.n_motors as usize).min(s.cmd.len());

@@ -95,10 +95,7 @@ impl Rest {
                 Err(_) => return Err("not known".to_string()),
             }
             let [a, b, c] = [0, 1, 2].map(|m| counts.get(m).copied().unwrap_or(f64::NAN));
-            robot
-                .point_of(&[a, b, c])
-                .map(|p| [p.x * 1e3, p.y * 1e3, p.z * 1e3])
-                .map_err(|e| format!("not known: {e}"))
+            robot.mm_of(&[a, b, c]).map_err(|e| format!("not known: {e}"))
         });
         rest
     }

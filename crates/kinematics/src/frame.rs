@@ -50,4 +50,10 @@ impl Robot {
     pub fn point_of(&self, counts: &[f64; ARMS]) -> Result<Point, KinematicsError> {
         self.geometry.forward(&self.frame.angles(counts))
     }
+
+    /// Where the effector is at the joint counts `counts`: x, y, z in mm.
+    pub fn mm_of(&self, counts: &[f64; ARMS]) -> Result<[f64; 3], KinematicsError> {
+        let p = self.point_of(counts)?;
+        Ok([p.x * 1e3, p.y * 1e3, p.z * 1e3])
+    }
 }

@@ -377,10 +377,10 @@ impl Commands {
             ..CommandResponse::default()
         };
         let c = r.command;
-        if let Some(p) =
-            self.settings.robot().and_then(|robot| robot.point_of(&[c[0], c[1], c[2]]).ok())
+        if let Some(mm) =
+            self.settings.robot().and_then(|robot| robot.mm_of(&[c[0], c[1], c[2]]).ok())
         {
-            r.effector_mm = [p.x * 1e3, p.y * 1e3, p.z * 1e3];
+            r.effector_mm = mm;
         }
         if self.ended.ended.load(Ordering::Acquire) {
             r.refusal = Refusal::NotServing as u32;
