@@ -2,8 +2,8 @@
 //! [--speed]` through the real processes on the simulated robot — where the move ends, that
 //! its sampled commands keep every joint's limits, the straight line, the refusals.
 
-use qmarc_plugins::moveto::MotionLimits;
-use qmarc_plugins::online::sampled_ratio;
+use qmarc_plugins::motion::MotionLimits;
+use qmarc_plugins::motion::sampled_ratio;
 use qmarc_proto::MAX_MOTORS;
 use qmarc_tests::{TestRun, read_gather, read_summary};
 use std::path::Path;

@@ -3,8 +3,8 @@
 //! say why, and the session ends as any move ends — on `quit`, on Ctrl-C, and with every
 //! process killed in turn.
 
-use qmarc_plugins::moveto::MotionLimits;
-use qmarc_plugins::online::sampled_ratio;
+use qmarc_plugins::motion::MotionLimits;
+use qmarc_plugins::motion::sampled_ratio;
 use qmarc_proto::MAX_MOTORS;
 use qmarc_tests::{Finished, TestRun, bin_dir, read_gather, read_summary, run_with_timeout};
 use std::path::Path;

@@ -112,8 +112,8 @@ fn moving(s: &mut Settings, linear: bool) {
 /// state and its fastest kept, so a preemption of this shared VM is not taken for the
 /// computation's cost; ns per recomputation (mean, p99, worst), and the worst single timing.
 fn retargets(base: &Settings, targets: usize) -> (f64, f64, f64, f64) {
-    use qmarc_plugins::moveto::MotionLimits;
-    use qmarc_plugins::online::{MotionState, Profile};
+    use qmarc_plugins::motion::MotionLimits;
+    use qmarc_plugins::motion::{MotionState, Profile};
     const REPEATS: usize = 5;
     let limits = MotionLimits::of(base);
     let mut profile = Profile::new(3, [0.0; MAX_MOTORS]);

@@ -19,21 +19,22 @@
 //! stops the robot (jerk-limited) and the goal ends canceled once it rests; a fault, the
 //! session's end or another motion (a move, a stop — a grip on the way is none) ends it
 //! aborted. A `goal_time_tolerance` of 0 is [`DEFAULT_GOAL_TIME`].
+//!
+//! This module is the goal tracker alone, without I/O ([`GoalTracker`]): it is told what
+//! arrived (a goal, a cancel, a request for a result, the loop's status, the telemetry) and
+//! answers what is to be done (send the path, send a stop, publish feedback or the goals'
+//! status, answer the clients waiting for a result); the bridge's loop does it.
 
 use crate::action_msgs::{
-    CancelGoalRequest, CancelGoalResponse, FeedbackMessage, FjtFeedback, FjtResult,
-    GetResultRequest, GetResultResponse, GoalInfo, GoalStatus, GoalStatusArray, JointTolerance,
-    SendGoalRequest, SendGoalResponse, Uuid,
+    CancelGoalResponse, FeedbackMessage, FjtFeedback, FjtResult, GetResultResponse, GoalInfo,
+    GoalStatus, GoalStatusArray, JointTolerance, SendGoalRequest, Uuid,
 };
-use crate::bridge::{Bridge, publish, reply_with};
-use crate::convert::{rate, seconds_between};
+use crate::convert::{Converter, rate, seconds_between};
 use crate::msgs::{Header, JointTrajectoryPoint, Time};
-use crate::node::{Node, RosPublisher, RosService, ZenohError, payload_of};
-use crate::ros2::{self, Qos};
 use qmarc_proto::MAX_MOTORS;
 use qmarc_proto::telemetry::TelemetrySample;
 use qmarc_session::client::{Fate, OrderLedger};
-use qmarc_session::wire::{CommandKind, CommandRequest};
+use qmarc_session::wire::{CommandResponse, PathRequest};
 use std::time::{Duration, Instant};
 
 /// Ended goals the server still answers for (the oldest forgotten first).
@@ -50,34 +51,13 @@ const END_MATCH_COUNTS: f64 = 1e-6;
 /// Feedback messages a second, at most.
 const FEEDBACK_HZ: f64 = 50.0;
 
-/// The action's entities.
-pub struct ActionEntities {
-    send_goal: RosService,
-    cancel_goal: RosService,
-    get_result: RosService,
-    feedback: RosPublisher,
-    status: RosPublisher,
-}
-
-impl ActionEntities {
-    /// Declares the action `name` of `node`.
-    pub fn declare(node: &mut Node, name: &str) -> Result<ActionEntities, ZenohError> {
-        let at = |part: &str| format!("{name}/_action/{part}");
-        Ok(ActionEntities {
-            send_goal: node.service(&at("send_goal"), &ros2::FJT_SEND_GOAL)?,
-            cancel_goal: node.service(&at("cancel_goal"), &ros2::CANCEL_GOAL)?,
-            get_result: node.service(&at("get_result"), &ros2::FJT_GET_RESULT)?,
-            feedback: node.publisher(&at("feedback"), &ros2::FJT_FEEDBACK, &Qos::DEFAULT)?,
-            status: node.publisher(&at("status"), &ros2::GOAL_STATUS_ARRAY, &Qos::ACTION_STATUS)?,
-        })
-    }
-}
-
 /// Where each motor is and how fast it goes: counts and counts/s.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-struct Motion {
-    position: [f64; MAX_MOTORS],
-    velocity: [f64; MAX_MOTORS],
+pub struct Motion {
+    /// Counts.
+    pub position: [f64; MAX_MOTORS],
+    /// Counts/s.
+    pub velocity: [f64; MAX_MOTORS],
 }
 
 /// A running goal's bounds on how far the motors may be from where they should be and how
@@ -174,138 +154,133 @@ struct Goal {
     status: i8,
     result: FjtResult,
     run: Option<Run>,
-    waiting: Vec<zenoh::query::Query>,
 }
 
-/// The action server's state.
-#[derive(Default)]
-pub struct Actions {
+/// A goal checked and its trajectory made a path, for the bridge to send
+/// ([`GoalTracker::start`] once the controller took it).
+pub struct NewGoal {
+    info: GoalInfo,
+    /// The goal's trajectory as the controller's path.
+    pub path: Box<PathRequest>,
+    path_tolerance: Tolerances,
+    goal_tolerance: Tolerances,
+    goal_time: Duration,
+}
+
+/// A goal that has ended: its result, for every client waiting for it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Finished {
+    /// The goal.
+    pub goal_id: Uuid,
+    /// Its result, as `get_result` answers it.
+    pub response: GetResultResponse,
+}
+
+/// A stop the tracker asks the bridge to send for a goal, which ends with `status` and
+/// `result` once the robot rests; the bridge says how it went with
+/// [`GoalTracker::stop_sent`].
+#[derive(Debug)]
+#[must_use]
+pub struct StopFor {
+    goal_id: Uuid,
+    status: i8,
+    result: FjtResult,
+}
+
+/// What the telemetry showed this turn.
+pub struct Seen<'a> {
+    /// Every sample received this turn, oldest first, each with the first of its velocity
+    /// window.
+    pub fresh: &'a [(TelemetrySample, TelemetrySample)],
+    /// The newest sample.
+    pub last: Option<&'a TelemetrySample>,
+    /// The loop's command (desired) and the motors (actual) in the newest sample.
+    pub motions: (Motion, Motion),
+}
+
+/// What watching the running goal asks of the bridge.
+#[derive(Debug, Default)]
+pub struct Watched {
+    /// Feedback to publish.
+    pub feedback: Option<FeedbackMessage>,
+    /// A stop to send.
+    pub stop: Option<StopFor>,
+    /// A goal that ended.
+    pub finished: Option<Finished>,
+}
+
+/// The action server's goals, without I/O.
+pub struct GoalTracker {
+    converter: Converter,
     goals: Vec<Goal>,
     feedback_at: Option<Instant>,
     changed: bool,
-}
-
-impl Actions {
-    fn running(&mut self) -> Option<&mut Goal> {
-        self.goals.iter_mut().find(|g| g.run.is_some())
-    }
 }
 
 fn ended(status: i8) -> bool {
     matches!(status, GoalStatus::SUCCEEDED | GoalStatus::CANCELED | GoalStatus::ABORTED)
 }
 
-impl Bridge {
-    /// The action's turn: requests answered, the running goal watched.
-    pub(crate) fn actions(&mut self, stamp: Time) {
-        while let Some(q) = self.e.action.send_goal.try_recv() {
-            let reply = match ros2::from_cdr::<SendGoalRequest>(
-                &payload_of(q.payload()),
-                "FollowJointTrajectory_SendGoal",
-            ) {
-                Err(e) => {
-                    self.bad_input("follow_joint_trajectory", &e.to_string());
-                    SendGoalResponse { accepted: false, stamp }
-                }
-                Ok(r) => SendGoalResponse { accepted: self.send_goal(&r, stamp), stamp },
-            };
-            reply_with(&self.e.action.send_goal, &q, &reply);
-        }
-        while let Some(q) = self.e.action.cancel_goal.try_recv() {
-            let reply =
-                match ros2::from_cdr::<CancelGoalRequest>(&payload_of(q.payload()), "CancelGoal") {
-                    Err(e) => {
-                        self.bad_input("follow_joint_trajectory", &e.to_string());
-                        CancelGoalResponse { return_code: 1, goals_canceling: Vec::new() }
-                    }
-                    Ok(r) => self.cancel(&r.goal_info),
-                };
-            reply_with(&self.e.action.cancel_goal, &q, &reply);
-        }
-        while let Some(q) = self.e.action.get_result.try_recv() {
-            match ros2::from_cdr::<GetResultRequest>(&payload_of(q.payload()), "GetResult") {
-                Err(e) => self.bad_input("follow_joint_trajectory", &e.to_string()),
-                Ok(r) => {
-                    match self.actions.goals.iter_mut().find(|g| g.info.goal_id == r.goal_id) {
-                        Some(g) if !ended(g.status) => g.waiting.push(q),
-                        Some(g) => {
-                            let reply =
-                                GetResultResponse { status: g.status, result: g.result.clone() };
-                            reply_with(&self.e.action.get_result, &q, &reply);
-                        }
-                        None => reply_with(
-                            &self.e.action.get_result,
-                            &q,
-                            &GetResultResponse {
-                                status: GoalStatus::UNKNOWN,
-                                ..Default::default()
-                            },
-                        ),
-                    }
-                }
-            }
-        }
-        self.watch(stamp);
-        // On every change, as rcl_action does: a client that joins later has the last from
-        // the publisher's cache (transient local).
-        if self.actions.changed {
-            let list = self
-                .actions
-                .goals
-                .iter()
-                .map(|g| GoalStatus { goal_info: g.info, status: g.status })
-                .collect();
-            publish(&mut self.e.action.status, &GoalStatusArray { status_list: list });
-            self.actions.changed = false;
-        }
+impl GoalTracker {
+    /// No goals yet, for the robot `converter` describes.
+    pub fn new(converter: Converter) -> GoalTracker {
+        GoalTracker { converter, goals: Vec::new(), feedback_at: None, changed: false }
     }
 
-    /// A new goal: true if the robot took it.
-    fn send_goal(&mut self, r: &SendGoalRequest, stamp: Time) -> bool {
-        let checked = if self.actions.running().is_some() {
-            Err("a goal is running: cancel it first".to_string())
-        } else if self.actions.goals.iter().any(|g| g.info.goal_id == r.goal_id) {
-            Err("a goal with this id exists".to_string())
-        } else {
-            self.goal_bounds(r)
-                .and_then(|t| self.opts.converter.path(&r.goal.trajectory).map(|p| (t, p)))
-        };
-        let ((path_tolerance, goal_tolerance), path) = match checked {
-            Ok(c) => c,
-            Err(why) => {
-                self.bad_input("follow_joint_trajectory", &why);
-                return false;
-            }
-        };
-        let Ok(answer) = self.send_path(&path, "follow_joint_trajectory") else { return false };
+    /// Whether a goal runs (the loop's status is needed to watch it).
+    pub fn running(&self) -> bool {
+        self.goals.iter().any(|g| g.run.is_some())
+    }
+
+    /// Goal `r`, stamped `stamp`, checked and made a path; why not, in words.
+    pub fn check(&self, r: &SendGoalRequest, stamp: Time) -> Result<NewGoal, String> {
+        if self.running() {
+            return Err("a goal is running: cancel it first".to_string());
+        }
+        if self.goals.iter().any(|g| g.info.goal_id == r.goal_id) {
+            return Err("a goal with this id exists".to_string());
+        }
+        let (path_tolerance, goal_tolerance) = self.goal_bounds(r)?;
+        let path = self.converter.path(&r.goal.trajectory)?;
         let d = r.goal.goal_time_tolerance;
-        let run = Run {
-            path: answer.accepted,
-            stopping: None,
-            from_cycle: self.last.map_or(0, |s| s.cycle + 1),
-            end: Motion::at(path.knots()[path.knots().len() - 1].pos),
+        Ok(NewGoal {
+            info: GoalInfo { goal_id: r.goal_id, stamp },
+            path,
             path_tolerance,
             goal_tolerance,
             goal_time: match Duration::new(d.sec.max(0) as u64, d.nanosec.min(999_999_999)) {
                 Duration::ZERO => DEFAULT_GOAL_TIME,
                 t => t,
             },
+        })
+    }
+
+    /// Goal `goal` runs: the controller took its path as order `path`; the samples from cycle
+    /// `from_cycle` on are the goal's.
+    pub fn start(&mut self, goal: NewGoal, path: u64, from_cycle: u64) {
+        let knots = goal.path.knots();
+        let run = Run {
+            path,
+            stopping: None,
+            from_cycle,
+            end: Motion::at(knots[knots.len() - 1].pos),
+            path_tolerance: goal.path_tolerance,
+            goal_tolerance: goal.goal_tolerance,
+            goal_time: goal.goal_time,
             ended_at: None,
         };
-        if self.actions.goals.len() >= KEPT_GOALS
-            && let Some(i) = self.actions.goals.iter().position(|g| ended(g.status))
+        if self.goals.len() >= KEPT_GOALS
+            && let Some(i) = self.goals.iter().position(|g| ended(g.status))
         {
-            self.actions.goals.remove(i);
+            self.goals.remove(i);
         }
-        self.actions.goals.push(Goal {
-            info: GoalInfo { goal_id: r.goal_id, stamp },
+        self.goals.push(Goal {
+            info: goal.info,
             status: GoalStatus::EXECUTING,
             result: FjtResult::default(),
             run: Some(run),
-            waiting: Vec::new(),
         });
-        self.actions.changed = true;
-        true
+        self.changed = true;
     }
 
     /// A goal's tolerances in counts, if its joints are the robot's and it has no multi-DOF
@@ -319,12 +294,11 @@ impl Bridge {
         {
             return Err("the robot has no multi-DOF joints: leave them empty".into());
         }
-        let per_rad = self.opts.converter.counts_per_rad;
+        let per_rad = self.converter.counts_per_rad;
         let of = |list: &[JointTolerance], what: &str| -> Result<Tolerances, String> {
             let mut t = Tolerances::default();
             for j in list {
                 let m = self
-                    .opts
                     .converter
                     .motor_of(&j.name)
                     .ok_or_else(|| format!("{what}: no joint {:?}", j.name))?;
@@ -340,97 +314,126 @@ impl Bridge {
         Ok((of(&g.path_tolerance, "path_tolerance")?, of(&g.goal_tolerance, "goal_tolerance")?))
     }
 
-    /// Cancels what `info` names.
-    fn cancel(&mut self, info: &GoalInfo) -> CancelGoalResponse {
+    /// The answer to `get_result` for `goal_id` now: `None` while the goal runs (the client
+    /// waits for its [`Finished`]).
+    pub fn result(&self, goal_id: &Uuid) -> Option<GetResultResponse> {
+        match self.goals.iter().find(|g| g.info.goal_id == *goal_id) {
+            Some(g) if !ended(g.status) => None,
+            Some(g) => Some(GetResultResponse { status: g.status, result: g.result.clone() }),
+            None => Some(GetResultResponse { status: GoalStatus::UNKNOWN, ..Default::default() }),
+        }
+    }
+
+    /// Cancels what `info` names: the answer, and the stop to send if a goal is to stop.
+    pub fn cancel(&mut self, info: &GoalInfo) -> (CancelGoalResponse, Option<StopFor>) {
         let all = info.goal_id == Uuid::default();
-        let known = self.actions.goals.iter().any(|g| all || g.info.goal_id == info.goal_id);
-        let target = self.actions.goals.iter().position(|g| {
+        let known = self.goals.iter().any(|g| all || g.info.goal_id == info.goal_id);
+        let target = self.goals.iter_mut().find(|g| {
             (all || g.info.goal_id == info.goal_id)
                 && g.run.as_ref().is_some_and(|r| r.stopping.is_none())
         });
-        let Some(i) = target else {
+        let Some(g) = target else {
             let return_code = if known || all {
                 CancelGoalResponse::ERROR_GOAL_TERMINATED
             } else {
                 CancelGoalResponse::ERROR_UNKNOWN_GOAL_ID
             };
-            return CancelGoalResponse { return_code, goals_canceling: Vec::new() };
+            return (CancelGoalResponse { return_code, goals_canceling: Vec::new() }, None);
         };
+        // Canceling until the robot rests (at once canceled if the stop cannot be sent).
+        g.status = GoalStatus::CANCELING;
+        self.changed = true;
         let canceled =
             FjtResult { error_code: FjtResult::SUCCESSFUL, error_string: "canceled".into() };
-        // Canceling until the robot rests (at once canceled if the stop cannot be sent).
-        self.actions.goals[i].status = GoalStatus::CANCELING;
-        self.stop_goal(i, GoalStatus::CANCELED, canceled);
-        CancelGoalResponse {
+        let answer = CancelGoalResponse {
             return_code: CancelGoalResponse::ERROR_NONE,
-            goals_canceling: vec![self.actions.goals[i].info],
-        }
+            goals_canceling: vec![g.info],
+        };
+        let stop =
+            StopFor { goal_id: g.info.goal_id, status: GoalStatus::CANCELED, result: canceled };
+        (answer, Some(stop))
     }
 
-    /// Stops the robot for goal `i`, which ends with `status` and `result` once it rests (at
-    /// once if the stop is refused: the session has ended).
-    fn stop_goal(&mut self, i: usize, status: i8, result: FjtResult) {
-        let stop = self.command(CommandRequest::of(CommandKind::Stop), "follow_joint_trajectory");
-        match stop {
-            Ok(answer) => {
-                if let Some(run) = self.actions.goals[i].run.as_mut() {
-                    run.stopping = Some(Stopping { id: answer.accepted, status, result });
-                }
+    /// The stop `stop` asked for was sent as order `sent`, or could not be (`None`: the
+    /// session has ended), and the goal ends at once.
+    pub fn stop_sent(&mut self, stop: StopFor, sent: Option<u64>) -> Option<Finished> {
+        self.changed = true;
+        let i = self.goals.iter().position(|g| g.info.goal_id == stop.goal_id)?;
+        let StopFor { status, result, .. } = stop;
+        match (sent, self.goals[i].run.as_mut()) {
+            (Some(id), Some(run)) => {
+                run.stopping = Some(Stopping { id, status, result });
+                None
             }
-            Err(_) => self.finish(i, status, result),
+            _ => Some(self.finish(i, status, result)),
         }
-        self.actions.changed = true;
     }
 
-    /// Ends goal `i`: its result to every client waiting for it.
-    fn finish(&mut self, i: usize, status: i8, result: FjtResult) {
-        let g = &mut self.actions.goals[i];
+    /// The controller does not answer (`why`): the running goal is aborted.
+    pub fn lost(&mut self, why: String) -> Option<Finished> {
+        let i = self.goals.iter().position(|g| g.run.is_some())?;
+        Some(self.finish(i, GoalStatus::ABORTED, aborted(FjtResult::INVALID_GOAL, why)))
+    }
+
+    /// Ends goal `i`.
+    fn finish(&mut self, i: usize, status: i8, result: FjtResult) -> Finished {
+        let g = &mut self.goals[i];
         g.status = status;
         g.result = result;
         g.run = None;
-        if g.result.error_code != FjtResult::SUCCESSFUL {
-            eprintln!("qmarc-bridge: follow_joint_trajectory: {}", g.result.error_string);
+        self.changed = true;
+        Finished {
+            goal_id: g.info.goal_id,
+            response: GetResultResponse { status, result: g.result.clone() },
         }
-        let reply = GetResultResponse { status, result: g.result.clone() };
-        for q in std::mem::take(&mut g.waiting) {
-            reply_with(&self.e.action.get_result, &q, &reply);
-        }
-        self.actions.changed = true;
     }
 
-    /// The running goal against the robot: feedback, tolerances, its end.
-    fn watch(&mut self, stamp: Time) {
-        let Some(i) = self.actions.goals.iter().position(|g| g.run.is_some()) else { return };
-        let status = match self.client.send(CommandRequest::of(CommandKind::Status)) {
-            Ok(s) => s,
-            Err(e) => {
-                let why = format!("the controller does not answer: {e}");
-                return self.finish(i, GoalStatus::ABORTED, aborted(FjtResult::INVALID_GOAL, why));
-            }
-        };
-        let n = self.opts.converter.n_motors;
-        let per_rad = self.opts.converter.counts_per_rad;
-        let (_, actual) = self.motions();
-        let Some(run) = self.actions.goals[i].run.as_mut() else { return };
-        let ledger = OrderLedger::of(&status);
+    /// The goals' status, when it changed since the last call (published on every change,
+    /// as rcl_action does).
+    pub fn status_changed(&mut self) -> Option<GoalStatusArray> {
+        if !std::mem::take(&mut self.changed) {
+            return None;
+        }
+        let list = self.goals.iter().map(|g| GoalStatus { goal_info: g.info, status: g.status });
+        Some(GoalStatusArray { status_list: list.collect() })
+    }
+
+    /// The running goal against the robot — the loop's `status` and what the telemetry
+    /// showed, at `now` (ROS time `stamp`): feedback, tolerances, its end.
+    pub fn watch(
+        &mut self,
+        status: &CommandResponse,
+        seen: &Seen<'_>,
+        stamp: Time,
+        now: Instant,
+    ) -> Watched {
+        let mut out = Watched::default();
+        let Some(i) = self.goals.iter().position(|g| g.run.is_some()) else { return out };
+        let n = self.converter.n_motors;
+        let per_rad = self.converter.counts_per_rad;
+        let Some(run) = self.goals[i].run.as_mut() else { return out };
+        let ledger = OrderLedger::of(status);
         if let Some(stop) = &run.stopping {
             // At rest past the stop (whatever was sent after it), or the session over.
             if ledger.rests_past(stop.id) || ledger.ended.is_some() {
-                let Some(Stopping { status, result, .. }) = run.stopping.take() else { return };
-                self.finish(i, status, result);
+                let Some(Stopping { status, result, .. }) = run.stopping.take() else {
+                    return out;
+                };
+                out.finished = Some(self.finish(i, status, result));
             }
-            return;
+            return out;
         }
         if let Some(outcome) = ended_by(ledger.fate(run.path)) {
-            return self.finish(i, GoalStatus::ABORTED, outcome);
+            out.finished = Some(self.finish(i, GoalStatus::ABORTED, outcome));
+            return out;
         }
         // The path's samples (once the loop took it: the telemetry before is the last move's):
         // the path tolerance in every sample received — positions, and velocities over the
-        // VELOCITY_WINDOW_NS before it (a velocity over one sample is too coarse) once all of
-        // it is the goal's — and feedback.
-        if self.last.is_some() && status.taken >= run.path {
+        // velocity window before it (a velocity over one sample is too coarse) once all of it
+        // is the goal's — and feedback.
+        if seen.last.is_some() && status.taken >= run.path {
             let (positions, velocities) = run.path_tolerance.split();
-            let broken = self.fresh.iter().filter(|(_, s)| s.cycle >= run.from_cycle).find_map(
+            let broken = seen.fresh.iter().filter(|(_, s)| s.cycle >= run.from_cycle).find_map(
                 |(first, s)| {
                     beyond(&positions, &Motion::at(s.cmd), &Motion::at(s.act), n).or_else(|| {
                         let (desired, actual) = motions(first, s);
@@ -440,25 +443,24 @@ impl Bridge {
                     })
                 },
             );
+            let goal_id = self.goals[i].info.goal_id;
             if let Some(v) = broken {
                 let why = format!("path tolerance violated: {} from its command", v.words(per_rad));
                 let result = aborted(FjtResult::PATH_TOLERANCE_VIOLATED, why);
-                return self.stop_goal(i, GoalStatus::ABORTED, result);
+                out.stop = Some(StopFor { goal_id, status: GoalStatus::ABORTED, result });
+                return out;
             }
-            let due = self
-                .actions
-                .feedback_at
-                .is_none_or(|t| t.elapsed().as_secs_f64() >= 1.0 / FEEDBACK_HZ);
+            let due = self.feedback_at.is_none_or(|t| {
+                now.saturating_duration_since(t).as_secs_f64() >= 1.0 / FEEDBACK_HZ
+            });
             if due {
-                self.actions.feedback_at = Some(Instant::now());
-                let goal_id = self.actions.goals[i].info.goal_id;
-                let feedback = self.feedback(goal_id, stamp);
-                publish(&mut self.e.action.feedback, &feedback);
+                self.feedback_at = Some(now);
+                out.feedback = Some(feedback(&self.converter, seen.motions, goal_id, stamp));
             }
         }
-        let Some(run) = self.actions.goals[i].run.as_mut() else { return };
+        let Some(run) = self.goals[i].run.as_mut() else { return out };
         if ledger.fate(run.path) != Fate::Settled {
-            return;
+            return out;
         }
         // The telemetry shows the command at the end too (its last samples have been checked
         // against the path tolerance: they come later than the status, through a relay).
@@ -466,75 +468,68 @@ impl Bridge {
             s.cycle >= run.from_cycle
                 && (0..n).all(|m| (s.cmd[m] - run.end.position[m]).abs() <= END_MATCH_COUNTS)
         };
-        if !self.last.as_ref().is_none_or(at_end) {
-            return;
+        if !seen.last.is_none_or(at_end) {
+            return out;
         }
         // At rest at the end: within the goal tolerance, in goal_time_tolerance.
-        let ended_at = *run.ended_at.get_or_insert_with(Instant::now);
-        let at = Motion { position: status.actual, velocity: actual.velocity };
-        match beyond(&run.goal_tolerance, &run.end, &at, n) {
+        let ended_at = *run.ended_at.get_or_insert(now);
+        let since = now.saturating_duration_since(ended_at);
+        let at = Motion { position: status.actual, velocity: seen.motions.1.velocity };
+        out.finished = match beyond(&run.goal_tolerance, &run.end, &at, n) {
             None => {
                 let done =
                     FjtResult { error_code: FjtResult::SUCCESSFUL, error_string: String::new() };
-                self.finish(i, GoalStatus::SUCCEEDED, done);
+                Some(self.finish(i, GoalStatus::SUCCEEDED, done))
             }
-            Some(v) if ended_at.elapsed() > run.goal_time => {
+            Some(v) if since > run.goal_time => {
                 let why = format!(
                     "goal tolerance violated: {} from the goal {:.3} s after the path's end",
                     v.words(per_rad),
-                    ended_at.elapsed().as_secs_f64(),
+                    since.as_secs_f64(),
                 );
-                self.finish(
-                    i,
-                    GoalStatus::ABORTED,
-                    aborted(FjtResult::GOAL_TOLERANCE_VIOLATED, why),
-                );
+                let result = aborted(FjtResult::GOAL_TOLERANCE_VIOLATED, why);
+                Some(self.finish(i, GoalStatus::ABORTED, result))
             }
-            Some(_) => {}
-        }
-    }
-
-    /// The loop's command (desired) and the motors (actual) in its newest telemetry sample:
-    /// positions, and velocities over the last [`crate::bridge::VELOCITY_WINDOW_NS`] (0
-    /// without two samples).
-    fn motions(&self) -> (Motion, Motion) {
-        match (self.recent.front(), self.recent.back()) {
-            (Some(first), Some(s)) => motions(first, s),
-            _ => Default::default(),
-        }
-    }
-
-    /// The feedback of the newest sample: desired (the command), actual, and their
-    /// difference, rad and rad/s.
-    fn feedback(&self, goal_id: Uuid, stamp: Time) -> FeedbackMessage {
-        let c = self.opts.converter;
-        let (desired, actual) = self.motions();
-        let error = Motion {
-            position: std::array::from_fn(|m| desired.position[m] - actual.position[m]),
-            velocity: std::array::from_fn(|m| desired.velocity[m] - actual.velocity[m]),
+            Some(_) => None,
         };
-        let point = |m: &Motion| JointTrajectoryPoint {
-            positions: c.rad(&m.position),
-            velocities: c.rad(&m.velocity),
-            ..JointTrajectoryPoint::default()
-        };
-        FeedbackMessage {
-            goal_id,
-            feedback: FjtFeedback {
-                header: Header { stamp, frame_id: String::new() },
-                joint_names: c.names(),
-                desired: point(&desired),
-                actual: point(&actual),
-                error: point(&error),
-                ..FjtFeedback::default()
-            },
-        }
+        out
+    }
+}
+
+/// The feedback of a sample's `(desired, actual)` motions: desired (the command), actual, and
+/// their difference, rad and rad/s.
+fn feedback(
+    c: &Converter,
+    motions: (Motion, Motion),
+    goal_id: Uuid,
+    stamp: Time,
+) -> FeedbackMessage {
+    let (desired, actual) = motions;
+    let error = Motion {
+        position: std::array::from_fn(|m| desired.position[m] - actual.position[m]),
+        velocity: std::array::from_fn(|m| desired.velocity[m] - actual.velocity[m]),
+    };
+    let point = |m: &Motion| JointTrajectoryPoint {
+        positions: c.rad(&m.position),
+        velocities: c.rad(&m.velocity),
+        ..JointTrajectoryPoint::default()
+    };
+    FeedbackMessage {
+        goal_id,
+        feedback: FjtFeedback {
+            header: Header { stamp, frame_id: String::new() },
+            joint_names: c.names(),
+            desired: point(&desired),
+            actual: point(&actual),
+            error: point(&error),
+            ..FjtFeedback::default()
+        },
     }
 }
 
 /// The loop's command (desired) and the motors (actual) in sample `s`: positions, and
 /// velocities since sample `first` (0 if it is no earlier).
-fn motions(first: &TelemetrySample, s: &TelemetrySample) -> (Motion, Motion) {
+pub fn motions(first: &TelemetrySample, s: &TelemetrySample) -> (Motion, Motion) {
     let dt = seconds_between(s, Some(first));
     let motion = |of: fn(&TelemetrySample) -> &[f64; MAX_MOTORS]| Motion {
         position: *of(s),

@@ -6,12 +6,16 @@
 //! decoded, its numbers finite and near; the controller checks the rest (reach, soft limits,
 //! homing) and refuses with a reason, which the bridge logs and puts in `/diagnostics`.
 
-use crate::action::{ActionEntities, Actions};
+use crate::action::{Finished, GoalTracker, Seen, StopFor, motions};
+use crate::action_msgs::{
+    CancelGoalRequest, CancelGoalResponse, FjtResult, GetResultRequest, SendGoalRequest,
+    SendGoalResponse, Uuid,
+};
 use crate::convert::{Converter, SessionState, target_mm};
 use crate::msgs::{
     JointTrajectory, PointStamped, SetBoolRequest, SuccessResponse, Time, TriggerRequest,
 };
-use crate::node::{Node, RosPublisher, RosService, payload_of, session_config};
+use crate::node::{Node, RosPublisher, RosService, ZenohError, payload_of, session_config};
 use crate::ros2::{self, Qos};
 use qmarc_proto::progress::Progress;
 use qmarc_proto::service::IpcLocation;
@@ -48,12 +52,35 @@ pub struct Options {
     pub hardware_id: String,
 }
 
+/// The action's entities.
+pub struct ActionEntities {
+    send_goal: RosService,
+    cancel_goal: RosService,
+    get_result: RosService,
+    feedback: RosPublisher,
+    status: RosPublisher,
+}
+
+impl ActionEntities {
+    /// Declares the action `name` of `node`.
+    pub fn declare(node: &mut Node, name: &str) -> Result<ActionEntities, ZenohError> {
+        let at = |part: &str| format!("{name}/_action/{part}");
+        Ok(ActionEntities {
+            send_goal: node.service(&at("send_goal"), &ros2::FJT_SEND_GOAL)?,
+            cancel_goal: node.service(&at("cancel_goal"), &ros2::CANCEL_GOAL)?,
+            get_result: node.service(&at("get_result"), &ros2::FJT_GET_RESULT)?,
+            feedback: node.publisher(&at("feedback"), &ros2::FJT_FEEDBACK, &Qos::DEFAULT)?,
+            status: node.publisher(&at("status"), &ros2::GOAL_STATUS_ARRAY, &Qos::ACTION_STATUS)?,
+        })
+    }
+}
+
 /// A subscription's queue.
 type Subscription =
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 
 /// The node's entities.
-pub(crate) struct Entities {
+struct Entities {
     joint_states: RosPublisher,
     effector: RosPublisher,
     diagnostics: RosPublisher,
@@ -61,11 +88,11 @@ pub(crate) struct Entities {
     trajectory: Subscription,
     stop: RosService,
     gripper: RosService,
-    pub(crate) action: ActionEntities,
+    action: ActionEntities,
 }
 
 impl Entities {
-    fn declare(node: &mut Node) -> Result<Entities, crate::node::ZenohError> {
+    fn declare(node: &mut Node) -> Result<Entities, ZenohError> {
         Ok(Entities {
             joint_states: node.publisher("joint_states", &ros2::JOINT_STATE, &Qos::DEFAULT)?,
             effector: node.publisher("qmarc/effector", &ros2::POINT_STAMPED, &Qos::DEFAULT)?,
@@ -84,27 +111,30 @@ impl Entities {
 }
 
 /// The bridge's state between turns.
-pub(crate) struct Bridge {
-    pub(crate) opts: Options,
-    pub(crate) e: Entities,
-    pub(crate) client: CommandClient,
+struct Bridge {
+    opts: Options,
+    e: Entities,
+    client: CommandClient,
     reader: TelemetryReader,
     /// The session's progress page: when its tick 0 was (none: stamps are the bridge's).
     progress: Option<Progress>,
     /// The newest sample.
-    pub(crate) last: Option<TelemetrySample>,
+    last: Option<TelemetrySample>,
     /// The sample of the last joint state published (its velocity is measured from it).
     published: Option<TelemetrySample>,
     /// The sample time the next joint state is due at, ns.
     next_joint_state_ns: Option<u64>,
     /// The samples of the last [`VELOCITY_WINDOW_NS`] and the newest one before: the
     /// action's velocities are measured from the first to the last.
-    pub(crate) recent: VecDeque<TelemetrySample>,
+    recent: VecDeque<TelemetrySample>,
     /// Every sample this turn received, oldest first, each with the first of its
     /// [`VELOCITY_WINDOW_NS`] (a running goal's path tolerance holds in each, however late
     /// the bridge turned).
-    pub(crate) fresh: Vec<(TelemetrySample, TelemetrySample)>,
-    pub(crate) actions: Actions,
+    fresh: Vec<(TelemetrySample, TelemetrySample)>,
+    /// The `FollowJointTrajectory` goals.
+    goals: GoalTracker,
+    /// The `get_result` calls waiting for their goal's end.
+    waiting: Vec<(Uuid, zenoh::query::Query)>,
     homed: bool,
     refused: String,
     said: Option<SessionState>,
@@ -114,7 +144,7 @@ pub(crate) struct Bridge {
 
 /// The shortest time a velocity the action checks is measured over: one encoder count in it
 /// is 50 counts/s (at 4 ms, a velocity would be 250 counts/s coarse).
-pub(crate) const VELOCITY_WINDOW_NS: u64 = 20_000_000;
+const VELOCITY_WINDOW_NS: u64 = 20_000_000;
 
 /// Serves until the session ends (`Ok`) or `stop` is set.
 pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
@@ -134,6 +164,7 @@ pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
     );
     let period = Duration::from_secs_f64(1.0 / opts.rate_hz);
     let progress = Progress::open(&Progress::path(&opts.location.prefix)).ok();
+    let goals = GoalTracker::new(opts.converter);
     let mut b = Bridge {
         opts,
         e,
@@ -145,7 +176,8 @@ pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
         next_joint_state_ns: None,
         recent: VecDeque::with_capacity(TELEMETRY_BUFFER),
         fresh: Vec::with_capacity(TELEMETRY_BUFFER),
-        actions: Actions::default(),
+        goals,
+        waiting: Vec::new(),
         homed: false,
         refused: String::new(),
         said: None,
@@ -265,11 +297,7 @@ impl Bridge {
 
     /// A command to the controller; its refusal, if refused, logged and kept for the
     /// diagnostics.
-    pub(crate) fn command(
-        &mut self,
-        r: CommandRequest,
-        what: &str,
-    ) -> Result<CommandResponse, String> {
+    fn command(&mut self, r: CommandRequest, what: &str) -> Result<CommandResponse, String> {
         let answer = self.client.send(r).map_err(|e| format!("{what}: {e}"));
         self.answered(answer, what)
     }
@@ -298,11 +326,7 @@ impl Bridge {
     }
 
     /// A path to the controller; refused, logged and kept for the diagnostics.
-    pub(crate) fn send_path(
-        &mut self,
-        path: &PathRequest,
-        what: &str,
-    ) -> Result<CommandResponse, String> {
+    fn send_path(&mut self, path: &PathRequest, what: &str) -> Result<CommandResponse, String> {
         let answer = self.client.send_path(path).map_err(|e| format!("{what}: {e}"));
         self.answered(answer, what)
     }
@@ -360,8 +384,119 @@ impl Bridge {
         }
     }
 
+    /// The action's turn: requests answered, the running goal watched, the goals' status
+    /// published on every change (a client that joins later has the last from the
+    /// publisher's cache: transient local).
+    fn actions(&mut self, stamp: Time) {
+        const WHAT: &str = "follow_joint_trajectory";
+        while let Some(q) = self.e.action.send_goal.try_recv() {
+            let accepted = match ros2::from_cdr::<SendGoalRequest>(
+                &payload_of(q.payload()),
+                "FollowJointTrajectory_SendGoal",
+            ) {
+                Err(e) => {
+                    self.bad_input(WHAT, &e.to_string());
+                    false
+                }
+                Ok(r) => self.send_goal(&r, stamp),
+            };
+            reply_with(&self.e.action.send_goal, &q, &SendGoalResponse { accepted, stamp });
+        }
+        while let Some(q) = self.e.action.cancel_goal.try_recv() {
+            let reply =
+                match ros2::from_cdr::<CancelGoalRequest>(&payload_of(q.payload()), "CancelGoal") {
+                    Err(e) => {
+                        self.bad_input(WHAT, &e.to_string());
+                        CancelGoalResponse { return_code: 1, goals_canceling: Vec::new() }
+                    }
+                    Ok(r) => {
+                        let (reply, stop) = self.goals.cancel(&r.goal_info);
+                        if let Some(stop) = stop {
+                            self.stop_for(stop);
+                        }
+                        reply
+                    }
+                };
+            reply_with(&self.e.action.cancel_goal, &q, &reply);
+        }
+        while let Some(q) = self.e.action.get_result.try_recv() {
+            match ros2::from_cdr::<GetResultRequest>(&payload_of(q.payload()), "GetResult") {
+                Err(e) => self.bad_input(WHAT, &e.to_string()),
+                Ok(r) => match self.goals.result(&r.goal_id) {
+                    Some(reply) => reply_with(&self.e.action.get_result, &q, &reply),
+                    None => self.waiting.push((r.goal_id, q)),
+                },
+            }
+        }
+        self.watch(stamp);
+        if let Some(status) = self.goals.status_changed() {
+            publish(&mut self.e.action.status, &status);
+        }
+    }
+
+    /// A new goal: true if the robot took it.
+    fn send_goal(&mut self, r: &SendGoalRequest, stamp: Time) -> bool {
+        let goal = match self.goals.check(r, stamp) {
+            Ok(goal) => goal,
+            Err(why) => {
+                self.bad_input("follow_joint_trajectory", &why);
+                return false;
+            }
+        };
+        let Ok(answer) = self.send_path(&goal.path, "follow_joint_trajectory") else {
+            return false;
+        };
+        self.goals.start(goal, answer.accepted, self.last.map_or(0, |s| s.cycle + 1));
+        true
+    }
+
+    /// Sends the stop the goal tracker asked for.
+    fn stop_for(&mut self, stop: StopFor) {
+        let sent = self.command(CommandRequest::of(CommandKind::Stop), "follow_joint_trajectory");
+        let finished = self.goals.stop_sent(stop, sent.ok().map(|a| a.accepted));
+        self.finished(finished);
+    }
+
+    /// The running goal against the robot: feedback, tolerances, its end.
+    fn watch(&mut self, stamp: Time) {
+        if !self.goals.running() {
+            return;
+        }
+        let status = match self.client.send(CommandRequest::of(CommandKind::Status)) {
+            Ok(s) => s,
+            Err(e) => {
+                let finished = self.goals.lost(format!("the controller does not answer: {e}"));
+                return self.finished(finished);
+            }
+        };
+        let motions = match (self.recent.front(), self.recent.back()) {
+            (Some(first), Some(s)) => motions(first, s),
+            _ => Default::default(),
+        };
+        let seen = Seen { fresh: &self.fresh, last: self.last.as_ref(), motions };
+        let watched = self.goals.watch(&status, &seen, stamp, Instant::now());
+        if let Some(feedback) = watched.feedback {
+            publish(&mut self.e.action.feedback, &feedback);
+        }
+        if let Some(stop) = watched.stop {
+            self.stop_for(stop);
+        }
+        self.finished(watched.finished);
+    }
+
+    /// A goal that ended: its result to every client waiting for it.
+    fn finished(&mut self, finished: Option<Finished>) {
+        let Some(Finished { goal_id, response }) = finished else { return };
+        if response.result.error_code != FjtResult::SUCCESSFUL {
+            eprintln!("qmarc-bridge: follow_joint_trajectory: {}", response.result.error_string);
+        }
+        for (_, q) in self.waiting.extract_if(.., |(id, _)| *id == goal_id) {
+            reply_with(&self.e.action.get_result, &q, &response);
+        }
+    }
+
     /// Input from the network that is not a command: logged, in the diagnostics, never sent.
-    pub(crate) fn bad_input(&mut self, topic: &str, why: &str) {
+    fn bad_input(&mut self, topic: &str, why: &str) {
         eprintln!("qmarc-bridge: {topic}: not taken: {why}");
         self.refused = format!("{topic}: {why}");
     }
@@ -403,18 +538,14 @@ fn failure(why: &str) -> SuccessResponse {
 }
 
 /// Publishes `value`; a failure is said, never fatal (the network is not the robot's).
-pub(crate) fn publish<T: serde::Serialize>(p: &mut RosPublisher, value: &T) {
+fn publish<T: serde::Serialize>(p: &mut RosPublisher, value: &T) {
     if let Err(e) = send_cdr(value, |b| p.put(b)) {
         eprintln!("qmarc-bridge: {}: {e}", p.keyexpr);
     }
 }
 
 /// Answers a call; a failure is said.
-pub(crate) fn reply_with<T: serde::Serialize>(
-    service: &RosService,
-    q: &zenoh::query::Query,
-    value: &T,
-) {
+fn reply_with<T: serde::Serialize>(service: &RosService, q: &zenoh::query::Query, value: &T) {
     if let Err(e) = send_cdr(value, |b| service.reply(q, b)) {
         eprintln!("qmarc-bridge: {}: {e}", service.keyexpr);
     }

@@ -5,6 +5,7 @@ use crate::form::{Action, Form};
 use crate::rest::Rest;
 use crate::results::{ChartsView, HistoryEntry, MoveResult};
 use crate::starter_process::{Mode, Running};
+use crate::tuning::{self, TuneEnded, TuneResult};
 use std::path::PathBuf;
 use std::time::{Duration, Instant, SystemTime};
 
@@ -84,7 +85,7 @@ pub struct App {
     /// When `rest` was read.
     rest_read: Option<Instant>,
     /// The last tuning's outcome (Ctrl-T).
-    pub tuned: Option<crate::tuning::TuneResult>,
+    pub tuned: Option<TuneResult>,
     /// The running move's live telemetry (the charts page while it runs).
     pub live: Option<crate::live::Live>,
     /// The session's moves.
@@ -373,6 +374,61 @@ impl App {
         }
         self.move_ended(&r, status);
         self.refresh_rest();
+    }
+
+    /// Puts the last of the tuning's progress lines among `lines` on the message line.
+    fn tune_progress(&mut self, lines: &[String]) {
+        if let Some(p) = tuning::progress(lines) {
+            self.say(p, false);
+        }
+    }
+
+    /// The tuning started by `r` ended with `status`: its summary and, where there is one,
+    /// the path with the tuned gains as the last move.
+    fn tune_ended(&mut self, r: &Running, status: std::process::ExitStatus) {
+        match tuning::ended(&r.out_dir, r.pid(), status) {
+            Err(why) => {
+                // The results page must not show an earlier tuning as this one's.
+                self.tuned = None;
+                self.page = Page::Log;
+                self.say(why, true);
+            }
+            Ok(TuneEnded { result, last, note, message }) => {
+                self.last = last;
+                self.results_note = note;
+                self.tuned = Some(result);
+                self.show(Page::Results);
+                self.say(message.0, message.1);
+            }
+        }
+    }
+
+    /// Ctrl-A: the last tuning's gains (those it tuned) into the form. Not saved: F10 saves
+    /// them, and the next move saves and runs with them.
+    pub fn apply_tuned(&mut self) {
+        if self.running.is_some() {
+            return self.say("a move is running: its end comes first", true);
+        }
+        let Some(t) = &self.tuned else {
+            return self.say("no tuning yet: Ctrl-T tunes the gains on the path", true);
+        };
+        let tuned = t.tuned_gains();
+        self.commit_edit();
+        let mut changed = 0;
+        for (place, text) in tuned {
+            if let Some(i) = self.form.index(place) {
+                self.form.fields[i].text = text;
+                changed += 1;
+            }
+        }
+        self.form.validate();
+        self.say(
+            format!(
+                "{changed} tuned gains in the form, not yet saved: F10 saves them, and the next \
+                 move saves and runs with them"
+            ),
+            false,
+        );
     }
 
     /// The move `r` ended with `status`: its results shown, or why there are none.

@@ -5,8 +5,8 @@
 //! with every turn of the console's loop (≥ 10 Hz). It lets go of the move on its last
 //! sample, when its publisher goes, or when the move ends.
 
-use crate::results::Series;
 use qmarc_proto::service::IpcLocation;
+use qmarc_report::series::Series;
 use qmarc_telemetry::reader::{TelemetryReader, is_last};
 use std::time::{Duration, Instant};
 

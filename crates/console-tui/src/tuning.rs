@@ -1,19 +1,17 @@
-//! The Tune action of the Gains section (Ctrl-T): `qmarc-starter tune run` on the settings'
-//! path, its progress on the message line while it runs (the starter's `tune progress:`
+//! The Tune action of the Gains section (Ctrl-T), what the console's state is told of it:
+//! `qmarc-starter tune run` on the settings' path, its progress on the message line while it runs (the starter's `tune progress:`
 //! lines, which it prints when no terminal shows its bar), the before/after figures and gains
 //! on the results page when it ends (from its `tune-summary.json`), and Ctrl-A, which puts
 //! the tuned gains into the form (saved by F10 or by the next move, like any edit).
 
-use crate::app::{App, Page};
 use crate::form::Place;
 use crate::results::MoveResult;
-use crate::starter_process::Running;
 use qmarc_config::TUNE_PARAMS;
 use qmarc_tune::eval::Figures;
 use qmarc_tune::report::{PROGRESS_PREFIX, TuneSummary, gain_text};
 use ratatui::style::{Color, Style};
 use ratatui::text::Line;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitStatus;
 
 /// What the last tuning found.
@@ -27,99 +25,76 @@ pub struct TuneResult {
     pub latest: bool,
 }
 
-impl App {
-    /// Puts the last of the tuning's progress lines among `lines` on the message line.
-    pub(crate) fn tune_progress(&mut self, lines: &[String]) {
-        if let Some(p) = lines.iter().rev().find_map(|l| l.strip_prefix(PROGRESS_PREFIX)) {
-            self.say(format!("tuning: {p} · F9 stops it (the best gains so far are kept)"), false);
-        }
-    }
+/// The message line's words for the newest of a tuning's progress `lines`, if one is among
+/// them.
+pub fn progress(lines: &[String]) -> Option<String> {
+    let p = lines.iter().rev().find_map(|l| l.strip_prefix(PROGRESS_PREFIX))?;
+    Some(format!("tuning: {p} · F9 stops it (the best gains so far are kept)"))
+}
 
-    /// The tuning started by `r` ended with `status`: its summary (refused if an earlier
-    /// tuning wrote it) and, where there is one, the path with the tuned gains as the last
-    /// move.
-    pub(crate) fn tune_ended(&mut self, r: &Running, status: ExitStatus) {
-        let dir = r.out_dir.join("tune");
-        let summary = TuneSummary::read(&dir).and_then(|s| {
-            if s.starter_pid == r.pid() {
-                Ok(s)
-            } else {
-                Err(format!(
-                    "{} is from an earlier tuning",
-                    dir.join("tune-summary.json").display()
-                ))
-            }
-        });
-        let summary = match summary {
-            Ok(s) => s,
-            Err(e) => {
-                // The results page must not show an earlier tuning as this one's.
-                self.tuned = None;
-                self.page = Page::Log;
-                return self.say(format!("tune ended ({status}) without results: {e}"), true);
-            }
-        };
-        // On the simulated robot `after/`; by real moves the last move, which ran the path
-        // with the tuned gains when the tuning was not stopped.
-        let tuned_path = summary.motors.iter().all(|m| m.after.is_some());
-        self.last = ["after", "moves"]
-            .iter()
-            .filter(|_| tuned_path)
-            .find_map(|d| MoveResult::load(&dir.join(d)).ok());
-        self.results_note = self.last.is_none().then(|| {
-            format!("the tuning left no path run with the tuned gains in {}", dir.display())
-        });
-        let (msg, error) = match &summary.ended_early {
-            Some(why) => (
-                format!("tune ended early ({why}): Ctrl-A puts the last safe gains in the form"),
-                true,
-            ),
-            None => (
-                format!(
-                    "tune done, {} candidates: Ctrl-A puts the tuned gains in the form (F10 saves)",
-                    summary.candidates
-                ),
-                false,
-            ),
-        };
-        self.tuned = Some(TuneResult { summary, dir, latest: true });
-        self.show(Page::Results);
-        self.say(msg, error);
-    }
+/// What a tuning that ended left: its result, the path run with the tuned gains (the
+/// results page's last move) or why there is none, and the message to say.
+#[derive(Debug)]
+pub struct TuneEnded {
+    /// The tuning's result.
+    pub result: TuneResult,
+    /// The path run with the tuned gains, when there is one.
+    pub last: Option<MoveResult>,
+    /// Why there is no such path, if there is none.
+    pub note: Option<String>,
+    /// The message line's words, and whether they are an error's.
+    pub message: (String, bool),
+}
 
-    /// Ctrl-A: the last tuning's gains (those it tuned) into the form. Not saved: F10 saves
-    /// them, and the next move saves and runs with them.
-    pub fn apply_tuned(&mut self) {
-        if self.running.is_some() {
-            return self.say("a move is running: its end comes first", true);
+/// The tuning of starter `pid` into `out_dir` ended with `status`: what it left (refused if
+/// an earlier tuning wrote it), or why there is nothing, in words.
+pub fn ended(out_dir: &Path, pid: u32, status: ExitStatus) -> Result<TuneEnded, String> {
+    let dir = out_dir.join("tune");
+    let summary = TuneSummary::read(&dir).and_then(|s| {
+        if s.starter_pid == pid {
+            Ok(s)
+        } else {
+            Err(format!("{} is from an earlier tuning", dir.join("tune-summary.json").display()))
         }
-        let Some(t) = &self.tuned else {
-            return self.say("no tuning yet: Ctrl-T tunes the gains on the path", true);
-        };
+    });
+    let summary = summary.map_err(|e| format!("tune ended ({status}) without results: {e}"))?;
+    // On the simulated robot `after/`; by real moves the last move, which ran the path with
+    // the tuned gains when the tuning was not stopped.
+    let tuned_path = summary.motors.iter().all(|m| m.after.is_some());
+    let last = ["after", "moves"]
+        .iter()
+        .filter(|_| tuned_path)
+        .find_map(|d| MoveResult::load(&dir.join(d)).ok());
+    let note = last
+        .is_none()
+        .then(|| format!("the tuning left no path run with the tuned gains in {}", dir.display()));
+    let message = match &summary.ended_early {
+        Some(why) => {
+            (format!("tune ended early ({why}): Ctrl-A puts the last safe gains in the form"), true)
+        }
+        None => (
+            format!(
+                "tune done, {} candidates: Ctrl-A puts the tuned gains in the form (F10 saves)",
+                summary.candidates
+            ),
+            false,
+        ),
+    };
+    Ok(TuneEnded { result: TuneResult { summary, dir, latest: true }, last, note, message })
+}
+
+impl TuneResult {
+    /// The gains it tuned, as the form's fields and their text.
+    pub fn tuned_gains(&self) -> Vec<(Place, String)> {
         let mut tuned = Vec::new();
-        for (m, motor) in t.summary.motors.iter().enumerate() {
+        for (m, motor) in self.summary.motors.iter().enumerate() {
             for (k, key) in TUNE_PARAMS.iter().enumerate() {
-                if t.summary.params.iter().any(|p| p == key) {
+                if self.summary.params.iter().any(|p| p == key) {
                     tuned.push((Place::Motor(m, key), gain_text(motor.gains_after[k])));
                 }
             }
         }
-        self.commit_edit();
-        let mut changed = 0;
-        for (place, text) in tuned {
-            if let Some(i) = self.form.index(place) {
-                self.form.fields[i].text = text;
-                changed += 1;
-            }
-        }
-        self.form.validate();
-        self.say(
-            format!(
-                "{changed} tuned gains in the form, not yet saved: F10 saves them, and the next \
-                 move saves and runs with them"
-            ),
-            false,
-        );
+        tuned
     }
 }
 

@@ -21,6 +21,7 @@ pub mod grip;
 pub mod homing;
 pub mod knots;
 pub mod linear;
+pub mod motion;
 pub mod moveto;
 pub mod online;
 pub mod pidff;

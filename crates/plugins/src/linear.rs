@@ -9,8 +9,7 @@
 //! 1 — playing a profile k times as fast multiplies every joint's velocity by k, its
 //! acceleration by k² and its jerk by k³, exactly.
 
-use crate::moveto::MotionLimits;
-use crate::online::{MotionState, Profile, sampled_ratio};
+use crate::motion::{MotionLimits, MotionState, Profile, sampled_ratio};
 use crate::source::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::{MoveTarget, Settings};
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of};

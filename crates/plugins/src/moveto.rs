@@ -4,50 +4,12 @@
 //! acceleration and jerk limits allow, the others slower. It is planned before the move and
 //! sampled into the command queue, so the loop only reads the queue.
 
-use crate::online::{MotionState, Profile};
+use crate::motion::{MotionLimits, MotionState, Profile};
 use crate::source::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::Settings;
 use qmarc_controller::traj::{MotorHome, Sample, TrajStartError, TrajectoryGenerator, bounds_of};
 use qmarc_proto::state::FaultKind;
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
-
-/// The limits a jerk-limited move keeps, per motor.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MotionLimits {
-    /// Velocity, counts/s.
-    pub velocity: [f64; MAX_MOTORS],
-    /// Acceleration, counts/s².
-    pub acceleration: [f64; MAX_MOTORS],
-    /// Jerk, counts/s³.
-    pub jerk: [f64; MAX_MOTORS],
-}
-
-impl MotionLimits {
-    /// Each motor's `[[motor]]` limits.
-    pub fn of(s: &Settings) -> MotionLimits {
-        let mut l = MotionLimits {
-            velocity: [1.0; MAX_MOTORS],
-            acceleration: [1.0; MAX_MOTORS],
-            jerk: [1.0; MAX_MOTORS],
-        };
-        for (m, safety) in s.safety.iter().enumerate().take(MAX_MOTORS) {
-            l.velocity[m] = safety.max_velocity_counts_per_s;
-            l.acceleration[m] = safety.max_acceleration_counts_per_s2;
-            l.jerk[m] = safety.max_jerk_counts_per_s3;
-        }
-        l
-    }
-
-    /// The limits of the same motions played `speed` times as fast (0 < speed ≤ 1): a time
-    /// scaling, velocity × speed, acceleration × speed², jerk × speed³.
-    pub fn at_speed(self, speed: f64) -> MotionLimits {
-        MotionLimits {
-            velocity: self.velocity.map(|v| v * speed),
-            acceleration: self.acceleration.map(|a| a * speed * speed),
-            jerk: self.jerk.map(|j| j * speed * speed * speed),
-        }
-    }
-}
 
 /// A jerk-limited move could not be planned.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -83,24 +45,6 @@ impl From<MoveToError> for TrajStartError {
     fn from(e: MoveToError) -> Self {
         TrajStartError::Generator(Box::new(e))
     }
-}
-
-/// The shortest rest-to-rest move of `d` counts under `v`, `a`, `j`, s: the double-S profile
-/// in closed form (Biagiotti & Melchiorri, "Trajectory Planning for Automatic Machines",
-/// 3.4): the time to reach `v`, plus a cruise if the distance allows one, else the profile
-/// that turns back before `v` (and before `a`, for short moves).
-pub fn double_s_duration(d: f64, v: f64, a: f64, j: f64) -> f64 {
-    let d = d.abs();
-    if d == 0.0 {
-        return 0.0;
-    }
-    let to_v = if v * j >= a * a { a / j + v / a } else { 2.0 * (v / j).sqrt() };
-    if d >= v * to_v {
-        return d / v + to_v;
-    }
-    let tj = a / j;
-    let ta = (tj + (tj * tj + 4.0 * d / a).sqrt()) / 2.0;
-    if ta >= 2.0 * tj { 2.0 * ta } else { 4.0 * (d / (2.0 * j)).cbrt() }
 }
 
 /// The way to a path's first knot `to` from `from`: [`rest_to_rest`] without its last

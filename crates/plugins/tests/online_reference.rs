@@ -6,8 +6,8 @@
 //! The reference runs in the Python environment `scripts/test` makes (`target/pyenv`, from
 //! `tests/requirements.txt`), or the interpreter `QMARC_PYTHON` names.
 
-use qmarc_plugins::moveto::MotionLimits;
-use qmarc_plugins::online::{MotionState, Profile};
+use qmarc_plugins::motion::MotionLimits;
+use qmarc_plugins::motion::{MotionState, Profile};
 use qmarc_proto::MAX_MOTORS;
 use std::io::Write;
 use std::path::PathBuf;

@@ -122,8 +122,8 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
 /// own refusal formats a message).
 #[test]
 fn a_refused_online_plan_allocates_nothing() {
-    use qmarc_plugins::moveto::MotionLimits;
-    use qmarc_plugins::online::{MotionState, NoProfile, Profile};
+    use qmarc_plugins::motion::MotionLimits;
+    use qmarc_plugins::motion::{MotionState, NoProfile, Profile};
     let good = MotionLimits::of(&settings());
     let mut p = Profile::new(3, [0.0; MAX_MOTORS]);
     let mut no_jerk = good;

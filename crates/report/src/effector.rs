@@ -3,7 +3,7 @@
 //! gathered rows only — the thesis summed its Table 5-2 over data gathered every 4th cycle,
 //! so these compare with it like for like.
 
-use crate::summary::MotorSummary;
+use crate::figures::MotorSummary;
 use qmarc_controller::gather::GatherRow;
 use qmarc_controller::stats::{AxisErrors, ErrorStats};
 use qmarc_kinematics::{ARMS, Robot};
@@ -13,16 +13,16 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct AxisMm {
     /// Smallest.
-    #[serde(deserialize_with = "crate::summary::figure")]
+    #[serde(deserialize_with = "crate::figures::figure")]
     pub min_mm: f64,
     /// Largest.
-    #[serde(deserialize_with = "crate::summary::figure")]
+    #[serde(deserialize_with = "crate::figures::figure")]
     pub max_mm: f64,
     /// Root mean square.
-    #[serde(deserialize_with = "crate::summary::figure")]
+    #[serde(deserialize_with = "crate::figures::figure")]
     pub rms_mm: f64,
     /// Largest magnitude.
-    #[serde(deserialize_with = "crate::summary::figure")]
+    #[serde(deserialize_with = "crate::figures::figure")]
     pub max_abs_mm: f64,
 }
 

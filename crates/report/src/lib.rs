@@ -13,6 +13,7 @@
 /// The open-loop check's report.
 pub mod check;
 pub mod effector;
+pub mod figures;
 pub mod files;
 pub mod output;
 pub mod series;

@@ -9,8 +9,9 @@
 
 use qmarc_config::Settings;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
-use qmarc_plugins::moveto::MotionLimits;
-use qmarc_plugins::online::{MotionState, OnlineMove, RetargetError};
+use qmarc_plugins::motion::MotionLimits;
+use qmarc_plugins::motion::MotionState;
+use qmarc_plugins::online::{OnlineMove, RetargetError};
 use qmarc_proto::{Gripper, MAX_MOTORS, MotorFlags};
 use rtrb::{Consumer, Producer, RingBuffer};
 use std::sync::Arc;

@@ -11,7 +11,7 @@ mod util;
 
 use qmarc_controller::plan::MovePlan;
 use qmarc_controller::servo::{CycleEnd, Servo};
-use qmarc_plugins::moveto::MotionLimits;
+use qmarc_plugins::motion::MotionLimits;
 use qmarc_plugins::registry::LAWS;
 use qmarc_proto::MAX_MOTORS;
 use qmarc_session::generator::{Order, ServeLimits, ServeMove};

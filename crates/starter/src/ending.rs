@@ -4,19 +4,22 @@
 
 use crate::Exit;
 use crate::lost::{controller_lost_message, lost, stopped_by, stopped_responding};
-use crate::moves::{Ended, Prepared};
 use crate::say;
+use crate::supervise::{Supervised, Unresponsive};
+use qmarc_config::RunSpec;
 use qmarc_proto::exit;
-use qmarc_proto::state::FaultKind;
+use qmarc_proto::progress::Snapshot;
+use qmarc_proto::state::{FaultKind, Phase};
 use qmarc_report::Summary;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The summary of the move and the folder it is in: the one this run's controller wrote
 /// (amended when a child stopped responding: the controller could not know why the run
 /// ended), or, for a controller that died after its move began, one the starter writes with
 /// what it knows.
-pub fn conclude(p: &Prepared, e: &Ended) -> Option<(Summary, PathBuf)> {
-    let out_dir = p.out_dir();
+pub fn conclude(spec: &RunSpec, e: &Ended) -> Option<(Summary, PathBuf)> {
+    let out_dir = spec.settings.gather.out_dir.as_path();
     let unresponsive = e.unresponsive();
     if let Some((mut s, dir)) = read_own_summary(out_dir) {
         if let Some((name, u)) = unresponsive {
@@ -31,9 +34,9 @@ pub fn conclude(p: &Prepared, e: &Ended) -> Option<(Summary, PathBuf)> {
     // could not write anywhere) — wrote nothing: say what is known, and what the hwserver
     // did. One that refused before anything moved has said why.
     if let Some(exit) = e.controller().filter(|x| lost(*x, e.began(), stopped_by(e.stop))) {
-        let settings = p.settings();
+        let settings = &spec.settings;
         let mut s = Summary::controller_lost(
-            (p.spec.mode, p.spec.deterministic),
+            (spec.mode, spec.deterministic),
             settings.n_motors,
             settings.period_us,
             e.reached.map_or(0, |r| r.cycle),
@@ -87,6 +90,53 @@ pub fn read_own_summary(out_dir: &Path) -> Option<(Summary, PathBuf)> {
         .into_iter()
         .filter_map(|d| Summary::read(&d).ok().map(|s| (s, d)))
         .find(|(s, _)| s.starter_pid == me)
+}
+
+/// How the two children ended.
+pub struct Ended {
+    /// How each child ended (hwserver first; the controller's missing if it could not start).
+    pub children: Vec<Supervised>,
+    /// What the progress page said last.
+    pub reached: Option<Snapshot>,
+    /// The user's stop flag (Ctrl-C, SIGTERM, the terminal gone).
+    pub stop: &'static AtomicBool,
+    /// The rows a controller that did not end well left in its gather page, oldest first.
+    pub salvaged: Option<qmarc_controller::gather::Gather>,
+}
+
+impl Ended {
+    /// How the controller ended (None: it did not start, or did not end).
+    pub fn controller(&self) -> Option<Exit> {
+        self.children.iter().find(|s| s.name == "qmarc-controller").and_then(|s| s.exit)
+    }
+
+    /// How the hwserver ended.
+    pub fn hwserver(&self) -> Option<Exit> {
+        self.children.first().and_then(|s| s.exit)
+    }
+
+    /// Both children started and exited 0.
+    pub fn all_clean(&self) -> bool {
+        self.children.len() == 2
+            && self.children.iter().all(|s| s.exit.is_some_and(|e| e.success()))
+    }
+
+    /// The child that stopped responding, if one did.
+    pub fn unresponsive(&self) -> Option<(&'static str, Unresponsive)> {
+        self.children.iter().find_map(|s| s.unresponsive.map(|u| (s.name, u)))
+    }
+
+    /// Whether the user stopped the run.
+    pub fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    /// Whether the move had begun (it got past preparing) when the run ended.
+    pub fn began(&self) -> bool {
+        self.reached
+            .and_then(|r| Phase::from_code(r.phase))
+            .is_some_and(|p| !matches!(p, Phase::Idle | Phase::Preparing))
+    }
 }
 
 /// What the exit code of a move is decided from.

@@ -221,7 +221,7 @@ impl Series<'_> {
             let outcome = match one_move(self.args, &command, io) {
                 Ok(o) => o,
                 Err(e) if k == 1 => return Err(e),
-                Err((_, e)) => {
+                Err(Failure { error: e, .. }) => {
                     let why = format!("trial {k} could not start: {e:#}");
                     return Ok((what, Some((exit::INTERNAL, why))));
                 }
@@ -278,5 +278,5 @@ fn main() -> ExitCode {
         StarterCommand::Trials(t) => trials(&args, t),
         StarterCommand::Tune(t) => tune_command::tune(&args, t),
     };
-    qmarc_config::program::conclude("qmarc-starter", result)
+    qmarc_config::program::conclude("qmarc-starter", result.map_err(<(u8, anyhow::Error)>::from))
 }

@@ -4,22 +4,21 @@
 //! table, a pure function of what ended. [`one_move`] runs the four; `qmarc-starter`'s
 //! moves, trials and real tuning moves call it.
 
-pub use crate::ending::{Ending, conclude, exit_code, read_own_summary};
+use crate::ending::{Ended, Ending, conclude, exit_code};
 use crate::status::StatusLine;
-use crate::supervise::{self, Supervised, Unresponsive};
+use crate::supervise::{self, Supervised};
 use crate::{Exit, check_iox_root, default_prefix, describe_exit, remove_stale_files, run_file};
 use anyhow::{Context, anyhow};
 use qmarc_config::{Mode, RunSpec, Settings};
 use qmarc_controller::gather::check_budget;
 use qmarc_plugins::registry;
 use qmarc_proto::exit;
-use qmarc_proto::progress::{Progress, Snapshot};
+use qmarc_proto::progress::Progress;
 use qmarc_proto::service::{DEFAULT_ROOT, IpcLocation};
 use qmarc_proto::state::Phase;
 use qmarc_report::Summary;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 /// A line on standard error that cannot fail: if whoever reads it went away (a closed pipe),
@@ -32,16 +31,29 @@ macro_rules! say {
 }
 
 /// An error and the exit code it ends the run with.
-pub type Failure = (u8, anyhow::Error);
+#[derive(Debug)]
+pub struct Failure {
+    /// docs/usage.md's exit code.
+    pub code: u8,
+    /// What went wrong.
+    pub error: anyhow::Error,
+}
+
+impl From<Failure> for (u8, anyhow::Error) {
+    /// As [`qmarc_config::program::conclude`] takes it.
+    fn from(f: Failure) -> Self {
+        (f.code, f.error)
+    }
+}
 
 /// `?` for errors of the user's input: the run is refused.
 pub fn refused<E: Into<anyhow::Error>>(e: E) -> Failure {
-    (exit::REFUSED, e.into())
+    Failure { code: exit::REFUSED, error: e.into() }
 }
 
 /// `?` for everything else.
 pub fn internal<E: Into<anyhow::Error>>(e: E) -> Failure {
-    (exit::INTERNAL, e.into())
+    Failure { code: exit::INTERNAL, error: e.into() }
 }
 
 /// What a move is asked to be: the settings (a file and the command line, or given), where
@@ -264,53 +276,6 @@ fn serving_words(p: &Prepared) -> String {
     )
 }
 
-/// How the two children ended.
-pub struct Ended {
-    /// How each child ended (hwserver first; the controller's missing if it could not start).
-    pub children: Vec<Supervised>,
-    /// What the progress page said last.
-    pub reached: Option<Snapshot>,
-    /// The user's stop flag (Ctrl-C, SIGTERM, the terminal gone).
-    pub stop: &'static AtomicBool,
-    /// The rows a controller that did not end well left in its gather page, oldest first.
-    pub salvaged: Option<qmarc_controller::gather::Gather>,
-}
-
-impl Ended {
-    /// How the controller ended (None: it did not start, or did not end).
-    pub fn controller(&self) -> Option<Exit> {
-        self.children.iter().find(|s| s.name == "qmarc-controller").and_then(|s| s.exit)
-    }
-
-    /// How the hwserver ended.
-    pub fn hwserver(&self) -> Option<Exit> {
-        self.children.first().and_then(|s| s.exit)
-    }
-
-    /// Both children started and exited 0.
-    pub fn all_clean(&self) -> bool {
-        self.children.len() == 2
-            && self.children.iter().all(|s| s.exit.is_some_and(|e| e.success()))
-    }
-
-    /// The child that stopped responding, if one did.
-    pub fn unresponsive(&self) -> Option<(&'static str, Unresponsive)> {
-        self.children.iter().find_map(|s| s.unresponsive.map(|u| (s.name, u)))
-    }
-
-    /// Whether the user stopped the run.
-    pub fn stopped(&self) -> bool {
-        self.stop.load(Ordering::Relaxed)
-    }
-
-    /// Whether the move had begun (it got past preparing) when the run ended.
-    pub fn began(&self) -> bool {
-        self.reached
-            .and_then(|r| Phase::from_code(r.phase))
-            .is_some_and(|p| !matches!(p, Phase::Idle | Phase::Preparing))
-    }
-}
-
 /// How long a stopped (SIGSTOP) child may stay stopped before it has stopped responding: as
 /// long as the other process would wait for it (the hwserver's watchdog, the controller's
 /// response timeout). In lock-step the other waits for as long as it lives (simulated time
@@ -451,7 +416,7 @@ pub fn one_move(req: &MoveRequest<'_>) -> Result<Outcome, Failure> {
     // The folder is this run's from before the children start until its summary is final.
     let lock = qmarc_report::output::lock(p.out_dir()).map_err(refused)?;
     let ended = launch(&p, req.trial.log)?;
-    let summary = conclude(&p, &ended);
+    let summary = conclude(&p.spec, &ended);
     drop(lock);
     match &summary {
         Some(_) if req.trial.log.is_some() => {}

@@ -91,7 +91,7 @@ fn tune_by_real_moves(
             };
             let io =
                 TrialIo { out: Some(&moves), log: Some(log), check_only: false, settings: Some(s) };
-            let o = one_move(args, &command, io).map_err(|(_, e)| format!("{e:#}"))?;
+            let o = one_move(args, &command, io).map_err(|f| format!("{:#}", f.error))?;
             o.summary.ok_or_else(|| {
                 format!(
                     "no move was made (exit code {}): the processes say why in {}",
@@ -149,7 +149,7 @@ pub(crate) fn tune(args: &StarterArgs, t: &TuneArgs) -> Result<ExitCode, Failure
             Some(_) => exit::REFUSED,
             None => exit::INTERNAL,
         };
-        (code, e.context("tuning"))
+        Failure { code, error: e.context("tuning") }
     })?;
     bar.finish_and_clear();
     print_outcome(&settings, &outcome, real);

@@ -106,3 +106,64 @@ fn only_succeeded_canceled_and_aborted_goals_have_ended() {
     let over: Vec<i8> = all.into_iter().filter(|&s| ended(s)).collect();
     assert_eq!(over, [GoalStatus::SUCCEEDED, GoalStatus::CANCELED, GoalStatus::ABORTED]);
 }
+
+/// A tracker for three motors at 1000 counts a radian, and a goal to 0.1 rad on each in 1 s
+/// (its id the byte `id`).
+fn tracker_and_goal(id: u8) -> (super::GoalTracker, crate::action_msgs::SendGoalRequest) {
+    use crate::msgs::{Duration, JointTrajectory, JointTrajectoryPoint};
+    let converter = crate::convert::Converter { n_motors: 3, counts_per_rad: 1000.0, robot: None };
+    let point = JointTrajectoryPoint {
+        positions: vec![0.1; 3],
+        time_from_start: Duration { sec: 1, nanosec: 0 },
+        ..Default::default()
+    };
+    let mut r = crate::action_msgs::SendGoalRequest::default();
+    r.goal_id.uuid[0] = id;
+    r.goal.trajectory = JointTrajectory {
+        joint_names: converter.names(),
+        points: vec![point],
+        ..Default::default()
+    };
+    (super::GoalTracker::new(converter), r)
+}
+
+/// The tracker alone, with no I/O: a goal runs once its path is taken; a second is refused
+/// while it runs; a cancel asks for a stop, and the goal ends canceled only once the robot
+/// rests past that stop — its result then answered, and the status published once a change.
+#[test]
+fn a_cancelled_goal_ends_canceled_once_the_robot_rests_past_its_stop() {
+    use super::Seen;
+    use crate::msgs::Time;
+    let (mut t, r) = tracker_and_goal(1);
+    let goal = t.check(&r, Time::default()).unwrap();
+    assert_eq!(goal.path.knots().last().unwrap().pos[..3], [100.0; 3]);
+    t.start(goal, 7, 0);
+    assert!(t.running());
+    assert!(t.status_changed().is_some());
+    assert!(t.status_changed().is_none(), "published once a change");
+    let (_, second) = tracker_and_goal(2);
+    assert_eq!(
+        t.check(&second, Time::default()).err().unwrap(),
+        "a goal is running: cancel it first"
+    );
+    assert_eq!(t.result(&r.goal_id), None, "a running goal's result is waited for");
+    let (answer, stop) =
+        t.cancel(&crate::action_msgs::GoalInfo { goal_id: r.goal_id, ..Default::default() });
+    assert_eq!(answer.goals_canceling.len(), 1);
+    assert_eq!(t.stop_sent(stop.unwrap(), Some(9)), None, "canceling until the robot rests");
+    let seen = Seen { fresh: &[], last: None, motions: Default::default() };
+    let now = std::time::Instant::now();
+    let moving = CommandResponse { ok: 1, settled: 7, moving: 1, ..Default::default() };
+    assert!(t.watch(&moving, &seen, Time::default(), now).finished.is_none());
+    let rests = CommandResponse { ok: 1, settled: 9, ..Default::default() };
+    let done = t.watch(&rests, &seen, Time::default(), now).finished.unwrap();
+    assert_eq!((done.goal_id, done.response.status), (r.goal_id, GoalStatus::CANCELED));
+    assert_eq!(t.result(&r.goal_id).unwrap().status, GoalStatus::CANCELED);
+    assert!(!t.running());
+    // A stop that cannot be sent (the session ended) ends the goal at once.
+    let goal = t.check(&second, Time::default()).unwrap();
+    t.start(goal, 10, 0);
+    let (_, stop) = t.cancel(&crate::action_msgs::GoalInfo::default());
+    let done = t.stop_sent(stop.unwrap(), None).unwrap();
+    assert_eq!(done.response.status, GoalStatus::CANCELED);
+}

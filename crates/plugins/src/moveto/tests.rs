@@ -4,6 +4,7 @@
 //! Ruckig, which plans the move); the approach puts a path behind its way there.
 
 use super::*;
+use crate::motion::*;
 use crate::spline::CubicSpline;
 use proptest::prelude::*;
 

@@ -2,6 +2,7 @@
 //! time synchronisation and mid-motion retargeting as properties.
 
 use super::*;
+use crate::motion::*;
 use proptest::prelude::*;
 
 const T: f64 = 400e-6;

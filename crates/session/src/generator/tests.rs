@@ -3,7 +3,7 @@
 //! refuses a profile that would leave the soft limits, and ends only after a quit's stop.
 
 use super::*;
-use qmarc_plugins::online::sampled_ratio;
+use qmarc_plugins::motion::sampled_ratio;
 use std::path::Path;
 
 /// The shipped settings.
