@@ -352,7 +352,7 @@ fn killing_the_controller_before_the_move_stops_the_hwserver() {
     let page = qmarc_proto::progress::Progress::path(&run.prefix);
     loop {
         let preparing = qmarc_proto::progress::Progress::open(&page)
-            .is_ok_and(|p| p.read().phase == qmarc_proto::state::Phase::Preparing.code());
+            .is_ok_and(|p| p.read().phase == qmarc_proto::state::Phase::Preparing.wire());
         if preparing {
             break;
         }
@@ -398,7 +398,7 @@ fn killing_the_starter_at_the_start_and_near_the_end_stops_everything() {
         }
         if near_the_end {
             qmarc_tests::wait_for_progress(&run.prefix, TIMEOUT, "settle", |s| {
-                s.phase == Phase::Settling.code()
+                s.phase == Phase::Settling.wire()
             });
         }
         child.kill().unwrap();

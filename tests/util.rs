@@ -255,7 +255,7 @@ pub fn send_signal(pid: u32, sig: nix::sys::signal::Signal) {
 /// wrong on a loaded machine. Panics after `timeout`.
 pub fn wait_until_moving(prefix: &str, timeout: Duration) {
     use qmarc_proto::state::Phase;
-    wait_for_progress(prefix, timeout, "a move under way", |s| s.phase >= Phase::Homing.code());
+    wait_for_progress(prefix, timeout, "a move under way", |s| s.phase >= Phase::Homing.wire());
 }
 
 /// Waits until the progress page of the run with iceoryx2 prefix `prefix` (the controller's

@@ -44,7 +44,7 @@ impl Session {
     /// A client, once the session's loop serves (within 20 s).
     pub fn client(&self) -> anyhow::Result<CommandClient> {
         let started = Instant::now();
-        let serving = qmarc_proto::state::Phase::Moving.code();
+        let serving = qmarc_proto::state::Phase::Moving.wire();
         loop {
             let status = CommandClient::connect(&self.location)
                 .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Status)).map(|s| (c, s)));

@@ -189,7 +189,7 @@ impl SessionState {
     pub fn of(s: &TelemetrySample, homed: bool, refused: &str) -> SessionState {
         use qmarc_proto::state::{FaultKind, Phase};
         SessionState {
-            phase: Phase::from_code(s.phase).map_or("unknown", Phase::name_serving).to_string(),
+            phase: Phase::from_wire(s.phase).map_or("unknown", Phase::name_serving).to_string(),
             fault: FaultKind::from_wire(s.fault).map_or(String::new(), |f| f.to_string()),
             homed,
             estop: Status(s.status).intersects(Status::ESTOP),

@@ -127,7 +127,7 @@ impl Cell {
             let c = CommandClient::connect(&location)
                 .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Status)).map(|s| (c, s)));
             match c {
-                Ok((c, s)) if s.phase == qmarc_proto::state::Phase::Moving.code() => return c,
+                Ok((c, s)) if s.phase == qmarc_proto::state::Phase::Moving.wire() => return c,
                 _ => assert!(started.elapsed() < Duration::from_secs(30), "no serving session"),
             }
             std::thread::sleep(Duration::from_millis(20));

@@ -141,7 +141,7 @@ fn path_request(
 
 /// The words of a status.
 fn describe(s: &CommandResponse, n: usize) -> String {
-    let phase = Phase::from_code(s.phase).map_or("?", Phase::name_serving);
+    let phase = Phase::from_wire(s.phase).map_or("?", Phase::name_serving);
     let fault = FaultKind::from_wire(s.fault).map_or(String::new(), |f| format!(", fault {f}"));
     let counts = |v: &[f64]| v[..n].iter().map(|c| format!("{c:.1}")).collect::<Vec<_>>().join(" ");
     let mut out = format!(

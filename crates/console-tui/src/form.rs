@@ -416,7 +416,7 @@ impl Form {
             .map(|k| if k.is_relative() && k != Path::new("-") { self.base.join(k) } else { k });
         let s = &s;
         let Some(entry) = registry::generator(&s.trajectory.method) else { return };
-        if !entry.needs_knots {
+        if !entry.needs_knots() {
             return;
         }
         let error = match &s.trajectory.knots {

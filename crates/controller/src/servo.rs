@@ -191,7 +191,7 @@ impl Servo {
     fn enter(&mut self, phase: Phase) {
         self.phase = phase;
         if let Some(p) = &self.progress {
-            p.set_phase(phase.code());
+            p.set_phase(phase.wire());
         }
     }
 

@@ -18,15 +18,60 @@ pub struct Inputs {
     pub outputs: u32,
 }
 
-/// A hardware operation failed (a short ioctl, a device error). Carries numbers only.
+/// The hardware operations a [`Backend`] does per exchange, as a [`HwFault`] names them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HwOp {
+    /// [`Backend::read_inputs`].
+    ReadInputs,
+    /// [`Backend::write_dacs`].
+    WriteDacs,
+    /// [`Backend::set_enabled`].
+    Enable,
+    /// [`Backend::load_counter`].
+    LoadCounter,
+    /// [`Backend::write_outputs`].
+    WriteOutputs,
+}
+
+impl std::fmt::Display for HwOp {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            HwOp::ReadInputs => "read inputs",
+            HwOp::WriteDacs => "write DACs",
+            HwOp::Enable => "enable",
+            HwOp::LoadCounter => "load counter",
+            HwOp::WriteOutputs => "write outputs",
+        })
+    }
+}
+
+/// A hardware operation failed (a short ioctl, a device error). Carries plain data only.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-#[error("hardware operation {op} failed with code {code}")]
+#[error("hardware operation `{op}` failed with code {code}")]
 pub struct HwFault {
-    /// Which operation: 1 read inputs, 2 write DACs, 3 enable, 4 load counter, 5 write
-    /// outputs.
-    pub op: u8,
+    /// Which operation.
+    pub op: HwOp,
     /// Backend-specific code (an errno for ioctl backends).
     pub code: i32,
+}
+
+/// A homed frame could not be kept where the backend keeps it (its state file): the homing
+/// then fails, for the next run would find the motor unhomed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "cannot keep the homed frame in {} ({key}): {reason}: the next run would find motor \
+     {motor} unhomed",
+    path.display()
+)]
+pub struct FrameNotKept {
+    /// The motor, 1-based.
+    pub motor: usize,
+    /// The state file.
+    pub path: std::path::PathBuf,
+    /// The setting that names it (`sim.state_file`, `s626.state_dir`).
+    pub key: &'static str,
+    /// Why, in words.
+    pub reason: String,
 }
 
 /// What the hardware outputs now, as far as the backend can read it back: the conformance
@@ -103,7 +148,7 @@ pub trait Backend: Send {
     /// as [`Backend::write_dacs`]. Default: a backend without outputs fails.
     fn write_outputs(&mut self, mask: u32, values: u32) -> Result<(), HwFault> {
         let _ = (mask, values);
-        Err(HwFault { op: 5, code: nix::errno::Errno::ENOTSUP as i32 })
+        Err(HwFault { op: HwOp::WriteOutputs, code: nix::errno::Errno::ENOTSUP as i32 })
     }
 
     /// All DACs to 0 V and all amplifiers off, as far as the hardware still obeys. Never fails:
@@ -132,7 +177,7 @@ pub trait Backend: Send {
     /// Homing has just set `motor`'s counter frame (persist it where the hardware does; this
     /// hook runs after homing, outside the servo loop, and may do I/O). An error says where
     /// and why it could not be kept: the homing then fails.
-    fn set_homed(&mut self, motor: usize) -> Result<(), String> {
+    fn set_homed(&mut self, motor: usize) -> Result<(), FrameNotKept> {
         let _ = motor;
         Ok(())
     }

@@ -1,6 +1,6 @@
 //! [`HwCore`]: what the server does with each request, independent of IPC and hardware.
 
-use crate::backend::{Backend, Inputs};
+use crate::backend::{Backend, FrameNotKept, Inputs};
 use crate::gripper::GripperModel;
 use qmarc_proto::link::{HwLink, LinkError};
 use qmarc_proto::{
@@ -30,6 +30,9 @@ pub struct HwCore {
     outputs: u32,
     /// The gripper on one of them, if one is wired.
     gripper: GripperModel,
+    /// A homed frame the backend could not keep, for whoever serves the core to say
+    /// ([`HwCore::take_not_kept`]): `handle` formats nothing.
+    not_kept: Option<FrameNotKept>,
 }
 
 /// Counts a counter may move beyond the physical bound between two reads (quantisation and
@@ -58,6 +61,7 @@ impl HwCore {
             last_read_ns: 0,
             outputs: 0,
             gripper: GripperModel::NONE,
+            not_kept: None,
         };
         // The kept frame holds only where the counters could be read: their distance from
         // COUNTER_ZERO is the position. Without that read no motor counts as homed.
@@ -293,12 +297,18 @@ impl HwCore {
         self.position[motor] = preset;
         // A frame that cannot be kept is a failed home: the next run would find it unhomed.
         if let Err(why) = self.backend.set_homed(motor) {
-            eprintln!("qmarc-hwserver: {why}");
+            self.not_kept = Some(why);
             self.homed[motor] = false;
             return Status::NOT_KEPT;
         }
         self.homed[motor] = true;
         Status::OK
+    }
+
+    /// Why the last homed frame the backend was told of could not be kept, once (the
+    /// response said `NOT_KEPT`).
+    pub fn take_not_kept(&mut self) -> Option<FrameNotKept> {
+        self.not_kept.take()
     }
 
     /// Answers one request. Unknown types and bad motor indices are answered with a status
@@ -376,7 +386,11 @@ impl HwCore {
 /// request is handled where the iceoryx2 exchange would carry it, so the exchange never fails.
 impl HwLink for HwCore {
     fn exchange(&mut self, req: &HwMsg) -> Result<HwMsg, LinkError> {
-        Ok(self.handle(req))
+        let resp = self.handle(req);
+        if let Some(why) = self.take_not_kept() {
+            eprintln!("qmarc-hwserver: {why}");
+        }
+        Ok(resp)
     }
 }
 

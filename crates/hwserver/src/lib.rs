@@ -3,7 +3,7 @@
 //! It waits for requests from the controller, performs them on a [`Backend`] and answers each
 //! with the status word. The [`HwCore`] holds what is backend-independent: the 64-bit
 //! software position extended from each 24-bit counter (thesis 3.10.2), enable state, latched
-//! limit-switch bits and the watchdog. [`server::serve`] is the iceoryx2 loop around it.
+//! limit-switch bits and the watchdog. [`server::answer_requests`] is the iceoryx2 loop around it.
 //! Backends are chosen by name from [`backends::BACKENDS`] (one file and one registry line
 //! each); the default is [`SimDeltabot`], a simulated Deltabot with velocity-mode amplifiers,
 //! quadrature counters and limit switches (`../shared/notes/deltabot.md`). Every backend

@@ -1,4 +1,5 @@
-//! [`serve`]: the iceoryx2 loop of the hardware server.
+//! [`answer_requests`]: the iceoryx2 loop of the hardware server, which answers the
+//! controller's requests (a serving session, `qmarc-starter serve`, is another thing).
 //!
 //! The server blocks on the request event (no busy spin unless asked), answers every pending
 //! request through [`HwCore::handle`] and notifies the response event after each answer.
@@ -17,7 +18,7 @@ use std::time::Duration;
 
 /// How the loop waits and when the watchdog fires.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ServeOptions {
+pub struct AnswerOptions {
     /// Controller silence (ns) tolerated while any motor is enabled.
     pub watchdog_ns: u64,
     /// Busy-poll instead of blocking.
@@ -31,9 +32,9 @@ pub struct ServeOptions {
     pub lockstep: bool,
 }
 
-/// Why [`serve`] ended.
+/// Why [`answer_requests`] ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ServeEnd {
+pub enum AnswerEnd {
     /// The controller sent [`qmarc_proto::MsgType::Exit`].
     Exit,
     /// The controller was silent for `silent_ns` with motors enabled: the safe state was
@@ -51,7 +52,7 @@ pub enum ServeEnd {
 /// The loop failed in iceoryx2.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
-pub enum ServeError {
+pub enum AnswerError {
     /// Node or services could not be opened.
     #[error(transparent)]
     Open(#[from] ServiceError),
@@ -65,8 +66,8 @@ pub enum ServeError {
     },
 }
 
-fn port_err(op: &'static str) -> impl FnOnce(&dyn std::fmt::Debug) -> ServeError {
-    move |e| ServeError::Port { op, reason: format!("{e:?}") }
+fn port_err(op: &'static str) -> impl FnOnce(&dyn std::fmt::Debug) -> AnswerError {
+    move |e| AnswerError::Port { op, reason: format!("{e:?}") }
 }
 
 /// While ending, a controller silent this long is checked for (a cleanup of dead nodes: a
@@ -79,12 +80,12 @@ const IDLE_WAIT_NS: u64 = 50_000_000;
 /// Serves requests at `location` until exit, watchdog or stop. `stop` is polled between
 /// waits; once it is set the hardware is made safe at once and [`crate::HwCore::shut_down`]
 /// refuses further enables. On every return the hardware is in the safe state.
-pub fn serve(
+pub fn answer_requests(
     core: &mut HwCore,
     location: &IpcLocation,
-    opts: &ServeOptions,
+    opts: &AnswerOptions,
     stop: &AtomicBool,
-) -> Result<ServeEnd, ServeError> {
+) -> Result<AnswerEnd, AnswerError> {
     let result = serve_inner(core, location, opts, stop);
     core.safe_state();
     result
@@ -93,9 +94,9 @@ pub fn serve(
 fn serve_inner(
     core: &mut HwCore,
     location: &IpcLocation,
-    opts: &ServeOptions,
+    opts: &AnswerOptions,
     stop: &AtomicBool,
-) -> Result<ServeEnd, ServeError> {
+) -> Result<AnswerEnd, AnswerError> {
     let node = create_node(HWSERVER_NODE, location)?;
     let services = open_hw_services(&node)?;
     let server =
@@ -122,12 +123,12 @@ fn serve_inner(
     };
     // Once stopping: since when, and how it will be reported. The server goes on answering
     // (every response says why) until the controller exits or falls silent for the grace time.
-    let mut ending: Option<(u64, ServeEnd)> = None;
+    let mut ending: Option<(u64, AnswerEnd)> = None;
     loop {
         let now = monotonic_now_ns();
         if ending.is_none() && stop.load(Ordering::Relaxed) {
             core.shut_down();
-            ending = Some((now, ServeEnd::Stopped));
+            ending = Some((now, AnswerEnd::Stopped));
         }
         let silent_ns = now.saturating_sub(last_request_ns.max(seen_alive_ns));
         if ending.is_none() && core.any_enabled() && silent_ns > opts.watchdog_ns {
@@ -136,7 +137,7 @@ fn serve_inner(
             } else {
                 core.trip_watchdog();
                 let silent_ns = now.saturating_sub(last_request_ns);
-                let end = ServeEnd::Watchdog { silent_ns, controller_alive: controller_alive() };
+                let end = AnswerEnd::Watchdog { silent_ns, controller_alive: controller_alive() };
                 ending = Some((now, end));
             }
         }
@@ -159,9 +160,12 @@ fn serve_inner(
             // by request id, so a next request on the same slot is not touched).
             notifier.notify().map_err(|e| port_err("response notify")(&e))?;
             drop(active);
+            if let Some(why) = core.take_not_kept() {
+                eprintln!("qmarc-hwserver: {why}");
+            }
             last_request_ns = monotonic_now_ns();
             if core.exit_requested() {
-                return Ok(ending.map_or(ServeEnd::Exit, |(_, end)| end));
+                return Ok(ending.map_or(AnswerEnd::Exit, |(_, end)| end));
             }
         }
     }
@@ -175,9 +179,9 @@ fn serve_inner(
 /// further notification a compare-exchange, no system call).
 fn wait_for_request(
     listener: &iceoryx2::port::listener::Listener<qmarc_proto::service::Link>,
-    opts: &ServeOptions,
+    opts: &AnswerOptions,
     (enabled, silent_ns): (bool, u64),
-) -> Result<(), ServeError> {
+) -> Result<(), AnswerError> {
     if opts.spin {
         std::hint::spin_loop();
         return Ok(());

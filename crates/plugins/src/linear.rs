@@ -10,9 +10,9 @@
 //! acceleration by k² and its jerk by k³, exactly.
 
 use crate::motion::{MotionLimits, MotionState, Profile, sampled_ratio};
-use crate::source::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
+use crate::source::{CommandQueue, QUEUE_BUDGET_BYTES, TrajBuildError};
 use qmarc_config::{MoveTarget, Settings};
-use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of};
+use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_kinematics::{ARMS, Point, Robot};
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
 
@@ -32,13 +32,13 @@ pub struct LinearMove {
     jog: Option<bool>,
     period_s: f64,
     limits: MotionLimits,
-    queue: Vec<[f64; MAX_MOTORS]>,
+    queue: CommandQueue,
 }
 
 impl LinearMove {
     /// A line to `to_mm` for `robot`, under `limits`, one sample every `period_s`.
     pub fn new(robot: Robot, to_mm: [f64; 3], period_s: f64, limits: MotionLimits) -> LinearMove {
-        LinearMove { robot, to_mm, jog: None, period_s, limits, queue: Vec::new() }
+        LinearMove { robot, to_mm, jog: None, period_s, limits, queue: CommandQueue::default() }
     }
 
     /// The Cartesian jog of the settings (`jog --axis A --mm D`): the effector `jog.mm` along
@@ -64,7 +64,7 @@ impl LinearMove {
 
     /// After [`TrajectoryGenerator::start`]: its samples, one per period.
     pub fn into_queue(self) -> Vec<[f64; MAX_MOTORS]> {
-        self.queue
+        self.queue.into_commands()
     }
 
     /// The joint counts of the line's point at `s` (0‥1) from `a` to `b`, m.
@@ -195,26 +195,27 @@ impl TrajectoryGenerator for LinearMove {
                     .into(),
             ))));
         }
-        self.queue = self
+        let queue = self
             .plan(start)
             .map_err(|e| TrajStartError::Generator(Box::new(TrajBuildError::Line(e))))?;
+        self.queue = CommandQueue::at_rest(queue);
         Ok(())
     }
 
     fn samples(&self) -> Option<u64> {
-        Some(self.queue.len() as u64)
+        self.queue.samples()
     }
 
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
-        Some(bounds_of(&self.queue))
+        self.queue.bounds()
     }
 
     fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
-        Some([0.0; MAX_MOTORS])
+        self.queue.end_velocity()
     }
 
     #[inline]
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
-        sample_queue(&self.queue, n, cmd)
+        self.queue.sample(n, cmd)
     }
 }

@@ -5,7 +5,7 @@
 //! sampled into the command queue, so the loop only reads the queue.
 
 use crate::motion::{MotionLimits, MotionState, Profile};
-use crate::source::{QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
+use crate::source::{CommandQueue, QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::Settings;
 use qmarc_controller::traj::{MotorHome, Sample, TrajStartError, TrajectoryGenerator, bounds_of};
 use qmarc_proto::state::FaultKind;
@@ -123,7 +123,7 @@ pub struct Jog {
     speed: f64,
     unhomed_speed: f64,
     homed: bool,
-    queue: Vec<[f64; MAX_MOTORS]>,
+    queue: CommandQueue,
     /// Per motor, the way to its top switch in counts (−1 or +1).
     top_direction: [f64; MAX_MOTORS],
     /// Per motor, the switches active since the jog began and continuously since.
@@ -149,7 +149,7 @@ impl Jog {
             speed: s.jog.speed,
             unhomed_speed: s.jog.unhomed_speed,
             homed: false,
-            queue: Vec::new(),
+            queue: CommandQueue::default(),
             top_direction,
             resting: [MotorFlags::default(); MAX_MOTORS],
             observed: false,
@@ -200,20 +200,21 @@ impl TrajectoryGenerator for Jog {
         to[self.motor] += self.counts;
         let speed = if self.homed { self.speed } else { self.unhomed_speed };
         let limits = self.limits.at_speed(speed);
-        self.queue = rest_to_rest(start, &to, self.n_motors, &limits, self.period_s)?;
+        self.queue =
+            CommandQueue::at_rest(rest_to_rest(start, &to, self.n_motors, &limits, self.period_s)?);
         Ok(())
     }
 
     fn samples(&self) -> Option<u64> {
-        Some(self.queue.len() as u64)
+        self.queue.samples()
     }
 
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
-        Some(bounds_of(&self.queue))
+        self.queue.bounds()
     }
 
     fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
-        Some([0.0; MAX_MOTORS])
+        self.queue.end_velocity()
     }
 
     #[inline]
@@ -221,7 +222,7 @@ impl TrajectoryGenerator for Jog {
         if self.tripped.is_some() {
             return Sample::Failed;
         }
-        sample_queue(&self.queue, n, cmd)
+        self.queue.sample(n, cmd)
     }
 
     fn failure(&self) -> Option<String> {

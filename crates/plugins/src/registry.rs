@@ -28,6 +28,24 @@ pub struct LawEntry {
     pub build: fn(&Settings) -> Box<dyn ServoLaw>,
 }
 
+/// What a generator follows, which says where the command line and the console offer it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GeneratorKind {
+    /// A path read from a knot file (`run --method`, which needs `--knots`).
+    KnotPath,
+    /// A path of its own from the settings (`step`, also a `run --method`).
+    OwnPath,
+    /// A mode of its own (`home`, `check`, `jog`, `move`, `linear`): never `run`'s.
+    Mode,
+}
+
+impl GeneratorEntry {
+    /// It reads a knot file.
+    pub fn needs_knots(&self) -> bool {
+        self.kind == GeneratorKind::KnotPath
+    }
+}
+
 /// A registered trajectory generator.
 #[derive(Clone, Copy)]
 pub struct GeneratorEntry {
@@ -35,8 +53,9 @@ pub struct GeneratorEntry {
     pub name: &'static str,
     /// One line for lists.
     pub description: &'static str,
-    /// True if it reads a knot file (`run`); false for the built-in `step`.
-    pub needs_knots: bool,
+    /// What it follows: a path `run` names (from a knot file, or `step`'s own), or a mode
+    /// of its own.
+    pub kind: GeneratorKind,
     /// Builds the generator from validated settings; reads and checks a knot file if one is
     /// named (streams are read when the move starts).
     pub build: fn(&Settings) -> Result<Box<dyn TrajectoryGenerator>, TrajBuildError>,
@@ -54,31 +73,31 @@ pub const GENERATORS: &[GeneratorEntry] = &[
     GeneratorEntry {
         name: "step",
         description: "ideal step of [step] size on every motor, held for [step] duration",
-        needs_knots: false,
+        kind: GeneratorKind::OwnPath,
         build: |s| Ok(Box::new(Step::from_settings(s)?)),
     },
     GeneratorEntry {
         name: "spline",
         description: "offline natural cubic spline through time/position knots (thesis 3.12.1)",
-        needs_knots: true,
+        kind: GeneratorKind::KnotPath,
         build: |s| Ok(Box::new(CubicSpline::from_settings(s)?)),
     },
     GeneratorEntry {
         name: "home",
         description: "homing on the top limit switches, one motor at a time (thesis 3.10.1.1)",
-        needs_knots: false,
+        kind: GeneratorKind::Mode,
         build: |s| Ok(Box::new(Homing::from_settings(s))),
     },
     GeneratorEntry {
         name: "check",
         description: "the open-loop first motion: [check] volts on each motor in turn, watched",
-        needs_knots: false,
+        kind: GeneratorKind::Mode,
         build: |s| Ok(Box::new(Check::from_settings(s))),
     },
     GeneratorEntry {
         name: "jog",
         description: "one motor by [jog] counts, jerk-limited from rest to rest (Ruckig)",
-        needs_knots: false,
+        kind: GeneratorKind::Mode,
         build: |s| match s.jog.axis {
             Some(_) => Ok(Box::new(LinearMove::jog(s)?)),
             None => Ok(Box::new(Jog::from_settings(s)?)),
@@ -87,7 +106,7 @@ pub const GENERATORS: &[GeneratorEntry] = &[
     GeneratorEntry {
         name: "move",
         description: "to a target from where the motors are, jerk-limited and time-optimal (online Ruckig)",
-        needs_knots: false,
+        kind: GeneratorKind::Mode,
         build: |s| match s.motion.target.counts() {
             // `move --grip on|off` alone: where the robot is.
             [] if s.motion.grip.is_some() => Ok(crate::grip::at_end(s, Box::<Here>::default())),
@@ -97,13 +116,13 @@ pub const GENERATORS: &[GeneratorEntry] = &[
     GeneratorEntry {
         name: "linear",
         description: "to a point along a straight line, jerk-limited, every joint within its limits",
-        needs_knots: false,
+        kind: GeneratorKind::Mode,
         build: |s| Ok(crate::grip::at_end(s, Box::new(LinearMove::from_settings(s)?))),
     },
     GeneratorEntry {
         name: "pvt",
         description: "online position-velocity-time cubics, from a file or a stream (thesis 3.12.2)",
-        needs_knots: true,
+        kind: GeneratorKind::KnotPath,
         build: |s| Ok(Box::new(Pvt::from_settings(s)?)),
     },
 ];
@@ -128,12 +147,8 @@ pub fn generator_names() -> Vec<&'static str> {
     GENERATORS.iter().map(|e| e.name).collect()
 }
 
-/// Names of the generators `run` accepts: every one that follows a path (not homing, jog,
-/// the check or a move to a target).
+/// Names of the generators `run` accepts: every one that follows a path (not a mode of its
+/// own: homing, jog, the check, a move to a target).
 pub fn path_generator_names() -> Vec<&'static str> {
-    GENERATORS
-        .iter()
-        .filter(|e| !matches!(e.name, "home" | "jog" | "check" | "move" | "linear"))
-        .map(|e| e.name)
-        .collect()
+    GENERATORS.iter().filter(|e| e.kind != GeneratorKind::Mode).map(|e| e.name).collect()
 }

@@ -1,10 +1,11 @@
 //! What every generator that reads knots shares: where knots come from ([`KnotSource`]),
-//! the memory a precomputed command queue may take ([`QUEUE_BUDGET_BYTES`], [`sample_queue`])
+//! a precomputed command queue ([`CommandQueue`]) and the memory it may take
+//! ([`QUEUE_BUDGET_BYTES`])
 //! and why a path cannot be built ([`TrajBuildError`], [`SplineError`]).
 
 use crate::knots::KnotFileError;
 use qmarc_config::Settings;
-use qmarc_controller::traj::{Sample, TrajStartError};
+use qmarc_controller::traj::{Sample, TrajStartError, bounds_of};
 use qmarc_proto::MAX_MOTORS;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -22,6 +23,66 @@ pub fn sample_queue(queue: &[[f64; MAX_MOTORS]], n: u64, cmd: &mut [f64; MAX_MOT
             Sample::Ready
         }
         None => Sample::Done,
+    }
+}
+
+/// A command queue computed before the move — the spline's, a jog's, a line's: one command a
+/// sample, then the velocity the path ends with. A generator that follows one answers the
+/// loop's questions from it: nothing while it is empty (not planned yet).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CommandQueue {
+    commands: Vec<[f64; MAX_MOTORS]>,
+    end_velocity: [f64; MAX_MOTORS],
+}
+
+impl CommandQueue {
+    /// `commands`, at rest after the last.
+    pub fn at_rest(commands: Vec<[f64; MAX_MOTORS]>) -> CommandQueue {
+        CommandQueue { commands, end_velocity: [0.0; MAX_MOTORS] }
+    }
+
+    /// `commands`, moving at `end_velocity` (counts/s) after the last.
+    pub fn ending_with(
+        commands: Vec<[f64; MAX_MOTORS]>,
+        end_velocity: [f64; MAX_MOTORS],
+    ) -> CommandQueue {
+        CommandQueue { commands, end_velocity }
+    }
+
+    /// The commands, one a sample.
+    pub fn commands(&self) -> &[[f64; MAX_MOTORS]] {
+        &self.commands
+    }
+
+    /// Its commands, given up.
+    pub fn into_commands(self) -> Vec<[f64; MAX_MOTORS]> {
+        self.commands
+    }
+
+    /// Nothing planned yet.
+    pub fn is_empty(&self) -> bool {
+        self.commands.is_empty()
+    }
+
+    /// [`TrajectoryGenerator::samples`](qmarc_controller::traj::TrajectoryGenerator::samples).
+    pub fn samples(&self) -> Option<u64> {
+        (!self.is_empty()).then_some(self.commands.len() as u64)
+    }
+
+    /// [`TrajectoryGenerator::path_bounds`](qmarc_controller::traj::TrajectoryGenerator::path_bounds).
+    pub fn bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
+        (!self.is_empty()).then(|| bounds_of(&self.commands))
+    }
+
+    /// [`TrajectoryGenerator::end_velocity`](qmarc_controller::traj::TrajectoryGenerator::end_velocity).
+    pub fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        (!self.is_empty()).then_some(self.end_velocity)
+    }
+
+    /// Sample `n`: its command into `cmd`, or [`Sample::Done`] past the end.
+    #[inline]
+    pub fn sample(&self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+        sample_queue(&self.commands, n, cmd)
     }
 }
 

@@ -11,9 +11,9 @@ use crate::knots::{
     KnotFileError, KnotRules, MAX_KNOT_FILE_BYTES, OfflineKnots, parse_offline, read_knot_file,
     text_of,
 };
-use crate::source::{KnotSource, QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
+use crate::source::{CommandQueue, KnotSource, QUEUE_BUDGET_BYTES, TrajBuildError};
 use qmarc_config::Settings;
-use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of, check_start};
+use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, check_start};
 use qmarc_proto::MAX_MOTORS;
 use std::io::Read;
 
@@ -172,9 +172,8 @@ pub struct CubicSpline {
     stream_wait: std::time::Duration,
     period_s: f64,
     start_tolerance: f64,
-    queue: Vec<[f64; MAX_MOTORS]>,
-    /// Each motor's velocity at the last knot, counts/s.
-    end_velocity: [f64; MAX_MOTORS],
+    /// The samples, and each motor's velocity at the last knot, counts/s.
+    queue: CommandQueue,
 }
 
 impl CubicSpline {
@@ -192,8 +191,7 @@ impl CubicSpline {
             stream_wait: std::time::Duration::from_secs(10),
             period_s,
             start_tolerance,
-            queue: Vec::new(),
-            end_velocity: [0.0; MAX_MOTORS],
+            queue: CommandQueue::default(),
         };
         g.compute(knots)?;
         Ok(g)
@@ -210,8 +208,7 @@ impl CubicSpline {
             stream_wait: std::time::Duration::from_secs_f64(s.trajectory.stream_wait_s),
             period_s: s.period_s(),
             start_tolerance: s.trajectory.start_tolerance_counts,
-            queue: Vec::new(),
-            end_velocity: [0.0; MAX_MOTORS],
+            queue: CommandQueue::default(),
         };
         if let KnotSource::File(path) = &source {
             let text = read_knot_file(path)?;
@@ -239,18 +236,20 @@ impl CubicSpline {
                 .push(NaturalSpline::new(knots.times.clone(), y).map_err(TrajBuildError::Spline)?);
         }
         self.check_dynamics(knots, &splines)?;
-        self.queue = Vec::with_capacity(samples as usize);
+        let mut queue = Vec::with_capacity(samples as usize);
         for n in 0..samples {
             let t = t0 + n as f64 * self.period_s;
             let mut cmd = [0.0; MAX_MOTORS];
             for (c, s) in cmd.iter_mut().zip(&mut splines) {
                 *c = s.position(t);
             }
-            self.queue.push(cmd);
+            queue.push(cmd);
         }
-        for (v, s) in self.end_velocity.iter_mut().zip(&mut splines) {
+        let mut end_velocity = [0.0; MAX_MOTORS];
+        for (v, s) in end_velocity.iter_mut().zip(&mut splines) {
             *v = s.velocity(t_end);
         }
+        self.queue = CommandQueue::ending_with(queue, end_velocity);
         Ok(())
     }
 
@@ -317,7 +316,7 @@ impl CubicSpline {
 
     /// The command queue.
     pub fn queue(&self) -> &[[f64; MAX_MOTORS]] {
-        &self.queue
+        self.queue.commands()
     }
 }
 
@@ -330,7 +329,7 @@ impl TrajectoryGenerator for CubicSpline {
         if self.queue.is_empty() {
             self.read_stream()?;
         }
-        check_start(start, &self.queue[0], self.n_motors, self.start_tolerance)
+        check_start(start, &self.queue.commands()[0], self.n_motors, self.start_tolerance)
     }
 
     /// The first knot (a stream's whole file is read for it).
@@ -338,24 +337,24 @@ impl TrajectoryGenerator for CubicSpline {
         if self.queue.is_empty() {
             self.read_stream()?;
         }
-        Ok(Some(self.queue[0]))
+        Ok(Some(self.queue.commands()[0]))
     }
 
     fn samples(&self) -> Option<u64> {
-        (!self.queue.is_empty()).then_some(self.queue.len() as u64)
+        self.queue.samples()
     }
 
     fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
-        (!self.queue.is_empty()).then(|| bounds_of(&self.queue))
+        self.queue.bounds()
     }
 
     fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
-        (!self.queue.is_empty()).then_some(self.end_velocity)
+        self.queue.end_velocity()
     }
 
     #[inline]
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
-        sample_queue(&self.queue, n, cmd)
+        self.queue.sample(n, cmd)
     }
 }
 

@@ -8,7 +8,7 @@ use qmarc_controller::fault::HostStall;
 use qmarc_controller::link::{HwLink, IoxLink, LinkTimeouts};
 use qmarc_controller::plan::{MoveLimits, MovePlan};
 use qmarc_controller::servo::{CycleEnd, Phase, Servo};
-use qmarc_hwserver::server::{ServeEnd, ServeOptions, serve};
+use qmarc_hwserver::server::{AnswerEnd, AnswerOptions, answer_requests};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
 use qmarc_plugins::registry::{GENERATORS, LAWS};
 use qmarc_proto::state::FaultKind;
@@ -32,7 +32,7 @@ fn all_generators() -> Vec<qmarc_plugins::registry::GeneratorEntry> {
     let approach = qmarc_plugins::registry::GeneratorEntry {
         name: "approach",
         description: "the way to the X-Z path's start, then the path",
-        needs_knots: true,
+        kind: qmarc_plugins::registry::GeneratorKind::KnotPath,
         build: |s| {
             let mut s = s.clone();
             s.trajectory.knots = Some(knots("xz-pick-place-spline.txt"));
@@ -188,13 +188,13 @@ fn over_iceoryx2_each_cycle_allocates_only_the_two_request_loans() {
     let server_location = location.clone();
     let server = std::thread::spawn(move || {
         let mut core = HwCore::new(Box::new(SimDeltabot::new(lockstep()).unwrap()));
-        let opts = ServeOptions {
+        let opts = AnswerOptions {
             watchdog_ns: 5_000_000_000,
             spin: false,
             lockstep: false,
             shutdown_grace_ns: 1_000_000_000,
         };
-        serve(&mut core, &server_location, &opts, &AtomicBool::new(false))
+        answer_requests(&mut core, &server_location, &opts, &AtomicBool::new(false))
     });
     // Deadlines far beyond any stall: a missed one would allocate (the liveness check).
     let timeouts =
@@ -216,7 +216,7 @@ fn over_iceoryx2_each_cycle_allocates_only_the_two_request_loans() {
     let during = allocations() - before;
     assert_eq!(during, 2 * cycles, "iceoryx2's loans only");
     link.exchange(&HwMsg::request(MsgType::Exit)).unwrap();
-    assert_eq!(server.join().unwrap().unwrap(), ServeEnd::Exit);
+    assert_eq!(server.join().unwrap().unwrap(), AnswerEnd::Exit);
     drop(link);
 }
 

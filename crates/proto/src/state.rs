@@ -42,13 +42,13 @@ impl Phase {
     ];
 
     /// Its number on the wire (telemetry, the progress page).
-    pub fn code(self) -> u32 {
+    pub fn wire(self) -> u32 {
         self as u32
     }
 
-    /// The phase of `code`, if one has it.
-    pub fn from_code(code: u32) -> Option<Phase> {
-        Phase::ALL.into_iter().find(|p| p.code() == code)
+    /// The phase of wire number `wire`, if one has it.
+    pub fn from_wire(wire: u32) -> Option<Phase> {
+        Phase::ALL.into_iter().find(|p| p.wire() == wire)
     }
 
     /// What it is called in messages.
@@ -146,24 +146,25 @@ impl FaultKind {
         FaultKind::TooMuchTravel,
     ];
 
-    /// Its number.
-    pub fn code(self) -> u32 {
+    /// Its number among [`FaultKind::ALL`].
+    fn number(self) -> u32 {
         self as u32
     }
 
-    /// The kind of `code`, if one has it.
-    pub fn from_code(code: u32) -> Option<FaultKind> {
-        FaultKind::ALL.into_iter().find(|k| k.code() == code)
+    /// The kind of number `n` among [`FaultKind::ALL`], if one has it.
+    fn of_number(n: u32) -> Option<FaultKind> {
+        FaultKind::ALL.into_iter().find(|k| k.number() == n)
     }
 
-    /// A telemetry sample's `fault`: the code + 1, 0 for no fault.
+    /// A fault or none on the wire (a telemetry sample's, a command's answer's, the
+    /// progress page's `fault`): its number + 1, 0 for no fault.
     pub fn wire(fault: Option<FaultKind>) -> u32 {
-        fault.map_or(0, |k| k.code() + 1)
+        fault.map_or(0, |k| k.number() + 1)
     }
 
-    /// The fault a telemetry sample's `fault` names (None for 0 and for unknown numbers).
+    /// The fault wire number `wire` names (None for 0 and for unknown numbers).
     pub fn from_wire(wire: u32) -> Option<FaultKind> {
-        wire.checked_sub(1).and_then(FaultKind::from_code)
+        wire.checked_sub(1).and_then(FaultKind::of_number)
     }
 
     /// The `kind` string of `summary.json`.
@@ -206,19 +207,19 @@ mod tests {
     /// mean, so it must be a new version of the sample, not an edit.
     #[test]
     fn the_wire_numbers_are_those_of_v1() {
-        let phases: Vec<u32> = Phase::ALL.iter().map(|p| p.code()).collect();
+        let phases: Vec<u32> = Phase::ALL.iter().map(|p| p.wire()).collect();
         assert_eq!(phases, (0..8).collect::<Vec<_>>());
-        assert_eq!((Phase::Done.code(), Phase::Fault.code()), (6, 7));
-        let kinds: Vec<u32> = FaultKind::ALL.iter().map(|k| k.code()).collect();
+        assert_eq!((Phase::Done.wire(), Phase::Fault.wire()), (6, 7));
+        let kinds: Vec<u32> = FaultKind::ALL.iter().map(|k| k.number()).collect();
         assert_eq!(kinds, (0..19).collect::<Vec<_>>());
         assert_eq!(FaultKind::wire(Some(FaultKind::FollowingError)), 11);
         assert_eq!(FaultKind::wire(None), 0);
         assert_eq!(FaultKind::from_wire(0), None);
         assert_eq!(FaultKind::from_wire(14), Some(FaultKind::HomingFailed));
         assert_eq!(FaultKind::from_wire(20), None);
-        assert_eq!(Phase::from_code(8), None);
+        assert_eq!(Phase::from_wire(8), None);
         for p in Phase::ALL {
-            assert_eq!(Phase::from_code(p.code()), Some(p));
+            assert_eq!(Phase::from_wire(p.wire()), Some(p));
         }
     }
 
@@ -241,11 +242,11 @@ mod tests {
     #[test]
     fn codes_map_both_ways_one_per_kind() {
         for (i, &kind) in FaultKind::ALL.iter().enumerate() {
-            assert_eq!(kind.code(), i as u32, "{kind}");
-            assert_eq!(FaultKind::from_code(kind.code()), Some(kind));
+            assert_eq!(kind.number(), i as u32, "{kind}");
+            assert_eq!(FaultKind::of_number(kind.number()), Some(kind));
         }
-        assert_eq!(FaultKind::from_code(FaultKind::ALL.len() as u32), None);
-        assert_eq!(FaultKind::from_code(u32::MAX), None);
+        assert_eq!(FaultKind::of_number(FaultKind::ALL.len() as u32), None);
+        assert_eq!(FaultKind::of_number(u32::MAX), None);
         let names: std::collections::BTreeSet<&str> =
             FaultKind::ALL.iter().map(|k| k.name()).collect();
         assert_eq!(names.len(), FaultKind::ALL.len(), "two kinds share a name");

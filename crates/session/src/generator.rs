@@ -112,8 +112,8 @@ pub enum NotTaken {
 }
 
 impl NotTaken {
-    /// Its number in [`ServeShared::not_taken_why`].
-    pub fn code(self) -> u32 {
+    /// Its number on the wire ([`ServeShared::not_taken_why`], a command's answer).
+    pub fn wire(self) -> u32 {
         match self {
             NotTaken::NoProfile => 1,
             NotTaken::SoftLimits(m) => 2 | m << 8,
@@ -121,11 +121,11 @@ impl NotTaken {
         }
     }
 
-    /// The reason of number `code`, if it is one.
-    pub fn from_code(code: u32) -> Option<NotTaken> {
-        match code & 0xff {
+    /// The reason of wire number `wire`, if it is one.
+    pub fn from_wire(wire: u32) -> Option<NotTaken> {
+        match wire & 0xff {
             1 => Some(NotTaken::NoProfile),
-            2 => Some(NotTaken::SoftLimits(code >> 8)),
+            2 => Some(NotTaken::SoftLimits(wire >> 8)),
             3 => Some(NotTaken::NotFromRest),
             _ => None,
         }
@@ -319,7 +319,7 @@ impl ServeMove {
                                 // A reason the plug-ins add later: no profile the loop took.
                                 _ => NotTaken::NoProfile,
                             };
-                            self.shared.not_taken_why.store(why.code(), Ordering::Release);
+                            self.shared.not_taken_why.store(why.wire(), Ordering::Release);
                             self.shared.not_taken.store(id, Ordering::Release);
                             if line {
                                 let _ = self.online.stop(&limits);
@@ -345,7 +345,7 @@ impl ServeMove {
                         (0..self.n_motors).any(|m| (q[m] - now.p[m]).abs() > LINE_START_COUNTS)
                     });
                     if off || self.online.moving() {
-                        let why = NotTaken::NotFromRest.code();
+                        let why = NotTaken::NotFromRest.wire();
                         self.shared.not_taken_why.store(why, Ordering::Release);
                         self.shared.not_taken.store(id, Ordering::Release);
                         let _ = self.spent.push(queue);

@@ -388,7 +388,7 @@ impl Commands {
         }
         // The last order not taken, and why (`qmarc cmd wait` says it).
         if r.not_taken >= r.accepted && r.accepted > 0 {
-            let why = NotTaken::from_code(shared.not_taken_why.load(Ordering::Acquire));
+            let why = NotTaken::from_wire(shared.not_taken_why.load(Ordering::Acquire));
             r.set_reason(
                 &why.map_or_else(|| "the loop did not take it".to_string(), NotTaken::words),
             );

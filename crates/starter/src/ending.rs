@@ -134,7 +134,7 @@ impl Ended {
     /// Whether the move had begun (it got past preparing) when the run ended.
     pub fn began(&self) -> bool {
         self.reached
-            .and_then(|r| Phase::from_code(r.phase))
+            .and_then(|r| Phase::from_wire(r.phase))
             .is_some_and(|p| !matches!(p, Phase::Idle | Phase::Preparing))
     }
 }

@@ -56,7 +56,7 @@ pub(crate) fn controller_lost_message(
         Some(r) if r.phase > 0 => format!(
             " at cycle {} while {}",
             r.cycle,
-            qmarc_proto::state::Phase::from_code(r.phase).map_or("?", |p| p.name())
+            qmarc_proto::state::Phase::from_wire(r.phase).map_or("?", |p| p.name())
         ),
         _ => " before the move began".to_string(),
     };

@@ -329,7 +329,7 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
     // A serving session says, once its loop serves, where it is and how to command it.
     let mut announce = (p.spec.mode == Mode::Serve).then(|| serving_words(p));
     supervise::wait_all(&mut children, stop, limit, said, || {
-        let serving = progress.as_ref().is_some_and(|pg| pg.read().phase == Phase::Moving.code());
+        let serving = progress.as_ref().is_some_and(|pg| pg.read().phase == Phase::Moving.wire());
         if serving && let Some(words) = announce.take() {
             status.borrow_mut().clear();
             say!("{words}");

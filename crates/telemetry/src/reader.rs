@@ -68,7 +68,7 @@ pub enum End {
 
 /// Whether `s` is a move's last sample: its phase is done or fault.
 pub fn is_last(s: &TelemetrySample) -> bool {
-    matches!(Phase::from_code(s.phase), Some(Phase::Done | Phase::Fault))
+    matches!(Phase::from_wire(s.phase), Some(Phase::Done | Phase::Fault))
 }
 
 impl TelemetryReader {
@@ -228,7 +228,7 @@ mod tests {
     use crate::relay::TelemetryPublisher;
 
     fn sample(seq: u64, phase: Phase) -> TelemetrySample {
-        TelemetrySample { seq, phase: phase.code(), ..TelemetrySample::default() }
+        TelemetrySample { seq, phase: phase.wire(), ..TelemetrySample::default() }
     }
 
     /// A publisher that sends its last samples and goes between the reader's receiving and

@@ -219,7 +219,7 @@ fn ended(s: &TelemetrySample) -> String {
 
 /// The phase's name in a sample.
 fn phase_name(code: u32) -> &'static str {
-    Phase::from_code(code).map_or("?", Phase::name)
+    Phase::from_wire(code).map_or("?", Phase::name)
 }
 
 impl Sink {

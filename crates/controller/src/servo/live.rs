@@ -42,7 +42,7 @@ impl Servo {
             wake_latency_ns: ns(tick.latency_ns()),
             output_latency_ns: ns(written_ns.saturating_sub(tick.intended_ns)),
             period_ns,
-            phase: self.phase.code(),
+            phase: self.phase.wire(),
             status,
             fault: FaultKind::wire(self.fault.map(|f| f.kind)),
             n_motors: self.plan.n_motors as u32,

@@ -14,7 +14,7 @@
 //! `--device fake` drives [`qmarc_comedi::fake::FakeS626`] in process: the same lists against
 //! a fake of the driver with a velocity-mode plant, to try the backend without a card.
 
-use crate::backend::{Backend, BackendOpenError, HwFault, Inputs, Outputs};
+use crate::backend::{Backend, BackendOpenError, FrameNotKept, HwFault, HwOp, Inputs, Outputs};
 use crate::backends::state::{load_homed, save_homed};
 use qmarc_comedi::list::{Insn, InsnList};
 use qmarc_comedi::s626::{
@@ -115,7 +115,7 @@ pub struct S626 {
 }
 
 /// What an ioctl error or a short list becomes: a [`HwFault`] of operation `op`.
-fn ran(result: Result<usize, nix::errno::Errno>, len: usize, op: u8) -> Result<(), HwFault> {
+fn ran(result: Result<usize, nix::errno::Errno>, len: usize, op: HwOp) -> Result<(), HwFault> {
     match result {
         Ok(n) if n == len => Ok(()),
         Ok(n) => Err(HwFault { op, code: -(n as i32) - 1 }),
@@ -372,7 +372,7 @@ impl Backend for S626 {
 
     fn read_inputs(&mut self, inputs: &mut Inputs) -> Result<(), HwFault> {
         let n = self.w.n_motors;
-        let done = ran(self.transport.run(&mut self.read), n + 1, 1);
+        let done = ran(self.transport.run(&mut self.read), n + 1, HwOp::ReadInputs);
         self.read_ok = done.is_ok();
         done?;
         for m in 0..n {
@@ -408,7 +408,7 @@ impl Backend for S626 {
             bits |= (self.pump_level & u32::from(self.pump_running)) << pump;
         }
         self.write.data_mut(n).copy_from_slice(&[mask, bits]);
-        let done = ran(self.transport.run(&mut self.write), n + 1, 2);
+        let done = ran(self.transport.run(&mut self.write), n + 1, HwOp::WriteDacs);
         self.write_ok = done.is_ok();
         done?;
         self.dac[..n].copy_from_slice(&codes[..n]);
@@ -418,7 +418,7 @@ impl Backend for S626 {
     fn set_amp_enable(&mut self, motor: usize, on: bool) -> Result<(), HwFault> {
         if on && !(self.read_ok && self.write_ok) {
             // Never power a motor before the card has answered a read and a write.
-            return Err(HwFault { op: 3, code: nix::errno::Errno::EAGAIN as i32 });
+            return Err(HwFault { op: HwOp::Enable, code: nix::errno::Errno::EAGAIN as i32 });
         }
         self.enabled[motor] = on;
         let mask = self.w.enable_mask();
@@ -428,14 +428,14 @@ impl Backend for S626 {
         if result != Ok(1) {
             self.enabled[motor] = false;
         }
-        ran(result, 1, 3)
+        ran(result, 1, HwOp::Enable)
     }
 
     fn load_counter(&mut self, motor: usize, raw: u32) -> Result<(), HwFault> {
         let sample = self.oriented(motor, raw & COUNTER_MASK);
         let preset = &mut self.presets[motor];
         preset.data_mut(0)[0] = sample;
-        ran(self.transport.run(preset), 1, 4)
+        ran(self.transport.run(preset), 1, HwOp::LoadCounter)
     }
 
     fn free_outputs(&self) -> u32 {
@@ -447,7 +447,7 @@ impl Backend for S626 {
     fn write_outputs(&mut self, mask: u32, values: u32) -> Result<(), HwFault> {
         let mask = mask & self.w.free;
         self.outputs.data_mut(0).copy_from_slice(&[mask, values & mask]);
-        ran(self.transport.run(&mut self.outputs), 1, 5)
+        ran(self.transport.run(&mut self.outputs), 1, HwOp::WriteOutputs)
     }
 
     fn safe_state(&mut self) {
@@ -483,19 +483,19 @@ impl Backend for S626 {
         self.homed[motor]
     }
 
-    fn set_homed(&mut self, motor: usize) -> Result<(), String> {
+    fn set_homed(&mut self, motor: usize) -> Result<(), FrameNotKept> {
         self.homed[motor] = true;
         if let Some(path) = &self.state_file
             && let Err(e) = save_homed(path, &self.homed[..self.w.n_motors], &self.identity)
         {
             // Rare (the starter checked the folder): a failed home, not a hidden one.
             self.homed[motor] = false;
-            return Err(format!(
-                "cannot keep the homed frame in {}: {e}: the next run would find motor {} \
-                 unhomed (s626.state_dir)",
-                path.display(),
-                motor + 1
-            ));
+            return Err(FrameNotKept {
+                motor: motor + 1,
+                path: path.clone(),
+                key: "s626.state_dir",
+                reason: e.to_string(),
+            });
         }
         Ok(())
     }

@@ -12,7 +12,7 @@
 //! lock-step (every read of the inputs advances it by exactly one servo period, so two runs
 //! with the same requests give identical data).
 
-use crate::backend::{Backend, BackendOpenError, HwFault, Inputs, Outputs};
+use crate::backend::{Backend, BackendOpenError, FrameNotKept, HwFault, Inputs, Outputs};
 use qmarc_config::{Settings, SimPlant};
 use qmarc_proto::{COUNTER_MASK, COUNTER_ZERO, DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, Status};
 use qmarc_timer::clock::monotonic_now_ns;
@@ -504,13 +504,18 @@ impl Backend for SimDeltabot {
 
     /// Records the homed frame, in the state file too if there is one (a file write: this
     /// hook runs after homing, not in the servo loop).
-    fn set_homed(&mut self, motor: usize) -> Result<(), String> {
+    fn set_homed(&mut self, motor: usize) -> Result<(), FrameNotKept> {
         self.homed[motor] = true;
         let Some(path) = &self.state_file else { return Ok(()) };
         let n = self.p.n_motors;
         super::state::save_homed(path, &self.homed[..n], SIM_IDENTITY).map_err(|e| {
             self.homed[motor] = false;
-            format!("cannot keep the homed frame in {} (sim.state_file): {e}", path.display())
+            FrameNotKept {
+                motor: motor + 1,
+                path: path.clone(),
+                key: "sim.state_file",
+                reason: e.to_string(),
+            }
         })
     }
 

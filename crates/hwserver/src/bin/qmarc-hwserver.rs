@@ -14,7 +14,7 @@ use anyhow::Context;
 use clap::Parser;
 use qmarc_config::RunSpec;
 use qmarc_hwserver::HwCore;
-use qmarc_hwserver::server::{ServeEnd, ServeOptions, serve};
+use qmarc_hwserver::server::{AnswerEnd, AnswerOptions, answer_requests};
 use qmarc_proto::exit;
 use qmarc_proto::service::IpcLocation;
 use qmarc_timer::rt::{RtRequest, apply_to_current_thread};
@@ -95,7 +95,7 @@ fn run(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
         eprintln!("qmarc-hwserver: warning: {w}");
     }
     let mut core = HwCore::for_settings(backend, s);
-    let opts = ServeOptions {
+    let opts = AnswerOptions {
         watchdog_ns: u64::from(s.hwserver.watchdog_periods) * s.period_ns(),
         spin: args.spin || s.hwserver.wait == qmarc_config::HwWait::Spin,
         shutdown_grace_ns: 1_000_000_000,
@@ -114,21 +114,21 @@ fn run(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
             period / 1000
         );
     }
-    let end = serve(&mut core, &location, &opts, stop);
+    let end = answer_requests(&mut core, &location, &opts, stop);
     core.finish().context("the backend's files").map_err(internal)?;
     let end = match end {
         Err(_) if qmarc_timer::stop::count() > 0 => return Ok(stopped_as_it_started()),
         end => end.map_err(|e| internal(e.into()))?,
     };
     Ok(match end {
-        ServeEnd::Exit => ExitCode::SUCCESS,
-        ServeEnd::Stopped => {
+        AnswerEnd::Exit => ExitCode::SUCCESS,
+        AnswerEnd::Stopped => {
             let sig =
                 qmarc_timer::stop::signal().map_or("a stop signal", qmarc_timer::stop::signal_name);
             eprintln!("qmarc-hwserver: stopped by {sig}: all motors disabled");
             ExitCode::SUCCESS
         }
-        ServeEnd::Watchdog { silent_ns, controller_alive } => {
+        AnswerEnd::Watchdog { silent_ns, controller_alive } => {
             eprintln!(
                 "qmarc-hwserver: watchdog: controller silent for {:.3} ms (limit {} periods of {} µs; \
                  its process {}) with motors enabled: all DACs zeroed, all motors disabled{}",

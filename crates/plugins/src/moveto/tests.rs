@@ -131,7 +131,7 @@ fn jog_of(counts: f64) -> Jog {
         speed: 0.1,
         unhomed_speed: 0.025,
         homed: false,
-        queue: Vec::new(),
+        queue: CommandQueue::default(),
         top_direction: [-1.0; MAX_MOTORS],
         resting: [MotorFlags::default(); MAX_MOTORS],
         observed: false,
@@ -151,8 +151,8 @@ fn jog_moves_one_motor_slower_where_unhomed() {
     };
     let (homed, unhomed) = (jog(true), jog(false));
     for j in [&homed, &unhomed] {
-        assert_eq!(*j.queue.last().unwrap(), [10.0, -380.0, 30.0, 0.0]);
-        assert!(j.queue.iter().all(|c| c[0] == 10.0 && c[2] == 30.0));
+        assert_eq!(*j.queue.commands().last().unwrap(), [10.0, -380.0, 30.0, 0.0]);
+        assert!(j.queue.commands().iter().all(|c| c[0] == 10.0 && c[2] == 30.0));
         assert_eq!(j.end_velocity(), Some([0.0; MAX_MOTORS]));
     }
     assert!(unhomed.samples().unwrap() > 2 * homed.samples().unwrap());

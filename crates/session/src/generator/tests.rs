@@ -128,7 +128,7 @@ fn a_line_is_followed_then_its_queue_handed_back_to_be_freed() {
     assert!(h.orders.push(Order::Line { id: 2, queue: queue.clone() }).is_ok());
     run(&mut g, 400..401, &mut cmds);
     assert_eq!((load(&h.shared.not_taken), cmds[400]), (2, end));
-    let why = NotTaken::from_code(h.shared.not_taken_why.load(Ordering::Acquire));
+    let why = NotTaken::from_wire(h.shared.not_taken_why.load(Ordering::Acquire));
     assert_eq!(why, Some(NotTaken::NotFromRest));
     assert!(h.spent.pop().is_ok(), "handed back");
     // A target while a line runs takes over from the line's state: a line at the limits
@@ -167,7 +167,7 @@ fn a_profile_that_would_leave_the_soft_limits_is_not_taken() {
     run(&mut g, 80..3_000, &mut cmds);
     assert_eq!(load(&h.shared.not_taken), 2);
     // Said truly (issue 42: `wait` blamed the soft limits for any order not taken).
-    let why = NotTaken::from_code(h.shared.not_taken_why.load(Ordering::Acquire));
+    let why = NotTaken::from_wire(h.shared.not_taken_why.load(Ordering::Acquire));
     assert_eq!(why, Some(NotTaken::SoftLimits(1)));
     assert_eq!(*cmds.last().unwrap(), target);
     assert!(cmds.iter().all(|c| c[0] <= 10_000.0));
@@ -183,7 +183,7 @@ fn a_move_with_no_profile_is_not_taken_and_said_so() {
     assert!(h.orders.push(Order::Move { id: 1, target, limits: vanishing }).is_ok());
     run(&mut g, 0..10, &mut cmds);
     assert_eq!(load(&h.shared.not_taken), 1);
-    let why = NotTaken::from_code(h.shared.not_taken_why.load(Ordering::Acquire));
+    let why = NotTaken::from_wire(h.shared.not_taken_why.load(Ordering::Acquire));
     assert_eq!(why, Some(NotTaken::NoProfile));
     assert!(why.unwrap().words().contains("no jerk-limited profile"));
     assert!(cmds.iter().all(|c| *c == [0.0; MAX_MOTORS]), "held where it was");

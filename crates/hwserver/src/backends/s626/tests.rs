@@ -406,9 +406,10 @@ fn the_homed_frame_is_kept_for_that_card_only() {
     // is a failed home, saying where: not homed, and the caller told.
     let blocked = card_settings(&device, &dir.join("comedi7"), "");
     let mut blocked_card = open(&blocked);
-    let e = blocked_card.set_homed(0).unwrap_err();
+    let e = blocked_card.set_homed(0).unwrap_err().to_string();
     assert!(e.starts_with("cannot keep the homed frame in "), "{e}");
-    assert!(e.ends_with("the next run would find motor 1 unhomed (s626.state_dir)"), "{e}");
+    assert!(e.contains(" (s626.state_dir): "), "{e}");
+    assert!(e.ends_with("the next run would find motor 1 unhomed"), "{e}");
     assert_eq!(homed(&blocked_card), [false; 3]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -486,11 +487,14 @@ fn fault_injection_is_the_fake_cards_only() {
 /// (−(instructions run) − 1), an errno is itself; the operation is named.
 #[test]
 fn a_short_list_or_an_errno_is_a_fault_of_that_operation() {
-    assert_eq!(ran(Ok(4), 4, 2), Ok(()));
-    assert_eq!(ran(Ok(2), 4, 2), Err(HwFault { op: 2, code: -3 }));
-    assert_eq!(ran(Ok(0), 1, 4), Err(HwFault { op: 4, code: -1 }));
+    assert_eq!(ran(Ok(4), 4, HwOp::WriteDacs), Ok(()));
+    assert_eq!(ran(Ok(2), 4, HwOp::WriteDacs), Err(HwFault { op: HwOp::WriteDacs, code: -3 }));
+    assert_eq!(ran(Ok(0), 1, HwOp::LoadCounter), Err(HwFault { op: HwOp::LoadCounter, code: -1 }));
     let eio = nix::errno::Errno::EIO;
-    assert_eq!(ran(Err(eio), 4, 1), Err(HwFault { op: 1, code: eio as i32 }));
+    assert_eq!(
+        ran(Err(eio), 4, HwOp::ReadInputs),
+        Err(HwFault { op: HwOp::ReadInputs, code: eio as i32 })
+    );
 }
 
 /// Issue 32: the backend's clock is the monotonic clock, in nanoseconds.
