@@ -273,14 +273,14 @@ fn targets(a: &BridgeArgs, b: &Bridged, client: &mut CommandClient) -> anyhow::R
     let publisher =
         a.client(&b.endpoint, &args).stdout(Stdio::piped()).stderr(Stdio::null()).spawn()?;
     let mut taken = Vec::new();
-    let start = client.send(CommandRequest::of(CommandKind::Status))?.accepted;
+    let start = client.send(CommandRequest::of(CommandKind::Status))?.orders.accepted;
     let mut last = start;
     let deadline = Instant::now() + Duration::from_secs_f64(f64::from(a.targets) * 0.1 + 30.0);
     while taken.len() < a.targets as usize && Instant::now() < deadline {
         let s = client.send(CommandRequest::of(CommandKind::Status))?;
-        if s.accepted > last && s.taken >= s.accepted {
-            taken.push(s.taken_ns);
-            last = s.accepted;
+        if s.orders.accepted > last && s.orders.taken >= s.orders.accepted {
+            taken.push(s.timing.taken_ns);
+            last = s.orders.accepted;
         }
         std::thread::sleep(Duration::from_micros(200));
     }

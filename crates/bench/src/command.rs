@@ -89,18 +89,18 @@ fn measure(
         let c = if k % 2 == 0 { 2_000.0 } else { -2_000.0 };
         let sent = qmarc_timer::clock::monotonic_now_ns();
         let r = client.send(CommandRequest::move_to(&[c, -c, c / 2.0], 1.0))?;
-        anyhow::ensure!(r.ok == 1, "move refused: {}", r.reason());
-        let id = r.accepted;
+        anyhow::ensure!(r.answer.ok == 1, "move refused: {}", r.reason());
+        let id = r.orders.accepted;
         let (taken_ns, taken_cycle) = loop {
             let s = client.send(CommandRequest::of(CommandKind::Status))?;
-            if s.taken >= id {
-                break (s.taken_ns, s.taken_cycle);
+            if s.orders.taken >= id {
+                break (s.timing.taken_ns, s.timing.taken_cycle);
             }
             anyhow::ensure!(started.elapsed() < Duration::from_secs(600), "the loop took nothing");
         };
-        to_read.push(r.received_ns.saturating_sub(sent));
-        to_taken.push(taken_ns.saturating_sub(r.received_ns));
-        cycles.push(taken_cycle.saturating_sub(r.received_cycle));
+        to_read.push(r.timing.received_ns.saturating_sub(sent));
+        to_taken.push(taken_ns.saturating_sub(r.timing.received_ns));
+        cycles.push(taken_cycle.saturating_sub(r.timing.received_cycle));
         std::thread::sleep(Duration::from_millis(15));
     }
     Ok(Measured { to_read, to_taken, cycles, period_ns })

@@ -154,14 +154,14 @@ impl Cell<'_> {
             return self.settle();
         }
         self.poll(|s| {
-            let d = (0..3).map(|i| (s.effector_mm[i] - p[i]).powi(2)).sum::<f64>().sqrt();
-            s.taken >= s.accepted && d <= blend
+            let d = (0..3).map(|i| (s.robot.effector_mm[i] - p[i]).powi(2)).sum::<f64>().sqrt();
+            s.orders.taken >= s.orders.accepted && d <= blend
         })
     }
 
     /// Until the last command accepted has settled (at rest, the gripper there).
     fn settle(&mut self) -> anyhow::Result<()> {
-        self.poll(|s| OrderLedger::of(s).fate(s.accepted) == Fate::Settled)
+        self.poll(|s| OrderLedger::of(s).fate(s.orders.accepted) == Fate::Settled)
     }
 
     /// Polls the status (every 200 µs, reading the telemetry in between) until `done`.
@@ -170,9 +170,9 @@ impl Cell<'_> {
         loop {
             self.drain()?;
             let s = self.send(CommandRequest::of(CommandKind::Status))?;
-            anyhow::ensure!(s.fault == 0, "the session faulted (fault {})", s.fault);
-            let not_taken = OrderLedger::of(&s).fate(s.accepted) == Fate::NotTaken;
-            anyhow::ensure!(!not_taken, "move {} was not taken", s.accepted);
+            anyhow::ensure!(s.robot.fault == 0, "the session faulted (fault {})", s.robot.fault);
+            let not_taken = OrderLedger::of(&s).fate(s.orders.accepted) == Fate::NotTaken;
+            anyhow::ensure!(!not_taken, "move {} was not taken", s.orders.accepted);
             if done(&s) {
                 return Ok(());
             }

@@ -49,7 +49,7 @@ impl Session {
             let status = CommandClient::connect(&self.location)
                 .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Status)).map(|s| (c, s)));
             match status {
-                Ok((c, s)) if s.phase == serving => return Ok(c),
+                Ok((c, s)) if s.robot.phase == serving => return Ok(c),
                 _ if started.elapsed() < Duration::from_secs(20) => {
                     std::thread::sleep(Duration::from_millis(20))
                 }

@@ -431,7 +431,7 @@ impl GoalTracker {
         // the path tolerance in every sample received — positions, and velocities over the
         // velocity window before it (a velocity over one sample is too coarse) once all of it
         // is the goal's — and feedback.
-        if seen.last.is_some() && status.taken >= run.path {
+        if seen.last.is_some() && status.orders.taken >= run.path {
             let (positions, velocities) = run.path_tolerance.split();
             let broken = seen.fresh.iter().filter(|(_, s)| s.cycle >= run.from_cycle).find_map(
                 |(first, s)| {
@@ -474,7 +474,7 @@ impl GoalTracker {
         // At rest at the end: within the goal tolerance, in goal_time_tolerance.
         let ended_at = *run.ended_at.get_or_insert(now);
         let since = now.saturating_duration_since(ended_at);
-        let at = Motion { position: status.actual, velocity: seen.motions.1.velocity };
+        let at = Motion { position: status.robot.actual, velocity: seen.motions.1.velocity };
         out.finished = match beyond(&run.goal_tolerance, &run.end, &at, n) {
             None => {
                 let done =

@@ -446,14 +446,14 @@ impl Bridge {
         let Ok(answer) = self.send_path(&goal.path, "follow_joint_trajectory") else {
             return false;
         };
-        self.goals.start(goal, answer.accepted, self.last.map_or(0, |s| s.cycle + 1));
+        self.goals.start(goal, answer.orders.accepted, self.last.map_or(0, |s| s.cycle + 1));
         true
     }
 
     /// Sends the stop the goal tracker asked for.
     fn stop_for(&mut self, stop: StopFor) {
         let sent = self.command(CommandRequest::of(CommandKind::Stop), "follow_joint_trajectory");
-        let finished = self.goals.stop_sent(stop, sent.ok().map(|a| a.accepted));
+        let finished = self.goals.stop_sent(stop, sent.ok().map(|a| a.orders.accepted));
         self.finished(finished);
     }
 
@@ -508,7 +508,7 @@ impl Bridge {
             self.status_at = Some(Instant::now());
             if let Ok(s) = self.client.send(CommandRequest::of(CommandKind::Status)) {
                 let all = (1u32 << self.opts.converter.n_motors) - 1;
-                self.homed = s.homed & all == all;
+                self.homed = s.robot.homed & all == all;
             }
         }
         let Some(last) = self.last else { return };

@@ -127,7 +127,9 @@ impl Cell {
             let c = CommandClient::connect(&location)
                 .and_then(|mut c| c.send(CommandRequest::of(CommandKind::Status)).map(|s| (c, s)));
             match c {
-                Ok((c, s)) if s.phase == qmarc_proto::state::Phase::Moving.wire() => return c,
+                Ok((c, s)) if s.robot.phase == qmarc_proto::state::Phase::Moving.wire() => {
+                    return c;
+                }
                 _ => assert!(started.elapsed() < Duration::from_secs(30), "no serving session"),
             }
             std::thread::sleep(Duration::from_millis(20));
@@ -209,7 +211,7 @@ fn wait_for_order_after(
     before: u64,
 ) -> qmarc_session::wire::CommandResponse {
     let started = Instant::now();
-    while client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted <= before {
+    while client.send(CommandRequest::of(CommandKind::Status)).unwrap().orders.accepted <= before {
         assert!(started.elapsed() < Duration::from_secs(30), "no order reached the controller");
         std::thread::sleep(Duration::from_millis(10));
     }
@@ -294,13 +296,13 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     assert!(r.iter().all(|c| c["success"] == true), "{r:?}");
     // A target the robot goes to.
     let mut client = cell.client();
-    let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted;
+    let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().orders.accepted;
     cell.lines(&["target", "0.02", "-0.01", "-0.64"]);
     let s = wait_for_order_after(&mut client, before);
-    let [x, y, z] = s.effector_mm;
+    let [x, y, z] = s.robot.effector_mm;
     assert!(close(x, 20.0, 1e-6) && close(y, -10.0, 1e-6) && close(z, -640.0, 1e-6), "{x} {y} {z}");
     // An unreachable one: the controller refuses it, the bridge says why.
-    let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted;
+    let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().orders.accepted;
     cell.lines(&["target", "0", "0", "-0.2"]);
     cell.diagnostics_until(|d| d["values"]["refused"].as_str().unwrap().contains("unreachable"));
     // Issue 42: a coordinate typed as a negative number is one (not an option), and an
@@ -315,11 +317,11 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     cell.log_says("qmarc/target: not taken: not a geometry_msgs/msg/PointStamped");
     cell.log_says("more than the 1048576 taken");
     let after = client.send(CommandRequest::of(CommandKind::Status)).unwrap();
-    assert_eq!(after.accepted, before, "nothing reached the controller");
+    assert_eq!(after.orders.accepted, before, "nothing reached the controller");
 
     // kill -9 of the bridge mid-move: the move goes on to its end.
     let r = client.send(CommandRequest::move_xyz([-30.0, 20.0, -650.0], false, 0.2)).unwrap();
-    assert_eq!(r.ok, 1);
+    assert_eq!(r.answer.ok, 1);
     let bridge = cell.bridge.as_mut().unwrap();
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(bridge.id() as i32),
@@ -328,8 +330,12 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
     .unwrap();
     bridge.wait().unwrap();
     let s = client.wait(Duration::from_secs(30)).unwrap();
-    assert_eq!((s.fault, s.settled, s.moving), (0, r.accepted, 0), "the move ended as sent");
-    let [x, y, z] = s.effector_mm;
+    assert_eq!(
+        (s.robot.fault, s.orders.settled, s.orders.moving),
+        (0, r.orders.accepted, 0),
+        "the move ended as sent"
+    );
+    let [x, y, z] = s.robot.effector_mm;
     assert!(close(x, -30.0, 1e-6) && close(y, 20.0, 1e-6) && close(z, -650.0, 1e-6));
     drop(client);
     assert!(cell.quit().success());
@@ -342,7 +348,7 @@ fn a_ros2_client_sees_and_commands_the_robot_through_the_bridge() {
 fn a_joint_trajectory_is_followed_through_its_knots() {
     let mut cell = Cell::start("traj", "/robot1");
     let mut client = cell.client();
-    let rest = client.send(CommandRequest::of(CommandKind::Status)).unwrap().command;
+    let rest = client.send(CommandRequest::of(CommandKind::Status)).unwrap().robot.command;
     let knots = joint_trajectories(&cell, &mut client, rest);
     drop(client);
     assert!(cell.quit().success());
@@ -370,18 +376,23 @@ fn joint_trajectories(cell: &Cell, client: &mut CommandClient, rest: [f64; 4]) -
             {"t": 0.6, "positions": [knots[1][1], knots[1][0], knots[1][2]]},
         ],
     });
-    let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted;
+    let before = client.send(CommandRequest::of(CommandKind::Status)).unwrap().orders.accepted;
     cell.lines(&["trajectory", &spec.to_string()]);
     let s = wait_for_order_after(client, before);
     assert_eq!(
-        (s.accepted, s.settled, s.fault),
+        (s.orders.accepted, s.orders.settled, s.robot.fault),
         (before + 1, before + 1, 0),
         "{}",
         cell.bridge_log()
     );
     let counts = knots.map(|k| k.map(|r| r * per_rad));
     for m in 0..3 {
-        assert!(close(s.command[m], counts[1][m], 1e-6), "{:?} {:?}", s.command, counts[1]);
+        assert!(
+            close(s.robot.command[m], counts[1][m], 1e-6),
+            "{:?} {:?}",
+            s.robot.command,
+            counts[1]
+        );
     }
     // Not motor1…motor3: not taken. Too fast for the motors: the controller says why.
     let wrong = serde_json::json!({"names": ["motor1", "motor2", "elbow"], "points": [{"t": 1.0, "positions": [0.0, 0.0, 0.0]}]});
@@ -392,7 +403,10 @@ fn joint_trajectories(cell: &Cell, client: &mut CommandClient, rest: [f64; 4]) -
     cell.diagnostics_until(|d| {
         d["values"]["refused"].as_str().unwrap().contains("max_velocity_counts_per_s")
     });
-    assert_eq!(client.send(CommandRequest::of(CommandKind::Status)).unwrap().accepted, before + 1);
+    assert_eq!(
+        client.send(CommandRequest::of(CommandKind::Status)).unwrap().orders.accepted,
+        before + 1
+    );
     counts.to_vec()
 }
 
@@ -414,7 +428,7 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
     let mut cell = Cell::start("fjt", "");
     let mut client = cell.client();
     let per_rad = settings().counts_per_rad();
-    let rest = client.send(CommandRequest::of(CommandKind::Status)).unwrap().command;
+    let rest = client.send(CommandRequest::of(CommandKind::Status)).unwrap().robot.command;
     let rad = |m: usize, by_counts: f64| (rest[m] + by_counts) / per_rad;
     let goal = |by: [f64; 3], t: f64, extra: serde_json::Value| {
         let mut spec = serde_json::json!({
@@ -440,7 +454,7 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
     assert_eq!(ok["joint_names"], serde_json::json!(["motor1", "motor2", "motor3"]));
     assert!(ok["max_error"].as_f64().unwrap() < 0.05, "{ok}");
     let s = client.wait(Duration::from_secs(30)).unwrap();
-    assert!(close(s.command[0], rest[0] + 400.0, 1e-6), "{:?}", s.command);
+    assert!(close(s.robot.command[0], rest[0] + 400.0, 1e-6), "{:?}", s.robot.command);
     // The gripper closed on the way is no other motion: the goal goes on to its end.
     let gripped = goal([800.0, -300.0, 200.0], 2.0, serde_json::json!({"grip_after": 0.3}));
     assert_eq!(
@@ -481,10 +495,13 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
     );
     client.wait(Duration::from_secs(30)).unwrap();
     let s = client.wait(Duration::from_secs(30)).unwrap();
-    assert_eq!((s.fault, s.moving), (0, 0));
-    assert!(s.accepted > 2 && s.settled == s.accepted, "the stop was the last order, done");
+    assert_eq!((s.robot.fault, s.orders.moving), (0, 0));
+    assert!(
+        s.orders.accepted > 2 && s.orders.settled == s.orders.accepted,
+        "the stop was the last order, done"
+    );
     // Half a count from the goal, which a motor at whole counts never is.
-    let rest = s.command;
+    let rest = s.robot.command;
     let rad = |m: usize, by_counts: f64| (rest[m] + by_counts) / per_rad;
     let spec = serde_json::json!({
         "names": ["motor1", "motor2", "motor3"],
@@ -514,7 +531,7 @@ fn the_follow_joint_trajectory_action_reports_tolerance_violations() {
         "{canceled}"
     );
     let s = client.wait(Duration::from_secs(30)).unwrap();
-    assert!(s.command[0] < rest[0] + 2900.0, "stopped short: {:?}", s.command);
+    assert!(s.robot.command[0] < rest[0] + 2900.0, "stopped short: {:?}", s.robot.command);
     let wrong = serde_json::json!({"names": ["motor1", "motor2", "wrist"], "points": [{"t": 1.0, "positions": [0.0, 0.0, 0.0]}]});
     let rejected = cell.lines(&["follow", &wrong.to_string()])[0].clone();
     assert_eq!(rejected["accepted"], false);
@@ -542,12 +559,16 @@ fn a_stopped_or_routerless_bridge_changes_nothing_in_a_move() {
     assert_eq!(js.len(), 3, "served with no router");
     let mut client = cell.client();
     let r = client.send(CommandRequest::move_xyz([25.0, 15.0, -655.0], false, 0.2)).unwrap();
-    assert_eq!(r.ok, 1, "{}", r.reason());
+    assert_eq!(r.answer.ok, 1, "{}", r.reason());
     let pid = nix::unistd::Pid::from_raw(cell.bridge.as_ref().unwrap().id() as i32);
     nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGSTOP).unwrap();
     let s = client.wait(Duration::from_secs(30)).unwrap();
-    assert_eq!((s.fault, s.settled, s.moving), (0, r.accepted, 0), "the move ended as sent");
-    let [x, y, z] = s.effector_mm;
+    assert_eq!(
+        (s.robot.fault, s.orders.settled, s.orders.moving),
+        (0, r.orders.accepted, 0),
+        "the move ended as sent"
+    );
+    let [x, y, z] = s.robot.effector_mm;
     assert!(close(x, 25.0, 1e-6) && close(y, 15.0, 1e-6) && close(z, -655.0, 1e-6));
     nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGCONT).unwrap();
     let fx = cell.lines(&["effector", "1"]);
@@ -673,9 +694,9 @@ fn serve_with_bridge_starts_it_and_outlives_its_death() {
     let location = IpcLocation::new(&prefix, DEFAULT_ROOT);
     let mut client = CommandClient::connect(&location).unwrap();
     let r = client.send(CommandRequest::move_to(&[500.0, -500.0, 250.0], 1.0)).unwrap();
-    assert_eq!(r.ok, 1, "still serving: {}", r.reason());
+    assert_eq!(r.answer.ok, 1, "still serving: {}", r.reason());
     let s = client.wait(Duration::from_secs(30)).unwrap();
-    assert_eq!((s.fault, s.command[..3].to_vec()), (0, vec![500.0, -500.0, 250.0]));
+    assert_eq!((s.robot.fault, s.robot.command[..3].to_vec()), (0, vec![500.0, -500.0, 250.0]));
     client.send(CommandRequest::of(CommandKind::Quit)).unwrap();
     drop(client);
     let end = session.wait_with_output().unwrap();
@@ -782,13 +803,16 @@ fn two_robots_are_seen_and_commanded_from_another_host_through_a_router() {
     let before = c1.send(CommandRequest::of(CommandKind::Status)).unwrap();
     remote("/robot2", &["target", "0.02", "-0.01", "-0.64"]);
     let s = c2.wait(Duration::from_secs(30)).unwrap();
-    assert!(close(s.effector_mm[0], 20.0, 1e-6) && close(s.effector_mm[2], -640.0, 1e-6), "{s:?}");
+    assert!(
+        close(s.robot.effector_mm[0], 20.0, 1e-6) && close(s.robot.effector_mm[2], -640.0, 1e-6),
+        "{s:?}"
+    );
     let r = remote("/robot1", &["gripper", "on"]);
     assert_eq!(r[0]["success"], true, "{r:?}");
     let after = c1.send(CommandRequest::of(CommandKind::Status)).unwrap();
     assert_eq!(
-        (after.command, after.accepted),
-        (before.command, before.accepted + 1),
+        (after.robot.command, after.orders.accepted),
+        (before.robot.command, before.orders.accepted + 1),
         "robot 1 gripped, unmoved"
     );
     drop((c1, c2));
@@ -902,7 +926,7 @@ fn a_second_bridge_of_one_node_name_is_refused_and_its_session_goes_on() {
     );
     let mut client = CommandClient::connect(&IpcLocation::new(&prefixes[1], DEFAULT_ROOT)).unwrap();
     let s = client.send(CommandRequest::of(CommandKind::Status)).unwrap();
-    assert_eq!(s.refusal, 0, "the second session serves: {}", s.reason());
+    assert_eq!(s.answer.refusal, 0, "the second session serves: {}", s.reason());
     drop(client);
     // Another namespace (forwarded by serve --bridge): a node of its own.
     let third =

@@ -141,27 +141,28 @@ fn path_request(
 
 /// The words of a status.
 fn describe(s: &CommandResponse, n: usize) -> String {
-    let phase = Phase::from_wire(s.phase).map_or("?", Phase::name_serving);
-    let fault = FaultKind::from_wire(s.fault).map_or(String::new(), |f| format!(", fault {f}"));
+    let phase = Phase::from_wire(s.robot.phase).map_or("?", Phase::name_serving);
+    let fault =
+        FaultKind::from_wire(s.robot.fault).map_or(String::new(), |f| format!(", fault {f}"));
     let counts = |v: &[f64]| v[..n].iter().map(|c| format!("{c:.1}")).collect::<Vec<_>>().join(" ");
     let mut out = format!(
         "{}; loop {phase}{fault}; moves accepted {}, settled {}\n  command {} cnt\n  actual  {} cnt",
-        if s.moving == 1 { "moving" } else { "at rest" },
-        s.accepted,
-        s.settled,
-        counts(&s.command),
-        counts(&s.actual),
+        if s.orders.moving == 1 { "moving" } else { "at rest" },
+        s.orders.accepted,
+        s.orders.settled,
+        counts(&s.robot.command),
+        counts(&s.robot.actual),
     );
-    if s.effector_mm.iter().all(|v| v.is_finite()) {
-        let [x, y, z] = s.effector_mm;
+    if s.robot.effector_mm.iter().all(|v| v.is_finite()) {
+        let [x, y, z] = s.robot.effector_mm;
         out.push_str(&format!("\n  effector {x:.2} {y:.2} {z:.2} mm"));
     }
-    let gripper = qmarc_proto::Gripper(s.gripper);
+    let gripper = qmarc_proto::Gripper(s.robot.gripper);
     if gripper.code() >= 0 {
         out.push_str(&format!("\n  gripper {}", gripper.name()));
     }
     let unhomed: Vec<String> =
-        (0..n).filter(|m| s.homed & (1 << m) == 0).map(|m| (m + 1).to_string()).collect();
+        (0..n).filter(|m| s.robot.homed & (1 << m) == 0).map(|m| (m + 1).to_string()).collect();
     if !unhomed.is_empty() {
         out.push_str(&format!("\n  not homed: motor {}", unhomed.join(", ")));
     }
@@ -258,15 +259,15 @@ fn run(session: &Session, out: Outgoing) -> anyhow::Result<u8> {
         Outgoing::Wait(timeout) => {
             let s = client.wait(Duration::from_secs_f64(timeout.max(0.0)))?;
             println!("{}", describe(&s, n));
-            if OrderLedger::of(&s).fate(s.accepted) == Fate::NotTaken {
+            if OrderLedger::of(&s).fate(s.orders.accepted) == Fate::NotTaken {
                 println!(
                     "move {} was not taken: {}; the robot went on as it was",
-                    s.accepted,
+                    s.orders.accepted,
                     s.reason()
                 );
                 return Ok(qmarc_proto::exit::REFUSED);
             }
-            Ok(if s.fault == 0 { 0 } else { qmarc_proto::exit::FAULT })
+            Ok(if s.robot.fault == 0 { 0 } else { qmarc_proto::exit::FAULT })
         }
     }
 }
@@ -280,7 +281,7 @@ fn said(answer: &CommandResponse, what: &str) -> u8 {
             0
         }
         None => {
-            println!("accepted ({what} {})", answer.accepted);
+            println!("accepted ({what} {})", answer.orders.accepted);
             0
         }
         Some(r) => {

@@ -111,7 +111,7 @@ impl CommandClient {
         let started = Instant::now();
         loop {
             let s = self.send(CommandRequest::of(CommandKind::Status))?;
-            if OrderLedger::of(&s).fate(s.accepted).is_final() {
+            if OrderLedger::of(&s).fate(s.orders.accepted).is_final() {
                 return Ok(s);
             }
             if started.elapsed() > timeout {
@@ -170,14 +170,15 @@ pub struct OrderLedger {
 impl OrderLedger {
     /// The ledger of the status `s`.
     pub fn of(s: &CommandResponse) -> OrderLedger {
-        let fault = FaultKind::from_wire(s.fault);
+        let fault = FaultKind::from_wire(s.robot.fault);
         let ended = s.refused() == Some(Refusal::NotServing) || fault.is_some();
+        let o = &s.orders;
         OrderLedger {
-            settled: s.settled,
-            taken: s.taken,
-            not_taken: s.not_taken,
-            motion: s.motion,
-            moving: s.moving != 0,
+            settled: o.settled,
+            taken: o.taken,
+            not_taken: o.not_taken,
+            motion: o.motion,
+            moving: o.moving != 0,
             ended: ended.then_some(fault),
         }
     }
@@ -235,23 +236,25 @@ fn answer_of<E: std::fmt::Debug>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::wire::Orders;
 
     /// Each fate from the move ids a status carries, the session's end first, and an order's
     /// end told apart from a later one's.
     #[test]
     fn an_orders_fate_is_read_from_the_status_move_ids() {
         let at = |settled, taken, not_taken, motion, moving, fault| {
-            let s = CommandResponse {
-                ok: 1,
+            let mut s = CommandResponse::default();
+            s.answer.ok = 1;
+            s.orders = Orders {
                 accepted: 5,
                 settled,
                 taken,
                 not_taken,
                 motion,
                 moving: u32::from(moving),
-                fault,
-                ..CommandResponse::default()
+                reserved: 0,
             };
+            s.robot.fault = fault;
             OrderLedger::of(&s)
         };
         assert_eq!(at(4, 4, 0, 4, false, 0).fate(5), Fate::Queued);

@@ -10,8 +10,8 @@ use crate::generator::{
 };
 use crate::path::{outside_soft_limits, path_queue};
 use crate::wire::{
-    COMMAND_SERVICE, CommandKind, CommandRequest, CommandResponse, PATH_SERVICE, PathRequest,
-    Refusal, Refused, Services,
+    Answer, COMMAND_SERVICE, CommandKind, CommandRequest, CommandResponse, Orders, PATH_SERVICE,
+    PathRequest, Refusal, Refused, RobotStatus, Services, Timing,
 };
 use iceoryx2::prelude::ipc;
 use qmarc_config::{Settings, TargetError};
@@ -192,7 +192,7 @@ impl Commands {
             |_| {
                 let mut r = self.status();
                 let why = "the controller could not check this request (an internal error)";
-                r.refuse(&Refused::new(Refusal::BadRequest, why));
+                r.answer.refuse(&Refused::new(Refusal::BadRequest, why));
                 r
             },
         )
@@ -240,17 +240,18 @@ impl Commands {
         order: bool,
         outcome: Result<(), Refused>,
     ) -> CommandResponse {
-        let mut r = CommandResponse { received_ns, ..self.status() };
-        r.id = id;
+        let mut r = self.status();
+        r.timing.received_ns = received_ns;
+        r.answer.id = id;
         match outcome {
             Ok(()) => {
-                r.ok = 1;
-                r.accepted = self.accepted;
+                r.answer.ok = 1;
+                r.orders.accepted = self.accepted;
                 if order {
-                    r.received_cycle = self.queued_at;
+                    r.timing.received_cycle = self.queued_at;
                 }
             }
-            Err(refused) => r.refuse(&refused),
+            Err(refused) => r.answer.refuse(&refused),
         }
         r
     }
@@ -359,41 +360,47 @@ impl Commands {
     /// Where the robot is.
     fn status(&self) -> CommandResponse {
         let shared = self.shared();
-        let mut r = CommandResponse {
+        let orders = Orders {
             accepted: self.accepted,
             settled: shared.settled.load(Ordering::Acquire),
-            homed: shared.homed.load(Ordering::Acquire),
-            moving: u32::from(shared.moving.load(Ordering::Acquire)),
             taken: shared.taken.load(Ordering::Acquire),
-            taken_ns: shared.taken_ns.load(Ordering::Acquire),
-            taken_cycle: shared.taken_cycle.load(Ordering::Acquire),
             not_taken: shared.not_taken.load(Ordering::Acquire),
             motion: shared.motion.load(Ordering::Acquire),
-            received_cycle: shared.cycles.load(Ordering::Acquire),
-            command: shared.command(),
-            actual: shared.actual(),
-            fault: self.ended.fault.load(Ordering::Acquire),
-            phase: self.progress.as_ref().map_or(0, |p| p.read().phase),
-            gripper: shared.gripper.load(Ordering::Acquire),
-            ..CommandResponse::default()
+            moving: u32::from(shared.moving.load(Ordering::Acquire)),
+            reserved: 0,
         };
-        let c = r.command;
-        if let Some(mm) =
-            self.settings.robot().and_then(|robot| robot.mm_of(&[c[0], c[1], c[2]]).ok())
-        {
-            r.effector_mm = mm;
-        }
+        let command = shared.command();
+        let robot = RobotStatus {
+            phase: self.progress.as_ref().map_or(0, |p| p.read().phase),
+            fault: self.ended.fault.load(Ordering::Acquire),
+            homed: shared.homed.load(Ordering::Acquire),
+            gripper: shared.gripper.load(Ordering::Acquire),
+            command,
+            actual: shared.actual(),
+            effector_mm: self
+                .settings
+                .robot()
+                .and_then(|robot| robot.mm_of(&[command[0], command[1], command[2]]).ok())
+                .unwrap_or([f64::NAN; 3]),
+        };
+        let timing = Timing {
+            received_ns: 0,
+            received_cycle: shared.cycles.load(Ordering::Acquire),
+            taken_ns: shared.taken_ns.load(Ordering::Acquire),
+            taken_cycle: shared.taken_cycle.load(Ordering::Acquire),
+        };
+        let mut answer = Answer::default();
         if self.ended.ended.load(Ordering::Acquire) {
-            r.refusal = Refusal::NotServing as u32;
+            answer.refusal = Refusal::NotServing as u32;
         }
         // The last order not taken, and why (`qmarc cmd wait` says it).
-        if r.not_taken >= r.accepted && r.accepted > 0 {
+        if orders.not_taken >= orders.accepted && orders.accepted > 0 {
             let why = NotTaken::from_wire(shared.not_taken_why.load(Ordering::Acquire));
-            r.set_reason(
+            answer.set_reason(
                 &why.map_or_else(|| "the loop did not take it".to_string(), NotTaken::words),
             );
         }
-        r
+        CommandResponse { answer, orders, robot, timing }
     }
 
     /// A move: checked, then queued.

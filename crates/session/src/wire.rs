@@ -11,8 +11,8 @@
 //!   the server (the controller's command thread, [`crate::server`]) sleeps between them.
 //!
 //! Every request is answered at once: accepted, or refused with the reason. A move's end is
-//! not waited for on the wire; the response's `accepted` and `settled` move ids say where the
-//! robot is in the commands it was given ([`crate::client::OrderLedger`] reads them).
+//! not waited for on the wire; the response's [`Orders`] (`accepted`, `settled`, … ids) say
+//! where the robot is in the commands it was given ([`crate::client::OrderLedger`] reads them).
 
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event, request_response};
@@ -186,93 +186,121 @@ impl CommandRequest {
     }
 }
 
-/// The answer to a command: accepted or refused, and where the robot is.
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("qmarc.CommandResponse.v3")]
+/// The answer to a command or a path, in four parts: the [`Answer`] to the request, the
+/// [`Orders`] ledger (what became of the orders given), the [`RobotStatus`] (where the loop
+/// has the robot) and the [`Timing`] of the request and the last order taken.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("qmarc.CommandResponse.v4")]
 #[repr(C)]
 pub struct CommandResponse {
+    /// The request's answer.
+    pub answer: Answer,
+    /// The orders' ledger.
+    pub orders: Orders,
+    /// Where the robot is.
+    pub robot: RobotStatus,
+    /// When.
+    pub timing: Timing,
+}
+
+/// The answer to one request: accepted, or refused and why.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+pub struct Answer {
     /// The request's id.
     pub id: u64,
-    /// The last move accepted (0: none yet).
-    pub accepted: u64,
-    /// The last move the robot has come to rest at the end of (equal to `accepted` once the
-    /// robot is at rest where it was last sent).
-    pub settled: u64,
     /// 1: accepted; 0: refused.
     pub ok: u32,
-    /// [`Refusal`] as its wire number (0 when accepted).
+    /// [`Refusal`] as its wire number (0 when accepted; [`Refusal::NotServing`] in a status
+    /// once the session has ended).
     pub refusal: u32,
-    /// The loop's [`qmarc_proto::state::Phase`] as its wire number.
-    pub phase: u32,
-    /// [`qmarc_proto::state::FaultKind::wire`]: 0, or the fault's code + 1.
-    pub fault: u32,
-    /// Bit m: motor m's frame is homed.
-    pub homed: u32,
-    /// 1 while the command moves.
-    pub moving: u32,
-    /// When the command thread read this request, ns of `CLOCK_MONOTONIC`.
-    pub received_ns: u64,
-    /// The cycles the loop had executed when the command thread had queued this request's
-    /// order (for an order; else when it read it).
-    pub received_cycle: u64,
+    /// Why it was refused (or, in a status, why the last order was not taken): UTF-8,
+    /// NUL-padded.
+    pub reason: [u8; REASON_BYTES],
+}
+
+impl Default for Answer {
+    fn default() -> Answer {
+        Answer { id: 0, ok: 0, refusal: 0, reason: [0; REASON_BYTES] }
+    }
+}
+
+/// What became of the orders a session was given, by id ([`crate::client::OrderLedger`]
+/// reads it).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+pub struct Orders {
+    /// The last order accepted (0: none yet).
+    pub accepted: u64,
+    /// The last order the robot has come to rest at the end of (equal to `accepted` once the
+    /// robot is at rest where it was last sent).
+    pub settled: u64,
     /// The last order the loop took (a move, a stop).
     pub taken: u64,
-    /// When it took it, ns of `CLOCK_MONOTONIC`: in the cycle whose command is the new
-    /// profile's first, as that cycle computed it.
-    pub taken_ns: u64,
-    /// The cycles the loop had executed when it took it, that cycle included: one more than
-    /// `received_cycle` when the first cycle after the order was queued took it.
-    pub taken_cycle: u64,
-    /// The last move the loop could not take (its profile from the state the command was in
+    /// The last order the loop could not take (its profile from the state the command was in
     /// would leave the soft limits, or there was none): the command went on as it was.
     pub not_taken: u64,
     /// The last motion order the loop took — a move, a line (a path), a stop: what the robot
     /// follows now (a grip is no motion: a path goes on through it).
     pub motion: u64,
+    /// 1 while the command moves.
+    pub moving: u32,
+    /// Zero (keeps the layout free of padding).
+    pub reserved: u32,
+}
+
+/// Where the loop has the robot.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+pub struct RobotStatus {
+    /// The loop's [`qmarc_proto::state::Phase`] as its wire number.
+    pub phase: u32,
+    /// [`qmarc_proto::state::FaultKind::wire`]: 0, or the fault's wire number.
+    pub fault: u32,
+    /// Bit m: motor m's frame is homed.
+    pub homed: u32,
+    /// The gripper as the loop's last read found it ([`qmarc_proto::Gripper`] bits).
+    pub gripper: u32,
     /// The command, counts.
     pub command: [f64; MAX_MOTORS],
     /// The motors' positions, counts.
     pub actual: [f64; MAX_MOTORS],
     /// The effector's commanded point, mm (NaN without the robot's geometry).
     pub effector_mm: [f64; 3],
-    /// The gripper as the loop's last read found it ([`qmarc_proto::Gripper`] bits).
-    pub gripper: u32,
-    /// Zero (keeps the layout free of padding).
-    pub reserved: u32,
-    /// Why it was refused: UTF-8, NUL-padded.
-    pub reason: [u8; REASON_BYTES],
 }
 
-impl Default for CommandResponse {
-    fn default() -> CommandResponse {
-        CommandResponse {
-            id: 0,
-            accepted: 0,
-            settled: 0,
-            ok: 0,
-            refusal: 0,
+impl Default for RobotStatus {
+    fn default() -> RobotStatus {
+        RobotStatus {
             phase: 0,
             fault: 0,
             homed: 0,
-            moving: 0,
-            received_ns: 0,
-            received_cycle: 0,
-            taken: 0,
-            taken_ns: 0,
-            taken_cycle: 0,
-            not_taken: 0,
-            motion: 0,
+            gripper: qmarc_proto::Gripper::ABSENT,
             command: [0.0; MAX_MOTORS],
             actual: [0.0; MAX_MOTORS],
             effector_mm: [f64::NAN; 3],
-            gripper: qmarc_proto::Gripper::ABSENT,
-            reserved: 0,
-            reason: [0; REASON_BYTES],
         }
     }
 }
 
-impl CommandResponse {
+/// When the request was read and the last order taken.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+pub struct Timing {
+    /// When the command thread read this request, ns of `CLOCK_MONOTONIC`.
+    pub received_ns: u64,
+    /// The cycles the loop had executed when the command thread had queued this request's
+    /// order (for an order; else when it read it).
+    pub received_cycle: u64,
+    /// When the loop took the last order it took, ns of `CLOCK_MONOTONIC`: in the cycle whose
+    /// command is the new profile's first, as that cycle computed it.
+    pub taken_ns: u64,
+    /// The cycles the loop had executed when it took it, that cycle included: one more than
+    /// `received_cycle` when the first cycle after the order was queued took it.
+    pub taken_cycle: u64,
+}
+
+impl Answer {
     /// Sets the reason, cut at a character boundary to fit.
     pub fn set_reason(&mut self, text: &str) {
         let mut end = text.len().min(REASON_BYTES);
@@ -299,6 +327,18 @@ impl CommandResponse {
     /// The refusal, if refused.
     pub fn refused(&self) -> Option<Refusal> {
         (self.ok == 0).then(|| Refusal::from_wire(self.refusal).unwrap_or(Refusal::BadRequest))
+    }
+}
+
+impl CommandResponse {
+    /// The refusal, if refused ([`Answer::refused`]).
+    pub fn refused(&self) -> Option<Refusal> {
+        self.answer.refused()
+    }
+
+    /// The reason's text ([`Answer::reason`]).
+    pub fn reason(&self) -> String {
+        self.answer.reason()
     }
 }
 
@@ -469,11 +509,16 @@ mod tests {
         assert_eq!(std::mem::size_of::<CommandRequest>(), 56);
         assert_eq!(std::mem::size_of::<CommandResponse>(), 400);
         assert_eq!(std::mem::align_of::<CommandResponse>(), 8);
+        // Its parts, each free of padding.
+        assert_eq!(std::mem::size_of::<Answer>(), 16 + REASON_BYTES);
+        assert_eq!(std::mem::size_of::<Orders>(), 48);
+        assert_eq!(std::mem::size_of::<RobotStatus>(), 16 + 16 * MAX_MOTORS + 24);
+        assert_eq!(std::mem::size_of::<Timing>(), 32);
     }
 
     #[test]
     fn a_reason_is_cut_at_a_character_boundary() {
-        let mut r = CommandResponse::default();
+        let mut r = Answer::default();
         r.set_reason("motor 2 would go to 12000 counts");
         assert_eq!(r.reason(), "motor 2 would go to 12000 counts");
         let long = "é".repeat(REASON_BYTES);

@@ -67,27 +67,33 @@ fn a_violation_is_said_in_radians() {
 fn a_path_is_ended_by_a_fault_the_sessions_end_or_another_motion_only() {
     let ended_by = |s: &CommandResponse, path| super::ended_by(OrderLedger::of(s).fate(path));
     let path = 7;
-    let running = CommandResponse { ok: 1, accepted: path, motion: path, ..Default::default() };
+    let mut running = CommandResponse::default();
+    running.answer.ok = 1;
+    (running.orders.accepted, running.orders.motion) = (path, path);
+    let with = |change: &dyn Fn(&mut CommandResponse)| {
+        let mut s = running;
+        change(&mut s);
+        s
+    };
     assert_eq!(ended_by(&running, path), None);
     // The loop has not taken it yet: still its own.
-    assert_eq!(ended_by(&CommandResponse { motion: path - 1, ..running }, path), None);
-    let gone = CommandResponse { ok: 0, refusal: Refusal::NotServing as u32, ..running };
+    assert_eq!(ended_by(&with(&|s| s.orders.motion = path - 1), path), None);
+    let gone = with(&|s| (s.answer.ok, s.answer.refusal) = (0, Refusal::NotServing as u32));
     let r = ended_by(&gone, path).unwrap();
     assert_eq!(
         (r.error_code, r.error_string.as_str()),
         (FjtResult::INVALID_GOAL, "the session ended")
     );
     // Any other refusal of the status is no end.
-    let busy = CommandResponse { ok: 0, refusal: Refusal::Busy as u32, ..running };
+    let busy = with(&|s| (s.answer.ok, s.answer.refusal) = (0, Refusal::Busy as u32));
     assert_eq!(ended_by(&busy, path), None);
-    let fault =
-        CommandResponse { fault: FaultKind::wire(Some(FaultKind::FollowingError)), ..running };
+    let fault = with(&|s| s.robot.fault = FaultKind::wire(Some(FaultKind::FollowingError)));
     let r = ended_by(&fault, path).unwrap();
     assert!(r.error_string.starts_with("fault: following_error"), "{}", r.error_string);
-    let dropped = CommandResponse { not_taken: path, ..running };
+    let dropped = with(&|s| s.orders.not_taken = path);
     assert_eq!(ended_by(&dropped, path).unwrap().error_string, "the loop did not take the path");
-    assert_eq!(ended_by(&CommandResponse { not_taken: path - 1, ..running }, path), None);
-    let taken_over = CommandResponse { motion: path + 1, ..running };
+    assert_eq!(ended_by(&with(&|s| s.orders.not_taken = path - 1), path), None);
+    let taken_over = with(&|s| s.orders.motion = path + 1);
     let r = ended_by(&taken_over, path).unwrap();
     assert_eq!(r.error_string, "another command (move 8) took over the robot");
 }
@@ -153,9 +159,11 @@ fn a_cancelled_goal_ends_canceled_once_the_robot_rests_past_its_stop() {
     assert_eq!(t.stop_sent(stop.unwrap(), Some(9)), None, "canceling until the robot rests");
     let seen = Seen { fresh: &[], last: None, motions: Default::default() };
     let now = std::time::Instant::now();
-    let moving = CommandResponse { ok: 1, settled: 7, moving: 1, ..Default::default() };
+    let mut moving = CommandResponse::default();
+    (moving.answer.ok, moving.orders.settled, moving.orders.moving) = (1, 7, 1);
     assert!(t.watch(&moving, &seen, Time::default(), now).finished.is_none());
-    let rests = CommandResponse { ok: 1, settled: 9, ..Default::default() };
+    let mut rests = CommandResponse::default();
+    (rests.answer.ok, rests.orders.settled) = (1, 9);
     let done = t.watch(&rests, &seen, Time::default(), now).finished.unwrap();
     assert_eq!((done.goal_id, done.response.status), (r.goal_id, GoalStatus::CANCELED));
     assert_eq!(t.result(&r.goal_id).unwrap().status, GoalStatus::CANCELED);
