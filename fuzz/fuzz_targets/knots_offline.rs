@@ -2,4 +2,4 @@
 //! accepts keeps its promises. The first byte picks the number of motors.
 #![no_main]
 
-libfuzzer_sys::fuzz_target!(|data: &[u8]| qmarc_plugins::knots::fuzzing::offline(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| qmarc_knots::fuzzing::offline(data));

@@ -2,4 +2,4 @@
 //! promises. The first byte picks the number of motors.
 #![no_main]
 
-libfuzzer_sys::fuzz_target!(|data: &[u8]| qmarc_plugins::knots::fuzzing::pvt(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| qmarc_knots::fuzzing::pvt(data));

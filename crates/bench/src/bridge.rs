@@ -106,7 +106,7 @@ impl BridgeArgs {
                  scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }} }}"
             ),
         )?;
-        let bin = qmarc_starter::bin_dir(self.bin_dir.as_deref())?.join("qmarc-bridge");
+        let bin = qmarc_program::process::bin_dir(self.bin_dir.as_deref())?.join("qmarc-bridge");
         let child = Command::new(&bin)
             .arg(format!("--iox-prefix={}", session.location.prefix))
             .arg(format!("--zenoh-config={}", config.display()))

@@ -79,7 +79,7 @@ fn measure(
     moves: u32,
     config: &std::path::Path,
 ) -> anyhow::Result<Measured> {
-    let settings = qmarc_config::Settings::load(config, &qmarc_starter::names())
+    let settings = qmarc_config::Settings::load(config, &qmarc_plugins::registry::names())
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let period_ns = settings.period_ns();
     let started = Instant::now();

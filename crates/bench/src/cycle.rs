@@ -26,7 +26,7 @@ pub struct CycleArgs {
 
 /// The names the registries accept (the starter's).
 pub fn names() -> Names {
-    qmarc_starter::names()
+    qmarc_plugins::registry::names()
 }
 
 /// Writes knot files for `n` motors long enough for `cycles` samples at 400 µs: whole periods

@@ -268,7 +268,7 @@ const PACED_SAMPLES: usize = 5_000;
 
 /// Runs `ipc`.
 pub fn run(a: &IpcArgs) -> anyhow::Result<()> {
-    let bin_dir = qmarc_starter::bin_dir(a.bin_dir.as_deref())?;
+    let bin_dir = qmarc_program::process::bin_dir(a.bin_dir.as_deref())?;
     // As the servo thread holds it during a move: no CPU of ours sleeps deeply between
     // exchanges (a deep idle state's exit would be in the paced rows).
     let _dma = DmaLatencyGuard::request_zero();

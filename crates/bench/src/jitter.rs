@@ -421,7 +421,7 @@ fn all_rounds(
     req: RtRequest,
     scratch: &Path,
 ) -> anyhow::Result<Vec<TimerResult>> {
-    let starter = qmarc_starter::bin_dir(a.bin_dir.as_deref())?.join("qmarc-starter");
+    let starter = qmarc_program::process::bin_dir(a.bin_dir.as_deref())?.join("qmarc-starter");
     let config = segment_config(a, scratch)?;
     let starter = (starter.as_path(), config.as_path());
     let period_ns = u64::from(a.period_us) * 1_000;

@@ -59,7 +59,7 @@ enum BenchCommand {
 }
 
 fn main() -> ExitCode {
-    let args: Args = qmarc_starter::cli::parse_or_exit();
+    let args: Args = qmarc_program::cli::parse_or_exit();
     let result = match &args.command {
         BenchCommand::Jitter(a) => jitter::run(a),
         BenchCommand::Ipc(a) => ipc::run(a),
@@ -69,5 +69,5 @@ fn main() -> ExitCode {
         BenchCommand::Bridge(a) => bridge::run(a),
     };
     let outcome = result.map(|()| ExitCode::SUCCESS).map_err(|e| (qmarc_proto::exit::INTERNAL, e));
-    qmarc_config::program::conclude("qmarc-bench", outcome)
+    qmarc_program::cli::conclude("qmarc-bench", outcome)
 }

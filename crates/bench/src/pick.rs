@@ -60,7 +60,7 @@ pub fn run(a: &PickArgs) -> anyhow::Result<()> {
     anyhow::ensure!(a.cycles >= 1, "--cycles must be ≥ 1");
     anyhow::ensure!(a.at.len() == 3, "--at: a point is three numbers X,Y,Z in mm");
     anyhow::ensure!(a.blend_mm >= 0.0 && a.blend_mm < a.lift_mm, "--blend-mm: 0 ≤ MM < --lift-mm");
-    let settings = qmarc_config::Settings::load(&a.config, &qmarc_starter::names())
+    let settings = qmarc_config::Settings::load(&a.config, &qmarc_plugins::registry::names())
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let robot = settings.robot().ok_or_else(|| anyhow::anyhow!("no [robot] table"))?;
     let mask = settings

@@ -21,7 +21,7 @@ pub struct Session {
 impl Session {
     /// Starts serving on the settings `config` (`name` tells the prefix and scratch folder).
     pub fn start(config: &Path, bin_dir: Option<&Path>, name: &str) -> anyhow::Result<Session> {
-        let starter = qmarc_starter::bin_dir(bin_dir)?.join("qmarc-starter");
+        let starter = qmarc_program::process::bin_dir(bin_dir)?.join("qmarc-starter");
         let pid = std::process::id();
         let prefix = format!("qmarc_bench{name}_{pid}_");
         let scratch = std::env::temp_dir().join(format!("qmarc-bench-{name}-{pid}"));

@@ -30,7 +30,6 @@ mod jog;
 mod motion;
 mod motor;
 mod overrides;
-pub mod program;
 mod robot;
 mod run;
 mod s626;

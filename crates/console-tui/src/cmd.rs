@@ -72,7 +72,7 @@ enum Cmd {
     /// Close (`on`) or open (`off`) the gripper now; `wait` then waits until it is there.
     Grip {
         /// `on` closes it, `off` opens it.
-        #[arg(value_name = "on|off", value_parser = qmarc_starter::cli::parse_on_off, action = clap::ArgAction::Set)]
+        #[arg(value_name = "on|off", value_parser = qmarc_program::cli::parse_on_off, action = clap::ArgAction::Set)]
         close: bool,
     },
     /// Wait until the robot is at rest at the end of the last move accepted.
@@ -118,7 +118,7 @@ fn path_request(
     file: &std::path::Path,
     settings: &qmarc_config::Settings,
 ) -> anyhow::Result<Box<PathRequest>> {
-    use qmarc_plugins::knots::{KnotRules, parse_pvt, read_knot_file};
+    use qmarc_knots::{KnotRules, parse_pvt, read_knot_file};
     let text = read_knot_file(file)?;
     let knots = parse_pvt(&file.display().to_string(), &text, &KnotRules::from_settings(settings))?;
     let mut t_s = 0.0;

@@ -370,7 +370,7 @@ impl Form {
         let mut skip: Vec<usize> = Vec::new();
         for _ in 0..=self.fields.len() {
             let text = self.doc_with(&skip).to_string();
-            match Settings::parse(&self.path, &text, &qmarc_starter::names()) {
+            match Settings::parse(&self.path, &text, &qmarc_plugins::registry::names()) {
                 Ok(s) => {
                     if skip.is_empty() {
                         self.checked = Some(s);

@@ -98,7 +98,7 @@ impl Live {
     /// `--iox-prefix`, or its own default `qmarc_<pid>_`) under `iox_root`.
     pub fn for_move(starter_args: &[String], iox_root: &str, starter_pid: u32) -> Live {
         let prefix = starter_args.iter().find_map(|a| a.strip_prefix("--iox-prefix=")).map_or_else(
-            || format!("{}{starter_pid}_", qmarc_starter::PREFIX_STEM),
+            || format!("{}{starter_pid}_", qmarc_session::discovery::PREFIX_STEM),
             str::to_string,
         );
         Live::new(IpcLocation::new(&prefix, iox_root))

@@ -202,7 +202,7 @@ fn main() -> ExitCode {
         let _ = writeln!(std::io::stderr(), "qmarc: cannot run {}: {err}", starter.display());
         return ExitCode::from(1);
     }
-    let args: Args = qmarc_starter::cli::parse_or_exit();
+    let args: Args = qmarc_program::cli::parse_or_exit();
     let outcome = run_console(&args)
         .map(|quit| {
             // Written without panicking: the terminal may be gone.
@@ -224,7 +224,7 @@ fn main() -> ExitCode {
             };
             (code, e)
         });
-    qmarc_config::program::conclude("qmarc", outcome)
+    qmarc_program::cli::conclude("qmarc", outcome)
 }
 
 #[cfg(test)]

@@ -188,7 +188,7 @@ impl Running {
             .stderr(Stdio::from(writer))
             .process_group(0);
         // The starter's own spawn rules: SIGTERM when the console dies, at once if it is gone.
-        qmarc_starter::supervise::with_parent_death_signal(&mut cmd);
+        qmarc_program::process::with_parent_death_signal(&mut cmd);
         let child = cmd.spawn()?;
         // `cmd` holds the writer's copies: gone with it, so only the starter's side stays open.
         drop(cmd);
@@ -231,7 +231,7 @@ impl Running {
     /// stops both children (motors disabled, data written).
     pub fn abort(&mut self) {
         if self.aborted.is_none() {
-            qmarc_starter::supervise::send(&self.child, nix::sys::signal::Signal::SIGTERM);
+            qmarc_program::process::send(&self.child, nix::sys::signal::Signal::SIGTERM);
             self.aborted = Some(Instant::now());
         }
     }

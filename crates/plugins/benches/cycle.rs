@@ -11,7 +11,7 @@ use qmarc_controller::plan::MovePlan;
 use qmarc_controller::servo::{CycleEnd, Servo};
 use qmarc_controller::traj::{Sample, TrajectoryGenerator};
 use qmarc_hwserver::{HwCore, SimDeltabot, SimParams};
-use qmarc_plugins::knots::{OfflineKnots, PvtKnot};
+use qmarc_knots::{OfflineKnots, PvtKnot};
 use qmarc_plugins::pidff::PidFf;
 use qmarc_plugins::pvt::Pvt;
 use qmarc_plugins::registry::GENERATORS;

@@ -1,7 +1,7 @@
 //! The plug-ins of the servo loop: the trajectory generators (the thesis' step, the offline
 //! natural cubic spline, the online PVT, homing, the jerk-limited moves from rest to rest —
 //! jog and the approach to a path's start — and the open-loop check), the servo law (PID with feed-forward and a
-//! notch, thesis eq. 3-1 and 3-2), the knot files they read (thesis A.2.3), and the
+//! notch, thesis eq. 3-1 and 3-2), the motion planner they share ([`motion`]), and the
 //! [`registry`] that names them — the settings file, the command line and the console choose
 //! from it. The traits they implement are the loop's (`qmarc_controller::traj`,
 //! `qmarc_controller::law`); adding one is one type plus one registry line
@@ -19,7 +19,6 @@ pub mod extending {}
 pub mod check;
 pub mod grip;
 pub mod homing;
-pub mod knots;
 pub mod linear;
 pub mod motion;
 pub mod moveto;

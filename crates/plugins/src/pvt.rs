@@ -8,14 +8,14 @@
 //! move; a stream knot by knot as it arrives. If the queue runs dry before the stream ends,
 //! the generator reports [`Sample::Starved`].
 
-use crate::knots::{
-    KnotFileError, KnotRules, MAX_LINE_BYTES, MIN_PVT_KNOTS, PvtKnot, PvtLineParser, parse_pvt,
-    read_knot_file, read_line_bounded,
-};
-use crate::source::{KnotSource, TrajBuildError};
+use crate::source::{KnotSource, TrajBuildError, knots_failed};
 use crate::spline::samples_between;
 use qmarc_config::Settings;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of, check_start};
+use qmarc_knots::{
+    KnotFileError, KnotRules, MAX_LINE_BYTES, MIN_PVT_KNOTS, PvtKnot, PvtLineParser, parse_pvt,
+    read_knot_file, read_line_bounded,
+};
 use qmarc_proto::MAX_MOTORS;
 use rtrb::{Consumer, Producer, PushError, RingBuffer};
 use std::sync::{Arc, Mutex};
@@ -310,9 +310,11 @@ impl Pvt {
         qmarc_timer::rt::spawn_normal("qmarc-knots", move || {
             read_stream(&source, &rules, &mut producer, &failure)
         })
-        .map_err(|e| KnotFileError::Read {
-            file: self.source_name(),
-            reason: format!("reader thread: {e}"),
+        .map_err(|e| {
+            knots_failed(KnotFileError::Read {
+                file: self.source_name(),
+                reason: format!("reader thread: {e}"),
+            })
         })?;
         let started = Instant::now();
         let mut first = Vec::with_capacity(MIN_PVT_KNOTS);
@@ -320,7 +322,7 @@ impl Pvt {
             match consumer.pop() {
                 Ok(Feed::Knot(k)) => first.push(k),
                 Ok(Feed::End) => break,
-                Ok(Feed::Error) => return Err(self.stored_failure().into()),
+                Ok(Feed::Error) => return Err(knots_failed(self.stored_failure())),
                 Err(_) if qmarc_timer::stop::requested() => {
                     return Err(TrajStartError::Interrupted { stream: self.source_name() });
                 }

@@ -147,6 +147,12 @@ pub fn generator_names() -> Vec<&'static str> {
     GENERATORS.iter().map(|e| e.name).collect()
 }
 
+/// The names the settings accept from the plug-ins: the laws and the path generators (the
+/// settings crate knows none of them; they are handed to it from here).
+pub fn names() -> qmarc_config::Names {
+    qmarc_config::Names { laws: law_names(), methods: path_generator_names(), any_plugin: false }
+}
+
 /// Names of the generators `run` accepts: every one that follows a path (not a mode of its
 /// own: homing, jog, the check, a move to a target).
 pub fn path_generator_names() -> Vec<&'static str> {

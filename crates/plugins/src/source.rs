@@ -3,9 +3,9 @@
 //! ([`QUEUE_BUDGET_BYTES`])
 //! and why a path cannot be built ([`TrajBuildError`], [`SplineError`]).
 
-use crate::knots::KnotFileError;
 use qmarc_config::Settings;
 use qmarc_controller::traj::{Sample, TrajStartError, bounds_of};
+use qmarc_knots::KnotFileError;
 use qmarc_proto::MAX_MOTORS;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -161,6 +161,11 @@ impl KnotSource {
         };
         Ok((name, reader))
     }
+}
+
+/// Bad knots met as the move starts (a stream's): the loop's start error carries them.
+pub(crate) fn knots_failed(e: KnotFileError) -> TrajStartError {
+    TrajStartError::Generator(Box::new(e))
 }
 
 impl From<TrajBuildError> for TrajStartError {

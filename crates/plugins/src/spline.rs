@@ -6,14 +6,14 @@
 //! between knots j and j+1 the curve is eq. 3-3, y = A·y_j + B·y_{j+1} + C·y″_j + D·y″_{j+1}.
 //! [`CubicSpline`] is the generator: one spline per motor, sampled at t₀ + n·T.
 
-use crate::knots::dynamics::{Excess, check_segment};
-use crate::knots::{
+use crate::source::{CommandQueue, KnotSource, QUEUE_BUDGET_BYTES, TrajBuildError, knots_failed};
+use qmarc_config::Settings;
+use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, check_start};
+use qmarc_knots::dynamics::{Excess, check_segment};
+use qmarc_knots::{
     KnotFileError, KnotRules, MAX_KNOT_FILE_BYTES, OfflineKnots, parse_offline, read_knot_file,
     text_of,
 };
-use crate::source::{CommandQueue, KnotSource, QUEUE_BUDGET_BYTES, TrajBuildError};
-use qmarc_config::Settings;
-use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, check_start};
 use qmarc_proto::MAX_MOTORS;
 use std::io::Read;
 
@@ -288,7 +288,7 @@ impl CubicSpline {
             let _ = tx.send(read_offline_stream(&source, &rules));
         })
         .map_err(|e| {
-            TrajStartError::from(KnotFileError::Read {
+            knots_failed(KnotFileError::Read {
                 file: self.source.name(),
                 reason: format!("reader thread: {e}"),
             })
@@ -296,7 +296,7 @@ impl CubicSpline {
         let started = std::time::Instant::now();
         let knots = loop {
             match rx.recv_timeout(std::time::Duration::from_millis(10)) {
-                Ok(result) => break result.map_err(TrajStartError::from)?,
+                Ok(result) => break result.map_err(knots_failed)?,
                 Err(_) if qmarc_timer::stop::requested() => {
                     return Err(TrajStartError::Interrupted { stream: self.source.name() });
                 }

@@ -374,8 +374,8 @@ fn fuzz_corpus_replays_cleanly() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus");
     let mut replayed = 0;
     for (target, check) in [
-        ("knots_offline", qmarc_plugins::knots::fuzzing::offline as fn(&[u8])),
-        ("knots_pvt", qmarc_plugins::knots::fuzzing::pvt),
+        ("knots_offline", qmarc_knots::fuzzing::offline as fn(&[u8])),
+        ("knots_pvt", qmarc_knots::fuzzing::pvt),
     ] {
         for entry in std::fs::read_dir(root.join(target)).unwrap() {
             let path = entry.unwrap().path();

@@ -13,8 +13,8 @@
 use crate::generator::SoftLimits;
 use crate::wire::{MAX_PATH_KNOTS, PathKnot, PathRequest, Refusal, Refused};
 use qmarc_config::Settings;
-use qmarc_plugins::knots::KnotRules;
-use qmarc_plugins::knots::dynamics::{check_segment, hermite_end_accelerations};
+use qmarc_knots::KnotRules;
+use qmarc_knots::dynamics::{check_segment, hermite_end_accelerations};
 use qmarc_plugins::pvt::Hermite;
 use qmarc_plugins::source::QUEUE_BUDGET_BYTES;
 use qmarc_proto::MAX_MOTORS;

@@ -6,8 +6,6 @@ use clap::{Args, Subcommand};
 use qmarc_config::{ConfigLoadError, Mode, Names, Settings};
 use std::path::PathBuf;
 
-pub use qmarc_config::program::parse_or_exit;
-
 /// Options of every move; flags override the settings file for this run. They are global:
 /// they go before or after the subcommand (`qmarc-starter --out x step` or
 /// `qmarc-starter step --out x`).
@@ -172,7 +170,7 @@ impl ServeArgs {
 
 /// A ROS namespace (`qmarc_config::program::check_ros_namespace`).
 fn ros_namespace(v: &str) -> Result<String, String> {
-    qmarc_config::program::check_ros_namespace(v).map(|()| v.to_string())
+    qmarc_program::cli::check_ros_namespace(v).map(|()| v.to_string())
 }
 
 /// Options of `move`.
@@ -196,17 +194,8 @@ pub struct MoveArgs {
     pub speed: Option<f64>,
     /// Close (`on`) or open (`off`) the gripper at the end of the move; the move ends once
     /// it is there. Without --to or --xyz: where the robot is.
-    #[arg(long, value_name = "on|off", value_parser = parse_on_off)]
+    #[arg(long, value_name = "on|off", value_parser = qmarc_program::cli::parse_on_off)]
     pub grip: Option<bool>,
-}
-
-/// `on` or `off`.
-pub fn parse_on_off(v: &str) -> Result<bool, String> {
-    match v {
-        "on" => Ok(true),
-        "off" => Ok(false),
-        _ => Err(format!("`{v}` is not on or off")),
-    }
 }
 
 impl MoveArgs {

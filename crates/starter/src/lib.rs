@@ -25,33 +25,9 @@ pub mod tune;
 
 pub use supervise::{Exit, describe_exit};
 
-use qmarc_config::Names;
-
 pub use qmarc_session::discovery::{
     PREFIX_STEM, default_prefix, remove_own_stale_files, remove_stale_files,
 };
-
-/// The directory holding the QMARC binaries: `explicit` (`--bin-dir`), else the one this
-/// program is in (where `cargo build` puts them all).
-pub fn bin_dir(explicit: Option<&std::path::Path>) -> std::io::Result<std::path::PathBuf> {
-    if let Some(d) = explicit {
-        return Ok(d.to_path_buf());
-    }
-    let me = std::env::current_exe()?;
-    me.parent().map(std::path::Path::to_path_buf).ok_or_else(|| {
-        std::io::Error::new(std::io::ErrorKind::NotFound, "no directory for this program")
-    })
-}
-
-/// The names the settings accept: the plug-ins' laws and path generators, the hwserver's
-/// backends. The settings crate knows none of them; they are handed to it from here.
-pub fn names() -> Names {
-    Names {
-        laws: qmarc_plugins::registry::law_names(),
-        methods: qmarc_plugins::registry::path_generator_names(),
-        any_plugin: false,
-    }
-}
 
 pub use qmarc_proto::service::run_file;
 
@@ -94,12 +70,11 @@ pub fn check_iox_root(root: &str, explicit: bool) -> Result<(), String> {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
 
     /// Issue 11: the settings crate gets its names from the registries, not the other way.
     #[test]
     fn the_names_come_from_the_registries() {
-        let n = names();
+        let n = qmarc_plugins::registry::names();
         assert_eq!(n.laws, ["pidff"]);
         assert_eq!(n.methods, ["step", "spline", "pvt"]);
         let backends: Vec<&str> =

@@ -8,11 +8,11 @@
 
 use anyhow::{Context, anyhow};
 use clap::{Parser, Subcommand};
+use qmarc_plugins::registry::names;
 use qmarc_proto::exit;
 use qmarc_report::Summary;
 use qmarc_starter::cli::{Command, MoveOptions};
 use qmarc_starter::moves::{Failure, MoveRequest, Outcome, TrialIo, internal, refused};
-use qmarc_starter::names;
 use qmarc_starter::path::PathArgs;
 use qmarc_starter::say;
 use qmarc_starter::trials::{TrialsArgs, TrialsCsv};
@@ -266,7 +266,7 @@ fn series_stops(k: u32, outcome: &Outcome) -> Option<(u8, String)> {
 }
 
 fn main() -> ExitCode {
-    let args: StarterArgs = qmarc_starter::cli::parse_or_exit();
+    let args: StarterArgs = qmarc_program::cli::parse_or_exit();
     let result = match &args.command {
         StarterCommand::Move(command) => run(&args, command),
         StarterCommand::Path(path) => qmarc_starter::path::make(&args.opts, path)
@@ -278,5 +278,5 @@ fn main() -> ExitCode {
         StarterCommand::Trials(t) => trials(&args, t),
         StarterCommand::Tune(t) => tune_command::tune(&args, t),
     };
-    qmarc_config::program::conclude("qmarc-starter", result.map_err(<(u8, anyhow::Error)>::from))
+    qmarc_program::cli::conclude("qmarc-starter", result.map_err(<(u8, anyhow::Error)>::from))
 }

@@ -40,7 +40,7 @@ pub struct Failure {
 }
 
 impl From<Failure> for (u8, anyhow::Error) {
-    /// As [`qmarc_config::program::conclude`] takes it.
+    /// As [`qmarc_program::cli::conclude`] takes it.
     fn from(f: Failure) -> Self {
         (f.code, f.error)
     }
@@ -120,7 +120,7 @@ impl Prepared {
 
 /// The settings of `req`: given, or the file's with the command line's, in the trial's folder.
 fn settings_of(req: &MoveRequest<'_>) -> Result<Settings, Failure> {
-    let names = crate::names();
+    let names = qmarc_plugins::registry::names();
     let mut settings = match req.trial.settings {
         Some(s) => s.clone(),
         None => {
@@ -137,7 +137,7 @@ fn settings_of(req: &MoveRequest<'_>) -> Result<Settings, Failure> {
 
 /// The two children's programs in `bin_dir` (`--bin-dir`, or next to this program).
 fn programs(bin_dir: Option<&Path>) -> Result<(PathBuf, PathBuf), Failure> {
-    let dir = crate::bin_dir(bin_dir).map_err(internal)?;
+    let dir = qmarc_program::process::bin_dir(bin_dir).map_err(internal)?;
     let (hwserver, controller) = (dir.join("qmarc-hwserver"), dir.join("qmarc-controller"));
     for b in [&hwserver, &controller] {
         if !b.is_file() {

@@ -35,7 +35,7 @@ pub fn make(opts: &MoveOptions, args: &PathArgs) -> anyhow::Result<String> {
     if out.symlink_metadata().is_ok() {
         bail!(already_there(out));
     }
-    let settings = opts.load(&crate::names())?;
+    let settings = opts.load(&qmarc_plugins::registry::names())?;
     let made = qmarc_waypoints::generate(&settings, &args.waypoints, format, args.every_ms)?;
     write_atomically(out, made.text.as_bytes())?;
     Ok(format!("wrote {} {} knots to {}", made.knots, args.method, out.display()))

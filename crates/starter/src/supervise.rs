@@ -1,10 +1,12 @@
 //! Spawning and supervising the two children.
 
-use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Child, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+
+pub use qmarc_program::process::send;
+use qmarc_program::process::with_parent_death_signal;
 
 /// How a child ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -77,32 +79,6 @@ pub fn spawn_logged(
     cmd.spawn()
 }
 
-/// Makes the child of `cmd` receive SIGTERM when the process that spawns it dies, and end
-/// itself at once if that process is already gone when it starts (the race the prctl alone
-/// leaves). Used for every child a QMARC program starts: no child outlives its parent.
-pub fn with_parent_death_signal(cmd: &mut Command) -> &mut Command {
-    use nix::sys::prctl;
-    use nix::sys::signal::{Signal, raise};
-    let parent = nix::unistd::getpid();
-    // SAFETY: the closure runs between fork and exec and only makes async-signal-safe calls
-    // (sigaction, prctl, getppid, raise).
-    unsafe {
-        cmd.pre_exec(move || {
-            // Until exec the child runs with its parent's signal handlers: a stop signal that
-            // arrived now would set the parent's flag in the child's copy of memory and be
-            // lost, leaving a child whose parent is gone. With the default action it ends it.
-            for sig in [Signal::SIGTERM, Signal::SIGINT, Signal::SIGHUP] {
-                nix::sys::signal::signal(sig, nix::sys::signal::SigHandler::SigDfl)?;
-            }
-            prctl::set_pdeathsig(Signal::SIGTERM)?;
-            if nix::unistd::getppid() != parent {
-                raise(Signal::SIGTERM)?;
-            }
-            Ok(())
-        })
-    }
-}
-
 /// A child under supervision.
 #[derive(Debug)]
 pub struct Supervised {
@@ -172,11 +148,6 @@ impl Supervised {
             return self.exit.is_some();
         }
     }
-}
-
-/// Sends `sig` to `child` (not yet reaped, so its pid cannot have been reused).
-pub fn send(child: &Child, sig: nix::sys::signal::Signal) {
-    let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(child.id() as i32), sig);
 }
 
 /// Ends a child that stays stopped: SIGTERM, then SIGCONT, so that it wakes to its stop

@@ -5,9 +5,9 @@
 use crate::{Failure, StarterArgs, TrialIo, internal, one_move, refused};
 use anyhow::anyhow;
 use qmarc_config::{Mode, Settings};
+use qmarc_plugins::registry::names;
 use qmarc_proto::exit;
 use qmarc_starter::cli::{Command, RunArgs, StepArgs};
-use qmarc_starter::names;
 use qmarc_starter::tune::TuneArgs;
 use qmarc_tune::eval::{EvalError, SimEvaluator};
 use qmarc_tune::optimise::Record;

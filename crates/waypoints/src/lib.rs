@@ -1,5 +1,5 @@
 //! Cartesian paths for the Delta (`qmarc-starter path`): a waypoint file
-//! ([`qmarc_plugins::knots::parse_waypoints`]) becomes a knot file for the spline or the PVT
+//! ([`qmarc_knots::parse_waypoints`]) becomes a knot file for the spline or the PVT
 //! generator (thesis A.2.3) through the robot's inverse kinematics.
 //!
 //! The Cartesian path is a natural cubic spline in t through the waypoints, one per axis (the
@@ -13,7 +13,7 @@
 //! between the knots then bulge, the "slight arcs" of its Fig. 5-8.)
 //!
 //! ```
-//! use qmarc_plugins::knots::{KnotRules, parse_waypoints};
+//! use qmarc_knots::{KnotRules, parse_waypoints};
 //! use qmarc_waypoints::{KnotFormat, joint_knots, render};
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let robot = qmarc_kinematics::Robot {
@@ -34,7 +34,7 @@ mod tests;
 
 use qmarc_config::Settings;
 use qmarc_kinematics::{ARMS, KinematicsError, Point, Robot};
-use qmarc_plugins::knots::{
+use qmarc_knots::{
     KnotFileError, KnotRules, MAX_KNOTS, Waypoints, parse_offline, parse_pvt, parse_waypoints,
     read_knot_file,
 };

@@ -44,8 +44,8 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args: Args = qmarc_config::program::parse_or_exit();
-    if let Err(e) = qmarc_config::program::check_ros_namespace(&args.namespace) {
+    let args: Args = qmarc_program::cli::parse_or_exit();
+    if let Err(e) = qmarc_program::cli::check_ros_namespace(&args.namespace) {
         eprintln!("qmarc-bridge: --namespace: {e}");
         return ExitCode::from(qmarc_proto::exit::USAGE);
     }
@@ -84,7 +84,7 @@ fn main() -> ExitCode {
         served?;
         anyhow::Ok(ExitCode::SUCCESS)
     })();
-    qmarc_config::program::conclude(
+    qmarc_program::cli::conclude(
         "qmarc-bridge",
         outcome.map_err(|e| {
             // A node of its name already alive, or several sessions and none chosen: refused,

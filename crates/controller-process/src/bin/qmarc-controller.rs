@@ -58,6 +58,6 @@ fn run(args: &ControllerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
 }
 
 fn main() -> ExitCode {
-    let args: ControllerArgs = qmarc_config::program::parse_or_exit();
-    qmarc_config::program::conclude("qmarc-controller", run(&args))
+    let args: ControllerArgs = qmarc_program::cli::parse_or_exit();
+    qmarc_program::cli::conclude("qmarc-controller", run(&args))
 }

@@ -157,6 +157,6 @@ fn stopped_as_it_started() -> ExitCode {
 }
 
 fn main() -> ExitCode {
-    let args: HwServerArgs = qmarc_config::program::parse_or_exit();
-    qmarc_config::program::conclude("qmarc-hwserver", run(&args))
+    let args: HwServerArgs = qmarc_program::cli::parse_or_exit();
+    qmarc_program::cli::conclude("qmarc-hwserver", run(&args))
 }

@@ -89,10 +89,10 @@ fn no_distance_is_one_sample_and_unused_motors_hold() {
 /// sample for sample; the loop is told how many samples lead in.
 #[test]
 fn the_approach_puts_the_path_behind_its_way_there() {
-    let knots = crate::knots::parse_offline(
+    let knots = qmarc_knots::parse_offline(
         "k.txt",
         "3\n0.0 1000 -500\n0.5 1500 -500\n1.0 2000 -500\n",
-        &crate::knots::KnotRules::new(2),
+        &qmarc_knots::KnotRules::new(2),
     )
     .unwrap();
     let path = CubicSpline::from_knots(&knots, T, 10.0).unwrap();

@@ -85,7 +85,7 @@ proptest! {
         x0 in -1e5f64..1e5, x1 in -1e5f64..1e5, v0 in -5e4f64..5e4, v1 in -5e4f64..5e4, t in 0.001f64..0.2,
     ) {
         let h = Hermite::new(x0, v0, x1, v1, t);
-        let (a0, a1) = crate::knots::dynamics::hermite_end_accelerations(x0, v0, x1, v1, t);
+        let (a0, a1) = qmarc_knots::dynamics::hermite_end_accelerations(x0, v0, x1, v1, t);
         let scale = (1.0 + x0.abs() + x1.abs() + (v0.abs() + v1.abs()) * t) / (t * t);
         prop_assert!((h.acceleration(0.0) - a0).abs() <= 1e-9 * scale);
         prop_assert!((h.acceleration(t) - a1).abs() <= 1e-9 * scale);

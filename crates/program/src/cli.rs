@@ -1,8 +1,9 @@
 //! The two ends of every QMARC program's `main`: reading its command line
 //! ([`parse_or_exit`]) and turning what it did into its exit code ([`conclude`]), so that
-//! `qmarc-starter`, `qmarc-hwserver`, `qmarc-controller`, `qmarc` and `qmarc-bench` all
-//! answer a wrong command line, `--help` and an error the same way (docs/usage.md "Exit codes",
-//! [`qmarc_proto::exit`]).
+//! `qmarc-starter`, `qmarc-hwserver`, `qmarc-controller`, `qmarc`, `qmarc-bridge` and
+//! `qmarc-bench` all answer a wrong command line, `--help` and an error the same way
+//! (docs/usage.md "Exit codes", [`qmarc_proto::exit`]); and the values more than one
+//! program's command line takes ([`parse_on_off`], [`check_ros_namespace`]).
 
 use std::io::Write;
 use std::process::ExitCode;
@@ -39,6 +40,15 @@ pub fn conclude<E: std::fmt::Display>(program: &str, outcome: Outcome<E>) -> Exi
     }
 }
 
+/// `on` or `off` (`--grip`, `qmarc cmd grip`).
+pub fn parse_on_off(v: &str) -> Result<bool, String> {
+    match v {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("`{v}` is not on or off")),
+    }
+}
+
 /// Checks a ROS namespace as given on a command line (`qmarc-bridge --namespace`, `serve
 /// --bridge --namespace`): empty, or `/` then names of letters, digits and `_` (not starting
 /// with a digit) joined by `/`, without a trailing `/`.
@@ -55,6 +65,12 @@ pub fn check_ros_namespace(ns: &str) -> Result<(), String> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn on_and_off_are_the_only_switch_words() {
+        assert_eq!((super::parse_on_off("on"), super::parse_on_off("off")), (Ok(true), Ok(false)));
+        assert_eq!(super::parse_on_off("yes"), Err("`yes` is not on or off".into()));
+    }
+
     #[test]
     fn ros_namespaces_are_checked() {
         for ok in ["", "/robot1", "/cell_a/robot_2"] {

@@ -1,5 +1,6 @@
 //! Knot files (thesis A.2.3), parsed strictly: every violation is an error naming the file,
-//! line, column and what was expected, found before any motor is enabled.
+//! line, column and what was expected, found before any motor is enabled. The generators
+//! (`qmarc-plugins`), the console, the waypoints and the fuzzers read them here.
 //!
 //! Offline (cubic spline): the first line is the number of knots; then one knot per line,
 //! the time in seconds and one position per motor in whole counts.
@@ -26,6 +27,7 @@
 //! number that becomes a duration is bounded: a path may last at most
 //! `trajectory.max_duration_s` ([`KnotRules`]), and a line may have at most
 //! [`MAX_LINE_BYTES`] bytes (a stream of bytes without line ends, `/dev/zero`, is refused).
+#![deny(missing_docs)]
 
 use qmarc_proto::MAX_MOTORS;
 use std::io::BufRead;
@@ -125,13 +127,6 @@ impl KnotRules {
     /// The same rules with the longest path `max_duration_s`.
     pub fn max_duration_s(self, max_duration_s: f64) -> KnotRules {
         KnotRules { max_duration_s, ..self }
-    }
-}
-
-impl From<KnotFileError> for qmarc_controller::traj::TrajStartError {
-    /// Bad knots met as the move starts (a stream's): the loop's start error carries them.
-    fn from(e: KnotFileError) -> Self {
-        qmarc_controller::traj::TrajStartError::Generator(Box::new(e))
     }
 }
 
