@@ -25,7 +25,7 @@ pub enum HwOp {
     ReadInputs,
     /// [`Backend::write_dacs`].
     WriteDacs,
-    /// [`Backend::set_enabled`].
+    /// [`Backend::set_amp_enable`].
     Enable,
     /// [`Backend::load_counter`].
     LoadCounter,
