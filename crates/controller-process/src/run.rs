@@ -278,8 +278,10 @@ pub fn build_serving(
     let mut unhomed_jog = settings.clone();
     unhomed_jog.jog.speed = settings.jog.unhomed_speed;
     let settings = if spec.unhomed && spec.mode == Mode::Jog { &unhomed_jog } else { settings };
+    // What the loop is doing, as it writes it: the serving session's command thread reads it.
+    let status = std::sync::Arc::new(qmarc_controller::status::LoopStatus::default());
     let (mut path, serving) = if spec.mode == Mode::Serve {
-        let (generator, handle) = server::generator(settings, spec.unhomed);
+        let (generator, handle) = server::generator(settings, spec.unhomed, status.clone());
         (generator, Some(handle))
     } else {
         let name = generator_name(spec.mode, settings);
@@ -295,7 +297,9 @@ pub fn build_serving(
         Mode::Check => Box::new(qmarc_plugins::check::OpenLoop::from_settings(settings)),
         _ => (law.build)(settings),
     };
-    let servo = Servo::new(plan, path, law, Box::new(MonotonicClock)).with_progress(progress);
+    let servo = Servo::new(plan, path, law, Box::new(MonotonicClock))
+        .with_progress(progress)
+        .with_status(status);
     Ok((servo, serving))
 }
 
@@ -394,7 +398,7 @@ fn preset_home(
 /// the hwserver read right after the counters were preset.
 fn homing_report(record: &MoveRecord, after: Option<HwMsg>, n: usize) -> HomingReport {
     HomingReport {
-        motors: record.homing.clone().unwrap_or_default(),
+        motors: qmarc_report::summarize::findings(record, "homing").unwrap_or_default(),
         after: after.map(|r| AfterHoming {
             positions_counts: r.data[..n].to_vec(),
             homed: r.aux[..n].iter().map(|&f| MotorFlags(f).homed()).collect(),

@@ -62,5 +62,6 @@ pub mod plan;
 pub mod record;
 pub mod servo;
 pub mod stats;
+pub mod status;
 pub mod telemetry;
 pub mod traj;

@@ -5,7 +5,7 @@
 use crate::fault::Fault;
 use crate::gather::Gather;
 use crate::stats::{ErrorStats, TimingStats};
-use crate::traj::{MotorCheckReport, MotorHome};
+use crate::traj::Findings;
 use qmarc_proto::MAX_MOTORS;
 
 /// A part of a move apart from its path (the approach before it, the settle after it).
@@ -56,10 +56,9 @@ pub struct MoveRecord {
     pub homed: [bool; MAX_MOTORS],
     /// The homed frame homing found, if it did.
     pub homed_frame: Option<[f64; MAX_MOTORS]>,
-    /// Where homing found and left each motor (homing only).
-    pub homing: Option<Vec<MotorHome>>,
-    /// What each motor did in the open-loop check (`check` only).
-    pub check: Option<Vec<MotorCheckReport>>,
+    /// The generator's own findings (homing's: where it found and left each motor; the
+    /// check's: what each motor did), for their section of the report.
+    pub findings: Option<Findings>,
     /// Live samples the loop dropped because their ring was full.
     pub telemetry_dropped: u32,
     /// The gathered rows.

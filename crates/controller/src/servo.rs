@@ -12,11 +12,13 @@ use crate::law::{ServoInput, ServoLaw, is_dac_code};
 use crate::link::{HwLink, LinkError};
 use crate::plan::MovePlan;
 use crate::stats::{ErrorStats, TimingStats};
+use crate::status::LoopStatus;
 use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_config::GatherFields;
 pub use qmarc_proto::state::Phase;
 use qmarc_proto::{Gripper, HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_timer::{Clock, Tick};
+use std::sync::Arc;
 
 mod error;
 mod limits;
@@ -89,6 +91,8 @@ pub struct Servo {
     /// The free outputs as the cycle's read reported them (after a write of this cycle, as
     /// written).
     outputs: u32,
+    /// What the loop is doing, for the threads of the process ([`LoopStatus`]).
+    status: Arc<LoopStatus>,
 }
 
 impl Servo {
@@ -136,7 +140,20 @@ impl Servo {
             telemetry_dropped: 0,
             grip: Gripper(Gripper::ABSENT),
             outputs: 0,
+            status: Arc::new(LoopStatus::default()),
         }
+    }
+
+    /// Writes what the loop is doing into `status` (the serving session's command thread
+    /// reads it) instead of a block of its own.
+    pub fn with_status(mut self, status: Arc<LoopStatus>) -> Servo {
+        self.status = status;
+        self
+    }
+
+    /// What the loop is doing, as it writes it every cycle.
+    pub fn status(&self) -> &Arc<LoopStatus> {
+        &self.status
     }
 
     /// Gathers into the gather page at `path` (`qmarc_proto::gather_page`), made when the
@@ -190,6 +207,7 @@ impl Servo {
 
     fn enter(&mut self, phase: Phase) {
         self.phase = phase;
+        self.status.set_phase(phase);
         if let Some(p) = &self.progress {
             p.set_phase(phase.wire());
         }
@@ -202,7 +220,7 @@ impl Servo {
 
     /// The positions that read 0 after this move, if it defines a homed frame (homing).
     pub fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
-        self.generator.homed_frame()
+        self.generator.report().homed_frame
     }
 
     /// Per motor, whether its frame was homed when the move began (the software limits held
@@ -287,6 +305,7 @@ impl Servo {
         self.act = start.data;
         let flags = start.aux.map(MotorFlags);
         self.homed = flags.map(MotorFlags::homed);
+        self.status.set_read(self.plan.n_motors, &self.act, &flags, Gripper(start.gripper));
         if self.plan.require_homed
             && let Some(m) = (0..self.plan.n_motors).find(|&m| !self.homed[m])
         {
@@ -316,6 +335,8 @@ impl Servo {
         }
         self.law.reset(&self.cmd, &self.act);
         self.law_sample = 0;
+        self.status.set_command(&self.cmd);
+        self.status.set_cycles(0);
         let samples = self.planned_samples.unwrap_or(self.plan.stream_gather_samples)
             + self.plan.settle_cycles;
         crate::gather::check_budget(samples, self.plan.gather_every)?;
@@ -417,6 +438,8 @@ impl Servo {
         self.record(n, tick);
         self.publish(n, tick, written, resp.status);
         self.executed += 1;
+        self.status.set_command(&self.cmd);
+        self.status.set_cycles(self.executed);
         if let Some(p) = &self.progress {
             p.set_cycle(self.executed, self.generator.progress());
         }
@@ -439,7 +462,9 @@ impl Servo {
         self.act = resp.data;
         self.grip = Gripper(resp.gripper);
         self.outputs = resp.outputs;
-        self.generator.observe(&self.act, &resp.aux.map(MotorFlags));
+        let flags = resp.aux.map(MotorFlags);
+        self.status.set_read(self.plan.n_motors, &self.act, &flags, self.grip);
+        self.generator.observe(&self.act, &flags);
         Ok(hw_time_ns)
     }
 

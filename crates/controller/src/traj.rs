@@ -170,18 +170,6 @@ pub trait TrajectoryGenerator: Send {
         None
     }
 
-    /// After a move without a fault: the positions (in the frame of the move) that are to read
-    /// 0 from now on, making the frame homed — homing's home positions. Default: none.
-    fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
-        None
-    }
-
-    /// After a homing: where each motor's switch was found and cleared and where home is
-    /// (the report's `homing`). Not called in the loop. Default: none.
-    fn homing_report(&self) -> Option<&[MotorHome]> {
-        None
-    }
-
     /// Before [`TrajectoryGenerator::start`]: the command of the path's first sample, where the
     /// generator can say it before the move (a knot file's first knot; a stream's, read for
     /// it), so that an approach can move there first. May read and fail like `start`. Default:
@@ -196,53 +184,33 @@ pub trait TrajectoryGenerator: Send {
         0
     }
 
-    /// After an open-loop check: what each motor did for its voltage (the report's `check`).
-    /// Not called in the loop. Default: none.
-    fn check_report(&self) -> Option<&[MotorCheckReport]> {
-        None
+    /// After the move (never in the loop): what the generator found, in one report — the
+    /// homed frame a homing defines, and its own findings for the move's report. Default:
+    /// nothing.
+    fn report(&self) -> GeneratorReport {
+        GeneratorReport::default()
     }
 }
 
-/// What one motor did in the open-loop check (`qmarc-starter check`), counts.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct MotorCheckReport {
-    /// 1-based motor.
-    pub motor: usize,
-    /// The voltage it got, V.
-    pub volts: f64,
-    /// For how long, s.
-    pub seconds: f64,
-    /// How far it moved while driven, counts (positive: up, as a positive voltage should).
-    pub moved_counts: f64,
-    /// How far it went on in the rest after, counts.
-    pub coasted_counts: f64,
-    /// The largest distance another motor moved while this one was driven, and which (1-based;
-    /// 0: none moved): crossed DACs or counters show here.
-    pub others_moved: (usize, f64),
-    /// Its pulse ran to its end.
-    pub done: bool,
+/// What a generator found in its move, told once it has ended ([`TrajectoryGenerator::report`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GeneratorReport {
+    /// After a move without a fault: the positions (in the frame of the move) that are to
+    /// read 0 from now on, making the frame homed — homing's home positions.
+    pub homed_frame: Option<[f64; MAX_MOTORS]>,
+    /// The generator's own findings, for the section of `summary.json` it names (homing's
+    /// `homing`, the open-loop check's `check`): plain JSON, so that the loop knows no
+    /// generator's types.
+    pub findings: Option<Findings>,
 }
 
-/// Where homing found and left one motor, counts in the frame before homing.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct MotorHome {
-    /// 1-based motor.
-    pub motor: usize,
-    /// Where the top switch was first seen active (`None`: not reached — the homing ended
-    /// before it found the switch).
-    pub switch_found_counts: Option<f64>,
-    /// Where it cleared while backing off (`None`: not reached).
-    pub switch_cleared_counts: Option<f64>,
-    /// Home: the home offset from where the switch cleared. It reads 0 afterwards (`None`:
-    /// not reached).
-    pub home_counts: Option<f64>,
-    /// Where the motor stood when the next one started (it reads `ended − home` afterwards;
-    /// `None`: it did not get there).
-    pub ended_counts: Option<f64>,
-    /// The motor was already on its top switch when its homing began.
-    pub started_on_switch: bool,
-    /// It got home (false: homing failed on this motor).
-    pub home: bool,
+/// A generator's findings: the section of the move's report they fill, and their value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Findings {
+    /// The section (`"homing"`, `"check"`).
+    pub section: &'static str,
+    /// What was found, as the generator's type serializes it.
+    pub value: serde_json::Value,
 }
 
 /// The per-motor bounds of a sequence of commands.

@@ -10,7 +10,9 @@
 
 use qmarc_config::Settings;
 use qmarc_controller::law::{ServoInput, ServoLaw};
-use qmarc_controller::traj::{MotorCheckReport, Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_controller::traj::{
+    Findings, GeneratorReport, Sample, TrajStartError, TrajectoryGenerator,
+};
 use qmarc_proto::state::FaultKind;
 use qmarc_proto::{DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, MotorFlags};
 
@@ -139,6 +141,13 @@ impl Check {
     }
 }
 
+impl Check {
+    /// What each motor did for its voltage, so far.
+    pub fn checked(&self) -> &[MotorCheckReport] {
+        &self.reports[..self.schedule.n_motors]
+    }
+}
+
 impl TrajectoryGenerator for Check {
     fn name(&self) -> &'static str {
         "check"
@@ -200,9 +209,35 @@ impl TrajectoryGenerator for Check {
         FaultKind::TooMuchTravel
     }
 
-    fn check_report(&self) -> Option<&[MotorCheckReport]> {
-        Some(&self.reports[..self.schedule.n_motors])
+    /// What each motor did for its voltage (the report's `check`).
+    fn report(&self) -> GeneratorReport {
+        GeneratorReport {
+            homed_frame: None,
+            findings: serde_json::to_value(self.checked())
+                .ok()
+                .map(|value| Findings { section: "check", value }),
+        }
     }
+}
+
+/// What one motor did in the open-loop check (`qmarc-starter check`), counts.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MotorCheckReport {
+    /// 1-based motor.
+    pub motor: usize,
+    /// The voltage it got, V.
+    pub volts: f64,
+    /// For how long, s.
+    pub seconds: f64,
+    /// How far it moved while driven, counts (positive: up, as a positive voltage should).
+    pub moved_counts: f64,
+    /// How far it went on in the rest after, counts.
+    pub coasted_counts: f64,
+    /// The largest distance another motor moved while this one was driven, and which (1-based;
+    /// 0: none moved): crossed DACs or counters show here.
+    pub others_moved: (usize, f64),
+    /// Its pulse ran to its end.
+    pub done: bool,
 }
 
 /// The check's law: the scheduled voltage on the motor whose pulse it is, 0 V on every other;
@@ -288,7 +323,7 @@ mod tests {
         };
         let (g, end) = run([4.0, -2.0], 100.0, &[]);
         assert_eq!(end, Sample::Done);
-        let r = g.check_report().unwrap();
+        let r = g.checked();
         assert_eq!((r[0].moved_counts, r[0].done, r[0].others_moved), (12.0, true, (0, 0.0)));
         assert_eq!((r[1].moved_counts, r[1].others_moved), (-6.0, (1, 1.5)));
         assert_eq!((r[0].volts, r[0].seconds, r[0].motor, r[1].motor), (0.2, 0.003, 1, 2));
@@ -296,7 +331,7 @@ mod tests {
         // begins (sample 6): the first reads after them book it, one step late at worst.
         let (g, end) = run([4.0, -2.0], 100.0, &[4, 6]);
         assert_eq!(end, Sample::Done);
-        let r = g.check_report().unwrap();
+        let r = g.checked();
         assert_eq!((r[0].moved_counts, r[0].done), (12.0, true));
         assert_eq!((r[1].moved_counts, r[1].done, r[1].others_moved), (-4.0, true, (1, 1.0)));
         let (g, end) = run([40.0, -2.0], 100.0, &[]);

@@ -15,7 +15,9 @@
 //! than the one being sought fails the homing.
 
 use qmarc_config::{HomingSettings, MotorSafety, Settings};
-use qmarc_controller::traj::{MotorHome, Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_controller::traj::{
+    Findings, GeneratorReport, Sample, TrajStartError, TrajectoryGenerator,
+};
 use qmarc_proto::state::FaultKind;
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
 
@@ -408,17 +410,42 @@ impl TrajectoryGenerator for Homing {
         self.phase_code()
     }
 
-    fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
+    /// The homed frame once every motor is home; where each motor's switch and home were
+    /// (the report's `homing`).
+    fn report(&self) -> GeneratorReport {
         let mut home = [0.0; MAX_MOTORS];
         for (h, r) in home.iter_mut().zip(&self.reports).take(self.n_motors) {
             *h = r.home_counts.unwrap_or(0.0);
         }
-        (self.phase == Phase::Done).then_some(home)
+        GeneratorReport {
+            homed_frame: (self.phase == Phase::Done).then_some(home),
+            findings: serde_json::to_value(self.reports())
+                .ok()
+                .map(|value| Findings { section: "homing", value }),
+        }
     }
+}
 
-    fn homing_report(&self) -> Option<&[MotorHome]> {
-        Some(self.reports())
-    }
+/// Where homing found and left one motor, counts in the frame before homing.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MotorHome {
+    /// 1-based motor.
+    pub motor: usize,
+    /// Where the top switch was first seen active (`None`: not reached — the homing ended
+    /// before it found the switch).
+    pub switch_found_counts: Option<f64>,
+    /// Where it cleared while backing off (`None`: not reached).
+    pub switch_cleared_counts: Option<f64>,
+    /// Home: the home offset from where the switch cleared. It reads 0 afterwards (`None`:
+    /// not reached).
+    pub home_counts: Option<f64>,
+    /// Where the motor stood when the next one started (it reads `ended − home` afterwards;
+    /// `None`: it did not get there).
+    pub ended_counts: Option<f64>,
+    /// The motor was already on its top switch when its homing began.
+    pub started_on_switch: bool,
+    /// It got home (false: homing failed on this motor).
+    pub home: bool,
 }
 
 #[cfg(test)]

@@ -7,7 +7,9 @@
 use crate::motion::{MotionLimits, MotionState, Profile};
 use crate::source::{CommandQueue, QUEUE_BUDGET_BYTES, TrajBuildError, sample_queue};
 use qmarc_config::Settings;
-use qmarc_controller::traj::{MotorHome, Sample, TrajStartError, TrajectoryGenerator, bounds_of};
+use qmarc_controller::traj::{
+    GeneratorReport, Sample, TrajStartError, TrajectoryGenerator, bounds_of,
+};
 use qmarc_proto::state::FaultKind;
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
 
@@ -330,12 +332,8 @@ impl TrajectoryGenerator for Approach {
         self.path.end_velocity()
     }
 
-    fn homed_frame(&self) -> Option<[f64; MAX_MOTORS]> {
-        self.path.homed_frame()
-    }
-
-    fn homing_report(&self) -> Option<&[MotorHome]> {
-        self.path.homing_report()
+    fn report(&self) -> GeneratorReport {
+        self.path.report()
     }
 
     fn lead_in(&self) -> u64 {

@@ -27,7 +27,7 @@ struct Block {
 /// What the progress file says.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Snapshot {
-    /// The move's phase ([`crate::state::Phase::code`]), 0 before it began.
+    /// The move's phase ([`crate::state::Phase::wire`]), 0 before it began.
     pub phase: u32,
     /// What the generator says about where it is (the controller's `TrajectoryGenerator::progress`).
     pub detail: u32,

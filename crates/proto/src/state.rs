@@ -6,7 +6,7 @@
 
 /// Where a move is. The loop goes Idle → Preparing → Moving (or Homing) → Settling → Done, or
 /// to Fault from Preparing onwards; Holding lies between Moving and Fault when a knot stream
-/// runs dry. The number is [`Phase::code`].
+/// runs dry. The number is [`Phase::wire`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
 pub enum Phase {
@@ -76,8 +76,8 @@ impl Phase {
 }
 
 /// What ended a move early. In `summary.json` it is the snake-case name
-/// ([`FaultKind::name`]); on the wire its [`FaultKind::code`] (a telemetry sample carries
-/// [`FaultKind::wire`]: the code + 1, 0 for none).
+/// ([`FaultKind::name`]); on the wire [`FaultKind::wire`] of it (its number among
+/// [`FaultKind::ALL`] + 1, 0 for none).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 #[repr(u32)]
@@ -123,7 +123,7 @@ pub enum FaultKind {
 }
 
 impl FaultKind {
-    /// Every kind, in the order of their codes ([`FaultKind::code`]).
+    /// Every kind, in the order of their wire numbers ([`FaultKind::wire`]).
     pub const ALL: [FaultKind; 19] = [
         FaultKind::LimitSwitch,
         FaultKind::HwserverLost,

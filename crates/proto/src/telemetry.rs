@@ -44,7 +44,7 @@ pub struct TelemetrySample {
     pub output_latency_ns: u32,
     /// Wake to wake since the previous cycle, ns (0 for the first; saturated).
     pub period_ns: u32,
-    /// The move's phase ([`crate::state::Phase::code`]).
+    /// The move's phase ([`crate::state::Phase::wire`]).
     pub phase: u32,
     /// The hwserver's status bits of the cycle ([`crate::Status`]).
     pub status: u32,

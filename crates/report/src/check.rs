@@ -3,7 +3,7 @@
 //! expects of the amplifier, whether another motor moved with it, and what to change.
 
 use qmarc_config::Settings;
-use qmarc_controller::traj::MotorCheckReport;
+use qmarc_plugins::check::MotorCheckReport;
 use serde::{Deserialize, Serialize};
 
 /// A motor that moved less than this share of what the feed-forward expects did not move.

@@ -8,6 +8,7 @@ use crate::summary::{
 };
 use qmarc_config::{Mode, Settings};
 use qmarc_controller::record::MoveRecord;
+use qmarc_plugins::check::MotorCheckReport;
 use qmarc_timer::rt::RtStatus;
 
 /// A path whose last command moves slower than this (counts/s) ends at rest.
@@ -72,13 +73,18 @@ pub fn summarize(
         starter_pid: nix::unistd::getppid().as_raw() as u32,
         files: Vec::new(),
         homing: None,
-        check: record
-            .check
-            .as_ref()
+        check: findings::<Vec<MotorCheckReport>>(record, "check")
             .map(|r| r.iter().map(|m| crate::check::MotorCheck::of(settings, m)).collect()),
     };
     summary.judge_figures();
     summary
+}
+
+/// The generator's findings for the report's `section`, as `T` (none: the generator found
+/// nothing for it, or what it found is not a `T`).
+pub fn findings<T: serde::de::DeserializeOwned>(record: &MoveRecord, section: &str) -> Option<T> {
+    let f = record.findings.as_ref().filter(|f| f.section == section)?;
+    serde_json::from_value(f.value.clone()).ok()
 }
 
 /// What the settings and the path call for a warning about: gathered rows not kept, a path

@@ -7,7 +7,7 @@ use qmarc_config::{Mode, MotorGains};
 use qmarc_controller::fault::Fault;
 use qmarc_controller::stats::TimingStats;
 /// Where homing found and left one motor (the homing generator's record, as it is).
-pub use qmarc_controller::traj::MotorHome;
+pub use qmarc_plugins::homing::MotorHome;
 use qmarc_proto::state::FaultKind;
 use qmarc_timer::Percentiles;
 use serde::{Deserialize, Serialize};

@@ -3,16 +3,18 @@
 //! wait-free queue from the command thread (`qmarc/command`, in the controller process): a
 //! new target or a stop takes over from the command's position, velocity and acceleration in
 //! the cycle it arrives ([`OnlineMove::retarget`]); a straight line, planned by the command
-//! thread from rest, is sampled from its queue. What the loop is doing goes back through
-//! atomics ([`ServeShared`]); a line's spent queue goes back through a second queue, so the
-//! servo thread never frees memory.
+//! thread from rest, is sampled from its queue. What became of the orders goes back through
+//! atomics ([`ServeShared`]; where the robot is, the loop says itself: its
+//! [`LoopStatus`]); a line's spent queue goes back through a second queue, so the servo
+//! thread never frees memory.
 
 use qmarc_config::Settings;
+use qmarc_controller::status::LoopStatus;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_plugins::motion::MotionLimits;
 use qmarc_plugins::motion::MotionState;
 use qmarc_plugins::online::{OnlineMove, RetargetError};
-use qmarc_proto::{Gripper, MAX_MOTORS, MotorFlags};
+use qmarc_proto::{Gripper, MAX_MOTORS};
 use rtrb::{Consumer, Producer, RingBuffer};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
@@ -150,8 +152,8 @@ impl NotTaken {
     }
 }
 
-/// What the loop is doing, for the command thread: written by the servo thread with atomic
-/// stores only.
+/// What became of the orders, for the command thread: written by the servo thread with
+/// atomic stores only.
 #[derive(Debug, Default)]
 pub struct ServeShared {
     /// The last order whose end the command has come to rest at.
@@ -163,39 +165,14 @@ pub struct ServeShared {
     pub taken_ns: AtomicU64,
     /// The cycles executed when it took it, that cycle included.
     pub taken_cycle: AtomicU64,
-    /// The cycles the loop has executed (samples computed; a stall's skipped samples are no
-    /// cycles).
-    pub cycles: AtomicU64,
     /// The last move the loop could not take (no profile, or one leaving the soft limits).
     pub not_taken: AtomicU64,
-    /// Why it could not ([`NotTaken::code`]).
+    /// Why it could not ([`NotTaken::wire`]).
     pub not_taken_why: AtomicU32,
     /// The last motion order the loop took (a move, a line, a stop; not a grip).
     pub motion: AtomicU64,
     /// The command moves.
     pub moving: AtomicBool,
-    /// The command, counts (f64 bits).
-    pub command: [AtomicU64; MAX_MOTORS],
-    /// The motors' positions, counts (f64 bits).
-    pub actual: [AtomicU64; MAX_MOTORS],
-    /// Bit m: motor m's frame is homed.
-    pub homed: AtomicU32,
-    /// The loop has sampled at least once.
-    pub started: AtomicBool,
-    /// The gripper as the loop's last read found it ([`Gripper`] bits).
-    pub gripper: AtomicU32,
-}
-
-impl ServeShared {
-    /// The command, counts.
-    pub fn command(&self) -> [f64; MAX_MOTORS] {
-        self.command.each_ref().map(|a| f64::from_bits(a.load(Ordering::Acquire)))
-    }
-
-    /// The motors' positions, counts.
-    pub fn actual(&self) -> [f64; MAX_MOTORS] {
-        self.actual.each_ref().map(|a| f64::from_bits(a.load(Ordering::Acquire)))
-    }
 }
 
 /// The command thread's end of a [`ServeMove`].
@@ -204,8 +181,10 @@ pub struct ServeHandle {
     pub orders: Producer<Order>,
     /// Lines the loop is done with, to be freed here.
     pub spent: Consumer<LineQueue>,
-    /// What the loop is doing.
+    /// What became of the orders.
     pub shared: Arc<ServeShared>,
+    /// What the loop is doing, as it says it.
+    pub status: Arc<LoopStatus>,
 }
 
 struct Line {
@@ -220,6 +199,8 @@ pub struct ServeMove {
     orders: Consumer<Order>,
     spent: Producer<LineQueue>,
     shared: Arc<ServeShared>,
+    /// The loop's status: its cycles, when an order is taken.
+    status: Arc<LoopStatus>,
     line: Option<Line>,
     current: u64,
     quitting: bool,
@@ -234,9 +215,14 @@ pub struct ServeMove {
 }
 
 impl ServeMove {
-    /// A serving generator for `settings` and its command thread's handle; `limits.soft`,
-    /// when the frame is homed and the soft limits hold, bounds every profile it takes.
-    pub fn new(settings: &Settings, limits: &ServeLimits) -> (ServeMove, ServeHandle) {
+    /// A serving generator for `settings` and its command thread's handle, in the loop whose
+    /// status is `status`; `limits.soft`, when the frame is homed and the soft limits hold,
+    /// bounds every profile it takes.
+    pub fn new(
+        settings: &Settings,
+        limits: &ServeLimits,
+        status: Arc<LoopStatus>,
+    ) -> (ServeMove, ServeHandle) {
         let mut online = OnlineMove::new(
             [0.0; MAX_MOTORS],
             settings.n_motors,
@@ -249,12 +235,12 @@ impl ServeMove {
         let (orders_tx, orders) = RingBuffer::new(ORDER_QUEUE);
         let (spent, spent_rx) = RingBuffer::new(ORDER_QUEUE + 1);
         let shared = Arc::new(ServeShared::default());
-        shared.gripper.store(Gripper::ABSENT, Ordering::Release);
         let serve = ServeMove {
             online,
             orders,
             spent,
             shared: shared.clone(),
+            status: status.clone(),
             line: None,
             current: 0,
             quitting: false,
@@ -264,7 +250,7 @@ impl ServeMove {
             period_s: settings.period_s(),
             n_motors: settings.n_motors,
         };
-        (serve, ServeHandle { orders: orders_tx, spent: spent_rx, shared })
+        (serve, ServeHandle { orders: orders_tx, spent: spent_rx, shared, status })
     }
 
     /// The state of the last sample commanded: the line's or the online profile's. A line's
@@ -375,15 +361,12 @@ impl ServeMove {
     /// Order `id` taken now, in this cycle.
     fn took(&self, id: u64) {
         self.shared.taken_ns.store(qmarc_timer::clock::monotonic_now_ns(), Ordering::Release);
-        let cycle = self.shared.cycles.load(Ordering::Relaxed) + 1;
+        let cycle = self.status.cycles() + 1;
         self.shared.taken_cycle.store(cycle, Ordering::Release);
         self.shared.taken.store(id, Ordering::Release);
     }
 
-    fn publish(&self, cmd: &[f64; MAX_MOTORS], moving: bool) {
-        for (a, c) in self.shared.command.iter().zip(cmd) {
-            a.store(c.to_bits(), Ordering::Release);
-        }
+    fn publish(&self, moving: bool) {
         self.shared.moving.store(moving, Ordering::Release);
         if !moving && self.grip_arrived {
             self.shared.settled.store(self.current, Ordering::Release);
@@ -398,7 +381,7 @@ impl TrajectoryGenerator for ServeMove {
 
     fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
         self.online.continue_from(0, MotionState::at_rest(*start));
-        self.publish(start, false);
+        self.publish(false);
         Ok(())
     }
 
@@ -411,17 +394,7 @@ impl TrajectoryGenerator for ServeMove {
     }
 
     #[inline]
-    fn observe(&mut self, act: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
-        for (a, x) in self.shared.actual.iter().zip(act) {
-            a.store(x.to_bits(), Ordering::Release);
-        }
-        let homed = (0..self.n_motors).filter(|&m| flags[m].homed()).fold(0, |b, m| b | 1 << m);
-        self.shared.homed.store(homed, Ordering::Release);
-    }
-
-    #[inline]
     fn gripper(&mut self, state: Gripper) -> Option<bool> {
-        self.shared.gripper.store(state.0, Ordering::Release);
         // Told and there: the order settles with the next sample at rest.
         self.grip_arrived |= self.grip.is_some_and(|c| state.reached(c));
         self.grip
@@ -432,15 +405,13 @@ impl TrajectoryGenerator for ServeMove {
         if self.ended {
             return Sample::Done;
         }
-        self.shared.started.store(true, Ordering::Release);
         self.take_orders(n);
-        self.shared.cycles.fetch_add(1, Ordering::AcqRel);
         if let Some(line) = &self.line {
             let k = n.saturating_sub(line.from_n) as usize;
             if k + 1 < line.queue.len() {
                 *cmd = line.queue[k];
                 self.online.continue_from(n, MotionState::at_rest(*cmd));
-                self.publish(cmd, true);
+                self.publish(true);
                 return Sample::Ready;
             }
             *cmd = line.queue[line.queue.len() - 1];
@@ -448,7 +419,7 @@ impl TrajectoryGenerator for ServeMove {
             if let Some(line) = self.line.take() {
                 let _ = self.spent.push(line.queue);
             }
-            self.publish(cmd, false);
+            self.publish(false);
             return Sample::Ready;
         }
         let moving = match self.online.sample(n, cmd) {
@@ -460,7 +431,7 @@ impl TrajectoryGenerator for ServeMove {
                 false
             }
         };
-        self.publish(cmd, moving);
+        self.publish(moving);
         // The rest a quit's stop comes to is commanded once; the sample after it ends.
         if self.quitting && !moving {
             self.ended = true;

@@ -15,13 +15,13 @@ use crate::wire::{
 };
 use iceoryx2::prelude::ipc;
 use qmarc_config::{Settings, TargetError};
+use qmarc_controller::status::LoopStatus;
 use qmarc_controller::traj::TrajectoryGenerator;
 use qmarc_plugins::linear::LinearMove;
 use qmarc_plugins::motion::MotionLimits;
 use qmarc_plugins::motion::{MotionState, Profile};
 use qmarc_plugins::moveto::approach_queue;
 use qmarc_proto::MAX_MOTORS;
-use qmarc_proto::progress::Progress;
 use qmarc_proto::service::{IpcLocation, ServiceError, create_node};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
@@ -41,13 +41,14 @@ pub struct Ended {
     pub stop: AtomicBool,
 }
 
-/// The serving generator for `settings` (soft limits on its profiles unless `unhomed`) and the
-/// command thread's end of it.
+/// The serving generator for `settings` (soft limits on its profiles unless `unhomed`) in the
+/// loop whose status is `status`, and the command thread's end of it.
 pub fn generator(
     settings: &Settings,
     unhomed: bool,
+    status: Arc<LoopStatus>,
 ) -> (Box<dyn TrajectoryGenerator>, ServeHandle) {
-    let (serve, handle) = ServeMove::new(settings, &ServeLimits::of(settings, unhomed));
+    let (serve, handle) = ServeMove::new(settings, &ServeLimits::of(settings, unhomed), status);
     (Box::new(serve), handle)
 }
 
@@ -59,7 +60,6 @@ struct Commands {
     unhomed: bool,
     handle: ServeHandle,
     ended: Arc<Ended>,
-    progress: Option<Progress>,
     /// The last order id given.
     seq: u64,
     /// The last move accepted.
@@ -90,7 +90,6 @@ impl CommandThread {
             unhomed,
             handle,
             ended: ended.clone(),
-            progress: Progress::open(&Progress::path(&location.prefix)).ok(),
             seq: 0,
             accepted: 0,
             queued_at: 0,
@@ -182,6 +181,11 @@ impl Commands {
         &self.handle.shared
     }
 
+    /// What the loop is doing, as it says it.
+    fn status(&self) -> &LoopStatus {
+        &self.handle.status
+    }
+
     /// `answer(self)`, or — should a check panic on a request no one foresaw — a refusal that
     /// says so: the thread, and with it every client's way to stop the robot, goes on.
     fn guarded(
@@ -190,7 +194,7 @@ impl Commands {
     ) -> CommandResponse {
         std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| answer(self))).unwrap_or_else(
             |_| {
-                let mut r = self.status();
+                let mut r = self.report();
                 let why = "the controller could not check this request (an internal error)";
                 r.answer.refuse(&Refused::new(Refusal::BadRequest, why));
                 r
@@ -203,7 +207,7 @@ impl Commands {
         if self.ended.ended.load(Ordering::Acquire) {
             return Err(Refused::new(Refusal::NotServing, "the session has ended"));
         }
-        if !self.shared().started.load(Ordering::Acquire) {
+        if !self.status().begun() {
             return Err(Refused::new(
                 Refusal::Busy,
                 "the session is starting: its loop has not begun (qmarc cmd status says when)",
@@ -240,7 +244,7 @@ impl Commands {
         order: bool,
         outcome: Result<(), Refused>,
     ) -> CommandResponse {
-        let mut r = self.status();
+        let mut r = self.report();
         r.timing.received_ns = received_ns;
         r.answer.id = id;
         match outcome {
@@ -286,7 +290,7 @@ impl Commands {
             self.homed()?;
         }
         self.at_rest("a path")?;
-        let start = self.shared().command();
+        let start = self.status().command();
         let (mut queue, from) = match req.knots().first().filter(|_| req.approached()) {
             // `--approach`: first to the path's first knot, as `run --approach` goes.
             Some(first) => {
@@ -321,7 +325,7 @@ impl Commands {
 
     /// Every motor's frame is homed.
     fn homed(&self) -> Result<(), Refused> {
-        let homed = self.shared().homed.load(Ordering::Acquire);
+        let homed = self.status().homed();
         match (0..self.settings.n_motors).find(|m| homed & (1 << m) == 0) {
             None => Ok(()),
             Some(m) => Err(Refused::new(
@@ -352,13 +356,13 @@ impl Commands {
         self.handle.orders.push(make(id)).map_err(|_| {
             Refused::new(Refusal::Busy, "the loop has not taken the last commands yet")
         })?;
-        self.queued_at = self.shared().cycles.load(Ordering::Acquire);
+        self.queued_at = self.status().cycles();
         self.seq = id;
         Ok(id)
     }
 
-    /// Where the robot is.
-    fn status(&self) -> CommandResponse {
+    /// Where the robot is, and what became of the orders.
+    fn report(&self) -> CommandResponse {
         let shared = self.shared();
         let orders = Orders {
             accepted: self.accepted,
@@ -369,14 +373,15 @@ impl Commands {
             moving: u32::from(shared.moving.load(Ordering::Acquire)),
             reserved: 0,
         };
-        let command = shared.command();
+        let status = self.status();
+        let command = status.command();
         let robot = RobotStatus {
-            phase: self.progress.as_ref().map_or(0, |p| p.read().phase),
+            phase: status.phase().wire(),
             fault: self.ended.fault.load(Ordering::Acquire),
-            homed: shared.homed.load(Ordering::Acquire),
-            gripper: shared.gripper.load(Ordering::Acquire),
+            homed: status.homed(),
+            gripper: status.gripper().0,
             command,
-            actual: shared.actual(),
+            actual: status.actual(),
             effector_mm: self
                 .settings
                 .robot()
@@ -385,7 +390,7 @@ impl Commands {
         };
         let timing = Timing {
             received_ns: 0,
-            received_cycle: shared.cycles.load(Ordering::Acquire),
+            received_cycle: status.cycles(),
             taken_ns: shared.taken_ns.load(Ordering::Acquire),
             taken_cycle: shared.taken_cycle.load(Ordering::Acquire),
         };
@@ -437,7 +442,7 @@ impl Commands {
             // What the loop will plan, planned from where the command is now (at rest there, if
             // it moves): a move with no profile (a speed so small that its limits vanish) is
             // refused now, in the words the starter's move gives, not accepted and never taken.
-            let start = self.shared().command();
+            let start = self.status().command();
             let mut profile = Profile::new(n, start);
             profile
                 .plan(&MotionState::at_rest(start), &target, &limits)
@@ -456,13 +461,12 @@ impl Commands {
     /// The straight line from where the robot rests to `mm`, sampled.
     fn line_to(&self, mm: [f64; 3], limits: &MotionLimits) -> Result<LineQueue, Refused> {
         self.at_rest("a straight line")?;
-        let shared = self.shared();
         let robot = self.settings.robot().ok_or(Refused::new(
             Refusal::BadRequest,
             "no [robot] table for 3 motors: a line needs the Delta's geometry",
         ))?;
         let mut line = LinearMove::new(robot, mm, self.settings.period_s(), *limits);
-        let start = shared.command();
+        let start = self.status().command();
         line.start(&start).map_err(|e| Refused::new(Refusal::Unreachable, e.to_string()))?;
         let queue = line.into_queue();
         if let Some((m, k, [lo, hi])) = self

@@ -32,8 +32,9 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
     let s = settings();
     let limits = MotionLimits::of(&s);
     let soft = [(-9_000.0, 10_000.0); MAX_MOTORS];
-    let (serve, mut handle) =
-        ServeMove::new(&s, &ServeLimits { soft: Some(soft), ..ServeLimits::of(&s, true) });
+    let status = std::sync::Arc::new(qmarc_controller::status::LoopStatus::default());
+    let limits_of = ServeLimits { soft: Some(soft), ..ServeLimits::of(&s, true) };
+    let (serve, mut handle) = ServeMove::new(&s, &limits_of, status.clone());
     // With the gripper on DIO6: a grip's third exchange is in the counted cycles too. The
     // rows in a gather page (shared memory, as a serving controller keeps them), a ring of
     // 1000 that wraps three times in the cycles counted.
@@ -46,7 +47,8 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
     let page = std::env::temp_dir().join(format!("qmarc-servo-page-{}", std::process::id()));
     let mut servo =
         Servo::new(plan, Box::new(serve), (LAWS[0].build)(&s), Box::new(MockClock::new(0)))
-            .with_gather_page(page.clone());
+            .with_gather_page(page.clone())
+            .with_status(status);
     let mut link = sim_core(lockstep()).with_gripper(1 << 6, 0.05);
     let mut ticker = ManualTicker::new(400_000);
     let reading = warmed_up(&mut servo, &mut link, &mut ticker);
@@ -76,8 +78,9 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
     assert_eq!(handle.shared.not_taken.load(Ordering::Acquire), 0);
     assert!(handle.spent.pop().is_err());
     // The last grip (id 12: close) was written and the gripper has closed.
-    let gripper = qmarc_proto::Gripper(handle.shared.gripper.load(Ordering::Acquire));
-    assert_eq!(gripper.name(), "closed");
+    assert_eq!(handle.status.gripper().name(), "closed", "as the loop's status says it");
+    assert_eq!(handle.status.cycles(), servo.status().cycles());
+    assert!(handle.status.begun());
     // The rows went into the page (the last 1000), as another process would read them.
     assert!(servo.gather().in_a_page());
     let salvaged = qmarc_controller::gather::Gather::salvage(&page).expect("the page");

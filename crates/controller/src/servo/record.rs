@@ -7,6 +7,7 @@ impl Servo {
     /// What the move leaves, taken when it has ended: the loop is spent (its gather buffer
     /// and figures move into the record).
     pub fn into_record(self) -> MoveRecord {
+        let report = self.generator.report();
         MoveRecord {
             generator: self.generator.name(),
             cycles: self.cycles(),
@@ -29,9 +30,8 @@ impl Servo {
             path_from: self.lead_in,
             settle_from: self.settle_from,
             homed: self.homed,
-            homed_frame: self.generator.homed_frame(),
-            homing: self.generator.homing_report().map(<[_]>::to_vec),
-            check: self.generator.check_report().map(<[_]>::to_vec),
+            homed_frame: report.homed_frame,
+            findings: report.findings,
             telemetry_dropped: self.telemetry_dropped(),
             // Moved last: every field above reads the loop whole.
             timing: self.timing,

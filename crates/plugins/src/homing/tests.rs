@@ -55,7 +55,7 @@ fn finds_the_switch_backs_off_and_goes_to_the_offset() {
     );
     assert_eq!(r.home_counts.unwrap(), r.switch_cleared_counts.unwrap() + 300.0);
     assert!((r.ended_counts.unwrap() - r.home_counts.unwrap()).abs() < 1e-9, "{r:?}");
-    assert_eq!(h.homed_frame().unwrap()[0], r.home_counts.unwrap());
+    assert_eq!(h.report().homed_frame.unwrap()[0], r.home_counts.unwrap());
     assert!(!r.started_on_switch);
     assert!(cmds.iter().all(|&c| c >= -200.0), "never past the switch");
 }
@@ -265,7 +265,7 @@ fn homes_three_motors_from_anywhere_at_each_phases_speed() {
     let (end, steps) = robot.run(&mut h, |_, _| {});
     assert_eq!(end, Sample::Done, "{:?}", h.failure());
     assert_eq!(h.progress(), 0, "done");
-    let reports = h.homing_report().unwrap();
+    let reports = h.reports();
     assert_eq!(reports.len(), 3);
     let mut home = [0.0; MAX_MOTORS];
     for (m, r) in reports.iter().enumerate() {
@@ -280,7 +280,7 @@ fn homes_three_motors_from_anywhere_at_each_phases_speed() {
         assert_eq!(r.ended_counts.unwrap(), r.home_counts.unwrap(), "{r:?}");
         home[m] = r.home_counts.unwrap();
     }
-    assert_eq!(h.homed_frame(), Some(home));
+    assert_eq!(h.report().homed_frame, Some(home));
 
     let phase = |p: u32| (p >> 8, p & 0xff);
     let mut settling = [0; 3];
