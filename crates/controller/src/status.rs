@@ -48,9 +48,10 @@ impl LoopStatus {
         Phase::from_wire(self.phase.load(Ordering::Acquire)).unwrap_or(Phase::Idle)
     }
 
-    /// The loop has begun its cycles (past preparing), whether or not it has ended since.
+    /// The loop has begun its cycles (a cycle executed, or its phase past preparing),
+    /// whether or not it has ended since.
     pub fn begun(&self) -> bool {
-        !matches!(self.phase(), Phase::Idle | Phase::Preparing)
+        self.cycles() > 0 || !matches!(self.phase(), Phase::Idle | Phase::Preparing)
     }
 
     /// The cycles the loop has executed (a stall's skipped samples are no cycles).
@@ -118,6 +119,9 @@ mod tests {
         assert_eq!((s.phase(), s.begun(), s.gripper().0), (Phase::Idle, false, Gripper::ABSENT));
         s.set_phase(Phase::Preparing);
         assert!(!s.begun());
+        s.set_cycles(1);
+        assert!(s.begun(), "a cycle executed");
+        s.set_cycles(0);
         s.set_phase(Phase::Moving);
         s.set_cycles(7);
         s.set_command(&[1.5, -2.0, 3.0, 0.0]);
