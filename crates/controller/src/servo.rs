@@ -23,9 +23,12 @@ use std::sync::Arc;
 mod error;
 mod limits;
 mod live;
+mod moving;
 mod record;
 mod run;
 pub use error::MoveError;
+pub use moving::Cycling;
+use moving::MoveState;
 
 /// How a cycle ended.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -38,7 +41,8 @@ pub enum CycleEnd {
     Fault(Fault),
 }
 
-/// A move: its plan, generator, law, clock and everything it records.
+/// A move: its plan, generator, law, clock, the loop's registers, and the move's state
+/// ([`MoveState`], made afresh by [`Servo::prepare`]).
 pub struct Servo {
     plan: MovePlan,
     generator: Box<dyn TrajectoryGenerator>,
@@ -48,38 +52,7 @@ pub struct Servo {
     act: [f64; MAX_MOTORS],
     dac: [i32; MAX_MOTORS],
     t0_ns: u64,
-    executed: u64,
-    last_sample: u64,
-    /// The last sample index the generator answered with a command.
-    last_ready: u64,
-    /// The sample of the law's previous cycle (0 = the sample its reset seeded).
-    law_sample: u64,
-    gather: Gather,
-    errors: ErrorStats,
-    timing: TimingStats,
-    fault: Option<Fault>,
-    /// The latest host stall in a real-time run: its sample and the periods it missed.
-    last_stall: Option<(u64, u64)>,
-    planned_samples: Option<u64>,
-    /// The command is frozen: the trajectory starved, or the path ended and the robot settles.
-    holding: bool,
-    /// Cycles of the settle at the end of the path (their errors go to `settle_errors`).
-    settle_executed: u64,
-    settling: bool,
-    /// The sample index the settle began at (the path's rows are the ones before it).
-    settle_from: Option<u64>,
-    settle_errors: ErrorStats,
     phase: Phase,
-    /// Σ (command − actual) per motor over the move.
-    integrated_error: [f64; MAX_MOTORS],
-    /// Per motor: its frame is homed (read before the move); the software limits, which hold
-    /// in the homed frame, are checked only there.
-    homed: [bool; MAX_MOTORS],
-    /// Samples before the path proper (an approach to its start), from the generator.
-    lead_in: u64,
-    /// Cycles of the lead-in executed, and their error figures (apart from the path's).
-    lead_executed: u64,
-    lead_errors: ErrorStats,
     /// Where the move's progress is published, if anywhere.
     progress: Option<qmarc_proto::progress::Progress>,
     /// Where the live samples go, if anywhere (until the move ends).
@@ -93,6 +66,8 @@ pub struct Servo {
     outputs: u32,
     /// What the loop is doing, for the threads of the process ([`LoopStatus`]).
     status: Arc<LoopStatus>,
+    /// The move's own state: nothing before it is prepared, made whole by `prepare`.
+    m: MoveState,
 }
 
 impl Servo {
@@ -103,9 +78,8 @@ impl Servo {
         law: Box<dyn ServoLaw>,
         clock: Box<dyn Clock>,
     ) -> Servo {
-        let timing = TimingStats::new(plan.period_ns);
-        let gather = Gather::for_move(0, plan.gather_every, plan.n_motors);
         Servo {
+            m: MoveState::new(&plan),
             plan,
             generator,
             law,
@@ -114,27 +88,7 @@ impl Servo {
             act: [0.0; MAX_MOTORS],
             dac: [0; MAX_MOTORS],
             t0_ns: 0,
-            executed: 0,
-            last_sample: 0,
-            last_ready: 0,
-            law_sample: 0,
-            gather,
-            errors: ErrorStats::default(),
-            timing,
-            fault: None,
-            last_stall: None,
-            planned_samples: None,
-            holding: false,
-            settle_executed: 0,
-            settling: false,
-            settle_from: None,
-            settle_errors: ErrorStats::default(),
             phase: Phase::Idle,
-            integrated_error: [0.0; MAX_MOTORS],
-            homed: [false; MAX_MOTORS],
-            lead_in: 0,
-            lead_executed: 0,
-            lead_errors: ErrorStats::default(),
             progress: None,
             telemetry: None,
             telemetry_dropped: 0,
@@ -185,7 +139,7 @@ impl Servo {
                 grip: self.plan.gather_fields.grip && self.plan.gripper_mask != 0,
                 ..self.plan.gather_fields
             })
-            .keeping_last(self.plan.gather_keeps_last && self.planned_samples.is_none())
+            .keeping_last(self.plan.gather_keeps_last && self.m.planned_samples.is_none())
     }
 
     /// Hands a live sample to `telemetry` every few cycles ([`crate::telemetry`]).
@@ -226,7 +180,7 @@ impl Servo {
     /// Per motor, whether its frame was homed when the move began (the software limits held
     /// only for those).
     pub fn homed(&self) -> [bool; MAX_MOTORS] {
-        self.homed
+        self.m.homed
     }
 
     /// The plan.
@@ -236,33 +190,33 @@ impl Servo {
 
     /// Gathered data.
     pub fn gather(&self) -> &Gather {
-        &self.gather
+        &self.m.gather
     }
 
     /// Error figures.
     pub fn errors(&self) -> &ErrorStats {
-        &self.errors
+        &self.m.errors
     }
 
     /// Timing figures.
     pub fn timing(&self) -> &TimingStats {
-        &self.timing
+        &self.m.timing
     }
 
     /// The fault that ended the move, if any.
     pub fn fault(&self) -> Option<Fault> {
-        self.fault
+        self.m.fault
     }
 
     /// The generator's own explanation of the fault that ended the move, where it has one
     /// (a bad knot in a stream, why homing failed).
     pub fn failure(&self) -> Option<String> {
-        match self.fault?.kind {
+        match self.m.fault?.kind {
             FaultKind::TrajectoryError | FaultKind::HomingFailed | FaultKind::TooMuchTravel => {
                 self.generator.failure()
             }
             // A switch a generator watched itself (jog), not the hwserver's latch.
-            FaultKind::LimitSwitch if self.fault?.status.is_ok() => self.generator.failure(),
+            FaultKind::LimitSwitch if self.m.fault?.status.is_ok() => self.generator.failure(),
             _ => None,
         }
     }
@@ -270,7 +224,7 @@ impl Servo {
     /// Cycles of the path executed (the error figures' cycles; the lead-in and the settle
     /// are apart).
     pub fn cycles(&self) -> u64 {
-        self.executed - self.settle_executed - self.lead_executed
+        self.m.executed - self.m.settle_executed - self.m.lead_executed
     }
 
     /// Command − actual of every motor in the last cycle.
@@ -295,7 +249,10 @@ impl Servo {
     /// Everything before the first tick, in order: clear and arm the safety monitoring, read
     /// where the robot is, start the path from there, reset the law, size the gather buffer
     /// from the path's length, and only then enable the motors.
-    pub fn prepare(&mut self, link: &mut dyn HwLink) -> Result<(), MoveError> {
+    ///
+    /// The move's state is made afresh here; what comes back is the only way to cycle it.
+    pub fn prepare(&mut self, link: &mut dyn HwLink) -> Result<Cycling<'_>, MoveError> {
+        self.m = MoveState::new(&self.plan);
         self.enter(Phase::Preparing);
         Servo::request(link, HwMsg::request(MsgType::ClearSafetyStatus))?;
         let monitor =
@@ -304,18 +261,18 @@ impl Servo {
         let start = Servo::request(link, HwMsg::read_all_encoders())?;
         self.act = start.data;
         let flags = start.aux.map(MotorFlags);
-        self.homed = flags.map(MotorFlags::homed);
+        self.m.homed = flags.map(MotorFlags::homed);
         self.status.set_read(self.plan.n_motors, &self.act, &flags, Gripper(start.gripper));
         if self.plan.require_homed
-            && let Some(m) = (0..self.plan.n_motors).find(|&m| !self.homed[m])
+            && let Some(m) = (0..self.plan.n_motors).find(|&m| !self.m.homed[m])
         {
             return Err(MoveError::NotHomed { motor: m + 1 });
         }
         self.generator.observe(&self.act, &flags);
         self.generator.start(&self.act)?;
-        self.lead_in = self.generator.lead_in();
+        self.m.lead_in = self.generator.lead_in();
         if let (Some(soft), Some(bounds)) = (self.plan.limits.soft, self.generator.path_bounds()) {
-            for m in (0..self.plan.n_motors).filter(|&m| self.homed[m]) {
+            for m in (0..self.plan.n_motors).filter(|&m| self.m.homed[m]) {
                 let ((min, max), (lo, hi)) = (soft[m], bounds[m]);
                 if lo < min || hi > max {
                     let value = if lo < min { lo } else { hi };
@@ -323,7 +280,7 @@ impl Servo {
                 }
             }
         }
-        self.planned_samples = self.generator.samples();
+        self.m.planned_samples = self.generator.samples();
         self.generator.sample(0, &mut self.cmd);
         if let Some(f) = self.check_command(0) {
             return Err(MoveError::Trajectory(TrajStartError::OutOfRange {
@@ -334,23 +291,12 @@ impl Servo {
             }));
         }
         self.law.reset(&self.cmd, &self.act);
-        self.law_sample = 0;
         self.status.set_command(&self.cmd);
         self.status.set_cycles(0);
-        let samples = self.planned_samples.unwrap_or(self.plan.stream_gather_samples)
+        let samples = self.m.planned_samples.unwrap_or(self.plan.stream_gather_samples)
             + self.plan.settle_cycles;
         crate::gather::check_budget(samples, self.plan.gather_every)?;
-        self.gather = self.gather_buffer(samples);
-        self.timing = TimingStats::new(self.plan.period_ns);
-        self.errors = ErrorStats::default();
-        self.settle_errors = ErrorStats::default();
-        self.lead_errors = ErrorStats::default();
-        self.fault = None;
-        self.executed = 0;
-        self.settle_executed = 0;
-        self.lead_executed = 0;
-        self.settle_from = None;
-        self.integrated_error = [0.0; MAX_MOTORS];
+        self.m.gather = self.gather_buffer(samples);
         // What may have changed while the path was prepared (a stream awaited, a path
         // planned): a fresh read, so that an emergency stop or a switch latched meanwhile
         // refuses the move before anything is enabled.
@@ -361,11 +307,11 @@ impl Servo {
                 return Err(e);
             }
         }
-        Ok(())
+        Ok(Cycling { servo: self })
     }
 
     /// Marks when tick 0 is due (the origin of gathered time in real-time runs).
-    pub fn set_t0(&mut self, t0_ns: u64) {
+    fn set_t0(&mut self, t0_ns: u64) {
         self.t0_ns = t0_ns;
         if let Some(p) = &self.progress {
             p.set_t0(t0_ns);
@@ -374,13 +320,13 @@ impl Servo {
 
     /// One servo cycle for `tick`. Allocates nothing, locks nothing, formats nothing.
     #[inline]
-    pub fn cycle(&mut self, link: &mut dyn HwLink, tick: &Tick) -> CycleEnd {
-        let n = if self.plan.deterministic { self.executed } else { tick.index };
-        self.last_sample = n;
+    fn cycle(&mut self, link: &mut dyn HwLink, tick: &Tick) -> CycleEnd {
+        let n = if self.plan.deterministic { self.m.executed } else { tick.index };
+        self.m.last_sample = n;
 
-        self.timing.record_tick(tick);
+        self.m.timing.record_tick(tick);
         if tick.missed > 0 && !self.plan.deterministic {
-            self.last_stall = Some((n, tick.missed));
+            self.m.last_stall = Some((n, tick.missed));
         }
         if tick.missed >= self.plan.limits.max_missed_in_row {
             return CycleEnd::Fault(Fault {
@@ -399,7 +345,7 @@ impl Servo {
         let read_done = self.clock.now_ns();
 
         // 2. Command position (frozen while holding after a starved trajectory).
-        if !self.holding
+        if !self.m.holding
             && let Some(end) = self.sample(n)
         {
             return end;
@@ -409,8 +355,8 @@ impl Servo {
         }
 
         // 3. Law.
-        let elapsed = n.saturating_sub(self.law_sample).max(1);
-        self.law_sample = n;
+        let elapsed = n.saturating_sub(self.m.law_sample).max(1);
+        self.m.law_sample = n;
         self.law.step(&ServoInput { n, elapsed, cmd: &self.cmd, act: &self.act }, &mut self.dac);
         if let Some(m) = (0..self.plan.n_motors).find(|&m| !is_dac_code(self.dac[m])) {
             return CycleEnd::Fault(Fault {
@@ -434,14 +380,14 @@ impl Servo {
         }
 
         // 5. Gather.
-        self.timing.record_cycle(tick, read_start, read_done, computed, written);
+        self.m.timing.record_cycle(tick, read_start, read_done, computed, written);
         self.record(n, tick);
         self.publish(n, tick, written, resp.status);
-        self.executed += 1;
+        self.m.executed += 1;
         self.status.set_command(&self.cmd);
-        self.status.set_cycles(self.executed);
+        self.status.set_cycles(self.m.executed);
         if let Some(p) = &self.progress {
-            p.set_cycle(self.executed, self.generator.progress());
+            p.set_cycle(self.m.executed, self.generator.progress());
         }
         match Fault::from_status(resp.status(), n) {
             Some(f) => CycleEnd::Fault(f),
@@ -493,7 +439,7 @@ impl Servo {
     fn sample(&mut self, n: u64) -> Option<CycleEnd> {
         match self.generator.sample(n, &mut self.cmd) {
             Sample::Ready => {
-                self.last_ready = n;
+                self.m.last_ready = n;
                 None
             }
             Sample::Done => {
@@ -514,8 +460,8 @@ impl Servo {
         if self.plan.settle_cycles == 0 {
             return;
         }
-        if let Some(last) = self.planned_samples.and_then(|s| s.checked_sub(1))
-            && self.last_ready < last
+        if let Some(last) = self.m.planned_samples.and_then(|s| s.checked_sub(1))
+            && self.m.last_ready < last
         {
             let mut end = self.cmd;
             if matches!(self.generator.sample(last, &mut end), Sample::Ready) {
@@ -528,20 +474,20 @@ impl Servo {
     /// `n` is due, a row of the gather buffer.
     #[inline]
     fn record(&mut self, n: u64, tick: &Tick) {
-        if self.settling {
-            self.settle_errors.add(self.plan.n_motors, &self.cmd, &self.act);
-            self.settle_executed += 1;
-            self.settle_from.get_or_insert(n);
-        } else if n < self.lead_in {
-            self.lead_errors.add(self.plan.n_motors, &self.cmd, &self.act);
-            self.lead_executed += 1;
+        if self.m.settling {
+            self.m.settle_errors.add(self.plan.n_motors, &self.cmd, &self.act);
+            self.m.settle_executed += 1;
+            self.m.settle_from.get_or_insert(n);
+        } else if n < self.m.lead_in {
+            self.m.lead_errors.add(self.plan.n_motors, &self.cmd, &self.act);
+            self.m.lead_executed += 1;
         } else {
-            self.errors.add(self.plan.n_motors, &self.cmd, &self.act);
+            self.m.errors.add(self.plan.n_motors, &self.cmd, &self.act);
         }
-        if self.gather.due(n) {
+        if self.m.gather.due(n) {
             // Integer ns divided once: the correctly rounded decimal, no accumulated noise.
             let time_s = self.sample_time_ns(n, tick) as f64 / 1e9;
-            self.gather.push(GatherRow {
+            self.m.gather.push(GatherRow {
                 cycle: n,
                 time_s,
                 cmd: self.cmd,
@@ -569,11 +515,11 @@ impl Servo {
         let disabled = !server_gone(Some(fault)) && self.disable_all(link);
         // A stall within the last second may be why: the plant ran on the last output.
         let recent = 1_000_000_000 / self.plan.period_ns.max(1);
-        let stall = self.last_stall.and_then(|(at, missed)| {
+        let stall = self.m.last_stall.and_then(|(at, missed)| {
             let cycles_before = fault.cycle.checked_sub(at)?;
             (cycles_before <= recent).then_some(HostStall { missed, cycles_before })
         });
-        self.fault = Some(Fault { disabled, stall, ..fault });
+        self.m.fault = Some(Fault { disabled, stall, ..fault });
         self.enter(Phase::Fault);
     }
 

@@ -47,14 +47,14 @@ fn bench_cycle(c: &mut Criterion) {
         .unwrap();
     let mut link = HwCore::new(Box::new(sim));
     let mut ticker = ManualTicker::new(400_000);
-    servo.prepare(&mut link).unwrap();
-    servo.set_t0(ticker.start().unwrap());
+    let mut moving = servo.prepare(&mut link).unwrap();
+    moving.set_t0(ticker.start().unwrap());
     c.bench_function(
         "servo cycle, 3 motors, in-process sim (read, step, pidff, write, gather every 4)",
         |b| {
             b.iter(|| {
                 let tick = ticker.wait().unwrap();
-                let end = servo.cycle(&mut link, black_box(&tick));
+                let end = moving.cycle(&mut link, black_box(&tick));
                 debug_assert_eq!(end, CycleEnd::Continue);
                 black_box(end)
             })

@@ -92,7 +92,7 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
                     .with_telemetry(Some(telemetry));
             let mut link = sim_core(lockstep());
             let mut ticker = ManualTicker::new(400_000);
-            let reading = warmed_up(&mut servo, &mut link, &mut ticker);
+            let (mut moving, reading) = warmed_up(&mut servo, &mut link, &mut ticker);
             let kernel_before = ThreadCounters::now();
             let before = allocations();
             for k in 0..3_000 {
@@ -100,7 +100,7 @@ fn servo_cycle_allocates_nothing_with_every_generator_and_law() {
                     ticker.inject_delay(150_000, 3); // a stall: missed periods on the way
                 }
                 let tick = ticker.wait().unwrap();
-                assert_eq!(servo.cycle(&mut link, &tick), CycleEnd::Continue);
+                assert_eq!(moving.cycle(&mut link, &tick), CycleEnd::Continue);
             }
             let during = allocations() - before;
             let kernel = kernel_before.delta(ThreadCounters::now());
@@ -203,15 +203,15 @@ fn over_iceoryx2_each_cycle_allocates_only_the_two_request_loans() {
     let s = settings();
     let mut servo = step_servo(&s);
     let mut ticker = ManualTicker::new(400_000);
-    servo.prepare(&mut link).unwrap();
-    servo.set_t0(ticker.start().unwrap());
+    let mut moving = servo.prepare(&mut link).unwrap();
+    moving.set_t0(ticker.start().unwrap());
     for _ in 0..50 {
-        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+        assert_eq!(moving.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
     }
     let before = allocations();
     let cycles = 1_000;
     for _ in 0..cycles {
-        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+        assert_eq!(moving.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
     }
     let during = allocations() - before;
     assert_eq!(during, 2 * cycles, "iceoryx2's loans only");
@@ -277,14 +277,16 @@ fn servo_cycle_makes_no_system_call_under_seccomp_strict_mode() {
             .with_telemetry(Some(telemetry));
             let mut link = sim_core(lockstep());
             let mut ticker = ManualTicker::new(400_000);
-            servo.prepare(&mut link).unwrap();
-            servo.set_t0(ticker.start().unwrap());
-            for _ in 0..10 {
-                servo.cycle(&mut link, &ticker.wait().unwrap());
-            }
             STRICT_PHASE.store(0, SeqCst);
             let (tid_tx, tid_rx) = std::sync::mpsc::channel();
             let thread = std::thread::spawn(move || {
+                // Prepared and warmed up on this thread, before strict mode: the prepared
+                // move is its own.
+                let mut moving = servo.prepare(&mut link).unwrap();
+                moving.set_t0(ticker.start().unwrap());
+                for _ in 0..10 {
+                    moving.cycle(&mut link, &ticker.wait().unwrap());
+                }
                 // SAFETY: gettid and prctl have no memory preconditions.
                 let tid = unsafe { libc::syscall(libc::SYS_gettid) };
                 tid_tx.send(tid).unwrap();
@@ -303,7 +305,7 @@ fn servo_cycle_makes_no_system_call_under_seccomp_strict_mode() {
                 wait_phase(2);
                 for _ in 0..3_000 {
                     let tick = ticker.wait().unwrap_or_default();
-                    if servo.cycle(&mut link, &tick) != CycleEnd::Continue {
+                    if moving.cycle(&mut link, &tick) != CycleEnd::Continue {
                         STRICT_FAILED.store(true, SeqCst);
                     }
                 }
@@ -516,15 +518,15 @@ fn too_many_missed_periods_in_a_row_are_an_overrun() {
         Box::new(MockClock::new(0)),
     );
     let mut ticker = ManualTicker::new(400_000);
-    servo.prepare(&mut link).unwrap();
+    let mut moving = servo.prepare(&mut link).unwrap();
     ticker.start().unwrap();
     for _ in 0..10 {
-        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+        assert_eq!(moving.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
     }
     ticker.inject_delay(0, 4); // 4 in a row: tolerated
-    assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+    assert_eq!(moving.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
     ticker.inject_delay(0, 5); // 5: the limit
-    match servo.cycle(&mut link, &ticker.wait().unwrap()) {
+    match moving.cycle(&mut link, &ticker.wait().unwrap()) {
         CycleEnd::Fault(f) => {
             assert_eq!((f.kind, f.value), (FaultKind::Overrun, 5.0));
             assert!(
@@ -617,12 +619,12 @@ fn a_late_cycle_outputs_what_a_punctual_one_would() {
     let (at, dac) = (Rc::new(Cell::new(0.0)), Rc::new(Cell::new(0)));
     let mut link = OnCommand { at: at.clone(), dac: dac.clone() };
     let mut ticker = ManualTicker::new(400_000);
-    servo.prepare(&mut link).unwrap();
-    servo.set_t0(ticker.start().unwrap());
+    let mut moving = servo.prepare(&mut link).unwrap();
+    moving.set_t0(ticker.start().unwrap());
     let mut cycle = |ticker: &mut ManualTicker| {
         let tick = ticker.wait().unwrap();
         at.set(17.0 * tick.index as f64); // no following error: only the feed-forward acts
-        assert_eq!(servo.cycle(&mut link, &tick), CycleEnd::Continue);
+        assert_eq!(moving.cycle(&mut link, &tick), CycleEnd::Continue);
         (tick.index, tick.missed, dac.get())
     };
     let mut punctual = (0, 0, 0);
@@ -647,15 +649,15 @@ fn the_626_backends_cycle_allocates_nothing() {
     let mut link = qmarc_hwserver::HwCore::new(Box::new(card));
     let mut servo = step_servo(&s);
     let mut ticker = ManualTicker::new(400_000);
-    servo.prepare(&mut link).unwrap();
-    servo.set_t0(ticker.start().unwrap());
+    let mut moving = servo.prepare(&mut link).unwrap();
+    moving.set_t0(ticker.start().unwrap());
     for _ in 0..10 {
-        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+        assert_eq!(moving.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
     }
     let before = allocations();
     for _ in 0..2_000 {
         let tick = ticker.wait().unwrap();
-        assert_eq!(servo.cycle(&mut link, &tick), CycleEnd::Continue);
+        assert_eq!(moving.cycle(&mut link, &tick), CycleEnd::Continue);
     }
     assert_eq!(allocations() - before, 0, "allocations in 2000 cycles over the 626 backend");
     assert!(link.position(0) > 100, "the fake card's motor followed the step");
@@ -839,13 +841,13 @@ fn a_fault_after_a_host_stall_says_so() {
         let ramp = Box::new(Ramp(2.0, [0.0; MAX_MOTORS]));
         let mut servo = Servo::new(plan, ramp, (LAWS[0].build)(&s), Box::new(MockClock::new(0)));
         let mut ticker = ManualTicker::new(400_000);
-        servo.prepare(&mut link).unwrap();
+        let mut moving = servo.prepare(&mut link).unwrap();
         ticker.start().unwrap();
         for i in 0..10_000 {
             if Some(i) == stall_at {
                 ticker.inject_delay(0, 4);
             }
-            if let CycleEnd::Fault(f) = servo.cycle(&mut link, &ticker.wait().unwrap()) {
+            if let CycleEnd::Fault(f) = moving.cycle(&mut link, &ticker.wait().unwrap()) {
                 servo.handle_fault(&mut link, f);
                 return servo.fault().unwrap();
             }
@@ -897,14 +899,14 @@ fn a_stall_at_the_end_of_a_path_settles_on_its_last_command() {
         let mut servo =
             Servo::new(plan, Box::new(ramp), Box::new(Off), Box::new(MockClock::new(0)));
         let mut ticker = ManualTicker::new(400_000);
-        servo.prepare(&mut Still).unwrap();
-        servo.set_t0(ticker.start().unwrap());
+        let mut moving = servo.prepare(&mut Still).unwrap();
+        moving.set_t0(ticker.start().unwrap());
         let end = loop {
             let tick = ticker.wait().unwrap();
             if tick.index == stall_after {
                 ticker.inject_delay(0, skip);
             }
-            match servo.cycle(&mut Still, &tick) {
+            match moving.cycle(&mut Still, &tick) {
                 CycleEnd::Continue => {}
                 end => break (end, tick.index),
             }

@@ -176,22 +176,23 @@ impl qmarc_controller::traj::TrajectoryGenerator for Ramp {
 }
 
 /// Prepares `servo` on `link` and runs its first 10 cycles (what is allocated once is
-/// allocated then, before anything is counted); returns what reading the thread's counters
-/// costs by itself, which the counted cycles' syscalls are compared with.
-pub fn warmed_up(
-    servo: &mut qmarc_controller::servo::Servo,
+/// allocated then, before anything is counted); returns the prepared move, to cycle on, and
+/// what reading the thread's counters costs by itself, which the counted cycles' syscalls are
+/// compared with.
+pub fn warmed_up<'s>(
+    servo: &'s mut qmarc_controller::servo::Servo,
     link: &mut HwCore,
     ticker: &mut qmarc_timer::ManualTicker,
-) -> ThreadCounters {
+) -> (qmarc_controller::servo::Cycling<'s>, ThreadCounters) {
     use qmarc_timer::Ticker;
-    servo.prepare(link).unwrap();
-    servo.set_t0(ticker.start().unwrap());
+    let mut moving = servo.prepare(link).unwrap();
+    moving.set_t0(ticker.start().unwrap());
     for _ in 0..10 {
-        let end = servo.cycle(link, &ticker.wait().unwrap());
+        let end = moving.cycle(link, &ticker.wait().unwrap());
         assert_eq!(end, qmarc_controller::servo::CycleEnd::Continue);
     }
     let (a, b) = (ThreadCounters::now(), ThreadCounters::now());
-    a.delta(b)
+    (moving, a.delta(b))
 }
 
 /// The plan of a move of `n_motors` on a 400 µs period that holds 25 cycles on a starved

@@ -51,7 +51,7 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
             .with_status(status);
     let mut link = sim_core(lockstep()).with_gripper(1 << 6, 0.05);
     let mut ticker = ManualTicker::new(400_000);
-    let reading = warmed_up(&mut servo, &mut link, &mut ticker);
+    let (mut moving, reading) = warmed_up(&mut servo, &mut link, &mut ticker);
     let kernel_before = ThreadCounters::now();
     let before = allocations();
     let mut id = 0;
@@ -68,7 +68,7 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
             };
             assert!(handle.orders.push(order).is_ok());
         }
-        assert_eq!(servo.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+        assert_eq!(moving.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
     }
     let during = allocations() - before;
     let kernel = kernel_before.delta(ThreadCounters::now());

@@ -21,7 +21,7 @@ impl Servo {
         let lim = &self.plan.limits;
         for m in 0..self.plan.n_motors {
             let c = self.cmd[m];
-            if let Some(soft) = lim.soft.filter(|_| self.homed[m]) {
+            if let Some(soft) = lim.soft.filter(|_| self.m.homed[m]) {
                 let (min, max) = soft[m];
                 if c < min || c > max {
                     let limit = if c < min { min } else { max };
@@ -43,8 +43,8 @@ impl Servo {
                     ..Fault::new(FaultKind::FollowingError, n)
                 });
             }
-            self.integrated_error[m] += fe;
-            let ie = self.integrated_error[m];
+            self.m.integrated_error[m] += fe;
+            let ie = self.m.integrated_error[m];
             if ie.abs() > lim.max_integrated_error[m] {
                 let limit = lim.max_integrated_error[m];
                 return Some(Fault {

@@ -44,7 +44,7 @@ impl Servo {
             period_ns,
             phase: self.phase.wire(),
             status,
-            fault: FaultKind::wire(self.fault.map(|f| f.kind)),
+            fault: FaultKind::wire(self.m.fault.map(|f| f.kind)),
             n_motors: self.plan.n_motors as u32,
             gripper: self.grip.0,
             outputs: self.outputs,
@@ -57,8 +57,8 @@ impl Servo {
     /// do nothing.
     pub fn end_telemetry(&mut self) {
         let now = self.clock.now_ns();
-        let tick = Tick { index: self.last_sample, intended_ns: now, woke_ns: now, missed: 0 };
-        let sample = self.sample_of(self.last_sample, &tick, 0, 0, 0);
+        let tick = Tick { index: self.m.last_sample, intended_ns: now, woke_ns: now, missed: 0 };
+        let sample = self.sample_of(self.m.last_sample, &tick, 0, 0, 0);
         if let Some(mut t) = self.telemetry.take() {
             t.offer(TelemetrySample { wake_latency_ns: 0, output_latency_ns: 0, ..sample });
             self.telemetry_dropped = t.dropped();

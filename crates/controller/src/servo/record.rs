@@ -11,32 +11,32 @@ impl Servo {
         MoveRecord {
             generator: self.generator.name(),
             cycles: self.cycles(),
-            planned_samples: self.planned_samples,
-            fault: self.fault,
+            planned_samples: self.m.planned_samples,
+            fault: self.m.fault,
             failure: self.failure(),
-            errors: self.errors,
+            errors: self.m.errors,
             last_error: self.last_error(),
             end_velocity: self.generator.end_velocity(),
-            approach: (self.lead_in > 0).then_some(Stretch {
-                samples: self.lead_in,
-                cycles: self.lead_executed,
-                errors: self.lead_errors,
+            approach: (self.m.lead_in > 0).then_some(Stretch {
+                samples: self.m.lead_in,
+                cycles: self.m.lead_executed,
+                errors: self.m.lead_errors,
             }),
-            settle: (self.settle_executed > 0).then_some(Stretch {
-                samples: self.settle_executed,
-                cycles: self.settle_executed,
-                errors: self.settle_errors,
+            settle: (self.m.settle_executed > 0).then_some(Stretch {
+                samples: self.m.settle_executed,
+                cycles: self.m.settle_executed,
+                errors: self.m.settle_errors,
             }),
-            path_from: self.lead_in,
-            settle_from: self.settle_from,
-            homed: self.homed,
+            path_from: self.m.lead_in,
+            settle_from: self.m.settle_from,
+            homed: self.m.homed,
             homed_frame: report.homed_frame,
             findings: report.findings,
             telemetry_dropped: self.telemetry_dropped(),
             // Moved last: every field above reads the loop whole.
-            timing: self.timing,
+            timing: self.m.timing,
             gather: {
-                let mut g = self.gather;
+                let mut g = self.m.gather;
                 g.in_order();
                 g
             },

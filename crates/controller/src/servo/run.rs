@@ -29,7 +29,7 @@ impl Servo {
         if stop.load(Ordering::Relaxed) {
             let fault = Fault {
                 signal: qmarc_timer::stop::signal().unwrap_or(0),
-                ..Fault::new(FaultKind::Aborted, self.last_sample)
+                ..Fault::new(FaultKind::Aborted, self.m.last_sample)
             };
             self.handle_fault(link, fault);
             return Ok(None);
@@ -62,7 +62,7 @@ impl Servo {
         stop: &AtomicBool,
         starved: Fault,
     ) {
-        self.holding = true;
+        self.m.holding = true;
         self.enter(Phase::Holding);
         let mut fault = starved;
         for _ in 0..self.plan.starve_hold_cycles {
@@ -75,7 +75,7 @@ impl Servo {
                 break;
             }
         }
-        self.holding = false;
+        self.m.holding = false;
         self.handle_fault(link, fault);
     }
 
@@ -88,8 +88,8 @@ impl Servo {
         ticker: &mut dyn Ticker,
         stop: &AtomicBool,
     ) -> Result<(), MoveError> {
-        self.holding = true;
-        self.settling = true;
+        self.m.holding = true;
+        self.m.settling = true;
         self.enter(Phase::Settling);
         for _ in 0..self.plan.settle_cycles {
             let Some(tick) = self.next_tick(link, ticker, stop)? else { break };
@@ -98,8 +98,8 @@ impl Servo {
                 break;
             }
         }
-        self.holding = false;
-        self.settling = false;
+        self.m.holding = false;
+        self.m.settling = false;
         Ok(())
     }
 
@@ -138,11 +138,11 @@ impl Servo {
                 }
             }
         }
-        if !server_gone(self.fault) {
+        if !server_gone(self.m.fault) {
             self.disable_all(link);
             let _ = link.exchange(&HwMsg::request(MsgType::DisableSafety));
         }
-        if self.fault.is_none() {
+        if self.m.fault.is_none() {
             self.enter(Phase::Done);
         }
         self.end_telemetry();
