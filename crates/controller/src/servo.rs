@@ -213,10 +213,12 @@ impl Servo {
     pub fn failure(&self) -> Option<String> {
         match self.m.fault?.kind {
             FaultKind::TrajectoryError | FaultKind::HomingFailed | FaultKind::TooMuchTravel => {
-                self.generator.failure()
+                self.generator.report().failure
             }
             // A switch a generator watched itself (jog), not the hwserver's latch.
-            FaultKind::LimitSwitch if self.m.fault?.status.is_ok() => self.generator.failure(),
+            FaultKind::LimitSwitch if self.m.fault?.status.is_ok() => {
+                self.generator.report().failure
+            }
             _ => None,
         }
     }

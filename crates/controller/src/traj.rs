@@ -14,7 +14,7 @@ pub enum Sample {
     Done,
     /// An online generator has no knot for this sample yet (a fault: the robot cannot wait).
     Starved,
-    /// The generator cannot go on (a bad knot in a stream); [`TrajectoryGenerator::failure`]
+    /// The generator cannot go on (a bad knot in a stream); [`TrajectoryGenerator::report`]
     /// says why, after the move.
     Failed,
 }
@@ -118,11 +118,6 @@ pub trait TrajectoryGenerator: Send {
     /// generators that act on feedback hold their command until they have observed.
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample;
 
-    /// After [`Sample::Failed`]: why, for the summary. Not called in the loop.
-    fn failure(&self) -> Option<String> {
-        None
-    }
-
     /// The fault kind a [`Sample::Failed`] stands for.
     fn failure_kind(&self) -> FaultKind {
         FaultKind::TrajectoryError
@@ -184,9 +179,9 @@ pub trait TrajectoryGenerator: Send {
         0
     }
 
-    /// After the move (never in the loop): what the generator found, in one report — the
-    /// homed frame a homing defines, and its own findings for the move's report. Default:
-    /// nothing.
+    /// After the move (never in the loop): what the generator found, in one report — why it
+    /// failed, the homed frame a homing defines, and its own findings for the move's report.
+    /// Default: nothing.
     fn report(&self) -> GeneratorReport {
         GeneratorReport::default()
     }
@@ -195,6 +190,8 @@ pub trait TrajectoryGenerator: Send {
 /// What a generator found in its move, told once it has ended ([`TrajectoryGenerator::report`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct GeneratorReport {
+    /// After [`Sample::Failed`]: why, in words (the summary's fault message).
+    pub failure: Option<String>,
     /// After a move without a fault: the positions (in the frame of the move) that are to
     /// read 0 from now on, making the frame homed — homing's home positions.
     pub homed_frame: Option<[f64; MAX_MOTORS]>,

@@ -194,7 +194,25 @@ impl TrajectoryGenerator for Check {
         Sample::Ready
     }
 
-    fn failure(&self) -> Option<String> {
+    fn failure_kind(&self) -> FaultKind {
+        FaultKind::TooMuchTravel
+    }
+
+    /// What each motor did for its voltage (the report's `check`).
+    fn report(&self) -> GeneratorReport {
+        GeneratorReport {
+            failure: self.failure(),
+            homed_frame: None,
+            findings: serde_json::to_value(self.checked())
+                .ok()
+                .map(|value| Findings { section: "check", value }),
+        }
+    }
+}
+
+impl Check {
+    /// Why it failed, in words, after a failed sample.
+    pub fn failure(&self) -> Option<String> {
         self.too_far.map(|(m, travel)| {
             format!(
                 "motor {} moved {travel:.0} counts from where it started, more than \
@@ -203,20 +221,6 @@ impl TrajectoryGenerator for Check {
                 self.max_travel
             )
         })
-    }
-
-    fn failure_kind(&self) -> FaultKind {
-        FaultKind::TooMuchTravel
-    }
-
-    /// What each motor did for its voltage (the report's `check`).
-    fn report(&self) -> GeneratorReport {
-        GeneratorReport {
-            homed_frame: None,
-            findings: serde_json::to_value(self.checked())
-                .ok()
-                .map(|value| Findings { section: "check", value }),
-        }
     }
 }
 

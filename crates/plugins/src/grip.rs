@@ -8,7 +8,7 @@
 //! robot holds where it is and every motor is disabled, as any failed path ends.
 
 use qmarc_config::Settings;
-use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_controller::traj::{GeneratorReport, Sample, TrajStartError, TrajectoryGenerator};
 use qmarc_proto::{Gripper, MAX_MOTORS, MotorFlags};
 
 /// The move's generator `inner`, with the gripper closed or opened at its end when the
@@ -133,26 +133,6 @@ impl TrajectoryGenerator for GripAtEnd {
         self.inner.end_velocity()
     }
 
-    fn failure(&self) -> Option<String> {
-        if self.absent {
-            return Some(format!(
-                "the move was to {} the gripper, but no gripper is wired (s626.gripper_dio)",
-                self.word()
-            ));
-        }
-        if self.late {
-            return Some(format!(
-                "the gripper did not {} within {:.3} s of the move's end (twice \
-                 s626.gripper_close_s = {} s, and ten periods): check its air, its valve and \
-                 its wiring",
-                self.word(),
-                self.wait as f64 * self.period_s,
-                self.travel_s
-            ));
-        }
-        self.inner.failure()
-    }
-
     #[inline]
     fn observe(&mut self, act: &[f64; MAX_MOTORS], flags: &[MotorFlags; MAX_MOTORS]) {
         self.inner.observe(act, flags);
@@ -199,6 +179,33 @@ impl TrajectoryGenerator for GripAtEnd {
         self.absent = state.0 & Gripper::ABSENT != 0;
         self.arrived |= state.reached(self.close);
         Some(self.close)
+    }
+
+    fn report(&self) -> GeneratorReport {
+        GeneratorReport { failure: self.failure(), ..GeneratorReport::default() }
+    }
+}
+
+impl GripAtEnd {
+    /// Why it failed, in words, after a failed sample.
+    pub fn failure(&self) -> Option<String> {
+        if self.absent {
+            return Some(format!(
+                "the move was to {} the gripper, but no gripper is wired (s626.gripper_dio)",
+                self.word()
+            ));
+        }
+        if self.late {
+            return Some(format!(
+                "the gripper did not {} within {:.3} s of the move's end (twice \
+                 s626.gripper_close_s = {} s, and ten periods): check its air, its valve and \
+                 its wiring",
+                self.word(),
+                self.wait as f64 * self.period_s,
+                self.travel_s
+            ));
+        }
+        self.inner.report().failure
     }
 }
 

@@ -227,7 +227,18 @@ impl TrajectoryGenerator for Jog {
         self.queue.sample(n, cmd)
     }
 
-    fn failure(&self) -> Option<String> {
+    fn failure_kind(&self) -> FaultKind {
+        FaultKind::LimitSwitch
+    }
+
+    fn report(&self) -> GeneratorReport {
+        GeneratorReport { failure: self.failure(), ..GeneratorReport::default() }
+    }
+}
+
+impl Jog {
+    /// Why it failed, in words, after a failed sample.
+    pub fn failure(&self) -> Option<String> {
         self.tripped.map(|(k, top)| {
             format!(
                 "jog: motor {}'s {} limit switch tripped (it was not active when the jog began)",
@@ -235,10 +246,6 @@ impl TrajectoryGenerator for Jog {
                 if top { "top" } else { "bottom" }
             )
         })
-    }
-
-    fn failure_kind(&self) -> FaultKind {
-        FaultKind::LimitSwitch
     }
 }
 
@@ -300,10 +307,6 @@ impl TrajectoryGenerator for Approach {
             None => sample_queue(&self.lead, n, cmd),
             Some(k) => self.path.sample(k, cmd),
         }
-    }
-
-    fn failure(&self) -> Option<String> {
-        self.path.failure()
     }
 
     fn failure_kind(&self) -> FaultKind {

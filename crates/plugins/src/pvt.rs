@@ -11,7 +11,9 @@
 use crate::source::{KnotSource, TrajBuildError, knots_failed};
 use crate::spline::samples_between;
 use qmarc_config::Settings;
-use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, bounds_of, check_start};
+use qmarc_controller::traj::{
+    GeneratorReport, Sample, TrajStartError, TrajectoryGenerator, bounds_of, check_start,
+};
 use qmarc_knots::{
     KnotFileError, KnotRules, MAX_LINE_BYTES, MIN_PVT_KNOTS, PvtKnot, PvtLineParser, parse_pvt,
     read_knot_file, read_line_bounded,
@@ -455,10 +457,6 @@ impl TrajectoryGenerator for Pvt {
         Sample::Ready
     }
 
-    fn failure(&self) -> Option<String> {
-        self.failed.then(|| self.stored_failure().to_string())
-    }
-
     /// A file's last knot; a stream's once it has ended.
     fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
         match &self.source {
@@ -482,6 +480,17 @@ impl TrajectoryGenerator for Pvt {
             }
         }
         Some(b)
+    }
+
+    fn report(&self) -> GeneratorReport {
+        GeneratorReport { failure: self.failure(), ..GeneratorReport::default() }
+    }
+}
+
+impl Pvt {
+    /// Why it failed, in words, after a failed sample.
+    pub fn failure(&self) -> Option<String> {
+        self.failed.then(|| self.stored_failure().to_string())
     }
 }
 
