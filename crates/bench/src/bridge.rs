@@ -96,7 +96,7 @@ impl BridgeArgs {
 
     /// A bridge on `session`, listening on a free loopback port, once its node is up.
     fn bridge(&self, session: &Session) -> anyhow::Result<Bridged> {
-        let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
+        let port = qmarc_program::net::free_loopback_port();
         let endpoint = format!("tcp/127.0.0.1:{port}");
         let config = std::env::temp_dir().join(format!("qmarc-bench-zenoh-{port}.json5"));
         std::fs::write(

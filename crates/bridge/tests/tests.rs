@@ -254,9 +254,9 @@ fn alive(pid: &str) -> bool {
     stat.rsplit_once(") ").is_some_and(|(_, rest)| !rest.starts_with('Z'))
 }
 
-/// A TCP port free on loopback now.
+/// A TCP port free on loopback now, where no client's outgoing connection can take it.
 fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    qmarc_program::net::free_loopback_port()
 }
 
 fn close(a: f64, b: f64, tol: f64) -> bool {
