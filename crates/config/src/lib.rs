@@ -21,6 +21,7 @@
 #![deny(missing_docs)]
 
 mod check;
+mod conveyor;
 mod error;
 mod gather;
 mod general;
@@ -42,6 +43,9 @@ mod trajectory;
 mod tune;
 
 pub use check::{CheckSettings, MAX_CHECK_PULSE_S, MAX_CHECK_VOLTS};
+pub use conveyor::{
+    CAMERA_BACKENDS, CameraSettings, ConveyorSettings, MAX_BELT_MM, MAX_BELT_MM_S, MAX_SPEED_STEPS,
+};
 pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};
 pub use homing::HomingSettings;
@@ -146,6 +150,12 @@ pub struct Settings {
     /// `[telemetry]`: the live samples of the loop.
     #[serde(default)]
     pub telemetry: TelemetrySettings,
+    /// `[conveyor]`: the belt the robot picks from.
+    #[serde(default)]
+    pub conveyor: ConveyorSettings,
+    /// `[camera]`: the camera upstream of the robot, and the parts it sees.
+    #[serde(default)]
+    pub camera: CameraSettings,
     /// Gains of every `[[motor]]` table (at least `n_motors`, at most [`MAX_MOTORS`]).
     pub motors: Vec<MotorGains>,
     /// Limits and homing of every `[[motor]]` table.
@@ -211,6 +221,10 @@ struct RawFile {
     tune: tune::RawTune,
     #[serde(default)]
     telemetry: telemetry::RawTelemetry,
+    #[serde(default)]
+    conveyor: conveyor::RawConveyor,
+    #[serde(default)]
+    camera: conveyor::RawCamera,
     #[serde(default)]
     robot: Option<Spanned<robot::RawRobot>>,
     #[serde(default)]
@@ -288,6 +302,19 @@ impl RawFile {
         }
         let tune = self.tune.check(src)?;
         let telemetry = self.telemetry.check(src)?;
+        let conveyor = self.conveyor.check(src)?;
+        if s626.counter_channels.contains(&conveyor.counter_channel) {
+            return Err(src.invalid(
+                self.conveyor.counter_channel_span(),
+                "conveyor.counter_channel",
+                format!(
+                    "counter {} reads a motor (s626.counter_channels = {:?}): the belt's encoder \
+                     needs a counter of its own",
+                    conveyor.counter_channel, s626.counter_channels
+                ),
+            ));
+        }
+        let camera = self.camera.check(src, &conveyor)?;
         let longest: f64 = safety.iter().map(|s| homing.longest_s(s.home_offset_counts)).sum();
         if longest > trajectory.max_duration_s {
             return Err(src.invalid(
@@ -329,6 +356,8 @@ impl RawFile {
             robot,
             tune,
             telemetry,
+            conveyor,
+            camera,
             motors,
             safety,
         })

@@ -90,7 +90,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         "[bogus]\nx = 1\n",
-        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `jog`, `check`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `robot`, `motor`",
+        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `jog`, `check`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `conveyor`, `camera`, `robot`, `motor`",
     );
     check(
         "[trajectory]\nmethod = \"home\"\n",
@@ -276,6 +276,7 @@ fn the_shipped_file_states_the_defaults() {
     assert_eq!((s.s626.gripper_dio, d.s626.gripper_dio), (Some(6), None));
     assert_eq!(S626Settings { gripper_dio: None, ..s.s626.clone() }, d.s626, "[s626]");
     assert!(s.sim.start_counts.iter().all(|&c| c == 0.0), "start at 0, the default");
+    assert_eq!((&s.conveyor, &s.camera), (&d.conveyor, &d.camera), "[conveyor], [camera]");
 }
 
 /// Issue 11: `stall_motor = 0` is "none" (it used to wrap around on the way to the

@@ -2,7 +2,7 @@
 //! (one exchange) → command position → law → write all DACs (one exchange) → gather.
 //!
 //! [`Servo`] owns everything a move needs, allocated in [`Servo::prepare`] before any motor
-//! is enabled. [`Servo::cycle`] then allocates nothing, locks nothing, formats nothing and
+//! is enabled. A cycle ([`Cycling::cycle`]) then allocates nothing, locks nothing, formats nothing and
 //! does no I/O besides the two exchanges of the link; a fault is recorded as a `Copy` value
 //! and handled by disabling every motor.
 
@@ -42,7 +42,7 @@ pub enum CycleEnd {
 }
 
 /// A move: its plan, generator, law, clock, the loop's registers, and the move's state
-/// ([`MoveState`], made afresh by [`Servo::prepare`]).
+/// (made afresh by [`Servo::prepare`]).
 pub struct Servo {
     plan: MovePlan,
     generator: Box<dyn TrajectoryGenerator>,

@@ -1,0 +1,123 @@
+//! `[conveyor]` and `[camera]`: the belt's frame, the shipped belt within the robot's reach,
+//! and every bad value named by file, line, column and field.
+
+use crate::{ConfigLoadError, Names, Settings};
+use std::path::Path;
+
+const MOTOR: &str = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
+
+fn parse(text: &str) -> Result<Settings, ConfigLoadError> {
+    Settings::parse(Path::new("q.toml"), &format!("{text}{}", MOTOR.repeat(3)), &Names::any())
+}
+
+fn refused(text: &str) -> String {
+    match parse(text) {
+        Ok(_) => panic!("accepted:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// The across-belt vector is the travel turned +90° about z, and a belt point is the origin
+/// plus its coordinates along both, raised off the surface.
+#[test]
+fn the_belt_frame_is_its_direction_and_the_direction_turned_about_z() {
+    let s = parse("[conveyor]\ndirection = [0.6, 0.8, 0.0]\norigin_mm = [10, 20, -600]\n").unwrap();
+    let c = &s.conveyor;
+    assert_eq!(c.across(), [-0.8, 0.6, 0.0]);
+    let p = c.point_mm(100.0, 50.0, 5.0);
+    let want = [10.0 + 60.0 - 40.0, 20.0 + 80.0 + 30.0, -595.0];
+    assert!(p.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-9), "{p:?}");
+    // Without the tables, the defaults: a belt along +x, 500 mm/s, a camera upstream.
+    let d = parse("").unwrap();
+    assert_eq!((d.conveyor.direction, d.conveyor.speed_mm_s), ([1.0, 0.0, 0.0], 500.0));
+    assert!(d.camera.field_mm[1] <= d.conveyor.window_mm[0]);
+    let steps = parse("[conveyor]\nspeed_steps = [[1.0, 300.0], [2.5, 0.0]]\n").unwrap();
+    assert_eq!(steps.conveyor.speed_steps, [[1.0, 300.0], [2.5, 0.0]]);
+}
+
+/// The shipped belt is one the shipped robot can work: every corner of the window, at the
+/// parts' height and across their spread, and the place are reachable inside the soft
+/// limits.
+#[test]
+fn the_shipped_window_and_place_are_within_the_robots_reach() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
+    let s = Settings::load(&path, &Names::any()).unwrap();
+    let robot = s.robot().expect("a robot");
+    let (c, cam) = (&s.conveyor, &s.camera);
+    let half = cam.spread_mm / 2.0;
+    let mut points = vec![c.place_mm];
+    for belt in c.window_mm {
+        for across in [-half, 0.0, half] {
+            points.push(c.point_mm(belt, across, cam.part_height_mm));
+        }
+    }
+    for mm in points {
+        let m = mm.map(|v| v / 1000.0);
+        let counts = robot.counts_of(&m.into()).unwrap_or_else(|e| panic!("{mm:?} mm: {e}"));
+        for (k, count) in counts.iter().enumerate() {
+            let [lo, hi] = s.safety[k].soft_limits;
+            assert!((lo..=hi).contains(count), "{mm:?} mm: motor {} at {count:.0} counts", k + 1);
+        }
+    }
+}
+
+#[test]
+fn bad_conveyor_values_are_named_by_line_column_and_field() {
+    assert_eq!(
+        refused("[conveyor]\ndirection = [1.0, 1.0, 0.0]\n"),
+        "q.toml:2:13: conveyor.direction: must be a unit vector (length 1), found length 1.4142135623730951"
+    );
+    assert_eq!(
+        refused("[conveyor]\ndirection = [0.0, 0.0, 1.0]\n"),
+        "q.toml:2:13: conveyor.direction: the belt is horizontal: its z must be 0, found 1"
+    );
+    assert_eq!(
+        refused("[conveyor]\nwindow_mm = [500, 300]\n"),
+        "q.toml:2:13: conveyor.window_mm: [start, end] with start < end, found [500, 300]"
+    );
+    assert_eq!(
+        refused("[conveyor]\nspeed_steps = [[2.0, 100.0], [1.0, 50.0]]\n"),
+        "q.toml:2:15: conveyor.speed_steps: step 2: times are ≥ 0 and rising, found 1"
+    );
+    assert_eq!(
+        refused("[conveyor]\nspeed_steps = [[1.0, 9000.0]]\n"),
+        "q.toml:2:15: conveyor.speed_steps: step 1: mm_s must be 0‥5000 mm/s, found 9000"
+    );
+    assert_eq!(
+        refused("[conveyor]\ncounter_channel = 6\n"),
+        "q.toml:2:19: conveyor.counter_channel: must be 0‥5, found 6"
+    );
+    assert_eq!(
+        refused("[conveyor]\nplace_mm = [0, 0]\n"),
+        "q.toml:2:12: conveyor.place_mm: 3 numbers, found 2"
+    );
+    assert_eq!(
+        refused("[conveyor]\ncounter_channel = 1\n"),
+        "q.toml:2:19: conveyor.counter_channel: counter 1 reads a motor (s626.counter_channels = \
+         [0, 1, 2]): the belt's encoder needs a counter of its own"
+    );
+    let unknown = refused("[conveyor]\nspeed = 3\n");
+    assert!(unknown.starts_with("q.toml:2:1: conveyor.speed: unknown field `speed`"), "{unknown}");
+}
+
+#[test]
+fn bad_camera_values_are_named_by_line_column_and_field() {
+    let backend = refused("[camera]\nbackend = \"v4l2\"\n");
+    assert!(backend.starts_with("q.toml:2:11: camera.backend: "), "{backend}");
+    assert!(backend.contains("sim"), "says which there are: {backend}");
+    assert_eq!(
+        refused("[camera]\nrate_hz = 0\n"),
+        "q.toml:2:11: camera.rate_hz: must be > 0 and ≤ 1000 Hz, found 0"
+    );
+    assert_eq!(
+        refused("[camera]\nnoise_mm = -1\n"),
+        "q.toml:2:12: camera.noise_mm: must be a finite number ≥ 0, found -1"
+    );
+    assert_eq!(refused("[camera]\nseed = -3\n"), "q.toml:2:8: camera.seed: must be ≥ 0, found -3");
+    // The camera sees the belt before the robot can reach it, never inside the window.
+    assert_eq!(
+        refused("[conveyor]\nwindow_mm = [300, 500]\n[camera]\nfield_mm = [200, 350]\n"),
+        "q.toml:4:12: camera.field_mm: the camera sees the belt upstream of the robot: its \
+         field must end by the window's start (conveyor.window_mm starts at 300 mm), found 350 mm"
+    );
+}
