@@ -62,6 +62,7 @@ fn the_state_diagram_in_architecture_md_names_every_phase_of_the_code() {
 const LAYERS: &[&str] = &[
     "proto",
     "kinematics",
+    "conveyor",
     "comedi",
     "timer",
     "config",

@@ -192,15 +192,14 @@ pub(crate) struct RawConveyor {
 }
 
 impl RawConveyor {
-    /// Where `counter_channel` is (the file's start if it is not set).
-    pub(crate) fn counter_channel_span(&self) -> std::ops::Range<usize> {
-        span_of(&self.counter_channel)
-    }
-
-    /// Checked.
-    pub(crate) fn check(&self, src: &Source<'_>) -> Result<ConveyorSettings, ConfigLoadError> {
+    /// Checked, its counter none of the motors' (`motor_counters`, `s626.counter_channels`).
+    pub(crate) fn check(
+        &self,
+        src: &Source<'_>,
+        motor_counters: &[u32],
+    ) -> Result<ConveyorSettings, ConfigLoadError> {
         let d = ConveyorSettings::default();
-        Ok(ConveyorSettings {
+        let conveyor = ConveyorSettings {
             direction: src
                 .read(&self.direction, "conveyor.direction", d.direction, |v| direction(v))?,
             origin_mm: src
@@ -235,7 +234,19 @@ impl RawConveyor {
                 .read(&self.window_mm, "conveyor.window_mm", d.window_mm, |v| range(v))?,
             place_mm: src
                 .read(&self.place_mm, "conveyor.place_mm", d.place_mm, |v| numbers::<3>(v))?,
-        })
+        };
+        if motor_counters.contains(&conveyor.counter_channel) {
+            return Err(src.invalid(
+                span_of(&self.counter_channel),
+                "conveyor.counter_channel",
+                format!(
+                    "counter {} reads a motor (s626.counter_channels = {motor_counters:?}): the \
+                     belt's encoder needs a counter of its own",
+                    conveyor.counter_channel
+                ),
+            ));
+        }
+        Ok(conveyor)
     }
 }
 

@@ -58,7 +58,7 @@ pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
 pub use s626::{S626_DIO_CHANNELS, S626Settings};
 pub use sim::{DEFAULT_SIM_STATE_FILE, SimPlant, SimSettings};
-pub use source::{in_exponent_notation, num};
+pub use source::{MAX_CONFIG_BYTES, in_exponent_notation, num, read_bounded, read_config};
 pub use step::{MAX_STEP_COUNTS, StepSettings};
 pub use telemetry::{MAX_TELEMETRY_EVERY, TelemetrySettings};
 pub use timer::{TimerMethod, TimerSettings};
@@ -162,32 +162,6 @@ pub struct Settings {
     pub safety: Vec<MotorSafety>,
     /// Which backend-dependent values the file set ([`TimingDefaults`]).
     pub explicit: ExplicitTiming,
-}
-
-/// Largest settings file, bytes.
-pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
-
-/// Reads at most `limit` bytes of the file `path`: `Ok(None)` when it holds more (a device
-/// such as `/dev/zero` included, whatever its size says). Every file a user names is read
-/// through this, so no input can grow memory without bound.
-pub fn read_bounded(path: &Path, limit: u64) -> std::io::Result<Option<Vec<u8>>> {
-    use std::io::Read;
-    let mut raw = Vec::new();
-    std::fs::File::open(path)?.take(limit.saturating_add(1)).read_to_end(&mut raw)?;
-    Ok((raw.len() as u64 <= limit).then_some(raw))
-}
-
-/// Reads the settings file `path`, refusing more than [`MAX_CONFIG_BYTES`] (`/dev/zero`
-/// included) and text that is not UTF-8.
-pub fn read_config(path: &Path) -> Result<String, ConfigLoadError> {
-    let file = || path.to_path_buf();
-    let raw = read_bounded(path, MAX_CONFIG_BYTES)
-        .map_err(|reason| ConfigLoadError::Read { file: file(), reason })?
-        .ok_or_else(|| ConfigLoadError::TooLarge { file: file(), limit: MAX_CONFIG_BYTES })?;
-    String::from_utf8(raw).map_err(|e| ConfigLoadError::Read {
-        file: file(),
-        reason: std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error()),
-    })
 }
 
 #[derive(Deserialize, Default)]
@@ -302,18 +276,7 @@ impl RawFile {
         }
         let tune = self.tune.check(src)?;
         let telemetry = self.telemetry.check(src)?;
-        let conveyor = self.conveyor.check(src)?;
-        if s626.counter_channels.contains(&conveyor.counter_channel) {
-            return Err(src.invalid(
-                self.conveyor.counter_channel_span(),
-                "conveyor.counter_channel",
-                format!(
-                    "counter {} reads a motor (s626.counter_channels = {:?}): the belt's encoder \
-                     needs a counter of its own",
-                    conveyor.counter_channel, s626.counter_channels
-                ),
-            ));
-        }
+        let conveyor = self.conveyor.check(src, &s626.counter_channels)?;
         let camera = self.camera.check(src, &conveyor)?;
         let longest: f64 = safety.iter().map(|s| homing.longest_s(s.home_offset_counts)).sum();
         if longest > trajectory.max_duration_s {

@@ -252,3 +252,29 @@ pub(crate) fn one_of<'a>(
         }
     }
 }
+
+/// Largest settings file, bytes.
+pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
+/// Reads at most `limit` bytes of the file `path`: `Ok(None)` when it holds more (a device
+/// such as `/dev/zero` included, whatever its size says). Every file a user names is read
+/// through this, so no input can grow memory without bound.
+pub fn read_bounded(path: &Path, limit: u64) -> std::io::Result<Option<Vec<u8>>> {
+    use std::io::Read;
+    let mut raw = Vec::new();
+    std::fs::File::open(path)?.take(limit.saturating_add(1)).read_to_end(&mut raw)?;
+    Ok((raw.len() as u64 <= limit).then_some(raw))
+}
+
+/// Reads the settings file `path`, refusing more than [`MAX_CONFIG_BYTES`] (`/dev/zero`
+/// included) and text that is not UTF-8.
+pub fn read_config(path: &Path) -> Result<String, ConfigLoadError> {
+    let file = || path.to_path_buf();
+    let raw = read_bounded(path, MAX_CONFIG_BYTES)
+        .map_err(|reason| ConfigLoadError::Read { file: file(), reason })?
+        .ok_or_else(|| ConfigLoadError::TooLarge { file: file(), limit: MAX_CONFIG_BYTES })?;
+    String::from_utf8(raw).map_err(|e| ConfigLoadError::Read {
+        file: file(),
+        reason: std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error()),
+    })
+}

@@ -1,0 +1,212 @@
+//! Conveyor tracking's bookkeeping (issue 44, thesis 6.2.1's object queue): where a part the
+//! camera saw is now ([`Belt`]), and the [`PartQueue`] — detections in, the frames of one
+//! part merged into one, each part claimed once for a pick, a part that leaves the window
+//! unpicked missed. Plain data and arithmetic: no I/O, no clock of its own, no allocation
+//! once the queue has its capacity, so that the serving session may ask it every cycle.
+//!
+//! ```
+//! use qmarc_conveyor::{Belt, Detection, PartQueue};
+//! let belt = Belt { mm_per_count: 0.05 };
+//! let mut q = PartQueue::new([300.0, 500.0], 2.0, 64);
+//! let seen = Detection { t_ns: 0, latched_counts: 1_000, belt_mm: 120.0, across_mm: -10.0 };
+//! let id = q.detect(seen, &belt).unwrap();
+//! // 4000 counts later (200 mm of belt) the part is at 320 mm: inside the window.
+//! assert_eq!(q.claim_next(5_000, &belt, |_, _| true), Some(id));
+//! ```
+#![deny(missing_docs)]
+
+/// The belt's encoder: how belt coordinates follow its counts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Belt {
+    /// mm of belt travel per encoder count (`conveyor.mm_per_count`).
+    pub mm_per_count: f64,
+}
+
+impl Belt {
+    /// Where a point seen at `belt_mm` when the encoder read `then` is when it reads `now`.
+    pub fn carried(&self, belt_mm: f64, then: i64, now: i64) -> f64 {
+        belt_mm + (now - then) as f64 * self.mm_per_count
+    }
+}
+
+/// One detection of a part: where it lay on the belt when the frame was exposed, and the
+/// belt's encoder then.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Detection {
+    /// When the frame was exposed, ns of `CLOCK_MONOTONIC`.
+    pub t_ns: u64,
+    /// The belt encoder at the exposure, counts.
+    pub latched_counts: i64,
+    /// Along the belt, mm (belt coordinates).
+    pub belt_mm: f64,
+    /// Across the belt, mm.
+    pub across_mm: f64,
+}
+
+/// What became of a part.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PartState {
+    /// Seen, not yet claimed.
+    Pending,
+    /// Claimed for a pick, not yet done.
+    Claimed,
+    /// Picked and placed.
+    Picked,
+    /// Left the window unpicked (or could not be reached inside it).
+    Missed,
+}
+
+impl PartState {
+    /// Its name in `parts.csv`: `pending`, `picked` or `missed` (a claimed part is pending).
+    pub fn name(self) -> &'static str {
+        match self {
+            PartState::Pending | PartState::Claimed => "pending",
+            PartState::Picked => "picked",
+            PartState::Missed => "missed",
+        }
+    }
+}
+
+/// A part the camera saw.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Part {
+    /// Its number, 1 up, in the order first seen.
+    pub id: u32,
+    /// Its first detection.
+    pub seen: Detection,
+    /// What became of it.
+    pub state: PartState,
+}
+
+impl Part {
+    /// Its belt coordinate when the encoder reads `now`, mm.
+    pub fn belt_mm(&self, now: i64, belt: &Belt) -> f64 {
+        belt.carried(self.seen.belt_mm, self.seen.latched_counts, now)
+    }
+}
+
+/// The parts seen, in the order seen.
+#[derive(Debug, Clone)]
+pub struct PartQueue {
+    parts: Vec<Part>,
+    window_mm: [f64; 2],
+    merge_mm: f64,
+    capacity: usize,
+    /// The id the next new part gets.
+    next_id: u32,
+}
+
+impl PartQueue {
+    /// A queue for the window `window_mm` (belt coordinates where a part may be picked),
+    /// merging detections within `merge_mm` of a known part (the same part in another frame),
+    /// holding at most `capacity` parts (the oldest done ones make room).
+    pub fn new(window_mm: [f64; 2], merge_mm: f64, capacity: usize) -> PartQueue {
+        PartQueue { parts: Vec::with_capacity(capacity), window_mm, merge_mm, capacity, next_id: 1 }
+    }
+
+    /// The parts, in the order seen.
+    pub fn parts(&self) -> &[Part] {
+        &self.parts
+    }
+
+    /// The part `id`, if the queue holds it.
+    pub fn part(&self, id: u32) -> Option<&Part> {
+        self.parts.iter().find(|p| p.id == id)
+    }
+
+    /// A detection: the id of a new part, or `None` when it is a part already known (within
+    /// `merge_mm` of where that part is at this detection's encoder count), its numbers are
+    /// not finite, or the queue is full of parts not done.
+    pub fn detect(&mut self, d: Detection, belt: &Belt) -> Option<u32> {
+        if !(d.belt_mm.is_finite() && d.across_mm.is_finite()) {
+            return None;
+        }
+        let known = self.parts.iter().any(|p| {
+            let along = p.belt_mm(d.latched_counts, belt) - d.belt_mm;
+            let across = p.seen.across_mm - d.across_mm;
+            along.hypot(across) <= self.merge_mm
+        });
+        if known {
+            return None;
+        }
+        if self.parts.len() == self.capacity {
+            let done = self
+                .parts
+                .iter()
+                .position(|p| matches!(p.state, PartState::Picked | PartState::Missed))?;
+            self.parts.remove(done);
+        }
+        let id = self.next_id;
+        self.next_id += 1;
+        self.parts.push(Part { id, seen: d, state: PartState::Pending });
+        Some(id)
+    }
+
+    /// Claims the part to pick next at encoder count `now`: the most downstream pending part
+    /// that has not left the window and that `reachable(part, its belt coordinate now)` says
+    /// can still be picked inside it. A pending part that has left the window, or that is
+    /// downstream of the one claimed and cannot be reached, is missed.
+    pub fn claim_next(
+        &mut self,
+        now: i64,
+        belt: &Belt,
+        mut reachable: impl FnMut(&Part, f64) -> bool,
+    ) -> Option<u32> {
+        self.sweep(now, belt);
+        // Downstream first — the part nearest the window's end is the one about to be lost —
+        // without sorting into a new list: each pass takes the most downstream pending part
+        // upstream of the last one looked at (ties: the one seen first).
+        let key = |p: &Part| (p.belt_mm(now, belt), -i64::from(p.id));
+        let mut after: Option<(f64, i64)> = None;
+        loop {
+            let next = (0..self.parts.len())
+                .filter(|&i| self.parts[i].state == PartState::Pending)
+                .filter(|&i| after.is_none_or(|a| key(&self.parts[i]) < a))
+                .max_by(|&a, &b| key(&self.parts[a]).partial_cmp(&key(&self.parts[b])).unwrap())?;
+            let at = self.parts[next].belt_mm(now, belt);
+            after = Some(key(&self.parts[next]));
+            if reachable(&self.parts[next], at) {
+                self.parts[next].state = PartState::Claimed;
+                return Some(self.parts[next].id);
+            }
+            // Inside the window and out of reach: it will not come back.
+            if at >= self.window_mm[0] {
+                self.parts[next].state = PartState::Missed;
+            }
+        }
+    }
+
+    /// Every part not done that the belt has carried past the window's end at `now` is
+    /// missed (a claimed one too: the pick did not happen inside the window).
+    pub fn sweep(&mut self, now: i64, belt: &Belt) {
+        let end = self.window_mm[1];
+        for p in &mut self.parts {
+            if matches!(p.state, PartState::Pending | PartState::Claimed)
+                && p.belt_mm(now, belt) > end
+            {
+                p.state = PartState::Missed;
+            }
+        }
+    }
+
+    /// Part `id` was picked and placed. False if it was not the claimed one (never picked
+    /// twice).
+    pub fn picked(&mut self, id: u32) -> bool {
+        match self.parts.iter_mut().find(|p| p.id == id && p.state == PartState::Claimed) {
+            Some(p) => {
+                p.state = PartState::Picked;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Parts picked and missed so far.
+    pub fn counts(&self) -> (usize, usize) {
+        let n = |s| self.parts.iter().filter(|p| p.state == s).count();
+        (n(PartState::Picked), n(PartState::Missed))
+    }
+}
+
+#[cfg(test)]
+mod tests;
