@@ -1,7 +1,7 @@
-//! Conveyor tracking's bookkeeping (issue 44, thesis 6.2.1's object queue): where a part the
-//! camera saw is now ([`Belt`]), and the [`PartQueue`] — detections in, the frames of one
-//! part merged into one, each part claimed once for a pick, a part that leaves the window
-//! unpicked missed. Plain data and arithmetic: no I/O, no clock of its own, no allocation
+//! Conveyor tracking's bookkeeping (issue 44, thesis 6.2.1's object queue): how the belt
+//! moves ([`BeltMotion`]), where a part the camera saw is now ([`Belt`]), and the
+//! [`PartQueue`] — detections in, the frames of one part merged into one, each part claimed
+//! once for a pick, a part that leaves the window unpicked missed. Plain data and arithmetic: no I/O, no clock of its own, no allocation
 //! once the queue has its capacity, so that the serving session may ask it every cycle.
 //!
 //! ```
@@ -14,6 +14,9 @@
 //! assert_eq!(q.claim_next(5_000, &belt, |_, _| true), Some(id));
 //! ```
 #![deny(missing_docs)]
+
+mod belt;
+pub use belt::BeltMotion;
 
 /// The belt's encoder: how belt coordinates follow its counts.
 #[derive(Debug, Clone, Copy, PartialEq)]
