@@ -3,7 +3,7 @@
 //! (`origin_mm`), across it along `direction` turned +90° about z.
 
 use crate::ConfigLoadError;
-use crate::source::{S, Source, non_negative, num, one_of, positive_at_most, span_of};
+use crate::source::{S, Source, non_negative, num, one_of, positive_at_most, span_of, within};
 use serde::{Deserialize, Serialize};
 
 /// Fastest belt, mm/s.
@@ -162,19 +162,15 @@ fn steps(v: &[Vec<f64>]) -> Result<Vec<[f64; 2]>, String> {
         if t < 0.0 || out.last().is_some_and(|l| t <= l[0]) {
             return Err(format!("step {}: times are ≥ 0 and rising, found {}", k + 1, num(t)));
         }
-        speed(&s).map_err(|e| format!("step {}: mm_s {e}", k + 1))?;
+        speed()(&s).map_err(|e| format!("step {}: mm_s {e}", k + 1))?;
         out.push([t, s]);
     }
     Ok(out)
 }
 
-/// A belt speed.
-fn speed(v: &f64) -> Result<(), String> {
-    if v.is_finite() && (0.0..=MAX_BELT_MM_S).contains(v) {
-        Ok(())
-    } else {
-        Err(format!("must be 0‥{MAX_BELT_MM_S} mm/s, found {}", num(*v)))
-    }
+/// A belt speed: 0‥[`MAX_BELT_MM_S`].
+fn speed() -> impl FnOnce(&f64) -> Result<(), String> {
+    within(0.0, MAX_BELT_MM_S, "mm/s")
 }
 
 #[derive(Deserialize, Default)]
@@ -217,7 +213,7 @@ impl RawConveyor {
                 0,
                 5,
             )? as u32,
-            speed_mm_s: src.take(&self.speed_mm_s, "conveyor.speed_mm_s", d.speed_mm_s, speed)?,
+            speed_mm_s: src.take(&self.speed_mm_s, "conveyor.speed_mm_s", d.speed_mm_s, speed())?,
             speed_steps: src.read(
                 &self.speed_steps,
                 "conveyor.speed_steps",
@@ -328,13 +324,8 @@ impl RawCamera {
             })? as u64,
         };
         if camera.field_mm[1] > conveyor.window_mm[0] {
-            let at = if self.field_mm.is_some() {
-                span_of(&self.field_mm)
-            } else {
-                span_of(&self.backend)
-            };
             return Err(src.invalid(
-                at,
+                span_of(&self.field_mm),
                 "camera.field_mm",
                 format!(
                     "the camera sees the belt upstream of the robot: its field must end by the \

@@ -211,16 +211,17 @@ impl Servo {
     /// The generator's own explanation of the fault that ended the move, where it has one
     /// (a bad knot in a stream, why homing failed).
     pub fn failure(&self) -> Option<String> {
-        match self.m.fault?.kind {
-            FaultKind::TrajectoryError | FaultKind::HomingFailed | FaultKind::TooMuchTravel => {
-                self.generator.report().failure
-            }
-            // A switch a generator watched itself (jog), not the hwserver's latch.
-            FaultKind::LimitSwitch if self.m.fault?.status.is_ok() => {
-                self.generator.report().failure
-            }
-            _ => None,
-        }
+        self.generator_failed().then(|| self.generator.report().failure).flatten()
+    }
+
+    /// Whether the fault that ended the move is one the generator explains: its own
+    /// failure, or a switch it watched itself (jog), not the hwserver's latch.
+    fn generator_failed(&self) -> bool {
+        self.m.fault.is_some_and(|f| match f.kind {
+            FaultKind::TrajectoryError | FaultKind::HomingFailed | FaultKind::TooMuchTravel => true,
+            FaultKind::LimitSwitch => f.status.is_ok(),
+            _ => false,
+        })
     }
 
     /// Cycles of the path executed (the error figures' cycles; the lead-in and the settle

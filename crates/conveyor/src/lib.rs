@@ -165,7 +165,10 @@ impl PartQueue {
             let next = (0..self.parts.len())
                 .filter(|&i| self.parts[i].state == PartState::Pending)
                 .filter(|&i| after.is_none_or(|a| key(&self.parts[i]) < a))
-                .max_by(|&a, &b| key(&self.parts[a]).partial_cmp(&key(&self.parts[b])).unwrap())?;
+                .max_by(|&a, &b| {
+                    let (a, b) = (key(&self.parts[a]), key(&self.parts[b]));
+                    a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
+                })?;
             let at = self.parts[next].belt_mm(now, belt);
             after = Some(key(&self.parts[next]));
             if reachable(&self.parts[next], at) {

@@ -98,3 +98,20 @@ fn a_full_queue_drops_only_parts_that_are_done() {
     assert_eq!(q.detect(seen(0, 100.0, 0.0), &BELT), Some(3));
     assert!(q.part(a).is_none(), "the done part made room");
 }
+
+/// Past a part out of reach, the next one upstream is still looked at and claimed; of two
+/// parts level on the belt, the one seen first goes first.
+#[test]
+fn an_unreachable_part_does_not_hide_the_next_and_a_tie_goes_to_the_first_seen() {
+    let mut q = PartQueue::new([300.0, 500.0], 2.0, 8);
+    let far = q.detect(seen(0, 450.0, 900.0), &BELT).unwrap();
+    let near = q.detect(seen(0, 350.0, 0.0), &BELT).unwrap();
+    let reach = |p: &Part, _: f64| p.seen.across_mm.abs() < 100.0;
+    assert_eq!(q.claim_next(0, &BELT, reach), Some(near));
+    assert_eq!(q.part(far).unwrap().state, PartState::Missed);
+    let mut level = PartQueue::new([300.0, 500.0], 2.0, 8);
+    let first = level.detect(seen(0, 350.0, -20.0), &BELT).unwrap();
+    let second = level.detect(seen(0, 350.0, 20.0), &BELT).unwrap();
+    assert_eq!(level.claim_next(0, &BELT, |_, _| true), Some(first));
+    assert_eq!(level.claim_next(0, &BELT, |_, _| true), Some(second));
+}

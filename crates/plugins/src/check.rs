@@ -139,12 +139,22 @@ impl Check {
             r.coasted_counts = self.act[motor] - self.slot_start[motor] - r.moved_counts;
         }
     }
-}
 
-impl Check {
     /// What each motor did for its voltage, so far.
     pub fn checked(&self) -> &[MotorCheckReport] {
         &self.reports[..self.schedule.n_motors]
+    }
+
+    /// Why it failed, in words, after a failed sample.
+    pub fn failure(&self) -> Option<String> {
+        self.too_far.map(|(m, travel)| {
+            format!(
+                "motor {} moved {travel:.0} counts from where it started, more than \
+                 check.max_travel_counts = {}",
+                m + 1,
+                self.max_travel
+            )
+        })
     }
 }
 
@@ -207,20 +217,6 @@ impl TrajectoryGenerator for Check {
                 .ok()
                 .map(|value| Findings { section: "check", value }),
         }
-    }
-}
-
-impl Check {
-    /// Why it failed, in words, after a failed sample.
-    pub fn failure(&self) -> Option<String> {
-        self.too_far.map(|(m, travel)| {
-            format!(
-                "motor {} moved {travel:.0} counts from where it started, more than \
-                 check.max_travel_counts = {}",
-                m + 1,
-                self.max_travel
-            )
-        })
     }
 }
 

@@ -107,6 +107,27 @@ impl GripAtEnd {
     fn word(&self) -> &'static str {
         if self.close { "close" } else { "open" }
     }
+
+    /// Why it failed, in words, after a failed sample.
+    pub fn failure(&self) -> Option<String> {
+        if self.absent {
+            return Some(format!(
+                "the move was to {} the gripper, but no gripper is wired (s626.gripper_dio)",
+                self.word()
+            ));
+        }
+        if self.late {
+            return Some(format!(
+                "the gripper did not {} within {:.3} s of the move's end (twice \
+                 s626.gripper_close_s = {} s, and ten periods): check its air, its valve and \
+                 its wiring",
+                self.word(),
+                self.wait as f64 * self.period_s,
+                self.travel_s
+            ));
+        }
+        self.inner.report().failure
+    }
 }
 
 impl TrajectoryGenerator for GripAtEnd {
@@ -183,29 +204,6 @@ impl TrajectoryGenerator for GripAtEnd {
 
     fn report(&self) -> GeneratorReport {
         GeneratorReport { failure: self.failure(), ..GeneratorReport::default() }
-    }
-}
-
-impl GripAtEnd {
-    /// Why it failed, in words, after a failed sample.
-    pub fn failure(&self) -> Option<String> {
-        if self.absent {
-            return Some(format!(
-                "the move was to {} the gripper, but no gripper is wired (s626.gripper_dio)",
-                self.word()
-            ));
-        }
-        if self.late {
-            return Some(format!(
-                "the gripper did not {} within {:.3} s of the move's end (twice \
-                 s626.gripper_close_s = {} s, and ten periods): check its air, its valve and \
-                 its wiring",
-                self.word(),
-                self.wait as f64 * self.period_s,
-                self.travel_s
-            ));
-        }
-        self.inner.report().failure
     }
 }
 

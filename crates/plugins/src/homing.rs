@@ -318,6 +318,31 @@ impl Homing {
             self.settle_left = self.settle_left.saturating_sub(periods);
         }
     }
+
+    /// Why it failed, in words, after a failed sample.
+    pub fn failure(&self) -> Option<String> {
+        let s = &self.settings;
+        self.failure.map(|f| match f {
+            HomingFailure::NoSwitch { motor, travel } => format!(
+                "homing motor {}: no top switch within {travel:.0} counts (homing.max_travel_counts {})",
+                motor + 1,
+                s.max_travel_counts
+            ),
+            HomingFailure::NotCleared { motor, backed_off } => format!(
+                "homing motor {}: its top switch was still active {backed_off:.1} counts back from \
+                 where it tripped (it must clear within {} counts): a stuck switch or a wiring fault",
+                motor + 1,
+                s.clear_within_counts
+            ),
+
+            HomingFailure::UnexpectedSwitch { motor, top, homing } => format!(
+                "homing motor {}: motor {}'s {} limit switch tripped",
+                homing + 1,
+                motor + 1,
+                if top { "top" } else { "bottom" }
+            ),
+        })
+    }
 }
 
 impl TrajectoryGenerator for Homing {
@@ -400,33 +425,6 @@ impl TrajectoryGenerator for Homing {
                 .ok()
                 .map(|value| Findings { section: "homing", value }),
         }
-    }
-}
-
-impl Homing {
-    /// Why it failed, in words, after a failed sample.
-    pub fn failure(&self) -> Option<String> {
-        let s = &self.settings;
-        self.failure.map(|f| match f {
-            HomingFailure::NoSwitch { motor, travel } => format!(
-                "homing motor {}: no top switch within {travel:.0} counts (homing.max_travel_counts {})",
-                motor + 1,
-                s.max_travel_counts
-            ),
-            HomingFailure::NotCleared { motor, backed_off } => format!(
-                "homing motor {}: its top switch was still active {backed_off:.1} counts back from \
-                 where it tripped (it must clear within {} counts): a stuck switch or a wiring fault",
-                motor + 1,
-                s.clear_within_counts
-            ),
-
-            HomingFailure::UnexpectedSwitch { motor, top, homing } => format!(
-                "homing motor {}: motor {}'s {} limit switch tripped",
-                homing + 1,
-                motor + 1,
-                if top { "top" } else { "bottom" }
-            ),
-        })
     }
 }
 

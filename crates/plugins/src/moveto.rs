@@ -158,6 +158,17 @@ impl Jog {
             tripped: None,
         })
     }
+
+    /// Why it failed, in words, after a failed sample.
+    pub fn failure(&self) -> Option<String> {
+        self.tripped.map(|(k, top)| {
+            format!(
+                "jog: motor {}'s {} limit switch tripped (it was not active when the jog began)",
+                k + 1,
+                if top { "top" } else { "bottom" }
+            )
+        })
+    }
 }
 
 impl TrajectoryGenerator for Jog {
@@ -233,19 +244,6 @@ impl TrajectoryGenerator for Jog {
 
     fn report(&self) -> GeneratorReport {
         GeneratorReport { failure: self.failure(), ..GeneratorReport::default() }
-    }
-}
-
-impl Jog {
-    /// Why it failed, in words, after a failed sample.
-    pub fn failure(&self) -> Option<String> {
-        self.tripped.map(|(k, top)| {
-            format!(
-                "jog: motor {}'s {} limit switch tripped (it was not active when the jog began)",
-                k + 1,
-                if top { "top" } else { "bottom" }
-            )
-        })
     }
 }
 

@@ -381,6 +381,11 @@ impl Pvt {
         }
         self.end_knot = next;
     }
+
+    /// Why it failed, in words, after a failed sample.
+    pub fn failure(&self) -> Option<String> {
+        self.failed.then(|| self.stored_failure().to_string())
+    }
 }
 
 impl TrajectoryGenerator for Pvt {
@@ -484,13 +489,6 @@ impl TrajectoryGenerator for Pvt {
 
     fn report(&self) -> GeneratorReport {
         GeneratorReport { failure: self.failure(), ..GeneratorReport::default() }
-    }
-}
-
-impl Pvt {
-    /// Why it failed, in words, after a failed sample.
-    pub fn failure(&self) -> Option<String> {
-        self.failed.then(|| self.stored_failure().to_string())
     }
 }
 

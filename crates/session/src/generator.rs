@@ -11,8 +11,7 @@
 use qmarc_config::Settings;
 use qmarc_controller::status::LoopStatus;
 use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
-use qmarc_plugins::motion::MotionLimits;
-use qmarc_plugins::motion::MotionState;
+use qmarc_plugins::motion::{MotionLimits, MotionState};
 use qmarc_plugins::online::{OnlineMove, RetargetError};
 use qmarc_proto::{Gripper, MAX_MOTORS};
 use rtrb::{Consumer, Producer, RingBuffer};

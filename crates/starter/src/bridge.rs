@@ -58,7 +58,7 @@ impl Bridge {
     /// The session has ended: the bridge ends too.
     pub(crate) fn stop(mut self) {
         let Some(child) = self.child.as_mut() else { return };
-        supervise::send(child, nix::sys::signal::Signal::SIGTERM);
+        qmarc_program::process::send(child, nix::sys::signal::Signal::SIGTERM);
         let since = Instant::now();
         while since.elapsed() < Duration::from_secs(3) {
             if let Ok(Some(_)) = child.try_wait() {

@@ -386,7 +386,7 @@ fn spawn_both(
         Ok(c) => children.push(Supervised::new("qmarc-controller", c, secs(120), secs(10))),
         Err(e) => {
             say!("qmarc-starter: cannot start {}: {e}", p.controller_bin.display());
-            supervise::send(&children[0].child, nix::sys::signal::Signal::SIGTERM);
+            qmarc_program::process::send(&children[0].child, nix::sys::signal::Signal::SIGTERM);
         }
     }
     Ok(children)

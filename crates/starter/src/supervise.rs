@@ -1,12 +1,10 @@
 //! Spawning and supervising the two children.
 
+use qmarc_program::process::{send, with_parent_death_signal};
 use std::path::Path;
 use std::process::{Child, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-
-pub use qmarc_program::process::send;
-use qmarc_program::process::with_parent_death_signal;
 
 /// How a child ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

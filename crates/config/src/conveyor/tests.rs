@@ -96,6 +96,33 @@ fn bad_conveyor_values_are_named_by_line_column_and_field() {
         "q.toml:2:19: conveyor.counter_channel: counter 1 reads a motor (s626.counter_channels = \
          [0, 1, 2]): the belt's encoder needs a counter of its own"
     );
+    assert_eq!(
+        refused("[conveyor]\norigin_mm = [1e9, 0, 0]\n"),
+        "q.toml:2:13: conveyor.origin_mm: must be finite numbers within ±100000, found 1e9"
+    );
+    assert_eq!(
+        refused("[conveyor]\nwindow_mm = [300, 300]\n"),
+        "q.toml:2:13: conveyor.window_mm: [start, end] with start < end, found [300, 300]"
+    );
+    assert_eq!(
+        refused("[conveyor]\nspeed_steps = [[-0.5, 100.0]]\n"),
+        "q.toml:2:15: conveyor.speed_steps: step 1: times are ≥ 0 and rising, found -0.5"
+    );
+    // At the boundaries: a step at the start, as many steps as allowed, a camera field that
+    // ends where the window starts.
+    let at_zero = parse("[conveyor]\nspeed_steps = [[0.0, 100.0]]\n").unwrap();
+    assert_eq!(at_zero.conveyor.speed_steps, [[0.0, 100.0]]);
+    let many = |n: usize| {
+        let steps: Vec<String> = (1..=n).map(|k| format!("[{k}.0, 100.0]")).collect();
+        format!("[conveyor]\nspeed_steps = [{}]\n", steps.join(", "))
+    };
+    assert_eq!(parse(&many(crate::MAX_SPEED_STEPS)).unwrap().conveyor.speed_steps.len(), 1_000);
+    assert_eq!(
+        refused(&many(crate::MAX_SPEED_STEPS + 1)),
+        "q.toml:2:15: conveyor.speed_steps: at most 1000 steps, found 1001"
+    );
+    let edge = parse("[conveyor]\nwindow_mm = [300, 500]\n[camera]\nfield_mm = [100, 300]\n");
+    assert_eq!(edge.unwrap().camera.field_mm, [100.0, 300.0]);
     let unknown = refused("[conveyor]\nspeed = 3\n");
     assert!(unknown.starts_with("q.toml:2:1: conveyor.speed: unknown field `speed`"), "{unknown}");
 }

@@ -13,7 +13,7 @@ impl Servo {
             cycles: self.cycles(),
             planned_samples: self.m.planned_samples,
             fault: self.m.fault,
-            failure: self.failure(),
+            failure: report.failure.filter(|_| self.generator_failed()),
             errors: self.m.errors,
             last_error: self.last_error(),
             end_velocity: self.generator.end_velocity(),
