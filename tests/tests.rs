@@ -2,6 +2,7 @@
 //! repository's tidiness rules.
 
 mod console;
+mod conveyor;
 mod counting;
 mod deltabot;
 mod e2e;

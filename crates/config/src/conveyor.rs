@@ -39,6 +39,14 @@ pub struct ConveyorSettings {
     pub window_mm: [f64; 2],
     /// Where a picked part is put down, robot frame, mm.
     pub place_mm: [f64; 3],
+    /// How long `qmarc-starter conveyor` runs the belt and picks, s (`--seconds`).
+    #[serde(default = "default_run_s")]
+    pub run_s: f64,
+}
+
+/// `conveyor.run_s`'s default: a minute, the benchmark.
+fn default_run_s() -> f64 {
+    60.0
 }
 
 impl Default for ConveyorSettings {
@@ -53,6 +61,7 @@ impl Default for ConveyorSettings {
             acceleration_mm_s2: 2_000.0,
             window_mm: [300.0, 500.0],
             place_mm: [0.0, 150.0, -600.0],
+            run_s: default_run_s(),
         }
     }
 }
@@ -173,6 +182,42 @@ fn speed() -> impl FnOnce(&f64) -> Result<(), String> {
     within(0.0, MAX_BELT_MM_S, "mm/s")
 }
 
+/// A conveyor session's length: 0.1 s‥a day.
+fn run_length() -> impl FnOnce(&f64) -> Result<(), String> {
+    within(0.1, 86_400.0, "s")
+}
+
+/// The camera's parts a minute: 0‥6000.
+fn part_rate() -> impl FnOnce(&f64) -> Result<(), String> {
+    within(0.0, 6_000.0, "a minute")
+}
+
+impl crate::Settings {
+    /// Overrides the simulated belt's speed (`--belt-mm-s`).
+    pub fn set_belt_speed(&mut self, mm_s: f64) -> Result<(), ConfigLoadError> {
+        speed()(&mm_s)
+            .map_err(|message| ConfigLoadError::Override { flag: "--belt-mm-s", message })?;
+        self.conveyor.speed_mm_s = mm_s;
+        Ok(())
+    }
+
+    /// Overrides the simulated camera's parts a minute (`--parts-per-min`).
+    pub fn set_parts_per_min(&mut self, n: f64) -> Result<(), ConfigLoadError> {
+        part_rate()(&n)
+            .map_err(|message| ConfigLoadError::Override { flag: "--parts-per-min", message })?;
+        self.camera.parts_per_min = n;
+        Ok(())
+    }
+
+    /// Overrides the conveyor session's length (`--seconds`).
+    pub fn set_conveyor_seconds(&mut self, s: f64) -> Result<(), ConfigLoadError> {
+        run_length()(&s)
+            .map_err(|message| ConfigLoadError::Override { flag: "--seconds", message })?;
+        self.conveyor.run_s = s;
+        Ok(())
+    }
+}
+
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawConveyor {
@@ -185,6 +230,7 @@ pub(crate) struct RawConveyor {
     acceleration_mm_s2: S<f64>,
     window_mm: S<Vec<f64>>,
     place_mm: S<Vec<f64>>,
+    run_s: S<f64>,
 }
 
 impl RawConveyor {
@@ -230,6 +276,7 @@ impl RawConveyor {
                 .read(&self.window_mm, "conveyor.window_mm", d.window_mm, |v| range(v))?,
             place_mm: src
                 .read(&self.place_mm, "conveyor.place_mm", d.place_mm, |v| numbers::<3>(v))?,
+            run_s: src.take(&self.run_s, "conveyor.run_s", d.run_s, run_length())?,
         };
         if motor_counters.contains(&conveyor.counter_channel) {
             return Err(src.invalid(
@@ -311,7 +358,7 @@ impl RawCamera {
                 &self.parts_per_min,
                 "camera.parts_per_min",
                 d.parts_per_min,
-                at_most(6_000.0, "a minute"),
+                part_rate(),
             )?,
             spread_mm: src.take(
                 &self.spread_mm,

@@ -45,23 +45,33 @@ pub struct GatherFields {
     /// wired (`s626.gripper_dio`).
     #[serde(default)]
     pub grip: bool,
+    /// `conv`: the belt encoder's counts, when the run reads a belt (`conveyor`).
+    #[serde(default)]
+    pub conv: bool,
 }
 
 impl Default for GatherFields {
     fn default() -> GatherFields {
-        GatherFields { time: true, cmd: true, act: true, dac: true, grip: true }
+        GatherFields { time: true, cmd: true, act: true, dac: true, grip: true, conv: true }
     }
 }
 
 impl GatherFields {
     /// The names used in `gather.fields`.
-    pub const NAMES: [&'static str; 5] = ["time", "cmd", "act", "dac", "grip"];
+    pub const NAMES: [&'static str; 6] = ["time", "cmd", "act", "dac", "grip", "conv"];
 
     /// Parses a list of names; the error names the first unknown one.
     pub fn from_names<'a>(
         names: impl IntoIterator<Item = &'a str>,
     ) -> Result<GatherFields, String> {
-        let mut f = GatherFields { time: false, cmd: false, act: false, dac: false, grip: false };
+        let mut f = GatherFields {
+            time: false,
+            cmd: false,
+            act: false,
+            dac: false,
+            grip: false,
+            conv: false,
+        };
         for n in names {
             match n {
                 "time" => f.time = true,
@@ -69,9 +79,10 @@ impl GatherFields {
                 "act" => f.act = true,
                 "dac" => f.dac = true,
                 "grip" => f.grip = true,
+                "conv" => f.conv = true,
                 other => {
                     return Err(format!(
-                        "unknown field `{other}`: the fields are time, cmd, act, dac, grip"
+                        "unknown field `{other}`: the fields are time, cmd, act, dac, grip, conv"
                     ));
                 }
             }
@@ -81,7 +92,7 @@ impl GatherFields {
 
     /// The names of the selected fields.
     pub fn names(&self) -> Vec<&'static str> {
-        let on = [self.time, self.cmd, self.act, self.dac, self.grip];
+        let on = [self.time, self.cmd, self.act, self.dac, self.grip, self.conv];
         GatherFields::NAMES.iter().zip(on).filter(|(_, on)| *on).map(|(n, _)| *n).collect()
     }
 }

@@ -28,6 +28,16 @@ pub enum Mode {
     Move,
     /// Hold, and move as commands arrive over `qmarc/command` (`serve`).
     Serve,
+    /// A serving session at a belt (`conveyor`): the belt runs, the camera sees its parts and
+    /// the robot picks them, for `conveyor.run_s`.
+    Conveyor,
+}
+
+impl Mode {
+    /// A serving session: it takes commands while it runs (`serve`, `conveyor`).
+    pub fn serving(self) -> bool {
+        matches!(self, Mode::Serve | Mode::Conveyor)
+    }
 }
 
 impl std::fmt::Display for Mode {
@@ -40,6 +50,7 @@ impl std::fmt::Display for Mode {
             Mode::Check => "check",
             Mode::Move => "move",
             Mode::Serve => "serve",
+            Mode::Conveyor => "conveyor",
         })
     }
 }
@@ -55,9 +66,10 @@ impl std::str::FromStr for Mode {
             "check" => Ok(Mode::Check),
             "move" => Ok(Mode::Move),
             "serve" => Ok(Mode::Serve),
-            other => {
-                Err(format!("unknown mode `{other}`: step, run, home, jog, check, move or serve"))
-            }
+            "conveyor" => Ok(Mode::Conveyor),
+            other => Err(format!(
+                "unknown mode `{other}`: step, run, home, jog, check, move, serve or conveyor"
+            )),
         }
     }
 }
@@ -82,6 +94,12 @@ pub struct RunSpec {
     pub iox_prefix: String,
     /// iceoryx2 root directory.
     pub iox_root: String,
+    /// `CLOCK_MONOTONIC` ns at which the run's world starts: the simulated belt is at 0 then
+    /// and its speed steps count from then, and the simulated camera's parts arrive on that
+    /// belt — one world for every process of the run. The starter's clock as it writes the
+    /// run; 0 (unset) starts each process's world when that process starts.
+    #[serde(default)]
+    pub epoch_ns: u64,
 }
 
 /// A run file could not be written or read.

@@ -193,6 +193,7 @@ fn every_field_round_trips_to_the_children() {
         unhomed: false,
         iox_prefix: "qmarc_7_".into(),
         iox_root: "/tmp/iceoryx2/".into(),
+        epoch_ns: 0,
     };
     let mut json: serde_json::Value = serde_json::from_str(&spec.to_json()).unwrap();
     let mut n = 0u32;

@@ -126,7 +126,8 @@ pub fn generator_name(mode: Mode, settings: &Settings) -> &str {
         Mode::Check => "check",
         Mode::Move if settings.motion.linear => "linear",
         Mode::Move => "move",
-        Mode::Serve => "serve",
+        // A conveyor session serves: the picking comes to it as orders.
+        Mode::Serve | Mode::Conveyor => "serve",
     }
 }
 
@@ -151,7 +152,7 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     // Serving: the command thread, answering from before the loop starts until this returns.
     let commands = match serving {
         Some(h) => Some(
-            server::CommandThread::spawn(&location, settings, spec.unhomed, h)
+            server::CommandThread::spawn(&location, settings, spec.unhomed, h, session_end(spec))
                 .map_err(|e| RunError::Location(e.to_string()))?,
         ),
         None => None,
@@ -280,7 +281,7 @@ pub fn build_serving(
     let settings = if spec.unhomed && spec.mode == Mode::Jog { &unhomed_jog } else { settings };
     // What the loop is doing, as it writes it: the serving session's command thread reads it.
     let status = std::sync::Arc::new(qmarc_controller::status::LoopStatus::default());
-    let (mut path, serving) = if spec.mode == Mode::Serve {
+    let (mut path, serving) = if spec.mode.serving() {
         let (generator, handle) = server::generator(settings, spec.unhomed, status.clone());
         (generator, Some(handle))
     } else {
@@ -406,10 +407,26 @@ fn homing_report(record: &MoveRecord, after: Option<HwMsg>, n: usize) -> HomingR
     }
 }
 
-/// Samples the gather buffer holds for a stream: `gather.stream_max_s` of servo periods.
-pub fn stream_gather_samples(settings: &Settings) -> u64 {
-    (settings.gather.stream_max_s / settings.period_s()).ceil() as u64
+/// Samples the gather buffer holds for a stream: `gather.stream_max_s` of servo periods, or a
+/// conveyor session's whole `conveyor.run_s` and its end.
+pub fn stream_gather_samples(settings: &Settings, mode: Mode) -> u64 {
+    let seconds = if mode == Mode::Conveyor {
+        settings.conveyor.run_s + CONVEYOR_END_S
+    } else {
+        settings.gather.stream_max_s
+    };
+    (seconds / settings.period_s()).ceil() as u64
 }
+
+/// The cycle a session with an end quits at: a conveyor session's `conveyor.run_s`.
+fn session_end(spec: &RunSpec) -> Option<u64> {
+    let s = &spec.settings;
+    (spec.mode == Mode::Conveyor).then(|| (s.conveyor.run_s / s.period_s()).round() as u64)
+}
+
+/// What a conveyor session gathers beyond its `conveyor.run_s`: the stop that brings it to
+/// rest at its end, s.
+pub const CONVEYOR_END_S: f64 = 5.0;
 
 /// Cycles the loop holds the end of a path of `mode` with its loop closed
 /// (`trajectory.settle_s`): none when homing, which settles every motor at home itself, or
@@ -445,7 +462,7 @@ pub fn plan_for(settings: &Settings, mode: Mode, deterministic: bool, unhomed: b
         starve_hold_cycles: (settings.trajectory.starve_hold_ms * 1e6 / settings.period_ns() as f64)
             .ceil() as u64,
         settle_cycles: settle_cycles(settings, mode),
-        stream_gather_samples: stream_gather_samples(settings),
+        stream_gather_samples: stream_gather_samples(settings, mode),
         // A session serves as long as it is told: it keeps its last gather.stream_max_s.
         gather_keeps_last: mode == Mode::Serve,
         limits,

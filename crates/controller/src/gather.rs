@@ -28,6 +28,8 @@ pub struct GatherRow {
     /// The gripper's state ([`qmarc_proto::Gripper::code`]: 0 open, 1 closing, 2 closed,
     /// 3 opening, −1 none).
     pub grip: i8,
+    /// The belt encoder's counts (the read response's [`qmarc_proto::HwMsg::belt`]).
+    pub conv: i64,
 }
 
 /// Most memory the gather buffer may take, bytes (`mlockall` keeps it resident).
@@ -119,7 +121,7 @@ impl PartialEq for Gather {
 
 /// The fields as the gather page keeps them: one bit each.
 fn field_bits(f: GatherFields) -> u32 {
-    [f.time, f.cmd, f.act, f.dac, f.grip]
+    [f.time, f.cmd, f.act, f.dac, f.grip, f.conv]
         .iter()
         .enumerate()
         .map(|(k, &on)| u32::from(on) << k)
@@ -129,7 +131,7 @@ fn field_bits(f: GatherFields) -> u32 {
 /// The fields of `bits` ([`field_bits`]).
 fn fields_of(bits: u32) -> GatherFields {
     let on = |k: u32| bits >> k & 1 == 1;
-    GatherFields { time: on(0), cmd: on(1), act: on(2), dac: on(3), grip: on(4) }
+    GatherFields { time: on(0), cmd: on(1), act: on(2), dac: on(3), grip: on(4), conv: on(5) }
 }
 
 impl Gather {
@@ -170,8 +172,9 @@ impl Gather {
             next_due: 0,
             n_motors: n_motors.min(MAX_MOTORS),
             dropped: 0,
-            // No gripper unless the move says one is wired (`with_fields`).
-            fields: GatherFields { grip: false, ..GatherFields::default() },
+            // No gripper unless the move says one is wired, no belt unless it reads one
+            // (`with_fields`).
+            fields: GatherFields { grip: false, conv: false, ..GatherFields::default() },
             ring: None,
         }
     }
@@ -343,6 +346,7 @@ mod tests {
             act: [998.0, -1.0, 0.0, 0.0],
             dac: [12, -8191, 0, 0],
             grip: 0,
+            conv: cycle as i64 * 7,
         }
     }
 

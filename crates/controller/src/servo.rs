@@ -14,7 +14,7 @@ use crate::plan::MovePlan;
 use crate::stats::{ErrorStats, TimingStats};
 use crate::status::LoopStatus;
 use crate::traj::{Sample, TrajStartError, TrajectoryGenerator};
-use qmarc_config::GatherFields;
+use qmarc_config::{GatherFields, Mode};
 pub use qmarc_proto::state::Phase;
 use qmarc_proto::{Gripper, HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_timer::{Clock, Tick};
@@ -61,6 +61,8 @@ pub struct Servo {
     telemetry_dropped: u32,
     /// The gripper as the cycle's read reported it.
     grip: Gripper,
+    /// The belt encoder's counts at this cycle's read.
+    belt: i64,
     /// The free outputs as the cycle's read reported them (after a write of this cycle, as
     /// written).
     outputs: u32,
@@ -93,6 +95,7 @@ impl Servo {
             telemetry: None,
             telemetry_dropped: 0,
             grip: Gripper(Gripper::ABSENT),
+            belt: 0,
             outputs: 0,
             status: Arc::new(LoopStatus::default()),
         }
@@ -137,6 +140,7 @@ impl Servo {
         buffer
             .with_fields(GatherFields {
                 grip: self.plan.gather_fields.grip && self.plan.gripper_mask != 0,
+                conv: self.plan.gather_fields.conv && self.plan.mode == Mode::Conveyor,
                 ..self.plan.gather_fields
             })
             .keeping_last(self.plan.gather_keeps_last && self.m.planned_samples.is_none())
@@ -410,6 +414,7 @@ impl Servo {
         }
         self.act = resp.data;
         self.grip = Gripper(resp.gripper);
+        self.belt = resp.belt;
         self.outputs = resp.outputs;
         let flags = resp.aux.map(MotorFlags);
         self.status.set_read(self.plan.n_motors, &self.act, &flags, self.grip);
@@ -497,6 +502,7 @@ impl Servo {
                 act: self.act,
                 dac: self.dac,
                 grip: self.grip.code(),
+                conv: self.belt,
             });
         }
     }

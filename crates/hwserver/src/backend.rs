@@ -16,6 +16,9 @@ pub struct Inputs {
     /// The free outputs ([`Backend::free_outputs`]) that are on now, as the pins read (bit c:
     /// DIO channel c); 0 for a backend without outputs.
     pub outputs: u32,
+    /// The belt encoder's raw 24-bit counter (`conveyor.counter_channel`; wraps like the
+    /// motors'); [`qmarc_proto::COUNTER_ZERO`] for a backend without one.
+    pub belt: u32,
 }
 
 /// The hardware operations a [`Backend`] does per exchange, as a [`HwFault`] names them.
@@ -158,6 +161,14 @@ pub trait Backend: Send {
     /// The backend's clock in ns: the response timestamp. Hardware uses `CLOCK_MONOTONIC`;
     /// the simulator its own (simulated in lock-step mode).
     fn now_ns(&self) -> u64;
+
+    /// The run's world (the simulated belt and the parts on it) started at `epoch_ns` of
+    /// `CLOCK_MONOTONIC` ([`qmarc_config::RunSpec::epoch_ns`]): a simulated belt runs from
+    /// then, so that it is the belt the simulated camera sees. Default: nothing (a real belt
+    /// moves on its own).
+    fn set_epoch(&mut self, epoch_ns: u64) {
+        let _ = epoch_ns;
+    }
 
     /// Called on every exchange: toggle the output of an external charge pump or safety relay
     /// that drops amplifier enable when the toggling stops. Default: no such output.

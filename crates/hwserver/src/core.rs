@@ -16,6 +16,8 @@ pub struct HwCore {
     inputs: Inputs,
     /// 64-bit software position per motor (thesis 3.10.2's software counter, widened).
     position: [i64; MAX_MOTORS],
+    /// The belt encoder's position, counts, widened the same way (0 when the server started).
+    belt: i64,
     enabled: [bool; MAX_MOTORS],
     dacs: [i32; MAX_MOTORS],
     monitoring: bool,
@@ -51,6 +53,7 @@ impl HwCore {
             n_motors,
             inputs: Inputs::default(),
             position: [0; MAX_MOTORS],
+            belt: 0,
             enabled: [false; MAX_MOTORS],
             dacs: [0; MAX_MOTORS],
             monitoring: false,
@@ -223,6 +226,8 @@ impl HwCore {
                 self.position[m] += step;
             }
         }
+        // The belt moves on its own, enabled or not: every step counts.
+        self.belt += i64::from(counter_delta(self.inputs.belt, fresh.belt));
         self.inputs = fresh;
         self.last_read_ns = now;
         // The emergency stop is watched always, homing or not: the motors go off in this read,
@@ -332,6 +337,7 @@ impl HwCore {
                 }
                 resp.outputs = self.outputs;
                 resp.gripper = self.gripper.state(self.backend.now_ns()).0;
+                resp.belt = self.belt;
             }
             Ok(MsgType::WriteAllDacs) => {
                 for m in 0..self.n_motors {

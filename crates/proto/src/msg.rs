@@ -187,7 +187,7 @@ impl std::error::Error for UnknownMsgType {}
 /// Plain old data: fixed arrays, no pointers, the same layout in both processes. A response
 /// echoes `msg_type`, `seq` and `motor` of its request.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("qmarc.HwMsg.v2")]
+#[type_name("qmarc.HwMsg.v3")]
 #[repr(C)]
 #[doc(alias = "ClientMessageT")]
 pub struct HwMsg {
@@ -213,9 +213,13 @@ pub struct HwMsg {
     /// In read responses: the gripper as the server knows it ([`Gripper`] bits); 0 in
     /// requests.
     pub gripper: u32,
+    /// In read responses: the belt encoder's position in counts (the conveyor's counter read
+    /// in the same exchange as the motors', widened to 64 bits like theirs; 0 where no belt
+    /// is read); 0 in requests.
+    pub belt: i64,
 }
 
-const _: () = assert!(core::mem::size_of::<HwMsg>() == 80);
+const _: () = assert!(core::mem::size_of::<HwMsg>() == 88);
 const _: () = assert!(core::mem::align_of::<HwMsg>() == 8);
 
 impl HwMsg {
@@ -331,13 +335,13 @@ mod tests {
         }
     }
 
-    fn to_bytes(m: &HwMsg) -> [u8; 80] {
-        // SAFETY: HwMsg is repr(C) plain old data of exactly 80 bytes without padding
-        // (4 × u32, u64, 4 × f64, 4 × i32, 2 × u32), so every byte is initialised.
+    fn to_bytes(m: &HwMsg) -> [u8; 88] {
+        // SAFETY: HwMsg is repr(C) plain old data of exactly 88 bytes without padding
+        // (4 × u32, u64, 4 × f64, 4 × i32, 2 × u32, i64), so every byte is initialised.
         unsafe { core::mem::transmute_copy(m) }
     }
 
-    fn from_bytes(b: &[u8; 80]) -> HwMsg {
+    fn from_bytes(b: &[u8; 88]) -> HwMsg {
         // SAFETY: every bit pattern is a valid HwMsg (integers and floats only).
         unsafe { core::mem::transmute_copy(b) }
     }
@@ -349,13 +353,15 @@ mod tests {
             motor in any::<u32>(), time_ns in any::<u64>(),
             data in proptest::array::uniform4(any::<f64>()),
             aux in proptest::array::uniform4(any::<i32>()),
-            outputs in any::<u32>(), gripper in any::<u32>(),
+            outputs in any::<u32>(), gripper in any::<u32>(), belt in any::<i64>(),
         ) {
-            let m = HwMsg { msg_type, seq, status, motor, time_ns, data, aux, outputs, gripper };
+            let m =
+                HwMsg { msg_type, seq, status, motor, time_ns, data, aux, outputs, gripper, belt };
             let back = from_bytes(&to_bytes(&m));
             prop_assert_eq!(to_bytes(&back), to_bytes(&m));
             prop_assert_eq!(back.msg_type, msg_type);
             prop_assert_eq!(back.aux, aux);
+            prop_assert_eq!(back.belt, belt);
             prop_assert_eq!(back.data.map(f64::to_bits), data.map(f64::to_bits));
         }
 

@@ -124,8 +124,15 @@ mod tests {
     }
 
     fn row(cmd: [f64; 3], act: [f64; 3]) -> GatherRow {
-        let mut r =
-            GatherRow { cycle: 0, time_s: 0.0, cmd: [0.0; 4], act: [0.0; 4], dac: [0; 4], grip: 0 };
+        let mut r = GatherRow {
+            cycle: 0,
+            time_s: 0.0,
+            cmd: [0.0; 4],
+            act: [0.0; 4],
+            dac: [0; 4],
+            grip: 0,
+            conv: 0,
+        };
         r.cmd[..3].copy_from_slice(&cmd);
         r.act[..3].copy_from_slice(&act);
         r

@@ -4,8 +4,8 @@
 use qmarc_controller::gather::{Gather, GatherRow};
 use std::io::{self, Write};
 
-/// Column names: `cycle,time_s,cmd1,act1,dac1,cmd2,…`, and `grip` last when a gripper is
-/// wired.
+/// Column names: `cycle,time_s,cmd1,act1,dac1,cmd2,…`, then `grip` when a gripper is wired
+/// and `conv` (the belt encoder's counts) when the run reads a belt.
 pub fn columns(g: &Gather) -> Vec<String> {
     let f = g.fields();
     let mut c = vec!["cycle".to_string()];
@@ -21,6 +21,9 @@ pub fn columns(g: &Gather) -> Vec<String> {
     }
     if f.grip {
         c.push("grip".to_string());
+    }
+    if f.conv {
+        c.push("conv".to_string());
     }
     c
 }
@@ -52,6 +55,9 @@ fn write_row(
     if f.grip {
         write!(w, "{sep}{}", r.grip)?;
     }
+    if f.conv {
+        write!(w, "{sep}{}", r.conv)?;
+    }
     writeln!(w)
 }
 
@@ -76,6 +82,9 @@ pub fn write_octave(g: &Gather, w: &mut (impl Write + ?Sized)) -> io::Result<()>
     )?;
     if g.fields().grip {
         writeln!(w, "% grip: the gripper, 0 open, 1 closing, 2 closed, 3 opening.")?;
+    }
+    if g.fields().conv {
+        writeln!(w, "% conv: the belt encoder, counts (conveyor.mm_per_count mm each).")?;
     }
     let quoted: Vec<String> = cols.iter().map(|c| format!("'{c}'")).collect();
     writeln!(w, "qmarc_columns = {{{}}};", quoted.join(", "))?;
@@ -103,6 +112,7 @@ mod tests {
             act: [998.0, -1.0, 0.0, 0.0],
             dac: [12, -8191, 0, 0],
             grip: 2,
+            conv: -70_001,
         }
     }
 
@@ -150,6 +160,7 @@ mod tests {
             act: true,
             dac: false,
             grip: false,
+            conv: false,
         });
         g.push(row(7));
         let mut csv = Vec::new();
@@ -159,7 +170,14 @@ mod tests {
             "cycle,cmd1,act1,cmd2,act2\n7,1000.5,998,-3,-1\n"
         );
         // Issue 30: the gripper's state last, when one is wired.
-        let fields = GatherFields { time: false, cmd: false, act: false, dac: true, grip: true };
+        let fields = GatherFields {
+            time: false,
+            cmd: false,
+            act: false,
+            dac: true,
+            grip: true,
+            conv: false,
+        };
         let mut g = Gather::for_move(1, 1, 2).with_fields(fields);
         g.push(row(7));
         let mut csv = Vec::new();
@@ -168,5 +186,15 @@ mod tests {
         let mut m = Vec::new();
         write_octave(&g, &mut m).unwrap();
         assert!(String::from_utf8(m).unwrap().contains("% grip: the gripper, 0 open"));
+        // Issue 44: the belt's counts after it, when the run reads a belt.
+        let fields = GatherFields { conv: true, ..fields };
+        let mut g = Gather::for_move(1, 1, 2).with_fields(fields);
+        g.push(row(7));
+        let mut csv = Vec::new();
+        write_csv(&g, &mut csv).unwrap();
+        assert_eq!(
+            String::from_utf8(csv).unwrap(),
+            "cycle,dac1,dac2,grip,conv\n7,12,-8191,2,-70001\n"
+        );
     }
 }

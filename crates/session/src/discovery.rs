@@ -197,7 +197,7 @@ fn live_in(procs: &[Process], prefix: &str) -> Option<LiveRun> {
         command: args.iter().map(|a| shell_word(a)).collect::<Vec<_>>().join(" "),
         out_dir,
         started: meta.as_ref().and_then(|m| m.modified().ok()),
-        serving: spec.is_some_and(|s| s.mode == qmarc_config::Mode::Serve),
+        serving: spec.is_some_and(|s| s.mode.serving()),
         own: meta.is_none_or(|m| {
             use std::os::unix::fs::MetadataExt;
             m.uid() == nix::unistd::geteuid().as_raw()
@@ -230,9 +230,7 @@ pub fn serving_sessions(root: Option<&str>) -> Vec<LiveRun> {
 /// says so. A client makes no iceoryx2 node otherwise: a node under a prefix whose run has
 /// ended would leave iceoryx2's files of that prefix behind.
 pub fn serving(prefix: &str) -> Option<qmarc_config::RunSpec> {
-    qmarc_config::RunSpec::read(&run_file(prefix))
-        .ok()
-        .filter(|s| s.mode == qmarc_config::Mode::Serve)
+    qmarc_config::RunSpec::read(&run_file(prefix)).ok().filter(|s| s.mode.serving())
 }
 
 /// Why a client has no session to address.

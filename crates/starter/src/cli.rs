@@ -127,6 +127,47 @@ pub enum Command {
     /// quit`. Ends on `qmarc cmd quit` (or Ctrl-C) as any move ends, its data files written
     /// (the last `gather.stream_max_s` of it). Needs a homed frame (or --unhomed).
     Serve(ServeArgs),
+    /// A serving session at the belt (`[conveyor]`, `[camera]`): the belt runs, the camera
+    /// sees its parts, the robot picks them; after --seconds it ends at rest, its data files
+    /// written (gather.csv with the belt's `conv`). Commanded like `serve` while it runs.
+    /// Needs a homed frame.
+    Conveyor(ConveyorArgs),
+}
+
+/// Options of `conveyor`.
+#[derive(Debug, Clone, PartialEq, Args, Default)]
+pub struct ConveyorArgs {
+    /// How long it runs, s (default `conveyor.run_s`).
+    #[arg(long, value_name = "S")]
+    pub seconds: Option<f64>,
+    /// The simulated belt's speed, mm/s (default `conveyor.speed_mm_s`).
+    #[arg(long, value_name = "V")]
+    pub belt_mm_s: Option<f64>,
+    /// The simulated camera's parts a minute (default `camera.parts_per_min`).
+    #[arg(long, value_name = "N")]
+    pub parts_per_min: Option<f64>,
+    /// The simulated parts' seed (default `camera.seed`).
+    #[arg(long, value_name = "K")]
+    pub seed: Option<u64>,
+}
+
+impl ConveyorArgs {
+    /// Applies the options to `s`.
+    fn apply(&self, s: &mut Settings) -> Result<(), ConfigLoadError> {
+        if let Some(v) = self.seconds {
+            s.set_conveyor_seconds(v)?;
+        }
+        if let Some(v) = self.belt_mm_s {
+            s.set_belt_speed(v)?;
+        }
+        if let Some(n) = self.parts_per_min {
+            s.set_parts_per_min(n)?;
+        }
+        if let Some(k) = self.seed {
+            s.camera.seed = k;
+        }
+        Ok(())
+    }
 }
 
 /// Options of `serve`.
@@ -289,6 +330,7 @@ impl Command {
             Command::Check => Mode::Check,
             Command::Move(_) => Mode::Move,
             Command::Serve(_) => Mode::Serve,
+            Command::Conveyor(_) => Mode::Conveyor,
         }
     }
 
@@ -319,6 +361,7 @@ impl Command {
                 }
             },
             Command::Move(a) => a.apply(s)?,
+            Command::Conveyor(a) => a.apply(s)?,
             Command::Home | Command::Check | Command::Serve(_) => {}
         }
         Ok(())

@@ -214,6 +214,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
         unhomed: req.opts.unhomed,
         iox_prefix: location.prefix.clone(),
         iox_root: location.root.clone(),
+        epoch_ns: 0,
     };
     let settings = &spec.settings;
     if spec.unpaced && settings.hwserver.backend != qmarc_config::BackendKind::Sim {
@@ -223,7 +224,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
             settings.hwserver.backend
         )));
     }
-    if spec.unpaced && mode == qmarc_config::Mode::Serve {
+    if spec.unpaced && mode.serving() {
         return Err(refused(anyhow!(
             "serve waits for commands in real time: not with --unpaced (--deterministic paces \
              the simulated robot's lock-step by the timer)"
@@ -241,7 +242,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
 /// inherits standard input), and its data must fit the gather budget and the disk.
 fn check_path(settings: &Settings, mode: Mode) -> Result<(), Failure> {
     // A serving session has no path: it gathers its last gather.stream_max_s, as a stream.
-    let planned = if mode == Mode::Serve {
+    let planned = if mode.serving() {
         None
     } else {
         let generator = qmarc_controller_process::run::generator_name(mode, settings);
@@ -251,8 +252,9 @@ fn check_path(settings: &Settings, mode: Mode) -> Result<(), Failure> {
         (entry.build)(settings).map_err(refused)?.samples()
     };
     let settle = qmarc_controller_process::run::settle_cycles(settings, mode);
-    let samples =
-        planned.unwrap_or(qmarc_controller_process::run::stream_gather_samples(settings)) + settle;
+    let samples = planned
+        .unwrap_or(qmarc_controller_process::run::stream_gather_samples(settings, mode))
+        + settle;
     check_budget(samples, settings.gather.every).map_err(refused)?;
     let rows = samples.div_ceil(u64::from(settings.gather.every));
     qmarc_report::output::check(
@@ -305,7 +307,9 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
     let progress = Progress::create(&Progress::path(&p.location.prefix)).ok();
     // The one settings value both children get, next to the run's shared memory.
     let run = run_file(&p.location.prefix);
-    p.spec.write(&run).map_err(internal)?;
+    // The run's world (the simulated belt and camera) starts now, for every child alike.
+    let epoch_ns = qmarc_timer::clock::monotonic_now_ns();
+    RunSpec { epoch_ns, ..p.spec.clone() }.write(&run).map_err(internal)?;
     let child_args = [format!("--settings={}", run.display())];
     // The children inherit this mask; the hwserver and the servo thread then pin themselves.
     if let Err(e) = qmarc_timer::cpus::keep_off(&p.settings().timer.rt_cpus()) {
@@ -327,7 +331,7 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
     };
     let limit = stall_limit(&p.spec);
     // A serving session says, once its loop serves, where it is and how to command it.
-    let mut announce = (p.spec.mode == Mode::Serve).then(|| serving_words(p));
+    let mut announce = p.spec.mode.serving().then(|| serving_words(p));
     supervise::wait_all(&mut children, stop, limit, said, || {
         let serving = progress.as_ref().is_some_and(|pg| pg.read().phase == Phase::Moving.wire());
         if serving && let Some(words) = announce.take() {

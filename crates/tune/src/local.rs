@@ -62,6 +62,7 @@ pub fn local_spec(settings: qmarc_config::Settings, mode: Mode) -> RunSpec {
         unhomed: false,
         iox_prefix: String::new(),
         iox_root: String::new(),
+        epoch_ns: 0,
     }
 }
 

@@ -148,3 +148,31 @@ fn bad_camera_values_are_named_by_line_column_and_field() {
          field must end by the window's start (conveyor.window_mm starts at 300 mm), found 350 mm"
     );
 }
+
+/// `conveyor`'s flags are checked as the file's keys are, each error naming its flag.
+#[test]
+fn the_conveyor_flags_are_checked_as_their_keys() {
+    let mut s = parse("").unwrap();
+    s.set_belt_speed(1_000.0).unwrap();
+    s.set_parts_per_min(240.0).unwrap();
+    s.set_conveyor_seconds(2.5).unwrap();
+    assert_eq!(
+        (s.conveyor.speed_mm_s, s.camera.parts_per_min, s.conveyor.run_s),
+        (1e3, 240.0, 2.5)
+    );
+    let flag = |e: ConfigLoadError| e.to_string();
+    assert!(flag(s.set_belt_speed(5_000.1).unwrap_err()).starts_with("--belt-mm-s: must be"));
+    assert!(flag(s.set_belt_speed(-1.0).unwrap_err()).starts_with("--belt-mm-s"));
+    assert!(flag(s.set_parts_per_min(6_000.5).unwrap_err()).starts_with("--parts-per-min"));
+    assert!(flag(s.set_conveyor_seconds(0.05).unwrap_err()).starts_with("--seconds"));
+    assert!(flag(s.set_conveyor_seconds(f64::NAN).unwrap_err()).starts_with("--seconds"));
+    // Nothing refused was kept; the edges are allowed.
+    assert_eq!(
+        (s.conveyor.speed_mm_s, s.camera.parts_per_min, s.conveyor.run_s),
+        (1e3, 240.0, 2.5)
+    );
+    s.set_belt_speed(5_000.0).unwrap();
+    s.set_conveyor_seconds(0.1).unwrap();
+    let shipped = parse("[conveyor]\nrun_s = 0.05\n").map(drop).unwrap_err().to_string();
+    assert!(shipped.contains("conveyor.run_s"), "{shipped}");
+}

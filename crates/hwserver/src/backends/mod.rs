@@ -167,6 +167,7 @@ pub fn standalone_run(
         unhomed: false,
         iox_prefix: location.prefix.clone(),
         iox_root: location.root.clone(),
+        epoch_ns: 0,
     })
 }
 

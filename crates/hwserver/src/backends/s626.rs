@@ -40,6 +40,8 @@ struct Wiring {
     dac_sign: [i32; MAX_MOTORS],
     counter: [u32; MAX_MOTORS],
     counter_sign: [i32; MAX_MOTORS],
+    /// The belt encoder's counter (`conveyor.counter_channel`), if one is read.
+    belt: Option<u32>,
     enable: [u32; MAX_MOTORS],
     enable_bit: u32,
     top: [u32; MAX_MOTORS],
@@ -64,6 +66,7 @@ impl Wiring {
             dac_sign: sign(&s.dac_sign),
             counter: pick(&s.counter_channels),
             counter_sign: sign(&s.counter_sign),
+            belt: None,
             enable: pick(&s.enable_dio),
             enable_bit: s.enable_bit,
             top: pick(&s.limit_top_dio),
@@ -134,10 +137,19 @@ impl S626 {
         if device == FAKE_DEVICE {
             let fake = fake_card(s);
             return S626::with_transport(Box::new(fake), &device, &s.s626, s.n_motors, None)
-                .map(S626::all_homed);
+                .map(|c| c.all_homed().with_belt_counter(s.conveyor.counter_channel));
         }
         let card = Comedi::open(&s.s626.device).map_err(open_error)?;
         S626::with_transport(Box::new(card), &device, &s.s626, s.n_motors, Some(state_file(s)))
+            .map(|c| c.with_belt_counter(s.conveyor.counter_channel))
+    }
+
+    /// Reads the belt's encoder on `channel` too, in the same instruction list as the motors'
+    /// counters (the settings' check keeps it off theirs).
+    pub fn with_belt_counter(mut self, channel: u32) -> S626 {
+        self.w.belt = Some(channel);
+        self.read = read_list(&self.w);
+        self
     }
 
     /// Checks, without writing anything or keeping the card, that the settings can drive it
@@ -283,10 +295,12 @@ fn lockstep_refused() -> BackendOpenError {
     )
 }
 
-/// The read list: every motor's counter, then DIO bank 0 read (mask 0: nothing written).
+/// The read list: every motor's counter, the belt's, then DIO bank 0 read (mask 0: nothing
+/// written).
 fn read_list(w: &Wiring) -> InsnList {
     let mut items: Vec<Insn> =
         (0..w.n_motors).map(|m| Insn::one(INSN_READ, SUBDEV_COUNTER, w.counter[m])).collect();
+    items.extend(w.belt.map(|c| Insn::one(INSN_READ, SUBDEV_COUNTER, c)));
     items.push(Insn::bits(SUBDEV_DIO0));
     InsnList::new(&items)
 }
@@ -372,13 +386,17 @@ impl Backend for S626 {
 
     fn read_inputs(&mut self, inputs: &mut Inputs) -> Result<(), HwFault> {
         let n = self.w.n_motors;
-        let done = ran(self.transport.run(&mut self.read), n + 1, HwOp::ReadInputs);
+        let belt = usize::from(self.w.belt.is_some());
+        let done = ran(self.transport.run(&mut self.read), n + belt + 1, HwOp::ReadInputs);
         self.read_ok = done.is_ok();
         done?;
         for m in 0..n {
             inputs.counters[m] = self.oriented(m, self.read.data(m)[0] & COUNTER_MASK);
         }
-        let pins = self.read.data(n)[1];
+        if belt == 1 {
+            inputs.belt = self.read.data(n)[0] & COUNTER_MASK;
+        }
+        let pins = self.read.data(n + belt)[1];
         let tripped = |chan: u32| (pins >> chan) & 1 != self.w.closed_bit;
         let mut limits = Status::OK;
         for m in 0..n {

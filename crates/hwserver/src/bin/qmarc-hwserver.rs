@@ -78,8 +78,11 @@ fn run(args: &HwServerArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
     let spec = RunSpec::read(settings).map_err(|e| (exit::USAGE, e.into()))?;
     let s = &spec.settings;
     let internal = |e: anyhow::Error| (exit::INTERNAL, e);
-    let backend = qmarc_hwserver::backends::open(s, spec.deterministic)
+    let mut backend = qmarc_hwserver::backends::open(s, spec.deterministic)
         .map_err(|e| (exit::REFUSED, e.into()))?;
+    if spec.epoch_ns != 0 {
+        backend.set_epoch(spec.epoch_ns);
+    }
     let location = IpcLocation::checked(&spec.iox_prefix, &spec.iox_root)
         .map_err(|e| (exit::USAGE, anyhow::Error::msg(e)))?;
     let stop =

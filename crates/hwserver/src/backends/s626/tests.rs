@@ -45,6 +45,37 @@ fn a_cycle_is_two_lists_in_the_thesis_order() {
 }
 
 #[test]
+fn the_belts_counter_is_read_in_the_same_list_and_counts_across_its_wrap() {
+    let (s, fake) = card(3);
+    let mut s = s.with_belt_counter(3);
+    let mut inputs = Inputs::default();
+    s.read_inputs(&mut inputs).unwrap();
+    assert_eq!(
+        locked(&fake).last_list(),
+        [
+            (INSN_READ, 5, 0),
+            (INSN_READ, 5, 1),
+            (INSN_READ, 5, 2),
+            (INSN_READ, 5, 3),
+            (INSN_BITS, 2, 0)
+        ],
+        "the motors' counters, the belt's (0B), then DIO bank 0: still one list"
+    );
+    // The core widens it like a motor's: a belt running forward through the 24-bit wrap.
+    locked(&fake).set_counter(3, qmarc_proto::COUNTER_MASK - 9);
+    let mut core = HwCore::new(Box::new(s));
+    let runs = locked(&fake).runs();
+    let mut belt = Vec::new();
+    for step in [0, 5, 20, 1_000] {
+        locked(&fake)
+            .set_counter(3, (qmarc_proto::COUNTER_MASK - 9 + step) & qmarc_proto::COUNTER_MASK);
+        belt.push(core.handle(&HwMsg::read_all_encoders()).belt);
+    }
+    assert_eq!(belt, [0, 5, 20, 1_000], "counts since the server started");
+    assert_eq!(locked(&fake).runs() - runs, 4, "one list per read");
+}
+
+#[test]
 fn inputs_and_reserved_channels_are_never_written_nor_dio_configured() {
     let (s, fake) = card(3);
     let mut core = HwCore::new(Box::new(s));

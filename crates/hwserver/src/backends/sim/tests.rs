@@ -205,3 +205,19 @@ fn a_frame_that_cannot_be_kept_fails_the_preset() {
     assert!(std::fs::read_to_string(&file).unwrap().starts_with("homed 1 1"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The robot of the settings stands at their belt: the server reads its encoder with the
+/// motors', and the belt runs whatever the motors do.
+#[test]
+fn the_settings_robot_reads_its_belts_encoder() {
+    let names = qmarc_config::Names::any();
+    let toml = "[general]\nn_motors = 1\nperiod_us = 400\n\
+                [[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n\
+                [conveyor]\nspeed_mm_s = 250.0\nmm_per_count = 0.1\n";
+    let s = qmarc_config::Settings::parse("q.toml".as_ref(), toml, &names).unwrap();
+    let mut core = crate::HwCore::new(Box::new(SimDeltabot::open(&s, true).unwrap()));
+    let belt: Vec<i64> =
+        (0..4).map(|_| core.handle(&qmarc_proto::HwMsg::read_all_encoders()).belt).collect();
+    // 250 mm/s of 0.1 mm counts is 2500 counts/s: one count per 400 µs read.
+    assert_eq!(belt.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>(), [1, 1, 1]);
+}
