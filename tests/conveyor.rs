@@ -50,3 +50,202 @@ fn the_belt_is_read_with_the_motors_and_the_session_ends_by_itself() {
     }
     run.assert_clean();
 }
+
+/// `parts.csv`'s rows: its header's names to each row's fields.
+fn read_parts(out: &std::path::Path) -> Vec<std::collections::HashMap<String, String>> {
+    let text = std::fs::read_to_string(out.join("parts.csv")).expect("parts.csv");
+    let mut lines = text.lines();
+    let header: Vec<String> =
+        lines.next().expect("a header").split(',').map(String::from).collect();
+    assert_eq!(
+        header.join(","),
+        "id,t_seen_s,latched_counts,belt_mm,across_mm,state,grip_cycle,place_cycle,error_mm"
+    );
+    lines.map(|l| header.iter().cloned().zip(l.split(',').map(String::from)).collect()).collect()
+}
+
+/// A conveyor session of `seconds` on `config` into `out`, in lock-step (the loop and the
+/// simulated robot's belt on the simulated clock; the camera latches the belt's count, so
+/// its detections hold whatever the clock), with `extra` options of `conveyor`.
+fn conveyor_args(
+    config: &std::path::Path,
+    out: &std::path::Path,
+    seconds: f64,
+    extra: &[&str],
+) -> Vec<String> {
+    let mut args = vec![
+        format!("--config={}", config.display()),
+        format!("--out={}", out.display()),
+        "--deterministic".into(),
+        "conveyor".into(),
+        format!("--seconds={seconds}"),
+    ];
+    args.extend(extra.iter().map(|a| a.to_string()));
+    args
+}
+
+fn field(row: &std::collections::HashMap<String, String>, name: &str) -> f64 {
+    row[name].parse().unwrap_or_else(|_| panic!("{name} = {}", row[name]))
+}
+
+/// The error of each picked part, recomputed from the files as a user would: the forward
+/// kinematics of gather.csv's actual positions at the part's grip cycle against the part's
+/// top centre where the belt (that row's `conv`) had carried it.
+fn recomputed_errors(out: &std::path::Path, s: &qmarc_config::Settings) -> Vec<(f64, f64)> {
+    let (header, rows) = read_gather(out);
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let robot = s.robot().expect("the Delta");
+    let c = &s.conveyor;
+    read_parts(out)
+        .iter()
+        .filter(|p| p["state"] == "picked")
+        .map(|p| {
+            let cycle = field(p, "grip_cycle");
+            let r = rows.iter().find(|r| r[col("cycle")] == cycle).expect("the grip row");
+            let act = [r[col("act1")], r[col("act2")], r[col("act3")]];
+            let effector = robot.mm_of(&act).unwrap();
+            let along = field(p, "belt_mm")
+                + (r[col("conv")] - field(p, "latched_counts")) * c.mm_per_count;
+            let part = c.point_mm(along, field(p, "across_mm"), s.camera.part_height_mm);
+            let e = (0..3).map(|i| (effector[i] - part[i]).powi(2)).sum::<f64>().sqrt();
+            (e, field(p, "error_mm"))
+        })
+        .collect()
+}
+
+/// Parts picked at a constant and at a stepping belt speed: every part that has passed the
+/// window is picked, none twice, none missed; each grip inside the window; the error the
+/// file says is the one its rows give; the session ends at rest with the gripper open.
+#[test]
+fn parts_are_picked_off_the_belt_at_a_constant_and_a_stepping_speed() {
+    let run = TestRun::new("conveyor-pick");
+    let steps = ("conveyor.speed_steps", "[[2.0, 300.0], [3.5, 450.0]]");
+    for (name, edits) in [("constant", vec![]), ("stepping", vec![steps])] {
+        let config = run.config_with(&edits);
+        let s = qmarc_config::Settings::load(&config, &qmarc_config::Names::any()).unwrap();
+        let out = run.out(name);
+        let args = conveyor_args(&config, &out, 6.0, &["--parts-per-min=60", "--seed=3"]);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        run.starter_ok(&args);
+        let summary = read_summary(&out);
+        assert!(summary.fault.is_none(), "{name}: {:?}", summary.fault);
+        let parts = read_parts(&out);
+        let picked: Vec<_> = parts.iter().filter(|p| p["state"] == "picked").collect();
+        let section = summary.conveyor.expect("the conveyor section");
+        assert_eq!(section.missed, 0, "{name}: {parts:?}");
+        assert!(picked.len() >= 4, "{name}: {} picked of {parts:?}", picked.len());
+        assert_eq!(section.picked, picked.len());
+        // None twice: distinct parts, one grip and one place each, in turn.
+        let mut cycles: Vec<(f64, f64)> =
+            picked.iter().map(|p| (field(p, "grip_cycle"), field(p, "place_cycle"))).collect();
+        cycles.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for w in cycles.windows(2) {
+            assert!(w[0].1 < w[1].0, "{name}: a grip before the last place: {cycles:?}");
+        }
+        for (g, p) in &cycles {
+            assert!(g < p && *g >= 0.0, "{name}: {cycles:?}");
+        }
+        // Each grip inside the window, measured from the files.
+        let (header, rows) = read_gather(&out);
+        let (cyc, conv) = (
+            header.iter().position(|h| h == "cycle").unwrap(),
+            header.iter().position(|h| h == "conv").unwrap(),
+        );
+        for p in &picked {
+            let r = rows.iter().find(|r| r[cyc] == field(p, "grip_cycle")).unwrap();
+            let along = field(p, "belt_mm")
+                + (r[conv] - field(p, "latched_counts")) * s.conveyor.mm_per_count;
+            let [start, end] = s.conveyor.window_mm;
+            assert!(along >= start - 1.0 && along <= end, "{name}: gripped at {along} mm");
+        }
+        for (recomputed, said) in recomputed_errors(&out, &s) {
+            assert!((recomputed - said).abs() < 1e-6, "{name}: {recomputed} against {said}");
+            // The thesis' gains follow a part at speed within a few mm (issue 44 tunes them
+            // to 1 mm): a grip that missed the intercept would be off by tens.
+            assert!(said < 6.0, "{name}: {said} mm at the grip");
+        }
+        // At rest with the gripper open at the end.
+        let last = rows.last().unwrap();
+        assert_eq!(last[header.iter().position(|h| h == "grip").unwrap()], 0.0, "{name}");
+    }
+    run.assert_clean();
+}
+
+/// Parts spread wider than the robot reaches: those it cannot reach inside the window are
+/// missed and never chased — no grip, no fault (the soft limits held), the others picked.
+#[test]
+fn a_part_beyond_reach_is_missed_never_chased() {
+    let run = TestRun::new("conveyor-reach");
+    let config = run.config_with(&[("camera.spread_mm", "2000.0")]);
+    let out = run.out("out");
+    let args = conveyor_args(&config, &out, 8.0, &["--parts-per-min=60", "--seed=5"]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    run.starter_ok(&args);
+    let summary = read_summary(&out);
+    assert!(summary.fault.is_none(), "{:?}", summary.fault);
+    let parts = read_parts(&out);
+    let missed: Vec<_> = parts.iter().filter(|p| p["state"] == "missed").collect();
+    assert!(!missed.is_empty(), "no part out of reach in {parts:?}");
+    for p in &missed {
+        assert_eq!((field(p, "grip_cycle"), field(p, "place_cycle")), (-1.0, -1.0), "{p:?}");
+        assert!(field(p, "across_mm").abs() > 300.0, "a part near the middle missed: {p:?}");
+    }
+    assert!(parts.iter().any(|p| p["state"] == "picked"), "{parts:?}");
+    run.assert_clean();
+}
+
+/// The camera killed mid-run is said at once and ends nothing: the session picks the parts
+/// it had seen and ends when its time is up, every file written.
+#[test]
+fn the_camera_killed_mid_run_ends_nothing() {
+    use nix::sys::signal::Signal;
+    let run = TestRun::new("conveyor-camkill");
+    let config = run.config_with(&[]);
+    let out = run.out("out");
+    let args = conveyor_args(&config, &out, 6.0, &["--parts-per-min=90"]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let child = run.spawn_starter(&args);
+    qmarc_tests::wait_until_moving(&run.location().prefix, std::time::Duration::from_secs(60));
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let camera = run.processes().into_iter().find(|(_, c)| c.contains("qmarc-camera"));
+    let (pid, _) = camera.expect("the camera runs");
+    qmarc_tests::send_signal(pid, Signal::SIGKILL);
+    let r = qmarc_tests::wait_with_timeout(child, std::time::Duration::from_secs(60));
+    assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
+    assert!(
+        r.stderr.contains(
+            "qmarc-camera was killed by SIGKILL; the session goes on, picking the parts it has \
+             already seen"
+        ),
+        "{}",
+        r.stderr
+    );
+    let summary = read_summary(&out);
+    assert!(summary.fault.is_none(), "{:?}", summary.fault);
+    assert!(read_parts(&out).iter().any(|p| p["state"] == "picked"));
+    run.assert_clean();
+}
+
+/// Ctrl-C ends a conveyor session as it ends any move, motors disabled, with every file
+/// written: the parts seen so far among them.
+#[test]
+fn ctrl_c_ends_a_conveyor_session_with_every_file_written() {
+    use nix::sys::signal::Signal;
+    let run = TestRun::new("conveyor-ctrlc");
+    let config = run.config_with(&[]);
+    let out = run.out("out");
+    let args = conveyor_args(&config, &out, 30.0, &["--parts-per-min=90"]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let child = run.spawn_starter(&args);
+    qmarc_tests::wait_until_moving(&run.location().prefix, std::time::Duration::from_secs(60));
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    qmarc_tests::send_signal(child.id(), Signal::SIGINT);
+    let r = qmarc_tests::wait_with_timeout(child, std::time::Duration::from_secs(60));
+    assert_eq!(r.code, Some(130), "{}\n{}", r.stdout, r.stderr);
+    qmarc_tests::assert_aborted_with_motors_disabled(&out);
+    for f in ["gather.csv", "gather.m", "summary.json", "parts.csv"] {
+        assert!(out.join(f).is_file(), "{f} was not written");
+    }
+    assert!(!read_parts(&out).is_empty(), "the parts seen are in parts.csv");
+    run.assert_clean();
+}

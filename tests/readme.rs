@@ -101,7 +101,7 @@ fn lay_out_clone(run: &TestRun) {
         let mode = std::os::unix::fs::PermissionsExt::from_mode(0o755);
         std::fs::set_permissions(&path, mode).expect("an executable shim");
     }
-    for name in ["qmarc-hwserver", "qmarc-controller", "qmarc-bench"] {
+    for name in ["qmarc-hwserver", "qmarc-controller", "qmarc-bench", "qmarc-camera"] {
         std::os::unix::fs::symlink(bins.join(name), release.join(name)).expect("a link");
     }
     for dir in ["knots", "examples"] {

@@ -70,6 +70,7 @@ const LAYERS: &[&str] = &[
     "controller",
     "knots",
     "hwserver",
+    "camera",
     "telemetry",
     "plugins",
     "session",

@@ -20,7 +20,7 @@ static COUNTER: AtomicU32 = AtomicU32::new(0);
 pub fn bin_dir() -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
     let dir = exe.parent().and_then(Path::parent).expect("target/<profile>/deps/..").to_path_buf();
-    for b in ["qmarc-starter", "qmarc-controller", "qmarc-hwserver", "qmarc"] {
+    for b in ["qmarc-starter", "qmarc-controller", "qmarc-hwserver", "qmarc", "qmarc-camera"] {
         assert!(
             dir.join(b).is_file(),
             "{} is missing: run the tests with `scripts/test` (cargo test --workspace), which builds it",

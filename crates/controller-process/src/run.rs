@@ -20,9 +20,11 @@ use qmarc_proto::service::IpcLocation;
 use qmarc_proto::state::FaultKind;
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_report::Summary;
-use qmarc_report::output::{WriteError, write_results};
+use qmarc_report::output::{WriteError, write_results_with};
 use qmarc_report::summarize::summarize;
 use qmarc_report::summary::{AfterHoming, HomingReport, Warning, WarningKind};
+use qmarc_session::conveyor::dispatch::Dispatcher;
+use qmarc_session::conveyor::picker::{Picker, PickerHandle};
 use qmarc_session::generator::ServeHandle;
 use qmarc_session::server;
 use qmarc_timer::rt::{DmaLatencyGuard, RtRequest, RtStatus};
@@ -144,7 +146,7 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     }
     let progress = Progress::open(&Progress::path(&location.prefix)).ok();
     let (telemetry, relay) = telemetry_for(settings, &location);
-    let (servo, serving) = build_serving(spec, progress)?;
+    let (servo, serving, picker) = build_serving(spec, progress)?;
     // The rows in shared memory beside the run's other files: a killed controller leaves
     // them to its starter.
     let page = qmarc_proto::gather_page::GatherPage::path(&location.prefix);
@@ -152,7 +154,15 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     // Serving: the command thread, answering from before the loop starts until this returns.
     let commands = match serving {
         Some(h) => Some(
-            server::CommandThread::spawn(&location, settings, spec.unhomed, h, session_end(spec))
+            server::CommandThread::spawn(&location, settings, spec.unhomed, h)
+                .map_err(|e| RunError::Location(e.to_string()))?,
+        ),
+        None => None,
+    };
+    // A conveyor session: the thread between the camera and the loop's picker.
+    let dispatcher = match picker {
+        Some((h, status)) => Some(
+            Dispatcher::spawn(&location, settings, spec.epoch_ns, h, status)
                 .map_err(|e| RunError::Location(e.to_string()))?,
         ),
         None => None,
@@ -179,6 +189,7 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
         c.ended(FaultKind::wire(record.fault.as_ref().map(|f| f.kind)));
     }
     let relayed = relay.map(qmarc_telemetry::relay::Relay::join);
+    let dispatched = dispatcher.map(Dispatcher::finish);
     result?;
 
     let mut summary = summarize(settings, &record, &rt, spec.mode, spec.deterministic);
@@ -192,7 +203,13 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     warn(&mut summary, spec, &record, relayed.and_then(|r| r.error));
     // The rescue folder is named after the run's starter, this process's parent.
     let starter = std::os::unix::process::parent_id();
-    write_results(&settings.gather.out_dir, &record.gather, &mut summary, starter)?;
+    let mut extra = Vec::new();
+    if let Some(d) = &dispatched {
+        let (parts, section) = crate::conveyor::results(d, &record.gather, settings);
+        summary.conveyor = Some(section);
+        extra.push(("parts.csv", parts));
+    }
+    write_results_with(&settings.gather.out_dir, &record.gather, &mut summary, starter, &extra)?;
     Ok(summary)
 }
 
@@ -264,12 +281,15 @@ pub fn build_servo(spec: &RunSpec, progress: Option<Progress>) -> Result<Servo, 
     Ok(build_serving(spec, progress)?.0)
 }
 
-/// [`build_servo`], and when `spec` serves (`serve`), the command thread's end of its
-/// generator.
+/// The dispatcher's end of a conveyor session's picker, and the loop's status.
+pub type PickerEnd = (PickerHandle, std::sync::Arc<qmarc_controller::status::LoopStatus>);
+
+/// [`build_servo`], and when `spec` serves (`serve`, `conveyor`), the command thread's end of
+/// its generator — and a conveyor session's picker's end for its dispatcher.
 pub fn build_serving(
     spec: &RunSpec,
     progress: Option<Progress>,
-) -> Result<(Servo, Option<ServeHandle>), RunError> {
+) -> Result<(Servo, Option<ServeHandle>, Option<PickerEnd>), RunError> {
     let settings = &spec.settings;
     let law =
         registry::law(&settings.law).ok_or_else(|| RunError::Unregistered(settings.law.clone()))?;
@@ -281,7 +301,17 @@ pub fn build_serving(
     let settings = if spec.unhomed && spec.mode == Mode::Jog { &unhomed_jog } else { settings };
     // What the loop is doing, as it writes it: the serving session's command thread reads it.
     let status = std::sync::Arc::new(qmarc_controller::status::LoopStatus::default());
-    let (mut path, serving) = if spec.mode.serving() {
+    let mut picker = None;
+    let (mut path, serving) = if spec.mode == Mode::Conveyor {
+        let (generator, handle, picker_end) =
+            Picker::new(settings, status.clone()).ok_or_else(|| {
+                RunError::Unregistered(
+                    "conveyor (the settings describe no Delta: [robot], three motors)".into(),
+                )
+            })?;
+        picker = Some((picker_end, status.clone()));
+        (Box::new(generator) as Box<dyn qmarc_controller::traj::TrajectoryGenerator>, Some(handle))
+    } else if spec.mode.serving() {
         let (generator, handle) = server::generator(settings, spec.unhomed, status.clone());
         (generator, Some(handle))
     } else {
@@ -301,7 +331,7 @@ pub fn build_serving(
     let servo = Servo::new(plan, path, law, Box::new(MonotonicClock))
         .with_progress(progress)
         .with_status(status);
-    Ok((servo, serving))
+    Ok((servo, serving, picker))
 }
 
 /// The ticker of `timer.method` (the benchmark's bare loop takes the same).
@@ -416,12 +446,6 @@ pub fn stream_gather_samples(settings: &Settings, mode: Mode) -> u64 {
         settings.gather.stream_max_s
     };
     (seconds / settings.period_s()).ceil() as u64
-}
-
-/// The cycle a session with an end quits at: a conveyor session's `conveyor.run_s`.
-fn session_end(spec: &RunSpec) -> Option<u64> {
-    let s = &spec.settings;
-    (spec.mode == Mode::Conveyor).then(|| (s.conveyor.run_s / s.period_s()).round() as u64)
 }
 
 /// What a conveyor session gathers beyond its `conveyor.run_s`: the stop that brings it to

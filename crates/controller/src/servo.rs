@@ -350,6 +350,7 @@ impl Servo {
             Err(f) => return CycleEnd::Fault(f),
         };
         let read_done = self.clock.now_ns();
+        self.status.set_belt(self.belt, tick.woke_ns);
 
         // 2. Command position (frozen while holding after a starved trajectory).
         if !self.m.holding
@@ -419,6 +420,7 @@ impl Servo {
         let flags = resp.aux.map(MotorFlags);
         self.status.set_read(self.plan.n_motors, &self.act, &flags, self.grip);
         self.generator.observe(&self.act, &flags);
+        self.generator.belt(self.belt);
         Ok(hw_time_ns)
     }
 

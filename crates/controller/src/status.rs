@@ -6,7 +6,7 @@
 
 use qmarc_proto::state::Phase;
 use qmarc_proto::{Gripper, MAX_MOTORS, MotorFlags};
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicI64, AtomicU32, AtomicU64, Ordering};
 
 /// The loop's status block: written by the servo thread, read by anyone holding it.
 #[derive(Debug)]
@@ -17,6 +17,10 @@ pub struct LoopStatus {
     actual: [AtomicU64; MAX_MOTORS],
     homed: AtomicU32,
     gripper: AtomicU32,
+    /// The belt's sample: odd while the loop writes it ([`LoopStatus::belt`]).
+    belt_seq: AtomicU64,
+    belt_counts: AtomicI64,
+    belt_ns: AtomicU64,
 }
 
 impl Default for LoopStatus {
@@ -28,6 +32,9 @@ impl Default for LoopStatus {
             actual: Default::default(),
             homed: AtomicU32::new(0),
             gripper: AtomicU32::new(Gripper::ABSENT),
+            belt_seq: AtomicU64::new(0),
+            belt_counts: AtomicI64::new(0),
+            belt_ns: AtomicU64::new(0),
         }
     }
 }
@@ -77,6 +84,31 @@ impl LoopStatus {
     /// The gripper as the last read found it ([`Gripper`] bits).
     pub fn gripper(&self) -> Gripper {
         Gripper(self.gripper.load(Ordering::Acquire))
+    }
+
+    /// The belt encoder's counts at the last read and when that cycle's tick woke the loop
+    /// (ns of `CLOCK_MONOTONIC`), read as one pair.
+    pub fn belt(&self) -> (i64, u64) {
+        loop {
+            let before = self.belt_seq.load(Ordering::Acquire);
+            let pair =
+                (self.belt_counts.load(Ordering::Acquire), self.belt_ns.load(Ordering::Acquire));
+            // The loop writes a pair in a few instructions: a torn read is retried at once.
+            if before.is_multiple_of(2) && self.belt_seq.load(Ordering::Acquire) == before {
+                return pair;
+            }
+            std::hint::spin_loop();
+        }
+    }
+
+    /// This cycle's belt counts, read when the tick at `woke_ns` woke the loop.
+    #[inline]
+    pub(crate) fn set_belt(&self, counts: i64, woke_ns: u64) {
+        let seq = self.belt_seq.load(Ordering::Relaxed);
+        self.belt_seq.store(seq + 1, Ordering::Release);
+        self.belt_counts.store(counts, Ordering::Release);
+        self.belt_ns.store(woke_ns, Ordering::Release);
+        self.belt_seq.store(seq + 2, Ordering::Release);
     }
 
     pub(crate) fn set_phase(&self, phase: Phase) {
@@ -138,6 +170,9 @@ mod tests {
         assert_eq!(s.actual(), [1.0, -2.5, 3.5, 9.0]);
         assert_eq!(s.homed(), 0b101, "only the robot's motors, by their flags");
         assert_eq!(s.gripper().0, 0);
+        assert_eq!(s.belt(), (0, 0));
+        s.set_belt(-12_345, 99);
+        assert_eq!(s.belt(), (-12_345, 99));
         s.set_phase(Phase::Done);
         assert!(s.begun(), "begun, and ended since");
     }

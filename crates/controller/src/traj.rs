@@ -133,6 +133,14 @@ pub trait TrajectoryGenerator: Send {
         let _ = (act, flags);
     }
 
+    /// Every cycle before [`TrajectoryGenerator::sample`], with the belt encoder's counts of
+    /// this cycle's read (a conveyor session's generator follows the parts on the belt with
+    /// it; 0 where no belt is read). Same contract as `sample`. The default ignores it.
+    #[inline]
+    fn belt(&mut self, counts: i64) {
+        let _ = counts;
+    }
+
     /// Every cycle after [`TrajectoryGenerator::sample`], with the gripper as this cycle's
     /// read found it ([`Gripper::ABSENT`] when none is wired): whether it should be closed
     /// (`Some(true)`), open (`Some(false)`), or left as it is (`None`, the default). The loop

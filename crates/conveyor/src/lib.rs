@@ -16,6 +16,7 @@
 #![deny(missing_docs)]
 
 mod belt;
+pub mod world;
 pub use belt::BeltMotion;
 
 /// The belt's encoder: how belt coordinates follow its counts.

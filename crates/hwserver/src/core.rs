@@ -16,7 +16,8 @@ pub struct HwCore {
     inputs: Inputs,
     /// 64-bit software position per motor (thesis 3.10.2's software counter, widened).
     position: [i64; MAX_MOTORS],
-    /// The belt encoder's position, counts, widened the same way (0 when the server started).
+    /// The belt encoder's position, counts, widened the same way: its counter's distance from
+    /// [`COUNTER_ZERO`] when the server started, then every step since.
     belt: i64,
     enabled: [bool; MAX_MOTORS],
     dacs: [i32; MAX_MOTORS],
@@ -73,6 +74,7 @@ impl HwCore {
                 core.homed[m] = core.backend.homed(m);
                 core.position[m] = i64::from(counter_delta(COUNTER_ZERO, core.inputs.counters[m]));
             }
+            core.belt = i64::from(counter_delta(COUNTER_ZERO, core.inputs.belt));
             core.outputs = core.inputs.outputs & core.backend.free_outputs();
         }
         core.last_read_ns = core.backend.now_ns();

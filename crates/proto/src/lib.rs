@@ -23,6 +23,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod camera;
 pub mod exit;
 pub mod gather_page;
 pub mod link;

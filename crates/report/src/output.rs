@@ -256,6 +256,10 @@ pub const OUTPUT_FILES: [&str; 3] = ["gather.csv", "gather.m", "summary.json"];
 pub const PLOT_FILES: [&str; 6] =
     ["arms.png", "error.png", "velocity.png", "period.png", "effector-3d.png", "effector-xz.png"];
 
+/// Files a set may have beside its data: a conveyor session's `parts.csv`. They belong to the
+/// set, so a new set retires them with it.
+pub const EXTRA_FILES: [&str; 1] = ["parts.csv"];
+
 /// The folder inside an output folder that keeps the last complete set a newer one replaced.
 pub const PREVIOUS_DIR: &str = "previous";
 
@@ -263,8 +267,12 @@ pub const PREVIOUS_DIR: &str = "previous";
 /// `dir/previous/`, replacing the set that was there; the files of an incomplete one (a
 /// summary without its data) are removed, so `previous/` keeps the last complete results.
 fn retire_current_set(dir: &Path) -> std::io::Result<()> {
-    let present: Vec<&str> =
-        OUTPUT_FILES.into_iter().chain(PLOT_FILES).filter(|f| dir.join(f).exists()).collect();
+    let present: Vec<&str> = OUTPUT_FILES
+        .into_iter()
+        .chain(PLOT_FILES)
+        .chain(EXTRA_FILES)
+        .filter(|f| dir.join(f).exists())
+        .collect();
     let complete = present.contains(&"gather.csv") && present.contains(&"summary.json");
     if complete {
         let previous = dir.join(PREVIOUS_DIR);
@@ -330,17 +338,43 @@ pub fn write_results(
     summary: &mut Summary,
     run_pid: u32,
 ) -> Result<(), WriteError> {
+    write_results_with(dir, gather, summary, run_pid, &[])
+}
+
+/// [`write_results`] with `extra` files of the set ([`EXTRA_FILES`]: a name and its text),
+/// written with the summary whether or not the data files are.
+pub fn write_results_with(
+    dir: &Path,
+    gather: &Gather,
+    summary: &mut Summary,
+    run_pid: u32,
+    extra: &[(&str, String)],
+) -> Result<(), WriteError> {
     let csv = |w: &mut dyn Write| crate::files::write_csv(gather, w);
     let octave = |w: &mut dyn Write| crate::files::write_octave(gather, w);
-    let attempt = |dir: &Path, summary: &mut Summary, data: bool| {
-        let names: &[&str] = if data { &OUTPUT_FILES } else { &OUTPUT_FILES[2..] };
-        summary.files = names.iter().map(|f| dir.join(f)).collect();
-        let frozen = summary.clone();
-        let json = move |w: &mut dyn Write| write_json(&frozen, w);
-        let all: [FileWriter<'_>; 3] =
-            [("gather.csv", &csv), ("gather.m", &octave), ("summary.json", &json)];
-        write_set(dir, if data { &all } else { &all[2..] })
-    };
+    let texts: Vec<_> = extra
+        .iter()
+        .map(|(name, text)| (*name, move |w: &mut dyn Write| w.write_all(text.as_bytes())))
+        .collect();
+    let attempt =
+        |dir: &Path, summary: &mut Summary, data: bool| {
+            let names: &[&str] = if data { &OUTPUT_FILES } else { &OUTPUT_FILES[2..] };
+            let extras = extra.iter().map(|(name, _)| dir.join(name));
+            summary.files = names.iter().map(|f| dir.join(f)).chain(extras).collect();
+            let frozen = summary.clone();
+            let json = move |w: &mut dyn Write| write_json(&frozen, w);
+            let mut all: Vec<FileWriter<'_>> = Vec::new();
+            if data {
+                all.push(("gather.csv", &csv));
+                all.push(("gather.m", &octave));
+            }
+            all.extend(texts.iter().map(|(name, write)| {
+                (*name, write as &dyn Fn(&mut dyn Write) -> std::io::Result<()>)
+            }));
+            // The summary last: once it is there, the set is complete.
+            all.push(("summary.json", &json));
+            write_set(dir, &all)
+        };
     let Err(e) = attempt(dir, summary, true) else { return Ok(()) };
     if interrupted(&e) {
         summary.warnings.push(Warning::new(

@@ -75,6 +75,7 @@ pub fn summarize(
         homing: None,
         check: findings::<Vec<MotorCheckReport>>(record, "check")
             .map(|r| r.iter().map(|m| crate::check::MotorCheck::of(settings, m)).collect()),
+        conveyor: None,
     };
     summary.judge_figures();
     summary

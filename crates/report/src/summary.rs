@@ -325,6 +325,51 @@ pub struct Summary {
     /// `check` only: what each motor did for its voltage, and what to change.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub check: Option<Vec<crate::check::MotorCheck>>,
+    /// `conveyor` only: what became of the parts the camera saw (`parts.csv` row by row).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub conveyor: Option<ConveyorSummary>,
+}
+
+/// A conveyor session's parts, as `parts.csv` has them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConveyorSummary {
+    /// Parts picked off the belt and placed.
+    pub picked: usize,
+    /// Parts that left the window unpicked (or could not be reached inside it).
+    pub missed: usize,
+    /// Parts seen and neither picked nor missed when the session ended.
+    pub pending: usize,
+    /// Picked parts a minute over the session (its first gathered row to its last).
+    pub picks_per_min: f64,
+    /// The effector (the forward kinematics of the actual positions) against the part's grip
+    /// point, where the belt had carried it, in the cycle the gripper was told to close, mm,
+    /// over the picked parts.
+    pub grip_error_mm: ErrorFigures,
+    /// The same, every cycle from then until the gripper had closed, mm: its largest.
+    pub closing_error_max_mm: f64,
+    /// Detections the camera sent (a part is seen in several frames).
+    pub detections: u64,
+}
+
+/// The largest and the RMS of some errors (0 for none).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ErrorFigures {
+    /// The largest.
+    pub max: f64,
+    /// The root mean square.
+    pub rms: f64,
+}
+
+impl ErrorFigures {
+    /// The figures of `errors`.
+    pub fn of(errors: &[f64]) -> ErrorFigures {
+        if errors.is_empty() {
+            return ErrorFigures { max: 0.0, rms: 0.0 };
+        }
+        let max = errors.iter().copied().fold(0.0, f64::max);
+        let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+        ErrorFigures { max, rms }
+    }
 }
 
 impl Summary {
@@ -429,6 +474,7 @@ impl Summary {
             files: Vec::new(),
             homing: None,
             check: None,
+            conveyor: None,
         }
     }
 }

@@ -44,6 +44,7 @@ pub fn render(s: &Summary) -> String {
     }
     error_lines(&mut t, s);
     approach_and_settle_lines(&mut t, s);
+    conveyor_line(&mut t, s);
     timing_lines(&mut t, &s.timing);
     warnings_and_files(&mut t, s);
     t
@@ -170,6 +171,24 @@ fn approach_and_settle_lines(t: &mut String, s: &Summary) {
             st.cycles,
             list(&st.final_error_counts),
             list(&st.max_abs_error_counts),
+        );
+    }
+}
+
+/// A conveyor session's parts.
+fn conveyor_line(t: &mut String, s: &Summary) {
+    if let Some(c) = &s.conveyor {
+        let _ = writeln!(
+            t,
+            "\n  parts: {} picked, {} missed, {} pending ({:.1} picks/min); grip error max {:.2} \
+             mm, RMS {:.2} mm; while closing max {:.2} mm",
+            c.picked,
+            c.missed,
+            c.pending,
+            c.picks_per_min,
+            c.grip_error_mm.max,
+            c.grip_error_mm.rms,
+            c.closing_error_max_mm,
         );
     }
 }

@@ -110,6 +110,9 @@ pub enum NotTaken {
     /// A line or path starts from rest where the command rests: the robot moved, or rested
     /// elsewhere, when it arrived.
     NotFromRest,
+    /// The session picks from the belt by itself (`conveyor`): it takes no moves, lines or
+    /// grips; a stop or a quit ends its picking.
+    Picking,
 }
 
 impl NotTaken {
@@ -119,6 +122,7 @@ impl NotTaken {
             NotTaken::NoProfile => 1,
             NotTaken::SoftLimits(m) => 2 | m << 8,
             NotTaken::NotFromRest => 3,
+            NotTaken::Picking => 4,
         }
     }
 
@@ -128,6 +132,7 @@ impl NotTaken {
             1 => Some(NotTaken::NoProfile),
             2 => Some(NotTaken::SoftLimits(wire >> 8)),
             3 => Some(NotTaken::NotFromRest),
+            4 => Some(NotTaken::Picking),
             _ => None,
         }
     }
@@ -147,6 +152,9 @@ impl NotTaken {
                  elsewhere when it arrived"
                     .into()
             }
+            NotTaken::Picking => "the session picks from the belt by itself: it takes no \
+                                  moves, lines or grips (stop or quit end its picking)"
+                .into(),
         }
     }
 }

@@ -10,10 +10,13 @@
 //! - [`generator`]: the loop's end, [`generator::ServeMove`], the trajectory generator that
 //!   holds, moves, stops and follows lines and paths as orders arrive; [`path`] samples a sent
 //!   path;
-//! - [`discovery`]: which sessions (and runs) are alive, whose, and what their dead ones left.
+//! - [`discovery`]: which sessions (and runs) are alive, whose, and what their dead ones left;
+//! - [`conveyor`]: the conveyor session — its dispatcher between the camera and the loop, and
+//!   its picker, the generator that intercepts, tracks and places the belt's parts.
 #![deny(missing_docs)]
 
 pub mod client;
+pub mod conveyor;
 pub mod discovery;
 pub mod generator;
 pub mod path;

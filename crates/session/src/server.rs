@@ -75,15 +75,12 @@ pub struct CommandThread {
 
 impl CommandThread {
     /// Starts the command thread of the run at `location`: its service exists when this
-    /// returns. A session with an end (`quit_at`, a conveyor session's `conveyor.run_s`)
-    /// quits by itself once the loop has executed that many cycles, as `qmarc cmd quit`
-    /// would.
+    /// returns.
     pub fn spawn(
         location: &IpcLocation,
         settings: &Settings,
         unhomed: bool,
         handle: ServeHandle,
-        quit_at: Option<u64>,
     ) -> Result<CommandThread, ServiceError> {
         let ended = Arc::new(Ended::default());
         let mut commands = Commands {
@@ -97,7 +94,6 @@ impl CommandThread {
             queued_at: 0,
         };
         let location = location.clone();
-        let mut quit_at = quit_at;
         // iceoryx2's ports stay on the thread that made them: made there, reported back.
         let (ready, opened) = std::sync::mpsc::channel();
         let thread = std::thread::Builder::new()
@@ -148,13 +144,6 @@ impl CommandThread {
                     }
                     // The loop's spent lines are freed here, not on the servo thread.
                     while commands.handle.spent.pop().is_ok() {}
-                    if quit_at.is_some_and(|end| commands.status().cycles() >= end) {
-                        let limits = commands.limits.motion;
-                        // Once taken, the session is quitting: a full queue tries again.
-                        if commands.give(|_| Order::Quit { limits }).is_ok() {
-                            quit_at = None;
-                        }
-                    }
                 }
             })
             .map_err(|e| ServiceError::new("thread", "qmarc-commands", e))?;

@@ -93,3 +93,58 @@ fn serve_cycle_allocates_nothing_while_commands_arrive() {
     assert!(last.windows(2).all(|w| w[1] == w[0] + 1));
     let _ = std::fs::remove_file(&page);
 }
+
+/// The conveyor session's picker in the loop: it intercepts parts on the moving belt, grips
+/// and places them, one after the other, and its cycles allocate nothing, make no I/O and
+/// never block — planning an intercept in the cycle a pick arrives included.
+#[test]
+fn picker_cycle_allocates_nothing_while_it_picks() {
+    use qmarc_hwserver::backends::sim::{SimBelt, SimDeltabot};
+    use qmarc_session::conveyor::picker::Picker;
+    use qmarc_session::conveyor::{Pick, PickEvent};
+    let s = settings();
+    let status = std::sync::Arc::new(qmarc_controller::status::LoopStatus::default());
+    let (picker, _serve, mut handle) = Picker::new(&s, status.clone()).expect("the Delta");
+    let plan = MovePlan {
+        gripper_mask: 1 << 6,
+        stream_gather_samples: 4_000,
+        mode: qmarc_config::Mode::Conveyor,
+        ..plan(3)
+    };
+    let mut servo =
+        Servo::new(plan, Box::new(picker), (LAWS[0].build)(&s), Box::new(MockClock::new(0)))
+            .with_status(status.clone());
+    let robot = SimDeltabot::new(lockstep()).unwrap().with_belt(SimBelt::of(&s));
+    let mut link = qmarc_hwserver::HwCore::new(Box::new(robot)).with_gripper(1 << 6, 0.05);
+    let mut ticker = ManualTicker::new(400_000);
+    let (mut moving, reading) = warmed_up(&mut servo, &mut link, &mut ticker);
+    let kernel_before = ThreadCounters::now();
+    let before = allocations();
+    let (mut given, mut events) = (0u32, [None; 64]);
+    let mut n_events = 0;
+    for _ in 0..3_000 {
+        // The dispatcher's part: a part at the window's start whenever the picker waits.
+        if handle.shared.ready.load(Ordering::Acquire) && handle.picks.slots() == 2 {
+            given += 1;
+            let (belt, _) = status.belt();
+            let pick = Pick { id: given, belt_mm: 300.0, across_mm: 20.0, latched_counts: belt };
+            assert!(handle.picks.push(pick).is_ok());
+        }
+        assert_eq!(moving.cycle(&mut link, &ticker.wait().unwrap()), CycleEnd::Continue);
+        while let Ok(e) = handle.events.pop() {
+            events[n_events] = Some(e);
+            n_events += 1;
+        }
+    }
+    let during = allocations() - before;
+    let kernel = kernel_before.delta(ThreadCounters::now());
+    assert_eq!(during, 0, "{during} allocations in 3000 cycles of picking");
+    assert_eq!(kernel, reading, "syscalls or blocking in the cycle");
+    let placed = events.iter().flatten().filter(|e| matches!(e, PickEvent::Placed { .. })).count();
+    assert!(placed >= 2, "{:?}", &events[..n_events]);
+    assert!(
+        !events.iter().flatten().any(|e| matches!(e, PickEvent::GaveUp { .. })),
+        "{:?}",
+        &events[..n_events]
+    );
+}

@@ -12,8 +12,8 @@
 //! ```
 #![deny(missing_docs)]
 
-mod bridge;
 pub mod cli;
+mod companion;
 pub mod ending;
 mod lost;
 pub mod moves;

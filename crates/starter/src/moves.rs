@@ -4,6 +4,7 @@
 //! table, a pure function of what ended. [`one_move`] runs the four; `qmarc-starter`'s
 //! moves, trials and real tuning moves call it.
 
+use crate::companion::Companion;
 use crate::ending::{Ended, Ending, conclude, exit_code};
 use crate::status::StatusLine;
 use crate::supervise::{self, Supervised};
@@ -101,6 +102,8 @@ pub struct Prepared {
     pub controller_bin: PathBuf,
     /// `qmarc-bridge` and its own options, when `serve --bridge` starts one beside them.
     pub bridge: Option<(PathBuf, Vec<String>)>,
+    /// `qmarc-camera`, when the session is at a belt (`conveyor`).
+    pub camera: Option<PathBuf>,
     /// The iceoryx2 prefix was given (`--iox-prefix`): an earlier run's files under it are
     /// removed before this one starts.
     pub own_prefix: bool,
@@ -150,16 +153,16 @@ fn programs(bin_dir: Option<&Path>) -> Result<(PathBuf, PathBuf), Failure> {
     Ok((hwserver, controller))
 }
 
-/// `qmarc-bridge`, beside the children's programs.
-fn bridge_program(hwserver_bin: &Path) -> Result<PathBuf, Failure> {
-    let bridge = hwserver_bin.with_file_name("qmarc-bridge");
-    if !bridge.is_file() {
+/// The companion `name` (`qmarc-bridge`, `qmarc-camera`), beside the children's programs.
+fn companion_program(hwserver_bin: &Path, name: &str) -> Result<PathBuf, Failure> {
+    let program = hwserver_bin.with_file_name(name);
+    if !program.is_file() {
         return Err(internal(anyhow!(
             "{} not found: build the workspace first (`cargo build --release`)",
-            bridge.display()
+            program.display()
         )));
     }
-    Ok(bridge)
+    Ok(program)
 }
 
 /// Everything is checked before anything starts: the settings, the programs, the iceoryx2
@@ -177,8 +180,12 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
                     f.display()
                 )));
             }
-            Some((bridge_program(&hwserver_bin)?, a.bridge_args()))
+            Some((companion_program(&hwserver_bin, "qmarc-bridge")?, a.bridge_args()))
         }
+        _ => None,
+    };
+    let camera = match mode {
+        Mode::Conveyor => Some(companion_program(&hwserver_bin, "qmarc-camera")?),
         _ => None,
     };
     let prefix = req.iox_prefix.map_or_else(default_prefix, str::to_string);
@@ -235,7 +242,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     qmarc_hwserver::backends::check(settings, spec.deterministic).map_err(refused)?;
     check_path(settings, mode)?;
     let own_prefix = req.iox_prefix.is_some();
-    Ok(Prepared { spec, location, hwserver_bin, controller_bin, bridge, own_prefix })
+    Ok(Prepared { spec, location, hwserver_bin, controller_bin, bridge, camera, own_prefix })
 }
 
 /// The path: knot files are read and checked now (streams are the controller's to read: it
@@ -316,8 +323,12 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
         say!("qmarc-starter: warning: cannot keep off the real-time CPUs ({e})");
     }
     let mut children = spawn_both(p, &child_args, log)?;
-    let mut bridge =
-        p.bridge.as_ref().map(|(b, args)| crate::bridge::Bridge::start(b, args, &p.location, log));
+    let mut companions: Vec<Companion> = p
+        .bridge
+        .iter()
+        .map(|(b, args)| Companion::bridge(b, args, &p.location, log))
+        .chain(p.camera.iter().map(|c| Companion::camera(c, &child_args, log)))
+        .collect();
     let status = std::cell::RefCell::new(StatusLine::new(progress.as_ref()));
     let said = |s: &Supervised| {
         status.borrow_mut().clear();
@@ -339,14 +350,14 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
             say!("{words}");
         }
         status.borrow_mut().update();
-        if let Some(b) = bridge.as_mut() {
-            b.watch(&mut status.borrow_mut());
+        for c in &mut companions {
+            c.watch(&mut status.borrow_mut());
         }
     });
-    if let Some(mut b) = bridge {
+    for mut c in companions {
         // A death between the last look and the session's end is said too.
-        b.watch(&mut status.borrow_mut());
-        b.stop();
+        c.watch(&mut status.borrow_mut());
+        c.stop();
     }
     status.borrow_mut().clear();
     let reached = progress.as_ref().map(Progress::read);

@@ -1,0 +1,86 @@
+//! A conveyor session's results: `parts.csv`, one row per part the camera saw, and
+//! `summary.json`'s `conveyor` section, both from the dispatcher's records and the gathered
+//! rows — the grip error measured as its user would: the forward kinematics of the actual
+//! motor positions in the gathered row of the cycle the gripper was told to close, against
+//! the part's grip point where the belt (that row's `conv`) had carried it.
+
+use qmarc_config::Settings;
+use qmarc_controller::gather::{Gather, GatherRow};
+use qmarc_report::summary::{ConveyorSummary, ErrorFigures};
+use qmarc_session::conveyor::BeltFrame;
+use qmarc_session::conveyor::dispatch::{Dispatched, PartRecord};
+use std::fmt::Write;
+
+/// `parts.csv`'s header.
+pub const PARTS_HEADER: &str =
+    "id,t_seen_s,latched_counts,belt_mm,across_mm,state,grip_cycle,place_cycle,error_mm";
+
+/// The gathered row of `cycle`, if it was gathered.
+fn row(rows: &[GatherRow], cycle: u64) -> Option<&GatherRow> {
+    rows.binary_search_by_key(&cycle, |r| r.cycle).ok().map(|i| &rows[i])
+}
+
+/// The effector against part `p`'s grip point in gathered row `r`, mm.
+fn error_mm(frame: &BeltFrame, p: &PartRecord, r: &GatherRow) -> Option<f64> {
+    let act = [r.act[0], r.act[1], r.act[2]];
+    let effector = frame.robot.mm_of(&act).ok()?;
+    let along = p.belt_mm + (r.conv - p.latched_counts) as f64 * frame.mm_per_count;
+    let part = frame.grip_point_mm(along, p.across_mm);
+    Some((0..3).map(|i| (effector[i] - part[i]).powi(2)).sum::<f64>().sqrt())
+}
+
+/// `parts.csv` and the summary's section of the session whose dispatcher saw `d` and whose
+/// loop gathered `gather` (in order), with the settings `s`.
+pub fn results(d: &Dispatched, gather: &Gather, s: &Settings) -> (String, ConveyorSummary) {
+    let rows = gather.rows();
+    let frame = BeltFrame::of(s);
+    let mut csv = String::from(PARTS_HEADER);
+    csv.push('\n');
+    let (mut grip, mut closing) = (Vec::new(), 0.0f64);
+    for p in &d.parts {
+        let at_grip = p.grip_cycle.and_then(|c| row(rows, c));
+        let error = frame.as_ref().zip(at_grip).and_then(|(f, r)| error_mm(f, p, r));
+        if p.state == "picked" {
+            if let Some(e) = error {
+                grip.push(e);
+            }
+            // Every row from the closing order until the gripper reads closed (2).
+            if let (Some(f), Some(c)) = (&frame, p.grip_cycle) {
+                let from = rows.partition_point(|r| r.cycle < c);
+                for r in rows[from..].iter().take_while(|r| r.grip != 2) {
+                    closing = closing.max(error_mm(f, p, r).unwrap_or(f64::INFINITY));
+                }
+            }
+        }
+        let cycle = |c: Option<u64>| c.map_or(-1, |c| c as i64);
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{},{}",
+            p.id,
+            p.t_seen_s,
+            p.latched_counts,
+            p.belt_mm,
+            p.across_mm,
+            p.state,
+            cycle(p.grip_cycle),
+            cycle(p.place_cycle),
+            error.map_or("nan".to_string(), |e| e.to_string()),
+        );
+    }
+    let count = |state: &str| d.parts.iter().filter(|p| p.state == state).count();
+    let span_s = match (rows.first(), rows.last()) {
+        (Some(a), Some(b)) if b.time_s > a.time_s => b.time_s - a.time_s,
+        _ => 0.0,
+    };
+    let picked = count("picked");
+    let summary = ConveyorSummary {
+        picked,
+        missed: count("missed"),
+        pending: count("pending"),
+        picks_per_min: if span_s > 0.0 { 60.0 * picked as f64 / span_s } else { 0.0 },
+        grip_error_mm: ErrorFigures::of(&grip),
+        closing_error_max_mm: closing,
+        detections: d.detections,
+    };
+    (csv, summary)
+}

@@ -1,0 +1,340 @@
+//! [`Dispatcher`]: the conveyor session's thread between the camera and the loop. Every
+//! millisecond it takes the camera's detections into the part queue (a detection whose belt
+//! count the camera did not latch gets one interpolated from the loop's own samples of the
+//! encoder at the exposure), sweeps the parts the belt has carried past the window, hands the
+//! picker the next part it can intercept inside the window, and notes what the picker did.
+//! At the end it says what became of every part ([`PartRecord`]).
+
+use super::picker::{PickerHandle, relative_limits};
+use super::{BeltFrame, GaveUp, Pick, PickEvent};
+use qmarc_config::Settings;
+use qmarc_controller::status::LoopStatus;
+use qmarc_conveyor::{Belt, Detection, Part, PartQueue};
+use qmarc_plugins::motion::{MotionLimits, MotionState, Profile};
+use qmarc_proto::MAX_MOTORS;
+use qmarc_proto::camera::{PartDetection, open_camera_service};
+use qmarc_proto::service::{IpcLocation, ServiceError, create_node};
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// How often the dispatcher looks.
+const POLL: Duration = Duration::from_millis(1);
+/// The loop's belt samples kept for interpolation: seconds of them.
+const HISTORY: usize = 4096;
+/// Most parts the queue holds.
+const QUEUE_CAPACITY: usize = 4096;
+
+/// What became of one part the camera saw (a row of `parts.csv`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PartRecord {
+    /// The queue's id.
+    pub id: u32,
+    /// Its first detection's exposure, s since the run's world began.
+    pub t_seen_s: f64,
+    /// The belt encoder at that exposure, counts.
+    pub latched_counts: i64,
+    /// Along the belt then, mm.
+    pub belt_mm: f64,
+    /// Across the belt, mm.
+    pub across_mm: f64,
+    /// `picked`, `missed` or `pending`.
+    pub state: &'static str,
+    /// The cycle the gripper was told to close on it, if it was.
+    pub grip_cycle: Option<u64>,
+    /// The cycle the gripper was told to open at the place, if it was.
+    pub place_cycle: Option<u64>,
+    /// Why its pick was given up, if it was.
+    pub gave_up: Option<GaveUp>,
+}
+
+/// What the dispatcher saw, at its end.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Dispatched {
+    /// Every part, in the order seen.
+    pub parts: Vec<PartRecord>,
+    /// Detections received.
+    pub detections: u64,
+}
+
+/// The dispatcher thread: it runs from [`Dispatcher::spawn`] until [`Dispatcher::finish`].
+pub struct Dispatcher {
+    stop: Arc<AtomicBool>,
+    thread: std::thread::JoinHandle<Dispatched>,
+}
+
+/// The dispatcher's state, on its thread.
+struct Dispatch {
+    queue: PartQueue,
+    belt: Belt,
+    frame: BeltFrame,
+    relative: MotionLimits,
+    close_s: f64,
+    n_motors: usize,
+    status: Arc<LoopStatus>,
+    handle: PickerHandle,
+    epoch_ns: u64,
+    /// The loop's belt samples, (counts, ns), oldest first.
+    history: VecDeque<(i64, u64)>,
+    /// The pick the picker has and has not finished.
+    given: Option<u32>,
+    records: Vec<PartRecord>,
+    detections: u64,
+    profile: Profile,
+}
+
+impl Dispatcher {
+    /// Starts the dispatcher of the run at `location` (its world began at `epoch_ns`) for the
+    /// picker behind `handle`, in the loop whose status is `status`; `None` when the settings
+    /// describe no robot. The camera's service exists when this returns.
+    pub fn spawn(
+        location: &IpcLocation,
+        s: &Settings,
+        epoch_ns: u64,
+        handle: PickerHandle,
+        status: Arc<LoopStatus>,
+    ) -> Result<Dispatcher, ServiceError> {
+        let frame = BeltFrame::of(s).ok_or_else(|| {
+            ServiceError::new("settings", "conveyor", "[robot] describes no Delta")
+        })?;
+        let c = &s.conveyor;
+        let fastest = c.speed_steps.iter().map(|s| s[1].abs()).fold(c.speed_mm_s.abs(), f64::max);
+        let limits = MotionLimits::of(s);
+        let merge_mm = (4.0 * s.camera.noise_mm).max(5.0);
+        let mut d = Dispatch {
+            queue: PartQueue::new(c.window_mm, merge_mm, QUEUE_CAPACITY),
+            belt: Belt { mm_per_count: c.mm_per_count },
+            relative: relative_limits(&frame, &limits, s.n_motors, fastest, s.camera.spread_mm),
+            frame,
+            close_s: s.s626.gripper_close_s,
+            n_motors: s.n_motors,
+            status,
+            handle,
+            epoch_ns,
+            history: VecDeque::with_capacity(HISTORY),
+            given: None,
+            records: Vec::new(),
+            detections: 0,
+            profile: Profile::new(s.n_motors, [0.0; MAX_MOTORS]),
+        };
+        let stop = Arc::new(AtomicBool::new(false));
+        let (location, stopping) = (location.clone(), stop.clone());
+        let (ready, opened) = std::sync::mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("qmarc-dispatch".into())
+            .spawn(move || {
+                let ports = (|| {
+                    let node = create_node::<iceoryx2::prelude::ipc::Service>(
+                        "qmarc-dispatch",
+                        &location,
+                    )?;
+                    let service = open_camera_service(&node)?;
+                    let subscriber = service.subscriber_builder().create().map_err(|e| {
+                        ServiceError::new("subscriber", qmarc_proto::camera::CAMERA_SERVICE, e)
+                    })?;
+                    Ok((node, subscriber))
+                })();
+                let (_node, subscriber) = match ports {
+                    Ok(p) => {
+                        let _ = ready.send(Ok(()));
+                        p
+                    }
+                    Err(e) => {
+                        let _ = ready.send(Err(e));
+                        return Dispatched::default();
+                    }
+                };
+                while !stopping.load(Ordering::Acquire) {
+                    while let Ok(Some(sample)) = subscriber.receive() {
+                        d.detected(sample.payload());
+                    }
+                    d.look();
+                    std::thread::sleep(POLL);
+                }
+                d.look();
+                d.finish()
+            })
+            .map_err(|e| ServiceError::new("thread", "qmarc-dispatch", e))?;
+        let opened = opened.recv().unwrap_or_else(|_| {
+            Err(ServiceError::new("thread", "qmarc-dispatch", "ended before serving"))
+        });
+        if let Err(e) = opened {
+            let _ = thread.join();
+            return Err(e);
+        }
+        Ok(Dispatcher { stop, thread })
+    }
+
+    /// The loop has ended: what became of every part.
+    pub fn finish(self) -> Dispatched {
+        self.stop.store(true, Ordering::Release);
+        self.thread.join().unwrap_or_default()
+    }
+}
+
+impl Dispatch {
+    /// The belt encoder at `t_ns`, interpolated between the loop's samples around it.
+    fn counts_at(&self, t_ns: u64) -> Option<i64> {
+        let after = self.history.iter().position(|&(_, t)| t >= t_ns)?;
+        let (c1, t1) = self.history[after];
+        let Some(&(c0, t0)) = after.checked_sub(1).and_then(|k| self.history.get(k)) else {
+            return (t1 == t_ns).then_some(c1);
+        };
+        let f = (t_ns - t0) as f64 / (t1 - t0).max(1) as f64;
+        Some(c0 + ((c1 - c0) as f64 * f).round() as i64)
+    }
+
+    /// A detection from the camera.
+    fn detected(&mut self, d: &PartDetection) {
+        self.detections += 1;
+        let counts =
+            if d.latched() { Some(d.latched_counts) } else { self.counts_at(d.exposure_ns) };
+        let Some(latched_counts) = counts else { return };
+        let seen = Detection {
+            t_ns: d.exposure_ns,
+            latched_counts,
+            belt_mm: d.belt_mm,
+            across_mm: d.across_mm,
+        };
+        if let Some(id) = self.queue.detect(seen, &self.belt) {
+            self.records.push(PartRecord {
+                id,
+                t_seen_s: d.exposure_ns.saturating_sub(self.epoch_ns) as f64 * 1e-9,
+                latched_counts,
+                belt_mm: d.belt_mm,
+                across_mm: d.across_mm,
+                state: "pending",
+                grip_cycle: None,
+                place_cycle: None,
+                gave_up: None,
+            });
+        }
+    }
+
+    fn record(&mut self, id: u32) -> Option<&mut PartRecord> {
+        self.records.iter_mut().rev().find(|r| r.id == id)
+    }
+
+    /// The loop's belt, the picker's events, the parts past the window, the next pick.
+    fn look(&mut self) {
+        let (now, ns) = self.status.belt();
+        if ns != 0 && self.history.back().is_none_or(|&(_, t)| t < ns) {
+            if self.history.len() == HISTORY {
+                self.history.pop_front();
+            }
+            self.history.push_back((now, ns));
+        }
+        while let Ok(event) = self.handle.events.pop() {
+            match event {
+                PickEvent::Gripping { id, cycle } => {
+                    self.record(id).into_iter().for_each(|r| r.grip_cycle = Some(cycle));
+                }
+                PickEvent::Lifted { id } => {
+                    self.queue.picked(id);
+                }
+                PickEvent::Placed { id, cycle } => {
+                    self.record(id).into_iter().for_each(|r| r.place_cycle = Some(cycle));
+                    self.given = None;
+                }
+                PickEvent::GaveUp { id, why } => {
+                    self.record(id).into_iter().for_each(|r| r.gave_up = Some(why));
+                    self.given = None;
+                }
+            }
+        }
+        if self.status.begun() {
+            self.queue.sweep(now, &self.belt);
+        }
+        let shared = &self.handle.shared;
+        let ready = shared.ready.load(Ordering::Acquire) && !shared.ending.load(Ordering::Acquire);
+        if ready && self.given.is_none() && self.history.len() > 1 {
+            let speed = self.belt_speed_mm_s();
+            let command = self.status.command();
+            let (frame, relative, close_s, n) =
+                (self.frame, self.relative, self.close_s, self.n_motors);
+            let profile = &mut self.profile;
+            let claimed = self.queue.claim_next(now, &self.belt, |part, at| {
+                intercepts(&frame, &relative, profile, n, &command, part, at, speed, close_s)
+            });
+            if let Some(part) = claimed.and_then(|id| self.queue.part(id)) {
+                let pick = Pick {
+                    id: part.id,
+                    belt_mm: part.seen.belt_mm,
+                    across_mm: part.seen.across_mm,
+                    latched_counts: part.seen.latched_counts,
+                };
+                if self.handle.picks.push(pick).is_ok() {
+                    self.given = Some(pick.id);
+                }
+            }
+        }
+    }
+
+    /// The belt's speed over the loop's last samples (up to 50 ms of them), mm/s.
+    fn belt_speed_mm_s(&self) -> f64 {
+        let Some(&(c1, t1)) = self.history.back() else { return 0.0 };
+        let Some(&(c0, t0)) = self
+            .history
+            .iter()
+            .rev()
+            .find(|&&(_, t)| t1 - t >= 50_000_000)
+            .or(self.history.front())
+        else {
+            return 0.0;
+        };
+        if t1 <= t0 {
+            return 0.0;
+        }
+        (c1 - c0) as f64 * self.belt.mm_per_count / ((t1 - t0) as f64 * 1e-9)
+    }
+
+    fn finish(mut self) -> Dispatched {
+        let (now, _) = self.status.belt();
+        self.queue.sweep(now, &self.belt);
+        for r in &mut self.records {
+            if let Some(p) = self.queue.part(r.id) {
+                r.state = p.state.name();
+            }
+        }
+        Dispatched { parts: self.records, detections: self.detections }
+    }
+}
+
+/// Whether the picker, at rest at `command`, can intercept `part` (now `at` mm along the belt
+/// at `speed` mm/s) so that the gripper closes on it inside the window: the intercept's
+/// duration planned as the picker will plan it, the grip point within reach and the window
+/// where the gripper is told to close and where it has closed (`close_s` later).
+#[allow(clippy::too_many_arguments)]
+fn intercepts(
+    frame: &BeltFrame,
+    relative: &MotionLimits,
+    profile: &mut Profile,
+    n_motors: usize,
+    command: &[f64; MAX_MOTORS],
+    part: &Part,
+    at: f64,
+    speed: f64,
+    close_s: f64,
+) -> bool {
+    let across = part.seen.across_mm;
+    let (Ok(q), Ok(ahead)) = (frame.counts(at, across), frame.counts(at + speed * 1e-3, across))
+    else {
+        return false;
+    };
+    let from = MotionState {
+        p: std::array::from_fn(|m| command[m] - q[m]),
+        v: std::array::from_fn(|m| if m < n_motors { -(ahead[m] - q[m]) / 1e-3 } else { 0.0 }),
+        a: [0.0; MAX_MOTORS],
+    };
+    if profile.plan(&from, &[0.0; MAX_MOTORS], relative).is_err() {
+        return false;
+    }
+    let grip = at + speed * profile.duration();
+    let closed = grip + speed * close_s;
+    let [start, end] = frame.window_mm;
+    grip >= start
+        && closed <= end
+        && frame.counts(grip, across).is_ok()
+        && frame.counts(closed, across).is_ok()
+}

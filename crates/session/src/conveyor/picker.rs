@@ -1,0 +1,422 @@
+//! [`Picker`]: the conveyor session's generator. It waits at rest for a [`Pick`], then:
+//!
+//! 1. **intercepts** the part in the belt's frame: the command is the joint counts of the
+//!    part's grip point where the belt has carried it this cycle, plus a jerk-limited
+//!    profile that takes the difference to zero — from the command's state (position,
+//!    velocity, acceleration) at rest relative to the part. A belt that changes speed moves
+//!    the part, and with it the command; the profile is not replanned;
+//! 2. **tracks** the part, the command on its grip point every cycle, while the gripper
+//!    closes ([`PickEvent::Gripping`] in the cycle it is told);
+//! 3. **places** it: a jerk-limited profile from the state it leaves the belt with to
+//!    `conveyor.place_mm` at rest, where the gripper opens ([`PickEvent::Placed`]);
+//! 4. waits there for the next pick.
+//!
+//! The profile relative to the part keeps what is left of each motor's limits once the
+//! belt's own motion is served (the belt's joint speed at its fastest, over the window). A
+//! part that leaves the window before the gripper has closed, or leaves the robot's reach, is
+//! given up ([`PickEvent::GaveUp`]) and the command stops: never chased.
+
+use super::{BeltFrame, GaveUp, Pick, PickEvent};
+use crate::generator::{NotTaken, Order, ServeHandle, ServeShared};
+use qmarc_config::Settings;
+use qmarc_controller::status::LoopStatus;
+use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_plugins::motion::{MotionLimits, MotionState, Profile};
+use qmarc_proto::{Gripper, MAX_MOTORS};
+use rtrb::{Consumer, Producer, RingBuffer};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Cycles over which the belt's speed is measured from its counts.
+const SPEED_CYCLES: usize = 32;
+
+/// What the picker and the dispatcher share: written with atomic stores only.
+#[derive(Debug, Default)]
+pub struct PickerShared {
+    /// The picker waits for a pick: the dispatcher may hand it one.
+    pub ready: AtomicBool,
+    /// The picker takes no more picks (its session ends, or it was told to stop).
+    pub ending: AtomicBool,
+}
+
+/// The dispatcher's end of a [`Picker`].
+pub struct PickerHandle {
+    /// Picks to the loop, one at a time.
+    pub picks: Producer<Pick>,
+    /// What the loop did with them.
+    pub events: Consumer<PickEvent>,
+    /// The picker's state.
+    pub shared: Arc<PickerShared>,
+}
+
+/// Where the picker is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Phase {
+    /// At rest, waiting for a pick.
+    Idle,
+    /// The profile relative to the part runs.
+    Intercept(Pick),
+    /// On the part, the gripper closing.
+    Track(Pick),
+    /// The fixed profile to the place (or, after a pick given up, to rest) runs.
+    Place(Option<Pick>),
+    /// At the place, the gripper opening.
+    Release,
+}
+
+/// The conveyor session's generator ([module docs](self)).
+pub struct Picker {
+    belt_frame: BeltFrame,
+    n_motors: usize,
+    period_s: f64,
+    limits: MotionLimits,
+    /// What is left of `limits` in the part's frame.
+    relative: MotionLimits,
+    place: [f64; MAX_MOTORS],
+    profile: Profile,
+    /// The sample the profile's time 0 is.
+    origin_n: u64,
+    phase: Phase,
+    /// The last sample commanded and its state.
+    last: MotionState,
+    /// The belt's counts this cycle and in the last [`SPEED_CYCLES`].
+    belt: [i64; SPEED_CYCLES],
+    belt_reads: usize,
+    grip: Option<bool>,
+    gripper: Gripper,
+    picks: Consumer<Pick>,
+    events: Producer<PickEvent>,
+    shared: Arc<PickerShared>,
+    orders: Consumer<Order>,
+    spent: Producer<crate::generator::LineQueue>,
+    serve: Arc<ServeShared>,
+    /// The cycle the session ends at (`conveyor.run_s`).
+    end_n: u64,
+    ended: bool,
+}
+
+/// A pick could not be followed this cycle.
+type Lost = GaveUp;
+
+impl Picker {
+    /// The picker of the settings `s` (`None`: they describe no robot to pick with), the
+    /// command thread's handle and the dispatcher's.
+    pub fn new(
+        s: &Settings,
+        status: Arc<LoopStatus>,
+    ) -> Option<(Picker, ServeHandle, PickerHandle)> {
+        let belt_frame = BeltFrame::of(s)?;
+        let c = &s.conveyor;
+        let place = {
+            let p = c.place_mm;
+            let q = s
+                .robot()?
+                .counts_of(&qmarc_kinematics::Point::new(p[0] * 1e-3, p[1] * 1e-3, p[2] * 1e-3))
+                .ok()?;
+            let mut out = [0.0; MAX_MOTORS];
+            out[..q.len()].copy_from_slice(&q);
+            out
+        };
+        let limits = MotionLimits::of(s);
+        let fastest = c.speed_steps.iter().map(|s| s[1].abs()).fold(c.speed_mm_s.abs(), f64::max);
+        let relative =
+            relative_limits(&belt_frame, &limits, s.n_motors, fastest, s.camera.spread_mm);
+        let (orders_tx, orders) = RingBuffer::new(crate::generator::ORDER_QUEUE);
+        let (spent, spent_rx) = RingBuffer::new(crate::generator::ORDER_QUEUE + 1);
+        let (picks_tx, picks) = RingBuffer::new(2);
+        let (events, events_rx) = RingBuffer::new(256);
+        let shared = Arc::new(PickerShared::default());
+        let serve = Arc::new(ServeShared::default());
+        let picker = Picker {
+            belt_frame,
+            n_motors: s.n_motors,
+            period_s: s.period_s(),
+            limits,
+            relative,
+            place,
+            profile: Profile::new(s.n_motors, [0.0; MAX_MOTORS]),
+            origin_n: 0,
+            phase: Phase::Idle,
+            last: MotionState::default(),
+            belt: [0; SPEED_CYCLES],
+            belt_reads: 0,
+            grip: None,
+            gripper: Gripper(Gripper::ABSENT),
+            picks,
+            events,
+            shared: shared.clone(),
+            orders,
+            spent,
+            serve: serve.clone(),
+            end_n: (c.run_s / s.period_s()).round() as u64,
+            ended: false,
+        };
+        let serve_handle =
+            ServeHandle { orders: orders_tx, spent: spent_rx, shared: serve, status };
+        let handle = PickerHandle { picks: picks_tx, events: events_rx, shared };
+        Some((picker, serve_handle, handle))
+    }
+
+    /// The belt's counts `back` reads ago (0: this cycle's).
+    fn belt_at(&self, back: usize) -> i64 {
+        let k = self.belt_reads.saturating_sub(1 + back.min(self.belt_reads.saturating_sub(1)));
+        self.belt[k % SPEED_CYCLES]
+    }
+
+    /// The belt's speed, counts per second, over the last reads.
+    fn belt_speed(&self) -> f64 {
+        let span = self.belt_reads.clamp(1, SPEED_CYCLES) - 1;
+        if span == 0 {
+            return 0.0;
+        }
+        (self.belt_at(0) - self.belt_at(span)) as f64 / (span as f64 * self.period_s)
+    }
+
+    /// The joint counts of `pick`'s grip point at the belt's `counts`, and their velocity at
+    /// the belt's speed.
+    fn on_part(
+        &self,
+        pick: &Pick,
+        counts: i64,
+    ) -> Result<([f64; MAX_MOTORS], [f64; MAX_MOTORS]), Lost> {
+        let f = &self.belt_frame;
+        let along = f.along(pick, counts);
+        if along > f.window_mm[1] {
+            return Err(GaveUp::LeftWindow);
+        }
+        let q = f.counts(along, pick.across_mm).map_err(|_| GaveUp::OutOfReach)?;
+        let step_mm = self.belt_speed() * f.mm_per_count * self.period_s;
+        let ahead = f.counts(along + step_mm, pick.across_mm).map_err(|_| GaveUp::OutOfReach)?;
+        Ok((q, std::array::from_fn(|m| (ahead[m] - q[m]) / self.period_s)))
+    }
+
+    /// Plans `plan` from the last sample (sample `n − 1`): the profile's time 0.
+    fn replan(
+        &mut self,
+        n: u64,
+        plan: impl FnOnce(&mut Profile) -> Result<(), qmarc_plugins::motion::NoProfile>,
+    ) -> Result<(), Lost> {
+        plan(&mut self.profile).map_err(|_| GaveUp::NoProfile)?;
+        self.origin_n = n.saturating_sub(1);
+        Ok(())
+    }
+
+    /// The profile's state at sample `n`.
+    fn profiled(&mut self, n: u64) -> MotionState {
+        self.profile.state_at(n.saturating_sub(self.origin_n) as f64 * self.period_s)
+    }
+
+    /// Starts intercepting `pick`: the last command's state relative to the part (at the
+    /// last cycle's belt) to rest on it.
+    fn intercept(&mut self, n: u64, pick: Pick) -> Result<(), Lost> {
+        let (q, v) = self.on_part(&pick, self.belt_at(1))?;
+        let from = MotionState {
+            p: std::array::from_fn(|m| self.last.p[m] - q[m]),
+            v: std::array::from_fn(|m| self.last.v[m] - v[m]),
+            a: self.last.a,
+        };
+        let relative = self.relative;
+        self.replan(n, |p| p.plan(&from, &[0.0; MAX_MOTORS], &relative))
+    }
+
+    /// Leaves the part at sample `n` for the place (`pick`: with the part) or, after a pick
+    /// given up, for rest wherever the command stops.
+    fn leave(&mut self, n: u64, pick: Option<Pick>) {
+        let (from, limits, place) = (self.last, self.limits, self.place);
+        let planned = match pick {
+            Some(_) => self.replan(n, |p| p.plan(&from, &place, &limits)),
+            None => self.replan(n, |p| p.plan_stop(&from, &limits)),
+        };
+        if planned.is_err() {
+            // No profile from a finite state within the limits is a bug, not a belt: hold.
+            let hold = MotionState::at_rest(self.last.p);
+            let _ = self.replan(n, |p| p.plan(&hold, &hold.p, &limits));
+        }
+        self.phase = Phase::Place(pick);
+    }
+
+    /// Gives `pick` up at sample `n`: the gripper opens and the command stops.
+    fn give_up(&mut self, n: u64, pick: &Pick, why: GaveUp) {
+        let _ = self.events.push(PickEvent::GaveUp { id: pick.id, why });
+        self.grip = Some(false);
+        self.leave(n, None);
+    }
+
+    /// The orders of the command thread: a stop or a quit ends the picking (a part in the
+    /// gripper is still placed); moves, lines and grips are not taken — the session picks.
+    fn take_orders(&mut self, n: u64) {
+        while let Ok(order) = self.orders.pop() {
+            let refused = match order {
+                Order::Move { id, .. } | Order::Grip { id, .. } => Some(id),
+                Order::Line { id, queue } => {
+                    let _ = self.spent.push(queue);
+                    Some(id)
+                }
+                Order::Stop { .. } | Order::Quit { .. } => {
+                    self.end_n = self.end_n.min(n);
+                    None
+                }
+            };
+            if let Some(id) = refused {
+                self.serve.not_taken_why.store(NotTaken::Picking.wire(), Ordering::Release);
+                self.serve.not_taken.store(id, Ordering::Release);
+                self.serve.taken.store(id, Ordering::Release);
+            }
+        }
+    }
+
+    /// One sample of the phase, its state in `self.last`.
+    fn step(&mut self, n: u64) {
+        let ending = n >= self.end_n;
+        match self.phase {
+            Phase::Idle => {
+                self.last = MotionState::at_rest(self.last.p);
+                if ending {
+                    self.ended = true;
+                } else if let Ok(pick) = self.picks.pop() {
+                    self.shared.ready.store(false, Ordering::Release);
+                    match self.intercept(n, pick) {
+                        Ok(()) => {
+                            self.phase = Phase::Intercept(pick);
+                            self.step(n);
+                        }
+                        Err(why) => self.give_up(n, &pick, why),
+                    }
+                }
+            }
+            Phase::Intercept(pick) => {
+                if ending {
+                    return self.give_up(n, &pick, GaveUp::Stopped);
+                }
+                let r = self.profiled(n);
+                match self.on_part(&pick, self.belt_at(0)) {
+                    Ok((q, v)) => {
+                        self.last = MotionState {
+                            p: std::array::from_fn(|m| q[m] + r.p[m]),
+                            v: std::array::from_fn(|m| v[m] + r.v[m]),
+                            a: r.a,
+                        };
+                        if n.saturating_sub(self.origin_n) as f64 * self.period_s
+                            >= self.profile.duration()
+                        {
+                            self.phase = Phase::Track(pick);
+                            self.grip = Some(true);
+                            let _ = self.events.push(PickEvent::Gripping { id: pick.id, cycle: n });
+                        }
+                    }
+                    Err(why) => self.give_up(n, &pick, why),
+                }
+            }
+            Phase::Track(pick) => match self.on_part(&pick, self.belt_at(0)) {
+                Ok((q, v)) => {
+                    self.last = MotionState { p: q, v, a: [0.0; MAX_MOTORS] };
+                    if self.gripper.reached(true) {
+                        let _ = self.events.push(PickEvent::Lifted { id: pick.id });
+                        self.leave(n + 1, Some(pick));
+                    }
+                }
+                Err(why) => self.give_up(n, &pick, why),
+            },
+            Phase::Place(pick) => {
+                self.last = self.profiled(n);
+                if n.saturating_sub(self.origin_n) as f64 * self.period_s >= self.profile.duration()
+                {
+                    self.last = MotionState::at_rest(self.last.p);
+                    if let Some(pick) = pick {
+                        self.grip = Some(false);
+                        let _ = self.events.push(PickEvent::Placed { id: pick.id, cycle: n });
+                    }
+                    self.phase = Phase::Release;
+                }
+            }
+            Phase::Release => {
+                self.last = MotionState::at_rest(self.last.p);
+                if self.grip != Some(true) && (self.grip.is_none() || self.gripper.reached(false)) {
+                    self.phase = Phase::Idle;
+                    self.shared.ready.store(!ending, Ordering::Release);
+                }
+            }
+        }
+    }
+}
+
+/// What is left of each motor's `limits` in a part's frame: the velocity less what the belt
+/// itself asks of the motor at `fastest_mm_s` anywhere in the window (across ±`spread_mm`/2;
+/// a tenth kept in reserve), at least a fifth of it; the acceleration and jerk at four
+/// fifths (the belt's own changes of speed and of the arms' leverage take the rest).
+pub fn relative_limits(
+    f: &BeltFrame,
+    limits: &MotionLimits,
+    n_motors: usize,
+    fastest_mm_s: f64,
+    spread_mm: f64,
+) -> MotionLimits {
+    let mut belt = [0.0f64; MAX_MOTORS];
+    for k in 0..=8 {
+        let along = f.window_mm[0] + (f.window_mm[1] - f.window_mm[0]) * f64::from(k) / 8.0;
+        for across in [-spread_mm / 2.0, 0.0, spread_mm / 2.0] {
+            if let (Ok(a), Ok(b)) = (f.counts(along, across), f.counts(along + 1.0, across)) {
+                for m in 0..n_motors {
+                    belt[m] = belt[m].max((b[m] - a[m]).abs() * fastest_mm_s);
+                }
+            }
+        }
+    }
+    let mut r = *limits;
+    for (m, b) in belt.iter().enumerate().take(n_motors) {
+        r.velocity[m] = (limits.velocity[m] - 1.1 * b).max(0.2 * limits.velocity[m]);
+        r.acceleration[m] = 0.8 * limits.acceleration[m];
+        r.jerk[m] = 0.8 * limits.jerk[m];
+    }
+    r
+}
+
+impl TrajectoryGenerator for Picker {
+    fn name(&self) -> &'static str {
+        "conveyor"
+    }
+
+    fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
+        self.last = MotionState::at_rest(*start);
+        self.profile = Profile::new(self.n_motors, *start);
+        self.phase = Phase::Idle;
+        self.shared.ready.store(true, Ordering::Release);
+        Ok(())
+    }
+
+    fn samples(&self) -> Option<u64> {
+        None
+    }
+
+    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
+        Some([0.0; MAX_MOTORS])
+    }
+
+    #[inline]
+    fn belt(&mut self, counts: i64) {
+        self.belt[self.belt_reads % SPEED_CYCLES] = counts;
+        self.belt_reads += 1;
+    }
+
+    #[inline]
+    fn gripper(&mut self, state: Gripper) -> Option<bool> {
+        self.gripper = state;
+        self.grip
+    }
+
+    #[inline]
+    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
+        if self.ended {
+            return Sample::Done;
+        }
+        self.take_orders(n);
+        if n >= self.end_n {
+            self.shared.ending.store(true, Ordering::Release);
+            self.shared.ready.store(false, Ordering::Release);
+        }
+        self.step(n);
+        *cmd = self.last.p;
+        self.serve.moving.store(self.phase != Phase::Idle, Ordering::Release);
+        Sample::Ready
+    }
+}
