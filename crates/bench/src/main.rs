@@ -9,6 +9,8 @@
 //! - `cycle`: the per-cycle compute of every registered generator × law for 1–4 motors.
 //! - `command`: a serving session's move commands, from sent to the loop's first new command.
 //! - `pick`: the Delta pick-and-place cycle through a serving session, with the gripper.
+//! - `conveyor`: conveyor tracking — picks a minute, missed parts, the grip error, what
+//!   limits the rate, how far it goes, at 1 m/s, and the intercept's cost in the cycle.
 //! - `bridge`: the ROS 2 bridge — the loop's p99 with it and two subscribers against without,
 //!   joint states over 60 s (loss, latency from the servo sample), a target to the loop.
 //!
@@ -17,6 +19,7 @@
 mod baselines;
 mod bridge;
 mod command;
+mod conveyor;
 mod cycle;
 mod ipc;
 mod jitter;
@@ -53,6 +56,10 @@ enum BenchCommand {
     /// The Delta pick-and-place cycle through a serving session: cycle time, picks per
     /// minute, tracking error, beside the thesis' X-Z path.
     Pick(pick::PickArgs),
+    /// Conveyor tracking through real `qmarc-starter conveyor` sessions: picks a minute,
+    /// missed parts, the grip error, what limits the rate, the highest rate with none missed,
+    /// 1 m/s; the intercept's computation in the servo cycle.
+    Conveyor(conveyor::ConveyorArgs),
     /// The ROS 2 bridge: the loop with it and two subscribers against without (p99 ratio),
     /// joint states' loss and latency, a published target to the loop's first command.
     Bridge(bridge::BridgeArgs),
@@ -66,6 +73,7 @@ fn main() -> ExitCode {
         BenchCommand::Cycle(a) => cycle::run(a),
         BenchCommand::Command(a) => command::run(a),
         BenchCommand::Pick(a) => pick::run(a),
+        BenchCommand::Conveyor(a) => conveyor::run(a),
         BenchCommand::Bridge(a) => bridge::run(a),
     };
     let outcome = result.map(|()| ExitCode::SUCCESS).map_err(|e| (qmarc_proto::exit::INTERNAL, e));

@@ -133,3 +133,6 @@ impl BeltFrame {
         Ok(out)
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -173,23 +173,27 @@ impl Dispatcher {
     }
 }
 
-impl Dispatch {
-    /// The belt encoder at `t_ns`, interpolated between the loop's samples around it.
-    fn counts_at(&self, t_ns: u64) -> Option<i64> {
-        let after = self.history.iter().position(|&(_, t)| t >= t_ns)?;
-        let (c1, t1) = self.history[after];
-        let Some(&(c0, t0)) = after.checked_sub(1).and_then(|k| self.history.get(k)) else {
-            return (t1 == t_ns).then_some(c1);
-        };
-        let f = (t_ns - t0) as f64 / (t1 - t0).max(1) as f64;
-        Some(c0 + ((c1 - c0) as f64 * f).round() as i64)
-    }
+/// The belt encoder at `t_ns`, interpolated between the loop's samples `history` ((counts,
+/// ns), oldest first) around it; `None` outside them.
+pub(crate) fn counts_at(history: &VecDeque<(i64, u64)>, t_ns: u64) -> Option<i64> {
+    let after = history.iter().position(|&(_, t)| t >= t_ns)?;
+    let (c1, t1) = history[after];
+    let Some(&(c0, t0)) = after.checked_sub(1).and_then(|k| history.get(k)) else {
+        return (t1 == t_ns).then_some(c1);
+    };
+    let f = (t_ns - t0) as f64 / (t1 - t0).max(1) as f64;
+    Some(c0 + ((c1 - c0) as f64 * f).round() as i64)
+}
 
+impl Dispatch {
     /// A detection from the camera.
     fn detected(&mut self, d: &PartDetection) {
         self.detections += 1;
-        let counts =
-            if d.latched() { Some(d.latched_counts) } else { self.counts_at(d.exposure_ns) };
+        let counts = if d.latched() {
+            Some(d.latched_counts)
+        } else {
+            counts_at(&self.history, d.exposure_ns)
+        };
         let Some(latched_counts) = counts else { return };
         let seen = Detection {
             t_ns: d.exposure_ns,
@@ -306,7 +310,7 @@ impl Dispatch {
 /// duration planned as the picker will plan it, the grip point within reach and the window
 /// where the gripper is told to close and where it has closed (`close_s` later).
 #[allow(clippy::too_many_arguments)]
-fn intercepts(
+pub(crate) fn intercepts(
     frame: &BeltFrame,
     relative: &MotionLimits,
     profile: &mut Profile,

@@ -1,0 +1,283 @@
+//! The conveyor session's safety: a part is handed to the loop only if the gripper closes on
+//! it inside the window and within reach; the loop follows a part exactly, never past the
+//! window or out of reach, grips it once and places it; the belt's count at an exposure is
+//! the loop's samples interpolated.
+
+use super::dispatch::{counts_at, intercepts};
+use super::picker::{Picker, PickerHandle, relative_limits};
+use super::*;
+use crate::generator::{NotTaken, Order, ServeHandle};
+use qmarc_controller::status::LoopStatus;
+use qmarc_controller::traj::{Sample, TrajectoryGenerator};
+use qmarc_conveyor::{Detection, Part, PartState};
+use qmarc_plugins::motion::{MotionLimits, Profile};
+use qmarc_proto::Gripper;
+use std::collections::VecDeque;
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+/// The shipped settings.
+fn settings() -> Settings {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
+    Settings::load(&path, &qmarc_config::Names::any()).unwrap()
+}
+
+fn part(across_mm: f64) -> Part {
+    let seen = Detection { t_ns: 0, latched_counts: 0, belt_mm: 0.0, across_mm };
+    Part { id: 1, seen, state: PartState::Pending }
+}
+
+/// Whether the picker at rest at the place intercepts a part now `at` mm along at `speed`,
+/// and the intercept's duration.
+fn intercept(s: &Settings, at: f64, across: f64, speed: f64) -> (bool, f64) {
+    let frame = BeltFrame::of(s).unwrap();
+    let limits = MotionLimits::of(s);
+    let relative = relative_limits(&frame, &limits, 3, speed, s.camera.spread_mm);
+    let p = s.conveyor.place_mm;
+    let place =
+        frame.robot.counts_of(&qmarc_kinematics::Point::new(p[0] * 1e-3, p[1] * 1e-3, p[2] * 1e-3));
+    let mut command = [0.0; MAX_MOTORS];
+    command[..3].copy_from_slice(&place.unwrap());
+    let mut profile = Profile::new(3, command);
+    let close_s = s.s626.gripper_close_s;
+    let ok =
+        intercepts(&frame, &relative, &mut profile, 3, &command, &part(across), at, speed, close_s);
+    (ok, profile.duration())
+}
+
+/// The gripper closes inside the window: told to close no earlier than its start, closed no
+/// later than its end — to the mm of the planned intercept.
+#[test]
+fn a_part_is_handed_over_only_if_the_grip_falls_inside_the_window() {
+    let s = settings();
+    let [start, end] = s.conveyor.window_mm;
+    let (speed, close_s) = (500.0, s.s626.gripper_close_s);
+    // Where the intercept would grip a part now at the window's start.
+    let (ok, t) = intercept(&s, start, 0.0, speed);
+    assert!(ok && t > 0.05, "{t}");
+    // Upstream: handed over once the grip would come at the window's start, not before.
+    let (early, t_early) = intercept(&s, start - speed * t - 30.0, 0.0, speed);
+    assert!(
+        !early,
+        "gripped {} mm before the window",
+        start - (start - speed * t - 30.0 + speed * t_early)
+    );
+    let upstream = start - speed * t + 30.0;
+    let (ok, t_up) = intercept(&s, upstream, 0.0, speed);
+    assert_eq!(ok, upstream + speed * t_up >= start, "{upstream} + {}", speed * t_up);
+    // Downstream: not when the gripper would close past the window's end.
+    let mut at = start;
+    while intercept(&s, at + 1.0, 0.0, speed).0 {
+        at += 1.0;
+    }
+    let (_, t_last) = intercept(&s, at, 0.0, speed);
+    let closed = at + speed * (t_last + close_s);
+    assert!(
+        closed <= end && closed > end - 10.0,
+        "the last part handed over closes at {closed} mm"
+    );
+    // A still belt: a part inside the window is handed over, one upstream of it never.
+    assert!(intercept(&s, (start + end) / 2.0, 0.0, 0.0).0);
+    assert!(!intercept(&s, start - 1.0, 0.0, 0.0).0);
+    assert!(intercept(&s, start, 0.0, 0.0).0);
+    assert!(intercept(&s, end, 0.0, 0.0).0, "closed at the end: inside");
+    assert!(!intercept(&s, end + 0.1, 0.0, 0.0).0);
+}
+
+#[test]
+fn a_part_out_of_reach_is_never_handed_over() {
+    let s = settings();
+    let mid = (s.conveyor.window_mm[0] + s.conveyor.window_mm[1]) / 2.0;
+    assert!(intercept(&s, mid, 0.0, 0.0).0);
+    assert!(!intercept(&s, mid, 1_500.0, 0.0).0, "1.5 m across the belt");
+    assert!(!intercept(&s, mid, -1_500.0, 0.0).0);
+}
+
+#[test]
+fn the_count_at_an_exposure_is_interpolated_between_the_loops_samples() {
+    let h: VecDeque<(i64, u64)> = [(0, 1_000), (10, 2_000), (30, 3_000)].into_iter().collect();
+    assert_eq!(counts_at(&h, 1_000), Some(0));
+    assert_eq!(counts_at(&h, 1_500), Some(5));
+    assert_eq!(counts_at(&h, 2_000), Some(10));
+    assert_eq!(counts_at(&h, 2_250), Some(15));
+    assert_eq!(counts_at(&h, 3_000), Some(30));
+    assert_eq!(counts_at(&h, 999), None, "before the first sample");
+    assert_eq!(counts_at(&h, 3_001), None, "after the last");
+    assert_eq!(counts_at(&VecDeque::new(), 5), None);
+}
+
+/// A picker at rest at the place, its handles, and its settings.
+fn picker(s: &Settings) -> (Picker, ServeHandle, PickerHandle) {
+    let (mut p, serve, handle) = Picker::new(s, Arc::new(LoopStatus::default())).unwrap();
+    let place = s.conveyor.place_mm;
+    let q = BeltFrame::of(s)
+        .unwrap()
+        .robot
+        .counts_of(&qmarc_kinematics::Point::new(place[0] * 1e-3, place[1] * 1e-3, place[2] * 1e-3))
+        .unwrap();
+    p.start(&[q[0], q[1], q[2], 0.0]).unwrap();
+    (p, serve, handle)
+}
+
+/// Runs the picker on a belt at `counts_per_cycle` from `belt`, its gripper closing and
+/// opening in `grip_cycles`, for `cycles` samples from `n`: the commands and the events.
+struct Rig {
+    n: u64,
+    belt: i64,
+    gripper: Gripper,
+    told: Option<bool>,
+    since: u64,
+}
+
+impl Rig {
+    fn run(
+        &mut self,
+        p: &mut Picker,
+        h: &mut PickerHandle,
+        cycles: u64,
+        speed: i64,
+    ) -> (Vec<[f64; MAX_MOTORS]>, Vec<PickEvent>, Sample) {
+        let (mut cmds, mut events, mut last) = (Vec::new(), Vec::new(), Sample::Ready);
+        for _ in 0..cycles {
+            self.belt += speed;
+            p.belt(self.belt);
+            let mut cmd = [0.0; MAX_MOTORS];
+            last = p.sample(self.n, &mut cmd);
+            if last == Sample::Done {
+                break;
+            }
+            cmds.push(cmd);
+            // The gripper takes 50 cycles to get where it is told.
+            let told = p.gripper(self.gripper);
+            if told != self.told {
+                (self.told, self.since) = (told, self.n);
+            }
+            let there = self.n >= self.since + 50;
+            self.gripper = Gripper(match (told, there) {
+                (Some(true), true) => Gripper::CLOSE | Gripper::CLOSED,
+                (Some(true), false) => Gripper::CLOSE,
+                (_, true) => Gripper::OPEN,
+                (_, false) => 0,
+            });
+            while let Ok(e) = h.events.pop() {
+                events.push(e);
+            }
+            self.n += 1;
+        }
+        (cmds, events, last)
+    }
+}
+
+fn rig() -> Rig {
+    Rig { n: 0, belt: 0, gripper: Gripper(Gripper::OPEN), told: None, since: 0 }
+}
+
+/// A part handed over is intercepted, followed exactly while the gripper closes, lifted,
+/// placed and let go, once; the command never jumps.
+#[test]
+fn the_picker_intercepts_follows_and_places_a_part_once() {
+    let s = settings();
+    let (mut p, _serve, mut h) = picker(&s);
+    let frame = BeltFrame::of(&s).unwrap();
+    let mut r = rig();
+    // The belt at 500 mm/s: 4 counts of 0.05 mm a 400 µs cycle is 0.5 m/s.
+    let speed = 4;
+    r.run(&mut p, &mut h, 40, speed);
+    assert!(h.shared.ready.load(Ordering::Acquire));
+    let pick = Pick { id: 7, belt_mm: 320.0, across_mm: 30.0, latched_counts: r.belt };
+    h.picks.push(pick).unwrap();
+    let start = r.n;
+    let (cmds, events, _) = r.run(&mut p, &mut h, 2_000, speed);
+    assert!(!h.shared.ready.load(Ordering::Acquire) || events.len() == 3, "{events:?}");
+    let gripping = events.iter().find_map(|e| match e {
+        PickEvent::Gripping { id: 7, cycle } => Some(*cycle),
+        _ => None,
+    });
+    let grip = gripping.expect("gripped");
+    assert!(matches!(events[1], PickEvent::Lifted { id: 7 }), "{events:?}");
+    assert!(matches!(events[2], PickEvent::Placed { id: 7, .. }), "{events:?}");
+    assert_eq!(events.len(), 3, "once: {events:?}");
+    // On the part, exactly, from the grip until the gripper has closed (50 cycles).
+    for k in grip..grip + 50 {
+        let belt = pick.latched_counts + speed * (k - start + 1) as i64;
+        let along = frame.along(&pick, belt);
+        let on = frame.counts(along, pick.across_mm).unwrap();
+        let cmd = cmds[(k - start) as usize];
+        assert!((0..3).all(|m| (cmd[m] - on[m]).abs() < 1e-6), "cycle {k}: {cmd:?} against {on:?}");
+        assert!(along <= s.conveyor.window_mm[1]);
+    }
+    // No jump: the command's steps stay within what the motors' velocity allows.
+    let v = MotionLimits::of(&s).velocity[0] * s.period_s();
+    for w in cmds.windows(2) {
+        assert!((0..3).all(|m| (w[1][m] - w[0][m]).abs() <= v * 1.01), "{w:?}");
+    }
+    // Back at rest, waiting for the next.
+    assert!(h.shared.ready.load(Ordering::Acquire));
+}
+
+/// A part the belt carries past the window before the gripper has closed on it is given up:
+/// the gripper opens, the command stops — never chased.
+#[test]
+fn a_part_leaving_the_window_is_given_up_never_chased() {
+    let s = settings();
+    let (mut p, _serve, mut h) = picker(&s);
+    let mut r = rig();
+    let speed = 4;
+    r.run(&mut p, &mut h, 40, speed);
+    // At the window's end already.
+    let end = s.conveyor.window_mm[1];
+    let pick = Pick { id: 3, belt_mm: end - 1.0, across_mm: 0.0, latched_counts: r.belt };
+    h.picks.push(pick).unwrap();
+    let (_, events, _) = r.run(&mut p, &mut h, 1_500, speed);
+    assert_eq!(
+        events.first(),
+        Some(&PickEvent::GaveUp { id: 3, why: GaveUp::LeftWindow }),
+        "{events:?}"
+    );
+    assert!(!events.iter().any(|e| matches!(e, PickEvent::Gripping { .. })), "{events:?}");
+    assert_eq!(r.told, Some(false), "the gripper told to open");
+    assert!(h.shared.ready.load(Ordering::Acquire), "ready for the next");
+    // Out of reach: given up at once.
+    let far = Pick { id: 4, belt_mm: 400.0, across_mm: 2_000.0, latched_counts: r.belt };
+    h.picks.push(far).unwrap();
+    let (_, events, _) = r.run(&mut p, &mut h, 200, speed);
+    assert_eq!(
+        events.first(),
+        Some(&PickEvent::GaveUp { id: 4, why: GaveUp::OutOfReach }),
+        "{events:?}"
+    );
+}
+
+/// A quit ends the picking: a part in the gripper is still placed, then the session ends at
+/// rest with the gripper open; a move is not taken, and says why.
+#[test]
+fn a_quit_finishes_the_part_held_and_moves_are_not_taken() {
+    let s = settings();
+    let (mut p, mut serve, mut h) = picker(&s);
+    let mut r = rig();
+    let speed = 4;
+    r.run(&mut p, &mut h, 40, speed);
+    let limits = MotionLimits::of(&s);
+    serve.orders.push(Order::Move { id: 9, target: [0.0; MAX_MOTORS], limits }).unwrap();
+    r.run(&mut p, &mut h, 2, speed);
+    assert_eq!(serve.shared.not_taken.load(Ordering::Acquire), 9);
+    let why = NotTaken::from_wire(serve.shared.not_taken_why.load(Ordering::Acquire));
+    assert_eq!(why, Some(NotTaken::Picking));
+    let pick = Pick { id: 5, belt_mm: 320.0, across_mm: 0.0, latched_counts: r.belt };
+    h.picks.push(pick).unwrap();
+    // Until the gripper has closed on it, then quit.
+    let mut events = Vec::new();
+    while !events.iter().any(|e| matches!(e, PickEvent::Lifted { .. })) {
+        events.extend(r.run(&mut p, &mut h, 1, speed).1);
+        assert!(r.n < 5_000, "{events:?}");
+    }
+    serve.orders.push(Order::Quit { limits }).unwrap();
+    let (cmds, rest, end) = r.run(&mut p, &mut h, 5_000, speed);
+    assert_eq!(end, Sample::Done, "the session ended");
+    assert!(matches!(rest.first(), Some(PickEvent::Placed { id: 5, .. })), "{rest:?}");
+    assert!(h.shared.ending.load(Ordering::Acquire) && !h.shared.ready.load(Ordering::Acquire));
+    assert_eq!(r.told, Some(false), "open at the end");
+    let last = cmds.last().unwrap();
+    assert_eq!(cmds[cmds.len() - 2], *last, "at rest");
+}
