@@ -249,3 +249,28 @@ fn ctrl_c_ends_a_conveyor_session_with_every_file_written() {
     assert!(!read_parts(&out).is_empty(), "the parts seen are in parts.csv");
     run.assert_clean();
 }
+
+/// An emergency stop while the robot picks ends the session as it ends every move: all
+/// motors disabled, the fault said, and every file written, the parts picked before it among
+/// them.
+#[test]
+fn an_emergency_stop_while_picking_ends_as_every_move_ends() {
+    let run = TestRun::new("conveyor-estop");
+    let config = run.config_with(&[("sim.estop_open_s", "[3.0, 3.5]")]);
+    let out = run.out("out");
+    let args = conveyor_args(&config, &out, 8.0, &["--parts-per-min=90"]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let r = run.starter(&args, std::time::Duration::from_secs(120));
+    assert_eq!(r.code, Some(i32::from(qmarc_proto::exit::FAULT)), "{}\n{}", r.stdout, r.stderr);
+    let fault = read_summary(&out).fault.expect("a fault");
+    assert_eq!(fault.kind.name(), "emergency_stop", "{}", fault.message);
+    assert!(fault.message.ends_with("all motors disabled"), "{}", fault.message);
+    let parts = read_parts(&out);
+    assert!(parts.iter().any(|p| p["state"] == "picked"), "picked before the stop: {parts:?}");
+    // Nothing was placed after the stop.
+    let stop_cycle = 3.0 / 400e-6;
+    for p in parts.iter().filter(|p| p["state"] == "picked") {
+        assert!(field(p, "place_cycle") < stop_cycle + 10.0, "{p:?}");
+    }
+    run.assert_clean();
+}
