@@ -207,11 +207,22 @@ fn the_picker_intercepts_follows_and_places_a_part_once() {
         assert!((0..3).all(|m| (cmd[m] - on[m]).abs() < 1e-6), "cycle {k}: {cmd:?} against {on:?}");
         assert!(along <= s.conveyor.window_mm[1]);
     }
-    // No jump: the command's steps stay within what the motors' velocity allows.
-    let v = MotionLimits::of(&s).velocity[0] * s.period_s();
+    // No jump, in position or in velocity: each step within what the motors' velocity
+    // allows, each change of step within what their acceleration allows (a velocity that
+    // jumped at a change of phase — the belt's own speed misjudged — would break it).
+    let limits = MotionLimits::of(&s);
+    let (v, a) = (limits.velocity[0] * s.period_s(), limits.acceleration[0] * s.period_s().powi(2));
     for w in cmds.windows(2) {
         assert!((0..3).all(|m| (w[1][m] - w[0][m]).abs() <= v * 1.01), "{w:?}");
     }
+    let worst = cmds
+        .windows(3)
+        .map(|w| (0..3).map(|m| (w[2][m] - 2.0 * w[1][m] + w[0][m]).abs()).fold(0.0, f64::max))
+        .fold(0.0, f64::max);
+    assert!(
+        worst <= a * (1.0 + 1e-6),
+        "a change of step of {worst} counts, the acceleration's {a}"
+    );
     // Back at rest, waiting for the next.
     assert!(h.shared.ready.load(Ordering::Acquire));
 }
@@ -225,9 +236,9 @@ fn a_part_leaving_the_window_is_given_up_never_chased() {
     let mut r = rig();
     let speed = 4;
     r.run(&mut p, &mut h, 40, speed);
-    // At the window's end already.
+    // Just short of the window's end (by no whole number of the belt's 0.2 mm steps).
     let end = s.conveyor.window_mm[1];
-    let pick = Pick { id: 3, belt_mm: end - 1.0, across_mm: 0.0, latched_counts: r.belt };
+    let pick = Pick { id: 3, belt_mm: end - 0.93, across_mm: 0.0, latched_counts: r.belt };
     h.picks.push(pick).unwrap();
     let (_, events, _) = r.run(&mut p, &mut h, 1_500, speed);
     assert_eq!(
