@@ -274,3 +274,18 @@ fn an_emergency_stop_while_picking_ends_as_every_move_ends() {
     }
     run.assert_clean();
 }
+
+/// A conveyor session needs a gripper: without one it is refused before anything starts.
+#[test]
+fn a_conveyor_session_without_a_gripper_is_refused() {
+    let run = TestRun::new("conveyor-nogrip");
+    let config = run.config_with(&[("s626.gripper_dio", "-1")]);
+    let out = run.out("out");
+    let args = conveyor_args(&config, &out, 2.0, &[]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let r = run.starter(&args, std::time::Duration::from_secs(60));
+    assert_eq!(r.code, Some(i32::from(qmarc_proto::exit::REFUSED)), "{}\n{}", r.stdout, r.stderr);
+    assert!(r.stderr.contains("conveyor grips the parts: [s626] gripper_dio = -1"), "{}", r.stderr);
+    assert!(!out.join("parts.csv").exists());
+    run.assert_clean();
+}

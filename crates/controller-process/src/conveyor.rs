@@ -15,9 +15,9 @@ use std::fmt::Write;
 pub const PARTS_HEADER: &str =
     "id,t_seen_s,latched_counts,belt_mm,across_mm,state,grip_cycle,place_cycle,error_mm";
 
-/// The gathered row of `cycle`, if it was gathered.
+/// The gathered row of `cycle`, or the first after it (gathering every N-th cycle).
 fn row(rows: &[GatherRow], cycle: u64) -> Option<&GatherRow> {
-    rows.binary_search_by_key(&cycle, |r| r.cycle).ok().map(|i| &rows[i])
+    rows.get(rows.partition_point(|r| r.cycle < cycle))
 }
 
 /// The effector against part `p`'s grip point in gathered row `r`, mm.

@@ -208,6 +208,18 @@ impl PartQueue {
         }
     }
 
+    /// Part `id`, claimed, cannot be picked after all (its pick was given up): missed. False
+    /// if it was not the claimed one.
+    pub fn missed(&mut self, id: u32) -> bool {
+        match self.parts.iter_mut().find(|p| p.id == id && p.state == PartState::Claimed) {
+            Some(p) => {
+                p.state = PartState::Missed;
+                true
+            }
+            None => false,
+        }
+    }
+
     /// Parts picked and missed so far.
     pub fn counts(&self) -> (usize, usize) {
         let n = |s| self.parts.iter().filter(|p| p.state == s).count();

@@ -52,6 +52,12 @@ fn the_most_downstream_reachable_part_is_claimed_once() {
     assert!(!q.picked(99));
     assert_eq!(q.part(b).unwrap().state, PartState::Picked);
     assert_eq!(q.counts(), (1, 0));
+    // A claimed part whose pick was given up is missed, once; a picked one never is.
+    assert!(q.missed(c));
+    assert!(!q.missed(c) && !q.picked(c), "done");
+    assert!(!q.missed(b), "picked already");
+    assert_eq!(q.part(c).unwrap().state, PartState::Missed);
+    assert_eq!(q.counts(), (1, 1));
 }
 
 /// A part the robot cannot reach inside the window is missed, never chased; one not yet in

@@ -3,7 +3,7 @@
 use qmarc_proto::{MAX_MOTORS, Status};
 
 /// What one input read latches: every counter and every limit switch.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Inputs {
     /// Raw 24-bit quadrature counter per motor ([`qmarc_proto::COUNTER_MASK`] wide, wraps).
     pub counters: [u32; MAX_MOTORS],
@@ -19,6 +19,20 @@ pub struct Inputs {
     /// The belt encoder's raw 24-bit counter (`conveyor.counter_channel`; wraps like the
     /// motors'); [`qmarc_proto::COUNTER_ZERO`] for a backend without one.
     pub belt: u32,
+}
+
+impl Default for Inputs {
+    /// Nothing read: counters at 0, no switch, the chain closed, no output, the belt's
+    /// counter at [`qmarc_proto::COUNTER_ZERO`] (a backend without a belt reads 0 counts).
+    fn default() -> Inputs {
+        Inputs {
+            counters: [0; MAX_MOTORS],
+            limits: Status::OK,
+            estop_open: false,
+            outputs: 0,
+            belt: qmarc_proto::COUNTER_ZERO,
+        }
+    }
 }
 
 /// The hardware operations a [`Backend`] does per exchange, as a [`HwFault`] names them.

@@ -126,7 +126,18 @@ impl BeltFrame {
     /// The joint counts that put the effector on the grip point of a part `along` the belt
     /// and `across` it. Allocates nothing.
     pub fn counts(&self, along: f64, across: f64) -> Result<[f64; MAX_MOTORS], KinematicsError> {
-        let p = self.grip_point_mm(along, across);
+        self.counts_up(along, across, 0.0)
+    }
+
+    /// The joint counts of the point `up_mm` above that grip point.
+    pub fn counts_up(
+        &self,
+        along: f64,
+        across: f64,
+        up_mm: f64,
+    ) -> Result<[f64; MAX_MOTORS], KinematicsError> {
+        let mut p = self.grip_point_mm(along, across);
+        p[2] += up_mm;
         let c = self.robot.counts_of(&Point::new(p[0] * 1e-3, p[1] * 1e-3, p[2] * 1e-3))?;
         let mut out = [0.0; MAX_MOTORS];
         out[..c.len()].copy_from_slice(&c);

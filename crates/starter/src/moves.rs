@@ -165,6 +165,24 @@ fn companion_program(hwserver_bin: &Path, name: &str) -> Result<PathBuf, Failure
     Ok(program)
 }
 
+/// A conveyor session picks with the Delta and grips with a gripper: both must be there.
+fn check_conveyor(s: &Settings) -> Result<(), Failure> {
+    if s.robot().is_none() {
+        return Err(refused(anyhow!(
+            "conveyor picks with the Delta: [robot] must describe it, with three motors \
+             (general.n_motors = {})",
+            s.n_motors
+        )));
+    }
+    if s.s626.gripper_dio.is_none() {
+        return Err(refused(anyhow!(
+            "conveyor grips the parts: [s626] gripper_dio = -1 wires no gripper; set it to \
+             the gripper's output (config/qmarc.toml has DIO6)"
+        )));
+    }
+    Ok(())
+}
+
 /// Everything is checked before anything starts: the settings, the programs, the iceoryx2
 /// location, the hardware, the path, the gather budget and the output folder. Starts
 /// nothing, writes nothing.
@@ -185,7 +203,10 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
         _ => None,
     };
     let camera = match mode {
-        Mode::Conveyor => Some(companion_program(&hwserver_bin, "qmarc-camera")?),
+        Mode::Conveyor => {
+            check_conveyor(&settings)?;
+            Some(companion_program(&hwserver_bin, "qmarc-camera")?)
+        }
         _ => None,
     };
     let prefix = req.iox_prefix.map_or_else(default_prefix, str::to_string);

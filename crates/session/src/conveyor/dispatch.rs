@@ -5,7 +5,7 @@
 //! picker the next part it can intercept inside the window, and notes what the picker did.
 //! At the end it says what became of every part ([`PartRecord`]).
 
-use super::picker::{PickerHandle, relative_limits};
+use super::picker::{CLOSE_MARGIN_MM, PickerHandle, relative_limits};
 use super::{BeltFrame, GaveUp, Pick, PickEvent};
 use qmarc_config::Settings;
 use qmarc_controller::status::LoopStatus;
@@ -71,6 +71,7 @@ struct Dispatch {
     frame: BeltFrame,
     relative: MotionLimits,
     close_s: f64,
+    period_s: f64,
     n_motors: usize,
     status: Arc<LoopStatus>,
     handle: PickerHandle,
@@ -108,6 +109,7 @@ impl Dispatcher {
             relative: relative_limits(&frame, &limits, s.n_motors, fastest, s.camera.spread_mm),
             frame,
             close_s: s.s626.gripper_close_s,
+            period_s: s.period_s(),
             n_motors: s.n_motors,
             status,
             handle,
@@ -243,6 +245,11 @@ impl Dispatch {
                 }
                 PickEvent::GaveUp { id, why } => {
                     self.record(id).into_iter().for_each(|r| r.gave_up = Some(why));
+                    // Out of reach or no profile: it will not be picked. One the session
+                    // stopped for stays as it is.
+                    if why != GaveUp::Stopped {
+                        self.queue.missed(id);
+                    }
                     self.given = None;
                 }
             }
@@ -255,11 +262,12 @@ impl Dispatch {
         if ready && self.given.is_none() && self.history.len() > 1 {
             let speed = self.belt_speed_mm_s();
             let command = self.status.command();
-            let (frame, relative, close_s, n) =
-                (self.frame, self.relative, self.close_s, self.n_motors);
+            // The gripper's read says it has closed two cycles after its travel.
+            let closing_s = self.close_s + 2.0 * self.period_s;
+            let (frame, relative, n) = (self.frame, self.relative, self.n_motors);
             let profile = &mut self.profile;
             let claimed = self.queue.claim_next(now, &self.belt, |part, at| {
-                intercepts(&frame, &relative, profile, n, &command, part, at, speed, close_s)
+                intercepts(&frame, &relative, profile, n, &command, part, at, speed, closing_s)
             });
             if let Some(part) = claimed.and_then(|id| self.queue.part(id)) {
                 let pick = Pick {
@@ -308,7 +316,8 @@ impl Dispatch {
 /// Whether the picker, at rest at `command`, can intercept `part` (now `at` mm along the belt
 /// at `speed` mm/s) so that the gripper closes on it inside the window: the intercept's
 /// duration planned as the picker will plan it, the grip point within reach and the window
-/// where the gripper is told to close and where it has closed (`close_s` later).
+/// where the gripper is told to close and where its read says it has closed (`closing_s`
+/// later, [`CLOSE_MARGIN_MM`] to spare).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn intercepts(
     frame: &BeltFrame,
@@ -319,7 +328,7 @@ pub(crate) fn intercepts(
     part: &Part,
     at: f64,
     speed: f64,
-    close_s: f64,
+    closing_s: f64,
 ) -> bool {
     let across = part.seen.across_mm;
     let (Ok(q), Ok(ahead)) = (frame.counts(at, across), frame.counts(at + speed * 1e-3, across))
@@ -335,7 +344,7 @@ pub(crate) fn intercepts(
         return false;
     }
     let grip = at + speed * profile.duration();
-    let closed = grip + speed * close_s;
+    let closed = grip + speed * closing_s + CLOSE_MARGIN_MM;
     let [start, end] = frame.window_mm;
     grip >= start
         && closed <= end

@@ -30,6 +30,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// Cycles over which the belt's speed is measured from its counts.
 const SPEED_CYCLES: usize = 32;
 
+/// How high a gripped part is lifted off the belt, in the belt's frame, before it is carried
+/// to the place, mm.
+pub const LIFT_MM: f64 = 25.0;
+
+/// What the gripper's closing must leave of the window besides its travel: the cycles before
+/// its read says it has closed (two) and this much more, mm.
+pub const CLOSE_MARGIN_MM: f64 = 2.0;
+
 /// What the picker and the dispatcher share: written with atomic stores only.
 #[derive(Debug, Default)]
 pub struct PickerShared {
@@ -58,7 +66,9 @@ enum Phase {
     Intercept(Pick),
     /// On the part, the gripper closing.
     Track(Pick),
-    /// The fixed profile to the place (or, after a pick given up, to rest) runs.
+    /// The part held, rising [`LIFT_MM`] in the belt's frame.
+    Lift(Pick),
+    /// The fixed profile to the place runs (with the part, or after a pick given up).
     Place(Option<Pick>),
     /// At the place, the gripper opening.
     Release,
@@ -84,6 +94,8 @@ pub struct Picker {
     belt_reads: usize,
     grip: Option<bool>,
     gripper: Gripper,
+    /// How long the gripper takes to close, s (`s626.gripper_close_s`).
+    close_s: f64,
     picks: Consumer<Pick>,
     events: Producer<PickEvent>,
     shared: Arc<PickerShared>,
@@ -142,6 +154,7 @@ impl Picker {
             belt_reads: 0,
             grip: None,
             gripper: Gripper(Gripper::ABSENT),
+            close_s: s.s626.gripper_close_s,
             picks,
             events,
             shared: shared.clone(),
@@ -172,22 +185,34 @@ impl Picker {
         (self.belt_at(0) - self.belt_at(span)) as f64 / (span as f64 * self.period_s)
     }
 
-    /// The joint counts of `pick`'s grip point at the belt's `counts`, and their velocity at
-    /// the belt's speed.
+    /// The joint counts of the point `up_mm` above `pick`'s grip point at the belt's
+    /// `counts`, and their velocity at the belt's speed; a part on the belt (not held) past
+    /// the window's end is lost.
     fn on_part(
         &self,
         pick: &Pick,
         counts: i64,
+        up_mm: f64,
     ) -> Result<([f64; MAX_MOTORS], [f64; MAX_MOTORS]), Lost> {
         let f = &self.belt_frame;
         let along = f.along(pick, counts);
-        if along > f.window_mm[1] {
+        if up_mm == 0.0 && along > f.window_mm[1] {
             return Err(GaveUp::LeftWindow);
         }
-        let q = f.counts(along, pick.across_mm).map_err(|_| GaveUp::OutOfReach)?;
+        let q = f.counts_up(along, pick.across_mm, up_mm).map_err(|_| GaveUp::OutOfReach)?;
         let step_mm = self.belt_speed() * f.mm_per_count * self.period_s;
-        let ahead = f.counts(along + step_mm, pick.across_mm).map_err(|_| GaveUp::OutOfReach)?;
+        let ahead =
+            f.counts_up(along + step_mm, pick.across_mm, up_mm).map_err(|_| GaveUp::OutOfReach)?;
         Ok((q, std::array::from_fn(|m| (ahead[m] - q[m]) / self.period_s)))
+    }
+
+    /// Whether the gripper, told to close on `pick` now, has closed before the belt carries
+    /// it past the window's end (its read comes two cycles after its travel).
+    fn closes_in_window(&self, pick: &Pick) -> bool {
+        let f = &self.belt_frame;
+        let speed_mm_s = self.belt_speed() * f.mm_per_count;
+        let closing_s = self.close_s + 2.0 * self.period_s;
+        f.along(pick, self.belt_at(0)) + speed_mm_s * closing_s + CLOSE_MARGIN_MM <= f.window_mm[1]
     }
 
     /// Plans `plan` from the last sample (sample `n − 1`): the profile's time 0.
@@ -206,10 +231,11 @@ impl Picker {
         self.profile.state_at(n.saturating_sub(self.origin_n) as f64 * self.period_s)
     }
 
-    /// Starts intercepting `pick`: the last command's state relative to the part (at the
-    /// last cycle's belt) to rest on it.
-    fn intercept(&mut self, n: u64, pick: Pick) -> Result<(), Lost> {
-        let (q, v) = self.on_part(&pick, self.belt_at(1))?;
+    /// Starts a profile relative to the point `up_mm` above `pick`, its time 0 the last
+    /// sample commanded (sample `n − 1`, read `back` reads ago): that sample's state relative
+    /// to the point to rest on it.
+    fn intercept(&mut self, n: u64, pick: Pick, up_mm: f64, back: usize) -> Result<(), Lost> {
+        let (q, v) = self.on_part(&pick, self.belt_at(back), up_mm)?;
         let from = MotionState {
             p: std::array::from_fn(|m| self.last.p[m] - q[m]),
             v: std::array::from_fn(|m| self.last.v[m] - v[m]),
@@ -219,14 +245,11 @@ impl Picker {
         self.replan(n, |p| p.plan(&from, &[0.0; MAX_MOTORS], &relative))
     }
 
-    /// Leaves the part at sample `n` for the place (`pick`: with the part) or, after a pick
-    /// given up, for rest wherever the command stops.
+    /// Leaves the belt at sample `n` for the place (`pick`: with the part; `None`: after a
+    /// pick given up, the gripper open — the place is clear of the belt).
     fn leave(&mut self, n: u64, pick: Option<Pick>) {
         let (from, limits, place) = (self.last, self.limits, self.place);
-        let planned = match pick {
-            Some(_) => self.replan(n, |p| p.plan(&from, &place, &limits)),
-            None => self.replan(n, |p| p.plan_stop(&from, &limits)),
-        };
+        let planned = self.replan(n, |p| p.plan(&from, &place, &limits));
         if planned.is_err() {
             // No profile from a finite state within the limits is a bug, not a belt: hold.
             let hold = MotionState::at_rest(self.last.p);
@@ -235,11 +258,26 @@ impl Picker {
         self.phase = Phase::Place(pick);
     }
 
-    /// Gives `pick` up at sample `n`: the gripper opens and the command stops.
+    /// Gives `pick` up at sample `n` (the last sample commanded is `n − 1`'s): the gripper
+    /// opens and the command goes to the place, from sample `n` on.
     fn give_up(&mut self, n: u64, pick: &Pick, why: GaveUp) {
         let _ = self.events.push(PickEvent::GaveUp { id: pick.id, why });
         self.grip = Some(false);
         self.leave(n, None);
+        self.last = self.profiled(n);
+    }
+
+    /// One sample `n` of the profile relative to the point `up_mm` above `pick`: the command
+    /// on that point plus the profile; `Ok(true)` once the profile has ended.
+    fn relative(&mut self, n: u64, pick: &Pick, up_mm: f64) -> Result<bool, Lost> {
+        let r = self.profiled(n);
+        let (q, v) = self.on_part(pick, self.belt_at(0), up_mm)?;
+        self.last = MotionState {
+            p: std::array::from_fn(|m| q[m] + r.p[m]),
+            v: std::array::from_fn(|m| v[m] + r.v[m]),
+            a: r.a,
+        };
+        Ok(n.saturating_sub(self.origin_n) as f64 * self.period_s >= self.profile.duration())
     }
 
     /// The orders of the command thread: a stop or a quit ends the picking (a part in the
@@ -275,7 +313,7 @@ impl Picker {
                     self.ended = true;
                 } else if let Ok(pick) = self.picks.pop() {
                     self.shared.ready.store(false, Ordering::Release);
-                    match self.intercept(n, pick) {
+                    match self.intercept(n, pick, 0.0, 1) {
                         Ok(()) => {
                             self.phase = Phase::Intercept(pick);
                             self.step(n);
@@ -288,34 +326,48 @@ impl Picker {
                 if ending {
                     return self.give_up(n, &pick, GaveUp::Stopped);
                 }
-                let r = self.profiled(n);
-                match self.on_part(&pick, self.belt_at(0)) {
-                    Ok((q, v)) => {
-                        self.last = MotionState {
-                            p: std::array::from_fn(|m| q[m] + r.p[m]),
-                            v: std::array::from_fn(|m| v[m] + r.v[m]),
-                            a: r.a,
-                        };
-                        if n.saturating_sub(self.origin_n) as f64 * self.period_s
-                            >= self.profile.duration()
-                        {
-                            self.phase = Phase::Track(pick);
-                            self.grip = Some(true);
-                            let _ = self.events.push(PickEvent::Gripping { id: pick.id, cycle: n });
-                        }
+                match self.relative(n, &pick, 0.0) {
+                    // On the part: the gripper closes, if it can close inside the window.
+                    Ok(true) if self.closes_in_window(&pick) => {
+                        self.phase = Phase::Track(pick);
+                        self.grip = Some(true);
+                        let _ = self.events.push(PickEvent::Gripping { id: pick.id, cycle: n });
                     }
+                    Ok(true) => {
+                        // Sample n is commanded: the place from it, the gripper left open.
+                        let why = GaveUp::LeftWindow;
+                        let _ = self.events.push(PickEvent::GaveUp { id: pick.id, why });
+                        self.grip = Some(false);
+                        self.leave(n + 1, None);
+                    }
+                    Ok(false) => {}
                     Err(why) => self.give_up(n, &pick, why),
                 }
             }
-            Phase::Track(pick) => match self.on_part(&pick, self.belt_at(0)) {
+            Phase::Track(pick) => match self.on_part(&pick, self.belt_at(0), 0.0) {
                 Ok((q, v)) => {
                     self.last = MotionState { p: q, v, a: [0.0; MAX_MOTORS] };
                     if self.gripper.reached(true) {
                         let _ = self.events.push(PickEvent::Lifted { id: pick.id });
-                        self.leave(n + 1, Some(pick));
+                        // Off the belt, rising with it; the place straight away if the point
+                        // above is out of reach.
+                        match self.intercept(n + 1, pick, LIFT_MM, 0) {
+                            Ok(()) => self.phase = Phase::Lift(pick),
+                            Err(_) => self.leave(n + 1, Some(pick)),
+                        }
                     }
                 }
                 Err(why) => self.give_up(n, &pick, why),
+            },
+            Phase::Lift(pick) => match self.relative(n, &pick, LIFT_MM) {
+                Ok(false) => {}
+                // Up: to the place, from this sample's state.
+                Ok(true) => self.leave(n + 1, Some(pick)),
+                Err(_) => {
+                    // Held, so never given up: to the place from the last sample.
+                    self.leave(n, Some(pick));
+                    self.last = self.profiled(n);
+                }
             },
             Phase::Place(pick) => {
                 self.last = self.profiled(n);
@@ -379,8 +431,10 @@ impl TrajectoryGenerator for Picker {
     fn start(&mut self, start: &[f64; MAX_MOTORS]) -> Result<(), TrajStartError> {
         self.last = MotionState::at_rest(*start);
         self.profile = Profile::new(self.n_motors, *start);
-        self.phase = Phase::Idle;
-        self.shared.ready.store(true, Ordering::Release);
+        // The gripper open before the first pick, whatever state it was left in.
+        self.grip = Some(false);
+        self.phase = Phase::Release;
+        self.shared.ready.store(false, Ordering::Release);
         Ok(())
     }
 

@@ -28,6 +28,12 @@ fn part(across_mm: f64) -> Part {
     Part { id: 1, seen, state: PartState::Pending }
 }
 
+/// How long after it is told the gripper's read says it has closed: its travel and two
+/// cycles.
+fn closing_s(s: &Settings) -> f64 {
+    s.s626.gripper_close_s + 2.0 * s.period_s()
+}
+
 /// Whether the picker at rest at the place intercepts a part now `at` mm along at `speed`,
 /// and the intercept's duration.
 fn intercept(s: &Settings, at: f64, across: f64, speed: f64) -> (bool, f64) {
@@ -40,9 +46,18 @@ fn intercept(s: &Settings, at: f64, across: f64, speed: f64) -> (bool, f64) {
     let mut command = [0.0; MAX_MOTORS];
     command[..3].copy_from_slice(&place.unwrap());
     let mut profile = Profile::new(3, command);
-    let close_s = s.s626.gripper_close_s;
-    let ok =
-        intercepts(&frame, &relative, &mut profile, 3, &command, &part(across), at, speed, close_s);
+    let closing_s = closing_s(s);
+    let ok = intercepts(
+        &frame,
+        &relative,
+        &mut profile,
+        3,
+        &command,
+        &part(across),
+        at,
+        speed,
+        closing_s,
+    );
     (ok, profile.duration())
 }
 
@@ -52,7 +67,7 @@ fn intercept(s: &Settings, at: f64, across: f64, speed: f64) -> (bool, f64) {
 fn a_part_is_handed_over_only_if_the_grip_falls_inside_the_window() {
     let s = settings();
     let [start, end] = s.conveyor.window_mm;
-    let (speed, close_s) = (500.0, s.s626.gripper_close_s);
+    let (speed, close_s) = (500.0, closing_s(&s));
     // Where the intercept would grip a part now at the window's start.
     let (ok, t) = intercept(&s, start, 0.0, speed);
     assert!(ok && t > 0.05, "{t}");
@@ -81,8 +96,9 @@ fn a_part_is_handed_over_only_if_the_grip_falls_inside_the_window() {
     assert!(intercept(&s, (start + end) / 2.0, 0.0, 0.0).0);
     assert!(!intercept(&s, start - 1.0, 0.0, 0.0).0);
     assert!(intercept(&s, start, 0.0, 0.0).0);
-    assert!(intercept(&s, end, 0.0, 0.0).0, "closed at the end: inside");
-    assert!(!intercept(&s, end + 0.1, 0.0, 0.0).0);
+    let last = end - super::picker::CLOSE_MARGIN_MM;
+    assert!(intercept(&s, last, 0.0, 0.0).0, "closed at the end, the margin kept: inside");
+    assert!(!intercept(&s, last + 0.1, 0.0, 0.0).0);
 }
 
 #[test]
@@ -173,6 +189,25 @@ fn rig() -> Rig {
     Rig { n: 0, belt: 0, gripper: Gripper(Gripper::OPEN), told: None, since: 0 }
 }
 
+/// No jump, in position or in velocity: each step of `cmds` within what the motors' velocity
+/// allows, each change of step within what their acceleration allows (a velocity that jumped
+/// at a change of phase — the belt's own speed misjudged, a profile begun a sample late —
+/// would break it).
+fn smooth(s: &Settings, cmds: &[[f64; MAX_MOTORS]]) {
+    let limits = MotionLimits::of(s);
+    let (v, a) = (limits.velocity[0] * s.period_s(), limits.acceleration[0] * s.period_s().powi(2));
+    for w in cmds.windows(2) {
+        assert!((0..3).all(|m| (w[1][m] - w[0][m]).abs() <= v * 1.01), "{w:?}");
+    }
+    for (k, w) in cmds.windows(3).enumerate() {
+        let change = (0..3).map(|m| (w[2][m] - 2.0 * w[1][m] + w[0][m]).abs()).fold(0.0, f64::max);
+        assert!(
+            change <= a * (1.0 + 1e-6),
+            "sample {k}: a change of step of {change} counts, the acceleration's {a}"
+        );
+    }
+}
+
 /// A part handed over is intercepted, followed exactly while the gripper closes, lifted,
 /// placed and let go, once; the command never jumps.
 #[test]
@@ -207,22 +242,7 @@ fn the_picker_intercepts_follows_and_places_a_part_once() {
         assert!((0..3).all(|m| (cmd[m] - on[m]).abs() < 1e-6), "cycle {k}: {cmd:?} against {on:?}");
         assert!(along <= s.conveyor.window_mm[1]);
     }
-    // No jump, in position or in velocity: each step within what the motors' velocity
-    // allows, each change of step within what their acceleration allows (a velocity that
-    // jumped at a change of phase — the belt's own speed misjudged — would break it).
-    let limits = MotionLimits::of(&s);
-    let (v, a) = (limits.velocity[0] * s.period_s(), limits.acceleration[0] * s.period_s().powi(2));
-    for w in cmds.windows(2) {
-        assert!((0..3).all(|m| (w[1][m] - w[0][m]).abs() <= v * 1.01), "{w:?}");
-    }
-    let worst = cmds
-        .windows(3)
-        .map(|w| (0..3).map(|m| (w[2][m] - 2.0 * w[1][m] + w[0][m]).abs()).fold(0.0, f64::max))
-        .fold(0.0, f64::max);
-    assert!(
-        worst <= a * (1.0 + 1e-6),
-        "a change of step of {worst} counts, the acceleration's {a}"
-    );
+    smooth(&s, &cmds);
     // Back at rest, waiting for the next.
     assert!(h.shared.ready.load(Ordering::Acquire));
 }
@@ -240,12 +260,14 @@ fn a_part_leaving_the_window_is_given_up_never_chased() {
     let end = s.conveyor.window_mm[1];
     let pick = Pick { id: 3, belt_mm: end - 0.93, across_mm: 0.0, latched_counts: r.belt };
     h.picks.push(pick).unwrap();
-    let (_, events, _) = r.run(&mut p, &mut h, 1_500, speed);
+    let (cmds, events, _) = r.run(&mut p, &mut h, 1_500, speed);
     assert_eq!(
         events.first(),
         Some(&PickEvent::GaveUp { id: 3, why: GaveUp::LeftWindow }),
         "{events:?}"
     );
+    // Given up while moving: on to the place without a repeated sample or a jump.
+    smooth(&s, &cmds);
     assert!(!events.iter().any(|e| matches!(e, PickEvent::Gripping { .. })), "{events:?}");
     assert_eq!(r.told, Some(false), "the gripper told to open");
     assert!(h.shared.ready.load(Ordering::Acquire), "ready for the next");
