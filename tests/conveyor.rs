@@ -194,19 +194,26 @@ fn a_part_beyond_reach_is_missed_never_chased() {
     run.assert_clean();
 }
 
+/// A conveyor session of `seconds` at 90 parts a minute, started and picking for
+/// `after_s` s: the starter and the output folder.
+fn picking(run: &TestRun, seconds: f64, after_s: u64) -> (std::process::Child, std::path::PathBuf) {
+    let config = run.config_with(&[]);
+    let out = run.out("out");
+    let args = conveyor_args(&config, &out, seconds, &["--parts-per-min=90"]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let child = run.spawn_starter(&args);
+    qmarc_tests::wait_until_moving(&run.location().prefix, std::time::Duration::from_secs(60));
+    std::thread::sleep(std::time::Duration::from_secs(after_s));
+    (child, out)
+}
+
 /// The camera killed mid-run is said at once and ends nothing: the session picks the parts
 /// it had seen and ends when its time is up, every file written.
 #[test]
 fn the_camera_killed_mid_run_ends_nothing() {
     use nix::sys::signal::Signal;
     let run = TestRun::new("conveyor-camkill");
-    let config = run.config_with(&[]);
-    let out = run.out("out");
-    let args = conveyor_args(&config, &out, 6.0, &["--parts-per-min=90"]);
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let child = run.spawn_starter(&args);
-    qmarc_tests::wait_until_moving(&run.location().prefix, std::time::Duration::from_secs(60));
-    std::thread::sleep(std::time::Duration::from_secs(2));
+    let (child, out) = picking(&run, 6.0, 2);
     let camera = run.processes().into_iter().find(|(_, c)| c.contains("qmarc-camera"));
     let (pid, _) = camera.expect("the camera runs");
     qmarc_tests::send_signal(pid, Signal::SIGKILL);
@@ -232,13 +239,7 @@ fn the_camera_killed_mid_run_ends_nothing() {
 fn ctrl_c_ends_a_conveyor_session_with_every_file_written() {
     use nix::sys::signal::Signal;
     let run = TestRun::new("conveyor-ctrlc");
-    let config = run.config_with(&[]);
-    let out = run.out("out");
-    let args = conveyor_args(&config, &out, 30.0, &["--parts-per-min=90"]);
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let child = run.spawn_starter(&args);
-    qmarc_tests::wait_until_moving(&run.location().prefix, std::time::Duration::from_secs(60));
-    std::thread::sleep(std::time::Duration::from_secs(3));
+    let (child, out) = picking(&run, 30.0, 3);
     qmarc_tests::send_signal(child.id(), Signal::SIGINT);
     let r = qmarc_tests::wait_with_timeout(child, std::time::Duration::from_secs(60));
     assert_eq!(r.code, Some(130), "{}\n{}", r.stdout, r.stderr);
