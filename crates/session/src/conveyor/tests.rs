@@ -199,6 +199,16 @@ fn smooth(s: &Settings, cmds: &[[f64; MAX_MOTORS]]) {
     for w in cmds.windows(2) {
         assert!((0..3).all(|m| (w[1][m] - w[0][m]).abs() <= v * 1.01), "{w:?}");
     }
+    let j = limits.jerk[0] * s.period_s().powi(3);
+    for (k, w) in cmds.windows(4).enumerate() {
+        let third = (0..3)
+            .map(|m| (w[3][m] - 3.0 * w[2][m] + 3.0 * w[1][m] - w[0][m]).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            third <= j * 1.5,
+            "sample {k}: a third difference of {third} counts, the jerk's {j}"
+        );
+    }
     for (k, w) in cmds.windows(3).enumerate() {
         let change = (0..3).map(|m| (w[2][m] - 2.0 * w[1][m] + w[0][m]).abs()).fold(0.0, f64::max);
         assert!(
@@ -218,12 +228,15 @@ fn the_picker_intercepts_follows_and_places_a_part_once() {
     let mut r = rig();
     // The belt at 500 mm/s: 4 counts of 0.05 mm a 400 µs cycle is 0.5 m/s.
     let speed = 4;
-    r.run(&mut p, &mut h, 40, speed);
+    let (rest, _, _) = r.run(&mut p, &mut h, 40, speed);
     assert!(h.shared.ready.load(Ordering::Acquire));
     let pick = Pick { id: 7, belt_mm: 320.0, across_mm: 30.0, latched_counts: r.belt };
     h.picks.push(pick).unwrap();
     let start = r.n;
     let (cmds, events, _) = r.run(&mut p, &mut h, 2_000, speed);
+    // The rest before it, then the pick: no jump where the intercept begins either.
+    let mut all = vec![rest[rest.len() - 1]];
+    all.extend_from_slice(&cmds);
     assert!(!h.shared.ready.load(Ordering::Acquire) || events.len() == 3, "{events:?}");
     let gripping = events.iter().find_map(|e| match e {
         PickEvent::Gripping { id: 7, cycle } => Some(*cycle),
@@ -242,7 +255,7 @@ fn the_picker_intercepts_follows_and_places_a_part_once() {
         assert!((0..3).all(|m| (cmd[m] - on[m]).abs() < 1e-6), "cycle {k}: {cmd:?} against {on:?}");
         assert!(along <= s.conveyor.window_mm[1]);
     }
-    smooth(&s, &cmds);
+    smooth(&s, &all);
     // Back at rest, waiting for the next.
     assert!(h.shared.ready.load(Ordering::Acquire));
 }
@@ -255,12 +268,25 @@ fn a_part_leaving_the_window_is_given_up_never_chased() {
     let (mut p, _serve, mut h) = picker(&s);
     let mut r = rig();
     let speed = 4;
-    r.run(&mut p, &mut h, 40, speed);
+    let (rest, _, _) = r.run(&mut p, &mut h, 40, speed);
     // Just short of the window's end (by no whole number of the belt's 0.2 mm steps).
     let end = s.conveyor.window_mm[1];
     let pick = Pick { id: 3, belt_mm: end - 0.93, across_mm: 0.0, latched_counts: r.belt };
     h.picks.push(pick).unwrap();
-    let (cmds, events, _) = r.run(&mut p, &mut h, 1_500, speed);
+    // Given up in the cycle the belt carries it past the end (the fifth 0.2 mm step), not
+    // chased until the intercept would end.
+    let (mut cmds, mut events) = (vec![rest[rest.len() - 1]], Vec::new());
+    let mut cycles = 0;
+    while events.is_empty() {
+        let (c, e, _) = r.run(&mut p, &mut h, 1, speed);
+        cmds.extend(c);
+        events.extend(e);
+        cycles += 1;
+    }
+    assert_eq!(cycles, 5, "given up {cycles} cycles after the pick arrived");
+    let (c, e, _) = r.run(&mut p, &mut h, 1_500, speed);
+    cmds.extend(c);
+    events.extend(e);
     assert_eq!(
         events.first(),
         Some(&PickEvent::GaveUp { id: 3, why: GaveUp::LeftWindow }),
@@ -313,4 +339,46 @@ fn a_quit_finishes_the_part_held_and_moves_are_not_taken() {
     assert_eq!(r.told, Some(false), "open at the end");
     let last = cmds.last().unwrap();
     assert_eq!(cmds[cmds.len() - 2], *last, "at rest");
+}
+
+/// The gripper is told to close only if its read will say closed before the belt carries the
+/// part past the window's end (its travel, two cycles and `CLOSE_MARGIN_MM`): parts reached
+/// late are given up at the end of the intercept, inside the window, never gripped.
+#[test]
+fn the_gripper_closes_only_if_it_closes_inside_the_window() {
+    let s = settings();
+    let end = s.conveyor.window_mm[1];
+    let speed = 4; // counts a cycle: 500 mm/s
+    let mm_s = speed as f64 * s.conveyor.mm_per_count / s.period_s();
+    let closing_mm = mm_s * closing_s(&s) + super::picker::CLOSE_MARGIN_MM;
+    let (mut gripped, mut gated) = (0, 0);
+    for k in 0..60 {
+        let (mut p, _serve, mut h) = picker(&s);
+        let mut r = rig();
+        r.run(&mut p, &mut h, 40, speed);
+        let start = end - 200.0 + 3.07 * f64::from(k);
+        let pick = Pick { id: 1, belt_mm: start, across_mm: 0.0, latched_counts: r.belt };
+        h.picks.push(pick).unwrap();
+        let mut event = None;
+        while event.is_none() && r.n < 3_000 {
+            event = r.run(&mut p, &mut h, 1, speed).1.first().copied();
+        }
+        // Where the part was in the cycle of the event (the last one run).
+        let along = pick.belt_mm + (r.belt - pick.latched_counts) as f64 * s.conveyor.mm_per_count;
+        match event {
+            Some(PickEvent::Gripping { .. }) => {
+                gripped += 1;
+                assert!(along + closing_mm <= end + 1e-9, "gripped at {along} mm");
+            }
+            Some(PickEvent::GaveUp { why: GaveUp::LeftWindow, .. }) => {
+                // Inside the window still: the gate, not the end, gave it up.
+                if along <= end {
+                    gated += 1;
+                    assert!(along + closing_mm > end - 0.3, "given up at {along} mm");
+                }
+            }
+            other => panic!("{other:?} for a part from {start} mm"),
+        }
+    }
+    assert!(gripped > 5 && gated > 0, "{gripped} gripped, {gated} given up inside the window");
 }
