@@ -89,7 +89,16 @@ fn the_camera_publishes_the_worlds_parts_until_stopped() {
     );
     drop(subscriber);
     drop(node);
+    // iceoryx2 keeps the node's management file in /dev/shm under the prefix: removed too.
+    location.remove_files();
     let _ = std::fs::remove_dir_all(&dir);
+    let left: Vec<_> = std::fs::read_dir(qmarc_proto::service::SHM_DIR)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+        .map(|e| e.file_name())
+        .collect();
+    assert!(left.is_empty(), "left in /dev/shm: {left:?}");
 }
 
 #[test]
