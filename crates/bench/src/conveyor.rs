@@ -12,8 +12,8 @@
 
 use qmarc_config::Settings;
 use qmarc_controller::traj::TrajectoryGenerator;
-use qmarc_session::conveyor::Pick;
 use qmarc_session::conveyor::picker::Picker;
+use qmarc_session::conveyor::{BeltFrame, Pick};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
@@ -167,14 +167,8 @@ fn intercept_timing(s: &Settings) -> anyhow::Result<()> {
     let status = std::sync::Arc::new(qmarc_controller::status::LoopStatus::default());
     let (mut p, _serve, mut h) =
         Picker::new(s, status).ok_or_else(|| anyhow::anyhow!("the settings describe no Delta"))?;
-    let place = s.conveyor.place_mm;
-    let robot = s.robot().ok_or_else(|| anyhow::anyhow!("no robot"))?;
-    let q = robot.counts_of(&qmarc_kinematics::Point::new(
-        place[0] * 1e-3,
-        place[1] * 1e-3,
-        place[2] * 1e-3,
-    ))?;
-    p.start(&[q[0], q[1], q[2], 0.0])?;
+    let frame = BeltFrame::of(s).ok_or_else(|| anyhow::anyhow!("no robot"))?;
+    p.start(&frame.counts_at_mm(s.conveyor.place_mm)?)?;
     let per_cycle = (s.conveyor.speed_mm_s * s.period_s() / s.conveyor.mm_per_count).round() as i64;
     let (mut all, mut planning) = (Vec::new(), Vec::new());
     let (mut belt, mut id, mut gripper) =

@@ -138,6 +138,12 @@ impl BeltFrame {
     ) -> Result<[f64; MAX_MOTORS], KinematicsError> {
         let mut p = self.grip_point_mm(along, across);
         p[2] += up_mm;
+        self.counts_at_mm(p)
+    }
+
+    /// The joint counts that put the effector on the robot-frame point `p`, mm (the place,
+    /// a point of the belt). Allocates nothing.
+    pub fn counts_at_mm(&self, p: [f64; 3]) -> Result<[f64; MAX_MOTORS], KinematicsError> {
         let c = self.robot.counts_of(&Point::new(p[0] * 1e-3, p[1] * 1e-3, p[2] * 1e-3))?;
         let mut out = [0.0; MAX_MOTORS];
         out[..c.len()].copy_from_slice(&c);

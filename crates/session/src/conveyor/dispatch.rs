@@ -5,7 +5,7 @@
 //! picker the next part it can intercept inside the window, and notes what the picker did.
 //! At the end it says what became of every part ([`PartRecord`]).
 
-use super::picker::{CLOSE_MARGIN_MM, PickerHandle, relative_limits};
+use super::picker::{CLOSE_MARGIN_MM, PickerHandle, relative_limits_of};
 use super::{BeltFrame, GaveUp, Pick, PickEvent};
 use qmarc_config::Settings;
 use qmarc_controller::status::LoopStatus;
@@ -100,13 +100,11 @@ impl Dispatcher {
             ServiceError::new("settings", "conveyor", "[robot] describes no Delta")
         })?;
         let c = &s.conveyor;
-        let fastest = c.speed_steps.iter().map(|s| s[1].abs()).fold(c.speed_mm_s.abs(), f64::max);
-        let limits = MotionLimits::of(s);
         let merge_mm = (4.0 * s.camera.noise_mm).max(5.0);
         let mut d = Dispatch {
             queue: PartQueue::new(c.window_mm, merge_mm, QUEUE_CAPACITY),
             belt: Belt { mm_per_count: c.mm_per_count },
-            relative: relative_limits(&frame, &limits, s.n_motors, fastest, s.camera.spread_mm),
+            relative: relative_limits_of(s, &frame),
             frame,
             close_s: s.s626.gripper_close_s,
             period_s: s.period_s(),

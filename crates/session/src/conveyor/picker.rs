@@ -119,20 +119,9 @@ impl Picker {
     ) -> Option<(Picker, ServeHandle, PickerHandle)> {
         let belt_frame = BeltFrame::of(s)?;
         let c = &s.conveyor;
-        let place = {
-            let p = c.place_mm;
-            let q = s
-                .robot()?
-                .counts_of(&qmarc_kinematics::Point::new(p[0] * 1e-3, p[1] * 1e-3, p[2] * 1e-3))
-                .ok()?;
-            let mut out = [0.0; MAX_MOTORS];
-            out[..q.len()].copy_from_slice(&q);
-            out
-        };
+        let place = belt_frame.counts_at_mm(c.place_mm).ok()?;
         let limits = MotionLimits::of(s);
-        let fastest = c.speed_steps.iter().map(|s| s[1].abs()).fold(c.speed_mm_s.abs(), f64::max);
-        let relative =
-            relative_limits(&belt_frame, &limits, s.n_motors, fastest, s.camera.spread_mm);
+        let relative = relative_limits_of(s, &belt_frame);
         let (orders_tx, orders) = RingBuffer::new(crate::generator::ORDER_QUEUE);
         let (spent, spent_rx) = RingBuffer::new(crate::generator::ORDER_QUEUE + 1);
         let (picks_tx, picks) = RingBuffer::new(2);
@@ -390,6 +379,15 @@ impl Picker {
             }
         }
     }
+}
+
+/// [`relative_limits`] of the settings `s` at the belt `frame`: the motors' limits, the
+/// simulated belt at its fastest (`speed_mm_s` or any of its `speed_steps`), the parts'
+/// spread — what the picker plans by and the dispatcher checks a part by.
+pub fn relative_limits_of(s: &Settings, frame: &BeltFrame) -> MotionLimits {
+    let c = &s.conveyor;
+    let fastest = c.speed_steps.iter().map(|s| s[1].abs()).fold(c.speed_mm_s.abs(), f64::max);
+    relative_limits(frame, &MotionLimits::of(s), s.n_motors, fastest, s.camera.spread_mm)
 }
 
 /// What is left of each motor's `limits` in a part's frame: the velocity less what the belt

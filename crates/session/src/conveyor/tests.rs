@@ -40,11 +40,7 @@ fn intercept(s: &Settings, at: f64, across: f64, speed: f64) -> (bool, f64) {
     let frame = BeltFrame::of(s).unwrap();
     let limits = MotionLimits::of(s);
     let relative = relative_limits(&frame, &limits, 3, speed, s.camera.spread_mm);
-    let p = s.conveyor.place_mm;
-    let place =
-        frame.robot.counts_of(&qmarc_kinematics::Point::new(p[0] * 1e-3, p[1] * 1e-3, p[2] * 1e-3));
-    let mut command = [0.0; MAX_MOTORS];
-    command[..3].copy_from_slice(&place.unwrap());
+    let command = frame.counts_at_mm(s.conveyor.place_mm).unwrap();
     let mut profile = Profile::new(3, command);
     let closing_s = closing_s(s);
     let ok = intercepts(
@@ -126,13 +122,7 @@ fn the_count_at_an_exposure_is_interpolated_between_the_loops_samples() {
 /// A picker at rest at the place, its handles, and its settings.
 fn picker(s: &Settings) -> (Picker, ServeHandle, PickerHandle) {
     let (mut p, serve, handle) = Picker::new(s, Arc::new(LoopStatus::default())).unwrap();
-    let place = s.conveyor.place_mm;
-    let q = BeltFrame::of(s)
-        .unwrap()
-        .robot
-        .counts_of(&qmarc_kinematics::Point::new(place[0] * 1e-3, place[1] * 1e-3, place[2] * 1e-3))
-        .unwrap();
-    p.start(&[q[0], q[1], q[2], 0.0]).unwrap();
+    p.start(&BeltFrame::of(s).unwrap().counts_at_mm(s.conveyor.place_mm).unwrap()).unwrap();
     (p, serve, handle)
 }
 
