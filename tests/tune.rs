@@ -188,3 +188,73 @@ fn paced_tuning_makes_real_moves_within_the_move_budget() {
     assert!(r.stderr.contains("--unhomed"), "{}", r.stderr);
     run.assert_clean();
 }
+
+/// The effector's distance from its command over the pick cycle (`run --method pick`, in
+/// lock-step from where the simulated robot stands, `--approach`) with the settings `config`:
+/// max and RMS, mm.
+fn pick_cycle_error(run: &TestRun, config: &Path, name: &str) -> (f64, f64) {
+    let config = run.config_from(config, &[]);
+    let (c, out) = (format!("--config={}", config.display()), run.out(name));
+    let o = format!("--out={}", out.display());
+    run.starter_ok(&[&c, &o, "--deterministic", "run", "--method=pick", "--approach"]);
+    let summary = read_summary(&out);
+    assert!(summary.fault.is_none(), "{name}: {:?}", summary.fault);
+    let d = summary.effector.expect("a Delta's effector figures").distance;
+    (d.max_mm, d.rms_mm)
+}
+
+/// Issue 44, accuracy at speed: the pick cycle — online, time-optimal moves at the motors'
+/// limits — with the thesis' gains leaves the effector more than 5 mm off its command
+/// (7.7 mm: the issue's 7.9); `config/tuned.toml`, its feed-forward (the jerk's included)
+/// tuned on that cycle, keeps it within 2 mm and 0.5 mm RMS. And tuned.toml is
+/// `config/qmarc.toml` but for the gains: the same robot, belt, camera and limits.
+#[test]
+fn the_tuned_settings_follow_the_pick_cycle_within_2_mm() {
+    let run = TestRun::new("tunedpick");
+    let (thesis_max, _) = pick_cycle_error(&run, &qmarc_tests::shipped_config(), "thesis");
+    assert!(thesis_max > 5.0, "the thesis' gains: {thesis_max} mm");
+    let (max, rms) = pick_cycle_error(&run, &qmarc_tests::tuned_config(), "tuned");
+    assert!(max <= 2.0 && rms <= 0.5, "tuned: max {max} mm, RMS {rms} mm");
+    let load = |p: PathBuf| {
+        let s = qmarc_config::Settings::load(&p, &qmarc_config::Names::any()).expect("loads");
+        let mut v = serde_json::to_value(&s).unwrap();
+        v["source"] = serde_json::Value::Null;
+        for m in v["motors"].as_array_mut().unwrap() {
+            for gain in ["kvff", "kaff", "kjff"] {
+                m[gain] = serde_json::Value::Null;
+            }
+        }
+        (s, v)
+    };
+    let ((thesis, a), (tuned, b)) =
+        (load(qmarc_tests::shipped_config()), load(qmarc_tests::tuned_config()));
+    assert_eq!(a, b, "tuned.toml differs from qmarc.toml beyond the feed-forward gains");
+    for m in 0..3 {
+        assert_eq!(thesis.motors[m].kjff, 0.0, "qmarc.toml is eq. 3-1");
+        assert!(
+            tuned.motors[m].kjff > 0.0 && tuned.motors[m].kaff > 1_000.0 * thesis.motors[m].kaff
+        );
+    }
+    run.assert_clean();
+}
+
+/// `tune … run --method pick` tunes on the pick cycle, a path with no knot file: its files
+/// say so, and the gains it writes include the jerk feed-forward when it is tuned.
+#[test]
+fn tuning_runs_on_the_pick_cycle() {
+    let run = TestRun::new("tunepick");
+    let config = run.config_with(&[("state_file", "\"\"")]);
+    let (c, o) = (format!("--config={}", config.display()), run.out("t"));
+    let out = format!("--out={}", o.display());
+    let r = run.starter(
+        &[&c, &out, "tune", "--params=kjff", "--budget=3", "run", "--method=pick"],
+        std::time::Duration::from_secs(1200),
+    );
+    assert_eq!(r.code, Some(0), "{}{}", r.stdout, r.stderr);
+    assert!(r.stdout.contains("on the pick path of [pick]"), "{}", r.stdout);
+    let gains = std::fs::read_to_string(o.join("tuned-gains.toml")).unwrap();
+    assert!(gains.contains("the pick path of [pick]") && gains.contains("kjff = "), "{gains}");
+    let summary = std::fs::read_to_string(o.join("tune-summary.json")).unwrap();
+    assert!(summary.contains("\"knots\": \"\""), "{summary}");
+    run.assert_clean();
+}

@@ -45,6 +45,12 @@ pub fn shipped_config() -> PathBuf {
     workspace().join("config/qmarc.toml")
 }
 
+/// The shipped settings tuned for online moves (`config/tuned.toml`: the same robot, the
+/// feed-forward tuned on the pick cycle).
+pub fn tuned_config() -> PathBuf {
+    workspace().join("config/tuned.toml")
+}
+
 /// The shipped settings for the Sensoray 626 (its counts, 1×).
 pub fn s626_config() -> PathBuf {
     workspace().join("config/s626.toml")

@@ -61,7 +61,8 @@ fn knot_files(dir: &Path, n: usize, cycles: u64) -> anyhow::Result<(PathBuf, Pat
 }
 
 /// Mean ns per cycle over `cycles`, and the slowest batch of 1 000 (ns per cycle); `None` when
-/// the generator cannot start here (homing needs switches to find).
+/// the generator cannot start here (homing needs switches to find, a line or the pick cycle
+/// the Delta's three motors).
 fn time_one(
     settings: &Settings,
     generator: usize,
@@ -71,7 +72,8 @@ fn time_one(
     let n = settings.n_motors;
     let Ok(mut g) = (GENERATORS[generator].build)(settings) else { return Ok(None) };
     let mut law = (LAWS[law].build)(settings);
-    let start = [0.0; MAX_MOTORS];
+    // Where its path starts (the pick cycle's pick point), else at 0.
+    let start = g.first_command().ok().flatten().unwrap_or([0.0; MAX_MOTORS]);
     if g.start(&start).is_err() {
         return Ok(None);
     }

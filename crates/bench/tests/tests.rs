@@ -133,8 +133,8 @@ fn cycle_times_every_generator_and_law_for_1_to_4_motors() {
     for name in qmarc_plugins::registry::GENERATORS.iter().map(|g| g.name) {
         let row = t.lines().find(|l| l.split_whitespace().nth(1) == Some(name));
         let row = row.unwrap_or_else(|| panic!("no row for {name}: {t}"));
-        if name == "linear" {
-            // A line needs the Delta: three motors only, "—" for the others.
+        if name == "linear" || name == "pick" {
+            // A line and the pick cycle need the Delta: three motors only, "—" for the others.
             let words: Vec<&str> = row.split_whitespace().collect();
             assert_eq!((words.len(), words[2], words[3], words[6]), (7, "—", "—", "—"), "{row}");
         } else {

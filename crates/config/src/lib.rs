@@ -31,6 +31,7 @@ mod jog;
 mod motion;
 mod motor;
 mod overrides;
+mod pick;
 mod robot;
 mod run;
 mod s626;
@@ -54,6 +55,7 @@ pub use jog::{AXES, JogSettings, MAX_JOG_COUNTS, MAX_JOG_MM};
 pub use motion::{MAX_TARGET_COUNTS, MoveSettings, MoveTarget, TargetError};
 pub use motor::{MotorGains, MotorSafety, effective_gains_problem, gains_problem};
 pub use overrides::TimingOverrides;
+pub use pick::{MAX_DWELL_S, MAX_PICK_MM, PickSettings};
 pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
 pub use s626::{S626_DIO_CHANNELS, S626Settings};
@@ -129,6 +131,9 @@ pub struct Settings {
     /// `move`: the target of an online move (from the command line, not the file).
     #[serde(default)]
     pub motion: MoveSettings,
+    /// `[pick]`: the pick-and-place cycle as a path (`run --method pick`).
+    #[serde(default)]
+    pub pick: PickSettings,
     /// `[check]`: the open-loop first motion.
     #[serde(default)]
     pub check: CheckSettings,
@@ -178,6 +183,8 @@ struct RawFile {
     #[serde(default)]
     jog: jog::RawJog,
     #[serde(default)]
+    pick: pick::RawPick,
+    #[serde(default)]
     check: check::RawCheck,
     #[serde(default)]
     trajectory: trajectory::RawTrajectory,
@@ -216,6 +223,7 @@ impl RawFile {
         let trajectory = self.trajectory.check(src, names)?;
         let step = self.step.check(src, trajectory.max_duration_s)?;
         let jog = self.jog.check(src, n_motors)?;
+        let pick = self.pick.check(src)?;
         let check = self.check.check(src)?;
         let hwserver = self.hwserver.check(src)?;
         self.hwserver.check_spin_cpu(src, &hwserver, &timer)?;
@@ -306,6 +314,7 @@ impl RawFile {
             trajectory,
             jog,
             motion: MoveSettings::default(),
+            pick,
             check,
             homing,
             max_missed_in_row: self.safety.check(src, hwserver.backend)?,

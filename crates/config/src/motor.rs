@@ -25,6 +25,11 @@ pub struct MotorGains {
     pub kvff: f64,
     /// Acceleration feed-forward gain Kaff.
     pub kaff: f64,
+    /// Jerk feed-forward gain Kjff: not in eq. 3-1 (0, the default, is eq. 3-1). A velocity-
+    /// mode amplifier whose velocity loop is second order lags the command by its jerk too
+    /// (docs/tuning.md, "Jerk feed-forward"); online moves at the motors' limits need it.
+    #[serde(default)]
+    pub kjff: f64,
     /// Notch coefficients `[n1, n2, d1, d2]`; all zero = no notch.
     pub notch: [f64; 4],
 }
@@ -94,7 +99,14 @@ fn short(x: f64) -> String {
 /// full-scale jumps: a bang-bang output, not a servo. (The thesis' gains ask 8 codes per count
 /// of following error, 2 for Kd and 81 for Kvff.) A sanity bound, not a tuning rule.
 pub fn gains_problem(g: &MotorGains, fe_scale: f64) -> Option<(&'static str, String)> {
-    let all = [("kp", g.kp), ("ki", g.ki), ("kd", g.kd), ("kvff", g.kvff), ("kaff", g.kaff)];
+    let all = [
+        ("kp", g.kp),
+        ("ki", g.ki),
+        ("kd", g.kd),
+        ("kvff", g.kvff),
+        ("kaff", g.kaff),
+        ("kjff", g.kjff),
+    ];
     for (key, v) in all {
         if !v.is_finite() {
             return Some((key, format!("must be a finite number, found {}", num(v))));
@@ -134,6 +146,13 @@ pub fn gains_problem(g: &MotorGains, fe_scale: f64) -> Option<(&'static str, Str
             "one count per period² of commanded acceleration",
             "2⁻²¹·Kp·Kaff/128",
         ),
+        (
+            "kjff",
+            g.kjff,
+            g.kp / 128.0,
+            "one count per period³ of commanded jerk",
+            "2⁻²¹·Kp·Kjff/128",
+        ),
     ];
     for (key, v, per_unit, input, formula) in terms {
         let codes = OUTPUT_SCALE * v * per_unit;
@@ -163,6 +182,7 @@ pub(crate) struct RawMotor {
     kd: S<f64>,
     kvff: S<f64>,
     kaff: S<f64>,
+    kjff: S<f64>,
     notch: S<Vec<f64>>,
     soft_limits: S<Vec<f64>>,
     max_following_error_counts: S<f64>,
@@ -182,7 +202,8 @@ impl RawMotor {
             "ki" => &self.ki,
             "kd" => &self.kd,
             "kvff" => &self.kvff,
-            _ => &self.kaff,
+            "kaff" => &self.kaff,
+            _ => &self.kjff,
         };
         v.as_ref().map_or(table, Spanned::span)
     }
@@ -219,11 +240,18 @@ fn check_notch(n: &[f64]) -> Result<(), String> {
 }
 
 /// The gains `g`, tuned at `gains_period_us`, as the law runs them at `period_us` (Kd, Kvff
-/// × T₀/T, Kaff × (T₀/T)², Ki × T/T₀; Kp and the notch as they are): see
+/// × T₀/T, Kaff × (T₀/T)², Kjff × (T₀/T)³, Ki × T/T₀; Kp and the notch as they are): see
 /// `Settings::effective_gains`.
 pub(crate) fn rescaled(g: MotorGains, (gains_period_us, period_us): (u32, u32)) -> MotorGains {
     let r = f64::from(gains_period_us) / f64::from(period_us);
-    MotorGains { ki: g.ki / r, kd: g.kd * r, kvff: g.kvff * r, kaff: g.kaff * r * r, ..g }
+    MotorGains {
+        ki: g.ki / r,
+        kd: g.kd * r,
+        kvff: g.kvff * r,
+        kaff: g.kaff * r * r,
+        kjff: g.kjff * r * r * r,
+        ..g
+    }
 }
 
 /// [`gains_problem`] of the gains `g`, tuned at `periods_us.0`, as the law runs them at
@@ -243,7 +271,8 @@ pub fn effective_gains_problem(
     })
 }
 
-/// Checks the `[[motor]]` table `m` (its 1-based number `i`): every gain must be there.
+/// Checks the `[[motor]]` table `m` (its 1-based number `i`): every gain of eq. 3-1 must be
+/// there (`kjff`, not of eq. 3-1, is 0 when left out).
 pub(crate) fn check_motor(
     src: &Source<'_>,
     m: &Spanned<RawMotor>,
@@ -265,6 +294,7 @@ pub(crate) fn check_motor(
         kd: need(&r.kd, "kd")?,
         kvff: need(&r.kvff, "kvff")?,
         kaff: need(&r.kaff, "kaff")?,
+        kjff: src.take(&r.kjff, &name("kjff"), 0.0, |_| Ok(()))?,
         notch: [notch[0], notch[1], notch[2], notch[3]],
     };
     if let Some((key, why)) = effective_gains_problem(&gains, cx.fe_scale, cx.periods_us) {

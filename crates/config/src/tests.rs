@@ -63,7 +63,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         &format!("{MOTOR}{MOTOR}[[motor]]\nkp = 1.0\nkpp = 2\n"),
-        "q.toml:15:1: motor[3].kpp: unknown field `kpp`, expected one of `kp`, `ki`, `kd`, `kvff`, `kaff`, `notch`, `soft_limits`, `max_following_error_counts`, `max_integrated_error_counts`, `home_offset_counts`, `top_direction`, `max_velocity_counts_per_s`, `max_acceleration_counts_per_s2`, `max_jerk_counts_per_s3`",
+        "q.toml:15:1: motor[3].kpp: unknown field `kpp`, expected one of `kp`, `ki`, `kd`, `kvff`, `kaff`, `kjff`, `notch`, `soft_limits`, `max_following_error_counts`, `max_integrated_error_counts`, `home_offset_counts`, `top_direction`, `max_velocity_counts_per_s`, `max_acceleration_counts_per_s2`, `max_jerk_counts_per_s3`",
     );
     check(
         &format!("{MOTOR}{MOTOR}[[motor]]\nkp = \"big\"\n"),
@@ -90,7 +90,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         "[bogus]\nx = 1\n",
-        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `jog`, `check`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `conveyor`, `camera`, `robot`, `motor`",
+        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `jog`, `pick`, `check`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `conveyor`, `camera`, `robot`, `motor`",
     );
     check(
         "[trajectory]\nmethod = \"home\"\n",
@@ -527,7 +527,7 @@ fn tune_settings_are_checked() {
     );
     check(
         &format!("[tune]\nparams = [\"kq\"]\n{m}"),
-        "q.toml:2:10: tune.params: unknown gain `kq`: one of kp, ki, kd, kvff, kaff",
+        "q.toml:2:10: tune.params: unknown gain `kq`: one of kp, ki, kd, kvff, kaff, kjff",
     );
     check(
         &format!("[tune]\nobjective = \"rms\"\n{m}"),
@@ -673,4 +673,32 @@ fn numbers_in_messages_are_short() {
     assert!(big != text, "the shipped file's step duration moved");
     let e = parse(&big).unwrap_err().to_string();
     assert!(e.ends_with("(trajectory.max_duration_s), found 1e308"), "{e}");
+}
+
+/// `[pick]` (the pick cycle as a path) and `kjff` (the jerk feed-forward, not in eq. 3-1):
+/// defaults, and bad values named by file, line and field.
+#[test]
+fn pick_and_the_jerk_feed_forward_are_checked() {
+    let one = "[general]\nn_motors = 1\n";
+    let s = parse(&format!("{one}{MOTOR}")).unwrap();
+    assert_eq!(s.pick, crate::PickSettings::default());
+    assert_eq!(s.motors[0].kjff, 0.0, "left out, Kjff is 0: eq. 3-1");
+    let s = parse(&format!(
+        "{one}[pick]\nat_mm = [0.0, 50.0, -650.0]\nspeed = 0.5\n{MOTOR}kjff = 2.0\n"
+    ))
+    .unwrap();
+    assert_eq!((s.pick.at_mm, s.pick.speed, s.motors[0].kjff), ([0.0, 50.0, -650.0], 0.5, 2.0));
+    check(
+        &format!("{one}[pick]\nspeed = 1.5\n{MOTOR}"),
+        "q.toml:4:9: pick.speed: must be > 0 and ≤ 1 (a fraction of the motors' limits), found 1.5",
+    );
+    check(
+        &format!("{one}[pick]\nat_mm = [1.0, 2.0]\n{MOTOR}"),
+        "q.toml:4:9: pick.at_mm: must be a point [x, y, z] in mm, found [1.0, 2.0]",
+    );
+    check(
+        &format!("{one}{MOTOR}kjff = -1.0\n"),
+        "q.toml:9:8: motor[1].kjff: must be ≥ 0, found -1: a negative gain drives the motor away \
+         from its command",
+    );
 }

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 /// The names of the gains tuning can change ([`TuneParam`]), in the order of
 /// [`TuneSettings::bounds`].
-pub const TUNE_PARAMS: [&str; 5] = ["kp", "ki", "kd", "kvff", "kaff"];
+pub const TUNE_PARAMS: [&str; 6] = ["kp", "ki", "kd", "kvff", "kaff", "kjff"];
 
 /// One gain of a motor that tuning changes (`tune.params`, `--params`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -23,11 +23,23 @@ pub enum TuneParam {
     Kvff,
     /// Acceleration feed-forward.
     Kaff,
+    /// Jerk feed-forward (not in eq. 3-1).
+    Kjff,
 }
 
 impl TuneParam {
     /// Every gain, in the order of [`TUNE_PARAMS`] and [`TuneSettings::bounds`].
-    pub const ALL: [TuneParam; 5] =
+    pub const ALL: [TuneParam; 6] = [
+        TuneParam::Kp,
+        TuneParam::Ki,
+        TuneParam::Kd,
+        TuneParam::Kvff,
+        TuneParam::Kaff,
+        TuneParam::Kjff,
+    ];
+
+    /// The gains of eq. 3-1 (all but Kjff): what is tuned unless `tune.params` says more.
+    pub const EQ_3_1: [TuneParam; 5] =
         [TuneParam::Kp, TuneParam::Ki, TuneParam::Kd, TuneParam::Kvff, TuneParam::Kaff];
 
     /// The gain named `name`.
@@ -47,12 +59,12 @@ impl TuneParam {
 
     /// Its value in `g`.
     pub fn get(self, g: &crate::MotorGains) -> f64 {
-        [g.kp, g.ki, g.kd, g.kvff, g.kaff][self.index()]
+        [g.kp, g.ki, g.kd, g.kvff, g.kaff, g.kjff][self.index()]
     }
 
     /// Sets it in `g`.
     pub fn set(self, g: &mut crate::MotorGains, v: f64) {
-        *[&mut g.kp, &mut g.ki, &mut g.kd, &mut g.kvff, &mut g.kaff][self.index()] = v;
+        *[&mut g.kp, &mut g.ki, &mut g.kd, &mut g.kvff, &mut g.kaff, &mut g.kjff][self.index()] = v;
     }
 
     /// Whether it is a feedback gain (Kp, Ki, Kd: scaled by the stability margin's step).
@@ -115,7 +127,7 @@ pub struct TuneSettings {
     pub budget: u32,
     /// `[min, max]` of each gain of [`TUNE_PARAMS`], in that order (`kp_bounds` …): no
     /// candidate leaves them.
-    pub bounds: [[f64; 2]; 5],
+    pub bounds: [[f64; 2]; 6],
     /// Largest share of the path's cycles a motor's DAC may spend saturated.
     pub max_saturated_fraction: f64,
     /// The stability check: a step of `step.size` held this long, s, must settle.
@@ -135,10 +147,10 @@ pub struct TuneSettings {
 impl Default for TuneSettings {
     fn default() -> TuneSettings {
         TuneSettings {
-            params: TuneParam::ALL.to_vec(),
+            params: TuneParam::EQ_3_1.to_vec(),
             objective: TuneObjective::Abs,
             budget: 150,
-            bounds: [[0.0, 2e6], [0.0, 1e4], [0.0, 1e5], [0.0, 1e6], [0.0, 1e7]],
+            bounds: [[0.0, 2e6], [0.0, 1e4], [0.0, 1e5], [0.0, 1e6], [0.0, 1e7], [0.0, 2e7]],
             max_saturated_fraction: 0.01,
             step_s: 0.5,
             settle_counts: 5.0,
@@ -185,6 +197,7 @@ pub(crate) struct RawTune {
     kd_bounds: S<Vec<f64>>,
     kvff_bounds: S<Vec<f64>>,
     kaff_bounds: S<Vec<f64>>,
+    kjff_bounds: S<Vec<f64>>,
     max_saturated_fraction: S<f64>,
     step_s: S<f64>,
     settle_counts: S<f64>,
@@ -211,6 +224,7 @@ impl RawTune {
             &self.kd_bounds,
             &self.kvff_bounds,
             &self.kaff_bounds,
+            &self.kjff_bounds,
         ];
         for (i, raw) in raws.iter().enumerate() {
             let field = format!("tune.{}_bounds", TUNE_PARAMS[i]);

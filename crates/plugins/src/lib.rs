@@ -23,6 +23,7 @@ pub mod linear;
 pub mod motion;
 pub mod moveto;
 pub mod online;
+pub mod pick;
 pub mod pidff;
 pub mod pvt;
 pub mod registry;

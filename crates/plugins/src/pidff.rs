@@ -48,6 +48,10 @@ struct AxisState {
     prev_cmd: f64,
     /// CV of the previous cycle, counts per period.
     prev_cv: f64,
+    /// CA of the previous cycle, counts per period², and the periods between the midpoints
+    /// of the velocity spans it was taken over.
+    prev_ca: f64,
+    prev_ca_span: f64,
     /// Periods the previous cycle's differences spanned (0 before the first cycle).
     prev_elapsed: u64,
     prev_act: f64,
@@ -67,7 +71,7 @@ const TWO_POW_23: f64 = 8_388_608.0;
 /// for the 626's 14-bit DAC, then the notch of eq. 3-2, then clamped to ±8191 and rounded to a
 /// DAC code:
 ///
-/// DAC(n) = 2⁻¹⁹·Kp·(s·FE + (Kvff·CV + Kaff·CA)/128 + s·Ki·IE/2²³ − Kd·AV/128) / 4
+/// DAC(n) = 2⁻¹⁹·Kp·(s·FE + (Kvff·CV + Kaff·CA + Kjff·CJ)/128 + s·Ki·IE/2²³ − Kd·AV/128) / 4
 ///
 /// where s is `general.fe_scale`: 96 (PMAC's Ix08 kept on the error terms, not on the
 /// feed-forward nor on Kd) is the reading under which the thesis' Table 5-1 gains give its
@@ -75,11 +79,16 @@ const TWO_POW_23: f64 = 8_388_608.0;
 /// literally (docs/deltabot.md, "Which eq. 3-1").
 ///
 /// with FE = CP(n) − AP(n), CV = CP(n) − CP(n−1), CA = CV(n) − CV(n−1),
-/// AV = AP(n) − AP(n−1) and IE(n) = Σ_{j<n} FE(j), all in counts per servo period.
+/// CJ = CA(n) − CA(n−1), AV = AP(n) − AP(n−1) and IE(n) = Σ_{j<n} FE(j), all in counts per
+/// servo period. The jerk feed-forward Kjff·CJ is not the thesis' (Kjff = 0 is eq. 3-1): a
+/// velocity-mode amplifier with a second-order velocity loop (ωn, ζ) turns the voltage for
+/// v + (2ζ/ωn)·a + j/ωn² into the velocity v, so Kvff and Kaff alone leave a lag of
+/// Δa/ωn² at every change of acceleration (docs/tuning.md, "Jerk feed-forward").
 ///
 /// After missed periods (the previous cycle was k = [`ServoInput::elapsed`] periods ago) the
 /// differences span k periods: CV and AV are divided by k, CA by the periods between the
-/// midpoints of the two velocity spans, and the integral counts the previous FE k times (the
+/// midpoints of the two velocity spans, CJ by the periods between the midpoints of the two
+/// acceleration spans, and the integral counts the previous FE k times (the
 /// DAC held its output meanwhile). A late cycle thus outputs what a punctual one would, not
 /// a feed-forward kick k times too large.
 #[derive(Debug, Clone, PartialEq)]
@@ -123,9 +132,16 @@ impl PidFf {
     /// the following error `fe` and integrated error `ie` already scaled by `fe_scale`.
     #[inline]
     pub fn pmac_output(g: &MotorGains, fe: f64, cv: f64, ca: f64, ie: f64, av: f64) -> f64 {
+        PidFf::output(g, fe, [cv, ca, 0.0], ie, av)
+    }
+
+    /// [`PidFf::pmac_output`] with the jerk feed-forward: `ff` is `[CV, CA, CJ]`.
+    #[inline]
+    pub fn output(g: &MotorGains, fe: f64, ff: [f64; 3], ie: f64, av: f64) -> f64 {
+        let [cv, ca, cj] = ff;
         TWO_POW_M19
             * g.kp
-            * (fe + (g.kvff * cv + g.kaff * ca) / 128.0 + g.ki * ie / TWO_POW_23
+            * (fe + (g.kvff * cv + g.kaff * ca + g.kjff * cj) / 128.0 + g.ki * ie / TWO_POW_23
                 - g.kd * av / 128.0)
             / 4.0
     }
@@ -163,11 +179,17 @@ impl ServoLaw for PidFf {
             // Periods between the midpoints of this velocity's span and the previous one's.
             let ca_span = (k + s.prev_elapsed.max(1)) as f64 / 2.0;
             let ca = (cv - s.prev_cv) / ca_span;
+            // Periods between the midpoints of this acceleration's span and the previous one's.
+            let cj_span = (ca_span + s.prev_ca_span.max(1.0)) / 2.0;
+            let cj = (ca - s.prev_ca) / cj_span;
             let av = (ap - s.prev_act) / span;
-            let u = PidFf::pmac_output(g, self.fe_scale * fe, cv, ca, self.fe_scale * s.ie, av);
+            let ff = [cv, ca, cj];
+            let u = PidFf::output(g, self.fe_scale * fe, ff, self.fe_scale * s.ie, av);
             s.prev_fe = fe;
             s.prev_cmd = cp;
             s.prev_cv = cv;
+            s.prev_ca = ca;
+            s.prev_ca_span = ca_span;
             s.prev_elapsed = k;
             s.prev_act = ap;
             *out = to_dac_code(s.notch.filter(u));
@@ -190,6 +212,7 @@ mod tests {
             kd: 3_000.0,
             kvff: 119_000.0,
             kaff: 100.0,
+            kjff: 0.0,
             notch: [0.0; 4],
         }
     }
@@ -490,5 +513,79 @@ mod tests {
         assert_eq!(step(&mut law, 2, 1), 2);
         assert_eq!(step(&mut law, 6, 4), 2, "skipped 3 periods");
         assert_eq!(step(&mut law, 7, 1), 2);
+    }
+
+    /// Kjff·CJ/128 is added inside the bracket, CJ = CA(n) − CA(n−1): the hand computation's
+    /// cycle 2 (CA 10 then −5, so CJ = −15) with Kjff = 12 800 outputs 2⁻²¹·Kp·(−1500) more
+    /// than with Kjff = 0 (eq. 3-1, which the other tests check).
+    #[test]
+    fn jerk_feed_forward_is_kjff_times_cj_over_128() {
+        let with = |kjff: f64| {
+            let mut law = PidFf::new(&[MotorGains { kjff, ..thesis_motor_1() }]);
+            law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+            run(&mut law, 10.0, 2.0);
+            run(&mut law, 15.0, 5.0)
+        };
+        let extra: f64 = 182_000.0 * (12_800.0 * -15.0 / 128.0) / 524_288.0 / 4.0;
+        assert_eq!(extra.round(), -130.0);
+        assert_eq!(with(12_800.0) - with(0.0), -130);
+        let g = MotorGains { kjff: 12_800.0, ..thesis_motor_1() };
+        let u = PidFf::output(&g, 10.0, [5.0, -5.0, -15.0], 8.0, 3.0);
+        assert!((u - PidFf::pmac_output(&g, 10.0, 5.0, -5.0, 8.0, 3.0) - extra).abs() < 1e-9);
+    }
+
+    /// On a cubic path c(n) = n³ the third difference CJ is 6 counts/period³; after missed
+    /// periods it is taken over the periods between the acceleration spans' midpoints, so
+    /// a late cycle outputs about 6 (not k³ or 1/k times it) and the loop is back on 6 three
+    /// punctual cycles later. Kp = 2²¹, Kjff = 1280: the output is 10·CJ.
+    #[test]
+    fn jerk_feed_forward_is_per_period_after_a_skip() {
+        let g = MotorGains { kp: 2_097_152.0, kjff: 1_280.0, ..MotorGains::default() };
+        let mut law = PidFf::new(&[g]);
+        law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+        let step = |law: &mut PidFf, n: u64, elapsed: u64| {
+            let mut c = [0.0; MAX_MOTORS];
+            c[0] = (n * n * n) as f64;
+            let mut dac = [0; MAX_MOTORS];
+            law.step(&ServoInput { n, elapsed, cmd: &c, act: &c }, &mut dac);
+            dac[0]
+        };
+        for n in 1..=4 {
+            step(&mut law, n, 1);
+        }
+        assert_eq!(step(&mut law, 5, 1), 60);
+        let late = step(&mut law, 9, 4);
+        assert!((55..=70).contains(&late), "skipped 3 periods: {late}");
+        for n in 10..=11 {
+            let d = step(&mut law, n, 1);
+            assert!((45..=70).contains(&d), "{n}: {d}");
+        }
+        assert_eq!(step(&mut law, 12, 1), 60);
+    }
+
+    /// Kjff × (T₀/T)³ at another period: one physical cubic motion, c(t) = (t / 400 µs)³,
+    /// at 400 µs with the gains as tuned and at 200 µs with them rescaled (`gains_period_us`
+    /// 400) outputs the same jerk feed-forward — CJ per period³ is (T/T₀)³ as large there.
+    #[test]
+    fn the_jerk_feed_forward_is_rescaled_with_the_period() {
+        let (mut s, _) = shipped_at_both_scales();
+        for g in &mut s.motors {
+            *g = MotorGains { kp: 2_097_152.0, kjff: 1_280.0, ..MotorGains::default() };
+        }
+        let at = |s: &Settings| {
+            let mut law = PidFf::from_settings(s);
+            law.reset(&[0.0; MAX_MOTORS], &[0.0; MAX_MOTORS]);
+            let per = s.period_us as f64 / 400.0;
+            let mut dac = [0; MAX_MOTORS];
+            for n in 1..=(8.0 / per) as u64 {
+                let c = [(n as f64 * per).powi(3); MAX_MOTORS];
+                law.step(&ServoInput { n, elapsed: 1, cmd: &c, act: &c }, &mut dac);
+            }
+            dac[0]
+        };
+        assert_eq!(s.gains_period_us, 400);
+        assert_eq!(at(&s), 60);
+        s.period_us = 200;
+        assert_eq!(at(&s), 60, "at 200 µs");
     }
 }

@@ -8,6 +8,7 @@ use crate::homing::Homing;
 use crate::linear::LinearMove;
 use crate::moveto::Jog;
 use crate::online::OnlineMove;
+use crate::pick::PickCycle;
 use crate::pidff::PidFf;
 use crate::pvt::Pvt;
 use crate::source::TrajBuildError;
@@ -118,6 +119,12 @@ pub const GENERATORS: &[GeneratorEntry] = &[
         description: "to a point along a straight line, jerk-limited, every joint within its limits",
         kind: GeneratorKind::Mode,
         build: |s| Ok(crate::grip::at_end(s, Box::new(LinearMove::from_settings(s)?))),
+    },
+    GeneratorEntry {
+        name: "pick",
+        description: "the pick-and-place cycle of [pick]: time-optimal jerk-limited legs at the motors' limits",
+        kind: GeneratorKind::OwnPath,
+        build: |s| Ok(Box::new(PickCycle::from_settings(s)?)),
     },
     GeneratorEntry {
         name: "pvt",

@@ -236,6 +236,9 @@ pub enum TrajBuildError {
     /// A straight line cannot be built (no `[robot]`, a point out of reach, limits).
     #[error("{0}")]
     Line(String),
+    /// The pick cycle cannot be built (no `[robot]`, a point out of reach, limits).
+    #[error("{0}")]
+    Pick(String),
 }
 
 /// The knots cannot carry a spline.

@@ -42,11 +42,14 @@ pub struct GainsReport {
     pub kvff: f64,
     /// Kaff.
     pub kaff: f64,
+    /// Kjff (0: eq. 3-1).
+    #[serde(default)]
+    pub kjff: f64,
 }
 
 impl From<MotorGains> for GainsReport {
     fn from(g: MotorGains) -> GainsReport {
-        GainsReport { kp: g.kp, ki: g.ki, kd: g.kd, kvff: g.kvff, kaff: g.kaff }
+        GainsReport { kp: g.kp, ki: g.ki, kd: g.kd, kvff: g.kvff, kaff: g.kaff, kjff: g.kjff }
     }
 }
 

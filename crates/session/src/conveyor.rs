@@ -16,6 +16,7 @@ use qmarc_proto::MAX_MOTORS;
 
 pub mod dispatch;
 pub mod picker;
+pub mod tracker;
 
 /// A part the loop is to pick: where it lay on the belt when the encoder read
 /// `latched_counts`.
@@ -112,6 +113,12 @@ impl BeltFrame {
     /// Where part `p` is along the belt when the encoder reads `counts`, mm.
     pub fn along(&self, p: &Pick, counts: i64) -> f64 {
         p.belt_mm + (counts - p.latched_counts) as f64 * self.mm_per_count
+    }
+
+    /// [`BeltFrame::along`] at the belt's estimated `counts` (not whole: the picker's
+    /// [`tracker::BeltTracker`]).
+    pub fn along_at(&self, p: &Pick, counts: f64) -> f64 {
+        p.belt_mm + (counts - p.latched_counts as f64) * self.mm_per_count
     }
 
     /// The robot-frame grip point (the part's top centre) of a part `along` the belt and

@@ -22,7 +22,8 @@ use std::sync::atomic::AtomicBool;
 /// Options of `tune`.
 #[derive(Debug, Clone, PartialEq, Args)]
 pub struct TuneArgs {
-    /// The gains to tune, comma-separated (default: `tune.params`): kp, ki, kd, kvff, kaff.
+    /// The gains to tune, comma-separated (default: `tune.params`): kp, ki, kd, kvff, kaff,
+    /// kjff.
     #[arg(long, value_delimiter = ',')]
     pub params: Option<Vec<String>>,
     /// What to minimise per motor over the path (default: `tune.objective`): `abs` Σ|e|,
@@ -124,7 +125,7 @@ pub fn run(
         Objective::Sse => "Σe², rad²",
         Objective::Max => "max |e|, rad",
     };
-    let title = format!("QMARC tune on {}", knots_name(settings));
+    let title = format!("QMARC tune on {}", report::path_name(settings));
     match qmarc_plots::convergence_plot(out, &title, what, &series) {
         Ok(png) => files.push(png),
         Err(e) => eprintln!("qmarc-starter: {e}"),
@@ -146,16 +147,11 @@ pub fn run(
     Ok(TuneOutcome { tuned, after, after_run, files })
 }
 
-/// The path's file name, for titles.
-fn knots_name(s: &Settings) -> String {
-    s.trajectory.knots.as_ref().map_or("the path".into(), |k| k.display().to_string())
-}
-
 /// Where tuned gains came from: the comment over them.
 pub fn provenance(s: &Settings) -> String {
     format!(
         "gains tuned by `qmarc-starter tune` on {} ({}), objective {}, from {}",
-        knots_name(s),
+        report::path_name(s),
         s.trajectory.method,
         s.tune.objective,
         s.source.display()

@@ -187,7 +187,7 @@ fn print_outcome(settings: &Settings, o: &qmarc_starter::tune::TuneOutcome, real
     println!(
         "tuned {} on {} by {} ({} candidates, objective {})",
         settings.tune.params.iter().map(|p| p.name()).collect::<Vec<_>>().join(","),
-        settings.trajectory.knots.as_ref().map_or(String::new(), |k| k.display().to_string()),
+        report::path_name(settings),
         if real { "real moves" } else { "lock-step simulation (the motors are independent there)" },
         evaluations,
         settings.tune.objective,

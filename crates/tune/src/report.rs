@@ -4,7 +4,7 @@
 
 use crate::eval::{Figures, PathRun};
 use crate::optimise::{Record, Tuned, Verdict};
-use qmarc_config::{MotorGains, TUNE_PARAMS};
+use qmarc_config::{MotorGains, TUNE_PARAMS, TuneParam};
 use std::fmt::Write as _;
 use std::path::Path;
 use toml_edit::{DocumentMut, Item, Value};
@@ -46,11 +46,20 @@ pub fn fragment(gains: &[MotorGains], comment: &str) -> String {
     }
     for g in gains {
         let _ = writeln!(t, "\n[[motor]]");
-        for (name, v) in TUNE_PARAMS.iter().zip([g.kp, g.ki, g.kd, g.kvff, g.kaff]) {
+        for (name, v) in written(g) {
             let _ = writeln!(t, "{name} = {}", gain_text(v));
         }
     }
     t
+}
+
+/// The gains a settings file gets, by name: Kjff only where it is not 0 (left out, it is 0:
+/// eq. 3-1).
+fn written(g: &MotorGains) -> impl Iterator<Item = (&'static str, f64)> {
+    TuneParam::ALL
+        .into_iter()
+        .map(|p| (p.name(), p.get(g)))
+        .filter(|&(name, v)| name != "kjff" || v != 0.0)
 }
 
 /// A gain as the settings file writes it: 4 significant digits after the point is plenty
@@ -63,10 +72,14 @@ pub fn gain_text(v: f64) -> String {
 /// The gains rounded as [`fragment`] and [`write_copy`] write them: what a user's file gets.
 pub fn rounded(g: &MotorGains) -> MotorGains {
     let r = |v: f64| gain_text(v).parse().unwrap_or(v);
-    MotorGains { kp: r(g.kp), ki: r(g.ki), kd: r(g.kd), kvff: r(g.kvff), kaff: r(g.kaff), ..*g }
+    let mut out = *g;
+    for p in TuneParam::ALL {
+        p.set(&mut out, r(p.get(g)));
+    }
+    out
 }
 
-/// Every candidate as CSV: motor, evaluation, the five gains, objective, best so far,
+/// Every candidate as CSV: motor, evaluation, the six gains, objective, best so far,
 /// verdict, moves so far.
 pub fn csv(records: &[Record]) -> String {
     let mut t =
@@ -77,7 +90,7 @@ pub fn csv(records: &[Record]) -> String {
         let best = if r.best.is_finite() { r.best.to_string() } else { String::new() };
         let _ = writeln!(
             t,
-            "{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{}",
             r.motor + 1,
             r.evaluation,
             g.kp,
@@ -85,6 +98,7 @@ pub fn csv(records: &[Record]) -> String {
             g.kd,
             g.kvff,
             g.kaff,
+            g.kjff,
             objective,
             best,
             r.verdict.word(),
@@ -167,7 +181,10 @@ pub fn write_copy(
         .and_then(Item::as_array_of_tables_mut)
         .ok_or_else(|| io(&format!("{}: no [[motor]] tables", source.display())))?;
     for (table, g) in tables.iter_mut().zip(gains) {
-        for (name, v) in TUNE_PARAMS.iter().zip([g.kp, g.ki, g.kd, g.kvff, g.kaff]) {
+        for (name, v) in TuneParam::ALL.into_iter().map(|p| (p.name(), p.get(g))) {
+            if name == "kjff" && v == 0.0 && !table.contains_key(name) {
+                continue;
+            }
             let value: f64 = gain_text(v).parse().unwrap_or(v);
             match table.get_mut(name).and_then(Item::as_value_mut) {
                 Some(old) => {
@@ -224,10 +241,20 @@ pub struct MotorOutcome {
     pub before: Figures,
     /// With the gains after (`None` when a stop or a fault ended the tuning).
     pub after: Option<Figures>,
-    /// Kp, Ki, Kd, Kvff, Kaff before.
-    pub gains_before: [f64; 5],
-    /// Kp, Ki, Kd, Kvff, Kaff after, rounded as the settings file gets them.
-    pub gains_after: [f64; 5],
+    /// Kp, Ki, Kd, Kvff, Kaff, Kjff before.
+    pub gains_before: [f64; 6],
+    /// Kp, Ki, Kd, Kvff, Kaff, Kjff after, rounded as the settings file gets them.
+    pub gains_after: [f64; 6],
+}
+
+/// The path a tuning ran, in words: the knot file, or the generator's own path (`the pick
+/// path of [pick]`).
+pub fn path_name(s: &qmarc_config::Settings) -> String {
+    let method = &s.trajectory.method;
+    match qmarc_plugins::registry::generator(method) {
+        Some(g) if !g.needs_knots() => format!("the {method} path of [{method}]"),
+        _ => s.trajectory.knots.as_ref().map_or("the path".into(), |k| k.display().to_string()),
+    }
 }
 
 /// What a tuning found, as `tune-summary.json` says it.
@@ -263,8 +290,11 @@ impl TuneSummary {
         after: &[MotorGains],
         after_run: Option<&PathRun>,
     ) -> TuneSummary {
-        let five = |g: &MotorGains| [g.kp, g.ki, g.kd, g.kvff, g.kaff];
-        let knots = settings.trajectory.knots.as_ref();
+        let six = |g: &MotorGains| TuneParam::ALL.map(|p| p.get(g));
+        // A generator with a path of its own (`step`, `pick`) reads no knot file.
+        let reads_knots = qmarc_plugins::registry::generator(&settings.trajectory.method)
+            .is_some_and(|g| g.needs_knots());
+        let knots = settings.trajectory.knots.as_ref().filter(|_| reads_knots);
         TuneSummary {
             starter_pid: std::process::id(),
             knots: knots.map_or(String::new(), |k| k.display().to_string()),
@@ -278,8 +308,8 @@ impl TuneSummary {
                 .map(|m| MotorOutcome {
                     before: tuned.before_run.motors.get(m).copied().unwrap_or_default(),
                     after: after_run.and_then(|r| r.motors.get(m).copied()),
-                    gains_before: five(&tuned.before[m]),
-                    gains_after: five(&after[m]),
+                    gains_before: six(&tuned.before[m]),
+                    gains_after: six(&after[m]),
                 })
                 .collect(),
         }

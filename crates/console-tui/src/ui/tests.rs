@@ -344,8 +344,8 @@ fn a_tuning_is_shown_before_after_and_ctrl_a_takes_its_gains() {
     let motor = |m: f64| MotorOutcome {
         before: fig(2.0 + m),
         after: Some(fig(0.5 + m * 0.1)),
-        gains_before: [182_000.0, 0.0, 2_800.0, 180_000.0, 100.0],
-        gains_after: [190_000.5 + m, 0.0, 2_900.0, 200_000.0, 1_000_000.0],
+        gains_before: [182_000.0, 0.0, 2_800.0, 180_000.0, 100.0, 0.0],
+        gains_after: [190_000.5 + m, 0.0, 2_900.0, 200_000.0, 1_000_000.0, 0.0],
     };
     app.tuned = Some(TuneResult {
         summary: TuneSummary {

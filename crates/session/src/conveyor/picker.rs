@@ -16,6 +16,7 @@
 //! part that leaves the window before the gripper has closed, or leaves the robot's reach, is
 //! given up ([`PickEvent::GaveUp`]) and the command stops: never chased.
 
+use super::tracker::BeltTracker;
 use super::{BeltFrame, GaveUp, Pick, PickEvent};
 use crate::generator::{NotTaken, Order, ServeHandle, ServeShared};
 use qmarc_config::Settings;
@@ -26,9 +27,6 @@ use qmarc_proto::{Gripper, MAX_MOTORS};
 use rtrb::{Consumer, Producer, RingBuffer};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-
-/// Cycles over which the belt's speed is measured from its counts.
-const SPEED_CYCLES: usize = 32;
 
 /// How high a gripped part is lifted off the belt, in the belt's frame, before it is carried
 /// to the place, mm.
@@ -89,9 +87,10 @@ pub struct Picker {
     phase: Phase,
     /// The last sample commanded and its state.
     last: MotionState,
-    /// The belt's counts this cycle and in the last [`SPEED_CYCLES`].
-    belt: [i64; SPEED_CYCLES],
-    belt_reads: usize,
+    /// Where the belt is: its encoder, followed smoothly.
+    belt: BeltTracker,
+    /// This cycle's read of the encoder, for the tracker at the cycle's sample.
+    belt_read: i64,
     grip: Option<bool>,
     gripper: Gripper,
     /// How long the gripper takes to close, s (`s626.gripper_close_s`).
@@ -139,8 +138,8 @@ impl Picker {
             origin_n: 0,
             phase: Phase::Idle,
             last: MotionState::default(),
-            belt: [0; SPEED_CYCLES],
-            belt_reads: 0,
+            belt: BeltTracker::new(s.period_s()),
+            belt_read: 0,
             grip: None,
             gripper: Gripper(Gripper::ABSENT),
             close_s: s.s626.gripper_close_s,
@@ -159,37 +158,27 @@ impl Picker {
         Some((picker, serve_handle, handle))
     }
 
-    /// The belt's counts `back` reads ago (0: this cycle's).
-    fn belt_at(&self, back: usize) -> i64 {
-        let k = self.belt_reads.saturating_sub(1 + back.min(self.belt_reads.saturating_sub(1)));
-        self.belt[k % SPEED_CYCLES]
-    }
-
-    /// The belt's speed, counts per second, over the last reads.
-    fn belt_speed(&self) -> f64 {
-        let span = self.belt_reads.clamp(1, SPEED_CYCLES) - 1;
-        if span == 0 {
-            return 0.0;
-        }
-        (self.belt_at(0) - self.belt_at(span)) as f64 / (span as f64 * self.period_s)
+    /// The belt's estimated counts this cycle (`back` 0) or the last (`back` 1).
+    fn belt_at(&self, back: usize) -> f64 {
+        if back == 0 { self.belt.position() } else { self.belt.position_before() }
     }
 
     /// The joint counts of the point `up_mm` above `pick`'s grip point at the belt's
-    /// `counts`, and their velocity at the belt's speed; a part on the belt (not held) past
-    /// the window's end is lost.
+    /// estimated `counts`, and their velocity at the belt's estimated speed; a part on the
+    /// belt (not held) past the window's end is lost.
     fn on_part(
         &self,
         pick: &Pick,
-        counts: i64,
+        counts: f64,
         up_mm: f64,
     ) -> Result<([f64; MAX_MOTORS], [f64; MAX_MOTORS]), Lost> {
         let f = &self.belt_frame;
-        let along = f.along(pick, counts);
+        let along = f.along_at(pick, counts);
         if up_mm == 0.0 && along > f.window_mm[1] {
             return Err(GaveUp::LeftWindow);
         }
         let q = f.counts_up(along, pick.across_mm, up_mm).map_err(|_| GaveUp::OutOfReach)?;
-        let step_mm = self.belt_speed() * f.mm_per_count * self.period_s;
+        let step_mm = self.belt.speed() * f.mm_per_count * self.period_s;
         let ahead =
             f.counts_up(along + step_mm, pick.across_mm, up_mm).map_err(|_| GaveUp::OutOfReach)?;
         Ok((q, std::array::from_fn(|m| (ahead[m] - q[m]) / self.period_s)))
@@ -199,9 +188,10 @@ impl Picker {
     /// it past the window's end (its read comes two cycles after its travel).
     fn closes_in_window(&self, pick: &Pick) -> bool {
         let f = &self.belt_frame;
-        let speed_mm_s = self.belt_speed() * f.mm_per_count;
+        let speed_mm_s = self.belt.speed() * f.mm_per_count;
         let closing_s = self.close_s + 2.0 * self.period_s;
-        f.along(pick, self.belt_at(0)) + speed_mm_s * closing_s + CLOSE_MARGIN_MM <= f.window_mm[1]
+        f.along_at(pick, self.belt_at(0)) + speed_mm_s * closing_s + CLOSE_MARGIN_MM
+            <= f.window_mm[1]
     }
 
     /// Plans `plan` from the last sample (sample `n − 1`): the profile's time 0.
@@ -446,8 +436,7 @@ impl TrajectoryGenerator for Picker {
 
     #[inline]
     fn belt(&mut self, counts: i64) {
-        self.belt[self.belt_reads % SPEED_CYCLES] = counts;
-        self.belt_reads += 1;
+        self.belt_read = counts;
     }
 
     #[inline]
@@ -461,6 +450,7 @@ impl TrajectoryGenerator for Picker {
         if self.ended {
             return Sample::Done;
         }
+        self.belt.read(n, self.belt_read);
         self.take_orders(n);
         if n >= self.end_n {
             self.shared.ending.store(true, Ordering::Release);

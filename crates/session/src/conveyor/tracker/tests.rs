@@ -1,0 +1,107 @@
+//! The tracker against a belt it reads as the loop does — whole counts, at read times that
+//! jitter by up to half a period: at a constant speed it sits on the belt and its jerk is
+//! a thousandth of the raw counts'; through a change of speed at the belt's acceleration it
+//! stays within a few counts and settles back on it.
+
+use super::*;
+
+const T: f64 = 400e-6;
+
+/// A belt at `v0` counts/s that goes to `v1` at `acc` counts/s² from `t1`: its position.
+fn belt(t: f64, (v0, v1, t1, acc): (f64, f64, f64, f64)) -> f64 {
+    let ramp = (v1 - v0).abs() / acc;
+    let s = (v1 - v0).signum();
+    if t < t1 {
+        return v0 * t;
+    }
+    let dt = (t - t1).min(ramp);
+    v0 * t1 + v0 * dt + 0.5 * s * acc * dt * dt + v1 * (t - t1 - ramp).max(0.0)
+}
+
+/// Reads `cycles` cycles of `motion` (counts at jittered times, floored): per cycle the
+/// estimate and the belt's true position at the cycle's time.
+fn follow(motion: (f64, f64, f64, f64), cycles: usize) -> Vec<(f64, f64)> {
+    let mut tracker = BeltTracker::new(T);
+    let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+    (0..cycles)
+        .map(|k| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            let jitter = (seed % 1000) as f64 / 1000.0 * T / 2.0;
+            let t = k as f64 * T;
+            tracker.read(k as u64, belt(t + jitter, motion).floor() as i64);
+            (tracker.position(), belt(t, motion))
+        })
+        .collect()
+}
+
+fn third_differences(x: &[f64]) -> Vec<f64> {
+    x.windows(4).map(|w| w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0]).collect()
+}
+
+fn rms(x: &[f64]) -> f64 {
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
+}
+
+#[test]
+fn at_a_constant_speed_it_sits_on_the_belt_with_a_smooth_jerk() {
+    // 487 mm/s at 0.05 mm a count: not a whole number of counts a period.
+    let speed = 9_740.0;
+    let run = follow((speed, speed, f64::INFINITY, 1.0), 5_000);
+    let settled = &run[2_500..];
+    let worst = settled.iter().map(|(p, b)| (p - b).abs()).fold(0.0, f64::max);
+    // Whole counts read up to half a period late: about a count and a half at most.
+    assert!(worst < 2.5, "{worst} counts off the belt");
+    let estimate: Vec<f64> = settled.iter().map(|r| r.0).collect();
+    let raw: Vec<f64> = settled.iter().map(|r| r.1.floor()).collect();
+    let (smooth, rough) = (rms(&third_differences(&estimate)), rms(&third_differences(&raw)));
+    assert!(rough > 0.5, "the raw counts' jerk {rough}");
+    assert!(smooth < rough / 1_000.0, "the estimate's jerk {smooth}, the counts' {rough}");
+}
+
+#[test]
+fn it_follows_a_change_of_speed_and_settles_on_the_belt() {
+    // 500 → 300 mm/s at 2000 mm/s² (the shipped belt's), in counts.
+    let motion = (10_000.0, 6_000.0, 1.0, 40_000.0);
+    let run = follow(motion, 5_000);
+    let during = run[2_400..3_000].iter().map(|(p, b)| (p - b).abs()).fold(0.0, f64::max);
+    assert!(during < 8.0, "{during} counts off while the belt slows (0.4 mm)");
+    let after = run[4_000..].iter().map(|(p, b)| (p - b).abs()).fold(0.0, f64::max);
+    assert!(after < 2.0, "{after} counts off after it");
+}
+
+#[test]
+fn before_the_speed_is_measured_it_is_the_counts_read() {
+    let mut tracker = BeltTracker::new(T);
+    for k in 0..SPEED_CYCLES as i64 {
+        let before = tracker.position();
+        tracker.read(k as u64, 100 + 4 * k);
+        assert_eq!(tracker.position(), (100 + 4 * k) as f64);
+        if k > 0 {
+            assert_eq!(tracker.position_before(), before);
+            assert!((tracker.speed() - 4.0 / T).abs() < 1e-6, "{}", tracker.speed());
+        }
+    }
+}
+
+/// After missed periods the reads are more than a period apart: the estimate is carried over
+/// the time between them, so a belt at a constant speed read every period, or every third
+/// period for a while, gives the same estimate at the same sample.
+#[test]
+fn missed_periods_carry_the_estimate_over_their_time() {
+    let speed = 9_740.0;
+    let at = |n: u64| (speed * n as f64 * T).floor() as i64;
+    let (mut punctual, mut late) = (BeltTracker::new(T), BeltTracker::new(T));
+    for n in 0..2_000u64 {
+        punctual.read(n, at(n));
+        if !(1_000..1_090).contains(&n) || n % 3 == 0 {
+            late.read(n, at(n));
+        }
+    }
+    let belt = speed * 1_999.0 * T;
+    for (name, t) in [("punctual", &punctual), ("late", &late)] {
+        assert!((t.position() - belt).abs() < 1.5, "{name}: {} for {belt}", t.position());
+        assert!((t.speed() - speed).abs() < 0.01 * speed, "{name}: {} counts/s", t.speed());
+    }
+}
