@@ -293,3 +293,32 @@ fn a_conveyor_session_without_a_gripper_is_refused() {
     assert!(!out.join("parts.csv").exists());
     run.assert_clean();
 }
+
+/// A paced session (on the clock, not in lock-step) measures how fast a part goes from the
+/// camera to the command: its summary has both latencies, the first at least the camera's
+/// own latency and the second under a period or so on a quiet machine (the bounds here only
+/// catch a wrong clock or unit, not a slow machine: no timed test).
+#[test]
+fn a_paced_session_measures_its_latencies() {
+    let run = TestRun::new("conveyor-latency");
+    let config = run.config_from(&qmarc_tests::tuned_config(), &[]);
+    let out = run.out("out");
+    let (c, o) = (format!("--config={}", config.display()), format!("--out={}", out.display()));
+    run.starter_ok(&[&c, &o, "conveyor", "--seconds=4", "--parts-per-min=90"]);
+    let summary = read_summary(&out);
+    assert!(summary.fault.is_none(), "{:?}", summary.fault);
+    let s = qmarc_config::Settings::load(&config, &qmarc_config::Names::any()).unwrap();
+    let section = summary.conveyor.expect("the conveyor section");
+    let l = section.latency_ms.expect("a paced session's latencies");
+    let camera_ms = s.camera.latency_s * 1e3;
+    let q = l.exposure_to_queue;
+    assert!(q.count >= 2 && q.p50 >= camera_ms && q.p99 >= q.p50 && q.max < 2_000.0, "{q:?}");
+    let h = l.queue_to_command;
+    assert!(h.count >= 1 && h.p50 < 100.0 && h.max >= h.p99, "{h:?}");
+    // In lock-step the camera's clock is the simulation's: no latencies.
+    let o2 = format!("--out={}", run.out("lockstep").display());
+    run.starter_ok(&[&c, &o2, "--deterministic", "conveyor", "--seconds=2"]);
+    let section = read_summary(&run.out("lockstep")).conveyor.expect("the section");
+    assert!(section.latency_ms.is_none());
+    run.assert_clean();
+}

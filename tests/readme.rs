@@ -110,6 +110,7 @@ fn lay_out_clone(run: &TestRun) {
     std::fs::create_dir_all(run.dir.join("config")).expect("config/");
     run.config_as("config/qmarc.toml", &shipped_config(), &[]);
     run.config_as("config/s626.toml", &s626_config(), &[]);
+    run.config_as("config/tuned.toml", &qmarc_tests::tuned_config(), &[]);
     let rehearsal = "config/rehearse-without-rt.toml";
     std::fs::copy(workspace().join(rehearsal), run.dir.join(rehearsal)).expect(rehearsal);
 }

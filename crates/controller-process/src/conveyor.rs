@@ -6,7 +6,7 @@
 
 use qmarc_config::Settings;
 use qmarc_controller::gather::{Gather, GatherRow};
-use qmarc_report::summary::{ConveyorSummary, ErrorFigures};
+use qmarc_report::summary::{ConveyorLatency, ConveyorSummary, ErrorFigures, Latencies};
 use qmarc_session::conveyor::BeltFrame;
 use qmarc_session::conveyor::dispatch::{Dispatched, PartRecord};
 use std::fmt::Write;
@@ -23,10 +23,18 @@ fn row(rows: &[GatherRow], cycle: u64) -> Option<&GatherRow> {
 /// The effector against part `p`'s grip point in gathered row `r`, mm.
 fn error_mm(frame: &BeltFrame, p: &PartRecord, r: &GatherRow) -> Option<f64> {
     let act = [r.act[0], r.act[1], r.act[2]];
-    let effector = frame.robot.mm_of(&act).ok()?;
-    let along = p.belt_mm + (r.conv - p.latched_counts) as f64 * frame.mm_per_count;
-    let part = frame.grip_point_mm(along, p.across_mm);
-    Some((0..3).map(|i| (effector[i] - part[i]).powi(2)).sum::<f64>().sqrt())
+    let part = (p.belt_mm, p.across_mm, p.latched_counts as f64);
+    frame.effector_error_mm(act, r.conv as f64, part)
+}
+
+/// The latencies of the parts `parts` (none when the session did not measure them).
+fn latency(parts: &[PartRecord]) -> Option<ConveyorLatency> {
+    let queued: Vec<u64> = parts.iter().filter_map(|p| p.queued_after_ns).collect();
+    let commanded: Vec<u64> = parts.iter().filter_map(|p| p.commanded_after_ns).collect();
+    (!queued.is_empty()).then(|| ConveyorLatency {
+        exposure_to_queue: Latencies::of_ns(&queued),
+        queue_to_command: Latencies::of_ns(&commanded),
+    })
 }
 
 /// `parts.csv` and the summary's section of the session whose dispatcher saw `d` and whose
@@ -81,6 +89,7 @@ pub fn results(d: &Dispatched, gather: &Gather, s: &Settings) -> (String, Convey
         grip_error_mm: ErrorFigures::of(&grip),
         closing_error_max_mm: closing,
         detections: d.detections,
+        latency_ms: latency(&d.parts),
     };
     (csv, summary)
 }

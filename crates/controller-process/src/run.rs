@@ -162,7 +162,7 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
     // A conveyor session: the thread between the camera and the loop's picker.
     let dispatcher = match picker {
         Some((h, status)) => Some(
-            Dispatcher::spawn(&location, settings, spec.epoch_ns, h, status)
+            Dispatcher::spawn(&location, settings, (spec.epoch_ns, !spec.deterministic), h, status)
                 .map_err(|e| RunError::Location(e.to_string()))?,
         ),
         None => None,

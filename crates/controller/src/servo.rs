@@ -350,7 +350,7 @@ impl Servo {
             Err(f) => return CycleEnd::Fault(f),
         };
         let read_done = self.clock.now_ns();
-        self.status.set_belt(self.belt, tick.woke_ns);
+        self.status.set_belt(self.belt, tick.woke_ns, n);
 
         // 2. Command position (frozen while holding after a starved trajectory).
         if !self.m.holding

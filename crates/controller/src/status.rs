@@ -21,6 +21,7 @@ pub struct LoopStatus {
     belt_seq: AtomicU64,
     belt_counts: AtomicI64,
     belt_ns: AtomicU64,
+    belt_sample: AtomicU64,
 }
 
 impl Default for LoopStatus {
@@ -35,6 +36,7 @@ impl Default for LoopStatus {
             belt_seq: AtomicU64::new(0),
             belt_counts: AtomicI64::new(0),
             belt_ns: AtomicU64::new(0),
+            belt_sample: AtomicU64::new(0),
         }
     }
 }
@@ -89,25 +91,36 @@ impl LoopStatus {
     /// The belt encoder's counts at the last read and when that cycle's tick woke the loop
     /// (ns of `CLOCK_MONOTONIC`), read as one pair.
     pub fn belt(&self) -> (i64, u64) {
+        let (counts, woke_ns, _) = self.belt_read();
+        (counts, woke_ns)
+    }
+
+    /// [`LoopStatus::belt`] and the sample (cycle) of that read, read as one: when a sample
+    /// was commanded, to the loop's tick.
+    pub fn belt_read(&self) -> (i64, u64, u64) {
         loop {
             let before = self.belt_seq.load(Ordering::Acquire);
-            let pair =
-                (self.belt_counts.load(Ordering::Acquire), self.belt_ns.load(Ordering::Acquire));
-            // The loop writes a pair in a few instructions: a torn read is retried at once.
+            let read = (
+                self.belt_counts.load(Ordering::Acquire),
+                self.belt_ns.load(Ordering::Acquire),
+                self.belt_sample.load(Ordering::Acquire),
+            );
+            // The loop writes them in a few instructions: a torn read is retried at once.
             if before.is_multiple_of(2) && self.belt_seq.load(Ordering::Acquire) == before {
-                return pair;
+                return read;
             }
             std::hint::spin_loop();
         }
     }
 
-    /// This cycle's belt counts, read when the tick at `woke_ns` woke the loop.
+    /// Sample `n`'s belt counts, read when the tick at `woke_ns` woke the loop.
     #[inline]
-    pub(crate) fn set_belt(&self, counts: i64, woke_ns: u64) {
+    pub(crate) fn set_belt(&self, counts: i64, woke_ns: u64, n: u64) {
         let seq = self.belt_seq.load(Ordering::Relaxed);
         self.belt_seq.store(seq + 1, Ordering::Release);
         self.belt_counts.store(counts, Ordering::Release);
         self.belt_ns.store(woke_ns, Ordering::Release);
+        self.belt_sample.store(n, Ordering::Release);
         self.belt_seq.store(seq + 2, Ordering::Release);
     }
 
@@ -171,8 +184,9 @@ mod tests {
         assert_eq!(s.homed(), 0b101, "only the robot's motors, by their flags");
         assert_eq!(s.gripper().0, 0);
         assert_eq!(s.belt(), (0, 0));
-        s.set_belt(-12_345, 99);
+        s.set_belt(-12_345, 99, 7);
         assert_eq!(s.belt(), (-12_345, 99));
+        assert_eq!(s.belt_read(), (-12_345, 99, 7));
         s.set_phase(Phase::Done);
         assert!(s.begun(), "begun, and ended since");
     }

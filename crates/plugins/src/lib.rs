@@ -9,7 +9,7 @@
 //!
 //! ```
 //! use qmarc_plugins::registry;
-//! assert_eq!(registry::path_generator_names(), ["step", "spline", "pvt"]);
+//! assert_eq!(registry::path_generator_names(), ["step", "spline", "pvt", "pick"]);
 //! assert!(registry::law("pidff").is_some());
 //! ```
 #![deny(missing_docs)]

@@ -121,16 +121,16 @@ pub const GENERATORS: &[GeneratorEntry] = &[
         build: |s| Ok(crate::grip::at_end(s, Box::new(LinearMove::from_settings(s)?))),
     },
     GeneratorEntry {
-        name: "pick",
-        description: "the pick-and-place cycle of [pick]: time-optimal jerk-limited legs at the motors' limits",
-        kind: GeneratorKind::OwnPath,
-        build: |s| Ok(Box::new(PickCycle::from_settings(s)?)),
-    },
-    GeneratorEntry {
         name: "pvt",
         description: "online position-velocity-time cubics, from a file or a stream (thesis 3.12.2)",
         kind: GeneratorKind::KnotPath,
         build: |s| Ok(Box::new(Pvt::from_settings(s)?)),
+    },
+    GeneratorEntry {
+        name: "pick",
+        description: "the pick-and-place cycle of [pick]: time-optimal jerk-limited legs at the motors' limits",
+        kind: GeneratorKind::OwnPath,
+        build: |s| Ok(Box::new(PickCycle::from_settings(s)?)),
     },
 ];
 

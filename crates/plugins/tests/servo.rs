@@ -56,7 +56,8 @@ fn all_laws() -> Vec<qmarc_plugins::registry::LawEntry> {
 }
 
 /// The settings `g` runs with in the proofs: an example path (the knot readers' threads are
-/// not the loop's), and a jog, a check and a move that last longer than the cycles counted.
+/// not the loop's), and a jog, a check, a move and the pick cycle that last longer than the
+/// cycles counted.
 fn example_settings(g: &qmarc_plugins::registry::GeneratorEntry) -> qmarc_config::Settings {
     let mut s = settings();
     let example = if g.name == "pvt" { "pvt-3motors.txt" } else { "sine-3motors.txt" };
@@ -66,6 +67,11 @@ fn example_settings(g: &qmarc_plugins::registry::GeneratorEntry) -> qmarc_config
     s.set_move_xyz([80.0, -40.0, -660.0]).unwrap();
     s.set_move_speed(0.01).unwrap();
     s.motion.linear = g.name == "linear";
+    // The pick cycle from where the simulated robot stands (the work centre is 0 counts on
+    // every arm), slow enough to outlast the cycles counted.
+    s.pick.at_mm = [0.0, 0.0, -600.0];
+    s.pick.speed = 0.25;
+    s.pick.dwell_s = 0.5;
     s
 }
 

@@ -35,6 +35,13 @@ pub struct Pick {
 /// What the loop did with a pick, cycle by cycle (the cycle is the gather row's).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PickEvent {
+    /// The loop took the pick: its intercept begins with this cycle's command.
+    Intercepting {
+        /// The part.
+        id: u32,
+        /// The cycle.
+        cycle: u64,
+    },
     /// The effector reached the part, moving with it: the gripper is told to close.
     Gripping {
         /// The part.
@@ -119,6 +126,21 @@ impl BeltFrame {
     /// [`tracker::BeltTracker`]).
     pub fn along_at(&self, p: &Pick, counts: f64) -> f64 {
         p.belt_mm + (counts - p.latched_counts as f64) * self.mm_per_count
+    }
+
+    /// The distance from the effector (the forward kinematics of the motors' `act` counts) to
+    /// the grip point of the part seen at `belt_mm` and `across_mm` when the belt read
+    /// `latched` counts, with the belt at `conv` counts, mm: `parts.csv`'s `error_mm`.
+    pub fn effector_error_mm(
+        &self,
+        act: [f64; 3],
+        conv: f64,
+        (belt_mm, across_mm, latched): (f64, f64, f64),
+    ) -> Option<f64> {
+        let effector = self.robot.mm_of(&act).ok()?;
+        let along = belt_mm + (conv - latched) * self.mm_per_count;
+        let part = self.grip_point_mm(along, across_mm);
+        Some((0..3).map(|i| (effector[i] - part[i]).powi(2)).sum::<f64>().sqrt())
     }
 
     /// The robot-frame grip point (the part's top centre) of a part `along` the belt and

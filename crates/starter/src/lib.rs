@@ -76,7 +76,7 @@ mod tests {
     fn the_names_come_from_the_registries() {
         let n = qmarc_plugins::registry::names();
         assert_eq!(n.laws, ["pidff"]);
-        assert_eq!(n.methods, ["step", "spline", "pvt"]);
+        assert_eq!(n.methods, ["step", "spline", "pvt", "pick"]);
         let backends: Vec<&str> =
             qmarc_hwserver::backends::BACKENDS.iter().map(|b| b.kind.name()).collect();
         assert_eq!(backends, ["sim", "s626"], "one registry entry per BackendKind, in its order");

@@ -47,6 +47,13 @@ pub struct PartRecord {
     pub place_cycle: Option<u64>,
     /// Why its pick was given up, if it was.
     pub gave_up: Option<GaveUp>,
+    /// Its first detection's exposure to the part in the queue, ns (a paced session's: the
+    /// camera's latency, the transport and the dispatcher's poll).
+    pub queued_after_ns: Option<u64>,
+    /// When it was handed to the loop, ns of `CLOCK_MONOTONIC`.
+    pub handed_ns: Option<u64>,
+    /// From then to the tick of the cycle whose command began its intercept, ns.
+    pub commanded_after_ns: Option<u64>,
 }
 
 /// What the dispatcher saw, at its end.
@@ -76,8 +83,12 @@ struct Dispatch {
     status: Arc<LoopStatus>,
     handle: PickerHandle,
     epoch_ns: u64,
+    /// Latencies are measured (a paced session: the exposures are `CLOCK_MONOTONIC`'s).
+    measure: bool,
     /// The loop's belt samples, (counts, ns), oldest first.
     history: VecDeque<(i64, u64)>,
+    /// The cycles (samples) of those reads, and their ticks (ns), oldest first.
+    ticks: VecDeque<(u64, u64)>,
     /// The pick the picker has and has not finished.
     given: Option<u32>,
     records: Vec<PartRecord>,
@@ -86,13 +97,14 @@ struct Dispatch {
 }
 
 impl Dispatcher {
-    /// Starts the dispatcher of the run at `location` (its world began at `epoch_ns`) for the
-    /// picker behind `handle`, in the loop whose status is `status`; `None` when the settings
-    /// describe no robot. The camera's service exists when this returns.
+    /// Starts the dispatcher of the run at `location` (its world began at `epoch_ns`; `paced`:
+    /// it runs on the clock, so its latencies are measured) for the picker behind `handle`, in
+    /// the loop whose status is `status`; `None` when the settings describe no robot. The
+    /// camera's service exists when this returns.
     pub fn spawn(
         location: &IpcLocation,
         s: &Settings,
-        epoch_ns: u64,
+        (epoch_ns, paced): (u64, bool),
         handle: PickerHandle,
         status: Arc<LoopStatus>,
     ) -> Result<Dispatcher, ServiceError> {
@@ -112,7 +124,9 @@ impl Dispatcher {
             status,
             handle,
             epoch_ns,
+            measure: paced,
             history: VecDeque::with_capacity(HISTORY),
+            ticks: VecDeque::with_capacity(HISTORY),
             given: None,
             records: Vec::new(),
             detections: 0,
@@ -202,6 +216,9 @@ impl Dispatch {
             across_mm: d.across_mm,
         };
         if let Some(id) = self.queue.detect(seen, &self.belt) {
+            let queued_after_ns = self
+                .measure
+                .then(|| qmarc_timer::clock::monotonic_now_ns().saturating_sub(d.exposure_ns));
             self.records.push(PartRecord {
                 id,
                 t_seen_s: d.exposure_ns.saturating_sub(self.epoch_ns) as f64 * 1e-9,
@@ -212,8 +229,18 @@ impl Dispatch {
                 grip_cycle: None,
                 place_cycle: None,
                 gave_up: None,
+                queued_after_ns,
+                handed_ns: None,
+                commanded_after_ns: None,
             });
         }
+    }
+
+    /// The tick of cycle `n`, ns: from the loop's read nearest to it, a period a cycle.
+    fn tick_of(&self, n: u64) -> Option<u64> {
+        let &(sample, woke) = self.ticks.iter().min_by_key(|(s, _)| s.abs_diff(n))?;
+        let periods = n as f64 - sample as f64;
+        Some((woke as f64 + periods * self.period_s * 1e9).max(0.0) as u64)
     }
 
     fn record(&mut self, id: u32) -> Option<&mut PartRecord> {
@@ -222,15 +249,24 @@ impl Dispatch {
 
     /// The loop's belt, the picker's events, the parts past the window, the next pick.
     fn look(&mut self) {
-        let (now, ns) = self.status.belt();
+        let (now, ns, sample) = self.status.belt_read();
         if ns != 0 && self.history.back().is_none_or(|&(_, t)| t < ns) {
             if self.history.len() == HISTORY {
                 self.history.pop_front();
+                self.ticks.pop_front();
             }
             self.history.push_back((now, ns));
+            self.ticks.push_back((sample, ns));
         }
         while let Ok(event) = self.handle.events.pop() {
             match event {
+                PickEvent::Intercepting { id, cycle } => {
+                    let tick = self.tick_of(cycle).filter(|_| self.measure);
+                    if let Some(r) = self.record(id) {
+                        r.commanded_after_ns =
+                            r.handed_ns.zip(tick).map(|(h, t)| t.saturating_sub(h));
+                    }
+                }
                 PickEvent::Gripping { id, cycle } => {
                     self.record(id).into_iter().for_each(|r| r.grip_cycle = Some(cycle));
                 }
@@ -276,6 +312,8 @@ impl Dispatch {
                 };
                 if self.handle.picks.push(pick).is_ok() {
                     self.given = Some(pick.id);
+                    let handed = qmarc_timer::clock::monotonic_now_ns();
+                    self.record(pick.id).into_iter().for_each(|r| r.handed_ns = Some(handed));
                 }
             }
         }

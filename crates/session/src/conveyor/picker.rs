@@ -294,6 +294,8 @@ impl Picker {
                     self.shared.ready.store(false, Ordering::Release);
                     match self.intercept(n, pick, 0.0, 1) {
                         Ok(()) => {
+                            let _ =
+                                self.events.push(PickEvent::Intercepting { id: pick.id, cycle: n });
                             self.phase = Phase::Intercept(pick);
                             self.step(n);
                         }

@@ -134,6 +134,8 @@ struct Rig {
     gripper: Gripper,
     told: Option<bool>,
     since: u64,
+    /// The picks whose intercept began, and the cycle (apart from the other events).
+    intercepting: Vec<(u32, u64)>,
 }
 
 impl Rig {
@@ -167,7 +169,10 @@ impl Rig {
                 (_, false) => 0,
             });
             while let Ok(e) = h.events.pop() {
-                events.push(e);
+                match e {
+                    PickEvent::Intercepting { id, cycle } => self.intercepting.push((id, cycle)),
+                    _ => events.push(e),
+                }
             }
             self.n += 1;
         }
@@ -176,7 +181,14 @@ impl Rig {
 }
 
 fn rig() -> Rig {
-    Rig { n: 0, belt: 0, gripper: Gripper(Gripper::OPEN), told: None, since: 0 }
+    Rig {
+        n: 0,
+        belt: 0,
+        gripper: Gripper(Gripper::OPEN),
+        told: None,
+        since: 0,
+        intercepting: Vec::new(),
+    }
 }
 
 /// No jump, in position or in velocity: each step of `cmds` within what the motors' velocity
@@ -236,6 +248,8 @@ fn the_picker_intercepts_follows_and_places_a_part_once() {
     assert!(matches!(events[1], PickEvent::Lifted { id: 7 }), "{events:?}");
     assert!(matches!(events[2], PickEvent::Placed { id: 7, .. }), "{events:?}");
     assert_eq!(events.len(), 3, "once: {events:?}");
+    // Its intercept began in the cycle the pick was there for.
+    assert_eq!(r.intercepting, [(7, start)]);
     // On the part, exactly, from the grip until the gripper has closed (50 cycles).
     for k in grip..grip + 50 {
         let belt = pick.latched_counts + speed * (k - start + 1) as i64;
