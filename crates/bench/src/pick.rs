@@ -80,6 +80,37 @@ pub fn run(a: &PickArgs) -> anyhow::Result<()> {
     let track = measured?;
     ended?;
     report(a, &settings, &track);
+    lock_step(a, &settings)
+}
+
+/// The same cycle as a path in lock-step (`run --method pick`, `[pick]`): the controller's
+/// own tracking, without the host stalls of a paced session on a VM.
+fn lock_step(a: &PickArgs, s: &qmarc_config::Settings) -> anyhow::Result<()> {
+    let p = &s.pick;
+    if p.at_mm[..] != a.at[..]
+        || (p.cross_mm, p.lift_mm, p.speed) != (a.cross_mm, a.lift_mm, a.speed)
+    {
+        println!("  (the cycle in lock-step runs [pick] of the settings: give it these options)");
+        return Ok(());
+    }
+    let starter = qmarc_program::process::bin_dir(a.bin_dir.as_deref())?.join("qmarc-starter");
+    let out =
+        std::env::temp_dir().join(format!("qmarc-bench-pick-lockstep-{}", std::process::id()));
+    let status = std::process::Command::new(starter)
+        .arg(format!("--config={}", a.config.display()))
+        .arg(format!("--out={}", out.display()))
+        .args(["--unpaced", "run", "--method=pick", "--approach"])
+        .stdout(std::process::Stdio::null())
+        .status()?;
+    let summary = qmarc_report::Summary::read(&out).map_err(anyhow::Error::msg);
+    let _ = std::fs::remove_dir_all(&out);
+    anyhow::ensure!(status.success(), "the lock-step cycle failed: {status}");
+    let e = summary?.effector.ok_or_else(|| anyhow::anyhow!("no effector figures"))?.distance;
+    println!(
+        "  the same cycle in lock-step (`run --method pick`, no host stall): effector max \
+         {:.3} mm, RMS {:.3} mm",
+        e.max_mm, e.rms_mm
+    );
     Ok(())
 }
 
