@@ -12,7 +12,7 @@
 use crate::motion::{MotionLimits, MotionState, Profile, sampled_ratio};
 use crate::source::{CommandQueue, QUEUE_BUDGET_BYTES, TrajBuildError};
 use qmarc_config::{MoveTarget, Settings};
-use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator};
+use qmarc_controller::traj::{TrajStartError, TrajectoryGenerator};
 use qmarc_kinematics::{ARMS, Point, Robot};
 use qmarc_proto::{MAX_MOTORS, MotorFlags};
 
@@ -202,20 +202,5 @@ impl TrajectoryGenerator for LinearMove {
         Ok(())
     }
 
-    fn samples(&self) -> Option<u64> {
-        self.queue.samples()
-    }
-
-    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
-        self.queue.bounds()
-    }
-
-    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
-        self.queue.end_velocity()
-    }
-
-    #[inline]
-    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
-        self.queue.sample(n, cmd)
-    }
+    crate::source::follows_queue!(queue, sample);
 }

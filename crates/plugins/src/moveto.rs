@@ -218,17 +218,7 @@ impl TrajectoryGenerator for Jog {
         Ok(())
     }
 
-    fn samples(&self) -> Option<u64> {
-        self.queue.samples()
-    }
-
-    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
-        self.queue.bounds()
-    }
-
-    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
-        self.queue.end_velocity()
-    }
+    crate::source::follows_queue!(queue);
 
     #[inline]
     fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {

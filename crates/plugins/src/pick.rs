@@ -11,7 +11,7 @@ use crate::motion::MotionLimits;
 use crate::moveto::rest_to_rest;
 use crate::source::{CommandQueue, QUEUE_BUDGET_BYTES, TrajBuildError};
 use qmarc_config::{PickSettings, Settings};
-use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, check_start};
+use qmarc_controller::traj::{TrajStartError, TrajectoryGenerator, check_start};
 use qmarc_kinematics::{ARMS, Point, Robot};
 use qmarc_proto::MAX_MOTORS;
 
@@ -121,22 +121,7 @@ impl TrajectoryGenerator for PickCycle {
         Ok(Some(self.queue.commands()[0]))
     }
 
-    fn samples(&self) -> Option<u64> {
-        self.queue.samples()
-    }
-
-    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
-        self.queue.bounds()
-    }
-
-    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
-        self.queue.end_velocity()
-    }
-
-    #[inline]
-    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
-        self.queue.sample(n, cmd)
-    }
+    crate::source::follows_queue!(queue, sample);
 }
 
 #[cfg(test)]

@@ -26,6 +26,38 @@ pub fn sample_queue(queue: &[[f64; MAX_MOTORS]], n: u64, cmd: &mut [f64; MAX_MOT
     }
 }
 
+/// The [`qmarc_controller::traj::TrajectoryGenerator`] methods of a generator that plays its
+/// [`CommandQueue`] field `$queue`: its samples, path bounds and end velocity — and with
+/// `sample`, its samples themselves.
+macro_rules! follows_queue {
+    ($queue:ident) => {
+        fn samples(&self) -> Option<u64> {
+            self.$queue.samples()
+        }
+
+        fn path_bounds(&self) -> Option<[(f64, f64); qmarc_proto::MAX_MOTORS]> {
+            self.$queue.bounds()
+        }
+
+        fn end_velocity(&self) -> Option<[f64; qmarc_proto::MAX_MOTORS]> {
+            self.$queue.end_velocity()
+        }
+    };
+    ($queue:ident, sample) => {
+        $crate::source::follows_queue!($queue);
+
+        #[inline]
+        fn sample(
+            &mut self,
+            n: u64,
+            cmd: &mut [f64; qmarc_proto::MAX_MOTORS],
+        ) -> qmarc_controller::traj::Sample {
+            self.$queue.sample(n, cmd)
+        }
+    };
+}
+pub(crate) use follows_queue;
+
 /// A command queue computed before the move — the spline's, a jog's, a line's: one command a
 /// sample, then the velocity the path ends with. A generator that follows one answers the
 /// loop's questions from it: nothing while it is empty (not planned yet).

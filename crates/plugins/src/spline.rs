@@ -8,7 +8,7 @@
 
 use crate::source::{CommandQueue, KnotSource, QUEUE_BUDGET_BYTES, TrajBuildError, knots_failed};
 use qmarc_config::Settings;
-use qmarc_controller::traj::{Sample, TrajStartError, TrajectoryGenerator, check_start};
+use qmarc_controller::traj::{TrajStartError, TrajectoryGenerator, check_start};
 use qmarc_knots::dynamics::{Excess, check_segment};
 use qmarc_knots::{
     KnotFileError, KnotRules, MAX_KNOT_FILE_BYTES, OfflineKnots, parse_offline, read_knot_file,
@@ -340,28 +340,14 @@ impl TrajectoryGenerator for CubicSpline {
         Ok(Some(self.queue.commands()[0]))
     }
 
-    fn samples(&self) -> Option<u64> {
-        self.queue.samples()
-    }
-
-    fn path_bounds(&self) -> Option<[(f64, f64); MAX_MOTORS]> {
-        self.queue.bounds()
-    }
-
-    fn end_velocity(&self) -> Option<[f64; MAX_MOTORS]> {
-        self.queue.end_velocity()
-    }
-
-    #[inline]
-    fn sample(&mut self, n: u64, cmd: &mut [f64; MAX_MOTORS]) -> Sample {
-        self.queue.sample(n, cmd)
-    }
+    crate::source::follows_queue!(queue, sample);
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
+    use qmarc_controller::traj::Sample;
 
     fn spline(t: &[f64], y: &[f64]) -> NaturalSpline {
         NaturalSpline::new(t.to_vec(), y.to_vec()).unwrap()
