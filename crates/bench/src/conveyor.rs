@@ -120,12 +120,12 @@ fn calm_grips(frame: &BeltFrame, parts: &str, gather: &str, (before, every): (u6
     let col = |name: &str| header.iter().position(|h| *h == name);
     let rows: Vec<Vec<f64>> =
         lines.map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect()).collect();
-    let (Some(cyc), Some(grip), Some(conv), Some(a1)) =
-        (col("cycle"), col("grip"), col("conv"), col("act1"))
+    let (Some(cyc), Some(grip), Some(conv), Some(a1), Some(a2), Some(a3)) =
+        (col("cycle"), col("grip"), col("conv"), col("act1"), col("act2"), col("act3"))
     else {
         return Calm::default();
     };
-    let act = |r: &[f64]| [r[a1], r[a1 + 3], r[a1 + 6]];
+    let act = |r: &[f64]| [r[a1], r[a2], r[a3]];
     let (mut calm, mut sq) = (Calm::default(), 0.0);
     for l in parts.lines().skip(1) {
         let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect();

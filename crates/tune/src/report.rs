@@ -268,7 +268,7 @@ pub struct TuneSummary {
     pub method: String,
     /// The objective (`abs`, `sse`, `max`).
     pub objective: String,
-    /// The gains tuned (`kp` … `kaff`).
+    /// The gains tuned (`kp` … `kjff`).
     pub params: Vec<String>,
     /// Candidates evaluated.
     pub candidates: usize,

@@ -52,7 +52,8 @@ pub struct PartRecord {
     pub queued_after_ns: Option<u64>,
     /// When it was handed to the loop, ns of `CLOCK_MONOTONIC`.
     pub handed_ns: Option<u64>,
-    /// From then to the tick of the cycle whose command began its intercept, ns.
+    /// From then to the tick of the cycle whose command began its intercept, ns (0 when
+    /// that cycle had woken before the hand-over: its command came within its compute).
     pub commanded_after_ns: Option<u64>,
 }
 
@@ -310,9 +311,10 @@ impl Dispatch {
                     across_mm: part.seen.across_mm,
                     latched_counts: part.seen.latched_counts,
                 };
+                // Before the push: the loop may take it at once.
+                let handed = qmarc_timer::clock::monotonic_now_ns();
                 if self.handle.picks.push(pick).is_ok() {
                     self.given = Some(pick.id);
-                    let handed = qmarc_timer::clock::monotonic_now_ns();
                     self.record(pick.id).into_iter().for_each(|r| r.handed_ns = Some(handed));
                 }
             }

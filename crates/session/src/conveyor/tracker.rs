@@ -24,6 +24,14 @@ pub const SPEED_CYCLES: usize = 32;
 /// The tracking loop's bandwidth ω / 2π, Hz.
 pub const TRACK_HZ: f64 = 15.0;
 
+/// The largest ω·T the loop runs at: a longer servo period gets a lower bandwidth (the
+/// discrete loop is stable only while a period is a small part of its time constant).
+pub const MAX_OMEGA_PERIOD: f64 = 0.1;
+
+/// Reads further apart than this many periods (a host stall) restart the loop at the count
+/// read and its measured speed: the jerk held over the gap would carry the estimate away.
+pub const RESTART_PERIODS: u64 = 8;
+
 /// The belt's estimated position, speed and acceleration ([module docs](self)).
 #[derive(Debug, Clone)]
 pub struct BeltTracker {
@@ -44,9 +52,10 @@ pub struct BeltTracker {
 }
 
 impl BeltTracker {
-    /// A tracker for reads every `period_s`, at [`TRACK_HZ`].
+    /// A tracker for reads every `period_s`, at [`TRACK_HZ`] (or [`MAX_OMEGA_PERIOD`] /
+    /// `period_s` at a long period).
     pub fn new(period_s: f64) -> BeltTracker {
-        let w = std::f64::consts::TAU * TRACK_HZ;
+        let w = (std::f64::consts::TAU * TRACK_HZ).min(MAX_OMEGA_PERIOD / period_s);
         BeltTracker {
             period_s,
             gains: [w.powi(4), 4.0 * w.powi(3), 6.0 * w * w, 4.0 * w],
@@ -92,8 +101,8 @@ impl BeltTracker {
 
     /// The encoder's `counts`, read at sample `n` (after missed periods the reads are more
     /// than a period apart: the estimate is carried over the time between them). Until the
-    /// speed can be measured (the first [`SPEED_CYCLES`] reads) the estimate is the counts
-    /// read, at their speed.
+    /// speed can be measured (the first [`SPEED_CYCLES`] reads), and after a gap of more
+    /// than [`RESTART_PERIODS`], the estimate restarts at the counts read, at their speed.
     #[inline]
     pub fn read(&mut self, n: u64, counts: i64) {
         let last_n = if self.n_reads == 0 { n } else { self.read_at(0).0 };
@@ -102,13 +111,15 @@ impl BeltTracker {
         let z = counts as f64;
         let speed = self.measured_speed();
         self.before = if self.n_reads == 1 { z } else { self.now[0] };
-        if self.n_reads <= SPEED_CYCLES {
+        let gap = n.saturating_sub(last_n);
+        let sound = self.now.iter().chain([&self.jerk, &self.integral]).all(|x| x.is_finite());
+        if self.n_reads <= SPEED_CYCLES || gap > RESTART_PERIODS || !sound {
             (self.now, self.jerk, self.integral) = ([z, speed, 0.0], 0.0, 0.0);
             return;
         }
         // The last estimate carried to this read by the loop's jerk; the read corrects the
         // jerk from here on.
-        let t = n.saturating_sub(last_n) as f64 * self.period_s;
+        let t = gap as f64 * self.period_s;
         let ([p, v, a], j) = (self.now, self.jerk);
         self.now = [
             p + v * t + a * t * t / 2.0 + j * t * t * t / 6.0,
