@@ -122,3 +122,22 @@ fn missed_periods_and_long_periods_keep_the_estimate_on_the_belt() {
         assert!(worst < 2.0, "{name}: {worst} counts off the belt");
     }
 }
+
+/// Over a gap (missed periods, fewer than a restart's) the estimate is carried by the
+/// belt's kinematics: on a belt accelerating hard (4·10⁷ counts/s², so that its motion over
+/// a few periods dwarfs a count) the estimate right after a 7-period gap is where the belt
+/// is, and so is its speed.
+#[test]
+fn a_gap_carries_the_estimate_with_the_belts_acceleration() {
+    let acc = 4e7;
+    let at = |n: u64| 0.5 * acc * (n as f64 * T).powi(2);
+    let mut t = BeltTracker::new(T);
+    for n in 0..3_000u64 {
+        t.read(n, at(n).floor() as i64);
+    }
+    let n = 3_006;
+    t.read(n, at(n).floor() as i64);
+    assert!((t.position() - at(n)).abs() < 2.0, "{} for {}", t.position(), at(n));
+    let speed = acc * n as f64 * T;
+    assert!((t.speed() - speed).abs() < 2e3, "{} counts/s for {speed}", t.speed());
+}
