@@ -744,3 +744,32 @@ fn the_console_jogs_the_effector_goes_to_a_point_and_grips() {
     drop(tmux);
     run.assert_clean();
 }
+
+/// Issue 44: Ctrl-B runs a conveyor session (the starter's `conveyor`, `conveyor.run_s`
+/// long); while it runs, the console shows the belt, the queue and the parts picked and
+/// missed, as the session counts them; its results come when it ends, `parts.csv` with them.
+#[test]
+fn the_console_runs_the_belt_and_shows_its_parts() {
+    let run = TestRun::new("consbelt");
+    let out = format!("{:?}", run.out("out").display().to_string());
+    run.config_with(&[("out_dir", &out), ("conveyor.run_s", "6.0")]);
+    let tmux = Tmux::start(&run.dir, &run.dir, &console_command(&run));
+    tmux.wait_for("the setup screen", Duration::from_secs(30), setup_drawn);
+    tmux.keys(&["C-b"]);
+    let picked = |s: &str| -> u32 {
+        let at = s.find(" picked").map_or("", |i| &s[..i]);
+        at.rsplit(|c: char| !c.is_ascii_digit()).next().and_then(|n| n.parse().ok()).unwrap_or(0)
+    };
+    let s = tmux.wait_for("a part picked", Duration::from_secs(60), |s| picked(s) > 0);
+    assert!(s.contains("conveyor running") && s.contains("mm/s") && s.contains(" missed"), "{s}");
+    let shown = picked(&s);
+    tmux.wait_for("the results", Duration::from_secs(60), results_drawn);
+    let parts = std::fs::read_to_string(run.out("out").join("parts.csv")).expect("parts.csv");
+    let in_file = parts.lines().filter(|l| l.contains(",picked,")).count();
+    assert!(in_file >= shown as usize, "the console showed {shown} picked, parts.csv {in_file}");
+    tmux.keys(&["F12"]);
+    let (status, s) = tmux.wait_exit(Duration::from_secs(20));
+    assert_eq!(status, 0, "{s}");
+    drop(tmux);
+    run.assert_clean();
+}

@@ -210,13 +210,44 @@ fn picking(run: &TestRun, seconds: f64, after_s: u64) -> (std::process::Child, s
     (child, out)
 }
 
+/// `qmarc cmd status`'s conveyor line, `belt B mm at V mm/s · Q queued · … · P picked · M
+/// missed`, as (B, V, Q, P, M); `None` while the session does not serve.
+fn status_counts(run: &TestRun) -> Option<(f64, f64, u32, u32, u32)> {
+    let r = run.cmd(&["status"]);
+    let line = r.stdout.lines().find(|l| l.trim_start().starts_with("belt "))?;
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let before = |w: &str| words[words.iter().position(|x| *x == w)? - 1].parse().ok();
+    let belt = words[1].parse().ok()?;
+    let speed = words[4].parse().ok()?;
+    Some((belt, speed, before("queued")?, before("picked")?, before("missed")?))
+}
+
 /// The camera killed mid-run is said at once and ends nothing: the session picks the parts
-/// it had seen and ends when its time is up, every file written.
+/// it had seen and ends when its time is up, every file written. While it runs, `qmarc cmd
+/// status` says the belt, the queue and the parts picked and missed, as they are.
 #[test]
 fn the_camera_killed_mid_run_ends_nothing() {
     use nix::sys::signal::Signal;
     let run = TestRun::new("conveyor-camkill");
-    let (child, out) = picking(&run, 6.0, 2);
+    let (child, out) = picking(&run, 8.0, 1);
+    // The status: the belt moving at its speed, then a part picked.
+    let s =
+        qmarc_config::Settings::load(&run.config_with(&[]), &qmarc_config::Names::any()).unwrap();
+    let started = std::time::Instant::now();
+    let (mut first, mut picked) = (None, 0);
+    while picked == 0 {
+        assert!(started.elapsed().as_secs() < 60, "no part picked in a minute");
+        if let Some((belt, speed, _, p, _)) = status_counts(&run) {
+            first.get_or_insert((belt, speed));
+            picked = p;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let (belt, speed) = first.expect("a status");
+    let ratio = speed / s.conveyor.speed_mm_s;
+    assert!((0.9..1.1).contains(&ratio), "the status says the belt at {speed} mm/s");
+    let (later, ..) = status_counts(&run).expect("a status");
+    assert!(later > belt, "the belt moves: {belt} then {later} mm");
     let camera = run.processes().into_iter().find(|(_, c)| c.contains("qmarc-camera"));
     let (pid, _) = camera.expect("the camera runs");
     qmarc_tests::send_signal(pid, Signal::SIGKILL);
@@ -232,7 +263,9 @@ fn the_camera_killed_mid_run_ends_nothing() {
     );
     let summary = read_summary(&out);
     assert!(summary.fault.is_none(), "{:?}", summary.fault);
-    assert!(read_parts(&out).iter().any(|p| p["state"] == "picked"));
+    let parts = read_parts(&out);
+    let in_file = parts.iter().filter(|p| p["state"] == "picked").count();
+    assert!(in_file >= picked as usize, "the status said {picked} picked, parts.csv {in_file}");
     run.assert_clean();
 }
 

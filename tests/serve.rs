@@ -34,9 +34,7 @@ fn serve(run: &TestRun, config: &Path, extra: &[&str]) -> Child {
 
 /// `qmarc cmd --iox-prefix … ARGS`.
 fn cmd(run: &TestRun, args: &[&str]) -> Finished {
-    let mut c = Command::new(bin_dir().join("qmarc"));
-    c.arg("cmd").args(run.isolation_args()).args(args);
-    run_with_timeout(&mut c, TIMEOUT)
+    run.cmd(args)
 }
 
 /// `qmarc cmd ARGS`, which must be accepted.

@@ -145,6 +145,13 @@ impl TestRun {
         )
     }
 
+    /// `qmarc cmd` with the isolation arguments and `args` (a minute at most).
+    pub fn cmd(&self, args: &[&str]) -> Finished {
+        let mut c = Command::new(bin_dir().join("qmarc"));
+        c.arg("cmd").args(self.isolation_args()).args(args);
+        run_with_timeout(&mut c, Duration::from_secs(60))
+    }
+
     /// A copy of the test settings in this run's directory with `edits` applied: each
     /// `(key, value)` replaces the value of every line `key = …` (every `[[motor]]` table's,
     /// for per-motor keys). A `section.key` that is not in the file is added to its

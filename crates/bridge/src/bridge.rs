@@ -136,6 +136,8 @@ struct Bridge {
     /// The `get_result` calls waiting for their goal's end.
     waiting: Vec<(Uuid, zenoh::query::Query)>,
     homed: bool,
+    /// A conveyor session's parts, by its last status: queued, picked, missed.
+    parts: Option<[u32; 3]>,
     refused: String,
     said: Option<SessionState>,
     said_at: Option<Instant>,
@@ -179,6 +181,7 @@ pub fn run(opts: Options, stop: &AtomicBool) -> anyhow::Result<()> {
         goals,
         waiting: Vec::new(),
         homed: false,
+        parts: None,
         refused: String::new(),
         said: None,
         said_at: None,
@@ -509,10 +512,13 @@ impl Bridge {
             if let Ok(s) = self.client.send(CommandRequest::of(CommandKind::Status)) {
                 let all = (1u32 << self.opts.converter.n_motors) - 1;
                 self.homed = s.robot.homed & all == all;
+                let c = s.conveyor;
+                self.parts = (c.active == 1).then_some([c.queued, c.picked, c.missed]);
             }
         }
         let Some(last) = self.last else { return };
         let mut state = SessionState::of(&last, self.homed, &self.refused);
+        state.parts = self.parts;
         match ended {
             Some(End::Gone) if state.fault.is_empty() => {
                 state.phase = "gone".into();

@@ -181,6 +181,8 @@ pub struct SessionState {
     pub estop: bool,
     /// The last command refused, and why (empty: none).
     pub refused: String,
+    /// A conveyor session's parts: queued, picked, missed (none outside one).
+    pub parts: Option<[u32; 3]>,
 }
 
 impl SessionState {
@@ -194,6 +196,7 @@ impl SessionState {
             homed,
             estop: Status(s.status).intersects(Status::ESTOP),
             refused: refused.to_string(),
+            parts: None,
         }
     }
 
@@ -213,6 +216,18 @@ impl SessionState {
             (f, _) => format!("fault: {f}"),
         };
         let kv = |k: &str, v: String| KeyValue { key: k.into(), value: v };
+        let mut values = vec![
+            kv("phase", self.phase.clone()),
+            kv("fault", self.fault.clone()),
+            kv("homed", self.homed.to_string()),
+            kv("estop", self.estop.to_string()),
+            kv("refused", self.refused.clone()),
+        ];
+        if let Some([queued, picked, missed]) = self.parts {
+            values.push(kv("queued", queued.to_string()));
+            values.push(kv("picked", picked.to_string()));
+            values.push(kv("missed", missed.to_string()));
+        }
         DiagnosticArray {
             header: Header { stamp, frame_id: String::new() },
             status: vec![DiagnosticStatus {
@@ -220,13 +235,7 @@ impl SessionState {
                 name: "qmarc".into(),
                 message,
                 hardware_id: hardware_id.into(),
-                values: vec![
-                    kv("phase", self.phase.clone()),
-                    kv("fault", self.fault.clone()),
-                    kv("homed", self.homed.to_string()),
-                    kv("estop", self.estop.to_string()),
-                    kv("refused", self.refused.clone()),
-                ],
+                values,
             }],
         }
     }
@@ -307,6 +316,26 @@ mod tests {
         let d = fault.diagnostics("sim", Time::default());
         assert_eq!((d.status[0].level, d.status[0].message.as_str()), (2, "fault: limit_switch"));
         assert_eq!(d.status[0].values[3], KeyValue { key: "estop".into(), value: "true".into() });
+        assert_eq!(d.status[0].values.len(), 5, "no parts outside a conveyor session");
+    }
+
+    #[test]
+    fn a_conveyor_session_says_its_parts() {
+        let at_belt = SessionState {
+            phase: "serving".into(),
+            homed: true,
+            parts: Some([2, 15, 1]),
+            ..SessionState::default()
+        };
+        let d = at_belt.diagnostics("sim", Time::default());
+        let value = |k: &str| {
+            d.status[0].values.iter().find(|v| v.key == k).map(|v| v.value.clone()).unwrap()
+        };
+        assert_eq!(
+            (value("queued"), value("picked"), value("missed")),
+            ("2".into(), "15".into(), "1".into())
+        );
+        assert_eq!(d.status[0].level, 0, "parts missed are counted, not a fault");
     }
 
     fn point(

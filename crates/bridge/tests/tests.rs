@@ -61,6 +61,10 @@ fn scratch(name: &str) -> (PathBuf, PathBuf) {
     (dir, config)
 }
 
+/// A bridge's Zenoh configuration: a peer listening on `LISTEN`, scouting nothing.
+const PEER: &str = "{ mode: \"peer\", listen: { endpoints: [\"LISTEN\"] }, \
+                    scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }";
+
 /// A serving session, its bridge and their scratch folder; stopped and cleaned up on drop.
 struct Cell {
     dir: PathBuf,
@@ -73,14 +77,17 @@ struct Cell {
 
 impl Cell {
     fn start(name: &str, namespace: &str) -> Cell {
-        let peer = "{ mode: \"peer\", listen: { endpoints: [\"LISTEN\"] }, \
-                    scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }";
-        Cell::start_with(name, namespace, peer)
+        Cell::start_with(name, namespace, PEER)
     }
 
     /// A cell whose bridge has the Zenoh configuration `zenoh`, `LISTEN` in it replaced by a
     /// free endpoint on loopback (the cell's `endpoint`).
     fn start_with(name: &str, namespace: &str, zenoh_config: &str) -> Cell {
+        Cell::start_session(name, namespace, zenoh_config, &["serve"])
+    }
+
+    /// [`Cell::start_with`] on the session the starter's `session` arguments start.
+    fn start_session(name: &str, namespace: &str, zenoh_config: &str, session: &[&str]) -> Cell {
         let (dir, config) = scratch(name);
         let prefix = format!("qmarc_bridge{name}_{}_", std::process::id());
         let starter = bridge_bin().with_file_name("qmarc-starter");
@@ -90,7 +97,7 @@ impl Cell {
             .arg(format!("--out={}", dir.join("out").display()))
             .arg(format!("--iox-prefix={prefix}"))
             .arg("--deterministic")
-            .arg("serve")
+            .args(session)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
@@ -216,6 +223,25 @@ fn wait_for_order_after(
         std::thread::sleep(Duration::from_millis(10));
     }
     client.wait(Duration::from_secs(30)).unwrap()
+}
+
+/// Issue 44: a conveyor session's bridge says the parts queued, picked and missed in
+/// `/diagnostics`, as the session counts them (never more than its status says later).
+#[test]
+fn a_conveyor_sessions_diagnostics_count_its_parts() {
+    let session = ["conveyor", "--seconds=30", "--parts-per-min=90"];
+    let mut cell = Cell::start_session("conveyor", "/belt", PEER, &session);
+    let count = |d: &serde_json::Value, k: &str| -> u64 {
+        d["values"][k].as_str().and_then(|v| v.parse().ok()).unwrap_or(0)
+    };
+    let d = cell.diagnostics_until(|d| count(d, "picked") >= 1);
+    assert!(d["values"]["queued"].is_string() && d["values"]["missed"].is_string(), "{d}");
+    assert_eq!(d["level"], 0, "{d}");
+    let later = cell.client().send(CommandRequest::of(CommandKind::Status)).unwrap().conveyor;
+    assert_eq!(later.active, 1);
+    assert!(u64::from(later.picked) >= count(&d, "picked"), "{later:?} after {d}");
+    assert!(u64::from(later.missed) >= count(&d, "missed"), "{later:?} after {d}");
+    assert!(cell.quit().success());
 }
 
 /// Issue 42: the example client says what it can do, and a session it cannot open is said

@@ -248,9 +248,11 @@ impl App {
             // It runs the path.
             Mode::Tune => Action::Run,
             // As homing: the settings, and no knot file.
-            Mode::Jog { .. } | Mode::JogAxis { .. } | Mode::GoTo { .. } | Mode::Grip { .. } => {
-                Action::Home
-            }
+            Mode::Jog { .. }
+            | Mode::JogAxis { .. }
+            | Mode::GoTo { .. }
+            | Mode::Grip { .. }
+            | Mode::Conveyor => Action::Home,
         };
         if let Some((field, e)) = self.form.blocking(action) {
             if let Some(i) = field {
@@ -277,7 +279,8 @@ impl App {
                     let robot = self.form.checked.as_ref().and_then(|s| s.robot());
                     let live =
                         crate::live::Live::for_move(&self.starter_args, &self.iox_root, r.pid())
-                            .with_robot(robot);
+                            .with_robot(robot)
+                            .with_belt(mode == Mode::Conveyor);
                     self.live = Some(live);
                 }
                 self.log.push(format!("── {} ──", mode.arg()));

@@ -161,6 +161,9 @@ fn describe(s: &CommandResponse, n: usize) -> String {
     if gripper.code() >= 0 {
         out.push_str(&format!("\n  gripper {}", gripper.name()));
     }
+    if s.conveyor.active == 1 {
+        out.push_str(&format!("\n  {}", s.conveyor.describe()));
+    }
     let unhomed: Vec<String> =
         (0..n).filter(|m| s.robot.homed & (1 << m) == 0).map(|m| (m + 1).to_string()).collect();
     if !unhomed.is_empty() {

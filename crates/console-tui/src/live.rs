@@ -7,6 +7,8 @@
 
 use qmarc_proto::service::IpcLocation;
 use qmarc_report::series::Series;
+use qmarc_session::client::CommandClient;
+use qmarc_session::wire::{CommandKind, CommandRequest, ConveyorStatus};
 use qmarc_telemetry::reader::{TelemetryReader, is_last};
 use std::time::{Duration, Instant};
 
@@ -15,6 +17,9 @@ pub const WINDOW_S: f64 = 4.0;
 
 /// How often a reader is tried until the move's telemetry is there.
 const RETRY: Duration = Duration::from_millis(100);
+
+/// How often a conveyor session is asked for its belt and parts.
+pub const BELT_EVERY: Duration = Duration::from_millis(250);
 
 /// The live view of one move.
 pub struct Live {
@@ -40,6 +45,11 @@ pub struct Live {
     pub effector_mm: Option<[f64; 3]>,
     /// The gripper, by the last sample.
     pub gripper: qmarc_proto::Gripper,
+    /// A conveyor session's belt and parts are asked for ([`Live::with_belt`]): the command
+    /// client once connected, and when it last asked.
+    belt_asked: Option<(Option<CommandClient>, Option<Instant>)>,
+    /// The belt and its parts, by the session's last status.
+    pub belt: Option<ConveyorStatus>,
 }
 
 impl std::fmt::Debug for Live {
@@ -72,6 +82,34 @@ impl Live {
             robot: None,
             effector_mm: None,
             gripper: qmarc_proto::Gripper(qmarc_proto::Gripper::ABSENT),
+            belt_asked: None,
+            belt: None,
+        }
+    }
+
+    /// Shows a conveyor session's belt, queue and parts picked and missed (`belt`): asked of
+    /// its command service every [`BELT_EVERY`].
+    pub fn with_belt(mut self, belt: bool) -> Live {
+        self.belt_asked = belt.then_some((None, None));
+        self
+    }
+
+    /// Asks the session for its belt and parts, when due.
+    fn ask_belt(&mut self) {
+        let Some((client, asked)) = &mut self.belt_asked else { return };
+        if asked.is_some_and(|t| t.elapsed() < BELT_EVERY) {
+            return;
+        }
+        *asked = Some(Instant::now());
+        if client.is_none() {
+            *client = CommandClient::connect(&self.location).ok();
+        }
+        let Some(c) = client else { return };
+        match c.send(CommandRequest::of(CommandKind::Status)) {
+            Ok(s) if s.conveyor.active == 1 => self.belt = Some(s.conveyor),
+            Ok(_) => {}
+            // The session has ended (or is not there yet): connect again next time.
+            Err(_) => *client = None,
         }
     }
 
@@ -90,6 +128,9 @@ impl Live {
         }
         if self.gripper.code() >= 0 {
             s.push_str(&format!(" · gripper {}", self.gripper.name()));
+        }
+        if let Some(belt) = &self.belt {
+            s.push_str(&format!(" · {}", belt.describe()));
         }
         s
     }
@@ -126,6 +167,7 @@ impl Live {
         if self.ended {
             return;
         }
+        self.ask_belt();
         if self.reader.is_none() {
             if self.tried.is_some_and(|t| t.elapsed() < RETRY) {
                 return;

@@ -51,6 +51,8 @@ pub enum Mode {
         /// Close it.
         close: bool,
     },
+    /// `conveyor`: pick the parts off the belt for `conveyor.run_s` (issue 44).
+    Conveyor,
 }
 
 impl Mode {
@@ -63,6 +65,7 @@ impl Mode {
             Mode::Tune => "tune",
             Mode::Jog { .. } | Mode::JogAxis { .. } => "jog",
             Mode::GoTo { .. } | Mode::Grip { .. } => "move",
+            Mode::Conveyor => "conveyor",
         }
     }
 
@@ -74,6 +77,7 @@ impl Mode {
             Mode::Run => &["run", "--approach"],
             Mode::Step => &["step"],
             Mode::Tune => &["tune", "run"],
+            Mode::Conveyor => &["conveyor"],
             Mode::Jog { motor, counts } => {
                 return vec![
                     "jog".into(),

@@ -78,11 +78,13 @@ pub fn draw(f: &mut Frame, app: &App) {
     }
     f.render_widget(Paragraph::new(indented(strip)), strip_area);
     f.render_widget(Paragraph::new(indented(message)), status);
-    f.render_widget(
-        Line::from(" F2 Home F5 Run F6 Step ^T Tune ^G Go to ^O Grip F9 Abort F10 Exit F12 Cancel")
-            .style(Style::new().dim()),
-        keys,
-    );
+    // The keys whole where they fit, in 80 columns shorter.
+    let bar = if keys.width >= 86 {
+        " F2 Home F5 Run F6 Step ^T Tune ^G Go to ^O Grip ^B Belt F9 Abort F10 Exit F12 Cancel"
+    } else {
+        "F2 Home F5 Run F6 Step ^T Tune ^G Go ^O Grip ^B Belt F9 Stop F10 Exit F12 Cancel"
+    };
+    f.render_widget(Line::from(bar).style(Style::new().dim()), keys);
 }
 
 fn value_style(app: &App, i: usize, f: &Field) -> Style {

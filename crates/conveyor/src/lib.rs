@@ -222,8 +222,22 @@ impl PartQueue {
 
     /// Parts picked and missed so far.
     pub fn counts(&self) -> (usize, usize) {
-        let n = |s| self.parts.iter().filter(|p| p.state == s).count();
-        (n(PartState::Picked), n(PartState::Missed))
+        let [_, _, picked, missed] = self.tally();
+        (picked, missed)
+    }
+
+    /// Parts by state: pending, claimed, picked, missed.
+    pub fn tally(&self) -> [usize; 4] {
+        let mut n = [0; 4];
+        for p in &self.parts {
+            n[match p.state {
+                PartState::Pending => 0,
+                PartState::Claimed => 1,
+                PartState::Picked => 2,
+                PartState::Missed => 3,
+            }] += 1;
+        }
+        n
     }
 }
 

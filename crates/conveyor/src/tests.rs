@@ -58,6 +58,12 @@ fn the_most_downstream_reachable_part_is_claimed_once() {
     assert!(!q.missed(b), "picked already");
     assert_eq!(q.part(c).unwrap().state, PartState::Missed);
     assert_eq!(q.counts(), (1, 1));
+    // Pending, claimed, picked, missed: a (claimed), b, c.
+    assert_eq!(q.tally(), [0, 1, 1, 1]);
+    let d = q.detect(seen(0, 10.0, 0.0), &BELT).unwrap();
+    assert_eq!(q.tally(), [1, 1, 1, 1]);
+    assert!(q.picked(a) && q.part(d).is_some());
+    assert_eq!(q.tally(), [1, 0, 2, 1]);
 }
 
 /// A part the robot cannot reach inside the window is missed, never chased; one not yet in

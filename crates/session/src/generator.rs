@@ -192,6 +192,8 @@ pub struct ServeHandle {
     pub shared: Arc<ServeShared>,
     /// What the loop is doing, as it says it.
     pub status: Arc<LoopStatus>,
+    /// A conveyor session's belt and parts, as its dispatcher counts them.
+    pub conveyor: Option<Arc<crate::wire::ConveyorTally>>,
 }
 
 struct Line {
@@ -257,7 +259,7 @@ impl ServeMove {
             period_s: settings.period_s(),
             n_motors: settings.n_motors,
         };
-        (serve, ServeHandle { orders: orders_tx, spent: spent_rx, shared, status })
+        (serve, ServeHandle { orders: orders_tx, spent: spent_rx, shared, status, conveyor: None })
     }
 
     /// The state of the last sample commanded: the line's or the online profile's. A line's

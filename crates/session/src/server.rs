@@ -404,7 +404,8 @@ impl Commands {
                 &why.map_or_else(|| "the loop did not take it".to_string(), NotTaken::words),
             );
         }
-        CommandResponse { answer, orders, robot, timing }
+        let conveyor = self.handle.conveyor.as_ref().map(|t| t.get()).unwrap_or_default();
+        CommandResponse { answer, orders, robot, timing, conveyor }
     }
 
     /// A move: checked, then queued.

@@ -18,6 +18,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event, request_response};
 use qmarc_proto::MAX_MOTORS;
 use qmarc_proto::service::ServiceError;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 /// Name of the request/response service.
 pub const COMMAND_SERVICE: &str = "qmarc/command";
@@ -186,11 +187,12 @@ impl CommandRequest {
     }
 }
 
-/// The answer to a command or a path, in four parts: the [`Answer`] to the request, the
+/// The answer to a command or a path, in five parts: the [`Answer`] to the request, the
 /// [`Orders`] ledger (what became of the orders given), the [`RobotStatus`] (where the loop
-/// has the robot) and the [`Timing`] of the request and the last order taken.
+/// has the robot), the [`Timing`] of the request and the last order taken, and a conveyor
+/// session's belt and parts ([`ConveyorStatus`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("qmarc.CommandResponse.v4")]
+#[type_name("qmarc.CommandResponse.v5")]
 #[repr(C)]
 pub struct CommandResponse {
     /// The request's answer.
@@ -201,6 +203,51 @@ pub struct CommandResponse {
     pub robot: RobotStatus,
     /// When.
     pub timing: Timing,
+    /// The belt and its parts (all zero outside a conveyor session).
+    pub conveyor: ConveyorStatus,
+}
+
+/// A conveyor session's belt and parts, as its dispatcher last counted them (within a
+/// millisecond); all zero outside a conveyor session.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+pub struct ConveyorStatus {
+    /// 1 in a conveyor session (then the rest counts).
+    pub active: u32,
+    /// Parts the camera has seen (every part of the queue, whatever became of it).
+    pub seen: u32,
+    /// Parts waiting in the queue: seen, not yet handed to the robot.
+    pub queued: u32,
+    /// Parts picked (the gripper closed on them inside the window).
+    pub picked: u32,
+    /// Parts missed (past the window unpicked, or not reachable inside it).
+    pub missed: u32,
+    /// The part the robot is going for or carrying: its id + 1 (0: none).
+    pub picking: u32,
+    /// The belt's encoder in mm (counts × `conveyor.mm_per_count`).
+    pub belt_mm: f64,
+    /// The belt's speed over the loop's last 50 ms of reads, mm/s.
+    pub belt_mm_s: f64,
+}
+
+impl ConveyorStatus {
+    /// The part being picked, if one is.
+    pub fn picking(&self) -> Option<u32> {
+        self.picking.checked_sub(1)
+    }
+
+    /// As the console and `qmarc cmd status` say it: `belt 1234.5 mm at 500 mm/s · 2 queued
+    /// · picking 17 · 15 picked · 0 missed`; empty outside a conveyor session.
+    pub fn describe(&self) -> String {
+        if self.active == 0 {
+            return String::new();
+        }
+        let picking = self.picking().map_or(String::new(), |id| format!(" · picking {id}"));
+        format!(
+            "belt {:.1} mm at {:.0} mm/s · {} queued{picking} · {} picked · {} missed",
+            self.belt_mm, self.belt_mm_s, self.queued, self.picked, self.missed
+        )
+    }
 }
 
 /// The answer to one request: accepted, or refused and why.
@@ -339,6 +386,47 @@ impl CommandResponse {
     /// The reason's text ([`Answer::reason`]).
     pub fn reason(&self) -> String {
         self.answer.reason()
+    }
+}
+
+/// The belt and the part queue as the dispatcher last counted them, for the command thread
+/// to answer with ([`ConveyorStatus`]): written by one thread, read by any,
+/// field by field (a reader may see one field a millisecond newer than another).
+#[derive(Debug, Default)]
+pub struct ConveyorTally {
+    seen: AtomicU32,
+    queued: AtomicU32,
+    picked: AtomicU32,
+    missed: AtomicU32,
+    picking: AtomicU32,
+    belt_mm: AtomicU64,
+    belt_mm_s: AtomicU64,
+}
+
+impl ConveyorTally {
+    /// Says `s` (its `active` is implied: a tally is a conveyor session's).
+    pub fn set(&self, s: &ConveyorStatus) {
+        self.seen.store(s.seen, Ordering::Relaxed);
+        self.queued.store(s.queued, Ordering::Relaxed);
+        self.picked.store(s.picked, Ordering::Relaxed);
+        self.missed.store(s.missed, Ordering::Relaxed);
+        self.picking.store(s.picking, Ordering::Relaxed);
+        self.belt_mm.store(s.belt_mm.to_bits(), Ordering::Relaxed);
+        self.belt_mm_s.store(s.belt_mm_s.to_bits(), Ordering::Relaxed);
+    }
+
+    /// What was last said.
+    pub fn get(&self) -> ConveyorStatus {
+        ConveyorStatus {
+            active: 1,
+            seen: self.seen.load(Ordering::Relaxed),
+            queued: self.queued.load(Ordering::Relaxed),
+            picked: self.picked.load(Ordering::Relaxed),
+            missed: self.missed.load(Ordering::Relaxed),
+            picking: self.picking.load(Ordering::Relaxed),
+            belt_mm: f64::from_bits(self.belt_mm.load(Ordering::Relaxed)),
+            belt_mm_s: f64::from_bits(self.belt_mm_s.load(Ordering::Relaxed)),
+        }
     }
 }
 
@@ -487,56 +575,4 @@ fn order_service<Request: std::fmt::Debug + ZeroCopySend>(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_wire_numbers_are_those_of_v2() {
-        let kinds: Vec<u32> = CommandKind::ALL.iter().map(|k| *k as u32).collect();
-        assert_eq!(kinds, [1, 2, 3, 4, 5]);
-        let refusals: Vec<u32> = Refusal::ALL.iter().map(|r| *r as u32).collect();
-        assert_eq!(refusals, [1, 2, 3, 4, 5, 6, 7, 8]);
-        assert_eq!(CommandKind::from_wire(3), Some(CommandKind::Status));
-        assert_eq!((CommandKind::from_wire(0), Refusal::from_wire(9)), (None, None));
-        let grip = CommandRequest::grip(true);
-        assert_eq!((grip.kind, grip.flags), (5, CommandRequest::CLOSE));
-        assert_eq!(CommandRequest::grip(false).flags, 0);
-        assert_eq!(Refusal::NoGripper.name(), "no_gripper");
-    }
-
-    #[test]
-    fn the_messages_are_fixed_size_plain_data() {
-        assert_eq!(std::mem::size_of::<CommandRequest>(), 56);
-        assert_eq!(std::mem::size_of::<CommandResponse>(), 400);
-        assert_eq!(std::mem::align_of::<CommandResponse>(), 8);
-        // Its parts, each free of padding.
-        assert_eq!(std::mem::size_of::<Answer>(), 16 + REASON_BYTES);
-        assert_eq!(std::mem::size_of::<Orders>(), 48);
-        assert_eq!(std::mem::size_of::<RobotStatus>(), 16 + 16 * MAX_MOTORS + 24);
-        assert_eq!(std::mem::size_of::<Timing>(), 32);
-    }
-
-    #[test]
-    fn a_reason_is_cut_at_a_character_boundary() {
-        let mut r = Answer::default();
-        r.set_reason("motor 2 would go to 12000 counts");
-        assert_eq!(r.reason(), "motor 2 would go to 12000 counts");
-        let long = "é".repeat(REASON_BYTES);
-        r.set_reason(&long);
-        assert_eq!(r.reason().len(), REASON_BYTES);
-        assert!(r.reason().chars().all(|c| c == 'é'));
-        assert_eq!(r.refused(), Some(Refusal::BadRequest));
-    }
-
-    #[test]
-    fn a_request_carries_its_knots_and_no_more() {
-        let k = PathKnot { t_s: 0.5, pos: [1.0, 2.0, 3.0, 0.0], vel: [0.0; MAX_MOTORS] };
-        let r = PathRequest::new(&[k, k], true).unwrap();
-        assert_eq!((r.knots().len(), r.has_velocities()), (2, true));
-        assert!(!PathRequest::new(&[k], false).unwrap().has_velocities());
-        assert!(PathRequest::new(&vec![k; MAX_PATH_KNOTS + 1], false).is_none());
-        let lying = PathRequest { n_knots: u32::MAX, ..PathRequest::default() };
-        assert_eq!(lying.knots().len(), MAX_PATH_KNOTS, "a count past the array is cut");
-        assert_eq!(std::mem::size_of::<PathRequest>(), 16 + MAX_PATH_KNOTS * 72);
-    }
-}
+mod tests;

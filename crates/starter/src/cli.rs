@@ -149,6 +149,10 @@ pub struct ConveyorArgs {
     /// The simulated parts' seed (default `camera.seed`).
     #[arg(long, value_name = "K")]
     pub seed: Option<u64>,
+    /// The bridge beside the session, as `serve` starts it (its `/diagnostics` say the parts
+    /// queued, picked and missed).
+    #[command(flatten)]
+    pub serve: ServeArgs,
 }
 
 impl ConveyorArgs {
@@ -170,7 +174,7 @@ impl ConveyorArgs {
     }
 }
 
-/// Options of `serve`.
+/// Options of `serve` (and of `conveyor`): the bridge beside the session.
 #[derive(Debug, Clone, PartialEq, Args, Default)]
 pub struct ServeArgs {
     /// Start `qmarc-bridge` beside the controller and the hwserver, and stop it with them: the
@@ -429,5 +433,17 @@ mod tests {
         let to = T::try_parse_from(["x", "move", "--to", "-100,0,0"]).unwrap();
         let Command::Move(m) = to.command else { panic!("a move") };
         assert_eq!(m.to, Some(vec![-100.0, 0.0, 0.0]));
+    }
+
+    /// Issue 44: a conveyor session takes the bridge's options as `serve` does, and only
+    /// with --bridge.
+    #[test]
+    fn a_conveyor_session_takes_the_bridges_options() {
+        let t = T::try_parse_from(["x", "conveyor", "--bridge", "--namespace=/r1", "--domain=3"])
+            .unwrap();
+        let Command::Conveyor(c) = t.command else { panic!("a conveyor session") };
+        assert!(c.serve.bridge);
+        assert_eq!(c.serve.bridge_args(), ["--namespace=/r1", "--domain=3"]);
+        assert!(T::try_parse_from(["x", "conveyor", "--namespace=/r1"]).is_err());
     }
 }

@@ -183,6 +183,29 @@ fn check_conveyor(s: &Settings) -> Result<(), Failure> {
     Ok(())
 }
 
+/// The bridge `command` starts beside its session (`serve --bridge`, `conveyor --bridge`):
+/// its program beside `hwserver_bin` and its own options.
+fn bridge_of(
+    command: &crate::cli::Command,
+    hwserver_bin: &Path,
+) -> Result<Option<(PathBuf, Vec<String>)>, Failure> {
+    Ok(match command {
+        crate::cli::Command::Serve(a)
+        | crate::cli::Command::Conveyor(crate::cli::ConveyorArgs { serve: a, .. })
+            if a.bridge =>
+        {
+            if let Some(f) = a.zenoh_config.as_ref().filter(|f| !f.is_file()) {
+                return Err(refused(anyhow!(
+                    "--zenoh-config {}: no such file (a Zenoh configuration, JSON5)",
+                    f.display()
+                )));
+            }
+            Some((companion_program(hwserver_bin, "qmarc-bridge")?, a.bridge_args()))
+        }
+        _ => None,
+    })
+}
+
 /// Everything is checked before anything starts: the settings, the programs, the iceoryx2
 /// location, the hardware, the path, the gather budget and the output folder. Starts
 /// nothing, writes nothing.
@@ -190,18 +213,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     let settings = settings_of(req)?;
     let mode = req.command.mode();
     let (hwserver_bin, controller_bin) = programs(req.bin_dir)?;
-    let bridge = match req.command {
-        crate::cli::Command::Serve(a) if a.bridge => {
-            if let Some(f) = a.zenoh_config.as_ref().filter(|f| !f.is_file()) {
-                return Err(refused(anyhow!(
-                    "--zenoh-config {}: no such file (a Zenoh configuration, JSON5)",
-                    f.display()
-                )));
-            }
-            Some((companion_program(&hwserver_bin, "qmarc-bridge")?, a.bridge_args()))
-        }
-        _ => None,
-    };
+    let bridge = bridge_of(req.command, &hwserver_bin)?;
     let camera = match mode {
         Mode::Conveyor => {
             check_conveyor(&settings)?;

@@ -137,6 +137,7 @@ impl App {
             KeyCode::F(6) => self.start(Mode::Step),
             KeyCode::F(9) => self.abort_key(),
             KeyCode::Char('t') if ctrl => self.start(Mode::Tune),
+            KeyCode::Char('b') if ctrl => self.start(Mode::Conveyor),
             // Jog keys where no arrow edits or chooses anything: not while a field is typed
             // (Setup) nor where ←/→ choose the motor charted (Charts).
             KeyCode::Left if ctrl && self.jog_page() => self.jog(-1),

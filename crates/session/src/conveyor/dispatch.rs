@@ -319,6 +319,23 @@ impl Dispatch {
                 }
             }
         }
+        self.tell(now);
+    }
+
+    /// Says the belt (at `now` counts) and the queue to the command thread.
+    fn tell(&self, now: i64) {
+        let [pending, claimed, picked, missed] = self.queue.tally();
+        let count = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+        self.handle.tally.set(&crate::wire::ConveyorStatus {
+            active: 1,
+            seen: count(pending + claimed + picked + missed),
+            queued: count(pending),
+            picked: count(picked),
+            missed: count(missed),
+            picking: self.given.map_or(0, |id| id.saturating_add(1)),
+            belt_mm: now as f64 * self.belt.mm_per_count,
+            belt_mm_s: self.belt_speed_mm_s(),
+        });
     }
 
     /// The belt's speed over the loop's last samples (up to 50 ms of them), mm/s.

@@ -53,6 +53,8 @@ pub struct PickerHandle {
     pub events: Consumer<PickEvent>,
     /// The picker's state.
     pub shared: Arc<PickerShared>,
+    /// The belt and the queue as the dispatcher counts them (the command thread says them).
+    pub tally: Arc<crate::wire::ConveyorTally>,
 }
 
 /// Where the picker is.
@@ -152,9 +154,15 @@ impl Picker {
             end_n: (c.run_s / s.period_s()).round() as u64,
             ended: false,
         };
-        let serve_handle =
-            ServeHandle { orders: orders_tx, spent: spent_rx, shared: serve, status };
-        let handle = PickerHandle { picks: picks_tx, events: events_rx, shared };
+        let tally = Arc::new(crate::wire::ConveyorTally::default());
+        let serve_handle = ServeHandle {
+            orders: orders_tx,
+            spent: spent_rx,
+            shared: serve,
+            status,
+            conveyor: Some(tally.clone()),
+        };
+        let handle = PickerHandle { picks: picks_tx, events: events_rx, shared, tally };
         Some((picker, serve_handle, handle))
     }
 
