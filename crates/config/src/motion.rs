@@ -141,8 +141,7 @@ impl Settings {
             return Err(TargetError::NotAPosition { motor: i + 1, value: bad });
         }
         let [x, y, z] = mm;
-        let point = qmarc_kinematics::Point::new(x / 1e3, y / 1e3, z / 1e3);
-        let counts = robot.counts_of(&point).map_err(|e| TargetError::Unreachable {
+        let counts = robot.counts_of_mm(mm).map_err(|e| TargetError::Unreachable {
             x,
             y,
             z,

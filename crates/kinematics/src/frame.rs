@@ -46,6 +46,12 @@ impl Robot {
         Ok(self.frame.counts(&self.geometry.inverse(p)?))
     }
 
+    /// Joint counts (not rounded) that put the effector at x, y, z in mm: [`Robot::mm_of`]
+    /// undone.
+    pub fn counts_of_mm(&self, mm: [f64; 3]) -> Result<[f64; ARMS], KinematicsError> {
+        self.counts_of(&Point::new(mm[0] / 1e3, mm[1] / 1e3, mm[2] / 1e3))
+    }
+
     /// Where the effector is at the joint counts `counts`.
     pub fn point_of(&self, counts: &[f64; ARMS]) -> Result<Point, KinematicsError> {
         self.geometry.forward(&self.frame.angles(counts))

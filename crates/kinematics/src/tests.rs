@@ -137,6 +137,10 @@ fn counts_follow_the_frame() {
     let p = Point::new(0.1, -0.05, -0.58);
     let back = robot.point_of(&robot.counts_of(&p).unwrap()).unwrap();
     assert!((back - p).norm() < 1e-12);
+    // The same in mm, both ways.
+    let mm = robot.mm_of(&robot.counts_of_mm([100.0, -50.0, -580.0]).unwrap()).unwrap();
+    assert!(mm.iter().zip([100.0, -50.0, -580.0]).all(|(a, b)| (a - b).abs() < 1e-9), "{mm:?}");
+    assert_eq!(robot.counts_of_mm([100.0, -50.0, -580.0]).unwrap(), robot.counts_of(&p).unwrap());
 }
 
 #[test]

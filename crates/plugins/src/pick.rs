@@ -12,7 +12,7 @@ use crate::moveto::rest_to_rest;
 use crate::source::{CommandQueue, QUEUE_BUDGET_BYTES, TrajBuildError};
 use qmarc_config::{PickSettings, Settings};
 use qmarc_controller::traj::{TrajStartError, TrajectoryGenerator, check_start};
-use qmarc_kinematics::{ARMS, Point, Robot};
+use qmarc_kinematics::{ARMS, Robot};
 use qmarc_proto::MAX_MOTORS;
 
 /// The cycle's path, sampled once when built.
@@ -41,14 +41,12 @@ impl PickCycle {
         period_s: f64,
     ) -> Result<PickCycle, TrajBuildError> {
         let counts = |mm: [f64; 3]| -> Result<[f64; MAX_MOTORS], TrajBuildError> {
-            let c = robot.counts_of(&Point::new(mm[0] / 1e3, mm[1] / 1e3, mm[2] / 1e3)).map_err(
-                |e| {
-                    TrajBuildError::Pick(format!(
-                        "[pick]: {:.1}, {:.1}, {:.1} mm is out of reach: {e}",
-                        mm[0], mm[1], mm[2]
-                    ))
-                },
-            )?;
+            let c = robot.counts_of_mm(mm).map_err(|e| {
+                TrajBuildError::Pick(format!(
+                    "[pick]: {:.1}, {:.1}, {:.1} mm is out of reach: {e}",
+                    mm[0], mm[1], mm[2]
+                ))
+            })?;
             let mut q = [0.0; MAX_MOTORS];
             q[..ARMS].copy_from_slice(&c);
             Ok(q)

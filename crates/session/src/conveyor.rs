@@ -11,7 +11,7 @@
 //! the count in the cycle that commands the motors.
 
 use qmarc_config::Settings;
-use qmarc_kinematics::{KinematicsError, Point, Robot};
+use qmarc_kinematics::{KinematicsError, Robot};
 use qmarc_proto::MAX_MOTORS;
 
 pub mod dispatch;
@@ -173,7 +173,7 @@ impl BeltFrame {
     /// The joint counts that put the effector on the robot-frame point `p`, mm (the place,
     /// a point of the belt). Allocates nothing.
     pub fn counts_at_mm(&self, p: [f64; 3]) -> Result<[f64; MAX_MOTORS], KinematicsError> {
-        let c = self.robot.counts_of(&Point::new(p[0] * 1e-3, p[1] * 1e-3, p[2] * 1e-3))?;
+        let c = self.robot.counts_of_mm(p)?;
         let mut out = [0.0; MAX_MOTORS];
         out[..c.len()].copy_from_slice(&c);
         Ok(out)

@@ -86,10 +86,8 @@ struct Dispatch {
     epoch_ns: u64,
     /// Latencies are measured (a paced session: the exposures are `CLOCK_MONOTONIC`'s).
     measure: bool,
-    /// The loop's belt samples, (counts, ns), oldest first.
-    history: VecDeque<(i64, u64)>,
-    /// The cycles (samples) of those reads, and their ticks (ns), oldest first.
-    ticks: VecDeque<(u64, u64)>,
+    /// The loop's reads of the belt, oldest first.
+    history: VecDeque<BeltRead>,
     /// The pick the picker has and has not finished.
     given: Option<u32>,
     records: Vec<PartRecord>,
@@ -127,7 +125,6 @@ impl Dispatcher {
             epoch_ns,
             measure: paced,
             history: VecDeque::with_capacity(HISTORY),
-            ticks: VecDeque::with_capacity(HISTORY),
             given: None,
             records: Vec::new(),
             detections: 0,
@@ -188,14 +185,27 @@ impl Dispatcher {
     }
 }
 
-/// The belt encoder at `t_ns`, interpolated between the loop's samples `history` ((counts,
-/// ns), oldest first) around it; `None` outside them.
-pub(crate) fn counts_at(history: &VecDeque<(i64, u64)>, t_ns: u64) -> Option<i64> {
-    let after = history.iter().position(|&(_, t)| t >= t_ns)?;
-    let (c1, t1) = history[after];
-    let Some(&(c0, t0)) = after.checked_sub(1).and_then(|k| history.get(k)) else {
+/// One read of the belt by the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct BeltRead {
+    /// The encoder, counts.
+    pub counts: i64,
+    /// When the loop woke for it, ns of `CLOCK_MONOTONIC` (the simulated clock's in
+    /// lock-step).
+    pub ns: u64,
+    /// The sample (cycle) it was read in.
+    pub sample: u64,
+}
+
+/// The belt encoder at `t_ns`, interpolated between the loop's reads `history` (oldest
+/// first) around it; `None` outside them.
+pub(crate) fn counts_at(history: &VecDeque<BeltRead>, t_ns: u64) -> Option<i64> {
+    let after = history.iter().position(|r| r.ns >= t_ns)?;
+    let (c1, t1) = (history[after].counts, history[after].ns);
+    let Some(r0) = after.checked_sub(1).and_then(|k| history.get(k)) else {
         return (t1 == t_ns).then_some(c1);
     };
+    let (c0, t0) = (r0.counts, r0.ns);
     let f = (t_ns - t0) as f64 / (t1 - t0).max(1) as f64;
     Some(c0 + ((c1 - c0) as f64 * f).round() as i64)
 }
@@ -239,9 +249,9 @@ impl Dispatch {
 
     /// The tick of cycle `n`, ns: from the loop's read nearest to it, a period a cycle.
     fn tick_of(&self, n: u64) -> Option<u64> {
-        let &(sample, woke) = self.ticks.iter().min_by_key(|(s, _)| s.abs_diff(n))?;
-        let periods = n as f64 - sample as f64;
-        Some((woke as f64 + periods * self.period_s * 1e9).max(0.0) as u64)
+        let r = self.history.iter().min_by_key(|r| r.sample.abs_diff(n))?;
+        let periods = n as f64 - r.sample as f64;
+        Some((r.ns as f64 + periods * self.period_s * 1e9).max(0.0) as u64)
     }
 
     fn record(&mut self, id: u32) -> Option<&mut PartRecord> {
@@ -251,13 +261,11 @@ impl Dispatch {
     /// The loop's belt, the picker's events, the parts past the window, the next pick.
     fn look(&mut self) {
         let (now, ns, sample) = self.status.belt_read();
-        if ns != 0 && self.history.back().is_none_or(|&(_, t)| t < ns) {
+        if ns != 0 && self.history.back().is_none_or(|r| r.ns < ns) {
             if self.history.len() == HISTORY {
                 self.history.pop_front();
-                self.ticks.pop_front();
             }
-            self.history.push_back((now, ns));
-            self.ticks.push_back((sample, ns));
+            self.history.push_back(BeltRead { counts: now, ns, sample });
         }
         while let Ok(event) = self.handle.events.pop() {
             match event {
@@ -340,13 +348,9 @@ impl Dispatch {
 
     /// The belt's speed over the loop's last samples (up to 50 ms of them), mm/s.
     fn belt_speed_mm_s(&self) -> f64 {
-        let Some(&(c1, t1)) = self.history.back() else { return 0.0 };
-        let Some(&(c0, t0)) = self
-            .history
-            .iter()
-            .rev()
-            .find(|&&(_, t)| t1 - t >= 50_000_000)
-            .or(self.history.front())
+        let Some(&BeltRead { counts: c1, ns: t1, .. }) = self.history.back() else { return 0.0 };
+        let Some(&BeltRead { counts: c0, ns: t0, .. }) =
+            self.history.iter().rev().find(|r| t1 - r.ns >= 50_000_000).or(self.history.front())
         else {
             return 0.0;
         };

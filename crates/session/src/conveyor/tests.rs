@@ -3,7 +3,7 @@
 //! window or out of reach, grips it once and places it; the belt's count at an exposure is
 //! the loop's samples interpolated.
 
-use super::dispatch::{counts_at, intercepts};
+use super::dispatch::{BeltRead, counts_at, intercepts};
 use super::picker::{Picker, PickerHandle, relative_limits};
 use super::*;
 use crate::generator::{NotTaken, Order, ServeHandle};
@@ -108,7 +108,8 @@ fn a_part_out_of_reach_is_never_handed_over() {
 
 #[test]
 fn the_count_at_an_exposure_is_interpolated_between_the_loops_samples() {
-    let h: VecDeque<(i64, u64)> = [(0, 1_000), (10, 2_000), (30, 3_000)].into_iter().collect();
+    let read = |(counts, ns)| BeltRead { counts, ns, sample: 0 };
+    let h: VecDeque<BeltRead> = [(0, 1_000), (10, 2_000), (30, 3_000)].map(read).into();
     assert_eq!(counts_at(&h, 1_000), Some(0));
     assert_eq!(counts_at(&h, 1_500), Some(5));
     assert_eq!(counts_at(&h, 2_000), Some(10));
