@@ -4,6 +4,7 @@
 
 use super::*;
 use qmarc_config::Names;
+use qmarc_kinematics::Point;
 
 const T: f64 = 400e-6;
 
