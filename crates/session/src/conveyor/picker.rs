@@ -338,11 +338,12 @@ impl Picker {
                     self.last = MotionState { p: q, v, a: [0.0; MAX_MOTORS] };
                     if self.gripper.reached(true) {
                         let _ = self.events.push(PickEvent::Lifted { id: pick.id });
-                        // Off the belt, rising with it; the place straight away if the point
-                        // above is out of reach.
-                        match self.intercept(n + 1, pick, LIFT_MM, 0) {
+                        // Off the belt, rising with it from the next sample; the place
+                        // straight away if the point above is out of reach.
+                        let next = n + 1;
+                        match self.intercept(next, pick, LIFT_MM, 0) {
                             Ok(()) => self.phase = Phase::Lift(pick),
-                            Err(_) => self.leave(n + 1, Some(pick)),
+                            Err(_) => self.leave(next, Some(pick)),
                         }
                     }
                 }

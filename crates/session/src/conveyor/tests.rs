@@ -226,19 +226,42 @@ fn smooth(s: &Settings, cmds: &[[f64; MAX_MOTORS]]) {
 #[test]
 fn the_picker_intercepts_follows_and_places_a_part_once() {
     let s = settings();
-    let (mut p, _serve, mut h) = picker(&s);
+    let (mut p, serve, mut h) = picker(&s);
     let frame = BeltFrame::of(&s).unwrap();
     let mut r = rig();
     // The belt at 500 mm/s: 4 counts of 0.05 mm a 400 µs cycle is 0.5 m/s.
     let speed = 4;
     let (rest, _, _) = r.run(&mut p, &mut h, 40, speed);
     assert!(h.shared.ready.load(Ordering::Acquire));
+    assert!(!serve.shared.moving.load(Ordering::Acquire), "at rest");
     let pick = Pick { id: 7, belt_mm: 320.0, across_mm: 30.0, latched_counts: r.belt };
     h.picks.push(pick).unwrap();
     let start = r.n;
-    let (cmds, events, _) = r.run(&mut p, &mut h, 2_000, speed);
-    // The rest before it, then the pick: no jump where the intercept begins either.
-    let mut all = vec![rest[rest.len() - 1]];
+    // Sample by sample: the command moves from the pick on, and the next pick is waited
+    // for only once the gripper reads open after the place (50 cycles in this rig).
+    let (mut cmds, mut events) = (Vec::new(), Vec::new());
+    let mut placed_at = None;
+    for _ in 0..2_000 {
+        let (c, e, _) = r.run(&mut p, &mut h, 1, speed);
+        cmds.extend(c);
+        events.extend(e);
+        if placed_at.is_none() && events.iter().any(|e| matches!(e, PickEvent::Placed { .. })) {
+            placed_at = Some(r.n);
+        }
+        let ready = h.shared.ready.load(Ordering::Acquire);
+        assert!(
+            !ready || placed_at.is_some_and(|at| r.n >= at + 50),
+            "ready at cycle {} before the gripper read open ({placed_at:?})",
+            r.n
+        );
+        if placed_at.is_none() {
+            assert!(serve.shared.moving.load(Ordering::Acquire), "moving at cycle {}", r.n);
+        }
+    }
+    assert!(!serve.shared.moving.load(Ordering::Acquire), "at rest again");
+    // At rest before it (two samples: a velocity), then the pick: no jump where the
+    // intercept begins either.
+    let mut all = rest[rest.len() - 2..].to_vec();
     all.extend_from_slice(&cmds);
     assert!(!h.shared.ready.load(Ordering::Acquire) || events.len() == 3, "{events:?}");
     let gripping = events.iter().find_map(|e| match e {
@@ -364,9 +387,11 @@ fn the_gripper_closes_only_if_it_closes_inside_the_window() {
         let start = end - 200.0 + 3.07 * f64::from(k);
         let pick = Pick { id: 1, belt_mm: start, across_mm: 0.0, latched_counts: r.belt };
         h.picks.push(pick).unwrap();
-        let mut event = None;
+        let (mut event, mut cmds) = (None, Vec::new());
         while event.is_none() && r.n < 3_000 {
-            event = r.run(&mut p, &mut h, 1, speed).1.first().copied();
+            let (c, e, _) = r.run(&mut p, &mut h, 1, speed);
+            cmds.extend(c);
+            event = e.first().copied();
         }
         // Where the part was in the cycle of the event (the last one run).
         let along = pick.belt_mm + (r.belt - pick.latched_counts) as f64 * s.conveyor.mm_per_count;
@@ -380,10 +405,69 @@ fn the_gripper_closes_only_if_it_closes_inside_the_window() {
                 if along <= end {
                     gated += 1;
                     assert!(along + closing_mm > end - 0.3, "given up at {along} mm");
+                    // On to the place from the sample it was on the part: no jump.
+                    cmds.extend(r.run(&mut p, &mut h, 300, speed).0);
+                    smooth(&s, &cmds);
                 }
             }
             other => panic!("{other:?} for a part from {start} mm"),
         }
     }
     assert!(gripped > 5 && gated > 0, "{gripped} gripped, {gated} given up inside the window");
+}
+
+/// The picker as the loop sees it: named `conveyor`, of no fixed length, at rest at its end.
+#[test]
+fn the_picker_is_an_endless_generator_that_ends_at_rest() {
+    let s = settings();
+    let (p, _serve, _h) = picker(&s);
+    assert_eq!(p.name(), "conveyor");
+    assert_eq!(p.samples(), None);
+    assert_eq!(p.end_velocity(), Some([0.0; MAX_MOTORS]));
+}
+
+/// The limits a part's frame leaves each motor, checked against the belt's own demand found
+/// independently: the motor's velocity over a dense grid of the window (every 5 mm along,
+/// every 5 mm across the spread) at the fastest belt speed, by a central difference.
+#[test]
+fn the_relative_limits_leave_the_motors_what_the_belt_does_not_take() {
+    let s = settings();
+    let frame = BeltFrame::of(&s).unwrap();
+    let limits = MotionLimits::of(&s);
+    let (fastest, spread) = (700.0, s.camera.spread_mm);
+    let r = relative_limits(&frame, &limits, 3, fastest, spread);
+    let [w0, w1] = frame.window_mm;
+    let mut demand = [0.0f64; 3];
+    let mut along = w0;
+    while along <= w1 + 1e-9 {
+        let mut across = -spread / 2.0;
+        while across <= spread / 2.0 + 1e-9 {
+            let (a, b) = (frame.counts(along - 0.01, across), frame.counts(along + 0.01, across));
+            if let (Ok(a), Ok(b)) = (a, b) {
+                for m in 0..3 {
+                    demand[m] = demand[m].max((b[m] - a[m]).abs() / 0.02 * fastest);
+                }
+            }
+            across += 5.0;
+        }
+        along += 5.0;
+    }
+    for m in 0..3 {
+        assert!(demand[m] > 0.0 && demand[m] < 0.8 * limits.velocity[m], "{demand:?}");
+        // The belt's demand and a tenth of it in reserve taken from the velocity (to the
+        // grid's and the difference's precision).
+        let taken = limits.velocity[m] - r.velocity[m];
+        let ratio = taken / (1.1 * demand[m]);
+        assert!((0.99..1.01).contains(&ratio), "motor {}: {taken} taken, {ratio}", m + 1);
+        assert_eq!(r.acceleration[m], 0.8 * limits.acceleration[m]);
+        assert_eq!(r.jerk[m], 0.8 * limits.jerk[m]);
+    }
+    // A belt too fast for a motor leaves it a fifth of its velocity, never less.
+    let r = relative_limits(&frame, &limits, 3, 1e6, spread);
+    for m in 0..3 {
+        assert_eq!(r.velocity[m], 0.2 * limits.velocity[m]);
+    }
+    // Motors past n_motors are left as they are.
+    let r = relative_limits(&frame, &limits, 2, fastest, spread);
+    assert_eq!(r.velocity[2], limits.velocity[2]);
 }
