@@ -406,7 +406,9 @@ pub fn relative_limits(
     for k in 0..=8 {
         let along = f.window_mm[0] + (f.window_mm[1] - f.window_mm[0]) * f64::from(k) / 8.0;
         for across in [-spread_mm / 2.0, 0.0, spread_mm / 2.0] {
-            if let (Ok(a), Ok(b)) = (f.counts(along, across), f.counts(along + 1.0, across)) {
+            // The counts a mm of belt takes, centred on the point.
+            let (a, b) = (f.counts(along - 0.5, across), f.counts(along + 0.5, across));
+            if let (Ok(a), Ok(b)) = (a, b) {
                 for m in 0..n_motors {
                     belt[m] = belt[m].max((b[m] - a[m]).abs() * fastest_mm_s);
                 }
