@@ -4,7 +4,7 @@
 //! the loop's samples interpolated.
 
 use super::dispatch::{BeltRead, counts_at, intercepts};
-use super::picker::{Picker, PickerHandle, relative_limits};
+use super::picker::{Picker, PickerHandle, relative_limits, relative_limits_of};
 use super::*;
 use crate::generator::{NotTaken, Order, ServeHandle};
 use qmarc_controller::status::LoopStatus;
@@ -470,4 +470,55 @@ fn the_relative_limits_leave_the_motors_what_the_belt_does_not_take() {
     // Motors past n_motors are left as they are.
     let r = relative_limits(&frame, &limits, 2, fastest, spread);
     assert_eq!(r.velocity[2], limits.velocity[2]);
+}
+
+/// The dispatcher hands a part over by the intercept the picker will then plan: the same
+/// duration, to a cycle, from the place to parts along and across the belt (its start state
+/// relative to the moving part — position and the belt's velocity — as the picker's).
+#[test]
+fn the_dispatchers_intercept_is_the_one_the_picker_runs() {
+    let s = settings();
+    let frame = BeltFrame::of(&s).unwrap();
+    let relative = relative_limits_of(&s, &frame);
+    let t = s.period_s();
+    let speed = 4; // counts a cycle: 500 mm/s
+    let mm_s = speed as f64 * s.conveyor.mm_per_count / t;
+    let command = frame.counts_at_mm(s.conveyor.place_mm).unwrap();
+    for (at, across) in [(300.0, 0.0), (320.0, 40.0), (280.0, -45.0)] {
+        let mut profile = Profile::new(3, command);
+        let closing = closing_s(&s);
+        let handed = intercepts(
+            &frame,
+            &relative,
+            &mut profile,
+            3,
+            &command,
+            &part(across),
+            at,
+            mm_s,
+            closing,
+        );
+        assert!(handed, "{at} mm along, {across} across");
+        // The picker at rest at the place, its belt tracker on the belt's speed.
+        let (mut p, _serve, mut h) = picker(&s);
+        let mut r = rig();
+        r.run(&mut p, &mut h, 500, speed);
+        h.picks
+            .push(Pick { id: 1, belt_mm: at, across_mm: across, latched_counts: r.belt })
+            .unwrap();
+        let start = r.n;
+        let mut grip = None;
+        while grip.is_none() && r.n < start + 5_000 {
+            grip = r.run(&mut p, &mut h, 1, speed).1.iter().find_map(|e| match e {
+                PickEvent::Gripping { cycle, .. } => Some(*cycle),
+                _ => None,
+            });
+        }
+        let ran = (grip.expect("gripped") - start + 1) as f64 * t;
+        let planned = profile.duration();
+        assert!(
+            (ran - planned).abs() <= 1.5 * t,
+            "{at} mm along, {across} across: planned {planned} s, the picker ran {ran} s"
+        );
+    }
 }
