@@ -312,9 +312,10 @@ fn an_emergency_stop_while_picking_ends_as_every_move_ends() {
     run.assert_clean();
 }
 
-/// A conveyor session needs a gripper: without one it is refused before anything starts.
+/// A conveyor session needs a gripper, and every point it picks at and places to in reach
+/// and inside the soft limits: else it is refused before anything starts.
 #[test]
-fn a_conveyor_session_without_a_gripper_is_refused() {
+fn a_conveyor_session_that_cannot_pick_is_refused() {
     let run = TestRun::new("conveyor-nogrip");
     let config = run.config_with(&[("s626.gripper_dio", "-1")]);
     let out = run.out("out");
@@ -324,6 +325,27 @@ fn a_conveyor_session_without_a_gripper_is_refused() {
     assert_eq!(r.code, Some(i32::from(qmarc_proto::exit::REFUSED)), "{}\n{}", r.stdout, r.stderr);
     assert!(r.stderr.contains("conveyor grips the parts: [s626] gripper_dio = -1"), "{}", r.stderr);
     assert!(!out.join("parts.csv").exists());
+    // A place out of reach, a window past the soft limits: refused, naming the setting.
+    for (key, value, says) in [
+        (
+            "conveyor.place_mm",
+            "[0.0, 0.0, -300.0]",
+            "[conveyor] place_mm: 0.0, 0.0, -300.0 mm is unreachable",
+        ),
+        (
+            "conveyor.window_mm",
+            "[300.0, 1200.0]",
+            "[conveyor] window_mm: the grip point at 1200 mm along",
+        ),
+    ] {
+        let config = run.config_with(&[(key, value)]);
+        let args = conveyor_args(&config, &out, 2.0, &[]);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let r = run.starter(&args, std::time::Duration::from_secs(60));
+        assert_eq!(r.code, Some(i32::from(qmarc_proto::exit::REFUSED)), "{key}: {}", r.stderr);
+        assert!(r.stderr.contains(says), "{key}: {}", r.stderr);
+        assert!(!out.join("parts.csv").exists());
+    }
     run.assert_clean();
 }
 
