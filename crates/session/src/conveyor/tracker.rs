@@ -77,8 +77,9 @@ impl BeltTracker {
     /// The speed of the counts read, counts/s, over the last [`SPEED_CYCLES`] reads.
     pub fn measured_speed(&self) -> f64 {
         let span = self.n_reads.clamp(1, SPEED_CYCLES) - 1;
+        // One read (span 0) is the same read twice: n1 = n0, no speed.
         let ((n1, c1), (n0, c0)) = (self.read_at(0), self.read_at(span));
-        if span == 0 || n1 <= n0 {
+        if n1 <= n0 {
             return 0.0;
         }
         (c1 - c0) as f64 / ((n1 - n0) as f64 * self.period_s)

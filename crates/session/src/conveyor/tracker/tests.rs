@@ -141,3 +141,39 @@ fn a_gap_carries_the_estimate_with_the_belts_acceleration() {
     let speed = acc * n as f64 * T;
     assert!((t.speed() - speed).abs() < 2e3, "{} counts/s for {speed}", t.speed());
 }
+
+/// Over a gap the estimate is carried exactly as its own jerk moves it (constant jerk over
+/// the gap's time), whatever the read then says; a gap of [`RESTART_PERIODS`] is carried,
+/// a longer one restarts the estimate at the counts read and their measured speed.
+#[test]
+fn a_gap_is_crossed_at_the_estimates_own_jerk_a_longer_one_restarts() {
+    let change = (12_500.0, 7_500.0, 0.5, 4e4);
+    for gap in [2, 5, RESTART_PERIODS, RESTART_PERIODS + 1] {
+        let mut t = BeltTracker::new(T);
+        // In the change of speed: an estimate with speed, acceleration and jerk.
+        let n0 = 1_300u64;
+        for n in 0..=n0 {
+            t.read(n, belt(n as f64 * T, change).floor() as i64);
+        }
+        let ([p, v, a], j) = (t.now, t.jerk);
+        assert!(a.abs() > 1e3 && j.abs() > 1e4, "a = {a}, j = {j}");
+        let n = n0 + gap;
+        let z = belt(n as f64 * T, change).floor() as i64;
+        t.read(n, z);
+        let dt = gap as f64 * T;
+        let carried = [
+            p + v * dt + a * dt * dt / 2.0 + j * dt.powi(3) / 6.0,
+            v + a * dt + j * dt * dt / 2.0,
+            a + j * dt,
+        ];
+        if gap <= RESTART_PERIODS {
+            for (k, (got, want)) in t.now.iter().zip(carried).enumerate() {
+                let scale = want.abs().max(1.0);
+                assert!((got - want).abs() <= 1e-9 * scale, "gap {gap}, [{k}]: {got} for {want}");
+            }
+        } else {
+            assert_eq!(t.now, [z as f64, t.measured_speed(), 0.0], "gap {gap}: restarted");
+            assert_eq!((t.jerk, t.integral), (0.0, 0.0));
+        }
+    }
+}
