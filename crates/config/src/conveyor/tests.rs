@@ -1,7 +1,7 @@
 //! `[conveyor]` and `[camera]`: the belt's frame, the shipped belt within the robot's reach,
 //! and every bad value named by file, line, column and field.
 
-use crate::{ConfigLoadError, Names, Settings};
+use crate::{ConfigLoadError, ConveyorSettings, Names, Settings};
 use std::path::Path;
 
 const MOTOR: &str = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
@@ -153,6 +153,12 @@ fn bad_camera_values_are_named_by_line_column_and_field() {
 #[test]
 fn the_conveyor_flags_are_checked_as_their_keys() {
     let mut s = parse("").unwrap();
+    assert_eq!(s.conveyor.run_s, 60.0, "a minute unless told: the issue's benchmark");
+    // A run file of settings without it (an older starter's) reads the same.
+    let mut json = serde_json::to_value(&s.conveyor).unwrap();
+    json.as_object_mut().unwrap().remove("run_s");
+    let read: ConveyorSettings = serde_json::from_value(json).unwrap();
+    assert_eq!(read.run_s, 60.0);
     s.set_belt_speed(1_000.0).unwrap();
     s.set_parts_per_min(240.0).unwrap();
     s.set_conveyor_seconds(2.5).unwrap();
