@@ -180,19 +180,18 @@ fn check_conveyor(s: &Settings) -> Result<(), Failure> {
              the gripper's output (config/qmarc.toml has DIO6)"
         )));
     }
-    // Every point the picking goes to, in reach and inside the motors' soft limits: the
-    // place, and the grip points (and LIFT_MM above them) at the window's ends, across the
-    // camera's spread — else the loop would find out mid-pick, a fault.
+    // The place, and the window's ends on the belt's centre line (a part's grip point and
+    // LIFT_MM above it), in reach and inside the motors' soft limits — else no part could be
+    // picked, or the loop would find out mid-pick, a fault. (A part seen far off the centre
+    // line may be out of reach: it is missed, never chased.)
     let c = &s.conveyor;
-    let (up, half) = (s.camera.part_height_mm, s.camera.spread_mm / 2.0);
+    let up = s.camera.part_height_mm;
     let lift = qmarc_session::conveyor::picker::LIFT_MM;
     let mut points = vec![("place_mm".to_string(), c.place_mm)];
     for along in c.window_mm {
-        for across in [-half, 0.0, half] {
-            for (what, above) in [("the grip point", up), ("the lift", up + lift)] {
-                let at = format!("window_mm: {what} at {along} mm along, {across} mm across");
-                points.push((at, c.point_mm(along, across, above)));
-            }
+        for (what, above) in [("the grip point", up), ("the lift", up + lift)] {
+            let at = format!("window_mm: {what} at {along} mm along the centre line");
+            points.push((at, c.point_mm(along, 0.0, above)));
         }
     }
     for (what, mm) in points {
