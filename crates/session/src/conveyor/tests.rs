@@ -11,7 +11,7 @@ use qmarc_controller::status::LoopStatus;
 use qmarc_controller::traj::{Sample, TrajectoryGenerator};
 use qmarc_conveyor::{Detection, Part, PartState};
 use qmarc_plugins::motion::{MotionLimits, Profile};
-use qmarc_proto::Gripper;
+use qmarc_proto::{Gripper, MotorFlags};
 use std::collections::VecDeque;
 use std::path::Path;
 use std::sync::Arc;
@@ -137,7 +137,17 @@ struct Rig {
     since: u64,
     /// The picks whose intercept began, and the cycle (apart from the other events).
     intercepting: Vec<(u32, u64)>,
+    /// The motors' positions the next cycle reads: the last command (a robot that follows it
+    /// a cycle late), or where `lag` puts them.
+    act: [f64; MAX_MOTORS],
+    /// Where the motors are, given the command of a cycle (default: on it, a cycle late).
+    lag: Lag,
+    /// Each cycle: its sample, the motors' positions and the belt it read.
+    reads: Vec<(u64, [f64; MAX_MOTORS], i64)>,
 }
+
+/// Where the rig's motors are after the command of a sample.
+type Lag = Box<dyn Fn(&[f64; MAX_MOTORS], u64) -> [f64; MAX_MOTORS]>;
 
 impl Rig {
     fn run(
@@ -151,11 +161,14 @@ impl Rig {
         for _ in 0..cycles {
             self.belt += speed;
             p.belt(self.belt);
+            p.observe(&self.act, &[MotorFlags::default(); MAX_MOTORS]);
+            self.reads.push((self.n, self.act, self.belt));
             let mut cmd = [0.0; MAX_MOTORS];
             last = p.sample(self.n, &mut cmd);
             if last == Sample::Done {
                 break;
             }
+            self.act = (self.lag)(&cmd, self.n);
             cmds.push(cmd);
             // The gripper takes 50 cycles to get where it is told.
             let told = p.gripper(self.gripper);
@@ -189,6 +202,9 @@ fn rig() -> Rig {
         told: None,
         since: 0,
         intercepting: Vec::new(),
+        act: [0.0; MAX_MOTORS],
+        lag: Box::new(|cmd, _| *cmd),
+        reads: Vec::new(),
     }
 }
 
@@ -521,4 +537,54 @@ fn the_dispatchers_intercept_is_the_one_the_picker_runs() {
             "{at} mm along, {across} across: planned {planned} s, the picker ran {ran} s"
         );
     }
+}
+
+/// A part picked by motors that follow the command as `lag` says: the cycle the gripper was
+/// told to close, and the distance from the effector (the forward kinematics of that cycle's
+/// read) to the part where that cycle's read of the belt had it — `parts.csv`'s `error_mm`.
+fn grip_with(s: &Settings, lag: Lag) -> (u64, f64) {
+    let frame = BeltFrame::of(s).unwrap();
+    let (mut p, _serve, mut h) = picker(s);
+    let mut r = rig();
+    r.lag = lag;
+    let speed = 4;
+    r.run(&mut p, &mut h, 40, speed);
+    let pick = Pick { id: 1, belt_mm: 320.0, across_mm: 20.0, latched_counts: r.belt };
+    h.picks.push(pick).unwrap();
+    let mut grip = None;
+    while grip.is_none() && r.n < 5_000 {
+        grip = r.run(&mut p, &mut h, 1, speed).1.iter().find_map(|e| match e {
+            PickEvent::Gripping { cycle, .. } => Some(*cycle),
+            _ => None,
+        });
+    }
+    let g = grip.expect("gripped");
+    let &(_, act, belt) = r.reads.iter().find(|(n, ..)| *n == g).unwrap();
+    let part = (pick.belt_mm, pick.across_mm, pick.latched_counts as f64);
+    (g, frame.effector_error_mm([act[0], act[1], act[2]], belt as f64, part).unwrap())
+}
+
+/// The gripper is told to close once the effector is on the part — the forward kinematics of
+/// the cycle's read within GRIP_WITHIN_MM of the part where the cycle's read of the belt has
+/// it — so a robot still off the part (a host's stall) settles first; one that never comes
+/// that near is gripped after SETTLE_MAX_S on it all the same.
+#[test]
+fn the_gripper_closes_once_the_effector_is_on_the_part() {
+    use super::picker::{GRIP_WITHIN_MM, SETTLE_MAX_S};
+    let s = settings();
+    let off = |cmd: &[f64; MAX_MOTORS]| -> [f64; MAX_MOTORS] {
+        std::array::from_fn(|m| cmd[m] + [60.0, -60.0, 60.0, 0.0][m])
+    };
+    // On the command a cycle late: the gripper told at the intercept's end.
+    let (on_time, error) = grip_with(&s, Box::new(|cmd, _| *cmd));
+    assert!(error <= GRIP_WITHIN_MM, "{error} mm");
+    // Off the part until 20 cycles later: told in the first cycle whose read is on it.
+    let (settled, error) =
+        grip_with(&s, Box::new(move |cmd, n| if n < on_time + 20 { off(cmd) } else { *cmd }));
+    assert_eq!(settled, on_time + 21);
+    assert!(error <= GRIP_WITHIN_MM, "{error} mm");
+    // Never on it: told after SETTLE_MAX_S all the same, however far.
+    let (late, error) = grip_with(&s, Box::new(move |cmd, _| off(cmd)));
+    assert_eq!(late, on_time + (SETTLE_MAX_S / s.period_s()).round() as u64);
+    assert!(error > 2.0 * GRIP_WITHIN_MM, "{error} mm: the offset is no test");
 }
