@@ -38,22 +38,24 @@ fn closing_s(s: &Settings) -> f64 {
 /// and the intercept's duration.
 fn intercept(s: &Settings, at: f64, across: f64, speed: f64) -> (bool, f64) {
     let frame = BeltFrame::of(s).unwrap();
-    let limits = MotionLimits::of(s);
-    let relative = relative_limits(&frame, &limits, 3, speed, s.camera.spread_mm);
+    let relative = relative_limits(&frame, &MotionLimits::of(s), 3, speed, s.camera.spread_mm);
+    intercept_within(s, &relative, at, across, speed)
+}
+
+/// [`intercept`] under the relative limits `relative`.
+fn intercept_within(
+    s: &Settings,
+    relative: &MotionLimits,
+    at: f64,
+    across: f64,
+    speed: f64,
+) -> (bool, f64) {
+    let frame = BeltFrame::of(s).unwrap();
     let command = frame.counts_at_mm(s.conveyor.place_mm).unwrap();
     let mut profile = Profile::new(3, command);
-    let closing_s = closing_s(s);
-    let ok = intercepts(
-        &frame,
-        &relative,
-        &mut profile,
-        3,
-        &command,
-        &part(across),
-        at,
-        speed,
-        closing_s,
-    );
+    let closing = closing_s(s);
+    let ok =
+        intercepts(&frame, relative, &mut profile, 3, &command, &part(across), at, speed, closing);
     (ok, profile.duration())
 }
 
@@ -499,21 +501,8 @@ fn the_dispatchers_intercept_is_the_one_the_picker_runs() {
     let t = s.period_s();
     let speed = 4; // counts a cycle: 500 mm/s
     let mm_s = speed as f64 * s.conveyor.mm_per_count / t;
-    let command = frame.counts_at_mm(s.conveyor.place_mm).unwrap();
     for (at, across) in [(300.0, 0.0), (320.0, 40.0), (280.0, -45.0)] {
-        let mut profile = Profile::new(3, command);
-        let closing = closing_s(&s);
-        let handed = intercepts(
-            &frame,
-            &relative,
-            &mut profile,
-            3,
-            &command,
-            &part(across),
-            at,
-            mm_s,
-            closing,
-        );
+        let (handed, planned) = intercept_within(&s, &relative, at, across, mm_s);
         assert!(handed, "{at} mm along, {across} across");
         // The picker at rest at the place, its belt tracker on the belt's speed.
         let (mut p, _serve, mut h) = picker(&s);
@@ -531,7 +520,6 @@ fn the_dispatchers_intercept_is_the_one_the_picker_runs() {
             });
         }
         let ran = (grip.expect("gripped") - start + 1) as f64 * t;
-        let planned = profile.duration();
         assert!(
             (ran - planned).abs() <= 1.5 * t,
             "{at} mm along, {across} across: planned {planned} s, the picker ran {ran} s"
