@@ -282,9 +282,8 @@ impl Picker {
     /// there ([`Picker::in_position`]) or has had [`SETTLE_MAX_S`], if it still closes inside
     /// the window — else the pick is given up, the command on to the place from this sample.
     fn settle(&mut self, n: u64, pick: Pick) {
-        match self.on_part(&pick, self.belt_at(0), 0.0) {
-            Ok((q, v)) => self.last = MotionState { p: q, v, a: [0.0; MAX_MOTORS] },
-            Err(why) => return self.give_up(n, &pick, why),
+        if !self.ride(n, &pick) {
+            return;
         }
         if !self.closes_in_window(&pick) {
             // Sample n is commanded: the place from it, the gripper left open.
@@ -298,6 +297,21 @@ impl Picker {
             self.phase = Phase::Track(pick);
             self.grip = Some(true);
             let _ = self.events.push(PickEvent::Gripping { id: pick.id, cycle: n });
+        }
+    }
+
+    /// Sample `n` on `pick`'s grip point, moving with the belt; false when the part is lost
+    /// (past the window or out of reach): then the pick is given up.
+    fn ride(&mut self, n: u64, pick: &Pick) -> bool {
+        match self.on_part(pick, self.belt_at(0), 0.0) {
+            Ok((q, v)) => {
+                self.last = MotionState { p: q, v, a: [0.0; MAX_MOTORS] };
+                true
+            }
+            Err(why) => {
+                self.give_up(n, pick, why);
+                false
+            }
         }
     }
 
@@ -388,22 +402,18 @@ impl Picker {
                 }
                 self.settle(n, pick);
             }
-            Phase::Track(pick) => match self.on_part(&pick, self.belt_at(0), 0.0) {
-                Ok((q, v)) => {
-                    self.last = MotionState { p: q, v, a: [0.0; MAX_MOTORS] };
-                    if self.gripper.reached(true) {
-                        let _ = self.events.push(PickEvent::Lifted { id: pick.id });
-                        // Off the belt, rising with it from the next sample; the place
-                        // straight away if the point above is out of reach.
-                        let next = n + 1;
-                        match self.intercept(next, pick, LIFT_MM, 0) {
-                            Ok(()) => self.phase = Phase::Lift(pick),
-                            Err(_) => self.leave(next, Some(pick)),
-                        }
+            Phase::Track(pick) => {
+                if self.ride(n, &pick) && self.gripper.reached(true) {
+                    let _ = self.events.push(PickEvent::Lifted { id: pick.id });
+                    // Off the belt, rising with it from the next sample; the place straight
+                    // away if the point above is out of reach.
+                    let next = n + 1;
+                    match self.intercept(next, pick, LIFT_MM, 0) {
+                        Ok(()) => self.phase = Phase::Lift(pick),
+                        Err(_) => self.leave(next, Some(pick)),
                     }
                 }
-                Err(why) => self.give_up(n, &pick, why),
-            },
+            }
             Phase::Lift(pick) => match self.relative(n, &pick, LIFT_MM) {
                 Ok(false) => {}
                 // Up: to the place, from this sample's state.
