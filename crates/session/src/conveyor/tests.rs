@@ -576,3 +576,20 @@ fn the_gripper_closes_once_the_effector_is_on_the_part() {
     assert_eq!(late, on_time + (SETTLE_MAX_S / s.period_s()).round() as u64);
     assert!(error > 2.0 * GRIP_WITHIN_MM, "{error} mm: the offset is no test");
 }
+
+/// The belt frame's points and counts are the settings' belt (`ConveyorSettings::point_mm`,
+/// the part's height on top): along, across and above it, off the centre line too.
+#[test]
+fn the_belt_frame_puts_a_part_where_the_settings_say() {
+    let s = settings();
+    let (frame, c, height) = (BeltFrame::of(&s).unwrap(), &s.conveyor, s.camera.part_height_mm);
+    let up_mm = 25.0;
+    for (along, across) in [(300.0, 0.0), (420.0, 45.0), (500.0, -40.0)] {
+        let want = c.point_mm(along, across, height);
+        let got = frame.grip_point_mm(along, across);
+        assert!((0..3).all(|i| (got[i] - want[i]).abs() < 1e-9), "{got:?} for {want:?}");
+        let up = frame.counts_up(along, across, up_mm).unwrap();
+        let above = frame.counts_at_mm(c.point_mm(along, across, height + up_mm)).unwrap();
+        assert_eq!(up, above, "{up_mm} mm above the part at {along}, {across}");
+    }
+}
