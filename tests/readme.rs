@@ -101,7 +101,9 @@ fn lay_out_clone(run: &TestRun) {
         let mode = std::os::unix::fs::PermissionsExt::from_mode(0o755);
         std::fs::set_permissions(&path, mode).expect("an executable shim");
     }
-    for name in ["qmarc-hwserver", "qmarc-controller", "qmarc-bench", "qmarc-camera"] {
+    for name in
+        ["qmarc-hwserver", "qmarc-controller", "qmarc-bench", "qmarc-camera", "qmarc-foxglove"]
+    {
         std::os::unix::fs::symlink(bins.join(name), release.join(name)).expect("a link");
     }
     for dir in ["knots", "examples"] {

@@ -61,6 +61,7 @@ fn the_state_diagram_in_architecture_md_names_every_phase_of_the_code() {
 /// (`controller-process`, `starter`, the console) sit on top.
 const LAYERS: &[&str] = &[
     "proto",
+    "ros2msg",
     "kinematics",
     "conveyor",
     "comedi",
@@ -75,6 +76,7 @@ const LAYERS: &[&str] = &[
     "plugins",
     "session",
     "report",
+    "foxglove",
     "bridge",
     "waypoints",
     "plots",

@@ -13,6 +13,7 @@
 //!   limits the rate, how far it goes, at 1 m/s, and the intercept's cost in the cycle.
 //! - `bridge`: the ROS 2 bridge — the loop's p99 with it and two subscribers against without,
 //!   joint states over 60 s (loss, latency from the servo sample), a target to the loop.
+//! - `files`: a move's files written with `gather.mcap` off and on (the time ratio, sizes).
 //!
 //! Figures are printed (and written as JSON with `--json`), never asserted: the machine decides.
 
@@ -21,6 +22,7 @@ mod bridge;
 mod command;
 mod conveyor;
 mod cycle;
+mod files;
 mod ipc;
 mod jitter;
 mod pick;
@@ -63,6 +65,8 @@ enum BenchCommand {
     /// The ROS 2 bridge: the loop with it and two subscribers against without (p99 ratio),
     /// joint states' loss and latency, a published target to the loop's first command.
     Bridge(bridge::BridgeArgs),
+    /// What gather.mcap costs: a move's files written with it off and on (the ratio).
+    Files(files::FilesArgs),
 }
 
 fn main() -> ExitCode {
@@ -75,6 +79,7 @@ fn main() -> ExitCode {
         BenchCommand::Pick(a) => pick::run(a),
         BenchCommand::Conveyor(a) => conveyor::run(a),
         BenchCommand::Bridge(a) => bridge::run(a),
+        BenchCommand::Files(a) => files::run(a),
     };
     let outcome = result.map(|()| ExitCode::SUCCESS).map_err(|e| (qmarc_proto::exit::INTERNAL, e));
     qmarc_program::cli::conclude("qmarc-bench", outcome)

@@ -8,7 +8,7 @@ use crate::msgs::{
     PointStamped, Time,
 };
 use qmarc_proto::telemetry::TelemetrySample;
-use qmarc_proto::{DAC_FULL_SCALE_V, DAC_MAX, MAX_MOTORS, Status};
+use qmarc_proto::{MAX_MOTORS, Status};
 use qmarc_session::wire::{MAX_PATH_KNOTS, PathKnot, PathRequest};
 
 /// The frame the effector's point is in: the Delta's base.
@@ -28,7 +28,7 @@ pub struct Converter {
 impl Converter {
     /// The joint names: `motor1` … `motorN`.
     pub fn names(&self) -> Vec<String> {
-        (1..=self.n_motors).map(|m| format!("motor{m}")).collect()
+        crate::msgs::motor_names(self.n_motors)
     }
 
     /// `s` as joint states stamped `stamp`: positions in rad from home, velocities in rad/s
@@ -45,9 +45,7 @@ impl Converter {
             name: self.names(),
             position: self.rad(&s.act),
             velocity: self.rad(&rate(&s.act, prev.map(|p| &p.act), seconds_between(s, prev))),
-            effort: (0..n)
-                .map(|m| f64::from(s.dac[m]) * DAC_FULL_SCALE_V / f64::from(DAC_MAX))
-                .collect(),
+            effort: (0..n).map(|m| qmarc_proto::dac_volts(s.dac[m])).collect(),
         }
     }
 

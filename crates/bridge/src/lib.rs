@@ -8,10 +8,11 @@
 //! [`action_msgs`] the messages, [`action`] the `FollowJointTrajectory` server.
 #![deny(missing_docs)]
 
+pub use qmarc_ros2msg::msgs;
+
 pub mod action;
 pub mod action_msgs;
 pub mod bridge;
 pub mod convert;
-pub mod msgs;
 pub mod node;
 pub mod ros2;

@@ -17,6 +17,9 @@ pub struct GatherSettings {
     /// How much of a stream (a path of unknown length: PVT from a pipe or a FIFO) the buffer
     /// holds, s; rows beyond are counted and reported, not kept.
     pub stream_max_s: f64,
+    /// Also write `gather.mcap` (the same rows, the robot drawn, its log: Foxglove,
+    /// PlotJuggler and `ros2 bag` open it).
+    pub mcap: bool,
 }
 
 impl Default for GatherSettings {
@@ -26,6 +29,7 @@ impl Default for GatherSettings {
             out_dir: PathBuf::from("out"),
             fields: GatherFields::default(),
             stream_max_s: 60.0,
+            mcap: true,
         }
     }
 }
@@ -104,6 +108,7 @@ pub(crate) struct RawGather {
     out_dir: S<String>,
     fields: S<Vec<String>>,
     stream_max_s: S<f64>,
+    mcap: S<bool>,
 }
 
 impl RawGather {
@@ -124,6 +129,7 @@ impl RawGather {
                 d.stream_max_s,
                 within(0.001, crate::DEFAULT_MAX_DURATION_S, "s"),
             )?,
+            mcap: src.take(&self.mcap, "gather.mcap", d.mcap, |_| Ok(()))?,
         })
     }
 }

@@ -6,6 +6,7 @@
 
 use qmarc_config::Settings;
 use qmarc_controller::gather::{Gather, GatherRow};
+use qmarc_foxglove::recording::Part;
 use qmarc_report::summary::{ConveyorLatency, ConveyorSummary, ErrorFigures, Latencies};
 use qmarc_session::conveyor::BeltFrame;
 use qmarc_session::conveyor::dispatch::{Dispatched, PartRecord};
@@ -37,14 +38,19 @@ fn latency(parts: &[PartRecord]) -> Option<ConveyorLatency> {
     })
 }
 
-/// `parts.csv` and the summary's section of the session whose dispatcher saw `d` and whose
-/// loop gathered `gather` (in order), with the settings `s`.
-pub fn results(d: &Dispatched, gather: &Gather, s: &Settings) -> (String, ConveyorSummary) {
+/// `parts.csv`, the summary's section and the parts as gather.mcap draws them, of the session
+/// whose dispatcher saw `d` and whose loop gathered `gather` (in order), with the settings `s`.
+pub fn results(
+    d: &Dispatched,
+    gather: &Gather,
+    s: &Settings,
+) -> (String, ConveyorSummary, Vec<Part>) {
     let rows = gather.rows();
     let frame = BeltFrame::of(s);
     let mut csv = String::from(PARTS_HEADER);
     csv.push('\n');
     let (mut grip, mut closing) = (Vec::new(), 0.0f64);
+    let mut drawn = Vec::with_capacity(d.parts.len());
     for p in &d.parts {
         let at_grip = p.grip_cycle.and_then(|c| row(rows, c));
         let error = frame.as_ref().zip(at_grip).and_then(|(f, r)| error_mm(f, p, r));
@@ -74,6 +80,16 @@ pub fn results(d: &Dispatched, gather: &Gather, s: &Settings) -> (String, Convey
             cycle(p.place_cycle),
             error.map_or("nan".to_string(), |e| e.to_string()),
         );
+        drawn.push(Part {
+            id: p.id,
+            belt_mm: p.belt_mm,
+            across_mm: p.across_mm,
+            latched_counts: p.latched_counts,
+            state: p.state.to_string(),
+            grip_cycle: p.grip_cycle,
+            place_cycle: p.place_cycle,
+            error_mm: error,
+        });
     }
     let count = |state: &str| d.parts.iter().filter(|p| p.state == state).count();
     let span_s = match (rows.first(), rows.last()) {
@@ -91,5 +107,5 @@ pub fn results(d: &Dispatched, gather: &Gather, s: &Settings) -> (String, Convey
         detections: d.detections,
         latency_ms: latency(&d.parts),
     };
-    (csv, summary)
+    (csv, summary, drawn)
 }

@@ -13,6 +13,7 @@ use qmarc_controller::plan::{MoveLimits, MovePlan};
 use qmarc_controller::record::MoveRecord;
 use qmarc_controller::servo::{MoveError, Servo, server_gone};
 use qmarc_controller::traj::TrajStartError;
+use qmarc_foxglove::recording::Recording;
 use qmarc_plugins::registry;
 use qmarc_plugins::source::TrajBuildError;
 use qmarc_proto::progress::Progress;
@@ -20,10 +21,10 @@ use qmarc_proto::service::IpcLocation;
 use qmarc_proto::state::FaultKind;
 use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
 use qmarc_report::Summary;
-use qmarc_report::output::{WriteError, write_results_with};
+use qmarc_report::output::WriteError;
 use qmarc_report::summarize::summarize;
 use qmarc_report::summary::{AfterHoming, HomingReport, Warning, WarningKind};
-use qmarc_session::conveyor::dispatch::Dispatcher;
+use qmarc_session::conveyor::dispatch::{Dispatched, Dispatcher};
 use qmarc_session::conveyor::picker::{Picker, PickerHandle};
 use qmarc_session::generator::ServeHandle;
 use qmarc_session::server;
@@ -201,16 +202,36 @@ pub fn run_move(spec: &RunSpec) -> Result<Summary, RunError> {
         summary.homing = Some(homing_report(&record, homed_read, settings.n_motors));
     }
     warn(&mut summary, spec, &record, relayed.and_then(|r| r.error));
+    write_results(settings, &record, &mut summary, dispatched.as_ref())?;
+    Ok(summary)
+}
+
+/// Writes the set of files of the move that left `record` (`summary`'s): gather.csv,
+/// gather.m, gather.mcap, a conveyor session's parts.csv (from what its dispatcher saw,
+/// `dispatched`) and summary.json last.
+fn write_results(
+    settings: &Settings,
+    record: &MoveRecord,
+    summary: &mut Summary,
+    dispatched: Option<&Dispatched>,
+) -> Result<(), WriteError> {
+    let (extra, parts) = match dispatched {
+        Some(d) => {
+            let (csv, section, parts) = crate::conveyor::results(d, &record.gather, settings);
+            summary.conveyor = Some(section);
+            (vec![("parts.csv", csv)], parts)
+        }
+        None => (Vec::new(), Vec::new()),
+    };
+    let frozen = summary.clone();
     // The rescue folder is named after the run's starter, this process's parent.
     let starter = std::os::unix::process::parent_id();
-    let mut extra = Vec::new();
-    if let Some(d) = &dispatched {
-        let (parts, section) = crate::conveyor::results(d, &record.gather, settings);
-        summary.conveyor = Some(section);
-        extra.push(("parts.csv", parts));
-    }
-    write_results_with(&settings.gather.out_dir, &record.gather, &mut summary, starter, &extra)?;
-    Ok(summary)
+    Recording::of(settings, record, &frozen, &parts).write_results(
+        &settings.gather.out_dir,
+        summary,
+        starter,
+        &extra,
+    )
 }
 
 /// The warnings of a move of `spec` that left `record`: a frame that may not be homed, motors

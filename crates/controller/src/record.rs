@@ -46,6 +46,9 @@ pub struct MoveRecord {
     /// The settle at the end of the path, if it began (its error at the end is
     /// `last_error`).
     pub settle: Option<Stretch>,
+    /// Tick 0 on the system clock, ns since the Unix epoch: a gathered row's time on the
+    /// wall is this plus its `time_s`.
+    pub started_wall_ns: u64,
     /// The first sample index of the path (after the approach).
     pub path_from: u64,
     /// The first sample index of the settle, if it began.

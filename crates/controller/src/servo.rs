@@ -52,6 +52,8 @@ pub struct Servo {
     act: [f64; MAX_MOTORS],
     dac: [i32; MAX_MOTORS],
     t0_ns: u64,
+    /// Tick 0 on the system clock, ns since the Unix epoch.
+    t0_wall_ns: u64,
     phase: Phase,
     /// Where the move's progress is published, if anywhere.
     progress: Option<qmarc_proto::progress::Progress>,
@@ -90,6 +92,7 @@ impl Servo {
             act: [0.0; MAX_MOTORS],
             dac: [0; MAX_MOTORS],
             t0_ns: 0,
+            t0_wall_ns: 0,
             phase: Phase::Idle,
             progress: None,
             telemetry: None,
@@ -320,6 +323,13 @@ impl Servo {
     /// Marks when tick 0 is due (the origin of gathered time in real-time runs).
     fn set_t0(&mut self, t0_ns: u64) {
         self.t0_ns = t0_ns;
+        // The loop's clock (monotonic, or a lock-step run's own) against the system clock,
+        // read once here, before the first cycle: the gathered rows' times on the wall.
+        let since_t0 = self.clock.now_ns().saturating_sub(t0_ns);
+        let wall = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        self.t0_wall_ns = wall.saturating_sub(since_t0);
         if let Some(p) = &self.progress {
             p.set_t0(t0_ns);
         }

@@ -194,6 +194,15 @@ impl Geometry {
         (self.base_radius_m + l * theta.cos()) * self.u(i) - l * theta.sin() * Vector3::z()
     }
 
+    /// Arm i's three joints with the arm at `theta` and the effector centre at `p`, m: the
+    /// shoulder (the motor's axis, on the base), the elbow (the upper arm's tip, where the
+    /// cable pair hangs) and the wrist (the pair's midpoint on the effector). The drawing of
+    /// the robot; elbow to wrist is the rod length where `p` is the forward solution.
+    pub fn joints(&self, i: usize, theta: f64, p: &Point) -> [Point; 3] {
+        let u = self.u(i);
+        [self.base_radius_m * u, self.elbow(i, theta), p + self.effector_radius_m * u]
+    }
+
     /// The arm angles that put the effector centre at `p` (closed form, elbow out).
     pub fn inverse(&self, p: &Point) -> Result<Angles, KinematicsError> {
         if !p.iter().all(|v| v.is_finite()) {

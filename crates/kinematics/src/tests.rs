@@ -174,3 +174,22 @@ fn a_point_far_out_of_reach_is_said_shortly() {
     assert_eq!(crate::mm(-2.5e9), "-2.5e9");
     assert_eq!(crate::mm(-600.04), "-600.0");
 }
+
+/// The drawing's joints are the robot's: the shoulder R from the axis at the arm's azimuth
+/// on the base plane, the upper arm L long at θ below horizontal, the rod l long, the wrist r
+/// from the effector centre toward the arm.
+#[test]
+fn the_joints_are_the_robots_links() {
+    for p in workspace().step_by(37) {
+        let theta = G.inverse(&p).unwrap();
+        for i in 0..ARMS {
+            let [shoulder, elbow, wrist] = G.joints(i, theta[i], &p);
+            let (s, c) = G.arm_azimuth_rad[i].sin_cos();
+            assert!((shoulder - Point::new(0.2 * c, 0.2 * s, 0.0)).norm() < 1e-12);
+            assert!(((elbow - shoulder).norm() - 0.3).abs() < 1e-12);
+            assert!(((elbow.z - shoulder.z) + 0.3 * theta[i].sin()).abs() < 1e-12);
+            assert!(((wrist - elbow).norm() - 0.7).abs() < 1e-9, "arm {i} at {p:?}");
+            assert!((wrist - p - Point::new(0.05 * c, 0.05 * s, 0.0)).norm() < 1e-12);
+        }
+    }
+}

@@ -57,6 +57,11 @@ pub const DAC_MAX: i32 = 8191;
 /// Volts at [`DAC_MAX`].
 pub const DAC_FULL_SCALE_V: f64 = 10.0;
 
+/// The volts DAC code `code` puts out (±[`DAC_MAX`] ↔ ±[`DAC_FULL_SCALE_V`]).
+pub fn dac_volts(code: i32) -> f64 {
+    f64::from(code) * DAC_FULL_SCALE_V / f64::from(DAC_MAX)
+}
+
 /// Extends a 24-bit counter step to a signed difference: the change from `old` to `new`, valid
 /// while the true motion between two reads is below 2²³ counts.
 ///

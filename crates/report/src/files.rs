@@ -28,36 +28,68 @@ pub fn columns(g: &Gather) -> Vec<String> {
     c
 }
 
+/// One value of a gathered row, in [`columns`]' order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Cell {
+    /// A whole number (cycle, DAC code, gripper state, belt counts).
+    Int(i64),
+    /// A measurement (time, command, position).
+    Float(f64),
+}
+
+impl std::fmt::Display for Cell {
+    /// `{}` on f64 is the shortest text that parses back to the same value, so figures
+    /// recomputed from the file equal the ones computed in the loop.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Cell::Int(v) => write!(f, "{v}"),
+            Cell::Float(v) => write!(f, "{v}"),
+        }
+    }
+}
+
+/// Calls `each` with the values of row `r`, in [`columns`]' order.
+pub fn cells(
+    g: &Gather,
+    r: &GatherRow,
+    mut each: impl FnMut(Cell) -> io::Result<()>,
+) -> io::Result<()> {
+    let f = g.fields();
+    each(Cell::Int(r.cycle as i64))?;
+    if f.time {
+        each(Cell::Float(r.time_s))?;
+    }
+    for m in 0..g.n_motors() {
+        if f.cmd {
+            each(Cell::Float(r.cmd[m]))?;
+        }
+        if f.act {
+            each(Cell::Float(r.act[m]))?;
+        }
+        if f.dac {
+            each(Cell::Int(r.dac[m].into()))?;
+        }
+    }
+    if f.grip {
+        each(Cell::Int(r.grip.into()))?;
+    }
+    if f.conv {
+        each(Cell::Int(r.conv))?;
+    }
+    Ok(())
+}
+
 fn write_row(
     g: &Gather,
     w: &mut (impl Write + ?Sized),
     r: &GatherRow,
     sep: &str,
 ) -> io::Result<()> {
-    // `{}` on f64 is the shortest text that parses back to the same value, so figures
-    // recomputed from the file equal the ones computed in the loop.
-    let f = g.fields();
-    write!(w, "{}", r.cycle)?;
-    if f.time {
-        write!(w, "{sep}{}", r.time_s)?;
-    }
-    for m in 0..g.n_motors() {
-        if f.cmd {
-            write!(w, "{sep}{}", r.cmd[m])?;
-        }
-        if f.act {
-            write!(w, "{sep}{}", r.act[m])?;
-        }
-        if f.dac {
-            write!(w, "{sep}{}", r.dac[m])?;
-        }
-    }
-    if f.grip {
-        write!(w, "{sep}{}", r.grip)?;
-    }
-    if f.conv {
-        write!(w, "{sep}{}", r.conv)?;
-    }
+    let mut first = true;
+    cells(g, r, |c| {
+        let sep = if std::mem::take(&mut first) { "" } else { sep };
+        write!(w, "{sep}{c}")
+    })?;
     writeln!(w)
 }
 

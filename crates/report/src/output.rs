@@ -256,9 +256,10 @@ pub const OUTPUT_FILES: [&str; 3] = ["gather.csv", "gather.m", "summary.json"];
 pub const PLOT_FILES: [&str; 6] =
     ["arms.png", "error.png", "velocity.png", "period.png", "effector-3d.png", "effector-xz.png"];
 
-/// Files a set may have beside its data: a conveyor session's `parts.csv`. They belong to the
-/// set, so a new set retires them with it.
-pub const EXTRA_FILES: [&str; 1] = ["parts.csv"];
+/// Files a set may have beside gather.csv: a conveyor session's `parts.csv`, the rows as
+/// MCAP (`gather.mcap`, [`write_results`]'s `also`). They belong to the set, so a new set
+/// retires them with it.
+pub const EXTRA_FILES: [&str; 2] = ["parts.csv", "gather.mcap"];
 
 /// The folder inside an output folder that keeps the last complete set a newer one replaced.
 pub const PREVIOUS_DIR: &str = "previous";
@@ -332,13 +333,17 @@ fn write_json(summary: &Summary, w: &mut dyn Write) -> std::io::Result<()> {
 /// warning, and the folder keeps the previous data files, if any: never a half-written set);
 /// a failure writes everything to the rescue folder of the run whose starter is `run_pid`
 /// instead ([`rescue_dir`]), with a warning, and says so on standard error.
+///
+/// `also`: more data files of the same rows (`gather.mcap`), written after gather.m and
+/// abandoned with them.
 pub fn write_results(
     dir: &Path,
     gather: &Gather,
     summary: &mut Summary,
     run_pid: u32,
+    also: &[FileWriter<'_>],
 ) -> Result<(), WriteError> {
-    write_results_with(dir, gather, summary, run_pid, &[])
+    write_results_with(dir, gather, summary, run_pid, &[], also)
 }
 
 /// [`write_results`] with `extra` files of the set ([`EXTRA_FILES`]: a name and its text),
@@ -349,6 +354,7 @@ pub fn write_results_with(
     summary: &mut Summary,
     run_pid: u32,
     extra: &[(&str, String)],
+    also: &[FileWriter<'_>],
 ) -> Result<(), WriteError> {
     let csv = |w: &mut dyn Write| crate::files::write_csv(gather, w);
     let octave = |w: &mut dyn Write| crate::files::write_octave(gather, w);
@@ -356,32 +362,39 @@ pub fn write_results_with(
         .iter()
         .map(|(name, text)| (*name, move |w: &mut dyn Write| w.write_all(text.as_bytes())))
         .collect();
-    let attempt =
-        |dir: &Path, summary: &mut Summary, data: bool| {
-            let names: &[&str] = if data { &OUTPUT_FILES } else { &OUTPUT_FILES[2..] };
-            let extras = extra.iter().map(|(name, _)| dir.join(name));
-            summary.files = names.iter().map(|f| dir.join(f)).chain(extras).collect();
-            let frozen = summary.clone();
-            let json = move |w: &mut dyn Write| write_json(&frozen, w);
-            let mut all: Vec<FileWriter<'_>> = Vec::new();
-            if data {
-                all.push(("gather.csv", &csv));
-                all.push(("gather.m", &octave));
-            }
-            all.extend(texts.iter().map(|(name, write)| {
+    let attempt = |dir: &Path, summary: &mut Summary, data: bool| {
+        let names: &[&str] = if data { &OUTPUT_FILES } else { &OUTPUT_FILES[2..] };
+        let also_names = also.iter().filter(|_| data).map(|(name, _)| dir.join(name));
+        let extras = extra.iter().map(|(name, _)| dir.join(name));
+        summary.files = names.iter().map(|f| dir.join(f)).chain(also_names).chain(extras).collect();
+        let frozen = summary.clone();
+        let json = move |w: &mut dyn Write| write_json(&frozen, w);
+        let mut all: Vec<FileWriter<'_>> = Vec::new();
+        if data {
+            all.push(("gather.csv", &csv));
+            all.push(("gather.m", &octave));
+            all.extend(also.iter().copied());
+        }
+        all.extend(
+            texts.iter().map(|(name, write)| {
                 (*name, write as &dyn Fn(&mut dyn Write) -> std::io::Result<()>)
-            }));
-            // The summary last: once it is there, the set is complete.
-            all.push(("summary.json", &json));
-            write_set(dir, &all)
-        };
+            }),
+        );
+        // The summary last: once it is there, the set is complete.
+        all.push(("summary.json", &json));
+        write_set(dir, &all)
+    };
     let Err(e) = attempt(dir, summary, true) else { return Ok(()) };
     if interrupted(&e) {
+        let mut files: Vec<&str> = vec!["gather.csv", "gather.m"];
+        files.extend(also.iter().map(|(name, _)| *name));
+        let last = files.pop().unwrap_or_default();
         summary.warnings.push(Warning::new(
             WarningKind::DataNotWritten,
             format!(
-                "a stop signal arrived while the data were written: this move's gather.csv and \
-                 gather.m were not written (the set they would have replaced, if any, is in {})",
+                "a stop signal arrived while the data were written: this move's {} and {last} \
+                 were not written (the set they would have replaced, if any, is in {})",
+                files.join(", "),
                 dir.join(PREVIOUS_DIR).display()
             ),
         ));

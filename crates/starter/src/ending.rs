@@ -7,6 +7,7 @@ use crate::lost::{controller_lost_message, lost, stopped_by, stopped_responding}
 use crate::say;
 use crate::supervise::{Supervised, Unresponsive};
 use qmarc_config::RunSpec;
+use qmarc_foxglove::recording::Recording;
 use qmarc_proto::exit;
 use qmarc_proto::progress::Snapshot;
 use qmarc_proto::state::{FaultKind, Phase};
@@ -42,6 +43,8 @@ pub fn conclude(spec: &RunSpec, e: &Ended) -> Option<(Summary, PathBuf)> {
             e.reached.map_or(0, |r| r.cycle),
             controller_lost_message(exit, e.hwserver(), settings, e.reached),
         );
+        // The settings' scale, which the rows it left are in.
+        s.counts_per_rad = settings.counts_per_rad();
         if let Some((name, u)) = unresponsive {
             stopped_responding(&mut s, name, u);
         }
@@ -63,7 +66,17 @@ pub fn conclude(spec: &RunSpec, e: &Ended) -> Option<(Summary, PathBuf)> {
                         g.rows().len()
                     ),
                 ));
-                qmarc_report::output::write_results(out_dir, g, &mut s, std::process::id())
+                let frozen = s.clone();
+                let recording = Recording {
+                    settings,
+                    gather: g,
+                    summary: &frozen,
+                    started_wall_ns: started_wall_ns(e.reached.map(|r| r.t0_ns), g),
+                    path_from: 0,
+                    settle_from: None,
+                    parts: &[],
+                };
+                recording.write_results(out_dir, &mut s, std::process::id(), &[])
             }
             None => qmarc_report::output::write_summary_set(out_dir, &s).map(|_| ()),
         };
@@ -78,6 +91,21 @@ pub fn conclude(spec: &RunSpec, e: &Ended) -> Option<(Summary, PathBuf)> {
         say!("qmarc-starter: the controller ended well, but its summary cannot be read: {why}");
     }
     None
+}
+
+/// Tick 0 of a dead controller's loop on the system clock: from its progress page's `t0_ns`
+/// (`CLOCK_MONOTONIC`) where that is a past time of this clock, else as if its last gathered
+/// row were now.
+fn started_wall_ns(t0_ns: Option<u64>, g: &qmarc_controller::gather::Gather) -> u64 {
+    let wall = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    let now = qmarc_timer::clock::monotonic_now_ns();
+    let since = match t0_ns.filter(|&t| t > 0 && t <= now) {
+        Some(t0) => now - t0,
+        None => g.rows().last().map_or(0, |r| (r.time_s * 1e9) as u64),
+    };
+    wall.saturating_sub(since)
 }
 
 /// The summary this run's controller wrote and its folder: `summary.json` in `out_dir` if

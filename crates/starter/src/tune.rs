@@ -13,6 +13,7 @@ use crate::cli::RunArgs;
 use anyhow::{Context, anyhow};
 use clap::{Args, Subcommand};
 use qmarc_config::{Mode, RunSpec, Settings};
+use qmarc_foxglove::recording::Recording;
 use qmarc_tune::eval::{EvalError, Evaluator, Objective, Param, PathRun};
 use qmarc_tune::optimise::{Plan, Record, Tuned, tune};
 use qmarc_tune::report;
@@ -170,11 +171,9 @@ fn write_local(
     s.gather.out_dir = dir.to_path_buf();
     let spec = RunSpec { settings: s, mode: Mode::Run, ..spec.clone() };
     let mut done = qmarc_tune::local::run_local(&spec, &AtomicBool::new(false))?;
-    qmarc_report::output::write_results(
-        dir,
-        &done.record.gather,
-        &mut done.summary,
-        std::process::id(),
-    )?;
+    let frozen = done.summary.clone();
+    let r = &done.record;
+    let recording = Recording::of(&spec.settings, r, &frozen, &[]);
+    recording.write_results(dir, &mut done.summary, std::process::id(), &[])?;
     Ok(dir.to_path_buf())
 }

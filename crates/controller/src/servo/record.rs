@@ -27,6 +27,7 @@ impl Servo {
                 cycles: self.m.settle_executed,
                 errors: self.m.settle_errors,
             }),
+            started_wall_ns: self.t0_wall_ns,
             path_from: self.m.lead_in,
             settle_from: self.m.settle_from,
             homed: self.m.homed,

@@ -1,4 +1,4 @@
-//! The ROS 2 messages the bridge speaks, field for field as their `.msg` files (Jazzy) define
+//! The ROS 2 messages QMARC speaks, field for field as their `.msg` files (Jazzy) define
 //! them, for `cdr-encoding`'s serde: the order of the fields is the wire's.
 
 use serde::{Deserialize, Serialize};
@@ -48,6 +48,11 @@ pub struct JointState {
     pub velocity: Vec<f64>,
     /// The drive's effort (here the DAC's volts).
     pub effort: Vec<f64>,
+}
+
+/// The joint names of `n` motors: `motor1` … `motorN`.
+pub fn motor_names(n: usize) -> Vec<String> {
+    (1..=n).map(|m| format!("motor{m}")).collect()
 }
 
 /// `geometry_msgs/msg/Point`.
