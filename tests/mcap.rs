@@ -16,16 +16,7 @@ use std::time::{Duration, Instant};
 /// Runs `tests/mcap_check.py` on the output folder `out`: it exits 1 naming the first
 /// difference between gather.mcap and gather.csv; its JSON line says what it found.
 fn check(out: &Path) -> Value {
-    let python = std::env::var_os("QMARC_PYTHON")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| workspace().join("target/pyenv/bin/python3"));
-    assert!(
-        python.exists(),
-        "no Python with mcap at {}: run scripts/test (it installs tests/requirements.txt into \
-         target/pyenv) or set QMARC_PYTHON",
-        python.display()
-    );
-    let r = Command::new(&python)
+    let r = Command::new(qmarc_tests::python())
         .arg(workspace().join("tests/mcap_check.py"))
         .arg(out)
         .output()

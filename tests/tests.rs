@@ -9,6 +9,7 @@ mod e2e;
 mod first_motion;
 mod gripper;
 mod hardware;
+mod live;
 mod mcap;
 mod online;
 mod readme;

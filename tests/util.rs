@@ -40,6 +40,21 @@ pub fn knots(name: &str) -> PathBuf {
     workspace().join("knots").join(name)
 }
 
+/// The Python with the tests' packages (tests/requirements.txt): `$QMARC_PYTHON`, else the
+/// one `scripts/test` makes in `target/pyenv`.
+pub fn python() -> PathBuf {
+    let python = std::env::var_os("QMARC_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace().join("target/pyenv/bin/python3"));
+    assert!(
+        python.exists(),
+        "no Python with the tests' packages at {}: run scripts/test (it installs \
+         tests/requirements.txt into target/pyenv) or set QMARC_PYTHON",
+        python.display()
+    );
+    python
+}
+
 /// The shipped settings file.
 pub fn shipped_config() -> PathBuf {
     workspace().join("config/qmarc.toml")

@@ -15,8 +15,8 @@
 //!   move (the command service's `taken_ns`), on one clock (the send time moved from the
 //!   system clock to `CLOCK_MONOTONIC` by their offset, read here).
 
-use crate::session::Session;
-use crate::stats::{median, percentiles_us};
+use crate::session::{Rounds, Session};
+use crate::stats::percentiles_us;
 use anyhow::Context;
 use qmarc_session::client::CommandClient;
 use qmarc_session::wire::{CommandKind, CommandRequest};
@@ -127,52 +127,28 @@ impl BridgeArgs {
     }
 }
 
-/// One session of the rounds, with the bridge and two subscribers or not: its loop's wake
-/// and output latency p99, µs.
-fn segment(a: &BridgeArgs, bridged: bool, name: &str) -> anyhow::Result<(f64, f64)> {
-    let session = Session::start(&a.config, a.bin_dir.as_deref(), name)?;
-    session.client()?;
-    let mut extra = None;
-    if bridged {
-        let mut b = a.bridge(&session)?;
-        for _ in 0..2 {
-            let args = [
-                "joint-states".into(),
-                "100000000".into(),
-                format!("--timeout={}", a.segment_s + 60.0),
-            ];
-            let sub =
-                a.client(&b.endpoint, &args).stdout(Stdio::null()).stderr(Stdio::null()).spawn()?;
-            b.children.push(sub);
-        }
-        extra = Some(b);
+/// The bridge and two subscribers of its joint states beside `session`, for a round.
+fn beside(a: &BridgeArgs, session: &Session) -> anyhow::Result<Box<dyn std::any::Any>> {
+    let mut b = a.bridge(session)?;
+    for _ in 0..2 {
+        let args = [
+            "joint-states".into(),
+            "100000000".into(),
+            format!("--timeout={}", a.segment_s + 60.0),
+        ];
+        let sub =
+            a.client(&b.endpoint, &args).stdout(Stdio::null()).stderr(Stdio::null()).spawn()?;
+        b.children.push(sub);
     }
-    std::thread::sleep(Duration::from_secs_f64(a.segment_s));
-    drop(extra);
-    let s = session.quit_with_summary()?;
-    Ok((s.timing.wake_latency_us.p99, s.timing.output_latency_us.p99))
-}
-
-/// The settings the sessions run on: `--config`, with `--pin`'s CPUs.
-fn pinned_config(a: &BridgeArgs) -> anyhow::Result<BridgeArgs> {
-    let text = std::fs::read_to_string(&a.config)
-        .with_context(|| format!("cannot read {}", a.config.display()))?;
-    let mut doc: toml_edit::DocumentMut =
-        text.parse().with_context(|| format!("{}", a.config.display()))?;
-    doc["timer"]["servo_cpu"] = toml_edit::value(0);
-    doc["timer"]["hwserver_cpu"] = toml_edit::value(0);
-    let path = std::env::temp_dir().join(format!("qmarc-bench-bridge-{}.toml", std::process::id()));
-    std::fs::write(&path, doc.to_string())?;
-    qmarc_timer::cpus::keep_off(&[0])?;
-    Ok(BridgeArgs { config: path, pin: false, ..a.clone() })
+    Ok(Box::new(b))
 }
 
 /// Runs `bridge`.
 pub fn run(a: &BridgeArgs) -> anyhow::Result<()> {
     if a.pin {
-        let pinned = pinned_config(a)?;
-        let result = run(&pinned);
-        let _ = std::fs::remove_file(&pinned.config);
+        let config = crate::session::pinned_config(&a.config, "bridge")?;
+        let result = run(&BridgeArgs { config: config.clone(), pin: false, ..a.clone() });
+        let _ = std::fs::remove_file(&config);
         return result;
     }
     anyhow::ensure!(a.rounds >= 1 && a.targets >= 1, "--rounds and --targets must be ≥ 1");
@@ -189,25 +165,16 @@ pub fn run(a: &BridgeArgs) -> anyhow::Result<()> {
         a.segment_s,
         if pinned { "; servo and hwserver on CPU 0, the rest off it" } else { "" }
     );
-    println!("  round   alone: wake p99  output p99    bridged: wake p99  output p99   (µs)");
-    let (mut wake, mut output) = (Vec::new(), Vec::new());
-    for r in 0..a.rounds {
-        let mut figures = [(0.0, 0.0); 2];
-        let order = if r % 2 == 0 { [false, true] } else { [true, false] };
-        for bridged in order {
-            figures[usize::from(bridged)] =
-                segment(a, bridged, &format!("br{r}{}", u8::from(bridged)))?;
-        }
-        let [(w0, o0), (w1, o1)] = figures;
-        println!("  {:>5}   {w0:>14.1}  {o0:>10.1}    {w1:>16.1}  {o1:>10.1}", r + 1);
-        wake.push(w1 / w0);
-        output.push(o1 / o0);
-    }
-    println!(
-        "  median p99 ratio bridged ÷ alone: wake {:.3}, output {:.3} (goal ≤ 1.1)",
-        median(&wake),
-        median(&output)
-    );
+    let rounds = Rounds {
+        config: &a.config,
+        bin_dir: a.bin_dir.as_deref(),
+        rounds: a.rounds,
+        segment_s: a.segment_s,
+        tag: "br",
+        with: "bridged",
+    };
+    let (wake, output) = rounds.run(&|session| beside(a, session))?;
+    println!("  median p99 ratio bridged ÷ alone: wake {wake:.3}, output {output:.3} (goal ≤ 1.1)");
     stream_and_targets(a)
 }
 

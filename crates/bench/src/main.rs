@@ -14,6 +14,8 @@
 //! - `bridge`: the ROS 2 bridge — the loop's p99 with it and two subscribers against without,
 //!   joint states over 60 s (loss, latency from the servo sample), a target to the loop.
 //! - `files`: a move's files written with `gather.mcap` off and on (the time ratio, sizes).
+//! - `foxglove`: the live view — the loop's p99 with it and two viewers against without, what
+//!   a viewer receives.
 //!
 //! Figures are printed (and written as JSON with `--json`), never asserted: the machine decides.
 
@@ -23,6 +25,7 @@ mod command;
 mod conveyor;
 mod cycle;
 mod files;
+mod foxglove;
 mod ipc;
 mod jitter;
 mod pick;
@@ -67,6 +70,9 @@ enum BenchCommand {
     Bridge(bridge::BridgeArgs),
     /// What gather.mcap costs: a move's files written with it off and on (the ratio).
     Files(files::FilesArgs),
+    /// The live view: the loop with it and two viewers against without (p99 ratio), what a
+    /// viewer receives.
+    Foxglove(foxglove::FoxgloveArgs),
 }
 
 fn main() -> ExitCode {
@@ -80,6 +86,7 @@ fn main() -> ExitCode {
         BenchCommand::Conveyor(a) => conveyor::run(a),
         BenchCommand::Bridge(a) => bridge::run(a),
         BenchCommand::Files(a) => files::run(a),
+        BenchCommand::Foxglove(a) => foxglove::run(a),
     };
     let outcome = result.map(|()| ExitCode::SUCCESS).map_err(|e| (qmarc_proto::exit::INTERNAL, e));
     qmarc_program::cli::conclude("qmarc-bench", outcome)

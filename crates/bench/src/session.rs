@@ -101,3 +101,72 @@ impl Drop for Session {
         let _ = std::fs::remove_dir_all(&self.scratch);
     }
 }
+
+/// The session's loop alone against with a companion, in interleaved rounds.
+pub struct Rounds<'a> {
+    /// The sessions' settings.
+    pub config: &'a Path,
+    /// Where the programs are.
+    pub bin_dir: Option<&'a Path>,
+    /// Rounds, each a session alone and one with the companion.
+    pub rounds: u32,
+    /// Each session's length, s.
+    pub segment_s: f64,
+    /// The sessions' names start with it.
+    pub tag: &'a str,
+    /// The companion's column head ("bridged").
+    pub with: &'a str,
+}
+
+impl Rounds<'_> {
+    /// Runs the rounds, the order alternating round by round so that neither kind always
+    /// meets the host first; `companion` starts what runs beside the session (dropped before
+    /// the session quits). Prints each round's loop wake and output latency p99 (from each
+    /// session's summary.json); returns the medians of the per-round ratios with ÷ alone.
+    pub fn run(
+        &self,
+        companion: &dyn Fn(&Session) -> anyhow::Result<Box<dyn std::any::Any>>,
+    ) -> anyhow::Result<(f64, f64)> {
+        println!(
+            "  round   alone: wake p99  output p99    {:>7}: wake p99  output p99   (µs)",
+            self.with
+        );
+        let (mut wake, mut output) = (Vec::new(), Vec::new());
+        for r in 0..self.rounds {
+            let mut figures = [(0.0, 0.0); 2];
+            let order = if r % 2 == 0 { [false, true] } else { [true, false] };
+            for with in order {
+                let name = format!("{}{r}{}", self.tag, u8::from(with));
+                let session = Session::start(self.config, self.bin_dir, &name)?;
+                session.client()?;
+                let beside = if with { Some(companion(&session)?) } else { None };
+                std::thread::sleep(Duration::from_secs_f64(self.segment_s));
+                drop(beside);
+                let s = session.quit_with_summary()?;
+                figures[usize::from(with)] =
+                    (s.timing.wake_latency_us.p99, s.timing.output_latency_us.p99);
+            }
+            let [(w0, o0), (w1, o1)] = figures;
+            println!("  {:>5}   {w0:>14.1}  {o0:>10.1}    {w1:>16.1}  {o1:>10.1}", r + 1);
+            wake.push(w1 / w0);
+            output.push(o1 / o0);
+        }
+        Ok((crate::stats::median(&wake), crate::stats::median(&output)))
+    }
+}
+
+/// A copy of the settings `config` with the servo thread and the hwserver on CPU 0
+/// (`timer.servo_cpu`, `timer.hwserver_cpu`), and this process (and what it starts after)
+/// kept off it: a servo PC's deployment (`--pin`). `what` names the copy.
+pub fn pinned_config(config: &Path, what: &str) -> anyhow::Result<PathBuf> {
+    let text = std::fs::read_to_string(config)
+        .with_context(|| format!("cannot read {}", config.display()))?;
+    let mut doc: toml_edit::DocumentMut =
+        text.parse().with_context(|| format!("{}", config.display()))?;
+    doc["timer"]["servo_cpu"] = toml_edit::value(0);
+    doc["timer"]["hwserver_cpu"] = toml_edit::value(0);
+    let path = std::env::temp_dir().join(format!("qmarc-bench-{what}-{}.toml", std::process::id()));
+    std::fs::write(&path, doc.to_string())?;
+    qmarc_timer::cpus::keep_off(&[0])?;
+    Ok(path)
+}

@@ -180,15 +180,26 @@ impl Cell {
         }
     }
 
-    /// Diagnostics messages until one satisfies `found` (30 s at most: the bridge forwards
-    /// and the controller answers when a loaded machine lets them); that one.
+    /// Diagnostics messages until one satisfies `found` (60 s at most: the bridge forwards
+    /// and the controller answers when a loaded machine lets them, and a client that heard
+    /// none in its 5 s asks again — a CI run once had one hear nothing in 20 s under load);
+    /// that one.
     fn diagnostics_until(&self, found: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
         let started = Instant::now();
         loop {
-            if let Some(d) = self.lines(&["diagnostics", "1"]).into_iter().find(|d| found(d)) {
+            let out = self.ros2(&["diagnostics", "1", "--timeout=5"]);
+            let text = String::from_utf8_lossy(&out.stdout).into_owned();
+            let heard = text.lines().filter_map(|l| serde_json::from_str(l).ok());
+            if let Some(d) = heard.into_iter().find(|d| found(d)) {
                 return d;
             }
-            assert!(started.elapsed() < Duration::from_secs(30), "{}", self.bridge_log());
+            assert!(
+                started.elapsed() < Duration::from_secs(60),
+                "no such diagnostics in 60 s; the last client: {:?} {text}\n{}\nbridge: {}",
+                out.status,
+                String::from_utf8_lossy(&out.stderr),
+                self.bridge_log()
+            );
         }
     }
 

@@ -9,7 +9,7 @@
 //! | `/qmarc/effector` | json | JSON Schema `qmarc.Effector` |
 //! | `/qmarc/log` | protobuf | `foxglove.Log` |
 
-use foxglove::messages::{Log, SceneUpdate};
+use foxglove::messages::{Log, SceneUpdate, log::Level};
 use foxglove::{
     Channel, ChannelBuilder, Context, FoxgloveError, PartialMetadata, RawChannel, Schema,
 };
@@ -95,6 +95,18 @@ impl Channels {
             effector: json(EFFECTOR, "qmarc.Effector", EFFECTOR_SCHEMA.to_string())?,
             log: ChannelBuilder::new(LOG).context(ctx).build::<Log>(),
         })
+    }
+
+    /// Logs `message` at `level` on `/qmarc/log` at `ns` (ns since the Unix epoch).
+    pub fn say(&self, ns: u64, level: Level, message: &str) {
+        let msg = Log {
+            timestamp: Some(crate::scene::stamp(ns)),
+            level: level as i32,
+            message: message.to_string(),
+            name: "qmarc".to_string(),
+            ..Default::default()
+        };
+        self.log.log_with_time(&msg, ns);
     }
 
     /// Logs `bytes` on `channel` at `log_ns` (ns since the Unix epoch).

@@ -8,7 +8,11 @@
 #![deny(missing_docs)]
 
 pub mod channels;
+pub mod live;
+pub mod proxy;
+pub mod publish;
 pub mod read;
 pub mod recording;
 pub mod render;
 pub mod scene;
+pub mod watch;

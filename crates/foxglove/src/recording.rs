@@ -1,28 +1,25 @@
 //! `gather.mcap`: a move's data as an MCAP file (profile `ros2`, uncompressed, as rosbag2's
 //! MCAP storage writes one) on the [`crate::channels`]: every gathered row, the joint states,
-//! the effector, the Deltabot drawn at [`SCENE_PERIOD_NS`] of loop time and the log (the move
+//! the effector, the Deltabot drawn at [`crate::publish::SCENE_PERIOD_NS`] of loop time and the log (the move
 //! began, its phases, each part picked or missed, its warnings, its fault, its end).
 //!
 //! A row's log time is its loop tick on the system clock: tick 0's ([`Recording::started_wall_ns`])
 //! plus its `time_s`. Written after the move, from what the loop gathered: never from the loop.
 
-use crate::channels::{Channels, effector_json, joint_states_cdr, json_integer, json_number};
-use crate::scene::{self, BeltLook, PartAt};
-use foxglove::messages::{Log, log::Level};
+use crate::channels::Channels;
+use crate::publish::RowPublisher;
+use crate::scene::{BeltLook, PartAt};
+use foxglove::messages::log::Level;
 use foxglove::{Context, FoxgloveError, McapWriteOptions};
 use qmarc_config::Settings;
 use qmarc_controller::gather::{Gather, GatherRow};
 use qmarc_controller::record::MoveRecord;
-use qmarc_report::files::{Cell, cells, columns};
+use qmarc_report::files::columns;
 use qmarc_report::output::{WriteError, write_results_with};
 use qmarc_report::summary::Summary;
 use std::io::{Cursor, Write};
 use std::path::Path;
 use std::sync::{Mutex, OnceLock};
-
-/// The scene's period in loop time, ns: 50 Hz (Foxglove plays it back smoothly; the issue
-/// asks at least 25 Hz).
-pub const SCENE_PERIOD_NS: u64 = 20_000_000;
 
 /// The name `gather.mcap` has in an output folder.
 pub const FILE: &str = "gather.mcap";
@@ -181,23 +178,18 @@ impl<'a> Recording<'a> {
 
     /// Every message, in time order: a `/qmarc/gather` message per row; the joint states
     /// and the effector at the live view's rate (every `telemetry.every` cycles); the scene
-    /// every [`SCENE_PERIOD_NS`] of loop time; the log's lines at their cycles.
-    /// False if `stopped` ended it first.
+    /// every [`crate::publish::SCENE_PERIOD_NS`] of loop time; the log's lines at their cycles. False if
+    /// `stopped` ended it first.
     fn log_all(&self, ch: &Channels, stopped: &dyn Fn() -> bool) -> bool {
         let rows = self.gather.rows();
-        let robot = self.settings.robot();
         let belt = (self.gather.fields().conv).then(|| BeltLook::of(self.settings));
-        let grip = self.gather.fields().grip;
-        let n = self.gather.n_motors();
-        let cpr = self.settings.counts_per_rad();
         let every = u64::from(self.settings.telemetry.every.max(1));
-        let keys = json_keys(&columns(self.gather));
+        let mut publisher =
+            RowPublisher::new(self.settings, self.gather.fields(), self.gather.n_motors());
         let mut events = self.events();
         events.sort_by_key(|e| e.cycle);
         let mut events = events.into_iter().peekable();
-        let (mut next_scene, mut next_sample) = (0u64, 0u64);
-        let mut text = String::with_capacity(512);
-        let mut last: Option<&GatherRow> = None;
+        let mut next_sample = 0u64;
         for (k, r) in rows.iter().enumerate() {
             if k % 512 == 0 && stopped() {
                 return false;
@@ -205,46 +197,18 @@ impl<'a> Recording<'a> {
             let ns = self.log_ns(r);
             let final_row = k + 1 == rows.len();
             while let Some(e) = events.next_if(|e| e.cycle <= r.cycle || final_row) {
-                log(ch, ns, e.level, &e.message);
+                ch.say(ns, e.level, &e.message);
             }
-            row_json(self.gather, &keys, &mut text, r);
-            Channels::put(&ch.gather, text.as_bytes(), ns);
+            publisher.gather(ch, r, ns);
             if r.cycle < next_sample && !final_row {
                 continue;
             }
             next_sample = r.cycle + every;
-            // rad/s from the last sample's row.
-            let rate: Vec<f64> = (0..n)
-                .map(|m| match last {
-                    Some(p) if r.time_s > p.time_s => (r.act[m] - p.act[m]) / (r.time_s - p.time_s),
-                    _ => 0.0,
-                })
-                .collect();
-            last = Some(r);
-            Channels::put(
-                &ch.joint_states,
-                &joint_states_cdr(ns, cpr, &r.act[..n], &rate, &r.dac[..n]),
-                ns,
-            );
-            let Some(robot) = robot.as_ref() else { continue };
-            let act = [r.act[0], r.act[1], r.act[2]];
-            let act_mm = robot.mm_of(&act).ok();
-            if let (Ok(cmd_mm), Some(act_mm)) =
-                (robot.mm_of(&[r.cmd[0], r.cmd[1], r.cmd[2]]), act_mm)
-            {
-                effector_json(&mut text, cmd_mm, act_mm);
-                Channels::put(&ch.effector, text.as_bytes(), ns);
-            }
-            let loop_ns = ns - self.started_wall_ns;
-            if loop_ns >= next_scene || final_row {
-                next_scene = loop_ns + SCENE_PERIOD_NS;
-                let mut entities: Vec<_> =
-                    scene::deltabot(robot, &act, grip.then_some(r.grip), ns).into_iter().collect();
-                if let Some(b) = &belt {
-                    let at = act_mm.map(|p| p.map(|v| v / 1000.0));
-                    entities.push(b.entity(&self.parts_at(b, r), at, ns));
-                }
-                ch.scene.log_with_time(&scene::update(entities), ns);
+            publisher.sample(ch, r, ns);
+            if publisher.scene_due(ns - self.started_wall_ns, final_row) {
+                let parts = belt.as_ref().map(|b| (b, self.parts_at(b, r)));
+                let belt = parts.as_ref().map(|(b, p)| (*b, p.as_slice()));
+                publisher.scene(ch, r, ns, belt);
             }
         }
         true
@@ -323,42 +287,4 @@ impl<'a> Recording<'a> {
         ev.push(info(last, format!("{} {end}, {} cycles", s.mode, s.cycles)));
         ev
     }
-}
-
-/// Each column's key as a JSON object starts it: `{"cycle":`, `,"time_s":`, …
-fn json_keys(columns: &[String]) -> Vec<String> {
-    columns
-        .iter()
-        .enumerate()
-        .map(|(k, c)| format!("{}\"{c}\":", if k == 0 { "{" } else { "," }))
-        .collect()
-}
-
-/// Row `r` of `g` as `/qmarc/gather`'s JSON into `out`: gather.csv's columns (`keys`, from
-/// [`json_keys`]) and values, the same text for each number.
-fn row_json(g: &Gather, keys: &[String], out: &mut String, r: &GatherRow) {
-    out.clear();
-    let mut k = 0;
-    let _ = cells(g, r, |c| {
-        out.push_str(&keys[k]);
-        match c {
-            Cell::Int(v) => json_integer(out, v),
-            Cell::Float(v) => json_number(out, v),
-        }
-        k += 1;
-        Ok(())
-    });
-    out.push('}');
-}
-
-/// Logs `message` at `level` on `/qmarc/log` at `ns`.
-fn log(ch: &Channels, ns: u64, level: Level, message: &str) {
-    let msg = Log {
-        timestamp: Some(scene::stamp(ns)),
-        level: level as i32,
-        message: message.to_string(),
-        name: "qmarc".to_string(),
-        ..Default::default()
-    };
-    ch.log.log_with_time(&msg, ns);
 }

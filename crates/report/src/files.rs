@@ -1,18 +1,23 @@
 //! The data files of a move: `gather.csv` and `gather.m` (Octave/Matlab), written from the
 //! gather buffer after the move.
 
+use qmarc_config::GatherFields;
 use qmarc_controller::gather::{Gather, GatherRow};
 use std::io::{self, Write};
 
 /// Column names: `cycle,time_s,cmd1,act1,dac1,cmd2,…`, then `grip` when a gripper is wired
 /// and `conv` (the belt encoder's counts) when the run reads a belt.
 pub fn columns(g: &Gather) -> Vec<String> {
-    let f = g.fields();
+    columns_of(g.fields(), g.n_motors())
+}
+
+/// [`columns`] of rows with `fields` of `n_motors` motors.
+pub fn columns_of(f: GatherFields, n_motors: usize) -> Vec<String> {
     let mut c = vec!["cycle".to_string()];
     if f.time {
         c.push("time_s".to_string());
     }
-    for m in 1..=g.n_motors() {
+    for m in 1..=n_motors {
         for (on, name) in [(f.cmd, "cmd"), (f.act, "act"), (f.dac, "dac")] {
             if on {
                 c.push(format!("{name}{m}"));
@@ -52,14 +57,23 @@ impl std::fmt::Display for Cell {
 pub fn cells(
     g: &Gather,
     r: &GatherRow,
+    each: impl FnMut(Cell) -> io::Result<()>,
+) -> io::Result<()> {
+    cells_of(g.fields(), g.n_motors(), r, each)
+}
+
+/// [`cells`] of a row with `fields` of `n_motors` motors.
+pub fn cells_of(
+    f: GatherFields,
+    n_motors: usize,
+    r: &GatherRow,
     mut each: impl FnMut(Cell) -> io::Result<()>,
 ) -> io::Result<()> {
-    let f = g.fields();
     each(Cell::Int(r.cycle as i64))?;
     if f.time {
         each(Cell::Float(r.time_s))?;
     }
-    for m in 0..g.n_motors() {
+    for m in 0..n_motors {
         if f.cmd {
             each(Cell::Float(r.cmd[m]))?;
         }
@@ -134,7 +148,6 @@ pub fn write_octave(g: &Gather, w: &mut (impl Write + ?Sized)) -> io::Result<()>
 #[cfg(test)]
 mod tests {
     use super::*;
-    use qmarc_config::GatherFields;
 
     fn row(cycle: u64) -> GatherRow {
         GatherRow {

@@ -194,6 +194,12 @@ pub struct ServeArgs {
     /// The bridge's Zenoh configuration file, JSON5 (qmarc-bridge --zenoh-config).
     #[arg(long, requires = "bridge")]
     pub zenoh_config: Option<PathBuf>,
+    /// Start `qmarc-foxglove live` beside the session and stop it with it: the session's live
+    /// view for Foxglove (the Foxglove WebSocket protocol, `foxglove.websocket.v1`) at ADDR,
+    /// `host:port` (default 127.0.0.1:8765): the robot drawn, its joint states, the effector,
+    /// the rows and the log (docs/foxglove.md). Its end, or its death, ends nothing else.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = qmarc_foxglove::live::DEFAULT_ADDR)]
+    pub foxglove: Option<String>,
 }
 
 impl ServeArgs {
@@ -445,5 +451,23 @@ mod tests {
         assert!(c.serve.bridge);
         assert_eq!(c.serve.bridge_args(), ["--namespace=/r1", "--domain=3"]);
         assert!(T::try_parse_from(["x", "conveyor", "--namespace=/r1"]).is_err());
+    }
+
+    /// Issue 45: `--foxglove` alone serves at Foxglove's default address, with a value there.
+    #[test]
+    fn the_live_view_takes_an_address_or_the_default() {
+        let foxglove = |args: &[&str]| {
+            let t = T::try_parse_from(args).unwrap();
+            match t.command {
+                Command::Serve(a) | Command::Conveyor(ConveyorArgs { serve: a, .. }) => a.foxglove,
+                _ => panic!("a serving session"),
+            }
+        };
+        assert_eq!(foxglove(&["x", "serve"]), None);
+        assert_eq!(foxglove(&["x", "serve", "--foxglove"]).as_deref(), Some("127.0.0.1:8765"));
+        let addr = foxglove(&["x", "conveyor", "--foxglove", "0.0.0.0:9000", "--seconds=3"]);
+        assert_eq!(addr.as_deref(), Some("0.0.0.0:9000"));
+        let before_flag = foxglove(&["x", "conveyor", "--foxglove", "--seconds=3"]);
+        assert_eq!(before_flag.as_deref(), Some("127.0.0.1:8765"));
     }
 }

@@ -1,5 +1,6 @@
 //! A serving session's companions beside the controller and the hwserver: `qmarc-bridge`
-//! (`serve --bridge`) and `qmarc-camera` (`conveyor`). A companion is not one of the run's
+//! (`serve --bridge`), `qmarc-foxglove live` (`serve --foxglove`) and `qmarc-camera`
+//! (`conveyor`). A companion is not one of the run's
 //! children: its end, or its death (kill -9), ends nothing, and a death is said once, at once;
 //! the session's end stops it (SIGTERM, then SIGKILL after 3 s). Like every child it ends if
 //! the starter dies (its parent-death signal).
@@ -10,6 +11,11 @@ use qmarc_proto::service::IpcLocation;
 use std::path::Path;
 use std::process::Child;
 use std::time::{Duration, Instant};
+
+/// The options that name the session at `location` to a client program.
+fn location_args(location: &IpcLocation) -> Vec<String> {
+    vec![format!("--iox-prefix={}", location.prefix), format!("--iox-root={}", location.root)]
+}
 
 /// A companion of a serving session.
 pub(crate) struct Companion {
@@ -29,12 +35,23 @@ impl Companion {
         location: &IpcLocation,
         log: Option<&std::fs::File>,
     ) -> Companion {
-        let mut args = vec![
-            format!("--iox-prefix={}", location.prefix),
-            format!("--iox-root={}", location.root),
-        ];
+        let mut args = location_args(location);
         args.extend_from_slice(own);
         Companion::start("qmarc-bridge", "the session goes on", program, &args, log)
+    }
+
+    /// Starts the live view `program` (`qmarc-foxglove live`) of the session at `location`,
+    /// serving at `addr` (its messages to `log`, if given).
+    pub(crate) fn foxglove(
+        program: &Path,
+        addr: &str,
+        location: &IpcLocation,
+        log: Option<&std::fs::File>,
+    ) -> Companion {
+        let mut args = vec!["live".to_string()];
+        args.extend(location_args(location));
+        args.push(format!("--addr={addr}"));
+        Companion::start("qmarc-foxglove", "the session goes on", program, &args, log)
     }
 
     /// Starts the camera server `program` on the run's file (`args`, the children's).

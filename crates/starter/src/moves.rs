@@ -102,6 +102,8 @@ pub struct Prepared {
     pub controller_bin: PathBuf,
     /// `qmarc-bridge` and its own options, when `serve --bridge` starts one beside them.
     pub bridge: Option<(PathBuf, Vec<String>)>,
+    /// `qmarc-foxglove` and the address of its live view, when `serve --foxglove` starts one.
+    pub foxglove: Option<(PathBuf, String)>,
     /// `qmarc-camera`, when the session is at a belt (`conveyor`).
     pub camera: Option<PathBuf>,
     /// The iceoryx2 prefix was given (`--iox-prefix`): an earlier run's files under it are
@@ -225,6 +227,27 @@ fn bridge_of(
     })
 }
 
+/// The live view `command` starts beside its session (`serve --foxglove [ADDR]`, `conveyor
+/// --foxglove`): its program beside `hwserver_bin` and its address, which must be free now.
+fn foxglove_of(
+    command: &crate::cli::Command,
+    hwserver_bin: &Path,
+) -> Result<Option<(PathBuf, String)>, Failure> {
+    let (crate::cli::Command::Serve(a)
+    | crate::cli::Command::Conveyor(crate::cli::ConveyorArgs { serve: a, .. })) = command
+    else {
+        return Ok(None);
+    };
+    let Some(addr) = &a.foxglove else { return Ok(None) };
+    if let Err(e) = std::net::TcpListener::bind(addr.as_str()) {
+        return Err(refused(anyhow!(
+            "--foxglove {addr}: cannot serve the live view there: {e} (give another address, \
+             HOST:PORT)"
+        )));
+    }
+    Ok(Some((companion_program(hwserver_bin, "qmarc-foxglove")?, addr.clone())))
+}
+
 /// Everything is checked before anything starts: the settings, the programs, the iceoryx2
 /// location, the hardware, the path, the gather budget and the output folder. Starts
 /// nothing, writes nothing.
@@ -233,6 +256,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     let mode = req.command.mode();
     let (hwserver_bin, controller_bin) = programs(req.bin_dir)?;
     let bridge = bridge_of(req.command, &hwserver_bin)?;
+    let foxglove = foxglove_of(req.command, &hwserver_bin)?;
     let camera = match mode {
         Mode::Conveyor => {
             check_conveyor(&settings)?;
@@ -294,7 +318,16 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     qmarc_hwserver::backends::check(settings, spec.deterministic).map_err(refused)?;
     check_path(settings, mode)?;
     let own_prefix = req.iox_prefix.is_some();
-    Ok(Prepared { spec, location, hwserver_bin, controller_bin, bridge, camera, own_prefix })
+    Ok(Prepared {
+        spec,
+        location,
+        hwserver_bin,
+        controller_bin,
+        bridge,
+        foxglove,
+        camera,
+        own_prefix,
+    })
 }
 
 /// The path: knot files are read and checked now (streams are the controller's to read: it
@@ -379,6 +412,7 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
         .bridge
         .iter()
         .map(|(b, args)| Companion::bridge(b, args, &p.location, log))
+        .chain(p.foxglove.iter().map(|(f, addr)| Companion::foxglove(f, addr, &p.location, log)))
         .chain(p.camera.iter().map(|c| Companion::camera(c, &child_args, log)))
         .collect();
     let status = std::cell::RefCell::new(StatusLine::new(progress.as_ref()));

@@ -1,8 +1,16 @@
 //! `qmarc-foxglove`: the robot as Foxglove sees it, from the command line.
 //!
+//! - `qmarc-foxglove live [--iox-prefix P] [--iox-root R] [--addr HOST:PORT]`: a serving
+//!   session's live view for Foxglove (the Foxglove WebSocket protocol, `foxglove.websocket.v1`)
+//!   at 127.0.0.1:8765 by default; without `--iox-prefix`, your newest serving session.
+//!   `qmarc-starter serve --foxglove [ADDR]` starts it beside the session.
 //! - `qmarc-foxglove scene OUT/gather.mcap [--at S] [--png FILE]`: the Deltabot (and the belt
 //!   with its parts) as the file's scene had it S seconds in, drawn to a PNG (side and top
 //!   views), for a report or a machine without Foxglove.
+//!
+//! Exit codes: 0 done (the session ended, a stop signal), 1 failed (no serving session, the
+//! server), 3 refused (the address taken, several sessions and none chosen, a file that is no
+//! gather.mcap), 64 bad options.
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -18,6 +26,18 @@ struct Args {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Serves a serving session's live view to Foxglove (`foxglove.websocket.v1`).
+    Live {
+        /// The serving session's iceoryx2 prefix (default: your newest serving run).
+        #[arg(long)]
+        iox_prefix: Option<String>,
+        /// The session's iceoryx2 root (default: the one its run file names).
+        #[arg(long)]
+        iox_root: Option<String>,
+        /// Where viewers connect, `host:port`.
+        #[arg(long, default_value = qmarc_foxglove::live::DEFAULT_ADDR)]
+        addr: String,
+    },
     /// Draws a gather.mcap's scene at a time to a PNG (side and top views).
     Scene {
         /// The gather.mcap.
@@ -47,11 +67,31 @@ fn scene(mcap: &PathBuf, at: f64, png: Option<PathBuf>) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Why the live view could not serve: refused (exit 3) or failed (1).
+fn live(prefix: Option<&str>, root: Option<&str>, addr: &str) -> Result<(), (u8, anyhow::Error)> {
+    use qmarc_proto::exit::{INTERNAL, REFUSED};
+    let stop = qmarc_timer::stop::install().map_err(|e| (INTERNAL, e.into()))?;
+    let (location, spec, _) =
+        qmarc_session::discovery::serving_session(prefix, root).map_err(|e| {
+            let refused = matches!(e, qmarc_session::discovery::SessionFindError::Ambiguous(_));
+            (if refused { REFUSED } else { INTERNAL }, anyhow::Error::from(e))
+        })?;
+    let opts = qmarc_foxglove::live::LiveOptions { location, spec, addr: addr.to_string() };
+    qmarc_foxglove::live::run(&opts, stop).map_err(|e| {
+        let taken = e.downcast_ref::<qmarc_foxglove::live::AddressTaken>().is_some();
+        (if taken { REFUSED } else { INTERNAL }, e)
+    })
+}
+
 fn main() -> ExitCode {
     let args: Args = qmarc_program::cli::parse_or_exit();
-    let result = match args.command {
-        Command::Scene { mcap, at, png } => scene(&mcap, at, png),
+    let outcome = match args.command {
+        Command::Scene { mcap, at, png } => {
+            scene(&mcap, at, png).map_err(|e| (qmarc_proto::exit::REFUSED, e))
+        }
+        Command::Live { iox_prefix, iox_root, addr } => {
+            live(iox_prefix.as_deref(), iox_root.as_deref(), &addr)
+        }
     };
-    let outcome = result.map(|()| ExitCode::SUCCESS).map_err(|e| (qmarc_proto::exit::REFUSED, e));
-    qmarc_program::cli::conclude("qmarc-foxglove", outcome)
+    qmarc_program::cli::conclude("qmarc-foxglove", outcome.map(|()| ExitCode::SUCCESS))
 }
