@@ -94,6 +94,10 @@ def main():
                 if topic == "/qmarc/scene":
                     ids = sorted(e.id for e in m.entities)
                     found["entities"] = sorted(set(found["entities"]) | set(ids))
+                    # The belt's first cube is the belt, the others its parts.
+                    for e in m.entities:
+                        if e.id == "belt":
+                            found["max_parts"] = max(found.get("max_parts", 0), len(e.cubes) - 1)
                 elif topic == "/qmarc/log":
                     found["log"].append([m.level, m.message])
             elif ch["encoding"] == "cdr":

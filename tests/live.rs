@@ -133,6 +133,38 @@ fn a_viewer_sees_the_robot_move_live_and_viewers_that_vanish_or_stall_change_not
     run.assert_clean();
 }
 
+/// `conveyor --foxglove`: the belt and the parts on it, live, and the log says each part
+/// picked.
+#[test]
+fn a_conveyor_sessions_live_view_shows_the_belt_and_its_parts() {
+    let run = TestRun::new("live-belt");
+    let port = free_port();
+    let out = run.out("out");
+    let addr = format!("127.0.0.1:{port}");
+    let config = qmarc_tests::tuned_config();
+    let starter = run.spawn_starter(&[
+        &format!("--config={}", config.display()),
+        &format!("--out={}", out.display()),
+        "conveyor",
+        "--seconds=8",
+        "--foxglove",
+        &addr,
+    ]);
+    live_view(&run, port);
+    let seen = wait_with_timeout(viewer(port, &["--seconds=5"]), Duration::from_secs(60));
+    assert_eq!(seen.code, Some(0), "{}", seen.stderr);
+    let found: Value =
+        serde_json::from_str(seen.stdout.trim()).unwrap_or_else(|e| panic!("{e}: {}", seen.stdout));
+    assert_eq!(found["entities"], serde_json::json!(["belt", "deltabot"]), "{found}");
+    assert!(found["max_parts"].as_u64().unwrap_or(0) >= 1, "{found}");
+    let said: Vec<&str> =
+        found["log"].as_array().unwrap().iter().filter_map(|l| l[1].as_str()).collect();
+    assert!(said.iter().any(|l| l.starts_with("part picked (")), "{said:?}");
+    let end = wait_with_timeout(starter, Duration::from_secs(90));
+    assert_eq!(end.code, Some(0), "{}", end.stderr);
+    run.assert_clean();
+}
+
 /// `--foxglove` at an address something else holds: refused before anything starts.
 #[test]
 fn a_taken_address_is_refused_before_anything_starts() {

@@ -157,14 +157,6 @@ pub fn run(a: &BridgeArgs) -> anyhow::Result<()> {
         "{}: no such client (run from the workspace)",
         a.client.display()
     );
-    let pinned = std::fs::read_to_string(&a.config).is_ok_and(|t| t.contains("servo_cpu = 0"));
-    println!(
-        "qmarc-bench bridge: {} interleaved rounds of {} s: a serving session alone, and with \
-         qmarc-bridge and 2 Python subscribers of joint_states over Zenoh (loopback){}",
-        a.rounds,
-        a.segment_s,
-        if pinned { "; servo and hwserver on CPU 0, the rest off it" } else { "" }
-    );
     let rounds = Rounds {
         config: &a.config,
         bin_dir: a.bin_dir.as_deref(),
@@ -172,9 +164,10 @@ pub fn run(a: &BridgeArgs) -> anyhow::Result<()> {
         segment_s: a.segment_s,
         tag: "br",
         with: "bridged",
+        bench: "bridge",
+        companion: "qmarc-bridge and 2 Python subscribers of joint_states over Zenoh (loopback)",
     };
-    let (wake, output) = rounds.run(&|session| beside(a, session))?;
-    println!("  median p99 ratio bridged ÷ alone: wake {wake:.3}, output {output:.3} (goal ≤ 1.1)");
+    rounds.run(&|session| beside(a, session))?;
     stream_and_targets(a)
 }
 

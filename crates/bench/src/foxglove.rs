@@ -126,18 +126,10 @@ pub fn run(a: &FoxgloveArgs) -> anyhow::Result<()> {
         return result;
     }
     anyhow::ensure!(a.rounds >= 1, "--rounds must be ≥ 1");
-    let pinned = std::fs::read_to_string(&a.config).is_ok_and(|t| t.contains("servo_cpu = 0"));
     anyhow::ensure!(
         a.client.is_file(),
         "{}: no such client (run from the workspace)",
         a.client.display()
-    );
-    println!(
-        "qmarc-bench foxglove: {} interleaved rounds of {} s: a serving session alone, and with \
-         qmarc-foxglove live and 2 Python viewers of every channel (loopback){}",
-        a.rounds,
-        a.segment_s,
-        if pinned { "; servo and hwserver on CPU 0, the rest off it" } else { "" }
     );
     let rounds = Rounds {
         config: &a.config,
@@ -146,9 +138,10 @@ pub fn run(a: &FoxgloveArgs) -> anyhow::Result<()> {
         segment_s: a.segment_s,
         tag: "fx",
         with: "viewed",
+        bench: "foxglove",
+        companion: "qmarc-foxglove live and 2 Python viewers of every channel (loopback)",
     };
-    let (wake, output) = rounds.run(&|session| beside(a, session))?;
-    println!("  median p99 ratio viewed ÷ alone: wake {wake:.3}, output {output:.3} (goal ≤ 1.1)");
+    rounds.run(&|session| beside(a, session))?;
     stream(a)
 }
 

@@ -116,17 +116,32 @@ pub struct Rounds<'a> {
     pub tag: &'a str,
     /// The companion's column head ("bridged").
     pub with: &'a str,
+    /// The benchmark's name ("bridge").
+    pub bench: &'a str,
+    /// What runs beside the session in a round, as the banner says it.
+    pub companion: &'a str,
 }
 
 impl Rounds<'_> {
     /// Runs the rounds, the order alternating round by round so that neither kind always
     /// meets the host first; `companion` starts what runs beside the session (dropped before
     /// the session quits). Prints each round's loop wake and output latency p99 (from each
-    /// session's summary.json); returns the medians of the per-round ratios with ÷ alone.
+    /// session's summary.json) and the medians of the per-round ratios with ÷ alone.
     pub fn run(
         &self,
         companion: &dyn Fn(&Session) -> anyhow::Result<Box<dyn std::any::Any>>,
-    ) -> anyhow::Result<(f64, f64)> {
+    ) -> anyhow::Result<()> {
+        let pinned =
+            std::fs::read_to_string(self.config).is_ok_and(|t| t.contains("servo_cpu = 0"));
+        println!(
+            "qmarc-bench {}: {} interleaved rounds of {} s: a serving session alone, and with \
+             {}{}",
+            self.bench,
+            self.rounds,
+            self.segment_s,
+            self.companion,
+            if pinned { "; servo and hwserver on CPU 0, the rest off it" } else { "" }
+        );
         println!(
             "  round   alone: wake p99  output p99    {:>7}: wake p99  output p99   (µs)",
             self.with
@@ -151,7 +166,12 @@ impl Rounds<'_> {
             wake.push(w1 / w0);
             output.push(o1 / o0);
         }
-        Ok((crate::stats::median(&wake), crate::stats::median(&output)))
+        let (wake, output) = (crate::stats::median(&wake), crate::stats::median(&output));
+        println!(
+            "  median p99 ratio {} ÷ alone: wake {wake:.3}, output {output:.3} (goal ≤ 1.1)",
+            self.with
+        );
+        Ok(())
     }
 }
 

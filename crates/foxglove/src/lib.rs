@@ -7,6 +7,7 @@
 //! back and draw it to a PNG (`qmarc-foxglove scene`).
 #![deny(missing_docs)]
 
+pub mod belt;
 pub mod channels;
 pub mod live;
 pub mod proxy;

@@ -98,7 +98,8 @@ fn serve(
     let progress = Progress::open(&Progress::path(&opts.location.prefix)).ok();
     let mut view: Option<(Channels, RowPublisher)> = None;
     let mut watch = crate::watch::Watch::new(&opts.location);
-    let belt = crate::scene::BeltLook::of(s);
+    let mut belt = at_belt(opts);
+    let robot = s.robot();
     let (mut phase, mut fault) = (u32::MAX, 0);
     while !stop.load(Ordering::Relaxed) {
         while let Some(sample) = reader.receive().map_err(|e| anyhow::anyhow!(e))? {
@@ -120,9 +121,16 @@ fn serve(
             publisher.gather(ch, &row, ns);
             publisher.sample(ch, &row, ns);
             if publisher.scene_due(sample.time_ns, false) {
-                // A conveyor session's belt (its parts are gather.mcap's).
-                let belt = watch.conveyor.is_some().then_some((&belt, &[][..]));
-                publisher.scene(ch, &row, ns, belt);
+                // A conveyor session's belt and its parts.
+                let effector = robot
+                    .as_ref()
+                    .and_then(|r| r.mm_of(&[row.act[0], row.act[1], row.act[2]]).ok());
+                let parts = belt.as_mut().map(|b| {
+                    b.receive();
+                    b.parts(effector, row.grip)
+                });
+                let drawn = belt.as_ref().zip(parts.as_deref()).map(|(b, p)| (&b.look, p));
+                publisher.scene(ch, &row, ns, drawn);
             }
             if sample.phase != phase {
                 phase = sample.phase;
@@ -135,8 +143,10 @@ fn serve(
                 ch.say(ns, Level::Error, &format!("fault {kind}"));
             }
         }
-        if let Some((ch, _)) = &view {
-            watch.poll(ch, wall_now());
+        if let Some((ch, _)) = &view
+            && let (Some(c), Some(b)) = (watch.poll(ch, wall_now()), belt.as_mut())
+        {
+            b.status(c);
         }
         if reader.end().is_some() {
             if let Some((ch, _)) = &view {
@@ -147,6 +157,17 @@ fn serve(
         std::thread::sleep(POLL);
     }
     Ok(())
+}
+
+/// A conveyor session's belt, read from its camera (none for another session, or when the
+/// camera's service cannot be read: said, and the robot is drawn alone).
+fn at_belt(opts: &LiveOptions) -> Option<crate::belt::LiveBelt> {
+    if opts.spec.mode != qmarc_config::Mode::Conveyor {
+        return None;
+    }
+    crate::belt::LiveBelt::open(&opts.location, &opts.spec.settings)
+        .map_err(|e| eprintln!("qmarc-foxglove: the belt's parts will not be drawn: {e}"))
+        .ok()
 }
 
 /// The session's telemetry, once it publishes (`serve --foxglove` starts the view with it);

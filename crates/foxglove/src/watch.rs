@@ -18,31 +18,35 @@ pub struct Watch {
     client: Option<CommandClient>,
     asked: Option<Instant>,
     said: Option<(Orders, ConveyorStatus)>,
-    /// The belt as the last answer had it.
-    pub conveyor: Option<ConveyorStatus>,
 }
 
 impl Watch {
     /// The session at `location`, not asked yet.
     pub fn new(location: &IpcLocation) -> Watch {
-        Watch { location: location.clone(), client: None, asked: None, said: None, conveyor: None }
+        Watch { location: location.clone(), client: None, asked: None, said: None }
     }
 
     /// Asks the session for its status if [`EVERY`] has passed, and logs on `ch` at `ns`
-    /// what changed since the last answer.
-    pub fn poll(&mut self, ch: &Channels, ns: u64) {
+    /// what changed since the last answer; the belt as this answer has it, if it came.
+    pub fn poll(&mut self, ch: &Channels, ns: u64) -> Option<ConveyorStatus> {
         if self.asked.is_some_and(|t| t.elapsed() < EVERY) {
-            return;
+            return None;
         }
         self.asked = Some(Instant::now());
         if self.client.is_none() {
             self.client = CommandClient::connect(&self.location).ok();
         }
-        let Some(client) = self.client.as_mut() else { return };
+        let client = self.client.as_mut()?;
         match client.send(CommandRequest::of(CommandKind::Status)) {
-            Ok(r) => self.answer(ch, ns, &r),
+            Ok(r) => {
+                self.answer(ch, ns, &r);
+                Some(r.conveyor)
+            }
             // The session may be ending: ask again with a new client.
-            Err(_) => self.client = None,
+            Err(_) => {
+                self.client = None;
+                None
+            }
         }
     }
 
@@ -54,7 +58,6 @@ impl Watch {
             }
         }
         self.said = Some((o, c));
-        self.conveyor = (c.active != 0).then_some(c);
     }
 }
 
