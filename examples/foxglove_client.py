@@ -5,10 +5,10 @@
 joint states with rosbags' CDR codec (issue 45; the tests and `qmarc-bench foxglove` use it).
 
     foxglove_client.py [--url ws://127.0.0.1:8765] [--seconds 3] [--topics T,…] [--hang]
-                       [--count-only]
+                       [--count-only] [--ready FILE]
 
 Connects, reads the server's advertisements, subscribes to `--topics` (default: all), and
-for `--seconds` counts what arrives; then prints one JSON line: the subprotocol agreed, the
+for `--seconds` from then counts what arrives (`--ready FILE`: creates FILE once subscribed); then prints one JSON line: the subprotocol agreed, the
 topics advertised, the messages per topic, the scene's entities, the last joint state and
 the log's lines. `--hang` subscribes and then never reads again (a viewer that stopped),
 until it is killed."""
@@ -22,6 +22,7 @@ import time
 
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from rosbags.typesys import Stores, get_typestore
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 
@@ -40,6 +41,8 @@ def main():
     ap.add_argument("--topics", default="")
     ap.add_argument("--subprotocol", default="foxglove.websocket.v1")
     ap.add_argument("--hang", action="store_true")
+    ap.add_argument("--ready", default="",
+                    help="a file to create once subscribed (for a caller to wait on)")
     ap.add_argument("--count-only", action="store_true",
                     help="count the messages, decode none (a viewer elsewhere: the benchmark)")
     a = ap.parse_args()
@@ -48,14 +51,19 @@ def main():
     with connect(a.url, subprotocols=[a.subprotocol], max_size=None, open_timeout=10,
                  proxy=None) as ws:
         found["subprotocol"] = ws.subprotocol
-        channels, subscribed, decoders = {}, {}, {}
+        channels, subscribed, decoders, last = {}, {}, {}, {}
         wanted = set(t for t in a.topics.split(",") if t)
-        deadline = time.monotonic() + a.seconds
+        # The seconds count from the subscription (connecting may take a while).
+        deadline = time.monotonic() + 30 + a.seconds
         next_id = 1
         while time.monotonic() < deadline:
             try:
                 msg = ws.recv(timeout=max(0.01, deadline - time.monotonic()))
             except TimeoutError:
+                break
+            except ConnectionClosed:
+                # The session ended (the live view with it): what came until then.
+                found["closed"] = True
                 break
             if isinstance(msg, str):
                 op = json.loads(msg)
@@ -71,6 +79,9 @@ def main():
                         next_id += 1
                     if subs:
                         ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                        deadline = time.monotonic() + a.seconds
+                        if a.ready:
+                            open(a.ready, "w").close()
                     if a.hang:
                         print(json.dumps({"hanging": True}), flush=True)
                         while True:
@@ -100,16 +111,20 @@ def main():
                             found["max_parts"] = max(found.get("max_parts", 0), len(e.cubes) - 1)
                 elif topic == "/qmarc/log":
                     found["log"].append([m.level, m.message])
-            elif ch["encoding"] == "cdr":
-                js = ros2.deserialize_cdr(payload, "sensor_msgs/msg/JointState")
-                found["joint_state"] = {
-                    "name": list(js.name),
-                    "position": [float(p) for p in js.position],
-                    "stamp_ns": js.header.stamp.sec * 1_000_000_000 + js.header.stamp.nanosec,
-                    "log_time": log_time,
-                }
-            elif ch["encoding"] == "json":
-                found["last_" + topic.rsplit("/", 1)[-1]] = json.loads(payload)
+            else:
+                # The last of each: decoded once at the end, so that the viewer keeps up.
+                last[topic] = (ch, log_time, payload)
+    for topic, (ch, log_time, payload) in last.items():
+        if ch["encoding"] == "cdr":
+            js = ros2.deserialize_cdr(payload, "sensor_msgs/msg/JointState")
+            found["joint_state"] = {
+                "name": list(js.name),
+                "position": [float(p) for p in js.position],
+                "stamp_ns": js.header.stamp.sec * 1_000_000_000 + js.header.stamp.nanosec,
+                "log_time": log_time,
+            }
+        elif ch["encoding"] == "json":
+            found["last_" + topic.rsplit("/", 1)[-1]] = json.loads(payload)
     found["advertised"] = sorted(set(found["advertised"]))
     print(json.dumps(found), flush=True)
 

@@ -33,6 +33,8 @@ const BACKLOG: usize = 4096;
 const ATTACH_WAIT: Duration = Duration::from_secs(30);
 /// How often the telemetry is read.
 const POLL: Duration = Duration::from_millis(2);
+/// The most samples one turn takes (a second's worth at the default telemetry rate).
+const TURN_SAMPLES: usize = 625;
 
 /// The viewers' address cannot be served.
 #[derive(Debug, thiserror::Error)]
@@ -102,7 +104,10 @@ fn serve(
     let robot = s.robot();
     let (mut phase, mut fault) = (u32::MAX, 0);
     while !stop.load(Ordering::Relaxed) {
-        while let Some(sample) = reader.receive().map_err(|e| anyhow::anyhow!(e))? {
+        // A turn's samples at most: the session's status and its end are looked at between
+        // turns, however fast the samples come.
+        for _ in 0..TURN_SAMPLES {
+            let Some(sample) = reader.receive().map_err(|e| anyhow::anyhow!(e))? else { break };
             // The channels once the first sample says whether a gripper is wired.
             let (ch, publisher) = match &mut view {
                 Some(v) => v,
