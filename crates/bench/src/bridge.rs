@@ -80,16 +80,9 @@ impl Drop for Bridged {
 }
 
 impl BridgeArgs {
-    fn python(&self) -> PathBuf {
-        self.python
-            .clone()
-            .or_else(|| std::env::var_os("QMARC_PYTHON").map(PathBuf::from))
-            .unwrap_or_else(|| PathBuf::from("target/pyenv/bin/python3"))
-    }
-
     /// The ROS 2 client with `args`, connected to `endpoint`.
     fn client(&self, endpoint: &str, args: &[String]) -> Command {
-        let mut c = Command::new(self.python());
+        let mut c = Command::new(crate::session::python(self.python.as_deref()));
         c.arg(&self.client).arg(format!("--connect={endpoint}")).args(args);
         c
     }

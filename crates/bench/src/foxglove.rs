@@ -66,12 +66,7 @@ impl Drop for Viewed {
 impl FoxgloveArgs {
     /// A viewer of the live view at `port`, for `seconds`.
     fn viewer(&self, port: u16, seconds: f64) -> Command {
-        let python = self
-            .python
-            .clone()
-            .or_else(|| std::env::var_os("QMARC_PYTHON").map(PathBuf::from))
-            .unwrap_or_else(|| PathBuf::from("target/pyenv/bin/python3"));
-        let mut c = Command::new(python);
+        let mut c = Command::new(crate::session::python(self.python.as_deref()));
         c.arg(&self.client)
             .arg(format!("--url=ws://127.0.0.1:{port}"))
             .arg(format!("--seconds={seconds}"));

@@ -190,3 +190,12 @@ pub fn pinned_config(config: &Path, what: &str) -> anyhow::Result<PathBuf> {
     qmarc_timer::cpus::keep_off(&[0])?;
     Ok(path)
 }
+
+/// The Python a benchmark's clients run under: `given` (`--python`), else `$QMARC_PYTHON`,
+/// else `target/pyenv/bin/python3` (which scripts/test makes).
+pub fn python(given: Option<&Path>) -> PathBuf {
+    given
+        .map(Path::to_path_buf)
+        .or_else(|| std::env::var_os("QMARC_PYTHON").map(PathBuf::from))
+        .unwrap_or_else(|| PathBuf::from("target/pyenv/bin/python3"))
+}
