@@ -7,8 +7,9 @@ joint states with rosbags' CDR codec (issue 45; the tests and `qmarc-bench foxgl
     foxglove_client.py [--url ws://127.0.0.1:8765] [--seconds 3] [--topics T,…] [--hang]
                        [--count-only] [--ready FILE]
 
-Connects, reads the server's advertisements, subscribes to `--topics` (default: all), and
-for `--seconds` from then counts what arrives (`--ready FILE`: creates FILE once subscribed); then prints one JSON line: the subprotocol agreed, the
+Connects (trying again for 30 s), reads the server's advertisements, subscribes to `--topics`
+(default: all), and for `--seconds` from then counts what arrives (`--ready FILE`: creates
+FILE once subscribed); then prints one JSON line: the subprotocol agreed, the
 topics advertised, the messages per topic, the scene's entities, the last joint state and
 the log's lines. `--hang` subscribes and then never reads again (a viewer that stopped),
 until it is killed."""
@@ -22,7 +23,7 @@ import time
 
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from rosbags.typesys import Stores, get_typestore
-from websockets.exceptions import ConnectionClosed
+from websockets.exceptions import ConnectionClosed, InvalidHandshake
 from websockets.sync.client import connect
 
 
@@ -32,6 +33,20 @@ def protobuf_class(schema_name, schema_b64):
     for f in fds.file:
         pool.Add(f)
     return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema_name))
+
+
+def connected(url, subprotocol, patience=30.0):
+    """The connection to the live view at `url`, tried again for `patience` seconds: on a
+    loaded machine an opening handshake can time out or a listener be not yet there."""
+    deadline = time.monotonic() + patience
+    while True:
+        try:
+            return connect(url, subprotocols=[subprotocol], max_size=None, open_timeout=10,
+                           proxy=None)
+        except (OSError, TimeoutError, InvalidHandshake) as e:
+            if time.monotonic() > deadline:
+                raise SystemExit(f"foxglove_client: cannot connect to {url}: {e}")
+            time.sleep(0.2)
 
 
 def main():
@@ -48,8 +63,7 @@ def main():
     a = ap.parse_args()
     ros2 = get_typestore(Stores.ROS2_JAZZY)
     found = {"counts": {}, "entities": [], "log": [], "advertised": []}
-    with connect(a.url, subprotocols=[a.subprotocol], max_size=None, open_timeout=10,
-                 proxy=None) as ws:
+    with connected(a.url, a.subprotocol) as ws:
         found["subprotocol"] = ws.subprotocol
         channels, subscribed, decoders, last = {}, {}, {}, {}
         wanted = set(t for t in a.topics.split(",") if t)

@@ -197,10 +197,15 @@ fn a_part_beyond_reach_is_missed_never_chased() {
     run.assert_clean();
 }
 
-/// A conveyor session of `seconds` at 90 parts a minute, started and picking for
-/// `after_s` s: the starter and the output folder.
-fn picking(run: &TestRun, seconds: f64, after_s: u64) -> (std::process::Child, std::path::PathBuf) {
-    let config = run.config_with(&[]);
+/// A conveyor session of `seconds` at 90 parts a minute on the test settings with `edits`,
+/// started and picking for `after_s` s: the starter and the output folder.
+fn picking(
+    run: &TestRun,
+    edits: &[(&str, &str)],
+    seconds: f64,
+    after_s: u64,
+) -> (std::process::Child, std::path::PathBuf) {
+    let config = run.config_with(edits);
     let out = run.out("out");
     let args = conveyor_args(&config, &out, seconds, &["--parts-per-min=90"]);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -224,12 +229,14 @@ fn status_counts(run: &TestRun) -> Option<(f64, f64, u32, u32, u32)> {
 
 /// The camera killed mid-run is said at once and ends nothing: the session picks the parts
 /// it had seen and ends when its time is up, every file written. While it runs, `qmarc cmd
-/// status` says the belt, the queue and the parts picked and missed, as they are.
+/// status` says the belt, the queue and the parts picked and missed, as they are. The
+/// camera is the one that finds the parts in frames (issue 46); the simulated camera's
+/// death is the same death.
 #[test]
 fn the_camera_killed_mid_run_ends_nothing() {
     use nix::sys::signal::Signal;
     let run = TestRun::new("conveyor-camkill");
-    let (child, out) = picking(&run, 8.0, 1);
+    let (child, out) = picking(&run, &[("camera.backend", "\"images\"")], 8.0, 1);
     // The status: the belt moving at its speed, then a part picked.
     let s =
         qmarc_config::Settings::load(&run.config_with(&[]), &qmarc_config::Names::any()).unwrap();
@@ -275,7 +282,7 @@ fn the_camera_killed_mid_run_ends_nothing() {
 fn ctrl_c_ends_a_conveyor_session_with_every_file_written() {
     use nix::sys::signal::Signal;
     let run = TestRun::new("conveyor-ctrlc");
-    let (child, out) = picking(&run, 30.0, 3);
+    let (child, out) = picking(&run, &[], 30.0, 3);
     qmarc_tests::send_signal(child.id(), Signal::SIGINT);
     let r = qmarc_tests::wait_with_timeout(child, std::time::Duration::from_secs(60));
     assert_eq!(r.code, Some(130), "{}\n{}", r.stdout, r.stderr);

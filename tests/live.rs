@@ -17,16 +17,35 @@ fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
-/// `foxglove_client.py` against `port` with `args`, its output piped.
-fn viewer(port: u16, args: &[&str]) -> Child {
-    Command::new(qmarc_tests::python())
-        .arg(workspace().join("examples/foxglove_client.py"))
-        .arg(format!("--url=ws://127.0.0.1:{port}"))
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start the viewer")
+/// The viewers a test started, killed if it fails (a failed assertion leaves no viewer
+/// behind, not even one that `--hang`s); a test that passes has ended each itself.
+#[derive(Default)]
+struct Viewers(Vec<u32>);
+
+impl Viewers {
+    /// `foxglove_client.py` against `port` with `args`, its output piped.
+    fn start(&mut self, port: u16, args: &[&str]) -> Child {
+        let child = Command::new(qmarc_tests::python())
+            .arg(workspace().join("examples/foxglove_client.py"))
+            .arg(format!("--url=ws://127.0.0.1:{port}"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start the viewer");
+        self.0.push(child.id());
+        child
+    }
+}
+
+impl Drop for Viewers {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            for &pid in &self.0 {
+                let _ = kill(Pid::from_raw(pid as i32), Signal::SIGKILL);
+            }
+        }
+    }
 }
 
 /// Waits until `qmarc cmd status` answers: the session serves.
@@ -70,11 +89,12 @@ fn a_viewer_sees_the_robot_move_live_and_viewers_that_vanish_or_stall_change_not
     ]);
     until_serving(&run);
     let view = live_view(&run, port);
+    let mut viewers = Viewers::default();
     // One viewer that stops reading once subscribed, one killed mid-stream, one that watches.
-    let mut stalled = viewer(port, &["--hang"]);
-    let mut killed = viewer(port, &["--seconds=60"]);
+    let mut stalled = viewers.start(port, &["--hang"]);
+    let mut killed = viewers.start(port, &["--seconds=60"]);
     let ready = run.out("subscribed");
-    let watching = viewer(port, &["--seconds=6", &format!("--ready={}", ready.display())]);
+    let watching = viewers.start(port, &["--seconds=6", &format!("--ready={}", ready.display())]);
     let start = Instant::now();
     while !ready.exists() {
         assert!(start.elapsed() < Duration::from_secs(60), "the viewer never subscribed");
@@ -157,8 +177,9 @@ fn a_conveyor_sessions_live_view_shows_the_belt_and_its_parts() {
     ]);
     until_serving(&run);
     live_view(&run, port);
+    let mut viewers = Viewers::default();
     // The first part reaches the window about 2 s after the belt starts.
-    let seen = wait_with_timeout(viewer(port, &["--seconds=6"]), Duration::from_secs(60));
+    let seen = wait_with_timeout(viewers.start(port, &["--seconds=6"]), Duration::from_secs(60));
     assert_eq!(seen.code, Some(0), "{}", seen.stderr);
     let found: Value =
         serde_json::from_str(seen.stdout.trim()).unwrap_or_else(|e| panic!("{e}: {}", seen.stdout));

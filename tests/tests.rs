@@ -20,3 +20,4 @@ mod telemetry;
 mod tidy;
 mod trajectories;
 mod tune;
+mod vision;

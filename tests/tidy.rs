@@ -68,6 +68,7 @@ const LAYERS: &[&str] = &[
     "timer",
     "config",
     "program",
+    "vision",
     "controller",
     "knots",
     "hwserver",

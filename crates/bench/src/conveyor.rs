@@ -67,7 +67,7 @@ struct Calm {
 
 /// One session's figures, from its files.
 #[derive(Debug, Clone)]
-struct Run {
+pub(crate) struct Run {
     calm: Calm,
     summary: qmarc_report::summary::ConveyorSummary,
     /// Mean s from a grip to the place, and from the place to the next grip.
@@ -76,7 +76,13 @@ struct Run {
 }
 
 /// A conveyor session of `seconds` at `belt` mm/s and `ppm` parts a minute.
-fn session(a: &ConveyorArgs, seconds: f64, belt: f64, ppm: f64, name: &str) -> anyhow::Result<Run> {
+pub(crate) fn session(
+    a: &ConveyorArgs,
+    seconds: f64,
+    belt: f64,
+    ppm: f64,
+    name: &str,
+) -> anyhow::Result<Run> {
     let starter = qmarc_program::process::bin_dir(a.bin_dir.as_deref())?.join("qmarc-starter");
     let pid = std::process::id();
     let out = std::env::temp_dir().join(format!("qmarc-bench-conveyor-{name}-{pid}"));
@@ -176,7 +182,7 @@ fn cycle_parts(csv: &str, period: f64) -> (f64, f64) {
     (with, back)
 }
 
-fn say(label: &str, r: &Run, ppm: f64) {
+pub(crate) fn say(label: &str, r: &Run, ppm: f64) {
     let c = &r.summary;
     println!(
         "  {label}: {:.1} picks/min of {ppm:.0} parts/min, {} picked, {} missed, {} pending; grip \

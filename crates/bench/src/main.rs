@@ -31,6 +31,7 @@ mod jitter;
 mod pick;
 mod session;
 mod stats;
+mod vision;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -73,6 +74,9 @@ enum BenchCommand {
     /// The live view: the loop with it and two viewers against without (p99 ratio), what a
     /// viewer receives.
     Foxglove(foxglove::FoxgloveArgs),
+    /// The vision system: detection's time on 1280×1024 frames of 20 parts, its accuracy,
+    /// the calibration's fit; a conveyor session whose camera finds the parts in frames.
+    Vision(vision::VisionArgs),
 }
 
 fn main() -> ExitCode {
@@ -87,6 +91,7 @@ fn main() -> ExitCode {
         BenchCommand::Bridge(a) => bridge::run(a),
         BenchCommand::Files(a) => files::run(a),
         BenchCommand::Foxglove(a) => foxglove::run(a),
+        BenchCommand::Vision(a) => vision::run(a),
     };
     let outcome = result.map(|()| ExitCode::SUCCESS).map_err(|e| (qmarc_proto::exit::INTERNAL, e));
     qmarc_program::cli::conclude("qmarc-bench", outcome)

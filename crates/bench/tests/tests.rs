@@ -163,6 +163,25 @@ fn pick_runs_the_delta_cycle_through_a_serving_session() {
     assert!(t.contains("tracking error (") && t.contains(" lost): effector max"), "{t}");
 }
 
+/// Issue 46: detection timed on rendered frames beside imageproc's labelling, with its
+/// accuracy and the calibration's fit (the conveyor session left out: `--seconds 0`).
+#[test]
+fn vision_times_detection_and_measures_its_accuracy() {
+    let out = run(&["vision", "--frames=3", "--parts=20", "--seconds=0"]);
+    let t = text(&out);
+    assert!(out.status.success(), "{t}");
+    for says in [
+        "calibration on the rendered 11x9 target: reprojection mean ",
+        "detection, 3 frames of 1280×1024 with 20 parts, one core: p50 ",
+        "imageproc's threshold + connected components",
+        "accuracy, 60 parts: position error p50 ",
+    ] {
+        assert!(t.contains(says), "{says}: {t}");
+    }
+    let bad = run(&["vision", "--parts=21"]);
+    assert_eq!(bad.status.code(), Some(64), "{}", text(&bad));
+}
+
 /// Runs `qmarc-bench ARGS` (a subcommand that serves a session under the prefix of `name`)
 /// on the shipped settings; asserts it succeeded and left nothing behind; its output.
 fn serving_bench(name: &str, args: &[&str]) -> String {

@@ -4,15 +4,19 @@
 //!
 //! The camera is behind a backend ([`CameraBackend`]), as the hardware is behind the
 //! hwserver's: [`sim::SimCamera`] sees the simulated world of the run (the belt of
-//! `[conveyor]`, the parts a feeder drops on it, `[camera]`'s rate, latency and noise). A
-//! camera on a network or a frame grabber is one more backend and one more name in
-//! `camera.backend`.
+//! `[conveyor]`, the parts a feeder drops on it, `[camera]`'s rate, latency and noise) and
+//! reports its parts directly; [`images::ImagesCamera`] finds them in frames — drawn from
+//! that world, replayed from files, or from a device ([`frames`]) — with `qmarc-vision`. A
+//! camera on a network is one more backend and one more name in `camera.backend`.
 #![deny(missing_docs)]
 
 use qmarc_proto::camera::PartDetection;
 use std::sync::atomic::AtomicBool;
 
+pub mod frames;
+pub mod images;
 pub mod sim;
+pub mod tools;
 
 /// A frame whose results are in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -51,6 +55,7 @@ pub trait CameraBackend: Send {
 pub fn open(spec: &qmarc_config::RunSpec) -> Result<Box<dyn CameraBackend>, CameraError> {
     match spec.settings.camera.backend.as_str() {
         "sim" => Ok(Box::new(sim::SimCamera::of(spec))),
+        "images" => Ok(Box::new(images::ImagesCamera::of(spec)?)),
         other => Err(CameraError {
             backend: "none",
             reason: format!(

@@ -67,17 +67,13 @@ impl SimCamera {
     /// The parts frame `number` sees, into `out` (no waiting): exposed at its time, each
     /// position with its noise.
     pub fn frame(&mut self, number: u64, out: &mut Vec<PartDetection>) -> Frame {
-        let since_epoch_ns = (number as f64 * self.frame_ns).round() as u64;
-        let frame = Frame { number, exposure_ns: self.epoch_ns + since_epoch_ns };
-        let t_s = since_epoch_ns as f64 * 1e-9;
-        self.feed.on_belt(&self.belt, t_s, self.field_mm, &mut self.seen);
-        // The encoder's count as the simulated robot's reads it (`SimBelt`).
-        let latched_counts = (self.belt.at(t_s).0 / self.mm_per_count).floor() as i64;
+        let mut seen = std::mem::take(&mut self.seen);
+        let (frame, latched_counts) = self.truth(number, self.field_mm, &mut seen);
         out.clear();
         let seed = self.feed.seed;
         // Two noise streams per frame, one along the belt and one across, drawn per part.
         let (along, across) = (4 * number + 3, 4 * number + 4);
-        for p in &self.seen {
+        for p in &seen {
             out.push(PartDetection {
                 frame: number,
                 exposure_ns: frame.exposure_ns,
@@ -86,10 +82,50 @@ impl SimCamera {
                 across_mm: p.across_mm + self.noise_mm * normal(seed, across, p.k),
                 angle_rad: p.angle_rad,
                 flags: PartDetection::LATCHED,
-                in_frame: self.seen.len() as u32,
+                in_frame: seen.len() as u32,
             });
         }
+        self.seen = seen;
         frame
+    }
+
+    /// The parts within `[lo, hi]` mm of the belt when frame `number` was exposed, where they
+    /// truly are, into `out`; the frame, and the belt's count latched at its exposure.
+    pub fn truth(&self, number: u64, range: [f64; 2], out: &mut Vec<TruePart>) -> (Frame, i64) {
+        let since_epoch_ns = (number as f64 * self.frame_ns).round() as u64;
+        let frame = Frame { number, exposure_ns: self.epoch_ns + since_epoch_ns };
+        let t_s = since_epoch_ns as f64 * 1e-9;
+        self.feed.on_belt(&self.belt, t_s, range, out);
+        // The encoder's count as the simulated robot's reads it (`SimBelt`).
+        let latched_counts = (self.belt.at(t_s).0 / self.mm_per_count).floor() as i64;
+        (frame, latched_counts)
+    }
+
+    /// Waits for the next frame's results (its exposure and the latency after it); its
+    /// number, `None` if `stop` was set first.
+    pub fn wait_next(&mut self, stop: &AtomicBool) -> Option<u64> {
+        let number = self.next;
+        let exposure_ns = self.epoch_ns + (number as f64 * self.frame_ns).round() as u64;
+        if !wait_until(stop, exposure_ns + self.latency_ns) {
+            return None;
+        }
+        self.next += 1;
+        Some(number)
+    }
+}
+
+/// Sleeps until `CLOCK_MONOTONIC` reads `at_ns`, looking at `stop` at least every 20 ms;
+/// false if it was set first.
+pub fn wait_until(stop: &AtomicBool, at_ns: u64) -> bool {
+    loop {
+        if stop.load(Ordering::Acquire) {
+            return false;
+        }
+        let now = monotonic_now_ns();
+        if now >= at_ns {
+            return true;
+        }
+        std::thread::sleep(NAP.min(Duration::from_nanos(at_ns - now)));
     }
 }
 
@@ -103,21 +139,7 @@ impl CameraBackend for SimCamera {
         out: &mut Vec<PartDetection>,
         stop: &AtomicBool,
     ) -> Result<Option<Frame>, CameraError> {
-        let number = self.next;
-        let exposure_ns = self.epoch_ns + (number as f64 * self.frame_ns).round() as u64;
-        let ready_ns = exposure_ns + self.latency_ns;
-        loop {
-            if stop.load(Ordering::Acquire) {
-                return Ok(None);
-            }
-            let now = monotonic_now_ns();
-            if now >= ready_ns {
-                break;
-            }
-            std::thread::sleep(NAP.min(Duration::from_nanos(ready_ns - now)));
-        }
-        self.next += 1;
-        Ok(Some(self.frame(number, out)))
+        Ok(self.wait_next(stop).map(|number| self.frame(number, out)))
     }
 }
 

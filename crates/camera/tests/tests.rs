@@ -1,13 +1,15 @@
 //! `qmarc-camera` as a process: on a run file it publishes every frame's detections on the
-//! run's `qmarc/camera` service, each where the simulated world says the part is, with the
-//! belt's count latched; a stop signal ends it with exit 0 and what it saw; a bad run file is
-//! refused with 64 before anything is opened.
+//! run's `qmarc/camera` service — the simulated camera each where the simulated world says
+//! the part is, with the belt's count latched; the `images` camera replaying a folder of
+//! frames, each part found where it was drawn, at the frames' spacing — until a stop signal
+//! ends it with exit 0 and what it saw; a bad run file is refused with 64 before anything is
+//! opened.
 
 use qmarc_config::{Mode, Names, RunSpec, Settings};
 use qmarc_conveyor::BeltMotion;
-use qmarc_proto::camera::open_camera_service;
+use qmarc_proto::camera::{PartDetection, open_camera_service};
 use qmarc_proto::service::{IpcLocation, create_node};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -23,15 +25,21 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
-#[test]
-fn the_camera_publishes_the_worlds_parts_until_stopped() {
-    let dir = scratch("publish");
-    let toml = "[general]\nn_motors = 3\n[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\n\
-                kaff = 0.0\n[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n\
-                [[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n\
-                [camera]\nrate_hz = 100.0\nparts_per_min = 600.0\nnoise_mm = 0.0\nlatency_s = 0.0\n";
-    let settings = Settings::parse("q.toml".as_ref(), toml, &Names::any()).unwrap();
-    let prefix = format!("qcamtest{}_", std::process::id());
+/// Three motors and `camera`'s lines in `[camera]`.
+fn settings(camera: &str) -> Settings {
+    let motor = "[[motor]]\nkp = 1.0\nki = 0.0\nkd = 0.0\nkvff = 0.0\nkaff = 0.0\n";
+    let toml = format!("[general]\nn_motors = 3\n{}[camera]\n{camera}", motor.repeat(3));
+    Settings::parse("q.toml".as_ref(), &toml, &Names::any()).unwrap()
+}
+
+/// The camera process on `settings` in `dir` until it has sent `want` detections (or 20 s
+/// have passed), then stopped with SIGTERM: its detections, the run's epoch and what it
+/// said. Everything it made in /dev/shm is gone after.
+fn serve(dir: &Path, settings: &Settings, want: usize) -> (Vec<PartDetection>, u64, String) {
+    // Each test its own prefix (tests run in parallel).
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let prefix = format!("qcamtest{}x{n}_", std::process::id());
     let root = dir.join("iox").display().to_string() + "/";
     let location = IpcLocation::checked(&prefix, &root).unwrap();
     let spec = RunSpec {
@@ -54,25 +62,13 @@ fn the_camera_publishes_the_worlds_parts_until_stopped() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let c = &settings.conveyor;
-    let belt = BeltMotion::new(c.speed_mm_s, &c.speed_steps, c.acceleration_mm_s2);
     let mut seen = Vec::new();
     let started = Instant::now();
-    while seen.len() < 20 && started.elapsed() < Duration::from_secs(20) {
+    while seen.len() < want && started.elapsed() < Duration::from_secs(20) {
         while let Ok(Some(s)) = subscriber.receive() {
             seen.push(*s.payload());
         }
         std::thread::sleep(Duration::from_millis(5));
-    }
-    assert!(seen.len() >= 20, "{} detections in 20 s", seen.len());
-    for d in &seen {
-        let [lo, hi] = settings.camera.field_mm;
-        assert!((lo..=hi).contains(&d.belt_mm), "{d:?} outside the field");
-        assert!(d.latched(), "the simulated strobe latches the belt");
-        // The latched count is the belt's travel at the exposure, in encoder counts.
-        let t = (d.exposure_ns - spec.epoch_ns) as f64 * 1e-9;
-        let counts = (belt.at(t).0 / c.mm_per_count).floor() as i64;
-        assert_eq!(d.latched_counts, counts, "{d:?}");
     }
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(child.id() as i32),
@@ -91,7 +87,6 @@ fn the_camera_publishes_the_worlds_parts_until_stopped() {
     drop(node);
     // iceoryx2 keeps the node's management file in /dev/shm under the prefix: removed too.
     location.remove_files();
-    let _ = std::fs::remove_dir_all(&dir);
     let left: Vec<_> = std::fs::read_dir(qmarc_proto::service::SHM_DIR)
         .unwrap()
         .flatten()
@@ -99,6 +94,89 @@ fn the_camera_publishes_the_worlds_parts_until_stopped() {
         .map(|e| e.file_name())
         .collect();
     assert!(left.is_empty(), "left in /dev/shm: {left:?}");
+    (seen, spec.epoch_ns, stderr)
+}
+
+#[test]
+fn the_camera_publishes_the_worlds_parts_until_stopped() {
+    let dir = scratch("publish");
+    let settings =
+        settings("rate_hz = 100.0\nparts_per_min = 600.0\nnoise_mm = 0.0\nlatency_s = 0.0\n");
+    let (seen, epoch_ns, _) = serve(&dir, &settings, 20);
+    assert!(seen.len() >= 20, "{} detections in 20 s", seen.len());
+    let c = &settings.conveyor;
+    let belt = BeltMotion::new(c.speed_mm_s, &c.speed_steps, c.acceleration_mm_s2);
+    for d in &seen {
+        let [lo, hi] = settings.camera.field_mm;
+        assert!((lo..=hi).contains(&d.belt_mm), "{d:?} outside the field");
+        assert!(d.latched(), "the simulated strobe latches the belt");
+        // The latched count is the belt's travel at the exposure, in encoder counts.
+        let t = (d.exposure_ns - epoch_ns) as f64 * 1e-9;
+        let counts = (belt.at(t).0 / c.mm_per_count).floor() as i64;
+        assert_eq!(d.latched_counts, counts, "{d:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A folder of frames `<exposure_ns>.png` (drawn here, parts at known places, 50 ms apart)
+/// replayed by the `images` camera: each frame's parts found where they were drawn, the
+/// frames in order at their spacing, nothing latched (a folder has no encoder: the
+/// controller places them by their exposure); the folder done, it waits for its stop.
+#[test]
+fn a_folder_of_frames_is_replayed_and_its_parts_found() {
+    use qmarc_vision::render::{self, PartShape};
+    let dir = scratch("replay");
+    let frames = dir.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    let base = settings("backend = \"images\"\n");
+    let model = qmarc_camera::images::camera_model(&base.camera.images);
+    let look = qmarc_camera::images::sim_look(&base.camera.images, 5);
+    let drawn: Vec<Vec<[f64; 3]>> = vec![
+        vec![[100.0, 20.0, 10.0]],
+        vec![[120.0, 20.0, 10.0], [200.0, -60.0, -45.0]],
+        vec![[140.0, 20.0, 10.0], [220.0, -60.0, -45.0]],
+    ];
+    for (k, parts) in drawn.iter().enumerate() {
+        let shapes: Vec<PartShape> = parts
+            .iter()
+            .map(|p| PartShape {
+                at_mm: [p[0], p[1]],
+                angle_rad: p[2].to_radians(),
+                size_mm: base.camera.images.sim_part_mm,
+                height_mm: base.camera.part_height_mm,
+            })
+            .collect();
+        let exposure = 7_000_000_000u64 + 50_000_000 * k as u64;
+        render::belt_frame(&model, &shapes, &look)
+            .save(frames.join(format!("{exposure}.png")))
+            .unwrap();
+    }
+    // The calibration from the camera's target, as `qmarc-camera calibrate` writes it.
+    let cal = qmarc_camera::images::calibration(&base.camera).unwrap();
+    let cal_file = dir.join("cal.toml");
+    std::fs::write(&cal_file, cal.to_toml("test")).unwrap();
+    let settings = settings(&format!(
+        "backend = \"images\"\nsource = \"dir:{}\"\ncalibration = \"{}\"\n",
+        frames.display(),
+        cal_file.display()
+    ));
+    let (seen, _, stderr) = serve(&dir, &settings, 5);
+    assert_eq!(seen.len(), 5, "{seen:?}");
+    assert!(stderr.contains("3 frames, 5 detections sent (images camera)"), "{stderr}");
+    for d in &seen {
+        let parts = &drawn[d.frame as usize];
+        assert_eq!(d.in_frame as usize, parts.len());
+        assert!(!d.latched(), "{d:?}");
+        let near = parts.iter().any(|p| {
+            let mut e = d.angle_rad.to_degrees() - p[2];
+            e -= 180.0 * (e / 180.0).round();
+            f64::hypot(d.belt_mm - p[0], d.across_mm - p[1]) < 0.5 && e.abs() < 2.0
+        });
+        assert!(near, "{d:?} is none of {parts:?}");
+    }
+    let spacing = seen.last().unwrap().exposure_ns - seen[0].exposure_ns;
+    assert_eq!(spacing, 100_000_000, "replayed at the frames' spacing");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

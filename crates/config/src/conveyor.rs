@@ -6,6 +6,9 @@ use crate::ConfigLoadError;
 use crate::source::{S, Source, non_negative, num, one_of, positive_at_most, span_of, within};
 use serde::{Deserialize, Serialize};
 
+mod images;
+pub use images::{FrameSource, ImageSettings, POLARITIES};
+
 /// Fastest belt, mm/s.
 pub const MAX_BELT_MM_S: f64 = 5_000.0;
 /// Most speed changes of a simulated belt.
@@ -103,6 +106,8 @@ pub struct CameraSettings {
     pub spread_mm: f64,
     /// The simulation's random seed.
     pub seed: u64,
+    /// An `images` camera: its frames, geometry, detection and calibration.
+    pub images: ImageSettings,
 }
 
 impl Default for CameraSettings {
@@ -117,12 +122,13 @@ impl Default for CameraSettings {
             parts_per_min: 120.0,
             spread_mm: 100.0,
             seed: 1,
+            images: ImageSettings::default(),
         }
     }
 }
 
 /// The camera backends there are.
-pub const CAMERA_BACKENDS: &[&str] = &["sim"];
+pub const CAMERA_BACKENDS: &[&str] = &["sim", "images"];
 
 /// A list of `N` finite numbers within ±[`MAX_BELT_MM`].
 fn numbers<const N: usize>(v: &[f64]) -> Result<[f64; N], String> {
@@ -206,6 +212,22 @@ impl crate::Settings {
         part_rate()(&n)
             .map_err(|message| ConfigLoadError::Override { flag: "--parts-per-min", message })?;
         self.camera.parts_per_min = n;
+        Ok(())
+    }
+
+    /// Overrides the camera's backend (`--camera`): `sim`, or `images` (whose frames from a
+    /// device or a folder need `camera.calibration`).
+    pub fn set_camera_backend(&mut self, backend: &str) -> Result<(), ConfigLoadError> {
+        let refused = |message| ConfigLoadError::Override { flag: "--camera", message };
+        one_of(CAMERA_BACKENDS, "camera backend")(&backend.to_string()).map_err(refused)?;
+        let i = &self.camera.images;
+        if backend == "images" && i.calibration.is_none() && i.frame_source() != FrameSource::Sim {
+            return Err(refused(format!(
+                "frames from `{}` need a calibration: set camera.calibration (docs/vision.md)",
+                i.source
+            )));
+        }
+        self.camera.backend = backend.to_string();
         Ok(())
     }
 
@@ -305,6 +327,18 @@ pub(crate) struct RawCamera {
     parts_per_min: S<f64>,
     spread_mm: S<f64>,
     seed: S<i64>,
+    source: S<String>,
+    pose: S<Vec<f64>>,
+    intrinsics: S<Vec<f64>>,
+    image_px: S<Vec<i64>>,
+    polarity: S<String>,
+    threshold: S<i64>,
+    area_px: S<Vec<i64>>,
+    calibration: S<String>,
+    sim_part_mm: S<Vec<f64>>,
+    sim_gray: S<Vec<f64>>,
+    sim_noise_gray: S<f64>,
+    sim_k1: S<f64>,
 }
 
 impl RawCamera {
@@ -369,7 +403,22 @@ impl RawCamera {
             seed: src.take(&self.seed, "camera.seed", d.seed as i64, |v| {
                 if *v >= 0 { Ok(()) } else { Err(format!("must be ≥ 0, found {v}")) }
             })? as u64,
+            images: self.images(src)?,
         };
+        if camera.backend == "images"
+            && camera.images.calibration.is_none()
+            && camera.images.frame_source() != FrameSource::Sim
+        {
+            return Err(src.invalid(
+                span_of(&self.source),
+                "camera.source",
+                format!(
+                    "frames from `{}` need a calibration: set camera.calibration to the file \
+                     `qmarc-camera calibrate --out` wrote (docs/vision.md)",
+                    camera.images.source
+                ),
+            ));
+        }
         if camera.field_mm[1] > conveyor.window_mm[0] {
             return Err(src.invalid(
                 span_of(&self.field_mm),

@@ -45,7 +45,8 @@ mod tune;
 
 pub use check::{CheckSettings, MAX_CHECK_PULSE_S, MAX_CHECK_VOLTS};
 pub use conveyor::{
-    CAMERA_BACKENDS, CameraSettings, ConveyorSettings, MAX_BELT_MM, MAX_BELT_MM_S, MAX_SPEED_STEPS,
+    CAMERA_BACKENDS, CameraSettings, ConveyorSettings, FrameSource, ImageSettings, MAX_BELT_MM,
+    MAX_BELT_MM_S, MAX_SPEED_STEPS, POLARITIES,
 };
 pub use error::ConfigLoadError;
 pub use gather::{GatherFields, GatherSettings};
@@ -60,7 +61,9 @@ pub use robot::{RobotSettings, WORK_CENTRE_M};
 pub use run::{Mode, RunSpec, RunSpecError};
 pub use s626::{S626_DIO_CHANNELS, S626Settings};
 pub use sim::{DEFAULT_SIM_STATE_FILE, SimPlant, SimSettings};
-pub use source::{MAX_CONFIG_BYTES, in_exponent_notation, num, read_bounded, read_config};
+pub use source::{
+    MAX_CONFIG_BYTES, in_exponent_notation, num, read_bounded, read_config, toml_file_error,
+};
 pub use step::{MAX_STEP_COUNTS, StepSettings};
 pub use telemetry::{MAX_TELEMETRY_EVERY, TelemetrySettings};
 pub use timer::{TimerMethod, TimerSettings};

@@ -9,6 +9,12 @@ use toml::Spanned;
 /// An optional value of the file with its position.
 pub(crate) type S<T> = Option<Spanned<T>>;
 
+/// The error of toml's own parse of the file `path` holding `text` (a settings file, or
+/// another TOML file of the project's: a camera's calibration): its line, column and field.
+pub fn toml_file_error(path: &Path, text: &str, e: &toml::de::Error) -> ConfigLoadError {
+    Source { path, text }.toml_error(e)
+}
+
 /// The text of the settings file, for turning byte offsets into lines and fields.
 pub(crate) struct Source<'a> {
     pub path: &'a Path,

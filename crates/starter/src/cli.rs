@@ -149,6 +149,11 @@ pub struct ConveyorArgs {
     /// The simulated parts' seed (default `camera.seed`).
     #[arg(long, value_name = "K")]
     pub seed: Option<u64>,
+    /// The camera: `sim` (the parts reported as the simulation has them) or `images` (found
+    /// in frames: `[camera]` source, calibration, detection; docs/vision.md) (default
+    /// `camera.backend`).
+    #[arg(long, value_name = "BACKEND")]
+    pub camera: Option<String>,
     /// The bridge beside the session, as `serve` starts it (its `/diagnostics` say the parts
     /// queued, picked and missed).
     #[command(flatten)]
@@ -169,6 +174,9 @@ impl ConveyorArgs {
         }
         if let Some(k) = self.seed {
             s.camera.seed = k;
+        }
+        if let Some(b) = &self.camera {
+            s.set_camera_backend(b)?;
         }
         Ok(())
     }

@@ -182,6 +182,11 @@ fn check_conveyor(s: &Settings) -> Result<(), Failure> {
              the gripper's output (config/qmarc.toml has DIO6)"
         )));
     }
+    // A camera that finds parts in frames: its frames' source and its calibration.
+    if s.camera.backend == "images" {
+        qmarc_camera::images::check(&s.camera)
+            .map_err(|e| refused(anyhow!("{}: [camera] {e}", s.source.display())))?;
+    }
     // The place, and the window's ends on the belt's centre line (a part's grip point and
     // LIFT_MM above it), in reach and inside the motors' soft limits — else no part could be
     // picked, or the loop would find out mid-pick, a fault. (A part seen far off the centre

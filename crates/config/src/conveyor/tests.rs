@@ -149,6 +149,45 @@ fn bad_camera_values_are_named_by_line_column_and_field() {
     );
 }
 
+/// An `images` camera's settings (issue 46): the defaults a 0.5 mm/px camera over the
+/// field; each bad value named; frames from a device or a folder need a calibration.
+#[test]
+fn an_images_cameras_settings_are_checked() {
+    let d = parse("").unwrap().camera.images;
+    assert_eq!((d.source.as_str(), d.image_px, d.calibration), ("sim", [640, 480], None));
+    // The default camera sees 0.5 mm a pixel at the belt: height / focal length.
+    assert_eq!(d.pose[2] / d.intrinsics[0], 0.5);
+    let s = parse(
+        "[camera]\nbackend = \"images\"\nsource = \"dir:/tmp/frames\"\ncalibration = \"cal.toml\"\n\
+         polarity = \"dark\"\narea_px = [10, 20]\n",
+    )
+    .unwrap();
+    let i = &s.camera.images;
+    assert_eq!(i.frame_source(), crate::FrameSource::Dir("/tmp/frames".into()));
+    assert_eq!((i.polarity.as_str(), i.area_px), ("dark", [10, 20]));
+    assert_eq!(
+        refused("[camera]\nsource = \"usb\"\n"),
+        "q.toml:2:10: camera.source: `sim`, `dir:PATH` or `v4l2:/dev/videoN`, found `usb`"
+    );
+    assert_eq!(
+        refused("[camera]\nbackend = \"images\"\nsource = \"v4l2:/dev/video0\"\n"),
+        "q.toml:3:10: camera.source: frames from `v4l2:/dev/video0` need a calibration: set \
+         camera.calibration to the file `qmarc-camera calibrate --out` wrote (docs/vision.md)"
+    );
+    assert_eq!(
+        refused("[camera]\narea_px = [500, 400]\n"),
+        "q.toml:2:11: camera.area_px: [min, max] with 1 ≤ min ≤ max ≤ 307200, found [500, 400]"
+    );
+    assert!(
+        refused("[camera]\npose = [0, 0, -5, 0, 0, 0]\n")
+            .contains("camera.pose: the camera is above")
+    );
+    assert!(
+        refused("[camera]\npolarity = \"grey\"\n").starts_with("q.toml:2:12: camera.polarity: ")
+    );
+    assert!(refused("[camera]\nthreshold = 0\n").contains("camera.threshold: must be 1‥254"));
+}
+
 /// `conveyor`'s flags are checked as the file's keys are, each error naming its flag.
 #[test]
 fn the_conveyor_flags_are_checked_as_their_keys() {
