@@ -37,15 +37,52 @@ pub fn read_png(path: &Path) -> Result<GrayImage, String> {
     Ok(img.to_luma8())
 }
 
-/// Why the Video4Linux2 device `dev` cannot be used: it does not exist, or this build does
-/// not capture from devices yet.
-pub fn v4l2_refused(dev: &Path) -> String {
-    if dev.exists() {
-        format!(
-            "v4l2:{}: capturing from a V4L2 device is not built in yet (docs/vision.md)",
-            dev.display()
-        )
+/// Why the Video4Linux2 device `dev` cannot be used: it does not exist, or (a build without
+/// the `v4l2` feature) this program does not capture from devices.
+pub fn v4l2_refused(dev: &Path) -> Option<String> {
+    if !dev.exists() {
+        Some(format!("v4l2:{}: no such device", dev.display()))
+    } else if cfg!(feature = "v4l2") {
+        None
     } else {
-        format!("v4l2:{}: no such device", dev.display())
+        Some(format!(
+            "v4l2:{}: this qmarc-camera was built without V4L2 capture: build it with \
+             `--features qmarc-camera/v4l2` (needs libclang: Debian's libclang-dev; docs/vision.md)",
+            dev.display()
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_device_is_refused_when_it_is_not_there_or_not_built_in() {
+        let missing = v4l2_refused(Path::new("/dev/video97"));
+        assert_eq!(missing.as_deref(), Some("v4l2:/dev/video97: no such device"));
+        let there = v4l2_refused(Path::new("/dev/null"));
+        if cfg!(feature = "v4l2") {
+            assert_eq!(there, None);
+        } else {
+            assert!(there.unwrap().contains("built without V4L2 capture"));
+        }
+    }
+
+    #[test]
+    fn a_folder_holds_frames_and_nothing_else() {
+        let dir = std::env::temp_dir().join(format!("qmarc-frames-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let e = in_folder(&dir).unwrap_err();
+        assert!(e.ends_with("no frames (<exposure_ns>.png) in the folder"), "{e}");
+        for name in ["300.png", "20.png", "1000.png"] {
+            std::fs::write(dir.join(name), b"").unwrap();
+        }
+        let frames: Vec<u64> = in_folder(&dir).unwrap().into_iter().map(|f| f.0).collect();
+        assert_eq!(frames, [20, 300, 1000], "in the order of their exposures");
+        std::fs::write(dir.join("notes.txt"), b"").unwrap();
+        let e = in_folder(&dir).unwrap_err();
+        assert!(e.contains("`notes.txt` is not a frame"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -54,7 +54,11 @@ pub fn check(c: &CameraSettings) -> Result<(), CameraError> {
         FrameSource::Dir(dir) => {
             crate::frames::in_folder(&dir).map_err(fail)?;
         }
-        FrameSource::V4l2(dev) => return Err(fail(crate::frames::v4l2_refused(&dev))),
+        FrameSource::V4l2(dev) => {
+            if let Some(why) = crate::frames::v4l2_refused(&dev) {
+                return Err(fail(why));
+            }
+        }
     }
     calibration(c).map(|_| ())
 }
@@ -121,6 +125,24 @@ enum Frames {
     Sim { world: Box<SimCamera>, model: CameraModel, view_mm: [f64; 2], truth: Vec<TruePart> },
     /// PNG files, in the order of their exposures.
     Dir { files: Vec<(u64, PathBuf)>, next: usize, start_ns: u64 },
+    /// A Video4Linux2 camera, and its frames so far.
+    #[cfg(feature = "v4l2")]
+    Device { camera: crate::v4l2::V4l2Frames, number: u64 },
+}
+
+/// The frames of the V4L2 camera at `dev`, streaming `size` frames.
+#[cfg(feature = "v4l2")]
+fn device(dev: &std::path::Path, size: [u32; 2]) -> Result<Frames, String> {
+    if let Some(why) = crate::frames::v4l2_refused(dev) {
+        return Err(why);
+    }
+    Ok(Frames::Device { camera: crate::v4l2::V4l2Frames::open(dev, size)?, number: 0 })
+}
+
+/// A build without V4L2 capture: the device refused, saying why.
+#[cfg(not(feature = "v4l2"))]
+fn device(dev: &std::path::Path, _size: [u32; 2]) -> Result<Frames, String> {
+    Err(crate::frames::v4l2_refused(dev).unwrap_or_default())
 }
 
 /// The camera that finds parts in frames.
@@ -154,7 +176,7 @@ impl ImagesCamera {
                 next: 0,
                 start_ns: 0,
             },
-            FrameSource::V4l2(dev) => return Err(fail(crate::frames::v4l2_refused(&dev))),
+            FrameSource::V4l2(dev) => device(&dev, c.images.image_px).map_err(fail)?,
         };
         let detector =
             Detector::new(detect_settings(c), calibration(c)?, Some(c.images.intrinsics));
@@ -184,6 +206,19 @@ impl ImagesCamera {
                 let look = sim_look(i, self.settings.seed ^ (frame.number << 20));
                 Ok(Some((render::belt_frame(model, &parts, &look), frame, Some(counts))))
             }
+            #[cfg(feature = "v4l2")]
+            Frames::Device { camera, number } => loop {
+                if stop.load(std::sync::atomic::Ordering::Acquire) {
+                    return Ok(None);
+                }
+                let next = camera
+                    .next_frame()
+                    .map_err(|reason| CameraError { backend: "images", reason })?;
+                if let Some((img, exposure_ns)) = next {
+                    *number += 1;
+                    return Ok(Some((img, Frame { number: *number - 1, exposure_ns }, None)));
+                }
+            },
             Frames::Dir { files, next, start_ns } => {
                 let Some((exposure, path)) = files.get(*next).cloned() else {
                     // Every frame replayed: the camera waits for its stop.

@@ -17,6 +17,8 @@ pub mod frames;
 pub mod images;
 pub mod sim;
 pub mod tools;
+#[cfg(feature = "v4l2")]
+pub mod v4l2;
 
 /// A frame whose results are in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
