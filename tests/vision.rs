@@ -193,8 +193,8 @@ fn a_conveyor_session_picks_the_parts_its_camera_sees_in_frames() {
     run.assert_clean();
 }
 
-/// Frames from a device or a folder that is not there: refused before anything starts,
-/// naming it.
+/// Frames from a device or a folder that is not there, and a camera over the robot's
+/// window rather than upstream: refused before anything starts, naming them.
 #[test]
 fn a_source_that_is_not_there_is_refused_naming_it() {
     let run = TestRun::new("vision-refused");
@@ -219,5 +219,18 @@ fn a_source_that_is_not_there_is_refused_naming_it() {
         assert_eq!(r.code, Some(i32::from(qmarc_proto::exit::REFUSED)), "{}", r.stderr);
         assert!(r.stderr.contains(says), "{}", r.stderr);
     }
+    // A camera that sees the robot's window, not upstream of it.
+    let over = images_config(&run, &[("camera.pose", "[400.0, 0.0, 800.0, 90.0, 0.0, 0.0]")]);
+    let r = run.starter(
+        &[&format!("--config={}", over.display()), "conveyor", "--seconds=2"],
+        Duration::from_secs(60),
+    );
+    assert_eq!(r.code, Some(i32::from(qmarc_proto::exit::REFUSED)), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("the camera sees the belt up to 520 mm along it")
+            && r.stderr.contains("(conveyor.window_mm starts at 300 mm)"),
+        "{}",
+        r.stderr
+    );
     run.assert_clean();
 }

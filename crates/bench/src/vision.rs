@@ -88,7 +88,13 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 /// Detection's time and accuracy; the calibration's fit.
 fn detection(a: &VisionArgs) -> anyhow::Result<()> {
     let cam = camera();
-    let target = Target { grid: [11, 9], pitch_mm: 40.0, origin_mm: [-50.0, -160.0], dot_mm: 12.0 };
+    let target = Target {
+        grid: [11, 9],
+        pitch_mm: 40.0,
+        origin_mm: [-50.0, -160.0],
+        dot_mm: 12.0,
+        origin_scale: render::ORIGIN_DOT_SCALE,
+    };
     let board = render::target_frame(&cam, &target, &Look::default());
     let dots = qmarc_vision::grid::find(&board, target.grid, target.pitch_mm, target.origin_mm)?;
     let cal = Calibration::fit(&dots.pixels, &dots.belt, cam.size_px)?;

@@ -45,14 +45,18 @@ pub fn sim_look(i: &ImageSettings, seed: u64) -> Look {
     }
 }
 
-/// Whether the `images` camera of `[camera]` can be used — its frames' source is there, its
-/// calibration reads and fits its frames — before anything starts (the starter asks).
-pub fn check(c: &CameraSettings) -> Result<(), CameraError> {
+/// Whether the `images` camera of `[camera]` can be used before anything starts (the
+/// starter asks): its frames' source is there (a folder's first frame of `image_px`), its
+/// calibration reads and agrees with `intrinsics`, and what it sees of the belt ends before
+/// the robot's window (`window_mm`).
+pub fn check(c: &CameraSettings, window_mm: [f64; 2]) -> Result<(), CameraError> {
     let fail = |reason: String| CameraError { backend: "images", reason };
     match c.images.frame_source() {
         FrameSource::Sim => {}
         FrameSource::Dir(dir) => {
-            crate::frames::in_folder(&dir).map_err(fail)?;
+            let files = crate::frames::in_folder(&dir).map_err(fail)?;
+            let first = crate::frames::read_png(&files[0].1).map_err(fail)?;
+            sized(&first, c.images.image_px, &files[0].1.display().to_string())?;
         }
         FrameSource::V4l2(dev) => {
             if let Some(why) = crate::frames::v4l2_refused(&dev) {
@@ -60,7 +64,53 @@ pub fn check(c: &CameraSettings) -> Result<(), CameraError> {
             }
         }
     }
-    calibration(c).map(|_| ())
+    let cal = calibration(c)?;
+    let [w, h] = c.images.image_px.map(|v| f64::from(v) - 1.0);
+    let seen = [[0.0, 0.0], [w, 0.0], [0.0, h], [w, h]].map(|p| cal.belt_of(p)[0]);
+    let last = seen.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if last > window_mm[0] {
+        return Err(fail(format!(
+            "the camera sees the belt up to {last:.0} mm along it (its calibration's frame \
+             corners): upstream of the robot, it must end by the window's start \
+             (conveyor.window_mm starts at {} mm)",
+            window_mm[0]
+        )));
+    }
+    detector(c).map(|_| ())
+}
+
+/// `img` if it is `size`, else why not (`what` names it).
+fn sized(img: &GrayImage, size: [u32; 2], what: &str) -> Result<(), CameraError> {
+    if img.dimensions() == (size[0], size[1]) {
+        return Ok(());
+    }
+    Err(CameraError {
+        backend: "images",
+        reason: format!(
+            "{what}: a {}×{} frame, camera.image_px is {}×{}",
+            img.width(),
+            img.height(),
+            size[0],
+            size[1]
+        ),
+    })
+}
+
+/// The detector of `[camera]`: its settings, its calibration, the camera's centre from the
+/// calibration and `intrinsics` (for the parallax of the parts' tops; refused when the two
+/// disagree and the parts have a height).
+pub fn detector(c: &CameraSettings) -> Result<Detector, CameraError> {
+    let d = Detector::new(detect_settings(c), calibration(c)?, Some(c.images.intrinsics));
+    if d.camera_mm().is_none() && c.part_height_mm > 0.0 {
+        return Err(CameraError {
+            backend: "images",
+            reason: "the calibration is not a view a pinhole camera of camera.intrinsics \
+                     gives: set camera.intrinsics to the camera's [fx, fy, cx, cy] (the \
+                     parallax of the parts' tops needs its centre), or recalibrate"
+                .into(),
+        });
+    }
+    Ok(d)
 }
 
 /// The calibration of `[camera]`: its file, or (no file, frames drawn by the simulation)
@@ -116,7 +166,13 @@ pub fn target_in_view(model: &CameraModel) -> Target {
         (centre[0] - f64::from(grid[0] - 1) * pitch / 2.0).round(),
         (centre[1] - f64::from(grid[1] - 1) * pitch / 2.0).round(),
     ];
-    Target { grid, pitch_mm: pitch, origin_mm, dot_mm: 0.3 * pitch }
+    Target {
+        grid,
+        pitch_mm: pitch,
+        origin_mm,
+        dot_mm: 0.3 * pitch,
+        origin_scale: render::ORIGIN_DOT_SCALE,
+    }
 }
 
 /// Frames from their source.
@@ -132,16 +188,16 @@ enum Frames {
 
 /// The frames of the V4L2 camera at `dev`, streaming `size` frames.
 #[cfg(feature = "v4l2")]
-fn device(dev: &std::path::Path, size: [u32; 2]) -> Result<Frames, String> {
+fn device(dev: &std::path::Path, size: [u32; 2], rate_hz: f64) -> Result<Frames, String> {
     if let Some(why) = crate::frames::v4l2_refused(dev) {
         return Err(why);
     }
-    Ok(Frames::Device { camera: crate::v4l2::V4l2Frames::open(dev, size)?, number: 0 })
+    Ok(Frames::Device { camera: crate::v4l2::V4l2Frames::open(dev, size, rate_hz)?, number: 0 })
 }
 
 /// A build without V4L2 capture: the device refused, saying why.
 #[cfg(not(feature = "v4l2"))]
-fn device(dev: &std::path::Path, _size: [u32; 2]) -> Result<Frames, String> {
+fn device(dev: &std::path::Path, _size: [u32; 2], _rate_hz: f64) -> Result<Frames, String> {
     Err(crate::frames::v4l2_refused(dev).unwrap_or_default())
 }
 
@@ -176,10 +232,9 @@ impl ImagesCamera {
                 next: 0,
                 start_ns: 0,
             },
-            FrameSource::V4l2(dev) => device(&dev, c.images.image_px).map_err(fail)?,
+            FrameSource::V4l2(dev) => device(&dev, c.images.image_px, c.rate_hz).map_err(fail)?,
         };
-        let detector =
-            Detector::new(detect_settings(c), calibration(c)?, Some(c.images.intrinsics));
+        let detector = detector(c)?;
         Ok(ImagesCamera { frames, detector, settings: c.clone(), found: Vec::new() })
     }
 
@@ -212,7 +267,7 @@ impl ImagesCamera {
                     return Ok(None);
                 }
                 let next = camera
-                    .next_frame()
+                    .next_frame(stop)
                     .map_err(|reason| CameraError { backend: "images", reason })?;
                 if let Some((img, exposure_ns)) = next {
                     *number += 1;
@@ -236,6 +291,7 @@ impl ImagesCamera {
                 *next += 1;
                 let img = crate::frames::read_png(&path)
                     .map_err(|reason| CameraError { backend: "images", reason })?;
+                sized(&img, i.image_px, &path.display().to_string())?;
                 Ok(Some((img, Frame { number: *next as u64 - 1, exposure_ns: at }, None)))
             }
         }
@@ -253,20 +309,6 @@ impl CameraBackend for ImagesCamera {
         stop: &AtomicBool,
     ) -> Result<Option<Frame>, CameraError> {
         let Some((img, frame, counts)) = self.next_image(stop)? else { return Ok(None) };
-        if img.dimensions() != (self.settings.images.image_px[0], self.settings.images.image_px[1])
-        {
-            return Err(CameraError {
-                backend: "images",
-                reason: format!(
-                    "frame {} is {}×{}, camera.image_px {}×{}",
-                    frame.number,
-                    img.width(),
-                    img.height(),
-                    self.settings.images.image_px[0],
-                    self.settings.images.image_px[1]
-                ),
-            });
-        }
         self.detector.detect(&img, &mut self.found);
         out.clear();
         let in_frame = self.found.len() as u32;

@@ -2,20 +2,25 @@
 //! dot target on the belt, `detect` the parts in one frame, `draw` what the simulated camera
 //! sees (its target, or the belt with parts) to try both without a camera.
 
-use crate::images::{calibration, camera_model, detect_settings, sim_look, target_in_view};
+use crate::images::{camera_model, sim_look, target_in_view};
 use qmarc_config::{Names, Settings};
 use qmarc_vision::calib::Calibration;
-use qmarc_vision::detect::Detector;
 use qmarc_vision::render::{self, PartShape};
 use std::fmt::Write as _;
 use std::path::Path;
 
 /// `COLSxROWS`, each ≥ 2.
 pub fn parse_grid(s: &str) -> Result<[u32; 2], String> {
-    let bad = || format!("COLSxROWS (two whole numbers ≥ 2, e.g. 9x7), found `{s}`");
+    let bad =
+        || format!("COLSxROWS (two whole numbers ≥ 2, 6 to 10000 dots, e.g. 9x7), found `{s}`");
     let (c, r) = s.split_once(['x', 'X']).ok_or_else(bad)?;
     match (c.trim().parse::<u32>(), r.trim().parse::<u32>()) {
-        (Ok(c), Ok(r)) if c >= 2 && r >= 2 && c * r <= 10_000 => Ok([c, r]),
+        // Six dots at least (the calibration's fit), ten thousand at most.
+        (Ok(c), Ok(r))
+            if c >= 2 && r >= 2 && (6..=10_000).contains(&(u64::from(c) * u64::from(r))) =>
+        {
+            Ok([c, r])
+        }
         _ => Err(bad()),
     }
 }
@@ -93,27 +98,50 @@ pub fn settings(config: &Path) -> Result<Settings, String> {
 pub fn detect(s: &Settings, image: &Path) -> Result<(String, String), String> {
     let frame = crate::frames::read_png(image)?;
     let c = &s.camera;
-    let cal = calibration(c).map_err(|e| e.reason)?;
-    if cal.image_px != [frame.width(), frame.height()] {
+    let mut detector = crate::images::detector(c).map_err(|e| e.reason)?;
+    let size = c.images.image_px;
+    if [frame.width(), frame.height()] != size {
         return Err(format!(
-            "{}: the frame is {}×{}, the calibration's {}×{}",
+            "{}: the frame is {}×{}, camera.image_px (and its calibration) {}×{}",
             image.display(),
             frame.width(),
             frame.height(),
-            cal.image_px[0],
-            cal.image_px[1]
+            size[0],
+            size[1]
         ));
     }
-    let mut detector = Detector::new(detect_settings(c), cal, Some(c.images.intrinsics));
     let mut parts = Vec::new();
     let t = detector.detect(&frame, &mut parts);
     let mut csv = String::new();
     for p in &parts {
-        let _ =
-            writeln!(csv, "{:.3},{:.3},{:.2},{}", p.belt_mm, p.across_mm, p.angle_deg, p.area_px);
+        // Rounded as printed, then into (−90, 90]: −90.00 is +90.00.
+        let mut angle = (p.angle_deg * 100.0).round() / 100.0;
+        if angle <= -90.0 {
+            angle += 180.0;
+        }
+        let _ = writeln!(csv, "{:.3},{:.3},{angle:.2},{}", p.belt_mm, p.across_mm, p.area_px);
     }
+    let through = match (&c.images.calibration, detector.camera_mm()) {
+        (Some(f), Some(m)) => format!(
+            "through {} (the camera's centre at {:.0}, {:.0}, {:.0} mm)",
+            f.display(),
+            m[0],
+            m[1],
+            m[2]
+        ),
+        (Some(f), None) => format!("through {}", f.display()),
+        (None, _) => {
+            "through the simulated camera's own calibration (no camera.calibration)".into()
+        }
+    };
+    let saturated = if t.saturated {
+        "; the threshold is beyond the gray scale: nothing can be found"
+    } else {
+        ""
+    };
     let said = format!(
-        "{}: {} parts; skipped {} regions too small, {} too big, {} at the border (belt level {})",
+        "{}: {} parts; skipped {} regions too small, {} too big, {} at the border (belt level \
+         {}){saturated}; {through}",
         image.display(),
         parts.len(),
         t.too_small,
@@ -175,7 +203,7 @@ mod tests {
     fn grids_and_points_are_read_or_refused_saying_what_is_expected() {
         assert_eq!(parse_grid("9x7"), Ok([9, 7]));
         assert_eq!(parse_grid("12X3"), Ok([12, 3]));
-        for bad in ["9", "1x7", "9x", "x7", "9x7x2", "-3x4"] {
+        for bad in ["9", "1x7", "9x", "x7", "9x7x2", "-3x4", "2x2", "65536x65536"] {
             assert!(parse_grid(bad).unwrap_err().contains("COLSxROWS"), "{bad}");
         }
         assert_eq!(parse_point("10.5,-3"), Ok([10.5, -3.0]));

@@ -33,9 +33,13 @@ fn settings(camera: &str) -> Settings {
 }
 
 /// The camera process on `settings` in `dir` until it has sent `want` detections (or 20 s
-/// have passed), then stopped with SIGTERM: its detections, the run's epoch and what it
-/// said. Everything it made in /dev/shm is gone after.
-fn serve(dir: &Path, settings: &Settings, want: usize) -> (Vec<PartDetection>, u64, String) {
+/// have passed), then stopped with SIGTERM: its detections with when each was received,
+/// the run's epoch and what it said. Everything it made in /dev/shm is gone after.
+fn serve(
+    dir: &Path,
+    settings: &Settings,
+    want: usize,
+) -> (Vec<(Instant, PartDetection)>, u64, String) {
     // Each test its own prefix (tests run in parallel).
     static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -66,9 +70,9 @@ fn serve(dir: &Path, settings: &Settings, want: usize) -> (Vec<PartDetection>, u
     let started = Instant::now();
     while seen.len() < want && started.elapsed() < Duration::from_secs(20) {
         while let Ok(Some(s)) = subscriber.receive() {
-            seen.push(*s.payload());
+            seen.push((Instant::now(), *s.payload()));
         }
-        std::thread::sleep(Duration::from_millis(5));
+        std::thread::sleep(Duration::from_millis(2));
     }
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(child.id() as i32),
@@ -103,6 +107,7 @@ fn the_camera_publishes_the_worlds_parts_until_stopped() {
     let settings =
         settings("rate_hz = 100.0\nparts_per_min = 600.0\nnoise_mm = 0.0\nlatency_s = 0.0\n");
     let (seen, epoch_ns, _) = serve(&dir, &settings, 20);
+    let seen: Vec<PartDetection> = seen.into_iter().map(|(_, d)| d).collect();
     assert!(seen.len() >= 20, "{} detections in 20 s", seen.len());
     let c = &settings.conveyor;
     let belt = BeltMotion::new(c.speed_mm_s, &c.speed_steps, c.acceleration_mm_s2);
@@ -160,8 +165,13 @@ fn a_folder_of_frames_is_replayed_and_its_parts_found() {
         frames.display(),
         cal_file.display()
     ));
-    let (seen, _, stderr) = serve(&dir, &settings, 5);
+    let (received, _, stderr) = serve(&dir, &settings, 5);
+    let seen: Vec<PartDetection> = received.iter().map(|(_, d)| *d).collect();
     assert_eq!(seen.len(), 5, "{seen:?}");
+    // Replayed at their pace: the last frame's parts arrive 100 ms of frames after the
+    // first's (not all at once).
+    let took = received[4].0 - received[0].0;
+    assert!(took >= Duration::from_millis(80), "the frames came {took:?} apart");
     assert!(stderr.contains("3 frames, 5 detections sent (images camera)"), "{stderr}");
     for d in &seen {
         let parts = &drawn[d.frame as usize];

@@ -184,7 +184,7 @@ fn check_conveyor(s: &Settings) -> Result<(), Failure> {
     }
     // A camera that finds parts in frames: its frames' source and its calibration.
     if s.camera.backend == "images" {
-        qmarc_camera::images::check(&s.camera)
+        qmarc_camera::images::check(&s.camera, s.conveyor.window_mm)
             .map_err(|e| refused(anyhow!("{}: [camera] {e}", s.source.display())))?;
     }
     // The place, and the window's ends on the belt's centre line (a part's grip point and

@@ -29,6 +29,8 @@ pub struct Region {
     pub axis_rad: f64,
     /// The square root of the second moments' larger over smaller eigenvalue (1: round).
     pub elongation: f64,
+    /// The second central moments over the area, px²: `[xx, yy, xy]`.
+    pub covariance: [f64; 3],
     /// Its first and last column and row.
     pub bbox: [u32; 4],
     /// Whether it touches the frame's border (it may go on beyond the frame).
@@ -178,6 +180,7 @@ fn region(s: &Sums, w: u32, h: u32) -> Region {
         centroid: [mx, my],
         axis_rad: axis,
         elongation: if small > 0.0 { (big / small).sqrt() } else { f64::INFINITY },
+        covariance: [cxx, cyy, cxy],
         bbox: b,
         at_border: b[0] == 0 || b[2] == 0 || b[1] == w - 1 || b[3] == h - 1,
     }

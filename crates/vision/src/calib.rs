@@ -61,6 +61,16 @@ pub enum CalibrationError {
     /// The file is not a calibration (its line, column and field).
     #[error("{0}")]
     Invalid(qmarc_config::ConfigLoadError),
+    /// The file reads, but a value cannot be a calibration's.
+    #[error("{file}: {field}: {reason}")]
+    Bad {
+        /// The file.
+        file: std::path::PathBuf,
+        /// The field.
+        field: &'static str,
+        /// Why.
+        reason: String,
+    },
 }
 
 impl Calibration {
@@ -74,6 +84,9 @@ impl Calibration {
         if pixels.len() != belt.len() || pixels.len() < 6 {
             let n = pixels.len().min(belt.len());
             return Err(CalibrationError::Degenerate(format!("{n} points, 6 at least")));
+        }
+        if flatness(pixels) < 1e-6 || flatness(belt) < 1e-6 {
+            return Err(CalibrationError::Degenerate("the points lie on a line".into()));
         }
         let [w, h] = image_px.map(f64::from);
         let centre_px = [(w - 1.0) / 2.0, (h - 1.0) / 2.0];
@@ -150,7 +163,14 @@ impl Calibration {
         let [fx, fy, cx, cy] = intrinsics;
         let k = Matrix3::new(fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0);
         let m = k.try_inverse()? * self.matrix().try_inverse()?;
-        let mut scale = 2.0 / (m.column(0).norm() + m.column(1).norm());
+        let (n1, n2) = (m.column(0).norm(), m.column(1).norm());
+        // A pinhole's view of a plane: two columns of one length, at right angles; wrong
+        // intrinsics give neither.
+        let right = m.column(0).dot(&m.column(1)).abs() / (n1 * n2);
+        if (n1 - n2).abs() > 0.02 * (n1 + n2) || right > 0.02 {
+            return None;
+        }
+        let mut scale = 2.0 / (n1 + n2);
         if m[(2, 2)] * scale < 0.0 {
             scale = -scale;
         }
@@ -189,9 +209,45 @@ impl Calibration {
     pub fn load(path: &Path) -> Result<Calibration, CalibrationError> {
         let text = std::fs::read_to_string(path)
             .map_err(|reason| CalibrationError::Read { file: path.into(), reason })?;
-        toml::from_str(&text)
-            .map_err(|e| CalibrationError::Invalid(qmarc_config::toml_file_error(path, &text, &e)))
+        let c: Calibration = toml::from_str(&text).map_err(|e| {
+            CalibrationError::Invalid(qmarc_config::toml_file_error(path, &text, &e))
+        })?;
+        let bad = |field, reason: &str| CalibrationError::Bad {
+            file: path.into(),
+            field,
+            reason: reason.to_string(),
+        };
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if c.image_px.contains(&0) {
+            return Err(bad("image_px", "a frame's columns and rows, each > 0"));
+        }
+        if !finite(&c.centre_px) || !finite(&c.k) {
+            return Err(bad(if finite(&c.k) { "centre_px" } else { "k" }, "finite numbers"));
+        }
+        if !(c.radius_px.is_finite() && c.radius_px > 0.0) {
+            return Err(bad("radius_px", "a finite number > 0"));
+        }
+        let m = c.matrix();
+        if !finite(m.as_slice()) || m.try_inverse().is_none() {
+            return Err(bad("homography", "finite numbers, an invertible matrix"));
+        }
+        Ok(c)
     }
+}
+
+/// How far `points` are from lying on a line: their scatter's smaller eigenvalue over its
+/// larger (0: on a line).
+fn flatness(points: &[[f64; 2]]) -> f64 {
+    let n = points.len() as f64;
+    let (mx, my) = points.iter().fold((0.0, 0.0), |(a, b), p| (a + p[0] / n, b + p[1] / n));
+    let (mut xx, mut yy, mut xy) = (0.0, 0.0, 0.0);
+    for p in points {
+        let (dx, dy) = (p[0] - mx, p[1] - my);
+        (xx, yy, xy) = (xx + dx * dx, yy + dy * dy, xy + dx * dy);
+    }
+    let spread = f64::hypot(xx - yy, 2.0 * xy) / 2.0;
+    let (big, small) = ((xx + yy) / 2.0 + spread, (xx + yy) / 2.0 - spread);
+    if big > 0.0 { small / big } else { 0.0 }
 }
 
 /// `m`'s rows.
@@ -340,9 +396,10 @@ mod tests {
     #[test]
     fn degenerate_points_are_refused() {
         let line: Vec<[f64; 2]> = (0..8).map(|i| [f64::from(i), 2.0 * f64::from(i)]).collect();
-        assert!(Calibration::fit(&line[..5], &line[..5], [10, 10]).is_err());
-        let e = Calibration::fit(&line, &line, [10, 10]);
-        assert!(e.is_err() || e.unwrap().reprojection.max_mm > 0.0);
+        let few = Calibration::fit(&line[..5], &line[..5], [10, 10]).unwrap_err();
+        assert_eq!(few.to_string(), "the calibration cannot be fitted: 5 points, 6 at least");
+        let on_a_line = Calibration::fit(&line, &line, [10, 10]).unwrap_err();
+        assert!(on_a_line.to_string().ends_with("the points lie on a line"), "{on_a_line}");
     }
 
     /// The file holds the calibration exactly; a bad file names its line and field.
@@ -363,6 +420,10 @@ mod tests {
         std::fs::write(&file, bad).unwrap();
         let e = Calibration::load(&file).unwrap_err().to_string();
         assert!(e.contains("cal.toml:") && e.contains("radius_px"), "{e}");
+        let zero = c.to_toml("").replace("radius_px = 400.0", "radius_px = 0.0");
+        std::fs::write(&file, zero).unwrap();
+        let e = Calibration::load(&file).unwrap_err().to_string();
+        assert!(e.ends_with("cal.toml: radius_px: a finite number > 0"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -50,6 +50,9 @@ pub struct Tally {
     pub too_big: u32,
     /// Regions at the frame's border.
     pub at_border: u32,
+    /// Whether the threshold lay beyond the gray scale (the belt's level within `threshold`
+    /// of 0 or 255 the wrong way): no pixel could be a part's.
+    pub saturated: bool,
 }
 
 /// Finds parts, frame after frame (its buffers are kept).
@@ -90,13 +93,21 @@ impl Detector {
     pub fn detect(&mut self, img: &GrayImage, out: &mut Vec<Detection>) -> Tally {
         let s = self.settings;
         let level = belt_level(img);
-        let threshold = match s.polarity {
-            Polarity::Bright => level.saturating_add(s.threshold),
-            Polarity::Dark => level.saturating_sub(s.threshold),
+        let (threshold, saturated) = match s.polarity {
+            Polarity::Bright => level.overflowing_add(s.threshold),
+            Polarity::Dark => level.overflowing_sub(s.threshold),
+        };
+        let threshold = if saturated {
+            match s.polarity {
+                Polarity::Bright => u8::MAX,
+                Polarity::Dark => 0,
+            }
+        } else {
+            threshold
         };
         self.labeller.regions(img, s.polarity, threshold, &mut self.regions);
         out.clear();
-        let mut tally = Tally { belt_level: level, ..Tally::default() };
+        let mut tally = Tally { belt_level: level, saturated, ..Tally::default() };
         for r in &self.regions {
             if r.at_border {
                 tally.at_border += 1;
@@ -111,17 +122,23 @@ impl Detector {
         tally
     }
 
-    /// Region `r` as a part on the belt.
+    /// Region `r` as a part on the belt: its centroid there, and its axis — the region's
+    /// second moments carried to the belt by the map's local Jacobian (a tilted or
+    /// anisotropic view turns a frame's axes), their principal axis.
     fn on_belt(&self, r: &Region) -> Detection {
         let c = r.centroid;
         let at = self.top(c);
-        // The axis: a point 5 px along it, to the belt too.
-        let tip = self.top([c[0] + 5.0 * r.axis_rad.cos(), c[1] + 5.0 * r.axis_rad.sin()]);
-        let mut angle = f64::atan2(tip[1] - at[1], tip[0] - at[0]).to_degrees();
+        let (dx, dy) = (self.top([c[0] + 1.0, c[1]]), self.top([c[0], c[1] + 1.0]));
+        let j = [[dx[0] - at[0], dy[0] - at[0]], [dx[1] - at[1], dy[1] - at[1]]];
+        let [xx, yy, xy] = r.covariance;
+        let cov = [[xx, xy], [xy, yy]];
+        // (J C Jᵀ)[a][b].
+        let m = |a: usize, b: usize| {
+            (0..2).map(|k| (0..2).map(|l| j[a][k] * cov[k][l] * j[b][l]).sum::<f64>()).sum::<f64>()
+        };
+        let mut angle = 0.5 * f64::atan2(2.0 * m(0, 1), m(0, 0) - m(1, 1)).to_degrees();
         if angle <= -90.0 {
             angle += 180.0;
-        } else if angle > 90.0 {
-            angle -= 180.0;
         }
         Detection { belt_mm: at[0], across_mm: at[1], angle_deg: angle, area_px: r.area }
     }

@@ -41,7 +41,8 @@ pub fn find(
     let [cols, rows] = grid;
     let fail = |found: String| GridError { cols, rows, found };
     let mut regions = Vec::new();
-    Labeller::default().regions(img, Polarity::Dark, otsu(img), &mut regions);
+    // Otsu's level is the dark class's top: the dots are at or below it.
+    Labeller::default().regions(img, Polarity::Dark, otsu(img).saturating_add(1), &mut regions);
     let round: Vec<Region> = regions
         .iter()
         .filter(|r| !r.at_border && r.area >= 6 && r.elongation < 3.0)
@@ -194,19 +195,36 @@ fn labellings(c: &[[f64; 2]; 4]) -> impl Iterator<Item = [[f64; 2]; 4]> + '_ {
     })
 }
 
-/// Each point's cell when the corners are `order`: `None` unless every point lies near a
-/// cell of the grid and no two on one.
+/// Each point's cell when the corners are `order`: named through the corners' perspective
+/// map (within 0.45 of a cell), then again through the map fitted to every dot so named
+/// (within 0.3: a lens' distortion bends the rows the corners' map cannot follow); `None`
+/// unless every point lies near a cell of the grid and no two on one.
 fn cells(points: &[[f64; 2]], order: &[[f64; 2]; 4], grid: [u32; 2]) -> Option<Vec<[u32; 2]>> {
     let (c, r) = (f64::from(grid[0] - 1), f64::from(grid[1] - 1));
-    let to_grid: Matrix3<f64> = homography(order, &[[0.0, 0.0], [c, 0.0], [c, r], [0.0, r]])?;
-    let mut seen = vec![false; (grid[0] * grid[1]) as usize];
+    let corners: Matrix3<f64> = homography(order, &[[0.0, 0.0], [c, 0.0], [c, r], [0.0, r]])?;
+    let first = name(points, &corners, grid, 0.45)?;
+    let cells: Vec<[f64; 2]> = first.iter().map(|c| c.map(f64::from)).collect();
+    let all = homography(points, &cells)?;
+    name(points, &all, grid, 0.3)
+}
+
+/// Each point's cell through `to_grid`, within `tolerance` of a cell; `None` if one is not,
+/// or two share one.
+fn name(
+    points: &[[f64; 2]],
+    to_grid: &Matrix3<f64>,
+    grid: [u32; 2],
+    tolerance: f64,
+) -> Option<Vec<[u32; 2]>> {
+    let (c, r) = (f64::from(grid[0] - 1), f64::from(grid[1] - 1));
+    let mut seen = vec![false; grid[0] as usize * grid[1] as usize];
     let mut out = Vec::with_capacity(points.len());
     for p in points {
         let v = to_grid * Vector3::new(p[0], p[1], 1.0);
         let (i, j) = (v.x / v.z, v.y / v.z);
         let (ri, rj) = (i.round(), j.round());
-        if (i - ri).abs() > 0.3 || (j - rj).abs() > 0.3 || ri < 0.0 || rj < 0.0 || ri > c || rj > r
-        {
+        let off = (i - ri).abs() > tolerance || (j - rj).abs() > tolerance;
+        if off || ri < 0.0 || rj < 0.0 || ri > c || rj > r {
             return None;
         }
         let k = (rj as u32 * grid[0] + ri as u32) as usize;

@@ -17,7 +17,7 @@
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! // A camera 800 mm above the belt, 0.5 mm a pixel; a 9×7 target of 20 mm under it.
 //! let cam = CameraModel::overhead([150.0, 0.0], 800.0, 0.5, [640, 480]);
-//! let target = render::Target { grid: [9, 7], pitch_mm: 20.0, origin_mm: [70.0, -60.0], dot_mm: 8.0 };
+//! let target = render::Target { grid: [9, 7], pitch_mm: 20.0, origin_mm: [70.0, -60.0], dot_mm: 8.0, origin_scale: render::ORIGIN_DOT_SCALE };
 //! let frame = render::target_frame(&cam, &target, &render::Look::default());
 //! let dots = grid::find(&frame, target.grid, target.pitch_mm, target.origin_mm)?;
 //! let calibration = Calibration::fit(&dots.pixels, &dots.belt, cam.size_px)?;

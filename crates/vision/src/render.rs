@@ -46,8 +46,8 @@ impl Default for Look {
 }
 
 /// A calibration target: a white board with black dots `pitch_mm` apart in `grid` columns
-/// (along the belt) and rows (across it), dot (0, 0) — the origin, 1.5 times as wide as
-/// the others — at `origin_mm`.
+/// (along the belt) and rows (across it), dot (0, 0) — the origin, `origin_scale` times as
+/// wide as the others ([`ORIGIN_DOT_SCALE`] marks it) — at `origin_mm`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Target {
     /// Columns and rows.
@@ -58,6 +58,8 @@ pub struct Target {
     pub origin_mm: [f64; 2],
     /// A dot's diameter, mm.
     pub dot_mm: f64,
+    /// The origin dot's diameter over the others'.
+    pub origin_scale: f64,
 }
 
 /// A target's dots' gray level (printed black).
@@ -114,7 +116,7 @@ pub fn target_frame(camera: &CameraModel, t: &Target, look: &Look) -> GrayImage 
             u.round().clamp(0.0, span[0] / t.pitch_mm),
             v.round().clamp(0.0, span[1] / t.pitch_mm),
         );
-        let scale = if i == 0.0 && j == 0.0 { ORIGIN_DOT_SCALE } else { 1.0 };
+        let scale = if i == 0.0 && j == 0.0 { t.origin_scale } else { 1.0 };
         let r = t.dot_mm / 2.0 * scale;
         let d = f64::hypot((u - i) * t.pitch_mm, (v - j) * t.pitch_mm) - r;
         let dot = coverage(d, soft);

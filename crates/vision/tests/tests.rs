@@ -23,8 +23,13 @@ fn camera() -> CameraModel {
     c
 }
 
-const TARGET: Target =
-    Target { grid: [11, 9], pitch_mm: 40.0, origin_mm: [-50.0, -160.0], dot_mm: 12.0 };
+const TARGET: Target = Target {
+    grid: [11, 9],
+    pitch_mm: 40.0,
+    origin_mm: [-50.0, -160.0],
+    dot_mm: 12.0,
+    origin_scale: render::ORIGIN_DOT_SCALE,
+};
 
 fn calibrated(cam: &CameraModel) -> Calibration {
     let frame = render::target_frame(cam, &TARGET, &Look::default());
@@ -106,14 +111,23 @@ fn parts_are_found_where_they_are() {
         let img = render::belt_frame(&cam, &parts, &look);
         let tally = detector.detect(&img, &mut out);
         assert_eq!(out.len(), parts.len(), "frame {frame}: {tally:?}");
+        // One to one: each detection the nearest of one part only.
+        let mut used = vec![false; out.len()];
         for p in &parts {
-            let d = nearest(&out, p.at_mm);
+            let k = nearest(&out, p.at_mm);
+            assert!(
+                !std::mem::replace(&mut used[k], true),
+                "frame {frame}: two parts, one detection"
+            );
+            let d = out[k];
             pos.push(f64::hypot(d.belt_mm - p.at_mm[0], d.across_mm - p.at_mm[1]));
             let mut e = d.angle_deg - p.angle_rad.to_degrees();
             e -= 180.0 * (e / 180.0).round();
             ang.push(e.abs());
         }
     }
+    let worst = pos.iter().copied().fold(0.0, f64::max);
+    assert!(worst < 1.0, "the worst part {worst} mm off");
     let (pos99, ang99) = (p99(pos.clone()), p99(ang.clone()));
     eprintln!("position error p99 {pos99:.3} mm, orientation p99 {ang99:.3}°");
     assert!(pos99 <= 0.5, "position error p99 {pos99} mm");
@@ -126,14 +140,10 @@ fn parts_are_found_where_they_are() {
     assert!(off > 2.0, "the parallax of a 10 mm part 280 mm off the camera's foot: {off}");
 }
 
-fn nearest(found: &[Detection], at: [f64; 2]) -> Detection {
-    *found
-        .iter()
-        .min_by(|a, b| {
-            let d = |x: &Detection| f64::hypot(x.belt_mm - at[0], x.across_mm - at[1]);
-            d(a).total_cmp(&d(b))
-        })
-        .unwrap()
+/// The index of the detection nearest `at`.
+fn nearest(found: &[Detection], at: [f64; 2]) -> usize {
+    let d = |x: &Detection| f64::hypot(x.belt_mm - at[0], x.across_mm - at[1]);
+    (0..found.len()).min_by(|&a, &b| d(&found[a]).total_cmp(&d(&found[b]))).unwrap()
 }
 
 /// A part cut by the frame's border is not reported (its centroid would be wrong); two
@@ -179,20 +189,35 @@ fn dark_parts_are_found_on_a_bright_belt() {
     assert!((out[0].angle_deg + 30.0).abs() < 2.0, "{out:?}");
 }
 
-/// Where there is no grid, the calibration is refused saying what the frame holds.
+/// Where there is no grid, the calibration is refused saying what the frame holds: another
+/// grid than the target's, a target without its origin dot, a target seen in a mirror (its
+/// rows against the across direction), a frame of parts.
 #[test]
 fn no_grid_is_refused_saying_what_was_found() {
     let cam = camera();
     let frame = render::target_frame(&cam, &TARGET, &Look::default());
     let e = grid::find(&frame, [10, 9], TARGET.pitch_mm, TARGET.origin_mm).unwrap_err();
-    assert!(e.to_string().contains("no 10x9 grid of dots: 99 dots"), "{e}");
+    assert!(e.to_string().contains("no 10x9 grid of dots: 99 dots of about "), "{e}");
+    assert!(e.to_string().contains("px (the grid has 90); "), "{e}");
+    let plain = Target { origin_scale: 1.0, ..TARGET };
+    let frame = render::target_frame(&cam, &plain, &Look::default());
+    let e = grid::find(&frame, TARGET.grid, TARGET.pitch_mm, TARGET.origin_mm).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "no 11x9 grid of dots: 99 dots, but none larger than the others: the origin dot is 1.5× \
+         as wide"
+    );
+    let frame = render::target_frame(&cam, &TARGET, &Look::default());
+    let mirrored = image::imageops::flip_horizontal(&frame);
+    let e = grid::find(&mirrored, TARGET.grid, TARGET.pitch_mm, TARGET.origin_mm).unwrap_err();
+    assert!(e.to_string().contains("the rows run from the origin dot against the across"), "{e}");
     let belt = render::belt_frame(&cam, &[part([150.0, 0.0], 0.0)], &Look::default());
     let e = grid::find(&belt, TARGET.grid, TARGET.pitch_mm, TARGET.origin_mm).unwrap_err();
     assert!(e.to_string().starts_with("no 11x9 grid of dots: "), "{e}");
 }
 
-/// Our runs-based labelling finds the regions imageproc's connected components find, with
-/// their areas, on frames of random specks and shapes.
+/// Our runs-based labelling finds the regions imageproc's connected components find — each
+/// with its area, centroid and whether it touches the border — on frames of random specks.
 #[test]
 fn the_labelling_agrees_with_imageproc() {
     use imageproc::region_labelling::{Connectivity, connected_components};
@@ -210,8 +235,22 @@ fn the_labelling_agrees_with_imageproc() {
         for p in labels.pixels() {
             areas[p[0] as usize] += 1;
         }
-        let mut theirs: Vec<u32> = areas[1..].to_vec();
-        let mut mine: Vec<u32> = ours.iter().map(|r| r.area).collect();
+        // Each region's area, centroid (×1000, rounded) and whether it touches the border.
+        let mut sums = vec![(0u32, 0u64, 0u64, false); n + 1];
+        for (x, y, p) in labels.enumerate_pixels() {
+            let s = &mut sums[p[0] as usize];
+            let edge = x == 0 || y == 0 || x == 199 || y == 149;
+            *s = (s.0 + 1, s.1 + u64::from(x), s.2 + u64::from(y), s.3 || edge);
+        }
+        let key = |area: u32, cx: f64, cy: f64, edge: bool| {
+            (area, (cx * 1000.0).round() as i64, (cy * 1000.0).round() as i64, edge)
+        };
+        let mut theirs: Vec<_> = sums[1..]
+            .iter()
+            .map(|s| key(s.0, s.1 as f64 / f64::from(s.0), s.2 as f64 / f64::from(s.0), s.3))
+            .collect();
+        let mut mine: Vec<_> =
+            ours.iter().map(|r| key(r.area, r.centroid[0], r.centroid[1], r.at_border)).collect();
         theirs.sort_unstable();
         mine.sort_unstable();
         assert_eq!(mine, theirs, "density {density}");

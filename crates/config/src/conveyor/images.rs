@@ -145,8 +145,17 @@ impl RawCamera {
             })?,
             intrinsics: src.read(&self.intrinsics, "camera.intrinsics", d.intrinsics, |v| {
                 let k = finite::<4>(v)?;
-                if k[0] <= 0.0 || k[1] <= 0.0 {
-                    return Err(format!("[fx, fy, cx, cy] with fx, fy > 0 px, found {v:?}"));
+                let [w, h] = image_px.map(|n| f64::from(n) - 1.0);
+                if k[0] <= 0.0
+                    || k[1] <= 0.0
+                    || !(0.0..=w).contains(&k[2])
+                    || !(0.0..=h).contains(&k[3])
+                {
+                    return Err(format!(
+                        "[fx, fy, cx, cy] with fx, fy > 0 px and (cx, cy) in the frame \
+                         (camera.image_px {}×{}), found {v:?}",
+                        image_px[0], image_px[1]
+                    ));
                 }
                 Ok(k)
             })?,

@@ -186,6 +186,9 @@ fn an_images_cameras_settings_are_checked() {
         refused("[camera]\npolarity = \"grey\"\n").starts_with("q.toml:2:12: camera.polarity: ")
     );
     assert!(refused("[camera]\nthreshold = 0\n").contains("camera.threshold: must be 1‥254"));
+    // The principal point of another frame size (a 1280×1024 camera's, in a 640×480 frame).
+    let e = refused("[camera]\nintrinsics = [1600, 1600, 639.5, 511.5]\n");
+    assert!(e.contains("camera.intrinsics: [fx, fy, cx, cy] with fx, fy > 0 px and (cx, cy) in the frame (camera.image_px 640×480)"), "{e}");
 }
 
 /// `conveyor`'s flags are checked as the file's keys are, each error naming its flag.
