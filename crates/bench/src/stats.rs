@@ -3,6 +3,12 @@
 
 use qmarc_report::summary::Pct;
 
+/// The nearest-rank `q` quantile (0 < q ≤ 1) of `sorted`, ascending and not empty.
+pub fn nearest_rank<T: Copy>(sorted: &[T], q: f64) -> T {
+    let n = sorted.len();
+    sorted[((q * n as f64).ceil() as usize).clamp(1, n) - 1]
+}
+
 /// p50/p99/p99.9/max of `samples_ns` (nearest rank), in µs; sorts them.
 pub fn percentiles_us(samples_ns: &mut [u64]) -> Pct {
     samples_ns.sort_unstable();
@@ -10,10 +16,7 @@ pub fn percentiles_us(samples_ns: &mut [u64]) -> Pct {
     if n == 0 {
         return Pct::default();
     }
-    let at = |q: f64| {
-        let rank = ((q * n as f64).ceil() as usize).clamp(1, n);
-        samples_ns[rank - 1] as f64 / 1e3
-    };
+    let at = |q: f64| nearest_rank(samples_ns, q) as f64 / 1e3;
     Pct { p50: at(0.5), p99: at(0.99), p999: at(0.999), max: samples_ns[n - 1] as f64 / 1e3 }
 }
 

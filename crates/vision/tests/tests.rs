@@ -60,12 +60,9 @@ fn p99(mut v: Vec<f64>) -> f64 {
     v[((v.len() as f64 * 0.99).ceil() as usize).saturating_sub(1)]
 }
 
-/// A pseudo-random number in [0, 1) from `k`.
+/// A pseudo-random number in [0, 1): draw `k` of the simulated world's own stream.
 fn uniform(k: u64) -> f64 {
-    let mut z = k.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(0x6A09_E667_F3BC_C909);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    (z ^ (z >> 31)) as f64 / 2f64.powi(64)
+    qmarc_conveyor::world::uniform(0, 0, k)
 }
 
 /// The calibration from a rendered target: reprojection ≤ 0.3 px mean, and the camera's
