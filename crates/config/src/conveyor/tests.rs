@@ -191,6 +191,32 @@ fn an_images_cameras_settings_are_checked() {
     assert!(e.contains("camera.intrinsics: [fx, fy, cx, cy] with fx, fy > 0 px and (cx, cy) in the frame (camera.image_px 640×480)"), "{e}");
 }
 
+/// `--camera`: a registered backend or refused naming the flag; `images` from a device or
+/// a folder needs a calibration, from the simulation none; nothing refused is kept.
+#[test]
+fn the_camera_flag_is_checked_as_its_key() {
+    let mut s = parse("").unwrap();
+    s.set_camera_backend("images").unwrap();
+    assert_eq!(s.camera.backend, "images");
+    s.set_camera_backend("sim").unwrap();
+    let e = s.set_camera_backend("webcam").unwrap_err().to_string();
+    assert!(e.starts_with("--camera: unknown camera backend `webcam`"), "{e}");
+    let mut dir = parse("[camera]\nsource = \"dir:/tmp/frames\"\n").unwrap();
+    let e = dir.set_camera_backend("images").unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "--camera: frames from `dir:/tmp/frames` need a calibration: set camera.calibration \
+         (docs/vision.md)"
+    );
+    assert_eq!(dir.camera.backend, "sim", "nothing refused is kept");
+    // The simulated camera with a folder's source: no calibration needed for `sim`.
+    dir.set_camera_backend("sim").unwrap();
+    let mut calibrated =
+        parse("[camera]\nsource = \"v4l2:/dev/video0\"\ncalibration = \"cal.toml\"\n").unwrap();
+    calibrated.set_camera_backend("images").unwrap();
+    assert_eq!(calibrated.camera.backend, "images");
+}
+
 /// `conveyor`'s flags are checked as the file's keys are, each error naming its flag.
 #[test]
 fn the_conveyor_flags_are_checked_as_their_keys() {
