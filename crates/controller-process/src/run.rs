@@ -7,7 +7,6 @@
 //! happen only here, after the loop.
 
 use qmarc_config::{Mode, RunSpec, Settings};
-use qmarc_controller::fault::Fault;
 use qmarc_controller::link::{HwLink, IoxLink, LinkConnectError, LinkTimeouts};
 use qmarc_controller::plan::{MoveLimits, MovePlan};
 use qmarc_controller::record::MoveRecord;
@@ -19,7 +18,7 @@ use qmarc_plugins::source::TrajBuildError;
 use qmarc_proto::progress::Progress;
 use qmarc_proto::service::IpcLocation;
 use qmarc_proto::state::FaultKind;
-use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType, Status};
+use qmarc_proto::{HwMsg, MAX_MOTORS, MotorFlags, MsgType};
 use qmarc_report::Summary;
 use qmarc_report::output::WriteError;
 use qmarc_report::summarize::summarize;
@@ -395,7 +394,6 @@ fn spawn_servo(
         prefault_stack_bytes: 128 * 1024,
         cpu: settings.timer.servo_cpu,
     };
-    let n_motors = settings.n_motors;
     let spinning_server = settings.hwserver.wait == qmarc_config::HwWait::Spin;
     qmarc_timer::rt::spawn("qmarc-servo", req, move |rt: RtStatus| {
         let _dma = DmaLatencyGuard::request_zero();
@@ -408,14 +406,8 @@ fn spawn_servo(
                 link => link.map_err(|e| unless_stopped(e.into()))?,
             };
             let moved = servo.run(&mut link, ticker.as_mut(), stop);
-            if let (Ok(()), None, Some(home)) = (&moved, servo.fault(), servo.homed_frame()) {
-                let (read, kept) = preset_home(&mut link, &home, n_motors)?;
-                if !kept.is_ok() {
-                    // The frame is set but not kept (or the preset failed): a failed home.
-                    let f = Fault::new(FaultKind::HomingFailed, servo.cycles());
-                    servo.handle_fault(&mut link, Fault { status: kept, ..f });
-                }
-                homed_read = Some(read);
+            if moved.is_ok() {
+                homed_read = servo.preset_home(&mut link);
             }
             // The thesis' last message: the hwserver makes the hardware safe and exits.
             if !server_gone(servo.fault()) {
@@ -426,24 +418,6 @@ fn spawn_servo(
         (servo, rt, result, homed_read)
     })
     .map_err(|e| RunError::Thread(e.to_string()))
-}
-
-/// Homing ends with every motor at its home offset: home reads 0 from now on and the frame is
-/// homed (thesis 3.10.1.1). Each motor's position is preset to where it stands relative to
-/// home, so the frame does not depend on how well it settled. Returns the read after it, and
-/// the preset's status (not ok: the frame could not be kept, or the preset failed).
-fn preset_home(
-    link: &mut dyn HwLink,
-    home: &[f64; MAX_MOTORS],
-    n_motors: usize,
-) -> Result<(HwMsg, Status), MoveError> {
-    let now = link.exchange(&HwMsg::read_all_encoders())?;
-    let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS);
-    for ((p, now), home) in preset.data.iter_mut().zip(now.data).zip(home).take(n_motors) {
-        *p = now - home;
-    }
-    let done = link.exchange(&preset)?;
-    Ok((link.exchange(&HwMsg::read_all_encoders())?, done.status()))
 }
 
 /// Homing's part of the summary: where each switch was found and where home is, and what

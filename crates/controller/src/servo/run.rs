@@ -167,3 +167,38 @@ fn stop_arrives(stop: &AtomicBool) -> Option<i32> {
     }
     stop.load(Ordering::Relaxed).then(|| qmarc_timer::stop::signal().unwrap_or(0))
 }
+
+impl Servo {
+    /// Homing's last step (thesis 3.10.1.1), after a move that defines a homed frame ended
+    /// without a fault: each motor's counter is preset to where it stands relative to home,
+    /// so home reads 0 from now on whatever the settle left. Returns the read right after the
+    /// preset (`None` without one). A preset the hwserver refused is a failed home, one it
+    /// did not answer the hwserver lost: either is the move's fault, every motor disabled —
+    /// the move's results are still written, as after any fault.
+    pub fn preset_home(&mut self, link: &mut dyn HwLink) -> Option<HwMsg> {
+        let home = self.homed_frame().filter(|_| self.m.fault.is_none())?;
+        let n = self.plan.n_motors;
+        let mut preset_all = || {
+            let now = link.exchange(&HwMsg::read_all_encoders())?;
+            let mut preset = HwMsg::for_motor(MsgType::ResetEncoderZero, HwMsg::ALL_MOTORS);
+            for ((p, now), home) in preset.data.iter_mut().zip(now.data).zip(home).take(n) {
+                *p = now - home;
+            }
+            let done = link.exchange(&preset)?;
+            Ok::<_, crate::link::LinkError>((link.exchange(&HwMsg::read_all_encoders())?, done))
+        };
+        let cycle = self.cycles();
+        match preset_all() {
+            Ok((read, done)) if done.status().is_ok() => Some(read),
+            Ok((read, done)) => {
+                let f = Fault::new(FaultKind::HomingFailed, cycle);
+                self.handle_fault(link, Fault { status: done.status(), ..f });
+                Some(read)
+            }
+            Err(e) => {
+                self.handle_fault(link, Fault::from_link(e, cycle));
+                None
+            }
+        }
+    }
+}
