@@ -20,6 +20,7 @@
 //! ```
 #![deny(missing_docs)]
 
+mod cell;
 mod check;
 mod conveyor;
 mod error;
@@ -43,6 +44,7 @@ mod timer;
 mod trajectory;
 mod tune;
 
+pub use cell::{CellSettings, MAX_CELL_NAME, MAX_HANDOFF_MM, cell_name_problem};
 pub use check::{CheckSettings, MAX_CHECK_PULSE_S, MAX_CHECK_VOLTS};
 pub use conveyor::{
     CAMERA_BACKENDS, CameraSettings, ConveyorSettings, FrameSource, ImageSettings, MAX_BELT_MM,
@@ -164,6 +166,9 @@ pub struct Settings {
     /// `[camera]`: the camera upstream of the robot, and the parts it sees.
     #[serde(default)]
     pub camera: CameraSettings,
+    /// `[cell]`: the robot in a cell of robots on one belt.
+    #[serde(default)]
+    pub cell: CellSettings,
     /// Gains of every `[[motor]]` table (at least `n_motors`, at most [`MAX_MOTORS`]).
     pub motors: Vec<MotorGains>,
     /// Limits and homing of every `[[motor]]` table.
@@ -209,6 +214,8 @@ struct RawFile {
     conveyor: conveyor::RawConveyor,
     #[serde(default)]
     camera: conveyor::RawCamera,
+    #[serde(default)]
+    cell: cell::RawCell,
     #[serde(default)]
     robot: Option<Spanned<robot::RawRobot>>,
     #[serde(default)]
@@ -289,6 +296,7 @@ impl RawFile {
         let telemetry = self.telemetry.check(src)?;
         let conveyor = self.conveyor.check(src, &s626.counter_channels)?;
         let camera = self.camera.check(src, &conveyor)?;
+        let cell = self.cell.check(src)?;
         let longest: f64 = safety.iter().map(|s| homing.longest_s(s.home_offset_counts)).sum();
         if longest > trajectory.max_duration_s {
             return Err(src.invalid(
@@ -333,6 +341,7 @@ impl RawFile {
             telemetry,
             conveyor,
             camera,
+            cell,
             motors,
             safety,
         })
@@ -387,53 +396,6 @@ impl Settings {
     /// Encoder counts per radian of arm rotation: counts_per_rev · gear_ratio / 2π.
     pub fn counts_per_rad(&self) -> f64 {
         self.counts_per_rev * self.gear_ratio / std::f64::consts::TAU
-    }
-
-    /// What the 626's wiring lacks for the motors in use, when it is the backend.
-    fn check_s626_wiring(&self, flag: &'static str) -> Result<(), ConfigLoadError> {
-        match self.s626.wiring_problem(self.n_motors) {
-            Some((key, message)) if self.hwserver.backend == BackendKind::S626 => {
-                Err(ConfigLoadError::Override {
-                    flag,
-                    message: format!("s626.{key} in {}: {message}", self.source.display()),
-                })
-            }
-            _ => Ok(()),
-        }
-    }
-
-    /// Why the settings' counts are not the 626's, if they are not: every count-valued
-    /// setting (limits, offsets, distances, speeds, steps) and Kp means something else
-    /// on a card that counts `[s626] counts_per_rev` — 4× too far, 4× too weak for the
-    /// thesis' encoders. Nothing is rescaled silently: a file for the card says its counts.
-    /// The 626 backend refuses to move with such settings (its selftest, which moves
-    /// nothing, does not mind).
-    pub fn s626_counts_problem(&self) -> Option<String> {
-        (self.counts_per_rev != self.s626.counts_per_rev).then(|| {
-            format!(
-                "{}: general.counts_per_rev = {} counts per revolution, but the 626 counts {} \
-                 ([s626] counts_per_rev): this file's limits, offsets, distances and gains are \
-                 in other counts than the card's — use a settings file written for the 626 \
-                 (config/s626.toml), or give general.counts_per_rev = {} and every count in \
-                 the card's counts (docs/hardware.md)",
-                self.source.display(),
-                self.counts_per_rev,
-                self.s626.counts_per_rev,
-                self.s626.counts_per_rev
-            )
-        })
-    }
-
-    /// Overrides the 626's device (`--device`).
-    pub fn set_device(&mut self, device: &Path) -> Result<(), ConfigLoadError> {
-        if device.as_os_str().is_empty() {
-            return Err(ConfigLoadError::Override {
-                flag: "--device",
-                message: "must not be empty".into(),
-            });
-        }
-        self.s626.device = device.to_path_buf();
-        Ok(())
     }
 
     /// Overrides the servo period (`--period-us`).

@@ -2,11 +2,11 @@
 //! device, how it is wired to the amplifiers and switches (thesis Table A-5), its polarities
 //! and its counting (`docs/hardware.md`).
 
-use crate::ConfigLoadError;
 use crate::source::{S, Source, positive, span_of};
+use crate::{BackendKind, ConfigLoadError};
 use qmarc_proto::MAX_MOTORS;
 use serde::{Deserialize, Serialize};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// DIO channels of a bank of the 626 (bank 0 = comedi subdevice 2).
 pub const S626_DIO_CHANNELS: u32 = 16;
@@ -359,5 +359,55 @@ impl S626Settings {
             }
         }
         None
+    }
+}
+
+/// The settings' checks and overrides that concern the 626.
+impl crate::Settings {
+    /// What the 626's wiring lacks for the motors in use, when it is the backend.
+    pub(crate) fn check_s626_wiring(&self, flag: &'static str) -> Result<(), ConfigLoadError> {
+        match self.s626.wiring_problem(self.n_motors) {
+            Some((key, message)) if self.hwserver.backend == BackendKind::S626 => {
+                Err(ConfigLoadError::Override {
+                    flag,
+                    message: format!("s626.{key} in {}: {message}", self.source.display()),
+                })
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Why the settings' counts are not the 626's, if they are not: every count-valued
+    /// setting (limits, offsets, distances, speeds, steps) and Kp means something else
+    /// on a card that counts `[s626] counts_per_rev` — 4× too far, 4× too weak for the
+    /// thesis' encoders. Nothing is rescaled silently: a file for the card says its counts.
+    /// The 626 backend refuses to move with such settings (its selftest, which moves
+    /// nothing, does not mind).
+    pub fn s626_counts_problem(&self) -> Option<String> {
+        (self.counts_per_rev != self.s626.counts_per_rev).then(|| {
+            format!(
+                "{}: general.counts_per_rev = {} counts per revolution, but the 626 counts {} \
+                 ([s626] counts_per_rev): this file's limits, offsets, distances and gains are \
+                 in other counts than the card's — use a settings file written for the 626 \
+                 (config/s626.toml), or give general.counts_per_rev = {} and every count in \
+                 the card's counts (docs/hardware.md)",
+                self.source.display(),
+                self.counts_per_rev,
+                self.s626.counts_per_rev,
+                self.s626.counts_per_rev
+            )
+        })
+    }
+
+    /// Overrides the 626's device (`--device`).
+    pub fn set_device(&mut self, device: &Path) -> Result<(), ConfigLoadError> {
+        if device.as_os_str().is_empty() {
+            return Err(ConfigLoadError::Override {
+                flag: "--device",
+                message: "must not be empty".into(),
+            });
+        }
+        self.s626.device = device.to_path_buf();
+        Ok(())
     }
 }

@@ -90,7 +90,7 @@ fn errors_name_file_line_column_and_field() {
     );
     check(
         "[bogus]\nx = 1\n",
-        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `jog`, `pick`, `check`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `conveyor`, `camera`, `robot`, `motor`",
+        "q.toml:1:2: bogus: unknown field `bogus`, expected one of `general`, `timer`, `gather`, `step`, `jog`, `pick`, `check`, `trajectory`, `homing`, `safety`, `hwserver`, `sim`, `s626`, `tune`, `telemetry`, `conveyor`, `camera`, `cell`, `robot`, `motor`",
     );
     check(
         "[trajectory]\nmethod = \"home\"\n",

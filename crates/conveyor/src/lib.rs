@@ -16,6 +16,7 @@
 #![deny(missing_docs)]
 
 mod belt;
+pub mod cell;
 pub mod world;
 pub use belt::BeltMotion;
 
@@ -58,16 +59,37 @@ pub enum PartState {
     Picked,
     /// Left the window unpicked (or could not be reached inside it).
     Missed,
+    /// Another robot of the cell's (issue 47): claimed or picked by it, or handed on past
+    /// this robot's window to the robots downstream.
+    Elsewhere,
+}
+
+/// What [`PartQueue::claim_next_by`] is told of a pending part.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Take {
+    /// Claim it.
+    Claim,
+    /// It cannot be picked inside the window: inside the window, it is missed.
+    OutOfReach,
+    /// Not this robot's to take now (another's share in a cell): left as it is.
+    Leave,
 }
 
 impl PartState {
-    /// Its name in `parts.csv`: `pending`, `picked` or `missed` (a claimed part is pending).
+    /// Its name in `parts.csv`: `pending`, `picked`, `missed` or `passed` (a claimed part
+    /// is pending; another robot's in a cell, passed).
     pub fn name(self) -> &'static str {
         match self {
             PartState::Pending | PartState::Claimed => "pending",
             PartState::Picked => "picked",
             PartState::Missed => "missed",
+            PartState::Elsewhere => "passed",
         }
+    }
+
+    /// Done with here: picked, missed, or another's.
+    pub fn done(self) -> bool {
+        matches!(self, PartState::Picked | PartState::Missed | PartState::Elsewhere)
     }
 }
 
@@ -133,17 +155,32 @@ impl PartQueue {
         if known {
             return None;
         }
+        let id = self.next_id;
+        self.add(id, d).then(|| {
+            self.next_id += 1;
+            id
+        })
+    }
+
+    /// A part another process numbered (a cell's camera, which merged its frames): false
+    /// when the queue holds `id` already, the numbers are not finite, or the queue is full of
+    /// parts not done.
+    pub fn insert(&mut self, id: u32, d: Detection) -> bool {
+        let finite = d.belt_mm.is_finite() && d.across_mm.is_finite();
+        finite && self.part(id).is_none() && self.add(id, d)
+    }
+
+    /// Adds part `id`, making room if the queue is full: false if it is full of parts not
+    /// done.
+    fn add(&mut self, id: u32, seen: Detection) -> bool {
         if self.parts.len() == self.capacity {
-            let done = self
-                .parts
-                .iter()
-                .position(|p| matches!(p.state, PartState::Picked | PartState::Missed))?;
+            let Some(done) = self.parts.iter().position(|p| p.state.done()) else {
+                return false;
+            };
             self.parts.remove(done);
         }
-        let id = self.next_id;
-        self.next_id += 1;
-        self.parts.push(Part { id, seen: d, state: PartState::Pending });
-        Some(id)
+        self.parts.push(Part { id, seen, state: PartState::Pending });
+        true
     }
 
     /// Claims the part to pick next at encoder count `now`: the most downstream pending part
@@ -157,6 +194,22 @@ impl PartQueue {
         mut reachable: impl FnMut(&Part, f64) -> bool,
     ) -> Option<u32> {
         self.sweep(now, belt);
+        self.claim_next_by(
+            now,
+            belt,
+            |p, at| if reachable(p, at) { Take::Claim } else { Take::OutOfReach },
+        )
+    }
+
+    /// [`PartQueue::claim_next`] told by `take` what to do with each pending part, downstream
+    /// first: claim it, miss it (out of reach inside the window), or leave it (another
+    /// robot's share). Sweeps nothing: the caller has.
+    pub fn claim_next_by(
+        &mut self,
+        now: i64,
+        belt: &Belt,
+        mut take: impl FnMut(&Part, f64) -> Take,
+    ) -> Option<u32> {
         // Downstream first — the part nearest the window's end is the one about to be lost —
         // without sorting into a new list: each pass takes the most downstream pending part
         // upstream of the last one looked at (ties: the one seen first).
@@ -172,13 +225,16 @@ impl PartQueue {
                 })?;
             let at = self.parts[next].belt_mm(now, belt);
             after = Some(key(&self.parts[next]));
-            if reachable(&self.parts[next], at) {
-                self.parts[next].state = PartState::Claimed;
-                return Some(self.parts[next].id);
-            }
-            // Inside the window and out of reach: it will not come back.
-            if at >= self.window_mm[0] {
-                self.parts[next].state = PartState::Missed;
+            match take(&self.parts[next], at) {
+                Take::Claim => {
+                    self.parts[next].state = PartState::Claimed;
+                    return Some(self.parts[next].id);
+                }
+                // Inside the window and out of reach: it will not come back.
+                Take::OutOfReach if at >= self.window_mm[0] => {
+                    self.parts[next].state = PartState::Missed;
+                }
+                Take::OutOfReach | Take::Leave => {}
             }
         }
     }
@@ -186,55 +242,79 @@ impl PartQueue {
     /// Every part not done that the belt has carried past the window's end at `now` is
     /// missed (a claimed one too: the pick did not happen inside the window).
     pub fn sweep(&mut self, now: i64, belt: &Belt) {
+        self.sweep_by(now, belt, |_| PartState::Missed);
+    }
+
+    /// [`PartQueue::sweep`] with the fate of each part past the window's end told by
+    /// `fate` (in a cell: missed, or handed on to the robots downstream).
+    pub fn sweep_by(&mut self, now: i64, belt: &Belt, mut fate: impl FnMut(&Part) -> PartState) {
         let end = self.window_mm[1];
         for p in &mut self.parts {
             if matches!(p.state, PartState::Pending | PartState::Claimed)
                 && p.belt_mm(now, belt) > end
             {
-                p.state = PartState::Missed;
+                p.state = fate(p);
             }
+        }
+    }
+
+    /// Part `id`, pending, is another robot's (its claim was seen): false if it was not
+    /// pending here.
+    pub fn elsewhere(&mut self, id: u32) -> bool {
+        self.set(id, PartState::Pending, PartState::Elsewhere)
+    }
+
+    /// Part `id`, another's, is pending again (its claimant was lost before it gripped):
+    /// false if it was not another's.
+    pub fn release(&mut self, id: u32) -> bool {
+        self.set(id, PartState::Elsewhere, PartState::Pending)
+    }
+
+    /// Part `id` goes from `from` to `to`; false if it was not in `from`.
+    fn set(&mut self, id: u32, from: PartState, to: PartState) -> bool {
+        match self.parts.iter_mut().find(|p| p.id == id && p.state == from) {
+            Some(p) => {
+                p.state = to;
+                true
+            }
+            None => false,
         }
     }
 
     /// Part `id` was picked and placed. False if it was not the claimed one (never picked
     /// twice).
     pub fn picked(&mut self, id: u32) -> bool {
-        match self.parts.iter_mut().find(|p| p.id == id && p.state == PartState::Claimed) {
-            Some(p) => {
-                p.state = PartState::Picked;
-                true
-            }
-            None => false,
-        }
+        self.set(id, PartState::Claimed, PartState::Picked)
     }
 
     /// Part `id`, claimed, cannot be picked after all (its pick was given up): missed. False
     /// if it was not the claimed one.
     pub fn missed(&mut self, id: u32) -> bool {
-        match self.parts.iter_mut().find(|p| p.id == id && p.state == PartState::Claimed) {
-            Some(p) => {
-                p.state = PartState::Missed;
-                true
-            }
-            None => false,
-        }
+        self.set(id, PartState::Claimed, PartState::Missed)
+    }
+
+    /// Part `id`, claimed, is given back (its pick was given up in a cell): pending again,
+    /// for the robots downstream. False if it was not the claimed one.
+    pub fn unclaim(&mut self, id: u32) -> bool {
+        self.set(id, PartState::Claimed, PartState::Pending)
     }
 
     /// Parts picked and missed so far.
     pub fn counts(&self) -> (usize, usize) {
-        let [_, _, picked, missed] = self.tally();
+        let [_, _, picked, missed, _] = self.tally();
         (picked, missed)
     }
 
-    /// Parts by state: pending, claimed, picked, missed.
-    pub fn tally(&self) -> [usize; 4] {
-        let mut n = [0; 4];
+    /// Parts by state: pending, claimed, picked, missed, another's.
+    pub fn tally(&self) -> [usize; 5] {
+        let mut n = [0; 5];
         for p in &self.parts {
             n[match p.state {
                 PartState::Pending => 0,
                 PartState::Claimed => 1,
                 PartState::Picked => 2,
                 PartState::Missed => 3,
+                PartState::Elsewhere => 4,
             }] += 1;
         }
         n

@@ -59,11 +59,11 @@ fn the_most_downstream_reachable_part_is_claimed_once() {
     assert_eq!(q.part(c).unwrap().state, PartState::Missed);
     assert_eq!(q.counts(), (1, 1));
     // Pending, claimed, picked, missed: a (claimed), b, c.
-    assert_eq!(q.tally(), [0, 1, 1, 1]);
+    assert_eq!(q.tally(), [0, 1, 1, 1, 0]);
     let d = q.detect(seen(0, 10.0, 0.0), &BELT).unwrap();
-    assert_eq!(q.tally(), [1, 1, 1, 1]);
+    assert_eq!(q.tally(), [1, 1, 1, 1, 0]);
     assert!(q.picked(a) && q.part(d).is_some());
-    assert_eq!(q.tally(), [1, 0, 2, 1]);
+    assert_eq!(q.tally(), [1, 0, 2, 1, 0]);
 }
 
 /// A part the robot cannot reach inside the window is missed, never chased; one not yet in
@@ -126,4 +126,41 @@ fn an_unreachable_part_does_not_hide_the_next_and_a_tie_goes_to_the_first_seen()
     let second = level.detect(seen(0, 350.0, 20.0), &BELT).unwrap();
     assert_eq!(level.claim_next(0, &BELT, |_, _| true), Some(first));
     assert_eq!(level.claim_next(0, &BELT, |_, _| true), Some(second));
+}
+
+/// In a cell the camera numbers the parts: the queue takes its numbers, each once; a part
+/// left to another robot is neither claimed nor missed here, another's claim makes it
+/// passed, a released one is pending again, and one past the window goes where it is told.
+#[test]
+fn a_cells_parts_keep_the_cameras_numbers_and_another_robots_are_left() {
+    let mut q = PartQueue::new([300.0, 500.0], 2.0, 8);
+    assert!(q.insert(41, seen(0, 400.0, 0.0)));
+    assert!(q.insert(42, seen(0, 450.0, 0.0)));
+    assert!(q.insert(43, seen(0, 350.0, 0.0)));
+    assert!(!q.insert(42, seen(0, 100.0, 0.0)), "known already");
+    assert!(!q.insert(44, seen(0, f64::NAN, 0.0)), "not a detection");
+    // 42 is another's to take: left as it is, not missed; 41 out of reach: missed.
+    let claimed = q.claim_next_by(0, &BELT, |p, _| match p.id {
+        42 => Take::Leave,
+        41 => Take::OutOfReach,
+        _ => Take::Claim,
+    });
+    assert_eq!(claimed, Some(43));
+    assert_eq!(q.part(42).unwrap().state, PartState::Pending);
+    assert_eq!(q.part(41).unwrap().state, PartState::Missed);
+    // Another robot claimed 42: passed here; released when its claimant was lost.
+    assert!(q.elsewhere(42));
+    assert!(!q.elsewhere(42));
+    assert_eq!(q.part(42).unwrap().state.name(), "passed");
+    assert!(q.release(42));
+    assert!(!q.release(42), "pending already");
+    // 43 given back (its pick given up): pending for the robots downstream.
+    assert!(q.unclaim(43));
+    assert!(!q.unclaim(43));
+    // Past the window (+200 mm: 4000 counts), each goes where it is told.
+    q.sweep_by(4_000, &BELT, |p| if p.id == 42 { PartState::Elsewhere } else { PartState::Missed });
+    assert_eq!(q.part(42).unwrap().state, PartState::Elsewhere);
+    assert_eq!(q.part(43).unwrap().state, PartState::Missed);
+    assert_eq!(q.tally(), [0, 0, 0, 2, 1]);
+    assert!(q.parts().iter().all(|p| p.state.done()));
 }

@@ -1,4 +1,4 @@
-//! `[conveyor]` and `[camera]`: the belt's frame, the shipped belt within the robot's reach,
+//! `[conveyor]`, `[camera]` and `[cell]`: the belt's frame, the shipped belt within the robot's reach,
 //! and every bad value named by file, line, column and field.
 
 use crate::{ConfigLoadError, ConveyorSettings, Names, Settings};
@@ -249,4 +249,56 @@ fn the_conveyor_flags_are_checked_as_their_keys() {
     s.set_conveyor_seconds(0.1).unwrap();
     let shipped = parse("[conveyor]\nrun_s = 0.05\n").map(drop).unwrap_err().to_string();
     assert!(shipped.contains("conveyor.run_s"), "{shipped}");
+}
+
+/// `[cell]`: the robot's name a chunk of a Zenoh key, its place along the cell's belt and
+/// the hand-off bounded; `--cell` and `--zenoh-config` checked as the keys are.
+#[test]
+fn a_robots_place_in_a_cell_is_checked() {
+    let d = parse("").unwrap();
+    assert_eq!(d.cell, crate::CellSettings::default());
+    assert_eq!(
+        (d.cell.robot.as_str(), d.cell.handoff_mm, d.cell.name.as_ref()),
+        ("deltabot", 50.0, None)
+    );
+    let s = parse("[cell]\nrobot = \"east-2\"\nbelt_offset_mm = 1200.0\nhandoff_mm = 0\n").unwrap();
+    assert_eq!(
+        (s.cell.robot.as_str(), s.cell.belt_offset_mm, s.cell.handoff_mm),
+        ("east-2", 1200.0, 0.0)
+    );
+    for (text, said) in [
+        (
+            "[cell]\nrobot = \"a/b\"\n",
+            "q.toml:2:9: cell.robot: must be 1‥31 letters, digits, `-` or `_`, found \"a/b\"",
+        ),
+        ("[cell]\nrobot = \"\"\n", "cell.robot: must be 1‥31"),
+        (
+            "[cell]\nbelt_offset_mm = 1e6\n",
+            "q.toml:2:18: cell.belt_offset_mm: must be within ±100000 mm, found 1000000",
+        ),
+        ("[cell]\nhandoff_mm = -1.0\n", "cell.handoff_mm: must be 0‥1000 mm, found -1"),
+        ("[cell]\nhandoff_mm = 1000.5\n", "cell.handoff_mm: must be 0‥1000 mm"),
+        ("[cell]\nlease_ms = 5\n", "unknown field `lease_ms`"),
+    ] {
+        let e = refused(text);
+        assert!(e.contains(said), "{text}: {e}");
+    }
+    let mut s = parse("").unwrap();
+    let e = s.set_cell("x".repeat(32).as_str(), None).unwrap_err().to_string();
+    assert!(e.starts_with("--cell: must be 1‥31 letters"), "{e}");
+    let e = s.set_cell("belt-1", Some(Path::new("/nonexistent/z.json5"))).unwrap_err().to_string();
+    assert_eq!(e, "--zenoh-config: /nonexistent/z.json5 is not a file");
+    assert_eq!(s.cell.name, None, "nothing refused is kept");
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("Cargo.toml");
+    s.set_cell("belt-1", Some(&file)).unwrap();
+    assert_eq!(
+        (s.cell.name.as_deref(), s.cell.zenoh_config.as_deref()),
+        (Some("belt-1"), Some(file.as_path()))
+    );
+    // The shipped file's table reads as the defaults.
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/qmarc.toml");
+    assert_eq!(
+        Settings::load(&shipped, &Names::any()).unwrap().cell,
+        crate::CellSettings::default()
+    );
 }

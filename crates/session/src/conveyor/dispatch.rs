@@ -332,11 +332,11 @@ impl Dispatch {
 
     /// Says the belt (at `now` counts) and the queue to the command thread.
     fn tell(&self, now: i64) {
-        let [pending, claimed, picked, missed] = self.queue.tally();
+        let [pending, claimed, picked, missed, elsewhere] = self.queue.tally();
         let count = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
         self.handle.tally.set(&crate::wire::ConveyorStatus {
             active: 1,
-            seen: count(pending + claimed + picked + missed),
+            seen: count(pending + claimed + picked + missed + elsewhere),
             queued: count(pending),
             picked: count(picked),
             missed: count(missed),
