@@ -7,7 +7,9 @@
 use qmarc_config::Settings;
 use qmarc_controller::gather::{Gather, GatherRow};
 use qmarc_foxglove::recording::Part;
-use qmarc_report::summary::{ConveyorLatency, ConveyorSummary, ErrorFigures, Latencies};
+use qmarc_report::summary::{
+    CellSummary, ConveyorLatency, ConveyorSummary, ErrorFigures, Latencies,
+};
 use qmarc_session::conveyor::BeltFrame;
 use qmarc_session::conveyor::dispatch::{Dispatched, PartRecord};
 use std::fmt::Write;
@@ -15,6 +17,9 @@ use std::fmt::Write;
 /// `parts.csv`'s header.
 pub const PARTS_HEADER: &str =
     "id,t_seen_s,latched_counts,belt_mm,across_mm,state,grip_cycle,place_cycle,error_mm";
+
+/// `parts.csv`'s last column in a cell: the robot that picked the part (empty: none did).
+pub const CELL_COLUMN: &str = "by";
 
 /// The gathered row of `cycle`, or the first after it (gathering every N-th cycle).
 fn row(rows: &[GatherRow], cycle: u64) -> Option<&GatherRow> {
@@ -38,16 +43,19 @@ fn latency(parts: &[PartRecord]) -> Option<ConveyorLatency> {
     })
 }
 
-/// `parts.csv`, the summary's section and the parts as gather.mcap draws them, of the session
-/// whose dispatcher saw `d` and whose loop gathered `gather` (in order), with the settings `s`.
-pub fn results(
-    d: &Dispatched,
-    gather: &Gather,
-    s: &Settings,
-) -> (String, ConveyorSummary, Vec<Part>) {
+/// What a conveyor session's results are made of: `parts.csv`, the summary's sections (a
+/// cell's too) and the parts as gather.mcap draws them.
+pub type Results = (String, ConveyorSummary, Option<CellSummary>, Vec<Part>);
+
+/// The results of the session whose dispatcher saw `d` and whose loop gathered `gather` (in
+/// order), with the settings `s`. In a cell `parts.csv` has a last column, [`CELL_COLUMN`].
+pub fn results(d: &Dispatched, gather: &Gather, s: &Settings) -> Results {
     let rows = gather.rows();
     let frame = BeltFrame::of(s);
     let mut csv = String::from(PARTS_HEADER);
+    if d.cell.is_some() {
+        csv = format!("{csv},{CELL_COLUMN}");
+    }
     csv.push('\n');
     let (mut grip, mut closing) = (Vec::new(), 0.0f64);
     let mut drawn = Vec::with_capacity(d.parts.len());
@@ -67,7 +75,7 @@ pub fn results(
             }
         }
         let cycle = |c: Option<u64>| c.map_or(-1, |c| c as i64);
-        let _ = writeln!(
+        let _ = write!(
             csv,
             "{},{},{},{},{},{},{},{},{}",
             p.id,
@@ -80,6 +88,10 @@ pub fn results(
             cycle(p.place_cycle),
             error.map_or("nan".to_string(), |e| e.to_string()),
         );
+        if d.cell.is_some() {
+            let _ = write!(csv, ",{}", p.by.as_deref().unwrap_or(""));
+        }
+        csv.push('\n');
         drawn.push(Part {
             id: p.id,
             belt_mm: p.belt_mm,
@@ -107,5 +119,12 @@ pub fn results(
         detections: d.detections,
         latency_ms: latency(&d.parts),
     };
-    (csv, summary, drawn)
+    let cell = d.cell.as_ref().map(|c| CellSummary {
+        name: c.name.clone(),
+        robot: c.robot.clone(),
+        picked,
+        passed: count("passed"),
+        missed: count("missed"),
+    });
+    (csv, summary, cell, drawn)
 }

@@ -216,8 +216,9 @@ fn write_results(
 ) -> Result<(), WriteError> {
     let (extra, parts) = match dispatched {
         Some(d) => {
-            let (csv, section, parts) = crate::conveyor::results(d, &record.gather, settings);
+            let (csv, section, cell, parts) = crate::conveyor::results(d, &record.gather, settings);
             summary.conveyor = Some(section);
+            summary.cell = cell;
             (vec![("parts.csv", csv)], parts)
         }
         None => (Vec::new(), Vec::new()),

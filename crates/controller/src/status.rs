@@ -113,9 +113,10 @@ impl LoopStatus {
         }
     }
 
-    /// Sample `n`'s belt counts, read when the tick at `woke_ns` woke the loop.
+    /// Sample `n`'s belt counts, read when the tick at `woke_ns` woke the loop. The loop's
+    /// (as are the other setters; public for a test that stands in for the loop).
     #[inline]
-    pub(crate) fn set_belt(&self, counts: i64, woke_ns: u64, n: u64) {
+    pub fn set_belt(&self, counts: i64, woke_ns: u64, n: u64) {
         let seq = self.belt_seq.load(Ordering::Relaxed);
         self.belt_seq.store(seq + 1, Ordering::Release);
         self.belt_counts.store(counts, Ordering::Release);
@@ -124,7 +125,8 @@ impl LoopStatus {
         self.belt_seq.store(seq + 2, Ordering::Release);
     }
 
-    pub(crate) fn set_phase(&self, phase: Phase) {
+    /// The loop's phase.
+    pub fn set_phase(&self, phase: Phase) {
         self.phase.store(phase.wire(), Ordering::Release);
     }
 
@@ -133,8 +135,9 @@ impl LoopStatus {
         self.cycles.store(cycles, Ordering::Release);
     }
 
+    /// The cycle's command.
     #[inline]
-    pub(crate) fn set_command(&self, cmd: &[f64; MAX_MOTORS]) {
+    pub fn set_command(&self, cmd: &[f64; MAX_MOTORS]) {
         store(&self.command, cmd);
     }
 

@@ -125,7 +125,8 @@ impl Cell {
     /// robot downstream can still reach it (it is handed on, not missed).
     pub fn handed_on(&self, at_mm: f64) -> bool {
         let mine = self.me().reach_mm()[1];
-        self.members.iter().any(|m| m.reach_mm()[1] > mine && m.reach_mm()[1] > at_mm)
+        // A window includes its end (the queue misses a part only past it).
+        self.members.iter().any(|m| m.reach_mm()[1] > mine && m.reach_mm()[1] >= at_mm)
     }
 }
 

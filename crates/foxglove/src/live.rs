@@ -21,6 +21,7 @@ use qmarc_proto::state::{FaultKind, Phase};
 use qmarc_proto::telemetry::TelemetrySample;
 use qmarc_proto::{Gripper, MAX_MOTORS};
 use qmarc_telemetry::reader::TelemetryReader;
+use qmarc_timer::clock::realtime_now_ns;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -117,7 +118,7 @@ fn serve(
                     let n = s.n_motors;
                     let ch = Channels::new(ctx, &qmarc_report::files::columns_of(fields, n))?;
                     let said = format!("live view of {}: {} motors", opts.spec.mode, n);
-                    ch.say(wall_now(), Level::Info, &said);
+                    ch.say(realtime_now_ns(), Level::Info, &said);
                     view.insert((ch, RowPublisher::new(s, fields, n)))
                 }
             };
@@ -149,13 +150,13 @@ fn serve(
             }
         }
         if let Some((ch, _)) = &view
-            && let (Some(c), Some(b)) = (watch.poll(ch, wall_now()), belt.as_mut())
+            && let (Some(c), Some(b)) = (watch.poll(ch, realtime_now_ns()), belt.as_mut())
         {
             b.status(c);
         }
         if reader.end().is_some() {
             if let Some((ch, _)) = &view {
-                ch.say(wall_now(), Level::Info, "the session ended");
+                ch.say(realtime_now_ns(), Level::Info, "the session ended");
             }
             return Ok(());
         }
@@ -206,18 +207,11 @@ fn row_of(s: &TelemetrySample) -> GatherRow {
     }
 }
 
-/// Now on the system clock, ns since the Unix epoch.
-fn wall_now() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
-}
-
 /// When the loop took sample `s`, on the system clock: its tick from the session's tick 0
 /// (its progress page) where the session runs in real time, which a sample less than a second
 /// old says; else (lock-step: simulated time) now.
 fn stamp(progress: Option<&Progress>, s: &TelemetrySample) -> u64 {
-    let now = wall_now();
+    let now = realtime_now_ns();
     let Some(t0) = progress.map(|p| p.read().t0_ns).filter(|&t| t != 0) else { return now };
     let taken = t0.saturating_add(s.time_ns);
     match qmarc_timer::clock::monotonic_now_ns().checked_sub(taken) {

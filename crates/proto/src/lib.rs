@@ -24,6 +24,7 @@
 #![deny(missing_docs)]
 
 pub mod camera;
+pub mod cell;
 pub mod exit;
 pub mod gather_page;
 pub mod link;

@@ -76,6 +76,7 @@ pub fn summarize(
         check: findings::<Vec<MotorCheckReport>>(record, "check")
             .map(|r| r.iter().map(|m| crate::check::MotorCheck::of(settings, m)).collect()),
         conveyor: None,
+        cell: None,
     };
     summary.judge_figures();
     summary

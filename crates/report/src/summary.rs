@@ -331,6 +331,24 @@ pub struct Summary {
     /// `conveyor` only: what became of the parts the camera saw (`parts.csv` row by row).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub conveyor: Option<ConveyorSummary>,
+    /// A conveyor session in a cell (`--cell`): this robot's share of the cell's parts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cell: Option<CellSummary>,
+}
+
+/// A robot's share of its cell's parts (docs/cell.md), as its `parts.csv` has them.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CellSummary {
+    /// The cell's name (`--cell`).
+    pub name: String,
+    /// This robot's (`[cell] robot`).
+    pub robot: String,
+    /// Parts this robot picked.
+    pub picked: usize,
+    /// Parts it saw pass: another robot's, claimed or picked by it or handed on to it.
+    pub passed: usize,
+    /// Parts it missed: it was the last robot that could reach them.
+    pub missed: usize,
 }
 
 /// A conveyor session's parts, as `parts.csv` has them.
@@ -519,6 +537,7 @@ impl Summary {
             homing: None,
             check: None,
             conveyor: None,
+            cell: None,
         }
     }
 }

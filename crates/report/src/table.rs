@@ -191,6 +191,13 @@ fn conveyor_line(t: &mut String, s: &Summary) {
             c.closing_error_max_mm,
         );
     }
+    if let Some(c) = &s.cell {
+        let _ = writeln!(
+            t,
+            "  cell {}, robot {}: {} picked, {} passed to the others, {} missed",
+            c.name, c.robot, c.picked, c.passed, c.missed
+        );
+    }
 }
 
 /// The loop's timing figures.
@@ -376,6 +383,25 @@ mod tests {
         assert_eq!(
             t,
             "  wake latency  142030.25           1\n  x                     2  99999999.5\n"
+        );
+    }
+
+    /// A robot of a cell says its share: picked, passed to the others, missed.
+    #[test]
+    fn a_cell_robot_says_its_share() {
+        let mut s = Summary::controller_lost((Mode::Step, true), 3, 400, 10, "x".into());
+        assert!(!render(&s).contains("cell "));
+        s.cell = Some(crate::summary::CellSummary {
+            name: "belt1".into(),
+            robot: "west".into(),
+            picked: 24,
+            passed: 23,
+            missed: 1,
+        });
+        let t = render(&s);
+        assert!(
+            t.contains("  cell belt1, robot west: 24 picked, 23 passed to the others, 1 missed\n"),
+            "{t}"
         );
     }
 

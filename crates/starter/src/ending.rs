@@ -97,9 +97,7 @@ pub fn conclude(spec: &RunSpec, e: &Ended) -> Option<(Summary, PathBuf)> {
 /// (`CLOCK_MONOTONIC`) where that is a past time of this clock, else as if its last gathered
 /// row were now.
 fn started_wall_ns(t0_ns: Option<u64>, g: &qmarc_controller::gather::Gather) -> u64 {
-    let wall = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64);
+    let wall = qmarc_timer::clock::realtime_now_ns();
     let now = qmarc_timer::clock::monotonic_now_ns();
     let since = match t0_ns.filter(|&t| t > 0 && t <= now) {
         Some(t0) => now - t0,

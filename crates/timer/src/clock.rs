@@ -23,6 +23,25 @@ pub fn monotonic_now_ns() -> u64 {
     ts.tv_sec() as u64 * crate::NS_PER_S + ts.tv_nsec() as u64
 }
 
+/// Reads the system clock (`CLOCK_REALTIME`) in ns since the Unix epoch: the time hosts
+/// share (PTP, NTP), which log files and other programs stamp with.
+#[inline]
+pub fn realtime_now_ns() -> u64 {
+    let ts = nix::time::clock_gettime(nix::time::ClockId::CLOCK_REALTIME)
+        .unwrap_or(nix::sys::time::TimeSpec::new(0, 0));
+    (ts.tv_sec().max(0) as u64) * crate::NS_PER_S + ts.tv_nsec() as u64
+}
+
+/// The system clock minus `CLOCK_MONOTONIC`, ns: a monotonic time plus this is the system
+/// clock's (and a system-clock time minus it, this host's monotonic one). Read between two
+/// monotonic reads, taken at their midpoint.
+pub fn realtime_offset_ns() -> i64 {
+    let before = monotonic_now_ns();
+    let real = realtime_now_ns();
+    let after = monotonic_now_ns();
+    real as i64 - (before / 2 + after / 2) as i64
+}
+
 impl Clock for MonotonicClock {
     #[inline]
     fn now_ns(&self) -> u64 {
@@ -73,6 +92,22 @@ mod tests {
         let b = c.now_ns();
         assert!(b >= a);
         assert!(a > 0);
+    }
+
+    /// The system clock is the Unix epoch's (std's), and the offset turns a monotonic time
+    /// into it: both within the few ms a loaded host takes between two reads.
+    #[test]
+    fn a_monotonic_time_plus_the_offset_is_the_system_clocks() {
+        let std_now =
+            std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos()
+                as i64;
+        let ours = realtime_now_ns() as i64;
+        assert!((ours - std_now).abs() < 50_000_000, "{ours} vs {std_now}");
+        let offset = realtime_offset_ns();
+        let mono = monotonic_now_ns() as i64;
+        let real = realtime_now_ns() as i64;
+        assert!((mono + offset - real).abs() < 50_000_000, "{mono} + {offset} vs {real}");
+        assert!(offset > 1_000_000_000_000_000_000, "after 2001: {offset}");
     }
 
     #[test]

@@ -23,6 +23,12 @@ fn cell_of(me: &str, robots: &[(&str, f64)]) -> Cell {
 #[test]
 fn the_members_are_ordered_downstream_first_and_take_turns() {
     let c = cell_of("a", &[("a", 0.0), ("b", 600.0), ("c", 1_200.0)]);
+    assert_eq!(
+        c.member("b").unwrap().reach_mm(),
+        [900.0, 1_100.0],
+        "its window on the cell's belt"
+    );
+    assert_eq!(c.handoff_mm(), 50.0);
     let names: Vec<&str> = c.members().iter().map(|m| m.name.as_str()).collect();
     assert_eq!(names, ["c", "b", "a"]);
     assert_eq!(c.me().name, "a");
@@ -78,9 +84,12 @@ fn a_part_let_pass_is_handed_on_while_a_robot_downstream_can_reach_it() {
     let (a, b) = (cell_of("a", &robots), cell_of("b", &robots));
     // Past a's window (500) and inside b's (900–1100): handed on. Past b's: missed.
     assert!(a.handed_on(510.0));
-    assert!(a.handed_on(1_099.0));
-    assert!(!a.handed_on(1_101.0));
-    assert!(!b.handed_on(1_101.0), "the last robot misses what it lets pass");
+    assert!(a.handed_on(1_100.0), "a window includes its end");
+    assert!(!a.handed_on(1_100.5));
+    assert!(!b.handed_on(1_000.0), "the last robot misses what it lets pass");
+    // A robot whose window ends where this one's does is not downstream of it.
+    let twins = cell_of("x", &[("x", 0.0), ("y", 0.0)]);
+    assert!(!twins.handed_on(450.0));
 }
 
 #[test]
@@ -119,6 +128,12 @@ fn two_claims_of_one_part_end_as_one_whatever_the_order_seen() {
     tie.claim(8, claim("b", 100, 900));
     assert!(tie.claim(8, claim("a", 100, 900)));
     assert_eq!(tie.claim_of(8).unwrap().robot, "a");
+    // A robot that claims anew (a later grip) holds it still, and a pick is not undone.
+    assert!(one.claim(7, claim("b", 300, 950)));
+    assert_eq!(one.claim_of(7).unwrap().grip_by_ns, 950);
+    one.picked(7, "b", 960);
+    assert!(one.claim(7, claim("b", 400, 990)));
+    assert!(one.claim_of(7).unwrap().picked, "still picked");
     // Picked: its robot's for good.
     let mut done = Ledger::new();
     done.picked(9, "c", 500);
@@ -134,7 +149,9 @@ fn a_lost_robot_releases_only_the_claims_it_could_not_have_gripped() {
     l.claim(3, claim("b", 160, 3_000)); // another robot's
     l.picked(4, "a", 1_200); // off the belt
     l.claim(5, claim("a", 170, 2_500));
+    l.claim(6, claim("a", 180, 2_000)); // to grip as it was seen gone: it may have
     assert_eq!(l.lost("a", 2_000), [2, 5]);
+    assert!(l.claim_of(6).is_some());
     assert!(l.claim_of(2).is_none() && l.claim_of(5).is_none());
     assert_eq!(l.claim_of(1).unwrap().robot, "a", "may have been gripped: kept");
     assert_eq!(l.claim_of(3).unwrap().robot, "b");

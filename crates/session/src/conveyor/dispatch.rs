@@ -5,14 +5,21 @@
 //! picker the next part it can intercept inside the window, and notes what the picker did.
 //! At the end it says what became of every part ([`PartRecord`]).
 
+mod cell;
+pub use cell::CellTally;
+
 use super::picker::{CLOSE_MARGIN_MM, PickerHandle, relative_limits_of};
 use super::{BeltFrame, GaveUp, Pick, PickEvent};
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::{Node, ipc};
 use qmarc_config::Settings;
 use qmarc_controller::status::LoopStatus;
-use qmarc_conveyor::{Belt, Detection, Part, PartQueue};
+use qmarc_conveyor::{Belt, Detection, Part, PartQueue, PartState, Take};
 use qmarc_plugins::motion::{MotionLimits, MotionState, Profile};
 use qmarc_proto::MAX_MOTORS;
 use qmarc_proto::camera::{PartDetection, open_camera_service};
+use qmarc_proto::cell::{CELL_IN, CELL_OUT, CellMsg, open_cell_service};
 use qmarc_proto::service::{IpcLocation, ServiceError, create_node};
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -52,6 +59,8 @@ pub struct PartRecord {
     pub queued_after_ns: Option<u64>,
     /// When it was handed to the loop, ns of `CLOCK_MONOTONIC`.
     pub handed_ns: Option<u64>,
+    /// In a cell: the robot that picked it, if one did.
+    pub by: Option<String>,
     /// From then to the tick of the cycle whose command began its intercept, ns (0 when
     /// that cycle had woken before the hand-over: its command came within its compute).
     pub commanded_after_ns: Option<u64>,
@@ -62,8 +71,10 @@ pub struct PartRecord {
 pub struct Dispatched {
     /// Every part, in the order seen.
     pub parts: Vec<PartRecord>,
-    /// Detections received.
+    /// Detections received (in a cell: parts from the cell's camera).
     pub detections: u64,
+    /// In a cell: which, and what the cell counted.
+    pub cell: Option<CellTally>,
 }
 
 /// The dispatcher thread: it runs from [`Dispatcher::spawn`] until [`Dispatcher::finish`].
@@ -93,6 +104,8 @@ struct Dispatch {
     records: Vec<PartRecord>,
     detections: u64,
     profile: Profile,
+    /// In a cell: the others, the claims, what to tell them.
+    cell: Option<cell::CellSide>,
 }
 
 impl Dispatcher {
@@ -107,31 +120,10 @@ impl Dispatcher {
         handle: PickerHandle,
         status: Arc<LoopStatus>,
     ) -> Result<Dispatcher, ServiceError> {
-        let frame = BeltFrame::of(s).ok_or_else(|| {
-            ServiceError::new("settings", "conveyor", "[robot] describes no Delta")
-        })?;
-        let c = &s.conveyor;
-        let merge_mm = (4.0 * s.camera.noise_mm).max(5.0);
-        let mut d = Dispatch {
-            queue: PartQueue::new(c.window_mm, merge_mm, QUEUE_CAPACITY),
-            belt: Belt { mm_per_count: c.mm_per_count },
-            relative: relative_limits_of(s, &frame),
-            frame,
-            close_s: s.s626.gripper_close_s,
-            period_s: s.period_s(),
-            n_motors: s.n_motors,
-            status,
-            handle,
-            epoch_ns,
-            measure: paced,
-            history: VecDeque::with_capacity(HISTORY),
-            given: None,
-            records: Vec::new(),
-            detections: 0,
-            profile: Profile::new(s.n_motors, [0.0; MAX_MOTORS]),
-        };
+        let mut d = Dispatch::new(s, (epoch_ns, paced), handle, status)?;
         let stop = Arc::new(AtomicBool::new(false));
         let (location, stopping) = (location.clone(), stop.clone());
+        let in_cell = d.cell.is_some();
         let (ready, opened) = std::sync::mpsc::channel();
         let thread = std::thread::Builder::new()
             .name("qmarc-dispatch".into())
@@ -141,13 +133,9 @@ impl Dispatcher {
                         "qmarc-dispatch",
                         &location,
                     )?;
-                    let service = open_camera_service(&node)?;
-                    let subscriber = service.subscriber_builder().create().map_err(|e| {
-                        ServiceError::new("subscriber", qmarc_proto::camera::CAMERA_SERVICE, e)
-                    })?;
-                    Ok((node, subscriber))
+                    Ports::open(node, in_cell)
                 })();
-                let (_node, subscriber) = match ports {
+                let ports = match ports {
                     Ok(p) => {
                         let _ = ready.send(Ok(()));
                         p
@@ -158,13 +146,14 @@ impl Dispatcher {
                     }
                 };
                 while !stopping.load(Ordering::Acquire) {
-                    while let Ok(Some(sample)) = subscriber.receive() {
-                        d.detected(sample.payload());
-                    }
+                    ports.receive(&mut d);
                     d.look();
+                    ports.send(&mut d);
                     std::thread::sleep(POLL);
                 }
+                ports.receive(&mut d);
                 d.look();
+                ports.send(&mut d);
                 d.finish()
             })
             .map_err(|e| ServiceError::new("thread", "qmarc-dispatch", e))?;
@@ -182,6 +171,105 @@ impl Dispatcher {
     pub fn finish(self) -> Dispatched {
         self.stop.store(true, Ordering::Release);
         self.thread.join().unwrap_or_default()
+    }
+}
+
+impl Dispatch {
+    /// The dispatcher's state for the picker behind `handle` in the loop whose status is
+    /// `status` ([`Dispatcher::spawn`]'s arguments); an error when the settings describe no
+    /// robot.
+    fn new(
+        s: &Settings,
+        (epoch_ns, paced): (u64, bool),
+        handle: PickerHandle,
+        status: Arc<LoopStatus>,
+    ) -> Result<Dispatch, ServiceError> {
+        let frame = BeltFrame::of(s).ok_or_else(|| {
+            ServiceError::new("settings", "conveyor", "[robot] describes no Delta")
+        })?;
+        let c = &s.conveyor;
+        let merge_mm = (4.0 * s.camera.noise_mm).max(5.0);
+        Ok(Dispatch {
+            queue: PartQueue::new(c.window_mm, merge_mm, QUEUE_CAPACITY),
+            belt: Belt { mm_per_count: c.mm_per_count },
+            relative: relative_limits_of(s, &frame),
+            frame,
+            close_s: s.s626.gripper_close_s,
+            period_s: s.period_s(),
+            n_motors: s.n_motors,
+            status,
+            handle,
+            epoch_ns,
+            measure: paced,
+            history: VecDeque::with_capacity(HISTORY),
+            given: None,
+            records: Vec::new(),
+            detections: 0,
+            profile: Profile::new(s.n_motors, [0.0; MAX_MOTORS]),
+            cell: cell::CellSide::of(s),
+        })
+    }
+}
+
+/// The dispatcher's iceoryx2 ports: the camera's detections, or in a cell the cell's
+/// messages in and this robot's out.
+enum Ports {
+    Camera {
+        _node: Node<ipc::Service>,
+        detections: Subscriber<ipc::Service, PartDetection, ()>,
+    },
+    Cell {
+        _node: Node<ipc::Service>,
+        from_cell: Subscriber<ipc::Service, CellMsg, ()>,
+        to_cell: Publisher<ipc::Service, CellMsg, ()>,
+    },
+}
+
+impl Ports {
+    /// The ports on `node`: the cell's (`in_cell`) or the camera's.
+    fn open(node: Node<ipc::Service>, in_cell: bool) -> Result<Ports, ServiceError> {
+        if !in_cell {
+            let service = open_camera_service(&node)?;
+            let detections = service.subscriber_builder().create().map_err(|e| {
+                ServiceError::new("subscriber", qmarc_proto::camera::CAMERA_SERVICE, e)
+            })?;
+            return Ok(Ports::Camera { _node: node, detections });
+        }
+        let from_cell = open_cell_service(&node, CELL_IN)?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| ServiceError::new("subscriber", CELL_IN, e))?;
+        let to_cell = open_cell_service(&node, CELL_OUT)?
+            .publisher_builder()
+            .create()
+            .map_err(|e| ServiceError::new("publisher", CELL_OUT, e))?;
+        Ok(Ports::Cell { _node: node, from_cell, to_cell })
+    }
+
+    /// Takes in what has arrived.
+    fn receive(&self, d: &mut Dispatch) {
+        match self {
+            Ports::Camera { detections, .. } => {
+                while let Ok(Some(sample)) = detections.receive() {
+                    d.detected(sample.payload());
+                }
+            }
+            Ports::Cell { from_cell, .. } => {
+                while let Ok(Some(sample)) = from_cell.receive() {
+                    d.cell_message(sample.payload());
+                }
+            }
+        }
+    }
+
+    /// Sends what the dispatcher has to tell the cell (a message that cannot be sent is
+    /// dropped: the cell's companion is gone, and with it the cell).
+    fn send(&self, d: &mut Dispatch) {
+        if let (Ports::Cell { to_cell, .. }, Some(side)) = (self, d.cell.as_mut()) {
+            for m in side.outbox.drain(..) {
+                let _ = to_cell.send_copy(m);
+            }
+        }
     }
 }
 
@@ -227,23 +315,29 @@ impl Dispatch {
             across_mm: d.across_mm,
         };
         if let Some(id) = self.queue.detect(seen, &self.belt) {
-            let queued_after_ns = self
-                .measure
-                .then(|| qmarc_timer::clock::monotonic_now_ns().saturating_sub(d.exposure_ns));
-            self.records.push(PartRecord {
-                id,
-                t_seen_s: d.exposure_ns.saturating_sub(self.epoch_ns) as f64 * 1e-9,
-                latched_counts,
-                belt_mm: d.belt_mm,
-                across_mm: d.across_mm,
-                state: "pending",
-                grip_cycle: None,
-                place_cycle: None,
-                gave_up: None,
-                queued_after_ns,
-                handed_ns: None,
-                commanded_after_ns: None,
-            });
+            let record = self.new_record(id, &seen);
+            self.records.push(record);
+        }
+    }
+
+    /// The record of new part `id`, first seen as `seen`.
+    fn new_record(&self, id: u32, seen: &Detection) -> PartRecord {
+        let queued_after_ns =
+            self.measure.then(|| qmarc_timer::clock::monotonic_now_ns().saturating_sub(seen.t_ns));
+        PartRecord {
+            id,
+            t_seen_s: seen.t_ns.saturating_sub(self.epoch_ns) as f64 * 1e-9,
+            latched_counts: seen.latched_counts,
+            belt_mm: seen.belt_mm,
+            across_mm: seen.across_mm,
+            state: "pending",
+            grip_cycle: None,
+            place_cycle: None,
+            gave_up: None,
+            queued_after_ns,
+            handed_ns: None,
+            commanded_after_ns: None,
+            by: None,
         }
     }
 
@@ -281,6 +375,8 @@ impl Dispatch {
                 }
                 PickEvent::Lifted { id } => {
                     self.queue.picked(id);
+                    let at = self.loop_now_ns();
+                    self.cell.iter_mut().for_each(|c| c.picked(id, at));
                 }
                 PickEvent::Placed { id, cycle } => {
                     self.record(id).into_iter().for_each(|r| r.place_cycle = Some(cycle));
@@ -288,17 +384,17 @@ impl Dispatch {
                 }
                 PickEvent::GaveUp { id, why } => {
                     self.record(id).into_iter().for_each(|r| r.gave_up = Some(why));
-                    // Out of reach or no profile: it will not be picked. One the session
-                    // stopped for stays as it is.
+                    // Out of reach or no profile: it will not be picked here (in a cell, a
+                    // robot downstream may still). One the session stopped for stays as it is.
                     if why != GaveUp::Stopped {
-                        self.queue.missed(id);
+                        self.gave_up(id, now);
                     }
                     self.given = None;
                 }
             }
         }
         if self.status.begun() {
-            self.queue.sweep(now, &self.belt);
+            self.sweep(now);
         }
         let shared = &self.handle.shared;
         let ready = shared.ready.load(Ordering::Acquire) && !shared.ending.load(Ordering::Acquire);
@@ -309,9 +405,27 @@ impl Dispatch {
             let closing_s = self.close_s + 2.0 * self.period_s;
             let (frame, relative, n) = (self.frame, self.relative, self.n_motors);
             let profile = &mut self.profile;
-            let claimed = self.queue.claim_next(now, &self.belt, |part, at| {
-                intercepts(&frame, &relative, profile, n, &command, part, at, speed, closing_s)
+            let cell = self.cell.as_ref();
+            let claimed = self.queue.claim_next_by(now, &self.belt, |part, at| {
+                // In a cell a part not this robot's to take now, or out of its reach, is left
+                // to the sweep: passed on, or missed by the last robot that could reach it.
+                let (mine, miss) = cell
+                    .map_or((true, Take::OutOfReach), |c| (c.may_claim(part.id, at), Take::Leave));
+                if !mine {
+                    Take::Leave
+                } else if intercepts(
+                    &frame, &relative, profile, n, &command, part, at, speed, closing_s,
+                ) {
+                    Take::Claim
+                } else {
+                    miss
+                }
             });
+            if let (Some(id), Some(side)) = (claimed, self.cell.as_mut()) {
+                // Said to the cell before the loop is given it.
+                let grip_in = (self.profile.duration() + closing_s) * 1e9;
+                side.claim(id, ns, grip_in as u64);
+            }
             if let Some(part) = claimed.and_then(|id| self.queue.part(id)) {
                 let pick = Pick {
                     id: part.id,
@@ -360,15 +474,51 @@ impl Dispatch {
         (c1 - c0) as f64 * self.belt.mm_per_count / ((t1 - t0) as f64 * 1e-9)
     }
 
+    /// The loop's time of its last read of the belt, ns of `CLOCK_MONOTONIC` (simulated in
+    /// lock-step): the dispatcher's "now" for what it tells the cell.
+    fn loop_now_ns(&self) -> u64 {
+        self.history.back().map_or(0, |r| r.ns)
+    }
+
+    /// Every part the belt has carried past the window at `now` counts: missed, or in a cell
+    /// passed on while a robot downstream can reach it.
+    fn sweep(&mut self, now: i64) {
+        let (belt, cell) = (self.belt, self.cell.as_ref());
+        self.queue.sweep_by(now, &belt, |p| {
+            cell.map_or(PartState::Missed, |c| c.fate(p.belt_mm(now, &belt)))
+        });
+    }
+
+    /// The picker gave part `id` up (not for a stop) with the belt at `now` counts: missed, or
+    /// in a cell given back to the cell — passed on while a robot downstream can reach it.
+    fn gave_up(&mut self, id: u32, now: i64) {
+        let at_ns = self.loop_now_ns();
+        let Some(side) = self.cell.as_mut() else {
+            self.queue.missed(id);
+            return;
+        };
+        let at = self.queue.part(id).map_or(f64::INFINITY, |p| p.belt_mm(now, &self.belt));
+        side.released(id, at_ns);
+        if side.fate(at) == PartState::Elsewhere {
+            self.queue.unclaim(id);
+            self.queue.elsewhere(id);
+        } else {
+            self.queue.missed(id);
+        }
+    }
+
     fn finish(mut self) -> Dispatched {
         let (now, _) = self.status.belt();
-        self.queue.sweep(now, &self.belt);
-        for r in &mut self.records {
+        self.sweep(now);
+        let mut records = std::mem::take(&mut self.records);
+        for r in &mut records {
             if let Some(p) = self.queue.part(r.id) {
                 r.state = p.state.name();
             }
         }
-        Dispatched { parts: self.records, detections: self.detections }
+        self.cell_records(&mut records);
+        let cell = self.cell.as_ref().map(cell::CellSide::tally);
+        Dispatched { parts: records, detections: self.detections, cell }
     }
 }
 
@@ -410,3 +560,6 @@ pub(crate) fn intercepts(
         && frame.counts(grip, across).is_ok()
         && frame.counts(closed, across).is_ok()
 }
+
+#[cfg(test)]
+mod tests;

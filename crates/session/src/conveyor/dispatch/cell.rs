@@ -1,0 +1,218 @@
+//! The dispatcher in a cell (issue 47, docs/cell.md): the parts come from the cell's camera
+//! (numbered there, the same numbers on every robot), a part is claimed only when the sharing
+//! rule ([`qmarc_conveyor::cell`]) says it is this robot's to take, every claim, pick and
+//! give-up is said to the cell before the loop acts on it, and the others' are taken in.
+//! The messages come and go through the companion that holds the cell's Zenoh session
+//! ([`qmarc_proto::cell`]); the dispatcher never waits for them.
+
+use super::{Dispatch, PartRecord};
+use qmarc_config::Settings;
+use qmarc_conveyor::Detection;
+use qmarc_conveyor::PartState;
+use qmarc_conveyor::cell::{Cell, Claim, Ledger, Member};
+use qmarc_proto::cell::{CellKind, CellMsg};
+
+/// The dispatcher's side of the cell.
+pub(crate) struct CellSide {
+    /// The cell's name.
+    pub name: String,
+    /// The robots alive as this one sees them.
+    pub cell: Cell,
+    /// The claims seen, this robot's among them.
+    pub ledger: Ledger,
+    /// This robot's belt coordinate 0 on the cell's belt, mm.
+    pub offset_mm: f64,
+    /// The system clock minus the monotonic one, ns.
+    pub realtime_offset_ns: i64,
+    /// What to tell the cell, sent after each look.
+    pub outbox: Vec<CellMsg>,
+    /// Claims of this robot that an earlier claim of another's beat (its pick went on).
+    pub conflicts: u64,
+}
+
+/// What a cell session counts, for its summary.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CellTally {
+    /// The cell's name.
+    pub name: String,
+    /// This robot's.
+    pub robot: String,
+    /// Claims of this robot that an earlier claim beat.
+    pub conflicts: u64,
+}
+
+impl CellSide {
+    /// The cell side of settings `s`, if they join a cell (`--cell`).
+    pub fn of(s: &Settings) -> Option<CellSide> {
+        let name = s.cell.name.clone()?;
+        let me = Member {
+            name: s.cell.robot.clone(),
+            offset_mm: s.cell.belt_offset_mm,
+            window_mm: s.conveyor.window_mm,
+        };
+        Some(CellSide {
+            name,
+            cell: Cell::new(me, s.cell.handoff_mm),
+            ledger: Ledger::new(),
+            offset_mm: s.cell.belt_offset_mm,
+            realtime_offset_ns: qmarc_timer::clock::realtime_offset_ns(),
+            outbox: Vec::new(),
+            conflicts: 0,
+        })
+    }
+
+    /// This robot's name.
+    pub fn me(&self) -> &str {
+        &self.cell.me().name
+    }
+
+    /// Monotonic `ns` on the system clock.
+    pub fn realtime(&self, ns: u64) -> u64 {
+        (ns as i64).saturating_add(self.realtime_offset_ns).max(0) as u64
+    }
+
+    /// System-clock `ns` on this host's monotonic clock.
+    pub fn monotonic(&self, ns: u64) -> u64 {
+        (ns as i64).saturating_sub(self.realtime_offset_ns).max(0) as u64
+    }
+
+    /// Whether this robot may claim part `id`, `at_mm` along its own belt.
+    pub fn may_claim(&self, id: u32, at_mm: f64) -> bool {
+        self.cell.may_claim(id, at_mm + self.offset_mm)
+    }
+
+    /// What becomes of a part past this robot's window, `at_mm` along its own belt: passed
+    /// on while a robot downstream can reach it, else missed.
+    pub fn fate(&self, at_mm: f64) -> PartState {
+        if self.cell.handed_on(at_mm + self.offset_mm) {
+            PartState::Elsewhere
+        } else {
+            PartState::Missed
+        }
+    }
+
+    /// Tells the cell `kind` of part `id` at monotonic `now`.
+    fn say(&mut self, kind: CellKind, id: u32, now: u64) -> &mut CellMsg {
+        let m = CellMsg::new(kind, id, &self.cell.me().name, self.realtime(now));
+        self.outbox.push(m);
+        self.outbox.last_mut().expect("just pushed")
+    }
+
+    /// This robot claims part `id` at monotonic `now`, its gripper to close `grip_in_ns`
+    /// later.
+    pub fn claim(&mut self, id: u32, now: u64, grip_in_ns: u64) {
+        let m = self.say(CellKind::Claim, id, now);
+        m.grip_by_ns = m.t_ns.saturating_add(grip_in_ns);
+        let c = Claim {
+            robot: m.robot().to_string(),
+            at_ns: m.t_ns,
+            grip_by_ns: m.grip_by_ns,
+            picked: false,
+        };
+        self.ledger.claim(id, c);
+    }
+
+    /// This robot picked part `id` (off the belt) at monotonic `now`.
+    pub fn picked(&mut self, id: u32, now: u64) {
+        let t = self.say(CellKind::Picked, id, now).t_ns;
+        let me = self.me().to_string();
+        self.ledger.picked(id, &me, t);
+    }
+
+    /// This robot gave part `id` up at monotonic `now`.
+    pub fn released(&mut self, id: u32, now: u64) {
+        self.say(CellKind::Released, id, now);
+        let me = self.me().to_string();
+        self.ledger.release(id, &me);
+    }
+
+    /// The robot that picked part `id`, if one did.
+    pub fn picked_by(&self, id: u32) -> Option<&str> {
+        self.ledger.claim_of(id).filter(|c| c.picked).map(|c| c.robot.as_str())
+    }
+
+    /// The tally for the summary.
+    pub fn tally(&self) -> CellTally {
+        CellTally {
+            name: self.name.clone(),
+            robot: self.me().to_string(),
+            conflicts: self.conflicts,
+        }
+    }
+}
+
+impl Dispatch {
+    /// A message from the cell.
+    pub(crate) fn cell_message(&mut self, m: &CellMsg) {
+        let Some(side) = self.cell.as_mut() else { return };
+        let robot = m.robot();
+        let mine = robot == side.me();
+        match m.kind() {
+            Some(CellKind::Part) => self.cell_part(m),
+            Some(CellKind::Member) if !mine => side.cell.join(Member {
+                name: robot.to_string(),
+                offset_mm: m.belt_mm,
+                window_mm: m.window_mm,
+            }),
+            Some(CellKind::Gone) if !mine => {
+                side.cell.leave(robot);
+                for id in side.ledger.lost(robot, m.t_ns) {
+                    self.queue.release(id);
+                }
+            }
+            Some(CellKind::Claim) if !mine => {
+                let c = Claim {
+                    robot: robot.to_string(),
+                    at_ns: m.t_ns,
+                    grip_by_ns: m.grip_by_ns,
+                    picked: false,
+                };
+                let was_mine = side.ledger.claim_of(m.part).is_some_and(|c| c.robot == side.me());
+                if side.ledger.claim(m.part, c) {
+                    if was_mine {
+                        side.conflicts += 1;
+                    }
+                    self.queue.elsewhere(m.part);
+                }
+            }
+            Some(CellKind::Picked) if !mine => {
+                side.ledger.picked(m.part, robot, m.t_ns);
+                self.queue.elsewhere(m.part);
+            }
+            Some(CellKind::Released) if !mine && side.ledger.release(m.part, robot) => {
+                self.queue.release(m.part);
+            }
+            // Its own messages back, or a kind this build does not know: nothing to do.
+            _ => {}
+        }
+    }
+
+    /// A part the cell's camera saw: on this robot's belt, its encoder count at the exposure
+    /// from the loop's own reads (none yet that far back: the part was seen before this
+    /// session could place it, and is not taken).
+    fn cell_part(&mut self, m: &CellMsg) {
+        let Some(side) = self.cell.as_ref() else { return };
+        let exposure = side.monotonic(m.t_ns);
+        let Some(latched_counts) = super::counts_at(&self.history, exposure) else { return };
+        let seen = Detection {
+            t_ns: exposure,
+            latched_counts,
+            belt_mm: m.belt_mm - side.offset_mm,
+            across_mm: m.across_mm,
+        };
+        self.detections += 1;
+        if self.queue.insert(m.part, seen) {
+            let record = self.new_record(m.part, &seen);
+            self.records.push(record);
+        }
+    }
+
+    /// The cell's side of the records at the end: who picked each part.
+    pub(crate) fn cell_records(&self, records: &mut [PartRecord]) {
+        if let Some(side) = &self.cell {
+            for r in records {
+                r.by = side.picked_by(r.id).map(str::to_string);
+            }
+        }
+    }
+}
