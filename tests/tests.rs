@@ -1,6 +1,7 @@
 //! End-to-end tests: the real three processes on the simulated Deltabot, plus the
 //! repository's tidiness rules.
 
+mod cell;
 mod console;
 mod conveyor;
 mod counting;

@@ -79,6 +79,7 @@ const LAYERS: &[&str] = &[
     "report",
     "foxglove",
     "bridge",
+    "cell",
     "waypoints",
     "plots",
     "controller-process",

@@ -20,6 +20,10 @@ pub const CELL_OUT: &str = "qmarc/cell/out";
 pub const CELL_BUFFER: usize = 1024;
 /// Bytes of a robot's name (NUL-padded; at most one fewer used).
 pub const NAME_BYTES: usize = 32;
+/// What a robot's companion (`qmarc-cell robot`) prints on standard output once it has
+/// joined its cell, followed by when the cell's world began (ns of this host's
+/// `CLOCK_MONOTONIC`: the run's `epoch_ns`).
+pub const JOINED: &str = "qmarc-cell: joined, epoch_ns=";
 
 /// What a [`CellMsg`] says.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

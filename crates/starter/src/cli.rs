@@ -154,6 +154,13 @@ pub struct ConveyorArgs {
     /// `camera.backend`).
     #[arg(long, value_name = "BACKEND")]
     pub camera: Option<String>,
+    /// Join the cell NAME: robots on one belt sharing the parts of the cell's camera
+    /// (`qmarc-cell camera --cell NAME`) over Zenoh, this one as `[cell] robot` at `[cell]
+    /// belt_offset_mm` (docs/cell.md); the session's Zenoh is rmw_zenoh's default (a peer,
+    /// a router at tcp/localhost:7447) or --zenoh-config's. Refused, saying why, when the
+    /// robot's belt is not the cell's.
+    #[arg(long, value_name = "NAME", conflicts_with = "camera")]
+    pub cell: Option<String>,
     /// The bridge beside the session, as `serve` starts it (its `/diagnostics` say the parts
     /// queued, picked and missed).
     #[command(flatten)]
@@ -178,6 +185,9 @@ impl ConveyorArgs {
         if let Some(b) = &self.camera {
             s.set_camera_backend(b)?;
         }
+        if let Some(name) = &self.cell {
+            s.set_cell(name, self.serve.zenoh_config.as_deref())?;
+        }
         Ok(())
     }
 }
@@ -199,8 +209,9 @@ pub struct ServeArgs {
     /// The bridge's ROS domain id, 0‥232 (qmarc-bridge --domain).
     #[arg(long, requires = "bridge", value_parser = clap::value_parser!(u32).range(0..=232))]
     pub domain: Option<u32>,
-    /// The bridge's Zenoh configuration file, JSON5 (qmarc-bridge --zenoh-config).
-    #[arg(long, requires = "bridge")]
+    /// The Zenoh configuration file, JSON5, of the bridge (qmarc-bridge --zenoh-config) and
+    /// of the cell (`conveyor --cell`).
+    #[arg(long)]
     pub zenoh_config: Option<PathBuf>,
     /// Start `qmarc-foxglove live` beside the session and stop it with it: the session's live
     /// view for Foxglove (the Foxglove WebSocket protocol, `foxglove.websocket.v1`) at ADDR,

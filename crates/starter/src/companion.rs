@@ -121,3 +121,129 @@ fn exit_of(s: std::process::ExitStatus) -> Exit {
         _ => Exit::Code(-1),
     }
 }
+
+/// How long the starter waits for its robot to join the cell: the companion's own wait for
+/// the cell's camera, and some.
+const JOIN_WAIT: Duration = Duration::from_secs(45);
+
+/// Starts the cell's companion `program` (`qmarc-cell robot`) on the run's file `run` and
+/// waits until it has joined the cell (its messages to `log`, if given): the companion, and
+/// when the cell's world began on this host's monotonic clock (the run's `epoch_ns`: the
+/// simulated belt is the cell camera's). `Err` with the exit code when it did not join: 3
+/// when the cell refused the robot (the companion said why), 130 on a stop signal.
+pub(crate) fn join_cell(
+    program: &Path,
+    run: &Path,
+    log: Option<&std::fs::File>,
+    stop: &std::sync::atomic::AtomicBool,
+) -> Result<(Companion, u64), (u8, String)> {
+    use std::io::BufRead;
+    use std::sync::atomic::Ordering;
+    let mut cmd = std::process::Command::new(program);
+    cmd.arg("robot").arg(format!("--settings={}", run.display()));
+    cmd.stdout(std::process::Stdio::piped());
+    if let Some(log) = log {
+        cmd.stderr(log.try_clone().map_err(|e| (qmarc_proto::exit::INTERNAL, e.to_string()))?);
+    }
+    qmarc_program::process::with_parent_death_signal(&mut cmd);
+    let mut child = cmd.spawn().map_err(|e| {
+        (qmarc_proto::exit::INTERNAL, format!("cannot start {}: {e}", program.display()))
+    })?;
+    let stdout = child.stdout.take();
+    let (tx, lines) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stdout?).lines() {
+            tx.send(line.ok()?).ok()?;
+        }
+        Some(())
+    });
+    let since = Instant::now();
+    let ended = |child: &mut Child, code: u8, why: String| {
+        let _ = child.kill();
+        let _ = child.wait();
+        Err((code, why))
+    };
+    loop {
+        if let Ok(line) = lines.recv_timeout(Duration::from_millis(20)) {
+            if let Some(epoch) = line.strip_prefix(qmarc_proto::cell::JOINED) {
+                return match epoch.trim().parse() {
+                    Ok(e) => Ok((
+                        Companion { name: "qmarc-cell", goes_on: CELL_GOES_ON, child: Some(child) },
+                        e,
+                    )),
+                    Err(_) => ended(
+                        &mut child,
+                        qmarc_proto::exit::INTERNAL,
+                        format!("qmarc-cell said `{line}`"),
+                    ),
+                };
+            }
+            continue;
+        }
+        if stop.load(Ordering::Relaxed) {
+            return ended(
+                &mut child,
+                qmarc_proto::exit::INTERRUPTED,
+                "stopped while joining the cell".into(),
+            );
+        }
+        if let Ok(Some(s)) = child.try_wait() {
+            let how = describe_exit("qmarc-cell", exit_of(s));
+            let code = if s.code() == Some(i32::from(qmarc_proto::exit::REFUSED)) {
+                qmarc_proto::exit::REFUSED
+            } else {
+                qmarc_proto::exit::INTERNAL
+            };
+            return Err((code, format!("this robot did not join the cell ({how})")));
+        }
+        if since.elapsed() > JOIN_WAIT {
+            return ended(
+                &mut child,
+                qmarc_proto::exit::INTERNAL,
+                format!("qmarc-cell did not join the cell in {} s", JOIN_WAIT.as_secs()),
+            );
+        }
+    }
+}
+
+/// What goes on when a robot's cell companion dies.
+const CELL_GOES_ON: &str =
+    "the session goes on with the parts it knows, out of the cell (the others see it gone)";
+
+/// Joins the cell through its companion `program` (`None`: the run joins none), on the
+/// run's file `run` holding `spec`, whose world's epoch the run then takes: the simulated
+/// belt is the cell camera's. A robot that does not join leaves none of the run's files at
+/// `location` behind; the error is [`join_cell`]'s.
+pub(crate) fn join(
+    program: Option<&Path>,
+    (spec, location, run): (&qmarc_config::RunSpec, &IpcLocation, &Path),
+    log: Option<&std::fs::File>,
+    stop: &std::sync::atomic::AtomicBool,
+) -> Result<Option<Companion>, (u8, String)> {
+    let Some(program) = program else { return Ok(None) };
+    let joined = join_cell(program, run, log, stop).and_then(|(companion, epoch_ns)| {
+        let spec = qmarc_config::RunSpec { epoch_ns, ..spec.clone() };
+        spec.write(run).map_err(|e| (qmarc_proto::exit::INTERNAL, e.to_string()))?;
+        Ok(companion)
+    });
+    if joined.is_err() {
+        location.remove_files();
+    }
+    joined.map(Some)
+}
+
+/// `--zenoh-config` configures the bridge's session or the cell's: with neither it would be
+/// ignored, so it is refused.
+pub(crate) fn zenoh_for(command: &crate::cli::Command, in_cell: bool) -> Result<(), String> {
+    if let crate::cli::Command::Serve(a)
+    | crate::cli::Command::Conveyor(crate::cli::ConveyorArgs { serve: a, .. }) = command
+        && a.zenoh_config.is_some()
+        && !a.bridge
+        && !in_cell
+    {
+        return Err(
+            "--zenoh-config configures the Zenoh session of --bridge or of --cell: give one".into(),
+        );
+    }
+    Ok(())
+}

@@ -104,8 +104,11 @@ pub struct Prepared {
     pub bridge: Option<(PathBuf, Vec<String>)>,
     /// `qmarc-foxglove` and the address of its live view, when `serve --foxglove` starts one.
     pub foxglove: Option<(PathBuf, String)>,
-    /// `qmarc-camera`, when the session is at a belt (`conveyor`).
+    /// `qmarc-camera`, when the session is at a belt (`conveyor`) of its own.
     pub camera: Option<PathBuf>,
+    /// `qmarc-cell`, when the session joins a cell (`conveyor --cell`): the cell's camera
+    /// serves it.
+    pub cell: Option<PathBuf>,
     /// The iceoryx2 prefix was given (`--iox-prefix`): an earlier run's files under it are
     /// removed before this one starts.
     pub own_prefix: bool,
@@ -232,6 +235,25 @@ fn bridge_of(
     })
 }
 
+/// The companions of a session at the belt (`conveyor`), checked: its own camera
+/// (`qmarc-camera`), or in a cell the cell's companion (`qmarc-cell`: the cell's camera
+/// serves it). None for other modes.
+fn at_the_belt(
+    s: &Settings,
+    mode: Mode,
+    hwserver_bin: &Path,
+) -> Result<(Option<PathBuf>, Option<PathBuf>), Failure> {
+    if mode != Mode::Conveyor {
+        return Ok((None, None));
+    }
+    check_conveyor(s)?;
+    Ok(if s.cell.name.is_some() {
+        (None, Some(companion_program(hwserver_bin, "qmarc-cell")?))
+    } else {
+        (Some(companion_program(hwserver_bin, "qmarc-camera")?), None)
+    })
+}
+
 /// The live view `command` starts beside its session (`serve --foxglove [ADDR]`, `conveyor
 /// --foxglove`): its program beside `hwserver_bin` and its address, which must be free now.
 fn foxglove_of(
@@ -262,13 +284,8 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
     let (hwserver_bin, controller_bin) = programs(req.bin_dir)?;
     let bridge = bridge_of(req.command, &hwserver_bin)?;
     let foxglove = foxglove_of(req.command, &hwserver_bin)?;
-    let camera = match mode {
-        Mode::Conveyor => {
-            check_conveyor(&settings)?;
-            Some(companion_program(&hwserver_bin, "qmarc-camera")?)
-        }
-        _ => None,
-    };
+    let (camera, cell) = at_the_belt(&settings, mode, &hwserver_bin)?;
+    crate::companion::zenoh_for(req.command, cell.is_some()).map_err(|e| refused(anyhow!(e)))?;
     let prefix = req.iox_prefix.map_or_else(default_prefix, str::to_string);
     let root = req.iox_root.unwrap_or(DEFAULT_ROOT);
     let location = IpcLocation::checked(&prefix, root).map_err(|e| refused(anyhow!(e)))?;
@@ -312,6 +329,11 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
             settings.hwserver.backend
         )));
     }
+    if spec.deterministic && settings.cell.name.is_some() {
+        return Err(refused(anyhow!(
+            "a cell's robots share one belt in real time: --cell not with --deterministic"
+        )));
+    }
     if spec.unpaced && mode.serving() {
         return Err(refused(anyhow!(
             "serve waits for commands in real time: not with --unpaced (--deterministic paces \
@@ -331,6 +353,7 @@ pub fn prepare(req: &MoveRequest<'_>) -> Result<Prepared, Failure> {
         bridge,
         foxglove,
         camera,
+        cell,
         own_prefix,
     })
 }
@@ -407,6 +430,9 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
     // The run's world (the simulated belt and camera) starts now, for every child alike.
     let epoch_ns = qmarc_timer::clock::monotonic_now_ns();
     RunSpec { epoch_ns, ..p.spec.clone() }.write(&run).map_err(internal)?;
+    // In a cell, the cell's world: the robot joins first (refused, nothing has started).
+    let cell = crate::companion::join(p.cell.as_deref(), (&p.spec, &p.location, &run), log, stop)
+        .map_err(|(code, why)| Failure { code, error: anyhow!(why) })?;
     let child_args = [format!("--settings={}", run.display())];
     // The children inherit this mask; the hwserver and the servo thread then pin themselves.
     if let Err(e) = qmarc_timer::cpus::keep_off(&p.settings().timer.rt_cpus()) {
@@ -419,6 +445,7 @@ pub fn launch(p: &Prepared, log: Option<&std::fs::File>) -> Result<Ended, Failur
         .map(|(b, args)| Companion::bridge(b, args, &p.location, log))
         .chain(p.foxglove.iter().map(|(f, addr)| Companion::foxglove(f, addr, &p.location, log)))
         .chain(p.camera.iter().map(|c| Companion::camera(c, &child_args, log)))
+        .chain(cell)
         .collect();
     let status = std::cell::RefCell::new(StatusLine::new(progress.as_ref()));
     let said = |s: &Supervised| {

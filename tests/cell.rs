@@ -1,0 +1,208 @@
+//! A cell of robots on one belt (issue 47, docs/cell.md): real processes — a Zenoh router
+//! (`qmarc-cell router`), the cell's camera (`qmarc-cell camera`) and robots that are each a
+//! whole conveyor session (`qmarc-starter conveyor --cell`), every one of them a Zenoh client
+//! of the router on loopback. What is checked is what each robot wrote: its parts.csv (the
+//! camera's part ids, `by` the robot that picked a part) and its summary.json.
+
+use qmarc_tests::{TestRun, bin_dir, read_summary, wait_with_timeout};
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+/// The cell's belt: 500 mm/s, a part every 250 ms (240 a minute: one robot's most).
+const PARTS_PER_MIN: &str = "240";
+
+/// The router and the camera of one test's cell, stopped with the test (pass or fail).
+struct CellRig {
+    run: TestRun,
+    name: String,
+    client: PathBuf,
+    endpoint: String,
+    router: Option<Child>,
+    camera: Option<Child>,
+}
+
+impl CellRig {
+    /// A router on a free loopback port and the cell `tag`'s camera, a Zenoh client of it.
+    fn start(tag: &str) -> CellRig {
+        let run = TestRun::new(&format!("cell-{tag}"));
+        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let client = run.dir.join("client.json5");
+        std::fs::write(
+            &client,
+            format!("{{ mode: \"client\", connect: {{ endpoints: [\"{endpoint}\"] }} }}"),
+        )
+        .unwrap();
+        let name = format!("{tag}{}", std::process::id());
+        let mut rig = CellRig { run, name, client, endpoint, router: None, camera: None };
+        rig.router = Some(rig.start_router());
+        rig.camera = Some(rig.start_camera());
+        rig
+    }
+
+    fn start_router(&self) -> Child {
+        Command::new(bin_dir().join("qmarc-cell"))
+            .args(["router", "--listen", &self.endpoint])
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap()
+    }
+
+    fn start_camera(&self) -> Child {
+        Command::new(bin_dir().join("qmarc-cell"))
+            .args(["camera", "--cell", &self.name, "--parts-per-min", PARTS_PER_MIN])
+            .arg(format!("--config={}", qmarc_tests::default_config().display()))
+            .arg(format!("--zenoh-config={}", self.client.display()))
+            .arg(format!("--iox-root={}", self.run.root()))
+            .current_dir(qmarc_tests::workspace())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    }
+
+    /// A robot `robot` at `offset_mm` along the cell's belt, its settings edited by `edits`:
+    /// its run, its output folder and its starter (`seconds` of conveyor session).
+    fn robot(&self, robot: &str, offset_mm: f64, edits: &[(&str, &str)], seconds: u32) -> Robot {
+        let run = TestRun::new(&format!("cell-{robot}"));
+        let quoted = format!("{robot:?}");
+        let offset = format!("{offset_mm:.1}");
+        let mut all =
+            vec![("cell.robot", quoted.as_str()), ("cell.belt_offset_mm", offset.as_str())];
+        all.extend_from_slice(edits);
+        let config = run.config_with(&all);
+        let out = run.out("out");
+        let child = run.spawn_starter(&[
+            &format!("--config={}", config.display()),
+            &format!("--out={}", out.display()),
+            "conveyor",
+            &format!("--seconds={seconds}"),
+            &format!("--cell={}", self.name),
+            &format!("--zenoh-config={}", self.client.display()),
+        ]);
+        Robot { run, out, child: Some(child) }
+    }
+}
+
+impl Drop for CellRig {
+    /// Stops the camera as its user would (SIGTERM: it ends its camera server and removes
+    /// its files), then the router.
+    fn drop(&mut self) {
+        if let Some(c) = self.camera.as_mut() {
+            stop(c);
+            // Killed after all: its files go here.
+            let prefix = format!("qmarc_cellcam_{}_", c.id());
+            qmarc_proto::service::IpcLocation::new(&prefix, &self.run.root()).remove_files();
+        }
+        if let Some(r) = self.router.as_mut() {
+            stop(r);
+        }
+    }
+}
+
+/// SIGTERM to `c`, SIGKILL if it has not ended within 10 s.
+fn stop(c: &mut Child) {
+    qmarc_tests::send_signal(c.id(), nix::sys::signal::Signal::SIGTERM);
+    let since = std::time::Instant::now();
+    while since.elapsed() < Duration::from_secs(10) {
+        if let Ok(Some(_)) = c.try_wait() {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = c.kill();
+    let _ = c.wait();
+}
+
+/// A robot of the cell: its run (prefix, folder), its output folder and its starter.
+struct Robot {
+    run: TestRun,
+    out: PathBuf,
+    child: Option<Child>,
+}
+
+impl Robot {
+    /// Waits for its session to end; its exit code and standard error.
+    fn finish(&mut self) -> (Option<i32>, String) {
+        let r = wait_with_timeout(self.child.take().unwrap(), Duration::from_secs(120));
+        (r.code, format!("{}\n{}", r.stdout, r.stderr))
+    }
+}
+
+/// `parts.csv` of `out`: id → (state, by).
+fn parts(out: &Path) -> BTreeMap<u32, (String, String)> {
+    let text = std::fs::read_to_string(out.join("parts.csv")).expect("parts.csv");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header.last(), Some(&"by"), "a cell's parts.csv says who picked: {header:?}");
+    let col = |n: &str| header.iter().position(|h| *h == n).unwrap();
+    let (id, state, by) = (col("id"), col("state"), col("by"));
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[id].parse().unwrap(), (f[state].to_string(), f[by].to_string()))
+        })
+        .collect()
+}
+
+/// Two robots share the belt at 240 parts a minute: every part the camera saw while both
+/// ran is picked by exactly one of them, none missed, each picking about half; both list
+/// the same parts by the same ids and agree on who picked each.
+#[test]
+fn two_robots_share_a_belt_none_picked_twice_none_missed() {
+    let rig = CellRig::start("share");
+    let mut west = rig.robot("west", 0.0, &[], 20);
+    let mut east = rig.robot("east", 600.0, &[], 20);
+    let (w, e) = (west.finish(), east.finish());
+    assert_eq!(w.0, Some(0), "west: {}", w.1);
+    assert_eq!(e.0, Some(0), "east: {}", e.1);
+    let (pw, pe) = (parts(&west.out), parts(&east.out));
+    let picked = |p: &BTreeMap<u32, (String, String)>| -> BTreeSet<u32> {
+        p.iter().filter(|(_, (s, _))| s == "picked").map(|(id, _)| *id).collect()
+    };
+    let (by_west, by_east) = (picked(&pw), picked(&pe));
+    assert!(by_west.is_disjoint(&by_east), "picked twice: {:?}", by_west.intersection(&by_east));
+    // Every part both saw and neither left pending: picked once, by the robot both name.
+    let mut both = 0;
+    for (id, (sw, bw)) in &pw {
+        let Some((se, be)) = pe.get(id) else { continue };
+        if sw == "pending" || se == "pending" {
+            continue;
+        }
+        both += 1;
+        assert_eq!(bw, be, "part {id}: who picked it");
+        assert!(!bw.is_empty(), "part {id} picked by no one: west {sw}, east {se}");
+        assert_eq!((sw == "picked", se == "picked"), (bw == "west", be == "east"), "part {id}");
+    }
+    let total = by_west.len() + by_east.len();
+    assert!(both >= 60, "{both} parts seen by both (20 s at 4 a second)");
+    for (robot, n) in [("west", by_west.len()), ("east", by_east.len())] {
+        assert!(n * 10 >= total * 4, "{robot} picked {n} of {total}: the work splits");
+    }
+    for (robot, out, mine) in [("west", &west.out, &by_west), ("east", &east.out, &by_east)] {
+        let s = read_summary(out);
+        let cell = s.cell.expect("the summary's cell section");
+        assert_eq!((cell.name.as_str(), cell.robot.as_str()), (rig.name.as_str(), robot));
+        assert_eq!((cell.picked, cell.missed), (mine.len(), 0), "{robot}");
+        let conveyor = s.conveyor.expect("the conveyor section");
+        assert_eq!(conveyor.missed, 0, "{robot}");
+    }
+    west.run.assert_clean();
+    east.run.assert_clean();
+}
+
+/// A robot whose belt is not the cell's is refused before anything starts, saying which
+/// setting and both values; nothing of its run is left.
+#[test]
+fn a_robot_whose_belt_disagrees_is_refused_saying_why() {
+    let rig = CellRig::start("refuse");
+    let mut r = rig.robot("odd", 600.0, &[("conveyor.mm_per_count", "0.04")], 5);
+    let (code, said) = r.finish();
+    assert_eq!(code, Some(3), "{said}");
+    assert!(said.contains("conveyor.mm_per_count = 0.04 in "), "{said}");
+    assert!(said.contains(&format!("but 0.05 in cell {}'s belt", rig.name)), "{said}");
+    assert!(!r.out.join("summary.json").exists(), "nothing ran");
+    r.run.assert_clean();
+}
