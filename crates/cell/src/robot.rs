@@ -24,6 +24,12 @@ pub const JOIN_WAIT: Duration = Duration::from_secs(30);
 /// How often the members are said again to the dispatcher (one that started late, or lost
 /// one).
 const RESAY: Duration = Duration::from_millis(500);
+/// How long after a robot's token went it is said gone: the camera's token, which goes with
+/// it when this robot is the one cut off, has had time to go too.
+const GONE_GRACE: Duration = Duration::from_millis(300);
+/// How long after the cell's camera came back a robot takes parts handed on to it again:
+/// the others' tokens are back, and their claims and picks asked and had.
+const RESYNC: Duration = Duration::from_secs(1);
 /// How long a query of another robot may take.
 const ASK: Duration = Duration::from_millis(500);
 
@@ -117,15 +123,21 @@ struct Relay<'a> {
         iceoryx2::port::subscriber::Subscriber<iceoryx2::prelude::ipc::Service, CellMsg, ()>,
     /// The other robots alive.
     members: BTreeMap<String, WireMember>,
-    /// This robot's claims not yet picked or given up.
+    /// This robot's claims not yet picked or given up (answered with its picks, `done`).
     open: BTreeMap<u32, WireClaim>,
     /// Robots alive whose window has not been had yet (asked again every [`RESAY`]).
     unanswered: Vec<String>,
     /// Robots seen gone.
     departed: Vec<String>,
+    /// Robots whose token went, not yet said gone: when (system clock), and since when here.
+    vanished: Vec<(String, u64, Instant)>,
     /// Questions out: what, the answers' channel, whether one came.
     asked: Vec<(Ask, zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>, bool)>,
     camera_lost: bool,
+    /// Since when the camera is back after being lost, until the others' claims are had.
+    rejoining: Option<Instant>,
+    /// This robot's picks of the last minute, for a robot that asks after an outage.
+    done: BTreeMap<u32, WireClaim>,
 }
 
 impl<'a> Relay<'a> {
@@ -199,8 +211,11 @@ impl<'a> Relay<'a> {
             open: BTreeMap::new(),
             unanswered: Vec::new(),
             departed: Vec::new(),
+            vanished: Vec::new(),
             asked: Vec::new(),
             camera_lost: false,
+            rejoining: None,
+            done: BTreeMap::new(),
         })
     }
 
@@ -214,6 +229,10 @@ impl<'a> Relay<'a> {
         let mut said = Instant::now();
         while !qmarc_timer::stop::requested() {
             self.relay_cell();
+            self.say_gone();
+            if self.rejoining.is_some_and(|since| since.elapsed() >= RESYNC) {
+                self.rejoining = None;
+            }
             self.answers();
             self.relay_session()?;
             self.answer();
@@ -224,6 +243,11 @@ impl<'a> Relay<'a> {
                 }
                 for robot in std::mem::take(&mut self.unanswered) {
                     self.joined(&robot);
+                }
+                // In the cell: the camera seen, every robot's window and claims had.
+                let settled = !self.camera_lost && self.rejoining.is_none();
+                if settled && self.asked.is_empty() && self.unanswered.is_empty() {
+                    self.tell(CellMsg::new(CellKind::Rejoined, 0, &self.me.robot, 0));
                 }
             }
             std::thread::sleep(Duration::from_millis(1));
@@ -254,6 +278,7 @@ impl<'a> Relay<'a> {
             match s.kind() {
                 SampleKind::Put => {
                     self.departed.retain(|r| *r != robot);
+                    self.vanished.retain(|(r, _, _)| *r != robot);
                     self.joined(&robot);
                 }
                 SampleKind::Delete => {
@@ -261,21 +286,48 @@ impl<'a> Relay<'a> {
                     self.unanswered.retain(|r| *r != robot);
                     self.departed.push(robot.clone());
                     let now = qmarc_timer::clock::realtime_now_ns();
-                    self.tell(CellMsg::new(CellKind::Gone, 0, &robot, now));
+                    self.vanished.push((robot, now, Instant::now()));
                 }
             }
         }
         while let Ok(Some(s)) = self.camera.try_recv() {
             match s.kind() {
-                SampleKind::Delete => self.camera_lost = true,
+                SampleKind::Delete => {
+                    self.camera_lost = true;
+                    self.rejoining = None;
+                    self.tell(CellMsg::new(CellKind::CutOff, 0, &self.me.robot, 0));
+                }
                 // Back (a router restarted): the parts seen meanwhile.
                 SampleKind::Put if self.camera_lost => {
                     self.camera_lost = false;
+                    self.rejoining = Some(Instant::now());
+                    // Those that vanished with it and do not come back with it are gone from now:
+                    // none of their claims made before is released (they may have gripped).
+                    let now = qmarc_timer::clock::realtime_now_ns();
+                    for (_, t, since) in &mut self.vanished {
+                        (*t, *since) = (now, Instant::now());
+                    }
                     let recent = key(&self.cell, "recent");
                     self.ask(Ask::Recent, recent);
                 }
                 SampleKind::Put => {}
             }
+        }
+    }
+
+    /// Says gone the robots whose token went [`GONE_GRACE`] ago, while the cell's camera is
+    /// alive. A robot that sees the camera go too is cut off from the cell (its router is
+    /// down, or its host's link), not the others: it goes on with what it claimed, and says
+    /// nobody gone until the camera is back.
+    fn say_gone(&mut self) {
+        if self.camera_lost {
+            return;
+        }
+        let (due, wait): (Vec<_>, Vec<_>) =
+            self.vanished.drain(..).partition(|(_, _, since)| since.elapsed() >= GONE_GRACE);
+        self.vanished = wait;
+        for (robot, t, _) in due {
+            self.tell(CellMsg::new(CellKind::Gone, 0, &robot, t));
         }
     }
 
@@ -361,11 +413,15 @@ impl<'a> Relay<'a> {
             } else {
                 self.open.remove(&c.part);
             }
+            if c.kind == "picked" {
+                self.done.insert(c.part, c.clone());
+            }
             self.claims_out.put(json(&c)).wait().map_err(failed("publishing a claim"))?;
         }
         // Claims whose grip is long past are done with, picked or not.
         let old = qmarc_timer::clock::realtime_now_ns().saturating_sub(60_000_000_000);
         self.open.retain(|_, c| c.grip_by_ns > old);
+        self.done.retain(|_, c| c.t_ns > old);
         Ok(())
     }
 
@@ -375,7 +431,7 @@ impl<'a> Relay<'a> {
             let _ = q.reply(q.key_expr().clone(), json(&self.me)).wait();
         }
         while let Ok(Some(q)) = self.ledger_q.try_recv() {
-            let list: Vec<&WireClaim> = self.open.values().collect();
+            let list: Vec<&WireClaim> = self.open.values().chain(self.done.values()).collect();
             let _ = q.reply(q.key_expr().clone(), json(&list)).wait();
         }
     }

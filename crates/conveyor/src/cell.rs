@@ -25,9 +25,10 @@
 //! - **A robot lost releases its claims**: those whose grip was still to come when it was
 //!   seen gone ([`Ledger::lost`]), and its share goes to the others (the turn is among the
 //!   robots alive). A robot cut off from the cell (it sees no camera) is not lost to itself:
-//!   it goes on with what it claimed; the others see it gone only after the session's lease,
-//!   which must outlast a claim (claim to grip), so that none of its claims is released while
-//!   it may still grip.
+//!   it goes on with what it claimed and claims nothing new (what the others claim meanwhile
+//!   it cannot know, nor they its claims); the others see it gone only after the session's
+//!   lease, which must outlast a claim (claim to grip), so that none of its claims is
+//!   released while it may still grip.
 
 /// A robot of the cell, as the sharing rule sees it.
 #[derive(Debug, Clone, PartialEq)]

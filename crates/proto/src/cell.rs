@@ -43,13 +43,21 @@ pub enum CellKind {
     Picked = 5,
     /// `robot` gave `part` up at `t_ns`: its claim is gone.
     Released = 6,
+    /// This robot is cut off from the cell (it cannot see the cell's camera: its router is
+    /// down, or its link): it goes on with what it claimed, and claims nothing.
+    CutOff = 7,
+    /// This robot is in the cell: the others and their claims had (said at first, after
+    /// an outage, and again from time to time).
+    Rejoined = 8,
 }
 
 impl CellKind {
     /// The kind of wire value `v`, if it is one.
     pub fn from_wire(v: u32) -> Option<CellKind> {
         use CellKind::*;
-        [Part, Member, Gone, Claim, Picked, Released].into_iter().find(|k| *k as u32 == v)
+        [Part, Member, Gone, Claim, Picked, Released, CutOff, Rejoined]
+            .into_iter()
+            .find(|k| *k as u32 == v)
     }
 }
 
@@ -144,7 +152,7 @@ mod tests {
         let long = "x".repeat(40);
         assert_eq!(CellMsg::new(CellKind::Member, 0, &long, 0).robot(), &long[..31]);
         assert_eq!(CellMsg { kind: 99, ..m }.kind(), None);
-        for k in [1, 2, 3, 4, 5, 6] {
+        for k in [1, 2, 3, 4, 5, 6, 7, 8] {
             assert_eq!(CellKind::from_wire(k).map(|k| k as u32), Some(k));
         }
         assert_eq!(CellKind::from_wire(0), None);

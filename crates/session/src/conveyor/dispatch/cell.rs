@@ -28,6 +28,21 @@ pub(crate) struct CellSide {
     pub outbox: Vec<CellMsg>,
     /// Claims of this robot that an earlier claim of another's beat (its pick went on).
     pub conflicts: u64,
+    /// How this robot stands in the cell: it claims nothing until its companion says it is
+    /// in (the others and their claims had), nor while it is cut off (it goes on with what it
+    /// claimed).
+    pub link: Link,
+}
+
+/// How a robot stands in its cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Link {
+    /// Not yet told the others: it claims nothing (its turns would be wrong).
+    Waiting,
+    /// In the cell: the sharing rule, hand-offs and all.
+    In,
+    /// Cut off from it: it goes on with what it claimed, and claims nothing.
+    CutOff,
 }
 
 /// What a cell session counts, for its summary.
@@ -58,6 +73,7 @@ impl CellSide {
             realtime_offset_ns: qmarc_timer::clock::realtime_offset_ns(),
             outbox: Vec::new(),
             conflicts: 0,
+            link: Link::Waiting,
         })
     }
 
@@ -78,7 +94,7 @@ impl CellSide {
 
     /// Whether this robot may claim part `id`, `at_mm` along its own belt.
     pub fn may_claim(&self, id: u32, at_mm: f64) -> bool {
-        self.cell.may_claim(id, at_mm + self.offset_mm)
+        self.link == Link::In && self.cell.may_claim(id, at_mm + self.offset_mm)
     }
 
     /// What becomes of a part past this robot's window, `at_mm` along its own belt: passed
@@ -182,6 +198,8 @@ impl Dispatch {
             Some(CellKind::Released) if !mine && side.ledger.release(m.part, robot) => {
                 self.queue.release(m.part);
             }
+            Some(CellKind::CutOff) => side.link = Link::CutOff,
+            Some(CellKind::Rejoined) => side.link = Link::In,
             // Its own messages back, or a kind this build does not know: nothing to do.
             _ => {}
         }

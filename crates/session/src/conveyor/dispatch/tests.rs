@@ -80,6 +80,8 @@ impl Run {
             .collect();
         for r in &mut robots {
             r.inbox.extend(members.iter().map(|m| (0, *m)));
+            // Its companion says it is in the cell, the others had.
+            r.inbox.push((0, CellMsg::new(CellKind::Rejoined, 0, r.name, 0)));
         }
         Run { robots, every_ms, t0, seen: 0 }
     }
