@@ -15,6 +15,9 @@ const PARTS_PER_MIN: &str = "240";
 
 /// The router and the camera of one test's cell, stopped with the test (pass or fail).
 struct CellRig {
+    /// One cell at a time on the machine (two robots and a camera take a 2-core machine's
+    /// share; another test runs beside it).
+    _one_at_a_time: nix::fcntl::Flock<std::fs::File>,
     run: TestRun,
     name: String,
     client: PathBuf,
@@ -27,6 +30,16 @@ impl CellRig {
     /// A router on a free loopback port and the cell `tag`'s camera, a Zenoh client of it,
     /// seeing [`PARTS_PER_MIN`].
     fn start(tag: &str) -> CellRig {
+        CellRig::start_with(tag, PARTS_PER_MIN)
+    }
+
+    /// [`CellRig::start`] with the camera seeing `parts_per_min`.
+    fn start_with(tag: &str, parts_per_min: &str) -> CellRig {
+        let lock = std::fs::File::create(std::env::temp_dir().join("qmarc-tests-cell.lock"))
+            .expect("the cells' lock file");
+        let one_at_a_time = nix::fcntl::Flock::lock(lock, nix::fcntl::FlockArg::LockExclusive)
+            .map_err(|(_, e)| e)
+            .expect("the cells' lock");
         let run = TestRun::new(&format!("cell-{tag}"));
         let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
         let endpoint = format!("tcp/127.0.0.1:{port}");
@@ -37,9 +50,11 @@ impl CellRig {
         )
         .unwrap();
         let name = format!("{tag}{}", std::process::id());
-        let mut rig = CellRig { run, name, client, endpoint, router: None, camera: None };
+        let (router, camera) = (None, None);
+        let mut rig =
+            CellRig { _one_at_a_time: one_at_a_time, run, name, client, endpoint, router, camera };
         rig.router = Some(rig.start_router());
-        rig.camera = Some(rig.start_camera(PARTS_PER_MIN));
+        rig.camera = Some(rig.start_camera(parts_per_min));
         rig
     }
 
@@ -134,6 +149,25 @@ struct Robot {
 }
 
 impl Robot {
+    /// Waits until its session moves; panics with what it said if it ended first.
+    fn wait_moving(&mut self) {
+        let since = std::time::Instant::now();
+        loop {
+            let page = qmarc_proto::progress::Progress::path(&self.run.prefix);
+            let moving = qmarc_proto::progress::Progress::open(&page)
+                .is_ok_and(|p| p.read().phase >= qmarc_proto::state::Phase::Homing.wire());
+            if moving {
+                return;
+            }
+            if let Ok(Some(_)) = self.child.as_mut().unwrap().try_wait() {
+                let (code, said) = self.finish();
+                panic!("the session ended before it moved ({code:?}): {said}");
+            }
+            assert!(since.elapsed() < Duration::from_secs(90), "not moving after 90 s");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
     /// Waits for its session to end; its exit code and standard error.
     fn finish(&mut self) -> (Option<i32>, String) {
         let r = wait_with_timeout(self.child.take().unwrap(), Duration::from_secs(120));
@@ -222,4 +256,57 @@ fn a_robot_whose_belt_disagrees_is_refused_saying_why() {
     assert!(said.contains(&format!("but 0.05 in cell {}'s belt", rig.name)), "{said}");
     assert!(!r.out.join("summary.json").exists(), "nothing ran");
     r.run.assert_clean();
+}
+
+/// The ids picked in `p`.
+fn picked(p: &BTreeMap<u32, (String, String)>) -> BTreeSet<u32> {
+    p.iter().filter(|(_, (s, _))| s == "picked").map(|(id, _)| *id).collect()
+}
+
+/// The upstream robot killed (kill -9 of its starter) mid-run, at 120 parts a minute (one
+/// robot's pace): the other, seeing its token go, takes every part from then on — its share,
+/// and the claims it had not gripped. None is picked twice; none is left unpicked but (at
+/// most) the one the dead robot held as it died.
+#[test]
+fn a_robot_killed_mid_run_leaves_its_share_to_the_other() {
+    let rig = CellRig::start_with("kill", "120");
+    let mut west = rig.robot("west", 0.0, &[], 24);
+    let mut east = rig.robot("east", 600.0, &[], 24);
+    west.wait_moving();
+    std::thread::sleep(Duration::from_secs(10));
+    let starter = west.child.as_ref().unwrap().id();
+    qmarc_tests::send_signal(starter, nix::sys::signal::Signal::SIGKILL);
+    let (w, e) = (west.finish(), east.finish());
+    assert_eq!(w.0, None, "west was killed: {}", w.1);
+    assert_eq!(e.0, Some(0), "east: {}", e.1);
+    // West's controller ended its move on its starter's death and wrote what it saw.
+    let (pw, pe) = (parts(&west.out), parts(&east.out));
+    let (by_west, by_east) = (picked(&pw), picked(&pe));
+    assert!(by_west.len() >= 3, "west picked before it died: {by_west:?}: {pw:?}\n{}", w.1);
+    let raw = |o: &Path| std::fs::read_to_string(o.join("parts.csv")).unwrap();
+    assert!(
+        by_west.is_disjoint(&by_east),
+        "picked twice: {:?}\nwest:\n{}\neast:\n{}",
+        by_west.intersection(&by_east),
+        raw(&west.out),
+        raw(&east.out)
+    );
+    let unpicked: Vec<u32> = pe
+        .iter()
+        .filter(|(id, (s, _))| s != "pending" && !by_west.contains(id) && !by_east.contains(id))
+        .map(|(id, _)| *id)
+        .collect();
+    assert!(unpicked.len() <= 1, "left unpicked: {unpicked:?} (east: {pe:?})");
+    let last_west = by_west.iter().max().copied().unwrap_or(0);
+    let after: Vec<&u32> = by_east.iter().filter(|id| **id > last_west).collect();
+    assert!(after.len() >= 15, "east picked on alone: {after:?}");
+    east.run.assert_clean();
+    // A killed starter's children end on its death; its run's files are left to the next run
+    // of its prefix (which removes them first).
+    let since = std::time::Instant::now();
+    while !west.run.processes().is_empty() && since.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    west.run.location().remove_files();
+    west.run.assert_clean();
 }

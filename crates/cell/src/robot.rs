@@ -27,6 +27,9 @@ const RESAY: Duration = Duration::from_millis(500);
 /// How long after a robot's token went it is said gone: the camera's token, which goes with
 /// it when this robot is the one cut off, has had time to go too.
 const GONE_GRACE: Duration = Duration::from_millis(300);
+/// How much longer, after an outage, a robot that vanished with the camera has to come back
+/// before it is said gone.
+const GONE_AFTER_OUTAGE: Duration = Duration::from_secs(5);
 /// How long after the cell's camera came back a robot takes parts handed on to it again:
 /// the others' tokens are back, and their claims and picks asked and had.
 const RESYNC: Duration = Duration::from_secs(1);
@@ -304,8 +307,11 @@ impl<'a> Relay<'a> {
                     // Those that vanished with it and do not come back with it are gone from now:
                     // none of their claims made before is released (they may have gripped).
                     let now = qmarc_timer::clock::realtime_now_ns();
+                    // And they have longer to come back: each reconnects to the router in its
+                    // own time.
+                    let later = Instant::now() + GONE_AFTER_OUTAGE;
                     for (_, t, since) in &mut self.vanished {
-                        (*t, *since) = (now, Instant::now());
+                        (*t, *since) = (now, later);
                     }
                     let recent = key(&self.cell, "recent");
                     self.ask(Ask::Recent, recent);

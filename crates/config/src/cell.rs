@@ -36,13 +36,14 @@ pub struct CellSettings {
 }
 
 impl Default for CellSettings {
-    /// A robot named `deltabot` at the cell's belt coordinate 0; a part handed on 50 mm
-    /// past a window (100 ms at 500 mm/s).
+    /// A robot named `deltabot` at the cell's belt coordinate 0; a part handed on 150 mm
+    /// past a window (300 ms at 500 mm/s: a claim's way to the others, a loaded host's
+    /// stalls included; the next robot's window is further on).
     fn default() -> CellSettings {
         CellSettings {
             robot: "deltabot".into(),
             belt_offset_mm: 0.0,
-            handoff_mm: 50.0,
+            handoff_mm: 150.0,
             name: None,
             zenoh_config: None,
         }

@@ -81,6 +81,9 @@ pub enum GaveUp {
     NoProfile,
     /// The session was told to stop before the part was reached.
     Stopped,
+    /// Another robot of the cell has the part (its claim was the earlier), and the gripper
+    /// had not been told to close on it.
+    Elsewhere,
 }
 
 /// The belt in the robot's frame: belt coordinates to points and joint counts.

@@ -259,7 +259,7 @@ fn a_robots_place_in_a_cell_is_checked() {
     assert_eq!(d.cell, crate::CellSettings::default());
     assert_eq!(
         (d.cell.robot.as_str(), d.cell.handoff_mm, d.cell.name.as_ref()),
-        ("deltabot", 50.0, None)
+        ("deltabot", 150.0, None)
     );
     let s = parse("[cell]\nrobot = \"east-2\"\nbelt_offset_mm = 1200.0\nhandoff_mm = 0\n").unwrap();
     assert_eq!(

@@ -385,9 +385,15 @@ impl Dispatch {
                 PickEvent::GaveUp { id, why } => {
                     self.record(id).into_iter().for_each(|r| r.gave_up = Some(why));
                     // Out of reach or no profile: it will not be picked here (in a cell, a
-                    // robot downstream may still). One the session stopped for stays as it is.
-                    if why != GaveUp::Stopped {
-                        self.gave_up(id, now);
+                    // robot downstream may still). One the session stopped for stays as it is;
+                    // one another robot has is its.
+                    match why {
+                        GaveUp::Stopped => {}
+                        GaveUp::Elsewhere => {
+                            self.queue.unclaim(id);
+                            self.queue.elsewhere(id);
+                        }
+                        _ => self.gave_up(id, now),
                     }
                     self.given = None;
                 }
@@ -409,8 +415,9 @@ impl Dispatch {
             let claimed = self.queue.claim_next_by(now, &self.belt, |part, at| {
                 // In a cell a part not this robot's to take now, or out of its reach, is left
                 // to the sweep: passed on, or missed by the last robot that could reach it.
-                let (mine, miss) = cell
-                    .map_or((true, Take::OutOfReach), |c| (c.may_claim(part.id, at), Take::Leave));
+                let (mine, miss) = cell.map_or((true, Take::OutOfReach), |c| {
+                    (c.may_claim(part.id, part.seen.t_ns, at), Take::Leave)
+                });
                 if !mine {
                     Take::Leave
                 } else if intercepts(

@@ -29,7 +29,7 @@ use qmarc_plugins::motion::{MotionLimits, MotionState, Profile};
 use qmarc_proto::{Gripper, MAX_MOTORS, MotorFlags};
 use rtrb::{Consumer, Producer, RingBuffer};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 /// How high a gripped part is lifted off the belt, in the belt's frame, before it is carried
 /// to the place, mm.
@@ -56,6 +56,9 @@ pub struct PickerShared {
     pub ready: AtomicBool,
     /// The picker takes no more picks (its session ends, or it was told to stop).
     pub ending: AtomicBool,
+    /// A part (its id) the picker is to give up if its gripper has not been told to close on
+    /// it yet: another robot of the cell has it (0: none).
+    pub cancel: AtomicU32,
 }
 
 /// The dispatcher's end of a [`Picker`].
@@ -269,6 +272,12 @@ impl Picker {
         self.phase = Phase::Place(pick);
     }
 
+    /// Whether the dispatcher said `pick` is another robot's (one atomic load).
+    #[inline]
+    fn cancelled(&self, pick: &Pick) -> bool {
+        self.shared.cancel.load(Ordering::Acquire) == pick.id
+    }
+
     /// Gives `pick` up at sample `n` (the last sample commanded is `n − 1`'s): the gripper
     /// opens and the command goes to the place, from sample `n` on.
     fn give_up(&mut self, n: u64, pick: &Pick, why: GaveUp) {
@@ -386,6 +395,9 @@ impl Picker {
                 if ending {
                     return self.give_up(n, &pick, GaveUp::Stopped);
                 }
+                if self.cancelled(&pick) {
+                    return self.give_up(n, &pick, GaveUp::Elsewhere);
+                }
                 match self.relative(n, &pick, 0.0) {
                     // On the part: the gripper closes once the effector is there.
                     Ok(true) => {
@@ -399,6 +411,9 @@ impl Picker {
             Phase::Settle(pick) => {
                 if ending {
                     return self.give_up(n, &pick, GaveUp::Stopped);
+                }
+                if self.cancelled(&pick) {
+                    return self.give_up(n, &pick, GaveUp::Elsewhere);
                 }
                 self.settle(n, pick);
             }

@@ -593,3 +593,5 @@ fn the_belt_frame_puts_a_part_where_the_settings_say() {
         assert_eq!(up, above, "{up_mm} mm above the part at {along}, {across}");
     }
 }
+
+mod cancel;

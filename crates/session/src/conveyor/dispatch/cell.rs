@@ -32,6 +32,10 @@ pub(crate) struct CellSide {
     /// in (the others and their claims had), nor while it is cut off (it goes on with what it
     /// claimed).
     pub link: Link,
+    /// After an outage (cut off, then back): parts seen before it ended, ns of
+    /// `CLOCK_MONOTONIC` (the loop's time), are no longer claimed — the others may have
+    /// claimed or picked them meanwhile, unheard. 0: none.
+    pub fresh_after_ns: u64,
 }
 
 /// How a robot stands in its cell.
@@ -74,6 +78,7 @@ impl CellSide {
             outbox: Vec::new(),
             conflicts: 0,
             link: Link::Waiting,
+            fresh_after_ns: 0,
         })
     }
 
@@ -92,9 +97,13 @@ impl CellSide {
         (ns as i64).saturating_sub(self.realtime_offset_ns).max(0) as u64
     }
 
-    /// Whether this robot may claim part `id`, `at_mm` along its own belt.
-    pub fn may_claim(&self, id: u32, at_mm: f64) -> bool {
-        self.link == Link::In && self.cell.may_claim(id, at_mm + self.offset_mm)
+    /// Whether this robot may claim part `id`, first seen at `seen_ns` (monotonic) and now
+    /// `at_mm` along its own belt: in the cell, its turn by the sharing rule, and not a part
+    /// from before an outage.
+    pub fn may_claim(&self, id: u32, seen_ns: u64, at_mm: f64) -> bool {
+        self.link == Link::In
+            && seen_ns >= self.fresh_after_ns
+            && self.cell.may_claim(id, at_mm + self.offset_mm)
     }
 
     /// What becomes of a part past this robot's window, `at_mm` along its own belt: passed
@@ -187,21 +196,39 @@ impl Dispatch {
                 if side.ledger.claim(m.part, c) {
                     if was_mine {
                         side.conflicts += 1;
+                        self.cancel(m.part);
                     }
                     self.queue.elsewhere(m.part);
                 }
             }
             Some(CellKind::Picked) if !mine => {
                 side.ledger.picked(m.part, robot, m.t_ns);
+                self.cancel(m.part);
                 self.queue.elsewhere(m.part);
             }
             Some(CellKind::Released) if !mine && side.ledger.release(m.part, robot) => {
                 self.queue.release(m.part);
             }
             Some(CellKind::CutOff) => side.link = Link::CutOff,
-            Some(CellKind::Rejoined) => side.link = Link::In,
+            Some(CellKind::Rejoined) => {
+                if side.link == Link::CutOff {
+                    side.fresh_after_ns = self.history.back().map_or(0, |r| r.ns);
+                }
+                side.link = Link::In;
+            }
             // Its own messages back, or a kind this build does not know: nothing to do.
             _ => {}
+        }
+    }
+
+    /// Another robot has part `id`: the picker gives it up if it is the one it has and its
+    /// gripper has not been told to close on it (once told, the pick goes on: the two claims
+    /// crossed too late, counted in `conflicts`).
+    fn cancel(&mut self, id: u32) {
+        let gripping =
+            self.records.iter().rev().find(|r| r.id == id).is_some_and(|r| r.grip_cycle.is_some());
+        if self.given == Some(id) && !gripping {
+            self.handle.shared.cancel.store(id, std::sync::atomic::Ordering::Release);
         }
     }
 

@@ -20,6 +20,7 @@ struct Robot {
     status: Arc<LoopStatus>,
     picks: Consumer<Pick>,
     events: Producer<PickEvent>,
+    shared: Arc<PickerShared>,
     /// The pick under way and the millisecond it is done.
     busy: Option<(u32, u64)>,
     picked: Vec<u32>,
@@ -43,9 +44,15 @@ fn robot(name: &'static str, offset_mm: f64, t0: u64) -> Robot {
     let (events, events_rx) = RingBuffer::new(256);
     let shared = Arc::new(PickerShared::default());
     shared.ready.store(true, Ordering::Release);
-    let handle = PickerHandle { picks: picks_tx, events: events_rx, shared, tally: Arc::default() };
+    let handle = PickerHandle {
+        picks: picks_tx,
+        events: events_rx,
+        shared: shared.clone(),
+        tally: Arc::default(),
+    };
     let d = Dispatch::new(&s, (t0, false), handle, status.clone()).unwrap();
-    Robot { name, d, status, picks, events, busy: None, picked: vec![], inbox: vec![], alive: true }
+    let (busy, picked, inbox) = (None, vec![], vec![]);
+    Robot { name, d, status, picks, events, shared, busy, picked, inbox, alive: true }
 }
 
 /// The belt: 500 mm/s, 0.05 mm a count: 10 counts a millisecond.
@@ -148,6 +155,13 @@ impl Robot {
                     self.busy = Some((p.id, k));
                 }
             }
+            // Another robot has it, before the gripper was told to close: given up.
+            Some((id, from))
+                if k < from + 150 && self.shared.cancel.load(Ordering::Acquire) == id =>
+            {
+                let _ = self.events.push(PickEvent::GaveUp { id, why: GaveUp::Elsewhere });
+                self.busy = None;
+            }
             Some((id, from)) if k == from + 150 => {
                 let _ = self.events.push(PickEvent::Gripping { id, cycle: k });
                 let _ = self.events.push(PickEvent::Lifted { id });
@@ -247,4 +261,40 @@ fn a_robot_lost_leaves_its_share_and_its_ungripped_claims_to_the_other() {
     let missed: Vec<u32> =
         states.iter().filter(|(_, s, _)| *s == "missed").map(|(id, _, _)| *id).collect();
     assert_eq!(missed, after, "east misses only what it could not reach");
+}
+
+/// Two claims of one part that crossed: the robot whose claim was the later gives the part
+/// up if its gripper has not been told to close (it is the other's, passed here); so does a
+/// robot that hears another picked the part it is going for.
+#[test]
+fn a_claim_that_loses_ends_the_pick_before_the_grip() {
+    for kind in [CellKind::Claim, CellKind::Picked] {
+        let mut run = Run::new(&[("east", 600.0)], 500);
+        let mut crossed = None;
+        for k in 0..6_000 {
+            // 20 ms into its first intercept, word comes that west had claimed (or picked)
+            // that part first.
+            if let (None, Some((id, from))) = (crossed, run.robots[0].busy)
+                && k == from + 20
+            {
+                let side = run.robots[0].d.cell.as_ref().unwrap();
+                let earlier = side.ledger.claim_of(id).unwrap().at_ns - 1;
+                let mut m = CellMsg::new(kind, id, "west", earlier);
+                m.grip_by_ns = earlier + 200 * MS;
+                run.robots[0].inbox.push((k, m));
+                crossed = Some(id);
+            }
+            run.step(k);
+        }
+        let id = crossed.expect("an intercept");
+        let east = run.robots.remove(0);
+        assert!(!east.picked.contains(&id), "{kind:?}: given up");
+        assert!(east.picked.len() >= 8, "{kind:?}: and the others picked: {:?}", east.picked);
+        let records = east.d.finish();
+        let r = records.parts.iter().find(|p| p.id == id).unwrap();
+        assert_eq!((r.state, r.gave_up), ("passed", Some(GaveUp::Elsewhere)), "{kind:?}");
+        if kind == CellKind::Claim {
+            assert_eq!(records.cell.unwrap().conflicts, 1);
+        }
+    }
 }
