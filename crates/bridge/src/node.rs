@@ -50,9 +50,10 @@ pub enum NodeOpenError {
 /// own: the router answers at once with what it knows; a peer's link may take a moment.
 const ALIVE_QUERY: std::time::Duration = std::time::Duration::from_secs(2);
 
-/// How long the bridge waits for its session to reach a router or peer it connects to
-/// (rmw_zenoh's default router may not run: it then goes on, retrying, as rmw_zenoh does).
-const LINK_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
+/// How long the bridge (and a cell's process) waits for its session to reach a router or
+/// peer it connects to (rmw_zenoh's default router may not run: it then goes on, retrying,
+/// as rmw_zenoh does).
+pub const LINK_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
 
 /// Whether `session` has reached a router or a peer.
 fn linked(session: &zenoh::Session) -> bool {
@@ -60,7 +61,23 @@ fn linked(session: &zenoh::Session) -> bool {
     info.routers_zid().wait().next().is_some() || info.peers_zid().wait().next().is_some()
 }
 
-fn failed(what: impl Into<String>) -> impl FnOnce(zenoh::Error) -> ZenohError {
+/// Opens the session of `config` and, when it connects to anyone, waits up to
+/// [`LINK_WAIT`] for it to reach a router or a peer: until then, nobody could answer what it
+/// asks (a node or robot of its name alive, the cell's camera). It goes on after, retrying.
+pub fn open_linked(config: zenoh::Config) -> Result<zenoh::Session, ZenohError> {
+    let connects = config
+        .get_json("connect/endpoints")
+        .is_ok_and(|j| j.trim() != "[]" && !j.trim().is_empty());
+    let session = zenoh::open(config).wait().map_err(failed("opening the session"))?;
+    let since = std::time::Instant::now();
+    while connects && !linked(&session) && since.elapsed() < LINK_WAIT {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    Ok(session)
+}
+
+/// The error of a Zenoh call that failed while `what` was being done.
+pub fn failed(what: impl Into<String>) -> impl FnOnce(zenoh::Error) -> ZenohError {
     let what = what.into();
     move |e| ZenohError { what, why: e.to_string() }
 }
@@ -173,16 +190,8 @@ impl Node {
         namespace: &str,
         name: &str,
     ) -> Result<Node, NodeOpenError> {
-        // Whom it connects to: until it has reached one of them, nobody could say whether a
-        // node of its name is alive.
-        let connects = config
-            .get_json("connect/endpoints")
-            .is_ok_and(|j| j.trim() != "[]" && !j.trim().is_empty());
-        let session = zenoh::open(config).wait().map_err(failed("opening the session"))?;
-        let since = std::time::Instant::now();
-        while connects && !linked(&session) && since.elapsed() < LINK_WAIT {
-            std::thread::sleep(std::time::Duration::from_millis(20));
-        }
+        // Linked first: until then nobody could say whether a node of its name is alive.
+        let session = open_linked(config)?;
         let info = NodeInfo {
             domain,
             zid: session.zid().to_string(),

@@ -60,7 +60,8 @@ struct Numbering {
     realtime_offset_ns: i64,
     recent: VecDeque<WirePart>,
     seen: Seen,
-    last_counts: i64,
+    /// The belt's furthest count seen, once a detection said one.
+    last_counts: Option<i64>,
 }
 
 impl Numbering {
@@ -74,7 +75,7 @@ impl Numbering {
             let t_s = d.exposure_ns.saturating_sub(self.epoch_mono_ns) as f64 * 1e-9;
             (self.motion.at(t_s).0 / self.belt.mm_per_count).floor() as i64
         };
-        self.last_counts = self.last_counts.max(counts);
+        self.last_counts = Some(self.last_counts.map_or(counts, |c| c.max(counts)));
         let seen = Detection {
             t_ns: d.exposure_ns,
             latched_counts: counts,
@@ -101,10 +102,8 @@ impl CameraNode {
         let session = session::open(self.zenoh_config.as_deref())?;
         let token_key = key(&self.cell, "camera");
         if let Some(other) = session::alive(&session, &token_key, Duration::from_secs(2))?.first() {
-            anyhow::bail!(
-                "cell {} has its camera already (its token {other}): one camera a cell",
-                self.cell
-            );
+            let why = format!("it has its camera already (its token {other}): one camera a cell");
+            return Err(crate::Refused { cell: self.cell.clone(), why }.into());
         }
         let epoch_mono_ns = qmarc_timer::clock::monotonic_now_ns();
         let realtime_offset_ns = qmarc_timer::clock::realtime_offset_ns();
@@ -182,7 +181,7 @@ impl CameraNode {
                 realtime_offset_ns,
                 recent: VecDeque::new(),
                 seen: Seen::default(),
-                last_counts: i64::MIN,
+                last_counts: None,
             };
             let started = Instant::now();
             let until = (self.seconds > 0.0).then(|| Duration::from_secs_f64(self.seconds));
@@ -195,8 +194,8 @@ impl CameraNode {
                         parts.put(json(&p)).wait().map_err(failed("publishing a part"))?;
                     }
                 }
-                if n.last_counts > i64::MIN {
-                    n.queue.sweep(n.last_counts, &n.belt);
+                if let Some(counts) = n.last_counts {
+                    n.queue.sweep(counts, &n.belt);
                 }
                 while let Ok(Some(q)) = belt_q.try_recv() {
                     let _ = q.reply(q.key_expr().clone(), json(belt)).wait();

@@ -18,3 +18,19 @@ pub mod keys;
 pub mod robot;
 pub mod session;
 pub mod wire;
+
+/// What a cell refuses — a robot that cannot join it, a second camera — said, and the
+/// program ends with exit code 3 (refused before anything moved).
+#[derive(Debug, thiserror::Error)]
+#[error("cell {cell}: {why}")]
+pub struct Refused {
+    /// The cell.
+    pub cell: String,
+    /// Why.
+    pub why: String,
+}
+
+/// The exit code of a cell program that ended with `e`: 3 for a [`Refused`], else 1.
+pub fn exit_code(e: &anyhow::Error) -> u8 {
+    if e.is::<Refused>() { qmarc_proto::exit::REFUSED } else { qmarc_proto::exit::INTERNAL }
+}

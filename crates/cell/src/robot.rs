@@ -7,6 +7,7 @@
 //! and gone, their claims; this robot's claims, picks and give-ups. It holds the robot's
 //! liveliness token and answers for its window and its open claims.
 
+use crate::Refused;
 use crate::keys::{key, robot_key, robot_of};
 use crate::session::{self, failed, json};
 use crate::wire::{CellBelt, WireClaim, WireMember, WirePart, disagreement};
@@ -44,16 +45,6 @@ enum Ask {
     Ledger,
     /// The camera's recent parts.
     Recent,
-}
-
-/// Why a robot cannot join its cell: said, and the starter refuses the run (exit 3).
-#[derive(Debug, thiserror::Error)]
-#[error("cell {cell}: {why}")]
-pub struct Refused {
-    /// The cell.
-    pub cell: String,
-    /// Why.
-    pub why: String,
 }
 
 /// The companion of the run `spec`: joins, then relays until a stop signal.

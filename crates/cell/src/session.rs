@@ -1,38 +1,17 @@
 //! The cell's Zenoh session: the bridge's (rmw_zenoh's defaults, or the file of
-//! `--zenoh-config`), waited for until it reaches a router or a peer, and the few calls the
-//! cell makes on it.
+//! `--zenoh-config`, opened and linked as the bridge's is), and the few calls the cell makes
+//! on it.
 
-use qmarc_bridge::node::{ZenohError, session_config};
+pub use qmarc_bridge::node::failed;
+use qmarc_bridge::node::{ZenohError, open_linked, session_config};
 use std::path::Path;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use zenoh::Wait;
 
-/// How long a cell process waits for its session to reach a router or peer before going on
-/// (it keeps retrying, as rmw_zenoh's nodes do).
-pub const LINK_WAIT: Duration = Duration::from_secs(5);
-
-/// A Zenoh call failed: `what` was being done.
-pub fn failed(what: impl Into<String>) -> impl FnOnce(zenoh::Error) -> ZenohError {
-    let what = what.into();
-    move |e| ZenohError { what, why: e.to_string() }
-}
-
-/// Opens the session `file` describes (`None`: rmw_zenoh's default) and waits up to
-/// [`LINK_WAIT`] for it to reach a router or a peer.
+/// Opens the session `file` describes (`None`: rmw_zenoh's default), linked to a router or
+/// a peer as the bridge's is ([`open_linked`]).
 pub fn open(file: Option<&Path>) -> Result<zenoh::Session, ZenohError> {
-    let session =
-        zenoh::open(session_config(file)?).wait().map_err(failed("opening the session"))?;
-    let since = Instant::now();
-    while !linked(&session) && since.elapsed() < LINK_WAIT {
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    Ok(session)
-}
-
-/// Whether `session` has reached a router or a peer.
-pub fn linked(session: &zenoh::Session) -> bool {
-    let info = session.info();
-    info.routers_zid().wait().next().is_some() || info.peers_zid().wait().next().is_some()
+    open_linked(session_config(file)?)
 }
 
 /// The keys of the live tokens matching `key`, asked for `timeout`.

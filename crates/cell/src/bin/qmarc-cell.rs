@@ -112,14 +112,7 @@ fn run(args: CellArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
                 bin_dir,
                 seconds,
             };
-            let seen = node.run().map_err(|e| {
-                let code = if e.to_string().contains("has its camera already") {
-                    exit::REFUSED
-                } else {
-                    exit::INTERNAL
-                };
-                (code, e)
-            })?;
+            let seen = node.run().map_err(|e| (qmarc_cell::exit_code(&e), e))?;
             println!(
                 "qmarc-cell camera: cell {cell}: {} parts seen ({} detections)",
                 seen.parts, seen.detections
@@ -132,14 +125,7 @@ fn run(args: CellArgs) -> Result<ExitCode, (u8, anyhow::Error)> {
         }
         Command::Robot { settings } => {
             let spec = RunSpec::read(&settings).map_err(|e| (exit::USAGE, e.into()))?;
-            qmarc_cell::robot::run(&spec).map_err(|e| {
-                let code = if e.is::<qmarc_cell::robot::Refused>() {
-                    exit::REFUSED
-                } else {
-                    exit::INTERNAL
-                };
-                (code, e)
-            })?;
+            qmarc_cell::robot::run(&spec).map_err(|e| (qmarc_cell::exit_code(&e), e))?;
             Ok(ExitCode::SUCCESS)
         }
     }

@@ -128,12 +128,7 @@ impl CellSide {
     pub fn claim(&mut self, id: u32, now: u64, grip_in_ns: u64) {
         let m = self.say(CellKind::Claim, id, now);
         m.grip_by_ns = m.t_ns.saturating_add(grip_in_ns);
-        let c = Claim {
-            robot: m.robot().to_string(),
-            at_ns: m.t_ns,
-            grip_by_ns: m.grip_by_ns,
-            picked: false,
-        };
+        let c = claim_in(m);
         self.ledger.claim(id, c);
     }
 
@@ -166,9 +161,15 @@ impl CellSide {
     }
 }
 
+/// The claim a [`CellKind::Claim`] message says.
+fn claim_in(m: &CellMsg) -> Claim {
+    Claim { robot: m.robot().to_string(), at_ns: m.t_ns, grip_by_ns: m.grip_by_ns, picked: false }
+}
+
 impl Dispatch {
     /// A message from the cell.
     pub(crate) fn cell_message(&mut self, m: &CellMsg) {
+        let now_ns = self.loop_now_ns();
         let Some(side) = self.cell.as_mut() else { return };
         let robot = m.robot();
         let mine = robot == side.me();
@@ -186,12 +187,7 @@ impl Dispatch {
                 }
             }
             Some(CellKind::Claim) if !mine => {
-                let c = Claim {
-                    robot: robot.to_string(),
-                    at_ns: m.t_ns,
-                    grip_by_ns: m.grip_by_ns,
-                    picked: false,
-                };
+                let c = claim_in(m);
                 let was_mine = side.ledger.claim_of(m.part).is_some_and(|c| c.robot == side.me());
                 if side.ledger.claim(m.part, c) {
                     if was_mine {
@@ -212,7 +208,7 @@ impl Dispatch {
             Some(CellKind::CutOff) => side.link = Link::CutOff,
             Some(CellKind::Rejoined) => {
                 if side.link == Link::CutOff {
-                    side.fresh_after_ns = self.history.back().map_or(0, |r| r.ns);
+                    side.fresh_after_ns = now_ns;
                 }
                 side.link = Link::In;
             }
@@ -225,8 +221,7 @@ impl Dispatch {
     /// gripper has not been told to close on it (once told, the pick goes on: the two claims
     /// crossed too late, counted in `conflicts`).
     fn cancel(&mut self, id: u32) {
-        let gripping =
-            self.records.iter().rev().find(|r| r.id == id).is_some_and(|r| r.grip_cycle.is_some());
+        let gripping = self.record(id).is_some_and(|r| r.grip_cycle.is_some());
         if self.given == Some(id) && !gripping {
             self.handle.shared.cancel.store(id, std::sync::atomic::Ordering::Release);
         }
