@@ -24,35 +24,54 @@ struct CellRig {
     endpoint: String,
     router: Option<Child>,
     camera: Option<Child>,
+    /// The second host, when the cell has one: a network namespace whose robots connect to
+    /// the router through its link (`there_client`).
+    host: Option<qmarc_program::net::Netns>,
+    there_client: PathBuf,
 }
 
 impl CellRig {
     /// A router on a free loopback port and the cell `tag`'s camera, a Zenoh client of it,
     /// seeing [`PARTS_PER_MIN`].
     fn start(tag: &str) -> CellRig {
-        CellRig::start_with(tag, PARTS_PER_MIN)
+        CellRig::start_with(tag, PARTS_PER_MIN, false)
     }
 
-    /// [`CellRig::start`] with the camera seeing `parts_per_min`.
-    fn start_with(tag: &str, parts_per_min: &str) -> CellRig {
+    /// [`CellRig::start`] with the camera seeing `parts_per_min`; with a second host
+    /// (`two_hosts`), on which the router listens too.
+    fn start_with(tag: &str, parts_per_min: &str, two_hosts: bool) -> CellRig {
         let lock = std::fs::File::create(std::env::temp_dir().join("qmarc-tests-cell.lock"))
             .expect("the cells' lock file");
         let one_at_a_time = nix::fcntl::Flock::lock(lock, nix::fcntl::FlockArg::LockExclusive)
             .map_err(|(_, e)| e)
             .expect("the cells' lock");
         let run = TestRun::new(&format!("cell-{tag}"));
-        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let port = qmarc_program::net::free_loopback_port();
         let endpoint = format!("tcp/127.0.0.1:{port}");
-        let client = run.dir.join("client.json5");
-        std::fs::write(
-            &client,
-            format!("{{ mode: \"client\", connect: {{ endpoints: [\"{endpoint}\"] }} }}"),
-        )
-        .unwrap();
+        let client_of = |file: &str, endpoint: &str| {
+            let path = run.dir.join(file);
+            let text =
+                format!("{{ mode: \"client\", connect: {{ endpoints: [\"{endpoint}\"] }} }}");
+            std::fs::write(&path, text).unwrap();
+            path
+        };
+        let client = client_of("client.json5", &endpoint);
+        let host = two_hosts.then(|| qmarc_program::net::Netns::new().expect("the second host"));
+        let there = host.as_ref().map(|h| format!("tcp/{}:{port}", h.here));
+        let there_client = client_of("there.json5", there.as_deref().unwrap_or(&endpoint));
         let name = format!("{tag}{}", std::process::id());
         let (router, camera) = (None, None);
-        let mut rig =
-            CellRig { _one_at_a_time: one_at_a_time, run, name, client, endpoint, router, camera };
+        let mut rig = CellRig {
+            _one_at_a_time: one_at_a_time,
+            run,
+            name,
+            client,
+            endpoint,
+            router,
+            camera,
+            host,
+            there_client,
+        };
         rig.router = Some(rig.start_router());
         rig.camera = Some(rig.start_camera(parts_per_min));
         rig
@@ -63,6 +82,10 @@ impl CellRig {
     fn start_router(&self) -> Child {
         let child = Command::new(bin_dir().join("qmarc-cell"))
             .args(["router", "--listen", &self.endpoint])
+            .args(self.host.iter().flat_map(|h| {
+                let port = self.endpoint.rsplit(':').next().unwrap_or_default();
+                ["--listen".to_string(), format!("tcp/{}:{port}", h.here)]
+            }))
             .stderr(Stdio::null())
             .spawn()
             .unwrap();
@@ -91,6 +114,18 @@ impl CellRig {
     /// A robot `robot` at `offset_mm` along the cell's belt, its settings edited by `edits`:
     /// its run, its output folder and its starter (`seconds` of conveyor session).
     fn robot(&self, robot: &str, offset_mm: f64, edits: &[(&str, &str)], seconds: u32) -> Robot {
+        self.robot_on(false, robot, offset_mm, edits, seconds)
+    }
+
+    /// [`CellRig::robot`] on the second host (`there`: the rig has one) or on this one.
+    fn robot_on(
+        &self,
+        there: bool,
+        robot: &str,
+        offset_mm: f64,
+        edits: &[(&str, &str)],
+        seconds: u32,
+    ) -> Robot {
         let run = TestRun::new(&format!("cell-{robot}"));
         let quoted = format!("{robot:?}");
         let offset = format!("{offset_mm:.1}");
@@ -99,14 +134,21 @@ impl CellRig {
         all.extend_from_slice(edits);
         let config = run.config_with(&all);
         let out = run.out("out");
-        let child = run.spawn_starter(&[
-            &format!("--config={}", config.display()),
-            &format!("--out={}", out.display()),
-            "conveyor",
-            &format!("--seconds={seconds}"),
-            &format!("--cell={}", self.name),
-            &format!("--zenoh-config={}", self.client.display()),
-        ]);
+        let (host, client) = match there {
+            true => (Some(self.host.as_ref().expect("a second host")), &self.there_client),
+            false => (None, &self.client),
+        };
+        let child = run.spawn_starter_on(
+            host,
+            &[
+                &format!("--config={}", config.display()),
+                &format!("--out={}", out.display()),
+                "conveyor",
+                &format!("--seconds={seconds}"),
+                &format!("--cell={}", self.name),
+                &format!("--zenoh-config={}", client.display()),
+            ],
+        );
         Robot { run, out, child: Some(child) }
     }
 }
@@ -191,21 +233,36 @@ fn parts(out: &Path) -> BTreeMap<u32, (String, String)> {
         .collect()
 }
 
-/// Two robots share the belt at 240 parts a minute: every part the camera saw while both
-/// ran is picked by exactly one of them, none missed, each picking about half; both list
-/// the same parts by the same ids and agree on who picked each.
+/// `parts.csv` of `out`: id → when its claim was seen there, ms from its exposure (the
+/// parts whose claim was).
+fn claims_seen(out: &Path) -> BTreeMap<u32, f64> {
+    let text = std::fs::read_to_string(out.join("parts.csv")).expect("parts.csv");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |n: &str| header.iter().position(|h| *h == n).unwrap();
+    let (id, ms) = (col("id"), col("claimed_ms"));
+    lines
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            Some((f[id].parse().unwrap(), f[ms].parse().ok()?))
+        })
+        .collect()
+}
+
+/// Two robots on two hosts — east in a network namespace, both Zenoh clients of a router
+/// that listens on loopback and on the namespace's link — share the belt at 240 parts a
+/// minute: every part the camera saw while both ran is picked by exactly one of them, none
+/// missed, each picking about half; both list the same parts by the same ids and agree on
+/// who picked each; each heard the other's claims, after they were made.
 #[test]
-fn two_robots_share_a_belt_none_picked_twice_none_missed() {
-    let rig = CellRig::start("share");
+fn two_robots_on_two_hosts_share_a_belt_none_picked_twice_none_missed() {
+    let rig = CellRig::start_with("share", PARTS_PER_MIN, true);
     let mut west = rig.robot("west", 0.0, &[], 20);
-    let mut east = rig.robot("east", 600.0, &[], 20);
+    let mut east = rig.robot_on(true, "east", 600.0, &[], 20);
     let (w, e) = (west.finish(), east.finish());
     assert_eq!(w.0, Some(0), "west: {}", w.1);
     assert_eq!(e.0, Some(0), "east: {}", e.1);
     let (pw, pe) = (parts(&west.out), parts(&east.out));
-    let picked = |p: &BTreeMap<u32, (String, String)>| -> BTreeSet<u32> {
-        p.iter().filter(|(_, (s, _))| s == "picked").map(|(id, _)| *id).collect()
-    };
     let (by_west, by_east) = (picked(&pw), picked(&pe));
     assert!(by_west.is_disjoint(&by_east), "picked twice: {:?}", by_west.intersection(&by_east));
     // Every part both saw and neither left pending: picked by one of them, both naming it —
@@ -227,6 +284,14 @@ fn two_robots_share_a_belt_none_picked_twice_none_missed() {
         }
     }
     assert!(unsaid.len() <= 2, "picks not said to the other: {unsaid:?}");
+    // Each robot's picks: claimed there, then heard on the other host (one clock: later).
+    let (cw, ce) = (claims_seen(&west.out), claims_seen(&east.out));
+    for (robot, mine, made, heard) in [("west", &by_west, &cw, &ce), ("east", &by_east, &ce, &cw)] {
+        let both: Vec<(f64, f64)> =
+            mine.iter().filter_map(|id| Some((*made.get(id)?, *heard.get(id)?))).collect();
+        assert!(both.len() * 10 >= mine.len() * 9, "{robot}'s claims heard: {both:?}");
+        assert!(both.iter().all(|(m, h)| h > m), "{robot}'s claims heard after made: {both:?}");
+    }
     let total = by_west.len() + by_east.len();
     assert!(both >= 60, "{both} parts seen by both (20 s at 4 a second)");
     for (robot, n) in [("west", by_west.len()), ("east", by_east.len())] {
@@ -269,7 +334,7 @@ fn picked(p: &BTreeMap<u32, (String, String)>) -> BTreeSet<u32> {
 /// most) the one the dead robot held as it died.
 #[test]
 fn a_robot_killed_mid_run_leaves_its_share_to_the_other() {
-    let rig = CellRig::start_with("kill", "120");
+    let rig = CellRig::start_with("kill", "120", false);
     let mut west = rig.robot("west", 0.0, &[], 24);
     let mut east = rig.robot("east", 600.0, &[], 24);
     west.wait_moving();
@@ -309,4 +374,56 @@ fn a_robot_killed_mid_run_leaves_its_share_to_the_other() {
     }
     west.run.location().remove_files();
     west.run.assert_clean();
+}
+
+/// The router killed 6 s into the run and started again 1.5 s later on its port, at 120
+/// parts a minute: both robots go on with what they had claimed while cut off, claim nothing
+/// meanwhile, and share the belt again once back (their clients reconnect on their own). No
+/// part is picked twice, and both pick after the restart.
+#[test]
+fn the_router_restarted_mid_run_both_go_on_and_share_again() {
+    let mut rig = CellRig::start_with("restart", "120", false);
+    let mut west = rig.robot("west", 0.0, &[], 26);
+    let mut east = rig.robot("east", 600.0, &[], 26);
+    west.wait_moving();
+    east.wait_moving();
+    std::thread::sleep(Duration::from_secs(6));
+    // It crashes (its links end at once, as a router's host that dies ends them later).
+    let mut router = rig.router.take().unwrap();
+    router.kill().unwrap();
+    router.wait().unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    rig.router = Some(rig.start_router());
+    let (w, e) = (west.finish(), east.finish());
+    assert_eq!(w.0, Some(0), "west: {}", w.1);
+    assert_eq!(e.0, Some(0), "east: {}", e.1);
+    let (pw, pe) = (parts(&west.out), parts(&east.out));
+    let (by_west, by_east) = (picked(&pw), picked(&pe));
+    let raw = |o: &Path| std::fs::read_to_string(o.join("parts.csv")).unwrap();
+    assert!(
+        by_west.is_disjoint(&by_east),
+        "picked twice: {:?}\nwest:\n{}\n{}\neast:\n{}\n{}",
+        by_west.intersection(&by_east),
+        raw(&west.out),
+        w.1,
+        raw(&east.out),
+        e.1
+    );
+    for (robot, said) in [("west", &w.1), ("east", &e.1)] {
+        assert!(said.contains("cut off"), "{robot} saw the router go: {said}");
+        assert!(said.contains("the camera is back"), "{robot} saw it back: {said}");
+    }
+    // The last parts both saw to their end: shared again.
+    let ended: Vec<u32> = pw
+        .iter()
+        .filter(|(id, (s, _))| s != "pending" && pe.get(id).is_some_and(|(s, _)| s != "pending"))
+        .map(|(id, _)| *id)
+        .collect();
+    let last: BTreeSet<u32> = ended.iter().rev().take(12).copied().collect();
+    for (robot, mine) in [("west", &by_west), ("east", &by_east)] {
+        let n = last.intersection(mine).count();
+        assert!(n >= 3, "{robot} picked {n} of the last 12 parts {last:?}: {pw:?} {pe:?}");
+    }
+    west.run.assert_clean();
+    east.run.assert_clean();
 }

@@ -237,7 +237,17 @@ impl TestRun {
     /// Starts `qmarc-starter` with the isolation arguments and `args`, standard input piped (to
     /// feed a knot stream) and the output captured; finish it with [`wait_with_timeout`].
     pub fn spawn_starter(&self, args: &[&str]) -> std::process::Child {
-        Command::new(bin_dir().join("qmarc-starter"))
+        self.spawn_starter_on(None, args)
+    }
+
+    /// [`TestRun::spawn_starter`] on the second host `host` (a network namespace), or here.
+    pub fn spawn_starter_on(
+        &self,
+        host: Option<&qmarc_program::net::Netns>,
+        args: &[&str],
+    ) -> std::process::Child {
+        let starter = bin_dir().join("qmarc-starter");
+        host.map_or_else(|| Command::new(&starter), |h| h.command(&starter))
             .args(self.isolation_args())
             .args(args)
             .current_dir(workspace())

@@ -14,6 +14,8 @@
 //! - `bridge`: the ROS 2 bridge — the loop's p99 with it and two subscribers against without,
 //!   joint states over 60 s (loss, latency from the servo sample), a target to the loop.
 //! - `files`: a move's files written with `gather.mcap` off and on (the time ratio, sizes).
+//! - `cell`: a cell of two robots on one belt over Zenoh — the share, one robot killed, the
+//!   claim latency with the second robot on another host (a network namespace).
 //! - `foxglove`: the live view — the loop's p99 with it and two viewers against without, what
 //!   a viewer receives.
 //!
@@ -21,6 +23,7 @@
 
 mod baselines;
 mod bridge;
+mod cell;
 mod command;
 mod conveyor;
 mod cycle;
@@ -66,6 +69,10 @@ enum BenchCommand {
     /// missed parts, the grip error, what limits the rate, the highest rate with none missed,
     /// 1 m/s; the intercept's computation in the servo cycle.
     Conveyor(conveyor::ConveyorArgs),
+    /// A cell of two robots on one belt (real sessions, a Zenoh router, the cell's camera):
+    /// picks a minute together, missed, picked twice, the split; one robot killed mid-run;
+    /// the claim latency with the second robot on another host (a network namespace).
+    Cell(cell::CellArgs),
     /// The ROS 2 bridge: the loop with it and two subscribers against without (p99 ratio),
     /// joint states' loss and latency, a published target to the loop's first command.
     Bridge(bridge::BridgeArgs),
@@ -88,6 +95,7 @@ fn main() -> ExitCode {
         BenchCommand::Command(a) => command::run(a),
         BenchCommand::Pick(a) => pick::run(a),
         BenchCommand::Conveyor(a) => conveyor::run(a),
+        BenchCommand::Cell(a) => cell::run(a),
         BenchCommand::Bridge(a) => bridge::run(a),
         BenchCommand::Files(a) => files::run(a),
         BenchCommand::Foxglove(a) => foxglove::run(a),

@@ -182,6 +182,26 @@ fn vision_times_detection_and_measures_its_accuracy() {
     assert_eq!(bad.status.code(), Some(64), "{}", text(&bad));
 }
 
+/// Issue 47: a cell of two robots — sharing the belt on one host, then the upstream one
+/// killed mid-run — runs and prints its figures (one cell at a time on the machine: the
+/// end-to-end cell tests' lock).
+#[test]
+fn cell_runs_two_robots_sharing_a_belt_and_one_killed() {
+    let lock = std::fs::File::create(std::env::temp_dir().join("qmarc-tests-cell.lock")).unwrap();
+    let _one_cell = nix::fcntl::Flock::lock(lock, nix::fcntl::FlockArg::LockExclusive)
+        .map_err(|(_, e)| e)
+        .unwrap();
+    let t = serving_bench("cell", &["cell", "--seconds=12", "--kill-at-s=4", "--one-host"]);
+    for says in [
+        "both on this host (loopback): ",
+        " picks/min together over ",
+        "west's claims seen by east (",
+        "west killed 4 s after both moved: until then ",
+    ] {
+        assert!(t.contains(says), "{says}: {t}");
+    }
+}
+
 /// Runs `qmarc-bench ARGS` (a subcommand that serves a session under the prefix of `name`)
 /// on the shipped settings; asserts it succeeded and left nothing behind; its output.
 fn serving_bench(name: &str, args: &[&str]) -> String {

@@ -763,53 +763,12 @@ fn serve_with_bridge_starts_it_and_outlives_its_death() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A network namespace joined to this one by a veth pair (10.231.S.1 here, .2 there): a
-/// second host for the test; deleted, with its link, on drop.
-struct Netns {
-    name: String,
-    /// This side's address.
-    here: String,
-}
-
-impl Netns {
-    fn new() -> Netns {
-        assert!(
-            nix::unistd::geteuid().is_root(),
-            "the two-host cell makes a network namespace (ip netns): run the tests as root"
-        );
-        let pid = std::process::id();
-        let subnet = format!("10.231.{}", pid % 200 + 20);
-        let (name, a, b) = (format!("qmarc{pid}"), format!("qv{pid}a"), format!("qv{pid}b"));
-        let ns = Netns { name: name.clone(), here: format!("{subnet}.1") };
-        let ip = |args: &[&str]| {
-            let out = Command::new("ip").args(args).output().expect("ip (iproute2)");
-            assert!(out.status.success(), "ip {args:?}: {}", String::from_utf8_lossy(&out.stderr));
-        };
-        ip(&["netns", "add", &name]);
-        ip(&["link", "add", &a, "type", "veth", "peer", "name", &b]);
-        ip(&["link", "set", &b, "netns", &name]);
-        ip(&["addr", "add", &format!("{subnet}.1/24"), "dev", &a]);
-        ip(&["link", "set", &a, "up"]);
-        ip(&["-n", &name, "addr", "add", &format!("{subnet}.2/24"), "dev", &b]);
-        ip(&["-n", &name, "link", "set", &b, "up"]);
-        ip(&["-n", &name, "link", "set", "lo", "up"]);
-        ns
-    }
-}
-
-impl Drop for Netns {
-    fn drop(&mut self) {
-        // The veth pair goes with the namespace.
-        let _ = Command::new("ip").args(["netns", "del", &self.name]).status();
-    }
-}
-
 /// Two robots on one PC, bridged under /robot1 and /robot2; the first bridge is the cell's
 /// Zenoh router, reachable from a second host (a network namespace); a ROS 2 client there
 /// sees both robots' joint states and commands each, and each command reaches its robot only.
 #[test]
 fn two_robots_are_seen_and_commanded_from_another_host_through_a_router() {
-    let host = Netns::new();
+    let host = qmarc_program::net::Netns::new().expect("the two-host cell's second host");
     let router_port = free_port();
     let lan = format!("tcp/{}:{router_port}", host.here);
     let router = format!(
@@ -825,9 +784,8 @@ fn two_robots_are_seen_and_commanded_from_another_host_through_a_router() {
     let mut robot2 = Cell::start_with("cell2", "/robot2", &peer);
     // The client on the other host, connected to the router only.
     let remote = |namespace: &str, args: &[&str]| -> Vec<serde_json::Value> {
-        let out = Command::new("ip")
-            .args(["netns", "exec", &host.name])
-            .arg(python())
+        let out = host
+            .command(&python())
             .arg(workspace().join("examples/ros2_client.py"))
             .args([
                 "--mode=client",

@@ -14,7 +14,7 @@ use crate::wire::{CellBelt, WireClaim, WireMember, WirePart, disagreement};
 use qmarc_config::RunSpec;
 use qmarc_proto::cell::{CELL_IN, CELL_OUT, CellKind, CellMsg, JOINED, open_cell_service};
 use qmarc_proto::service::{IpcLocation, create_node};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
 use std::time::{Duration, Instant};
 use zenoh::Wait;
@@ -121,13 +121,15 @@ struct Relay<'a> {
     open: BTreeMap<u32, WireClaim>,
     /// Robots alive whose window has not been had yet (asked again every [`RESAY`]).
     unanswered: Vec<String>,
-    /// Robots seen gone.
-    departed: Vec<String>,
+    /// The other robots whose token is up.
+    up: BTreeSet<String>,
     /// Robots whose token went, not yet said gone: when (system clock), and since when here.
     vanished: Vec<(String, u64, Instant)>,
     /// Questions out: what, the answers' channel, whether one came.
     asked: Vec<(Ask, zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>, bool)>,
     camera_lost: bool,
+    /// Said to be in the cell (and not cut off since).
+    in_cell: bool,
     /// Since when the camera is back after being lost, until the others' claims are had.
     rejoining: Option<Instant>,
     /// This robot's picks of the last minute, for a robot that asks after an outage.
@@ -204,13 +206,19 @@ impl<'a> Relay<'a> {
             members: BTreeMap::new(),
             open: BTreeMap::new(),
             unanswered: Vec::new(),
-            departed: Vec::new(),
+            up: BTreeSet::new(),
             vanished: Vec::new(),
             asked: Vec::new(),
             camera_lost: false,
+            in_cell: false,
             rejoining: None,
             done: BTreeMap::new(),
         })
+    }
+
+    /// Says `what` on standard error (the run's log), naming the cell and this robot.
+    fn say(&self, what: &str) {
+        eprintln!("qmarc-cell robot {} in cell {}: {what}", self.me.robot, self.cell);
     }
 
     /// Tells the dispatcher `m` (dropped if it cannot be sent: the session is gone).
@@ -241,6 +249,10 @@ impl<'a> Relay<'a> {
                 // In the cell: the camera seen, every robot's window and claims had.
                 let settled = !self.camera_lost && self.rejoining.is_none();
                 if settled && self.asked.is_empty() && self.unanswered.is_empty() {
+                    if !self.in_cell {
+                        self.in_cell = true;
+                        self.say("in the cell: the others' windows and claims had");
+                    }
                     self.tell(CellMsg::new(CellKind::Rejoined, 0, &self.me.robot, 0));
                 }
             }
@@ -271,14 +283,14 @@ impl<'a> Relay<'a> {
             }
             match s.kind() {
                 SampleKind::Put => {
-                    self.departed.retain(|r| *r != robot);
+                    self.up.insert(robot.clone());
                     self.vanished.retain(|(r, _, _)| *r != robot);
                     self.joined(&robot);
                 }
                 SampleKind::Delete => {
                     self.members.remove(&robot);
                     self.unanswered.retain(|r| *r != robot);
-                    self.departed.push(robot.clone());
+                    self.up.remove(&robot);
                     let now = qmarc_timer::clock::realtime_now_ns();
                     self.vanished.push((robot, now, Instant::now()));
                 }
@@ -288,12 +300,15 @@ impl<'a> Relay<'a> {
             match s.kind() {
                 SampleKind::Delete => {
                     self.camera_lost = true;
+                    self.in_cell = false;
                     self.rejoining = None;
+                    self.say("cut off (the camera's token went): claims nothing new");
                     self.tell(CellMsg::new(CellKind::CutOff, 0, &self.me.robot, 0));
                 }
                 // Back (a router restarted): the parts seen meanwhile.
                 SampleKind::Put if self.camera_lost => {
                     self.camera_lost = false;
+                    self.say("the camera is back: asking the others' claims again");
                     self.rejoining = Some(Instant::now());
                     // Those that vanished with it and do not come back with it are gone from now:
                     // none of their claims made before is released (they may have gripped).
@@ -324,6 +339,7 @@ impl<'a> Relay<'a> {
             self.vanished.drain(..).partition(|(_, _, since)| since.elapsed() >= GONE_GRACE);
         self.vanished = wait;
         for (robot, t, _) in due {
+            self.say(&format!("robot {robot} is gone (its token went)"));
             self.tell(CellMsg::new(CellKind::Gone, 0, &robot, t));
         }
     }
@@ -398,7 +414,7 @@ impl<'a> Relay<'a> {
 
     /// Whether robot `robot` has gone since it was asked (its window is not taken then).
     fn gone(&self, robot: &str) -> bool {
-        self.departed.iter().any(|r| r == robot)
+        !self.up.contains(robot)
     }
 
     /// The dispatcher's claims, picks and give-ups, to the cell.

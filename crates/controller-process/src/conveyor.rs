@@ -18,8 +18,10 @@ use std::fmt::Write;
 pub const PARTS_HEADER: &str =
     "id,t_seen_s,latched_counts,belt_mm,across_mm,state,grip_cycle,place_cycle,error_mm";
 
-/// `parts.csv`'s last column in a cell: the robot that picked the part (empty: none did).
-pub const CELL_COLUMN: &str = "by";
+/// `parts.csv`'s last columns in a cell: from the part's exposure to its claim as this robot
+/// saw it, ms (made here, or heard from another; empty: none), and the robot that picked the
+/// part (empty: none did, or its pick was not heard).
+pub const CELL_COLUMNS: &str = "claimed_ms,by";
 
 /// The gathered row of `cycle`, or the first after it (gathering every N-th cycle).
 fn row(rows: &[GatherRow], cycle: u64) -> Option<&GatherRow> {
@@ -48,13 +50,13 @@ fn latency(parts: &[PartRecord]) -> Option<ConveyorLatency> {
 pub type Results = (String, ConveyorSummary, Option<CellSummary>, Vec<Part>);
 
 /// The results of the session whose dispatcher saw `d` and whose loop gathered `gather` (in
-/// order), with the settings `s`. In a cell `parts.csv` has a last column, [`CELL_COLUMN`].
+/// order), with the settings `s`. In a cell `parts.csv` has two more columns, [`CELL_COLUMNS`].
 pub fn results(d: &Dispatched, gather: &Gather, s: &Settings) -> Results {
     let rows = gather.rows();
     let frame = BeltFrame::of(s);
     let mut csv = String::from(PARTS_HEADER);
     if d.cell.is_some() {
-        csv = format!("{csv},{CELL_COLUMN}");
+        csv = format!("{csv},{CELL_COLUMNS}");
     }
     csv.push('\n');
     let (mut grip, mut closing) = (Vec::new(), 0.0f64);
@@ -89,7 +91,8 @@ pub fn results(d: &Dispatched, gather: &Gather, s: &Settings) -> Results {
             error.map_or("nan".to_string(), |e| e.to_string()),
         );
         if d.cell.is_some() {
-            let _ = write!(csv, ",{}", p.by.as_deref().unwrap_or(""));
+            let ms = p.claimed_after_ns.map_or(String::new(), |ns| format!("{}", ns as f64 * 1e-6));
+            let _ = write!(csv, ",{ms},{}", p.by.as_deref().unwrap_or(""));
         }
         csv.push('\n');
         drawn.push(Part {

@@ -293,10 +293,10 @@ impl PartQueue {
         self.set(id, PartState::Claimed, PartState::Missed)
     }
 
-    /// Part `id`, claimed, is given back (its pick was given up in a cell): pending again,
-    /// for the robots downstream. False if it was not the claimed one.
-    pub fn unclaim(&mut self, id: u32) -> bool {
-        self.set(id, PartState::Claimed, PartState::Pending)
+    /// Part `id`, claimed, is left to the robots downstream (its pick was given up in a
+    /// cell, or another robot has it): passed. False if it was not the claimed one.
+    pub fn pass_on(&mut self, id: u32) -> bool {
+        self.set(id, PartState::Claimed, PartState::Elsewhere)
     }
 
     /// Parts picked and missed so far.

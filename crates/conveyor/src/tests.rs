@@ -154,13 +154,14 @@ fn a_cells_parts_keep_the_cameras_numbers_and_another_robots_are_left() {
     assert_eq!(q.part(42).unwrap().state.name(), "passed");
     assert!(q.release(42));
     assert!(!q.release(42), "pending already");
-    // 43 given back (its pick given up): pending for the robots downstream.
-    assert!(q.unclaim(43));
-    assert!(!q.unclaim(43));
-    // Past the window (+200 mm: 4000 counts), each goes where it is told.
+    // 43 left to the robots downstream (its pick given up): passed, once.
+    assert!(q.pass_on(43));
+    assert!(!q.pass_on(43));
+    assert_eq!(q.part(43).unwrap().state, PartState::Elsewhere);
+    // Past the window (+200 mm: 4000 counts), each pending one goes where it is told.
     q.sweep_by(4_000, &BELT, |p| if p.id == 42 { PartState::Elsewhere } else { PartState::Missed });
     assert_eq!(q.part(42).unwrap().state, PartState::Elsewhere);
-    assert_eq!(q.part(43).unwrap().state, PartState::Missed);
-    assert_eq!(q.tally(), [0, 0, 0, 2, 1]);
+    assert_eq!(q.part(43).unwrap().state, PartState::Elsewhere);
+    assert_eq!(q.tally(), [0, 0, 0, 1, 2]);
     assert!(q.parts().iter().all(|p| p.state.done()));
 }

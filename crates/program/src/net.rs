@@ -1,4 +1,6 @@
-//! Loopback ports for a program's own servers (a benchmark's Zenoh router, a test's bridge).
+//! Loopback ports for a program's own servers (a benchmark's Zenoh router, a test's bridge),
+//! and a second host on this machine for the programs that try a network of them
+//! ([`Netns`]: the bridge's and the cell's two-host tests and benchmark).
 
 use std::net::TcpListener;
 use std::sync::atomic::{AtomicU16, Ordering};
@@ -28,6 +30,74 @@ pub fn free_loopback_port() -> u16 {
     }
 }
 
+/// A network namespace joined to this one by a veth pair — a second host on this machine
+/// (10.231.S.1 on this side, 10.231.S.2 there); deleted, with its link, on drop. Making one
+/// takes root (`ip netns`, iproute2).
+#[derive(Debug)]
+pub struct Netns {
+    /// Its name (`ip netns exec NAME …` runs a program there).
+    pub name: String,
+    /// This side's address.
+    pub here: String,
+    /// Its side's address.
+    pub there: String,
+}
+
+impl Netns {
+    /// A new namespace and its link, up; an error saying which `ip` command failed and why.
+    pub fn new() -> Result<Netns, String> {
+        static MADE: AtomicU16 = AtomicU16::new(0);
+        if !nix::unistd::geteuid().is_root() {
+            return Err("a second host (ip netns) needs root".into());
+        }
+        let (pid, k) = (std::process::id(), MADE.fetch_add(1, Ordering::Relaxed));
+        let subnet = format!("10.231.{}", (pid + u32::from(k) * 7) % 200 + 20);
+        let tag = format!("{pid}{k}");
+        let (name, a, b) = (format!("qmarc{tag}"), format!("qv{tag}a"), format!("qv{tag}b"));
+        let ns =
+            Netns { name: name.clone(), here: format!("{subnet}.1"), there: format!("{subnet}.2") };
+        let ip = |args: &[&str]| -> Result<(), String> {
+            let out = std::process::Command::new("ip")
+                .args(args)
+                .output()
+                .map_err(|e| format!("ip (iproute2): {e}"))?;
+            if out.status.success() {
+                Ok(())
+            } else {
+                Err(format!("ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr)))
+            }
+        };
+        ip(&["netns", "add", &name])?;
+        // From here the namespace is deleted on every way out (ns's drop).
+        ip(&["link", "add", &a, "type", "veth", "peer", "name", &b])?;
+        ip(&["link", "set", &b, "netns", &name])?;
+        ip(&["addr", "add", &format!("{}/24", ns.here), "dev", &a])?;
+        ip(&["link", "set", &a, "up"])?;
+        ip(&["-n", &name, "addr", "add", &format!("{}/24", ns.there), "dev", &b])?;
+        ip(&["-n", &name, "link", "set", &b, "up"])?;
+        ip(&["-n", &name, "link", "set", "lo", "up"])?;
+        Ok(ns)
+    }
+
+    /// `program` to be run in the namespace (`ip netns exec NAME program`).
+    pub fn command(&self, program: &std::path::Path) -> std::process::Command {
+        let mut c = std::process::Command::new("ip");
+        c.args(["netns", "exec", &self.name]).arg(program);
+        c
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        // The veth pair goes with the namespace.
+        let _ = std::process::Command::new("ip")
+            .args(["netns", "del", &self.name])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -38,5 +108,31 @@ mod tests {
         distinct.sort();
         distinct.dedup();
         assert_eq!(distinct.len(), ports.len(), "{ports:?}");
+    }
+
+    #[test]
+    fn a_second_host_is_made_reachable_and_gone_on_drop() {
+        if !nix::unistd::geteuid().is_root() {
+            return; // CI runs as root; a user's `cargo test` may not.
+        }
+        let ns = super::Netns::new().unwrap();
+        // A connection from there reaches a listener on this side's address.
+        let listener = std::net::TcpListener::bind((ns.here.as_str(), 0)).unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let reached = ns
+            .command(std::path::Path::new("bash"))
+            .args(["-c", &format!("exec 3<>/dev/tcp/{}/{port}", ns.here)])
+            .status()
+            .unwrap();
+        assert!(reached.success(), "this side reachable from there");
+        assert!(listener.accept().is_ok());
+        let list = || {
+            let out = std::process::Command::new("ip").args(["netns", "list"]).output().unwrap();
+            String::from_utf8_lossy(&out.stdout).into_owned()
+        };
+        let name = ns.name.clone();
+        assert!(list().contains(&name));
+        drop(ns);
+        assert!(!list().contains(&name), "deleted on drop");
     }
 }

@@ -139,16 +139,12 @@ pub(crate) fn join_cell(
 ) -> Result<(Companion, u64), (u8, String)> {
     use std::io::BufRead;
     use std::sync::atomic::Ordering;
-    let mut cmd = std::process::Command::new(program);
-    cmd.arg("robot").arg(format!("--settings={}", run.display()));
-    cmd.stdout(std::process::Stdio::piped());
-    if let Some(log) = log {
-        cmd.stderr(log.try_clone().map_err(|e| (qmarc_proto::exit::INTERNAL, e.to_string()))?);
-    }
-    qmarc_program::process::with_parent_death_signal(&mut cmd);
-    let mut child = cmd.spawn().map_err(|e| {
-        (qmarc_proto::exit::INTERNAL, format!("cannot start {}: {e}", program.display()))
-    })?;
+    let args = ["robot".to_string(), format!("--settings={}", run.display())];
+    let mut child = supervise::command_logged(program, &args, log)
+        .and_then(|mut cmd| cmd.stdout(std::process::Stdio::piped()).spawn())
+        .map_err(|e| {
+            (qmarc_proto::exit::INTERNAL, format!("cannot start {}: {e}", program.display()))
+        })?;
     let stdout = child.stdout.take();
     let (tx, lines) = std::sync::mpsc::channel();
     std::thread::spawn(move || {

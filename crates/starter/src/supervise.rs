@@ -68,13 +68,22 @@ pub fn spawn_logged(
     args: &[String],
     log: Option<&std::fs::File>,
 ) -> std::io::Result<Child> {
+    command_logged(program, args, log)?.spawn()
+}
+
+/// The command [`spawn_logged`] spawns, for a caller that sets more of it first.
+pub fn command_logged(
+    program: &Path,
+    args: &[String],
+    log: Option<&std::fs::File>,
+) -> std::io::Result<Command> {
     let mut cmd = Command::new(program);
     cmd.args(args);
     if let Some(log) = log {
         cmd.stderr(log.try_clone()?);
     }
     with_parent_death_signal(&mut cmd);
-    cmd.spawn()
+    Ok(cmd)
 }
 
 /// A child under supervision.

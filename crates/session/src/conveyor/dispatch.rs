@@ -61,6 +61,9 @@ pub struct PartRecord {
     pub handed_ns: Option<u64>,
     /// In a cell: the robot that picked it, if one did.
     pub by: Option<String>,
+    /// In a cell: from its first detection's exposure to its claim as seen here (this
+    /// robot's: when made; another's: when heard), ns.
+    pub claimed_after_ns: Option<u64>,
     /// From then to the tick of the cycle whose command began its intercept, ns (0 when
     /// that cycle had woken before the hand-over: its command came within its compute).
     pub commanded_after_ns: Option<u64>,
@@ -338,6 +341,7 @@ impl Dispatch {
             handed_ns: None,
             commanded_after_ns: None,
             by: None,
+            claimed_after_ns: None,
         }
     }
 
@@ -390,8 +394,7 @@ impl Dispatch {
                     match why {
                         GaveUp::Stopped => {}
                         GaveUp::Elsewhere => {
-                            self.queue.unclaim(id);
-                            self.queue.elsewhere(id);
+                            self.queue.pass_on(id);
                         }
                         _ => self.gave_up(id, now),
                     }
@@ -432,6 +435,7 @@ impl Dispatch {
                 // Said to the cell before the loop is given it.
                 let grip_in = (self.profile.duration() + closing_s) * 1e9;
                 side.claim(id, ns, grip_in as u64);
+                self.claim_seen(id);
             }
             if let Some(part) = claimed.and_then(|id| self.queue.part(id)) {
                 let pick = Pick {
@@ -507,8 +511,7 @@ impl Dispatch {
         let at = self.queue.part(id).map_or(f64::INFINITY, |p| p.belt_mm(now, &self.belt));
         side.released(id, at_ns);
         if side.fate(at) == PartState::Elsewhere {
-            self.queue.unclaim(id);
-            self.queue.elsewhere(id);
+            self.queue.pass_on(id);
         } else {
             self.queue.missed(id);
         }

@@ -195,6 +195,7 @@ impl Dispatch {
                         self.cancel(m.part);
                     }
                     self.queue.elsewhere(m.part);
+                    self.claim_seen(m.part);
                 }
             }
             Some(CellKind::Picked) if !mine => {
@@ -214,6 +215,16 @@ impl Dispatch {
             }
             // Its own messages back, or a kind this build does not know: nothing to do.
             _ => {}
+        }
+    }
+
+    /// Part `id`'s claim is seen here now: from its exposure, into its record (the first
+    /// claim seen: one said again after an outage is not new).
+    pub(super) fn claim_seen(&mut self, id: u32) {
+        let Some(exposure) = self.queue.part(id).map(|p| p.seen.t_ns) else { return };
+        let now = qmarc_timer::clock::monotonic_now_ns();
+        if let Some(r) = self.record(id) {
+            r.claimed_after_ns.get_or_insert(now.saturating_sub(exposure));
         }
     }
 
