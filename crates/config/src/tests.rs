@@ -313,6 +313,41 @@ fn the_backend_chooses_the_timing_defaults() {
     );
 }
 
+/// The wiring's errors name the key they are about where the file sets it: the later of two
+/// keys that take one channel, each list's length; the simulated robot's `--motors` leaves
+/// the card's wiring alone.
+#[test]
+fn the_626_wiring_errors_name_the_key_where_it_is_set() {
+    let motors = MOTOR.repeat(3);
+    let on = |s626: &str| {
+        format!(
+            "[hwserver]\nbackend = \"s626\"\n[s626]\n{s626}[general]\ncounts_per_rev = 1024\n{motors}"
+        )
+    };
+    check(
+        &on("limit_bottom_dio = [10, 12, 9]\n"),
+        "q.toml:4:20: s626.limit_bottom_dio: DIO9 is already s626.limit_top_dio",
+    );
+    // Both set: the later one is named.
+    check(
+        &on("limit_top_dio = [9, 11, 13]\nlimit_bottom_dio = [10, 12, 9]\n"),
+        "q.toml:5:20: s626.limit_bottom_dio: DIO9 is already s626.limit_top_dio",
+    );
+    check(
+        &on("counter_channels = [0, 1, 1]\n"),
+        "q.toml:4:20: s626.counter_channels: each motor needs a channel of its own, found [0, 1, 1]",
+    );
+    // A list holds up to one entry per motor the card drives (four).
+    assert_eq!(parse(&on("dac_channels = [0, 1, 2, 3]\n")).unwrap().s626.dac_channels.len(), 4);
+    check(
+        &on("dac_channels = [0, 1, 2, 3, 0]\n"),
+        "q.toml:4:16: s626.dac_channels: at most 4 entries, found 5",
+    );
+    let mut sim = parse(&format!("[s626]\nenable_dio = [0, 1]\n{motors}")).unwrap();
+    sim.set_n_motors(3).unwrap();
+    assert_eq!(sim.n_motors, 3);
+}
+
 /// Issue 12: the 626's wiring is checked where it is used — every motor with its channels,
 /// no DIO channel twice or reserved — naming the key; `--device` and `--backend` too.
 #[test]
