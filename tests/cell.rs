@@ -330,50 +330,64 @@ fn picked(p: &BTreeMap<u32, (String, String)>) -> BTreeSet<u32> {
 
 /// The upstream robot killed (kill -9 of its starter) mid-run, at 120 parts a minute (one
 /// robot's pace): the other, seeing its token go, takes every part from then on — its share,
-/// and the claims it had not gripped. None is picked twice; none is left unpicked but (at
-/// most) the one the dead robot held as it died.
+/// and the claims it had not gripped — until the robot comes back (a new session of the
+/// same name), which rejoins and takes its turns again. None is picked twice; none is left
+/// unpicked but (at most) the one the dead robot held as it died.
 #[test]
-fn a_robot_killed_mid_run_leaves_its_share_to_the_other() {
+fn a_robot_killed_mid_run_leaves_its_share_to_the_other_and_rejoins() {
     let rig = CellRig::start_with("kill", "120", false);
     let mut west = rig.robot("west", 0.0, &[], 24);
-    let mut east = rig.robot("east", 600.0, &[], 24);
+    let mut east = rig.robot("east", 600.0, &[], 34);
     west.wait_moving();
     std::thread::sleep(Duration::from_secs(10));
     let starter = west.child.as_ref().unwrap().id();
     qmarc_tests::send_signal(starter, nix::sys::signal::Signal::SIGKILL);
-    let (w, e) = (west.finish(), east.finish());
+    let w = west.finish();
     assert_eq!(w.0, None, "west was killed: {}", w.1);
-    assert_eq!(e.0, Some(0), "east: {}", e.1);
-    // West's controller ended its move on its starter's death and wrote what it saw.
-    let (pw, pe) = (parts(&west.out), parts(&east.out));
-    let (by_west, by_east) = (picked(&pw), picked(&pe));
-    assert!(by_west.len() >= 3, "west picked before it died: {by_west:?}: {pw:?}\n{}", w.1);
-    let raw = |o: &Path| std::fs::read_to_string(o.join("parts.csv")).unwrap();
-    assert!(
-        by_west.is_disjoint(&by_east),
-        "picked twice: {:?}\nwest:\n{}\neast:\n{}",
-        by_west.intersection(&by_east),
-        raw(&west.out),
-        raw(&east.out)
-    );
-    let unpicked: Vec<u32> = pe
-        .iter()
-        .filter(|(id, (s, _))| s != "pending" && !by_west.contains(id) && !by_east.contains(id))
-        .map(|(id, _)| *id)
-        .collect();
-    assert!(unpicked.len() <= 1, "left unpicked: {unpicked:?} (east: {pe:?})");
-    let last_west = by_west.iter().max().copied().unwrap_or(0);
-    let after: Vec<&u32> = by_east.iter().filter(|id| **id > last_west).collect();
-    assert!(after.len() >= 15, "east picked on alone: {after:?}");
-    east.run.assert_clean();
-    // A killed starter's children end on its death; its run's files are left to the next run
-    // of its prefix (which removes them first).
+    // A killed starter's children end on its death (its companion's token with it); its
+    // run's files are left to the next run of its prefix (which removes them first).
     let since = std::time::Instant::now();
     while !west.run.processes().is_empty() && since.elapsed() < Duration::from_secs(20) {
         std::thread::sleep(Duration::from_millis(20));
     }
     west.run.location().remove_files();
     west.run.assert_clean();
+    // West comes back: a new session of the same name.
+    let mut again = rig.robot("west", 0.0, &[], 12);
+    let (a, e) = (again.finish(), east.finish());
+    assert_eq!(a.0, Some(0), "west again: {}", a.1);
+    assert_eq!(e.0, Some(0), "east: {}", e.1);
+    // West's controller ended its move on its starter's death and wrote what it saw.
+    let (pw, pa, pe) = (parts(&west.out), parts(&again.out), parts(&east.out));
+    let (by_west, by_again, by_east) = (picked(&pw), picked(&pa), picked(&pe));
+    assert!(by_west.len() >= 3, "west picked before it died: {by_west:?}: {pw:?}\n{}", w.1);
+    assert!(by_again.len() >= 3, "west picked again: {by_again:?}: {pa:?}\n{}", a.1);
+    let raw = |o: &Path| std::fs::read_to_string(o.join("parts.csv")).unwrap();
+    for (who, mine) in [("west", &by_west), ("west again", &by_again)] {
+        assert!(
+            mine.is_disjoint(&by_east),
+            "picked by {who} and east: {:?}\n{who}:\n{}\n{}\neast:\n{}\n{}",
+            mine.intersection(&by_east),
+            raw(&west.out),
+            raw(&again.out),
+            raw(&east.out),
+            e.1
+        );
+    }
+    let anyone = |id: &u32| by_west.contains(id) || by_again.contains(id) || by_east.contains(id);
+    let unpicked: Vec<u32> =
+        pe.iter().filter(|(id, (s, _))| s != "pending" && !anyone(id)).map(|(id, _)| *id).collect();
+    assert!(unpicked.len() <= 1, "left unpicked: {unpicked:?} (east: {pe:?})");
+    let (last_west, first_again) = (
+        by_west.iter().max().copied().unwrap_or(0),
+        by_again.iter().min().copied().unwrap_or(u32::MAX),
+    );
+    // Alone, east takes the dead robot's turns too: consecutive parts (the unpicked check
+    // above says it took them all).
+    let alone: Vec<u32> = by_east.range(last_west + 1..first_again).copied().collect();
+    assert!(alone.windows(2).any(|p| p[1] == p[0] + 1), "east picked on alone: {alone:?}");
+    east.run.assert_clean();
+    again.run.assert_clean();
 }
 
 /// The router killed 6 s into the run and started again 1.5 s later on its port, at 120
