@@ -441,3 +441,51 @@ fn the_router_restarted_mid_run_both_go_on_and_share_again() {
     west.run.assert_clean();
     east.run.assert_clean();
 }
+
+/// The second host cut off mid-run (its link down 12 s: longer than Zenoh's 10 s lease, no
+/// connection ending on either side) at 120 parts a minute, then back: the robot there goes
+/// on with its turns until its session's lease ends (cut off then), the other sees its token
+/// go only then and takes every part; back, it rejoins and both share again. No part is
+/// picked twice.
+#[test]
+fn a_host_cut_off_mid_run_is_seen_gone_and_rejoins() {
+    let rig = CellRig::start_with("cut", "120", true);
+    let mut west = rig.robot("west", 0.0, &[], 38);
+    let mut east = rig.robot_on(true, "east", 600.0, &[], 38);
+    west.wait_moving();
+    east.wait_moving();
+    std::thread::sleep(Duration::from_secs(6));
+    let host = rig.host.as_ref().unwrap();
+    host.set_link(false).unwrap();
+    std::thread::sleep(Duration::from_secs(12));
+    host.set_link(true).unwrap();
+    let (w, e) = (west.finish(), east.finish());
+    assert_eq!(w.0, Some(0), "west: {}", w.1);
+    assert_eq!(e.0, Some(0), "east: {}", e.1);
+    let (pw, pe) = (parts(&west.out), parts(&east.out));
+    let (by_west, by_east) = (picked(&pw), picked(&pe));
+    let raw = |o: &Path| std::fs::read_to_string(o.join("parts.csv")).unwrap();
+    assert!(
+        by_west.is_disjoint(&by_east),
+        "picked twice: {:?}\nwest:\n{}\n{}\neast:\n{}\n{}",
+        by_west.intersection(&by_east),
+        raw(&west.out),
+        w.1,
+        raw(&east.out),
+        e.1
+    );
+    assert!(w.1.contains("robot east is gone"), "west saw east go: {}", w.1);
+    assert!(e.1.contains("cut off"), "east saw itself cut off: {}", e.1);
+    let ended: Vec<u32> = pw
+        .iter()
+        .filter(|(id, (s, _))| s != "pending" && pe.get(id).is_some_and(|(s, _)| s != "pending"))
+        .map(|(id, _)| *id)
+        .collect();
+    let last: BTreeSet<u32> = ended.iter().rev().take(12).copied().collect();
+    for (robot, mine) in [("west", &by_west), ("east", &by_east)] {
+        let n = last.intersection(mine).count();
+        assert!(n >= 3, "{robot} picked {n} of the last 12 parts {last:?}: {pw:?} {pe:?}");
+    }
+    west.run.assert_clean();
+    east.run.assert_clean();
+}

@@ -41,6 +41,8 @@ pub struct Netns {
     pub here: String,
     /// Its side's address.
     pub there: String,
+    /// This side's end of the link.
+    link: String,
 }
 
 impl Netns {
@@ -54,8 +56,12 @@ impl Netns {
         let subnet = format!("10.231.{}", (pid + u32::from(k) * 7) % 200 + 20);
         let tag = format!("{pid}{k}");
         let (name, a, b) = (format!("qmarc{tag}"), format!("qv{tag}a"), format!("qv{tag}b"));
-        let ns =
-            Netns { name: name.clone(), here: format!("{subnet}.1"), there: format!("{subnet}.2") };
+        let ns = Netns {
+            name: name.clone(),
+            here: format!("{subnet}.1"),
+            there: format!("{subnet}.2"),
+            link: a.clone(),
+        };
         let ip = |args: &[&str]| -> Result<(), String> {
             let out = std::process::Command::new("ip")
                 .args(args)
@@ -77,6 +83,23 @@ impl Netns {
         ip(&["-n", &name, "link", "set", &b, "up"])?;
         ip(&["-n", &name, "link", "set", "lo", "up"])?;
         Ok(ns)
+    }
+
+    /// Cuts the link to the namespace (`up` false: its cable pulled) or restores it.
+    pub fn set_link(&self, up: bool) -> Result<(), String> {
+        let state = if up { "up" } else { "down" };
+        let out = std::process::Command::new("ip")
+            .args(["link", "set", &self.link, state])
+            .output()
+            .map_err(|e| format!("ip (iproute2): {e}"))?;
+        match out.status.success() {
+            true => Ok(()),
+            false => Err(format!(
+                "ip link set {} {state}: {}",
+                self.link,
+                String::from_utf8_lossy(&out.stderr)
+            )),
+        }
     }
 
     /// `program` to be run in the namespace (`ip netns exec NAME program`).
@@ -126,6 +149,18 @@ mod tests {
             .unwrap();
         assert!(reached.success(), "this side reachable from there");
         assert!(listener.accept().is_ok());
+        // Its cable pulled, nothing gets through; put back, it does again.
+        let connect = || {
+            ns.command(std::path::Path::new("timeout"))
+                .args(["2", "bash", "-c", &format!("exec 3<>/dev/tcp/{}/{port}", ns.here)])
+                .status()
+                .unwrap()
+                .success()
+        };
+        ns.set_link(false).unwrap();
+        assert!(!connect(), "cut off");
+        ns.set_link(true).unwrap();
+        assert!(connect(), "back");
         let list = || {
             let out = std::process::Command::new("ip").args(["netns", "list"]).output().unwrap();
             String::from_utf8_lossy(&out.stdout).into_owned()
