@@ -13,7 +13,7 @@
 
 use anyhow::Context;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -106,14 +106,13 @@ impl Share {
     }
 }
 
-/// The share of the robots whose parts are `a` and `b` (the camera's ids on both), over the
-/// parts exposed from `from_s` on (s since the cell's world began).
-pub(crate) fn share(a: &BTreeMap<u32, Row>, b: &BTreeMap<u32, Row>, from_s: f64) -> Share {
+/// The share of the robots whose parts are `a` and `b` (the camera's ids on both).
+pub(crate) fn share(a: &BTreeMap<u32, Row>, b: &BTreeMap<u32, Row>) -> Share {
     let mut s = Share::default();
     let (mut first, mut last) = (f64::INFINITY, f64::NEG_INFINITY);
     for (id, ra) in a.range(..) {
         let Some(rb) = b.get(id) else { continue };
-        if ra.state == "pending" || rb.state == "pending" || ra.t_seen_s < from_s {
+        if ra.state == "pending" || rb.state == "pending" {
             continue;
         }
         s.ended += 1;
@@ -161,12 +160,12 @@ impl Rig {
     fn start(a: &CellArgs, tag: &str, two_hosts: bool) -> anyhow::Result<Rig> {
         let bin = qmarc_program::process::bin_dir(a.bin_dir.as_deref())?;
         let pid = std::process::id();
-        let dir = std::env::temp_dir().join(format!("qmarc-bench-cell-{tag}-{pid}"));
-        std::fs::create_dir_all(&dir)?;
         let host = match two_hosts {
             true => Some(qmarc_program::net::Netns::new().map_err(anyhow::Error::msg)?),
             false => None,
         };
+        let dir = std::env::temp_dir().join(format!("qmarc-bench-cell-{tag}-{pid}"));
+        std::fs::create_dir_all(&dir)?;
         let port = qmarc_program::net::free_loopback_port();
         let lo = format!("tcp/127.0.0.1:{port}");
         let lan = host.as_ref().map(|h| format!("tcp/{}:{port}", h.here));
@@ -211,14 +210,15 @@ impl Rig {
     }
 
     /// Robot `robot` at `offset_mm` along the cell's belt (on the second host: `there`), a
-    /// conveyor session of `a.seconds`; its output folder.
+    /// conveyor session of `a.seconds`, kept with the rig's children (stopped with it); its
+    /// place among them.
     fn robot(
-        &self,
+        &mut self,
         a: &CellArgs,
         robot: &str,
         offset_mm: f64,
         there: bool,
-    ) -> anyhow::Result<(Child, PathBuf)> {
+    ) -> anyhow::Result<usize> {
         let text = std::fs::read_to_string(&a.config)
             .with_context(|| format!("cannot read {}", a.config.display()))?;
         let mut doc: toml_edit::DocumentMut =
@@ -243,14 +243,56 @@ impl Rig {
             .arg(format!("--cell={}", self.name))
             .arg(format!("--zenoh-config={}", client.display()))
             .stdout(Stdio::null())
-            .stderr(Stdio::piped());
-        Ok((c.spawn().context("qmarc-starter conveyor --cell")?, out))
+            .stderr(std::fs::File::create(self.dir.join(format!("{robot}.log")))?);
+        self.children.push(c.spawn().context("qmarc-starter conveyor --cell")?);
+        Ok(self.children.len() - 1)
+    }
+
+    /// Robot `robot` (the rig's child `k`) ended: its parts.csv rows, or what it said.
+    fn ended(&mut self, k: usize, robot: &str) -> anyhow::Result<BTreeMap<u32, Row>> {
+        let status = self.children[k].wait()?;
+        match std::fs::read_to_string(self.dir.join(robot).join("parts.csv")) {
+            Ok(csv) => rows(&csv),
+            Err(_) => anyhow::bail!(
+                "robot {robot} ended ({status}) without its results: {}",
+                std::fs::read_to_string(self.dir.join(format!("{robot}.log"))).unwrap_or_default()
+            ),
+        }
+    }
+
+    /// Waits until robot `robot` (the rig's child `k`) moves (the progress page of its
+    /// prefix says so); an error if it ended first.
+    fn wait_moving(&mut self, k: usize, robot: &str) -> anyhow::Result<()> {
+        let page = qmarc_proto::progress::Progress::path(&prefix(robot));
+        let since = Instant::now();
+        loop {
+            let moving = qmarc_proto::progress::Progress::open(&page)
+                .is_ok_and(|p| p.read().phase >= qmarc_proto::state::Phase::Homing.wire());
+            if moving {
+                return Ok(());
+            }
+            if let Ok(Some(status)) = self.children[k].try_wait() {
+                let said = std::fs::read_to_string(self.dir.join(format!("{robot}.log")));
+                anyhow::bail!(
+                    "robot {robot} ended ({status}) before it moved: {}",
+                    said.unwrap_or_default()
+                );
+            }
+            anyhow::ensure!(
+                since.elapsed() < Duration::from_secs(90),
+                "{robot} not moving after 90 s"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
     }
 }
 
 impl Drop for Rig {
     fn drop(&mut self) {
         for c in self.children.iter_mut().rev() {
+            if matches!(c.try_wait(), Ok(Some(_))) {
+                continue;
+            }
             // As its user stops it (SIGTERM: the camera ends its server, removing its files);
             // SIGKILL if it has not ended in 10 s.
             qmarc_program::process::send(c, nix::sys::signal::Signal::SIGTERM);
@@ -266,38 +308,9 @@ impl Drop for Rig {
     }
 }
 
-/// A robot's session ended: its parts.csv rows, or what it said.
-fn ended(child: Child, out: &Path) -> anyhow::Result<BTreeMap<u32, Row>> {
-    let done = child.wait_with_output()?;
-    match std::fs::read_to_string(out.join("parts.csv")) {
-        Ok(csv) => rows(&csv),
-        _ => anyhow::bail!(
-            "{} ended ({}) without its results: {}",
-            out.display(),
-            done.status,
-            String::from_utf8_lossy(&done.stderr)
-        ),
-    }
-}
-
 /// The iceoryx2 prefix of robot `robot`'s session.
 fn prefix(robot: &str) -> String {
     format!("qmarc_benchcell_{}_{robot}_", std::process::id())
-}
-
-/// Waits until robot `robot`'s session moves (the progress page of its prefix says so).
-fn wait_moving(robot: &str) -> anyhow::Result<()> {
-    let page = qmarc_proto::progress::Progress::path(&prefix(robot));
-    let since = Instant::now();
-    loop {
-        let moving = qmarc_proto::progress::Progress::open(&page)
-            .is_ok_and(|p| p.read().phase >= qmarc_proto::state::Phase::Homing.wire());
-        if moving {
-            return Ok(());
-        }
-        anyhow::ensure!(since.elapsed() < Duration::from_secs(90), "{robot} not moving after 90 s");
-        std::thread::sleep(Duration::from_millis(20));
-    }
 }
 
 /// Prints the share `s` of robots `names`.
@@ -338,28 +351,25 @@ fn say_latency(names: [&str; 2], s: &Share) {
 
 /// Runs two robots (the downstream one on the second host: `two_hosts`), killing the
 /// upstream one (SIGKILL to its starter) `kill_at_s` after both move when `kill`; their
-/// parts.csv rows.
+/// parts.csv rows. Whatever fails, the rig stops every process it started.
 fn two_robots(
     a: &CellArgs,
     tag: &str,
     two_hosts: bool,
     kill: bool,
 ) -> anyhow::Result<[BTreeMap<u32, Row>; 2]> {
-    let rig = Rig::start(a, tag, two_hosts)?;
-    let (west, west_out) = rig.robot(a, "west", 0.0, false)?;
-    let (east, east_out) = rig.robot(a, "east", a.offset_mm, two_hosts)?;
+    let mut rig = Rig::start(a, tag, two_hosts)?;
+    let west = rig.robot(a, "west", 0.0, false)?;
+    let east = rig.robot(a, "east", a.offset_mm, two_hosts)?;
     if kill {
-        wait_moving("west")?;
-        wait_moving("east")?;
+        rig.wait_moving(west, "west")?;
+        rig.wait_moving(east, "east")?;
         std::thread::sleep(Duration::from_secs_f64(a.kill_at_s));
-        nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(west.id() as i32),
-            nix::sys::signal::Signal::SIGKILL,
-        )?;
+        qmarc_program::process::send(&rig.children[west], nix::sys::signal::Signal::SIGKILL);
     }
     // East first: a killed west's controller writes its files after its starter's death.
-    let e = ended(east, &east_out);
-    let w = ended(west, &west_out);
+    let e = rig.ended(east, "east");
+    let w = rig.ended(west, "west");
     if kill {
         // A killed starter's children end on its death; its run's files are left behind.
         std::thread::sleep(Duration::from_secs(2));
@@ -381,41 +391,53 @@ pub fn run(a: &CellArgs) -> anyhow::Result<()> {
         a.parts_per_min,
         a.seconds
     );
+    anyhow::ensure!(
+        a.one_host || nix::unistd::geteuid().is_root(),
+        "the two-host run makes a network namespace: run as root, or with --one-host"
+    );
     let [w, e] = two_robots(a, "share", false, false)?;
-    let s = share(&w, &e, 0.0);
+    let s = share(&w, &e);
     say("both on this host (loopback)", names, &s);
     say_latency(names, &s);
     if a.kill_at_s > 0.0 {
         let [w, e] = two_robots(a, "kill", false, true)?;
-        // West's parts.csv ends where it died: its last part.
-        let died = w.values().map(|r| r.t_seen_s).fold(f64::NEG_INFINITY, f64::max);
-        let before = share(&w, &e, 0.0);
-        let alone: BTreeMap<u32, Row> =
-            e.iter().filter(|(_, r)| r.t_seen_s > died).map(|(k, r)| (*k, r.clone())).collect();
-        let picked = alone.values().filter(|r| r.state == "picked").count();
-        let missed = alone.values().filter(|r| r.state == "missed").count();
-        let span = alone
-            .values()
-            .filter(|r| r.state != "pending")
-            .map(|r| r.t_seen_s)
-            .fold(f64::NEG_INFINITY, f64::max)
-            - died;
+        // West's parts.csv ends where it died: its last part (the camera's ids are the
+        // same on both robots).
+        let died = w.keys().max().copied().unwrap_or(0);
+        let before = share(&w, &e);
+        // What west held or had queued as it died (pending in its parts.csv): east's fate.
+        let held: Vec<&str> = w
+            .iter()
+            .filter(|(_, r)| r.state == "pending")
+            .filter_map(|(id, _)| e.get(id).map(|r| r.state.as_str()))
+            .collect();
+        let took = held.iter().filter(|s| **s == "picked").count();
+        let alone: Vec<&Row> =
+            e.range(died + 1..).map(|(_, r)| r).filter(|r| r.state != "pending").collect();
+        let picked = alone.iter().filter(|r| r.state == "picked").count();
+        let missed = alone.iter().filter(|r| r.state == "missed").count();
+        let span = match (alone.first(), alone.last()) {
+            (Some(a), Some(b)) => b.t_seen_s - a.t_seen_s,
+            _ => 0.0,
+        };
         println!(
             "  west killed {} s after both moved: until then {} picked by west, {} by east, {} \
-             twice, {} missed; after it (parts seen over {span:.1} s), east alone {picked} picked \
-             ({:.1} picks/min), {missed} missed (one robot's pace: those it could not reach in \
-             its window)",
+             twice, {} missed; of the {} parts west held or had queued as it died, east picked \
+             {took}; after them (parts seen over {span:.1} s), east alone {picked} picked ({:.1} \
+             picks/min), {missed} missed (one robot's pace: those it could not reach in its \
+             window)",
             a.kill_at_s,
             before.picked[0],
             before.picked[1],
             before.twice,
             before.missed,
+            held.len(),
             if span > 0.0 { 60.0 * picked as f64 / span } else { 0.0 }
         );
     }
     if !a.one_host {
         let [w, e] = two_robots(a, "hosts", true, false)?;
-        let s = share(&w, &e, 0.0);
+        let s = share(&w, &e);
         say("east on a second host (a network namespace, through the router)", names, &s);
         say_latency(names, &s);
     }
@@ -443,7 +465,7 @@ mod tests {
     #[test]
     fn the_share_counts_each_part_once_and_the_claims_heard() {
         let (w, e) = (rows(WEST).unwrap(), rows(EAST).unwrap());
-        let s = share(&w, &e, 0.0);
+        let s = share(&w, &e);
         assert_eq!((s.ended, s.picked, s.twice, s.missed), (4, [2, 2], 1, 1));
         assert!((s.span_s - 0.75).abs() < 1e-12);
         // Three different parts picked over 0.75 s.
@@ -451,8 +473,6 @@ mod tests {
         // West's part 2 made at 200 ms, heard by east at 202; its part 4 not heard.
         assert_eq!((s.made_ms[0].clone(), s.heard_ms[0].clone()), (vec![200.0], vec![202.0]));
         assert_eq!((s.made_ms[1].clone(), s.heard_ms[1].clone()), (vec![310.0], vec![310.5]));
-        let late = share(&w, &e, 1.3);
-        assert_eq!((late.ended, late.picked), (2, [1, 1]));
         assert_eq!(p50_p99(&[3.0, 1.0, 2.0]), (2.0, 3.0));
         assert!(rows("id,state\n1,picked\n").is_err(), "no claimed_ms: not a cell's");
     }

@@ -152,6 +152,8 @@ impl RawS626 {
             "gripper_dio" => span_of(&self.gripper_dio),
             "dac_channels" => span_of(&self.dac_channels),
             "counter_channels" => span_of(&self.counter_channels),
+            "dac_sign" => span_of(&self.dac_sign),
+            "counter_sign" => span_of(&self.counter_sign),
             // Not a key the wiring's checks name: the file's start.
             _ => 0..0,
         }

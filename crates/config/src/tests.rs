@@ -343,6 +343,18 @@ fn the_626_wiring_errors_name_the_key_where_it_is_set() {
         &on("dac_channels = [0, 1, 2, 3, 0]\n"),
         "q.toml:4:16: s626.dac_channels: at most 4 entries, found 5",
     );
+    // Each per-motor list, the signs too, where it is set.
+    let lists = [
+        ("dac_sign", 12, "[1, -1]"),
+        ("counter_sign", 16, "[1, -1]"),
+        ("limit_bottom_dio", 20, "[10, 12]"),
+    ];
+    for (key, col, two) in lists {
+        check(
+            &on(&format!("{key} = {two}\n")),
+            &format!("q.toml:4:{col}: s626.{key}: 3 motors need 3 entries, found 2"),
+        );
+    }
     let mut sim = parse(&format!("[s626]\nenable_dio = [0, 1]\n{motors}")).unwrap();
     sim.set_n_motors(3).unwrap();
     assert_eq!(sim.n_motors, 3);

@@ -53,7 +53,19 @@ impl Netns {
             return Err("a second host (ip netns) needs root".into());
         }
         let (pid, k) = (std::process::id(), MADE.fetch_add(1, Ordering::Relaxed));
-        let subnet = format!("10.231.{}", (pid + u32::from(k) * 7) % 200 + 20);
+        // A subnet no other namespace of this machine's has taken (another process's, made
+        // beside: two links on one /24 would misroute silently).
+        let taken = |subnet: &str| {
+            std::process::Command::new("ip")
+                .args(["-4", "-o", "addr", "show", "to", &format!("{subnet}.0/24")])
+                .output()
+                .map_or(true, |o| !o.stdout.is_empty())
+        };
+        let start = (pid + u32::from(k) * 7) % 200;
+        let subnet = (0..200)
+            .map(|i| format!("10.231.{}", (start + i) % 200 + 20))
+            .find(|s| !taken(s))
+            .ok_or("no free subnet in 10.231.20‥219.0/24")?;
         let tag = format!("{pid}{k}");
         let (name, a, b) = (format!("qmarc{tag}"), format!("qv{tag}a"), format!("qv{tag}b"));
         let ns = Netns {
@@ -112,12 +124,15 @@ impl Netns {
 
 impl Drop for Netns {
     fn drop(&mut self) {
-        // The veth pair goes with the namespace.
-        let _ = std::process::Command::new("ip")
-            .args(["netns", "del", &self.name])
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .status();
+        // The veth pair goes with the namespace, once its end is there; before (a step of
+        // `new` that failed) it is deleted here.
+        for args in [["netns", "del", &self.name], ["link", "del", &self.link]] {
+            let _ = std::process::Command::new("ip")
+                .args(args)
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::null())
+                .status();
+        }
     }
 }
 

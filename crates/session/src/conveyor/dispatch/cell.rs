@@ -188,14 +188,19 @@ impl Dispatch {
             }
             Some(CellKind::Claim) if !mine => {
                 let c = claim_in(m);
-                let was_mine = side.ledger.claim_of(m.part).is_some_and(|c| c.robot == side.me());
+                let held = side.ledger.claim_of(m.part).map(|c| c.robot == side.me());
+                let was_mine = held == Some(true);
+                // A claim said again (after an outage) is not a new one.
+                let new_holder = side.ledger.claim_of(m.part).is_none_or(|c| c.robot != robot);
                 if side.ledger.claim(m.part, c) {
                     if was_mine {
                         side.conflicts += 1;
                         self.cancel(m.part);
                     }
                     self.queue.elsewhere(m.part);
-                    self.claim_seen(m.part);
+                    if new_holder {
+                        self.claim_seen(m.part);
+                    }
                 }
             }
             Some(CellKind::Picked) if !mine => {
@@ -218,13 +223,13 @@ impl Dispatch {
         }
     }
 
-    /// Part `id`'s claim is seen here now: from its exposure, into its record (the first
-    /// claim seen: one said again after an outage is not new).
+    /// Part `id`'s claim by a new holder is seen here now: from its exposure, into its
+    /// record (a claim given up and taken by another robot: the later one's).
     pub(super) fn claim_seen(&mut self, id: u32) {
         let Some(exposure) = self.queue.part(id).map(|p| p.seen.t_ns) else { return };
         let now = qmarc_timer::clock::monotonic_now_ns();
         if let Some(r) = self.record(id) {
-            r.claimed_after_ns.get_or_insert(now.saturating_sub(exposure));
+            r.claimed_after_ns = Some(now.saturating_sub(exposure));
         }
     }
 
