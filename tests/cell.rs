@@ -448,3 +448,26 @@ fn shared_again(west: &mut Robot, east: &mut Robot) -> (String, String) {
     east.run.assert_clean();
     (w.1, e.1)
 }
+
+/// The second host cut off mid-run (its link down 15 s: longer than Zenoh's 10 s lease, no
+/// connection ending on either side) at 120 parts a minute, then back: until the lease ends
+/// neither side knows, and what one claims the other does not hear — the hand-off is said,
+/// so the other does not take it. Then the robot there is cut off (it goes on with what it
+/// claimed), the other sees its token go and takes every part; back, it rejoins and both
+/// share again. No part is picked twice.
+#[test]
+fn a_host_cut_off_mid_run_is_seen_gone_and_rejoins() {
+    let rig = CellRig::start_with("cut", "120", true);
+    let mut west = rig.robot("west", 0.0, &[], 40);
+    let mut east = rig.robot_on(true, "east", 600.0, &[], 40);
+    west.wait_moving();
+    east.wait_moving();
+    std::thread::sleep(Duration::from_secs(6));
+    let host = rig.host.as_ref().unwrap();
+    host.set_link(false).unwrap();
+    std::thread::sleep(Duration::from_secs(15));
+    host.set_link(true).unwrap();
+    let (w, e) = shared_again(&mut west, &mut east);
+    assert!(w.contains("robot east is gone"), "west saw east go: {w}");
+    assert!(e.contains("cut off"), "east saw itself cut off: {e}");
+}

@@ -8,8 +8,8 @@
 //! | `recent` | the camera (queryable) | the parts of the last seconds, a list |
 //! | `robot/ROBOT` | a robot (liveliness token) | the robot is alive |
 //! | `member/ROBOT` | a robot (queryable) | its window and offset, [`crate::wire::WireMember`] |
-//! | `claims/ROBOT` | a robot (publication) | its claims, picks and give-ups, [`crate::wire::WireClaim`] |
-//! | `ledger/ROBOT` | a robot (queryable) | its claims not yet picked, a list |
+//! | `claims/ROBOT` | a robot (publication) | its claims, picks, give-ups and parts let pass, [`crate::wire::WireClaim`] |
+//! | `ledger/ROBOT` | a robot (queryable) | its claims not yet picked, and its picks and passes of the last minute, a list |
 
 /// The key of `what` in cell `cell`.
 pub fn key(cell: &str, what: &str) -> String {

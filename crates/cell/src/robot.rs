@@ -4,8 +4,9 @@
 //! — and says on standard output when the cell's world began ([`JOINED`]), which the starter
 //! gives the run. Then it relays, every millisecond, between the cell and its session's
 //! dispatcher (iceoryx2 [`CELL_IN`] and [`CELL_OUT`]): the camera's parts, the robots alive
-//! and gone, their claims; this robot's claims, picks and give-ups. It holds the robot's
-//! liveliness token and answers for its window and its open claims.
+//! and gone, their claims; this robot's claims, picks, give-ups and the parts it lets pass.
+//! It holds the robot's liveliness token and answers for its open claims, and for its window
+//! once its session's dispatcher runs (the others count it in the turns from then).
 
 use crate::Refused;
 use crate::keys::{key, robot_key, robot_of};
@@ -130,9 +131,13 @@ struct Relay<'a> {
     camera_lost: bool,
     /// Said to be in the cell (and not cut off since).
     in_cell: bool,
+    /// Its session's dispatcher runs (it said so): the others are told its window, and so
+    /// count it in the turns, only from then — a robot counted in must say what it lets pass.
+    ready: bool,
     /// Since when the camera is back after being lost, until the others' claims are had.
     rejoining: Option<Instant>,
-    /// This robot's picks of the last minute, for a robot that asks after an outage.
+    /// This robot's picks and the parts it let pass, of the last minute, for a robot that
+    /// asks after an outage or as it joins.
     done: BTreeMap<u32, WireClaim>,
 }
 
@@ -211,6 +216,7 @@ impl<'a> Relay<'a> {
             asked: Vec::new(),
             camera_lost: false,
             in_cell: false,
+            ready: false,
             rejoining: None,
             done: BTreeMap::new(),
         })
@@ -420,14 +426,23 @@ impl<'a> Relay<'a> {
     /// The dispatcher's claims, picks and give-ups, to the cell.
     fn relay_session(&mut self) -> anyhow::Result<()> {
         while let Ok(Some(sample)) = self.from_session.receive() {
-            let Some(c) = WireClaim::of(sample.payload()) else { continue };
-            if c.kind == "claim" {
-                self.open.insert(c.part, c.clone());
-            } else {
-                self.open.remove(&c.part);
+            if sample.payload().kind() == Some(CellKind::Member) && !self.ready {
+                // Its dispatcher runs: this robot takes its turns from now, and lets pass
+                // at once the parts in flight it cannot place.
+                self.ready = true;
+                self.say("its session takes parts: the others count it in");
+                self.ask(Ask::Recent, key(&self.cell, "recent"));
             }
-            if c.kind == "picked" {
-                self.done.insert(c.part, c.clone());
+            let Some(c) = WireClaim::of(sample.payload()) else { continue };
+            match c.kind.as_str() {
+                "claim" => {
+                    self.open.insert(c.part, c.clone());
+                }
+                // Picked, given up (let pass with it) or let pass.
+                _ => {
+                    self.open.remove(&c.part);
+                    self.done.insert(c.part, c.clone());
+                }
             }
             self.claims_out.put(json(&c)).wait().map_err(failed("publishing a claim"))?;
         }
@@ -440,8 +455,11 @@ impl<'a> Relay<'a> {
 
     /// The others' questions: this robot's window, its open claims.
     fn answer(&self) {
+        // Unanswered (the query dropped) until its dispatcher runs: the others ask again.
         while let Ok(Some(q)) = self.member_q.try_recv() {
-            let _ = q.reply(q.key_expr().clone(), json(&self.me)).wait();
+            if self.ready {
+                let _ = q.reply(q.key_expr().clone(), json(&self.me)).wait();
+            }
         }
         while let Ok(Some(q)) = self.ledger_q.try_recv() {
             let list: Vec<&WireClaim> = self.open.values().chain(self.done.values()).collect();

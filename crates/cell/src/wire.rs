@@ -152,10 +152,10 @@ impl WireMember {
     }
 }
 
-/// A robot's claim, pick or give-up of a part.
+/// A robot's claim, pick or give-up of a part, or its word that it lets the part pass.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WireClaim {
-    /// `claim`, `picked` or `released`.
+    /// `claim`, `picked`, `released` or `passed`.
     pub kind: String,
     /// The part.
     pub part: u32,
@@ -174,6 +174,7 @@ impl WireClaim {
             CellKind::Claim => "claim",
             CellKind::Picked => "picked",
             CellKind::Released => "released",
+            CellKind::Passed => "passed",
             _ => return None,
         };
         Some(WireClaim {
@@ -191,6 +192,7 @@ impl WireClaim {
             "claim" => CellKind::Claim,
             "picked" => CellKind::Picked,
             "released" => CellKind::Released,
+            "passed" => CellKind::Passed,
             _ => return None,
         };
         let mut m = CellMsg::new(kind, self.part, &self.robot, self.t_ns);

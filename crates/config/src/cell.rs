@@ -1,7 +1,7 @@
 //! `[cell]`: this robot in a cell of robots on one belt (issue 47; `qmarc-starter conveyor
-//! --cell NAME`): its name among them, where it stands along the cell's belt, and when a part
-//! it lets pass becomes the next robot's. The cell itself (its name, the Zenoh session) is
-//! the command line's: a robot's file says what the robot is, not which cell it joins.
+//! --cell NAME`): its name among them and where it stands along the cell's belt. The cell
+//! itself (its name, the Zenoh session) is the command line's: a robot's file says what the
+//! robot is, not which cell it joins.
 
 use crate::ConfigLoadError;
 use crate::conveyor::MAX_BELT_MM;
@@ -12,9 +12,6 @@ use std::path::{Path, PathBuf};
 /// Longest robot or cell name: a chunk of a Zenoh key expression, in a fixed-size message.
 pub const MAX_CELL_NAME: usize = 31;
 
-/// Longest `cell.handoff_mm`, mm.
-pub const MAX_HANDOFF_MM: f64 = 1_000.0;
-
 /// This robot in a cell.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CellSettings {
@@ -23,9 +20,6 @@ pub struct CellSettings {
     /// Where this robot's belt coordinate 0 lies on the cell's belt, mm (the cell's belt
     /// coordinates are the camera's).
     pub belt_offset_mm: f64,
-    /// How far past a robot's window a part it let pass becomes the next robot's, mm: the
-    /// belt's travel while a claim is on its way to the others (docs/cell.md).
-    pub handoff_mm: f64,
     /// The cell joined (`--cell NAME`); `None`: a robot on its own.
     #[serde(default)]
     pub name: Option<String>,
@@ -36,14 +30,11 @@ pub struct CellSettings {
 }
 
 impl Default for CellSettings {
-    /// A robot named `deltabot` at the cell's belt coordinate 0; a part handed on 150 mm
-    /// past a window (300 ms at 500 mm/s: a claim's way to the others, a loaded host's
-    /// stalls included; the next robot's window is further on).
+    /// A robot named `deltabot` at the cell's belt coordinate 0.
     fn default() -> CellSettings {
         CellSettings {
             robot: "deltabot".into(),
             belt_offset_mm: 0.0,
-            handoff_mm: 150.0,
             name: None,
             zenoh_config: None,
         }
@@ -68,7 +59,6 @@ pub fn cell_name_problem(name: &str) -> Option<String> {
 pub(crate) struct RawCell {
     robot: S<String>,
     belt_offset_mm: S<f64>,
-    handoff_mm: S<f64>,
 }
 
 impl RawCell {
@@ -84,13 +74,6 @@ impl RawCell {
                     Ok(())
                 } else {
                     Err(format!("must be within ±{} mm, found {}", num(MAX_BELT_MM), num(*v)))
-                }
-            })?,
-            handoff_mm: src.take(&self.handoff_mm, "cell.handoff_mm", d.handoff_mm, |v| {
-                if v.is_finite() && (0.0..=MAX_HANDOFF_MM).contains(v) {
-                    Ok(())
-                } else {
-                    Err(format!("must be 0‥{} mm, found {}", num(MAX_HANDOFF_MM), num(*v)))
                 }
             })?,
             name: None,

@@ -44,7 +44,7 @@ mod timer;
 mod trajectory;
 mod tune;
 
-pub use cell::{CellSettings, MAX_CELL_NAME, MAX_HANDOFF_MM, cell_name_problem};
+pub use cell::{CellSettings, MAX_CELL_NAME, cell_name_problem};
 pub use check::{CheckSettings, MAX_CHECK_PULSE_S, MAX_CHECK_VOLTS};
 pub use conveyor::{
     CAMERA_BACKENDS, CameraSettings, ConveyorSettings, FrameSource, ImageSettings, MAX_BELT_MM,

@@ -1,7 +1,8 @@
 //! A cell of robots on one belt (issue 47): which robot takes which part, as each robot
 //! decides it alone from what it knows of the others — the members alive and their windows
-//! ([`Cell`]) and the claims seen ([`Ledger`]). Plain data and arithmetic; unlike the queue
-//! it allocates (names, the claims seen): the dispatcher uses it, never the loop.
+//! ([`Cell`]) and what they said of the parts ([`Ledger`]: their claims, picks and the parts
+//! they let pass). Plain data and arithmetic; unlike the queue it allocates (names, the
+//! claims seen): the dispatcher uses it, never the loop.
 //!
 //! The sharing rule, in belt coordinates of the cell (a robot's own plus its
 //! `[cell] belt_offset_mm`):
@@ -11,24 +12,27 @@
 //!   downstream robot's, part 2 the next one's… Two robots each get every other part: the
 //!   work splits evenly whatever the rate, and an upstream robot leaves the downstream one its
 //!   share instead of taking all it can reach.
-//! - **What the home robot lets pass goes on downstream**: a part is its home robot's until
-//!   it is [`Cell::handoff_mm`] past that robot's window (the home robot can no longer grip
-//!   it there, and its claim, if it made one, has had that long to be seen); then the next
-//!   robot downstream's, until it is as far past that one's window; and so on. One robot at
-//!   a time may claim a part: two claims of one part need a claim slower to arrive than the
-//!   belt takes to carry the part `handoff_mm` (should it happen, [`Ledger::claim`] keeps the
-//!   earlier claim).
+//! - **The hand-off is said, never assumed**: a part is its home robot's until that robot
+//!   says it let the part pass (it left its window unclaimed, it gave its pick up, or it
+//!   could not place the part at all); then the next robot downstream's, until that one says
+//!   so too; and so on ([`Cell::holder`]). A robot claims a part not of its turn only when
+//!   every robot from the part's home to it has said it let it pass: a claim unheard (a
+//!   network cut silently) leaves the part with the robot that claimed it, never with two.
+//!   A robot says a part passed only once it will not claim it, and says its claims in the
+//!   same stream before, so a pass heard is never followed by that robot's claim.
 //! - **A robot claims only what it can grip inside its window** (the dispatcher's intercept
 //!   check), and a part that leaves its window unclaimed is handed on to a robot downstream
 //!   that can still reach it ([`Cell::handed_on`]) — missed only by the last robot that
 //!   could.
 //! - **A robot lost releases its claims**: those whose grip was still to come when it was
 //!   seen gone ([`Ledger::lost`]), and its share goes to the others (the turn is among the
-//!   robots alive). A robot cut off from the cell (it sees no camera) is not lost to itself:
-//!   it goes on with what it claimed and claims nothing new (what the others claim meanwhile
-//!   it cannot know, nor they its claims); the others see it gone only after the session's
-//!   lease, which must outlast a claim (claim to grip), so that none of its claims is
-//!   released while it may still grip.
+//!   robots alive: the parts whose home it was have a new home). A robot cut off from the
+//!   cell (it sees no camera) is not lost to itself: it goes on with what it claimed and
+//!   claims nothing new (what the others claim meanwhile it cannot know, nor they its
+//!   claims); the others see it gone only after the session's lease, which must outlast a
+//!   claim (claim to grip), so that none of its claims is released while it may still grip.
+
+use std::collections::BTreeMap;
 
 /// A robot of the cell, as the sharing rule sees it.
 #[derive(Debug, Clone, PartialEq)]
@@ -59,18 +63,12 @@ impl Member {
 pub struct Cell {
     me: String,
     members: Vec<Member>,
-    handoff_mm: f64,
 }
 
 impl Cell {
-    /// The cell of `me` alone, handing a part on `handoff_mm` past a robot's window.
-    pub fn new(me: Member, handoff_mm: f64) -> Cell {
-        Cell { me: me.name.clone(), members: vec![me], handoff_mm }
-    }
-
-    /// How far past a robot's window a part it let pass becomes the next robot's, mm.
-    pub fn handoff_mm(&self) -> f64 {
-        self.handoff_mm
+    /// The cell of `me` alone.
+    pub fn new(me: Member) -> Cell {
+        Cell { me: me.name.clone(), members: vec![me] }
     }
 
     /// The robots alive, downstream first.
@@ -108,18 +106,18 @@ impl Cell {
         &self.members[((u64::from(id) + n - 1) % n) as usize]
     }
 
-    /// The robot whose part `id` is when it is `at_mm` along the cell's belt: its home robot
-    /// until it is [`Cell::handoff_mm`] past that one's window, then each robot downstream
-    /// in turn; `None` past the last one's.
-    pub fn holder(&self, id: u32, at_mm: f64) -> Option<&Member> {
+    /// The robot whose part `id` is now, by what `said` holds: its home robot until that one
+    /// has let it pass, then each robot downstream in turn until it has too; `None` once
+    /// every one of them has.
+    pub fn holder(&self, id: u32, said: &Ledger) -> Option<&Member> {
         let home = self.members.iter().position(|m| m.name == self.home_of(id).name)?;
         // Downstream first: the home robot and those downstream of it, from the home on.
-        self.members[..=home].iter().rev().find(|m| at_mm <= m.reach_mm()[1] + self.handoff_mm)
+        self.members[..=home].iter().rev().find(|m| !said.passed_by(id, &m.name))
     }
 
-    /// Whether this robot may claim part `id`, `at_mm` along the cell's belt.
-    pub fn may_claim(&self, id: u32, at_mm: f64) -> bool {
-        self.holder(id, at_mm).is_some_and(|m| m.name == self.me)
+    /// Whether this robot may claim part `id`, by what `said` holds.
+    pub fn may_claim(&self, id: u32, said: &Ledger) -> bool {
+        self.holder(id, said).is_some_and(|m| m.name == self.me)
     }
 
     /// A part `at_mm` along the cell's belt, past this robot's window unpicked: whether a
@@ -144,10 +142,12 @@ pub struct Claim {
     pub picked: bool,
 }
 
-/// The claims a robot has seen, its own among them: one per part, the earliest kept.
+/// What a robot has heard of the parts, its own word among it: the claims (one per part, the
+/// earliest kept) and which robots let which parts pass.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Ledger {
-    claims: Vec<(u32, Claim)>,
+    claims: BTreeMap<u32, Claim>,
+    passes: BTreeMap<u32, Vec<String>>,
 }
 
 impl Ledger {
@@ -158,23 +158,23 @@ impl Ledger {
 
     /// The claim of part `id`, if any.
     pub fn claim_of(&self, id: u32) -> Option<&Claim> {
-        self.claims.iter().find(|(p, _)| *p == id).map(|(_, c)| c)
+        self.claims.get(&id)
     }
 
     /// `c` claims part `id`: true if it holds the part now — there was no other claim, or
     /// this one is earlier (then equal times: the name first in order) than one not yet
     /// picked. A robot that sees its own claim lose gives the part up.
     pub fn claim(&mut self, id: u32, c: Claim) -> bool {
-        match self.claims.iter_mut().find(|(p, _)| *p == id) {
+        match self.claims.get_mut(&id) {
             None => {
-                self.claims.push((id, c));
+                self.claims.insert(id, c);
                 true
             }
-            Some((_, held)) if held.robot == c.robot => {
+            Some(held) if held.robot == c.robot => {
                 *held = Claim { picked: held.picked || c.picked, ..c };
                 true
             }
-            Some((_, held)) => {
+            Some(held) => {
                 let earlier = (c.at_ns, &c.robot) < (held.at_ns, &held.robot);
                 let wins = earlier && !held.picked;
                 if wins {
@@ -188,24 +188,38 @@ impl Ledger {
     /// Robot `robot` picked part `id` (it is off the belt).
     pub fn picked(&mut self, id: u32, robot: &str, at_ns: u64) {
         let c = Claim { robot: robot.to_string(), at_ns, grip_by_ns: at_ns, picked: true };
-        match self.claims.iter_mut().find(|(p, _)| *p == id) {
-            Some((_, held)) => *held = c,
-            None => self.claims.push((id, c)),
+        self.claims.insert(id, c);
+    }
+
+    /// Robot `robot` let part `id` pass: it will not claim it.
+    pub fn passed(&mut self, id: u32, robot: &str) {
+        let by = self.passes.entry(id).or_default();
+        if !by.iter().any(|r| r == robot) {
+            by.push(robot.to_string());
         }
     }
 
-    /// Robot `robot` gave part `id` up: its claim is gone. False if it held none.
+    /// Whether robot `robot` has let part `id` pass.
+    pub fn passed_by(&self, id: u32, robot: &str) -> bool {
+        self.passes.get(&id).is_some_and(|by| by.iter().any(|r| r == robot))
+    }
+
+    /// Robot `robot` gave part `id` up: its claim is gone, and it lets the part pass. False
+    /// if it held none.
     pub fn release(&mut self, id: u32, robot: &str) -> bool {
-        let before = self.claims.len();
-        self.claims.retain(|(p, c)| *p != id || c.robot != robot || c.picked);
-        self.claims.len() != before
+        self.passed(id, robot);
+        let held = self.claims.get(&id).is_some_and(|c| c.robot == robot && !c.picked);
+        if held {
+            self.claims.remove(&id);
+        }
+        held
     }
 
     /// Robot `robot` was seen gone at `gone_ns`: its claims not picked whose grip was still
-    /// to come are released; their parts, in the order claimed.
+    /// to come are released; their parts, in order.
     pub fn lost(&mut self, robot: &str, gone_ns: u64) -> Vec<u32> {
         let mut released = Vec::new();
-        self.claims.retain(|(id, c)| {
+        self.claims.retain(|id, c| {
             let free = c.robot == robot && !c.picked && c.grip_by_ns > gone_ns;
             if free {
                 released.push(*id);
@@ -217,7 +231,8 @@ impl Ledger {
 
     /// Forgets the parts `done` says are done with everywhere (past the cell's last window).
     pub fn forget(&mut self, mut done: impl FnMut(u32) -> bool) {
-        self.claims.retain(|(id, _)| !done(*id));
+        self.claims.retain(|id, _| !done(*id));
+        self.passes.retain(|id, _| !done(*id));
     }
 }
 

@@ -2,7 +2,8 @@
 //! that holds the cell's Zenoh session, tell each other: one fixed-size [`CellMsg`] on two
 //! publish–subscribe services of the run's prefix — [`CELL_IN`] from the cell to the
 //! session's dispatcher (the camera's parts, the robots alive, the others' claims), and
-//! [`CELL_OUT`] from the dispatcher to the cell (this robot's claims, picks and give-ups).
+//! [`CELL_OUT`] from the dispatcher to the cell (this robot's claims, picks, give-ups and the
+//! parts it lets pass).
 //! The network never reaches the servo loop: the dispatcher is a thread of its own.
 //!
 //! Times are the system clock's (`CLOCK_REALTIME`, ns since the Unix epoch): the cell's hosts
@@ -49,13 +50,16 @@ pub enum CellKind {
     /// This robot is in the cell: the others and their claims had (said at first, after
     /// an outage, and again from time to time).
     Rejoined = 8,
+    /// `robot` lets `part` pass at `t_ns`: it will not claim it (it left its window
+    /// unclaimed, or it could not place it). The robot downstream may claim it then.
+    Passed = 9,
 }
 
 impl CellKind {
     /// The kind of wire value `v`, if it is one.
     pub fn from_wire(v: u32) -> Option<CellKind> {
         use CellKind::*;
-        [Part, Member, Gone, Claim, Picked, Released, CutOff, Rejoined]
+        [Part, Member, Gone, Claim, Picked, Released, CutOff, Rejoined, Passed]
             .into_iter()
             .find(|k| *k as u32 == v)
     }
@@ -152,7 +156,7 @@ mod tests {
         let long = "x".repeat(40);
         assert_eq!(CellMsg::new(CellKind::Member, 0, &long, 0).robot(), &long[..31]);
         assert_eq!(CellMsg { kind: 99, ..m }.kind(), None);
-        for k in [1, 2, 3, 4, 5, 6, 7, 8] {
+        for k in [1, 2, 3, 4, 5, 6, 7, 8, 9] {
             assert_eq!(CellKind::from_wire(k).map(|k| k as u32), Some(k));
         }
         assert_eq!(CellKind::from_wire(0), None);

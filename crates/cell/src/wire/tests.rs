@@ -53,7 +53,7 @@ fn the_dispatchers_messages_go_out_and_come_back_the_same() {
     assert_eq!(json, r#"{"kind":"claim","part":12,"robot":"west","t_ns":1000,"grip_by_ns":1200}"#);
     let back: WireClaim = serde_json::from_str(&json).unwrap();
     assert_eq!(back.msg(), Some(claim));
-    for kind in [CellKind::Picked, CellKind::Released] {
+    for kind in [CellKind::Picked, CellKind::Released, CellKind::Passed] {
         let m = CellMsg::new(kind, 3, "east", 5);
         assert_eq!(WireClaim::of(&m).and_then(|w| w.msg()), Some(m));
     }

@@ -251,21 +251,18 @@ fn the_conveyor_flags_are_checked_as_their_keys() {
     assert!(shipped.contains("conveyor.run_s"), "{shipped}");
 }
 
-/// `[cell]`: the robot's name a chunk of a Zenoh key, its place along the cell's belt and
-/// the hand-off bounded; `--cell` and `--zenoh-config` checked as the keys are.
+/// `[cell]`: the robot's name a chunk of a Zenoh key, its place along the cell's belt
+/// bounded; `--cell` and `--zenoh-config` checked as the keys are.
 #[test]
 fn a_robots_place_in_a_cell_is_checked() {
     let d = parse("").unwrap();
     assert_eq!(d.cell, crate::CellSettings::default());
     assert_eq!(
-        (d.cell.robot.as_str(), d.cell.handoff_mm, d.cell.name.as_ref()),
-        ("deltabot", 150.0, None)
+        (d.cell.robot.as_str(), d.cell.belt_offset_mm, d.cell.name.as_ref()),
+        ("deltabot", 0.0, None)
     );
-    let s = parse("[cell]\nrobot = \"east-2\"\nbelt_offset_mm = 1200.0\nhandoff_mm = 0\n").unwrap();
-    assert_eq!(
-        (s.cell.robot.as_str(), s.cell.belt_offset_mm, s.cell.handoff_mm),
-        ("east-2", 1200.0, 0.0)
-    );
+    let s = parse("[cell]\nrobot = \"east-2\"\nbelt_offset_mm = 1200.0\n").unwrap();
+    assert_eq!((s.cell.robot.as_str(), s.cell.belt_offset_mm), ("east-2", 1200.0));
     for (text, said) in [
         (
             "[cell]\nrobot = \"a/b\"\n",
@@ -276,8 +273,8 @@ fn a_robots_place_in_a_cell_is_checked() {
             "[cell]\nbelt_offset_mm = 1e6\n",
             "q.toml:2:18: cell.belt_offset_mm: must be within ±100000 mm, found 1000000",
         ),
-        ("[cell]\nhandoff_mm = -1.0\n", "cell.handoff_mm: must be 0‥1000 mm, found -1"),
-        ("[cell]\nhandoff_mm = 1000.5\n", "cell.handoff_mm: must be 0‥1000 mm"),
+        // The hand-off is said by the robots now, not a distance (docs/cell.md).
+        ("[cell]\nhandoff_mm = 150.0\n", "unknown field `handoff_mm`"),
         ("[cell]\nlease_ms = 5\n", "unknown field `lease_ms`"),
     ] {
         let e = refused(text);

@@ -1,6 +1,6 @@
-//! The sharing rule: every part has one robot that may claim it at any place on the belt,
-//! the turns split the parts evenly, what a robot lets pass goes on downstream, and a lost
-//! robot's claims come back only when it could not have gripped them.
+//! The sharing rule: every part has one robot that may claim it at a time, the turns split
+//! the parts evenly, what a robot says it lets pass goes on downstream (and only what it
+//! says), and a lost robot's claims come back only when it could not have gripped them.
 
 use super::*;
 
@@ -13,7 +13,7 @@ fn cell_of(me: &str, robots: &[(&str, f64)]) -> Cell {
         window_mm: [300.0, 500.0],
     };
     let mine = robots.iter().find(|(n, _)| *n == me).expect("me among them");
-    let mut c = Cell::new(member(mine), 50.0);
+    let mut c = Cell::new(member(mine));
     for r in robots {
         c.join(member(r));
     }
@@ -28,7 +28,6 @@ fn the_members_are_ordered_downstream_first_and_take_turns() {
         [900.0, 1_100.0],
         "its window on the cell's belt"
     );
-    assert_eq!(c.handoff_mm(), 50.0);
     let names: Vec<&str> = c.members().iter().map(|m| m.name.as_str()).collect();
     assert_eq!(names, ["c", "b", "a"]);
     assert_eq!(c.me().name, "a");
@@ -42,25 +41,30 @@ fn the_members_are_ordered_downstream_first_and_take_turns() {
     assert!((1..50).all(|id| alone.home_of(id).name == "a"));
 }
 
-/// At every place along the belt, at most one robot may claim a part, and it is the home
-/// robot until the hand-off past its window.
+/// At most one robot may claim a part at a time: its home robot until it says it lets the
+/// part pass, then each robot downstream in turn as every one before it has said so — and
+/// a robot that has not heard a pass (a link cut silently) does not take the part.
 #[test]
-fn one_robot_at_a_time_may_claim_a_part() {
+fn one_robot_at_a_time_may_claim_a_part_and_only_on_the_word() {
     let robots = [("a", 0.0), ("b", 600.0), ("c", 1_200.0)];
     let views: Vec<Cell> = robots.iter().map(|(n, _)| cell_of(n, &robots)).collect();
+    let who = |id, said: &Ledger| -> Vec<String> {
+        views.iter().filter(|v| v.may_claim(id, said)).map(|v| v.me.clone()).collect()
+    };
     for id in 1..=6 {
         let home = views[0].home_of(id).name.clone();
+        // Every robot hears every pass: the home robot, then each one downstream, then none.
+        let mut said = Ledger::new();
         let mut holders = Vec::new();
-        for at in (-200..2_000).step_by(5).map(f64::from) {
-            let who: Vec<&str> =
-                views.iter().filter(|v| v.may_claim(id, at)).map(|v| v.me.as_str()).collect();
-            assert!(who.len() <= 1, "part {id} at {at}: {who:?}");
-            let now = who.first().copied().unwrap_or("-");
-            if holders.last() != Some(&now) {
-                holders.push(now);
-            }
+        for m in views[0].members().iter().rev() {
+            let now = who(id, &said);
+            assert!(now.len() <= 1, "part {id}: {now:?}");
+            holders.push(now.first().cloned().unwrap_or_else(|| "-".into()));
+            said.passed(id, &m.name);
+            assert_eq!(views[0].holder(id, &said).is_some(), m.name != "c", "part {id}");
         }
-        // The home robot first, then each robot downstream of it, then no one.
+        holders.push(who(id, &said).first().cloned().unwrap_or_else(|| "-".into()));
+        holders.dedup();
         let expected: Vec<&str> = match home.as_str() {
             "a" => vec!["a", "b", "c", "-"],
             "b" => vec!["b", "c", "-"],
@@ -68,14 +72,23 @@ fn one_robot_at_a_time_may_claim_a_part() {
         };
         assert_eq!(holders, expected, "part {id}, home {home}");
     }
-    // The hand-off: a's window ends at 500 mm of the cell; b's turn begins 50 mm past it.
-    let (a, b) = (&views[0], &views[1]);
     let id = 3; // a's
-    assert_eq!(a.home_of(id).name, "a");
-    assert!(a.may_claim(id, 550.0) && !b.may_claim(id, 550.0));
-    assert!(!a.may_claim(id, 550.5) && b.may_claim(id, 550.5));
-    // And past the last window (c's ends at 1700), no one's.
-    assert!(views.iter().all(|v| !v.may_claim(id, 1_750.5)));
+    assert_eq!(views[0].home_of(id).name, "a");
+    // b and c heard nothing from a (it claimed, or let pass, unheard): a's still.
+    let mut said = Ledger::new();
+    said.passed(id, "b");
+    assert_eq!(who(id, &said), ["a"]);
+    // c heard b let it pass but not a: not c's.
+    assert!(!views[2].may_claim(id, &said));
+    said.passed(id, "a");
+    assert_eq!(who(id, &said), ["c"]);
+    // A pick given up lets the part pass too.
+    let mut given_up = Ledger::new();
+    given_up.claim(id, claim("a", 10, 20));
+    assert!(given_up.release(id, "a"));
+    assert_eq!(who(id, &given_up), ["b"]);
+    assert!(given_up.passed_by(id, "a") && !given_up.passed_by(id, "b"));
+    assert!(!given_up.passed_by(id + 1, "a"), "that part only");
 }
 
 #[test]
@@ -100,10 +113,11 @@ fn a_robot_lost_leaves_its_turns_to_the_others_and_one_back_rejoins() {
     assert!(b.leave("a"));
     assert!(!b.leave("a"), "gone already");
     assert!(!b.leave("b"), "never itself");
-    assert!((1..20).all(|id| b.may_claim(id, 600.0)), "every part is b's now");
+    let none = Ledger::new();
+    assert!((1..20).all(|id| b.may_claim(id, &none)), "every part is b's now");
     b.join(Member { name: "a".into(), offset_mm: 0.0, window_mm: [300.0, 500.0] });
     assert_eq!(b.home_of(2).name, "a", "back: its turns again");
-    assert!(!b.may_claim(2, 400.0));
+    assert!(!b.may_claim(2, &none) && b.may_claim(1, &none));
 }
 
 fn claim(robot: &str, at_ns: u64, grip_by_ns: u64) -> Claim {
@@ -160,6 +174,10 @@ fn a_lost_robot_releases_only_the_claims_it_could_not_have_gripped() {
     assert!(l.release(3, "b"));
     assert!(!l.release(3, "b"));
     assert!(!l.release(4, "a"));
+    assert!(l.passed_by(3, "b"), "given up: let pass");
+    l.passed(4, "b");
+    l.passed(4, "b");
     l.forget(|id| id < 4);
     assert!(l.claim_of(1).is_none() && l.claim_of(4).is_some());
+    assert!(!l.passed_by(3, "b") && l.passed_by(4, "b"), "forgotten with its part");
 }

@@ -419,7 +419,7 @@ impl Dispatch {
                 // In a cell a part not this robot's to take now, or out of its reach, is left
                 // to the sweep: passed on, or missed by the last robot that could reach it.
                 let (mine, miss) = cell.map_or((true, Take::OutOfReach), |c| {
-                    (c.may_claim(part.id, part.seen.t_ns, at), Take::Leave)
+                    (c.may_claim(part.id, part.seen.t_ns), Take::Leave)
                 });
                 if !mine {
                     Take::Leave
@@ -492,12 +492,21 @@ impl Dispatch {
     }
 
     /// Every part the belt has carried past the window at `now` counts: missed, or in a cell
-    /// passed on while a robot downstream can reach it.
+    /// passed on while a robot downstream can reach it — and said to the cell to be let pass
+    /// when this robot had not claimed it (one it had is said given up when the picker does).
     fn sweep(&mut self, now: i64) {
         let (belt, cell) = (self.belt, self.cell.as_ref());
+        let mut unclaimed = Vec::new();
         self.queue.sweep_by(now, &belt, |p| {
+            if p.state == PartState::Pending {
+                unclaimed.push(p.id);
+            }
             cell.map_or(PartState::Missed, |c| c.fate(p.belt_mm(now, &belt)))
         });
+        let at_ns = self.loop_now_ns();
+        if let Some(side) = self.cell.as_mut() {
+            unclaimed.into_iter().for_each(|id| side.passed(id, at_ns));
+        }
     }
 
     /// The picker gave part `id` up (not for a stop) with the belt at `now` counts: missed, or

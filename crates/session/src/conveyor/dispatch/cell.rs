@@ -69,13 +69,17 @@ impl CellSide {
             offset_mm: s.cell.belt_offset_mm,
             window_mm: s.conveyor.window_mm,
         };
+        // Said first: this robot takes its turns from now (before, it could not let pass
+        // what it would not take, so the others did not count it in).
+        let mut ready = CellMsg::new(CellKind::Member, 0, &me.name, 0);
+        (ready.belt_mm, ready.window_mm) = (me.offset_mm, me.window_mm);
         Some(CellSide {
             name,
-            cell: Cell::new(me, s.cell.handoff_mm),
+            cell: Cell::new(me),
             ledger: Ledger::new(),
             offset_mm: s.cell.belt_offset_mm,
             realtime_offset_ns: qmarc_timer::clock::realtime_offset_ns(),
-            outbox: Vec::new(),
+            outbox: vec![ready],
             conflicts: 0,
             link: Link::Waiting,
             fresh_after_ns: 0,
@@ -97,13 +101,13 @@ impl CellSide {
         (ns as i64).saturating_sub(self.realtime_offset_ns).max(0) as u64
     }
 
-    /// Whether this robot may claim part `id`, first seen at `seen_ns` (monotonic) and now
-    /// `at_mm` along its own belt: in the cell, its turn by the sharing rule, and not a part
-    /// from before an outage.
-    pub fn may_claim(&self, id: u32, seen_ns: u64, at_mm: f64) -> bool {
+    /// Whether this robot may claim part `id`, first seen at `seen_ns` (monotonic): in the
+    /// cell, its turn by the sharing rule (its home, or let pass by every robot from its home
+    /// to this one), and not a part from before an outage.
+    pub fn may_claim(&self, id: u32, seen_ns: u64) -> bool {
         self.link == Link::In
             && seen_ns >= self.fresh_after_ns
-            && self.cell.may_claim(id, at_mm + self.offset_mm)
+            && self.cell.may_claim(id, &self.ledger)
     }
 
     /// What becomes of a part past this robot's window, `at_mm` along its own belt: passed
@@ -139,7 +143,14 @@ impl CellSide {
         self.ledger.picked(id, &me, t);
     }
 
-    /// This robot gave part `id` up at monotonic `now`.
+    /// This robot lets part `id` pass (it will not claim it) at monotonic `now`.
+    pub fn passed(&mut self, id: u32, now: u64) {
+        self.say(CellKind::Passed, id, now);
+        let me = self.me().to_string();
+        self.ledger.passed(id, &me);
+    }
+
+    /// This robot gave part `id` up at monotonic `now` (and so lets it pass).
     pub fn released(&mut self, id: u32, now: u64) {
         self.say(CellKind::Released, id, now);
         let me = self.me().to_string();
@@ -211,6 +222,7 @@ impl Dispatch {
             Some(CellKind::Released) if !mine && side.ledger.release(m.part, robot) => {
                 self.queue.release(m.part);
             }
+            Some(CellKind::Passed) if !mine => side.ledger.passed(m.part, robot),
             Some(CellKind::CutOff) => side.link = Link::CutOff,
             Some(CellKind::Rejoined) => {
                 if side.link == Link::CutOff {
@@ -245,11 +257,20 @@ impl Dispatch {
 
     /// A part the cell's camera saw: on this robot's belt, its encoder count at the exposure
     /// from the loop's own reads (none yet that far back: the part was seen before this
-    /// session could place it, and is not taken).
+    /// session could place it, and is let pass).
     fn cell_part(&mut self, m: &CellMsg) {
-        let Some(side) = self.cell.as_ref() else { return };
+        let now = self.loop_now_ns();
+        let Some(side) = self.cell.as_mut() else { return };
+        // What it has heard of parts the queue no longer holds is done with.
+        let old = m.part.saturating_sub(super::QUEUE_CAPACITY as u32);
+        side.ledger.forget(|id| id < old);
         let exposure = side.monotonic(m.t_ns);
-        let Some(latched_counts) = super::counts_at(&self.history, exposure) else { return };
+        let Some(latched_counts) = super::counts_at(&self.history, exposure) else {
+            if !side.ledger.passed_by(m.part, side.me()) {
+                side.passed(m.part, now);
+            }
+            return;
+        };
         let seen = Detection {
             t_ns: exposure,
             latched_counts,
