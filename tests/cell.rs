@@ -171,16 +171,7 @@ impl Drop for CellRig {
 
 /// SIGTERM to `c`, SIGKILL if it has not ended within 10 s.
 fn stop(c: &mut Child) {
-    qmarc_tests::send_signal(c.id(), nix::sys::signal::Signal::SIGTERM);
-    let since = std::time::Instant::now();
-    while since.elapsed() < Duration::from_secs(10) {
-        if let Ok(Some(_)) = c.try_wait() {
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let _ = c.kill();
-    let _ = c.wait();
+    qmarc_program::process::terminate(c, Duration::from_secs(10));
 }
 
 /// A robot of the cell: its run (prefix, folder), its output folder and its starter.
@@ -195,9 +186,8 @@ impl Robot {
     fn wait_moving(&mut self) {
         let since = std::time::Instant::now();
         loop {
-            let page = qmarc_proto::progress::Progress::path(&self.run.prefix);
-            let moving = qmarc_proto::progress::Progress::open(&page)
-                .is_ok_and(|p| p.read().phase >= qmarc_proto::state::Phase::Homing.wire());
+            let moving = qmarc_proto::progress::Progress::snapshot(&self.run.prefix)
+                .is_some_and(|s| s.phase >= qmarc_proto::state::Phase::Homing.wire());
             if moving {
                 return;
             }

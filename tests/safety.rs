@@ -349,10 +349,9 @@ fn killing_the_controller_before_the_move_stops_the_hwserver() {
     };
     // Killed once its progress page says it is preparing (it then waits there for the knots),
     // however long a loaded machine takes to get it there.
-    let page = qmarc_proto::progress::Progress::path(&run.prefix);
     loop {
-        let preparing = qmarc_proto::progress::Progress::open(&page)
-            .is_ok_and(|p| p.read().phase == qmarc_proto::state::Phase::Preparing.wire());
+        let preparing = qmarc_proto::progress::Progress::snapshot(&run.prefix)
+            .is_some_and(|s| s.phase == qmarc_proto::state::Phase::Preparing.wire());
         if preparing {
             break;
         }

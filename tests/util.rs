@@ -304,11 +304,9 @@ pub fn wait_for_progress(
     what: &str,
     done: impl Fn(&qmarc_proto::progress::Snapshot) -> bool,
 ) -> qmarc_proto::progress::Snapshot {
-    use qmarc_proto::progress::Progress;
-    let page = Progress::path(prefix);
     let start = Instant::now();
     loop {
-        if let Ok(s) = Progress::open(&page).map(|p| p.read())
+        if let Some(s) = qmarc_proto::progress::Progress::snapshot(prefix)
             && done(&s)
         {
             return s;
@@ -384,13 +382,13 @@ impl HeldStream {
         }
         let _ = sink.flush();
         let stop = std::sync::Arc::new(AtomicBool::new(false));
-        let page = qmarc_proto::progress::Progress::path(prefix);
+        let prefix = prefix.to_string();
         let thread = std::thread::spawn({
             let stop = stop.clone();
             move || {
                 while !stop.load(Ordering::Acquire) {
                     let cycle =
-                        qmarc_proto::progress::Progress::open(&page).map_or(0, |p| p.read().cycle);
+                        qmarc_proto::progress::Progress::snapshot(&prefix).map_or(0, |s| s.cycle);
                     while written_s < cycle as f64 * period_s + 1.0 {
                         written_s += next_ms / 1e3;
                         next_ms = 20.0;

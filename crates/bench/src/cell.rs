@@ -248,26 +248,28 @@ impl Rig {
         Ok(self.children.len() - 1)
     }
 
-    /// Robot `robot` (the rig's child `k`) ended: its parts.csv rows, or what it said.
-    fn ended(&mut self, k: usize, robot: &str) -> anyhow::Result<BTreeMap<u32, Row>> {
+    /// Robot `robot` (the rig's child `k`) ended — with success unless it was `killed`: its
+    /// parts.csv rows, or what it said (a session that failed makes no figures).
+    fn ended(&mut self, k: usize, robot: &str, killed: bool) -> anyhow::Result<BTreeMap<u32, Row>> {
         let status = self.children[k].wait()?;
+        let said =
+            || std::fs::read_to_string(self.dir.join(format!("{robot}.log"))).unwrap_or_default();
+        anyhow::ensure!(killed || status.success(), "robot {robot} ended ({status}): {}", said());
         match std::fs::read_to_string(self.dir.join(robot).join("parts.csv")) {
             Ok(csv) => rows(&csv),
-            Err(_) => anyhow::bail!(
-                "robot {robot} ended ({status}) without its results: {}",
-                std::fs::read_to_string(self.dir.join(format!("{robot}.log"))).unwrap_or_default()
-            ),
+            Err(_) => {
+                anyhow::bail!("robot {robot} ended ({status}) without its results: {}", said())
+            }
         }
     }
 
     /// Waits until robot `robot` (the rig's child `k`) moves (the progress page of its
     /// prefix says so); an error if it ended first.
     fn wait_moving(&mut self, k: usize, robot: &str) -> anyhow::Result<()> {
-        let page = qmarc_proto::progress::Progress::path(&prefix(robot));
         let since = Instant::now();
         loop {
-            let moving = qmarc_proto::progress::Progress::open(&page)
-                .is_ok_and(|p| p.read().phase >= qmarc_proto::state::Phase::Homing.wire());
+            let moving = qmarc_proto::progress::Progress::snapshot(&prefix(robot))
+                .is_some_and(|s| s.phase >= qmarc_proto::state::Phase::Homing.wire());
             if moving {
                 return Ok(());
             }
@@ -290,19 +292,8 @@ impl Rig {
 impl Drop for Rig {
     fn drop(&mut self) {
         for c in self.children.iter_mut().rev() {
-            if matches!(c.try_wait(), Ok(Some(_))) {
-                continue;
-            }
-            // As its user stops it (SIGTERM: the camera ends its server, removing its files);
-            // SIGKILL if it has not ended in 10 s.
-            qmarc_program::process::send(c, nix::sys::signal::Signal::SIGTERM);
-            let since = Instant::now();
-            while !matches!(c.try_wait(), Ok(Some(_))) && since.elapsed() < Duration::from_secs(10)
-            {
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            let _ = c.kill();
-            let _ = c.wait();
+            // As its user stops it (the camera ends its server, removing its files).
+            qmarc_program::process::terminate(c, Duration::from_secs(10));
         }
         let _ = std::fs::remove_dir_all(&self.dir);
     }
@@ -368,8 +359,16 @@ fn two_robots(
         qmarc_program::process::send(&rig.children[west], nix::sys::signal::Signal::SIGKILL);
     }
     // East first: a killed west's controller writes its files after its starter's death.
-    let e = rig.ended(east, "east");
-    let w = rig.ended(west, "west");
+    let e = rig.ended(east, "east", false);
+    let w = rig.ended(west, "west", kill);
+    // What happened to the cell as each robot saw it (a robot cut off, one gone, a companion
+    // ended): the figures are read with it.
+    for robot in ["west", "east"] {
+        let log = std::fs::read_to_string(rig.dir.join(format!("{robot}.log")));
+        for line in log.unwrap_or_default().lines().filter(|l| cell_event(l)) {
+            println!("    {robot}'s log: {line}");
+        }
+    }
     if kill {
         // A killed starter's children end on its death; its run's files are left behind.
         std::thread::sleep(Duration::from_secs(2));
@@ -377,6 +376,12 @@ fn two_robots(
             .remove_files();
     }
     Ok([w?, e?])
+}
+
+/// Whether a robot's log line `l` says something happened to its cell: it was cut off, saw
+/// another robot go, or its companion or session ended otherwise than done.
+fn cell_event(l: &str) -> bool {
+    ["cut off", "is gone", "error", "exited", "killed"].iter().any(|w| l.contains(w))
 }
 
 /// `qmarc-bench cell`.

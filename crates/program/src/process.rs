@@ -1,6 +1,6 @@
 //! Children of a QMARC program: spawned so that none outlives its parent
-//! ([`with_parent_death_signal`]), signalled ([`send`]), found beside the program
-//! ([`bin_dir`]).
+//! ([`with_parent_death_signal`]), signalled ([`send`]), stopped ([`terminate`]), found
+//! beside the program ([`bin_dir`]).
 
 use std::os::unix::process::CommandExt;
 use std::process::{Child, Command};
@@ -46,4 +46,26 @@ pub fn with_parent_death_signal(cmd: &mut Command) -> &mut Command {
 /// Sends `sig` to `child` (not yet reaped, so its pid cannot have been reused).
 pub fn send(child: &Child, sig: nix::sys::signal::Signal) {
     let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(child.id() as i32), sig);
+}
+
+/// Stops `child` as its user would — SIGTERM, so that it ends what it started and removes
+/// its files — and SIGKILLs it if it has not ended within `grace`; reaps it. Its exit status
+/// (`None` if it could not be had). A child that has ended already is only reaped.
+pub fn terminate(
+    child: &mut Child,
+    grace: std::time::Duration,
+) -> Option<std::process::ExitStatus> {
+    if let Ok(Some(status)) = child.try_wait() {
+        return Some(status);
+    }
+    send(child, nix::sys::signal::Signal::SIGTERM);
+    let since = std::time::Instant::now();
+    while since.elapsed() < grace {
+        if let Ok(Some(status)) = child.try_wait() {
+            return Some(status);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    child.wait().ok()
 }

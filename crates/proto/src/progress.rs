@@ -55,6 +55,12 @@ impl Progress {
         Path::new(crate::service::SHM_DIR).join(format!("{prefix}progress"))
     }
 
+    /// What the progress file of the run whose iceoryx2 prefix is `prefix` says now, if it
+    /// is there (a reader's one look: the file is mapped and unmapped again).
+    pub fn snapshot(prefix: &str) -> Option<Snapshot> {
+        Progress::open(&Progress::path(prefix)).ok().map(|p| p.read())
+    }
+
     /// Creates (or clears) the file at `path` and maps it: the starter's side.
     pub fn create(path: &Path) -> std::io::Result<Progress> {
         let file = std::fs::OpenOptions::new()

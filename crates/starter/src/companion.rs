@@ -99,17 +99,9 @@ impl Companion {
 
     /// The session has ended: the companion ends too.
     pub(crate) fn stop(mut self) {
-        let Some(child) = self.child.as_mut() else { return };
-        qmarc_program::process::send(child, nix::sys::signal::Signal::SIGTERM);
-        let since = Instant::now();
-        while since.elapsed() < Duration::from_secs(3) {
-            if let Ok(Some(_)) = child.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(10));
+        if let Some(child) = self.child.as_mut() {
+            qmarc_program::process::terminate(child, Duration::from_secs(3));
         }
-        let _ = child.kill();
-        let _ = child.wait();
     }
 }
 
