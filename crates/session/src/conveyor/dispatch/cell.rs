@@ -183,21 +183,25 @@ impl Dispatch {
         let now_ns = self.loop_now_ns();
         let Some(side) = self.cell.as_mut() else { return };
         let robot = m.robot();
-        let mine = robot == side.me();
-        match m.kind() {
+        let kind = m.kind();
+        // Its own word back changes nothing (its companion's word on the link is its own).
+        if robot == side.me() && !matches!(kind, Some(CellKind::CutOff | CellKind::Rejoined)) {
+            return;
+        }
+        match kind {
             Some(CellKind::Part) => self.cell_part(m),
-            Some(CellKind::Member) if !mine => side.cell.join(Member {
+            Some(CellKind::Member) => side.cell.join(Member {
                 name: robot.to_string(),
                 offset_mm: m.belt_mm,
                 window_mm: m.window_mm,
             }),
-            Some(CellKind::Gone) if !mine => {
+            Some(CellKind::Gone) => {
                 side.cell.leave(robot);
                 for id in side.ledger.lost(robot, m.t_ns) {
                     self.queue.release(id);
                 }
             }
-            Some(CellKind::Claim) if !mine => {
+            Some(CellKind::Claim) => {
                 let c = claim_in(m);
                 let held = side.ledger.claim_of(m.part).map(|c| c.robot == side.me());
                 let was_mine = held == Some(true);
@@ -214,15 +218,15 @@ impl Dispatch {
                     }
                 }
             }
-            Some(CellKind::Picked) if !mine => {
+            Some(CellKind::Picked) => {
                 side.ledger.picked(m.part, robot, m.t_ns);
                 self.cancel(m.part);
                 self.queue.elsewhere(m.part);
             }
-            Some(CellKind::Released) if !mine && side.ledger.release(m.part, robot) => {
+            Some(CellKind::Released) if side.ledger.release(m.part, robot) => {
                 self.queue.release(m.part);
             }
-            Some(CellKind::Passed) if !mine => side.ledger.passed(m.part, robot),
+            Some(CellKind::Passed) => side.ledger.passed(m.part, robot),
             Some(CellKind::CutOff) => side.link = Link::CutOff,
             Some(CellKind::Rejoined) => {
                 if side.link == Link::CutOff {
@@ -230,7 +234,7 @@ impl Dispatch {
                 }
                 side.link = Link::In;
             }
-            // Its own messages back, or a kind this build does not know: nothing to do.
+            // A kind this build does not know, or a release of a claim not held.
             _ => {}
         }
     }
