@@ -35,6 +35,8 @@ const GONE_AFTER_OUTAGE: Duration = Duration::from_secs(5);
 /// How long after the cell's camera came back a robot takes parts handed on to it again:
 /// the others' tokens are back, and their claims and picks asked and had.
 const RESYNC: Duration = Duration::from_secs(1);
+/// A robot's answer for its window while its session's dispatcher does not run yet.
+const NOT_READY: &str = "not ready";
 /// How long a query of another robot may take.
 const ASK: Duration = Duration::from_millis(500);
 
@@ -93,10 +95,12 @@ pub fn run(spec: &RunSpec) -> anyhow::Result<()> {
         return Err(refused(why).into());
     }
     let epoch = (belt.epoch_ns as i64 - qmarc_timer::clock::realtime_offset_ns()).max(0);
+    // Its ports first: the session, told it joined, finds them there.
+    let relay = Relay::open(&zenoh, spec, &cell, &me)?;
     let mut out = std::io::stdout();
     writeln!(out, "{JOINED}{epoch}")?;
     out.flush()?;
-    Relay::open(&zenoh, spec, &cell, &me)?.run()
+    relay.run()
 }
 
 /// The companion's ports, Zenoh's and iceoryx2's, and what it keeps.
@@ -122,6 +126,9 @@ struct Relay<'a> {
     open: BTreeMap<u32, WireClaim>,
     /// Robots alive whose window has not been had yet (asked again every [`RESAY`]).
     unanswered: Vec<String>,
+    /// Robots alive whose session does not take parts yet (asked again every [`RESAY`], not
+    /// counted in the turns until then, nor waited for).
+    unready: BTreeSet<String>,
     /// The other robots whose token is up.
     up: BTreeSet<String>,
     /// Robots whose token went, not yet said gone: when (system clock), and since when here.
@@ -211,6 +218,7 @@ impl<'a> Relay<'a> {
             members: BTreeMap::new(),
             open: BTreeMap::new(),
             unanswered: Vec::new(),
+            unready: BTreeSet::new(),
             up: BTreeSet::new(),
             vanished: Vec::new(),
             asked: Vec::new(),
@@ -261,6 +269,10 @@ impl<'a> Relay<'a> {
                     }
                     self.tell(CellMsg::new(CellKind::Rejoined, 0, &self.me.robot, 0));
                 }
+                for robot in std::mem::take(&mut self.unready) {
+                    let key = robot_key(&self.cell, "member", &robot);
+                    self.ask(Ask::Member(robot), key);
+                }
             }
             std::thread::sleep(Duration::from_millis(1));
         }
@@ -296,6 +308,7 @@ impl<'a> Relay<'a> {
                 SampleKind::Delete => {
                     self.members.remove(&robot);
                     self.unanswered.retain(|r| *r != robot);
+                    self.unready.remove(&robot);
                     self.up.remove(&robot);
                     let now = qmarc_timer::clock::realtime_now_ns();
                     self.vanished.push((robot, now, Instant::now()));
@@ -376,11 +389,19 @@ impl<'a> Relay<'a> {
         asked.retain_mut(|(what, replies, answered)| {
             loop {
                 match replies.try_recv() {
-                    Ok(Some(reply)) => {
-                        let Ok(sample) = reply.result() else { continue };
-                        let bytes = sample.payload().to_bytes();
-                        *answered |= self.answer_of(what, &bytes);
-                    }
+                    Ok(Some(reply)) => match reply.result() {
+                        Ok(sample) => {
+                            let bytes = sample.payload().to_bytes();
+                            *answered |= self.answer_of(what, &bytes);
+                        }
+                        // Its session does not take parts yet: asked again, not waited for.
+                        Err(_) => {
+                            if let Ask::Member(robot) = &*what {
+                                self.unready.insert(robot.clone());
+                                *answered = true;
+                            }
+                        }
+                    },
                     Ok(None) => return true,
                     // Every answer is in (or the time is up).
                     Err(_) => {
@@ -423,7 +444,8 @@ impl<'a> Relay<'a> {
         !self.up.contains(robot)
     }
 
-    /// The dispatcher's claims, picks and give-ups, to the cell.
+    /// The dispatcher's claims, picks, give-ups and passes, to the cell (its first word,
+    /// its window, says it takes parts: the others are told its window from then).
     fn relay_session(&mut self) -> anyhow::Result<()> {
         while let Ok(Some(sample)) = self.from_session.receive() {
             if sample.payload().kind() == Some(CellKind::Member) && !self.ready {
@@ -453,13 +475,16 @@ impl<'a> Relay<'a> {
         Ok(())
     }
 
-    /// The others' questions: this robot's window, its open claims.
+    /// The others' questions: this robot's window (not ready until its dispatcher spoke),
+    /// its open claims and its picks and passes of the last minute.
     fn answer(&self) {
-        // Unanswered (the query dropped) until its dispatcher runs: the others ask again.
+        // Until its dispatcher runs it says it is not ready: the others ask again, and do
+        // not count it in meanwhile.
         while let Ok(Some(q)) = self.member_q.try_recv() {
-            if self.ready {
-                let _ = q.reply(q.key_expr().clone(), json(&self.me)).wait();
-            }
+            let _ = match self.ready {
+                true => q.reply(q.key_expr().clone(), json(&self.me)).wait(),
+                false => q.reply_err(NOT_READY).wait(),
+            };
         }
         while let Ok(Some(q)) = self.ledger_q.try_recv() {
             let list: Vec<&WireClaim> = self.open.values().chain(self.done.values()).collect();

@@ -1,9 +1,10 @@
 //! What a conveyor session in a cell (issue 47, docs/cell.md) and its companion, the process
 //! that holds the cell's Zenoh session, tell each other: one fixed-size [`CellMsg`] on two
 //! publish–subscribe services of the run's prefix — [`CELL_IN`] from the cell to the
-//! session's dispatcher (the camera's parts, the robots alive, the others' claims), and
-//! [`CELL_OUT`] from the dispatcher to the cell (this robot's claims, picks, give-ups and the
-//! parts it lets pass).
+//! session's dispatcher (the camera's parts, the robots alive, the others' claims and
+//! passes), and [`CELL_OUT`] from the dispatcher to the cell (first its own [`CellKind::Member`]:
+//! it takes parts from now; then this robot's claims, picks, give-ups and the parts it lets
+//! pass).
 //! The network never reaches the servo loop: the dispatcher is a thread of its own.
 //!
 //! Times are the system clock's (`CLOCK_REALTIME`, ns since the Unix epoch): the cell's hosts
@@ -34,7 +35,8 @@ pub enum CellKind {
     /// cell's belt then, `across_mm`.
     Part = 1,
     /// `robot` is alive, its window `window_mm` of its own belt, `belt_mm` its offset along
-    /// the cell's (its liveliness token, or its window said anew).
+    /// the cell's (its liveliness token, or its window said anew). On [`CELL_OUT`], the
+    /// dispatcher's first word: it takes parts from now (the others count it in).
     Member = 2,
     /// `robot` is gone (its token went) at `t_ns`.
     Gone = 3,
@@ -42,7 +44,7 @@ pub enum CellKind {
     Claim = 4,
     /// `robot` picked `part` (it is off the belt) at `t_ns`.
     Picked = 5,
-    /// `robot` gave `part` up at `t_ns`: its claim is gone.
+    /// `robot` gave `part` up at `t_ns`: its claim is gone, and it lets the part pass.
     Released = 6,
     /// This robot is cut off from the cell (it cannot see the cell's camera: its router is
     /// down, or its link): it goes on with what it claimed, and claims nothing.
@@ -51,7 +53,8 @@ pub enum CellKind {
     /// an outage, and again from time to time).
     Rejoined = 8,
     /// `robot` lets `part` pass at `t_ns`: it will not claim it (it left its window
-    /// unclaimed, or it could not place it). The robot downstream may claim it then.
+    /// unclaimed, it could not place it, or its session ended). A robot downstream may claim
+    /// it once every robot from the part's home to it has said so.
     Passed = 9,
 }
 

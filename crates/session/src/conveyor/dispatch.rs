@@ -74,7 +74,7 @@ pub struct PartRecord {
 pub struct Dispatched {
     /// Every part, in the order seen.
     pub parts: Vec<PartRecord>,
-    /// Detections received (in a cell: parts from the cell's camera).
+    /// Detections received (in a cell: parts from the cell's camera taken into its queue).
     pub detections: u64,
     /// In a cell: which, and what the cell counted.
     pub cell: Option<CellTally>,
@@ -156,6 +156,7 @@ impl Dispatcher {
                 }
                 ports.receive(&mut d);
                 d.look();
+                d.end_cell();
                 ports.send(&mut d);
                 d.finish()
             })
@@ -505,7 +506,12 @@ impl Dispatch {
         });
         let at_ns = self.loop_now_ns();
         if let Some(side) = self.cell.as_mut() {
-            unclaimed.into_iter().for_each(|id| side.passed(id, at_ns));
+            for id in unclaimed {
+                // Once: a part it let pass at once (not placed in time) is swept later too.
+                if !side.ledger.passed_by(id, side.me()) {
+                    side.passed(id, at_ns);
+                }
+            }
         }
     }
 

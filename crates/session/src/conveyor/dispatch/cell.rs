@@ -1,7 +1,8 @@
 //! The dispatcher in a cell (issue 47, docs/cell.md): the parts come from the cell's camera
 //! (numbered there, the same numbers on every robot), a part is claimed only when the sharing
 //! rule ([`qmarc_conveyor::cell`]) says it is this robot's to take, every claim, pick and
-//! give-up is said to the cell before the loop acts on it, and the others' are taken in.
+//! give-up is said to the cell before the loop acts on it, every part it will not take is
+//! said to pass, and the others' word is taken in.
 //! The messages come and go through the companion that holds the cell's Zenoh session
 //! ([`qmarc_proto::cell`]); the dispatcher never waits for them.
 
@@ -12,13 +13,17 @@ use qmarc_conveyor::PartState;
 use qmarc_conveyor::cell::{Cell, Claim, Ledger, Member};
 use qmarc_proto::cell::{CellKind, CellMsg};
 
+/// Most parts let pass at once for a gap in the camera's numbers (a message lost): a robot
+/// that missed more than that missed the cell.
+const MAX_SKIPPED: usize = 64;
+
 /// The dispatcher's side of the cell.
 pub(crate) struct CellSide {
     /// The cell's name.
     pub name: String,
     /// The robots alive as this one sees them.
     pub cell: Cell,
-    /// The claims seen, this robot's among them.
+    /// The claims and passes heard, this robot's among them.
     pub ledger: Ledger,
     /// This robot's belt coordinate 0 on the cell's belt, mm.
     pub offset_mm: f64,
@@ -32,6 +37,8 @@ pub(crate) struct CellSide {
     /// in (the others and their claims had), nor while it is cut off (it goes on with what it
     /// claimed).
     pub link: Link,
+    /// The highest part number heard of, 0: none yet.
+    pub newest: u32,
     /// After an outage (cut off, then back): parts seen before it ended, ns of
     /// `CLOCK_MONOTONIC` (the loop's time), are no longer claimed — the others may have
     /// claimed or picked them meanwhile, unheard. 0: none.
@@ -82,6 +89,7 @@ impl CellSide {
             outbox: vec![ready],
             conflicts: 0,
             link: Link::Waiting,
+            newest: 0,
             fresh_after_ns: 0,
         })
     }
@@ -103,10 +111,11 @@ impl CellSide {
 
     /// Whether this robot may claim part `id`, first seen at `seen_ns` (monotonic): in the
     /// cell, its turn by the sharing rule (its home, or let pass by every robot from its home
-    /// to this one), and not a part from before an outage.
+    /// to this one), not a part it said it let pass, and not a part from before an outage.
     pub fn may_claim(&self, id: u32, seen_ns: u64) -> bool {
         self.link == Link::In
             && seen_ns >= self.fresh_after_ns
+            && !self.ledger.passed_by(id, self.me())
             && self.cell.may_claim(id, &self.ledger)
     }
 
@@ -201,7 +210,9 @@ impl Dispatch {
                     self.queue.release(id);
                 }
             }
-            Some(CellKind::Claim) => {
+            // A claim older than that robot's word that it let the part pass (an answer to
+            // a ledger question that came late) is stale.
+            Some(CellKind::Claim) if !side.ledger.passed_by(m.part, robot) => {
                 let c = claim_in(m);
                 let held = side.ledger.claim_of(m.part).map(|c| c.robot == side.me());
                 let was_mine = held == Some(true);
@@ -234,7 +245,7 @@ impl Dispatch {
                 }
                 side.link = Link::In;
             }
-            // A kind this build does not know, or a release of a claim not held.
+            // A kind this build does not know, a stale claim, a release of a claim not held.
             _ => {}
         }
     }
@@ -260,16 +271,26 @@ impl Dispatch {
     }
 
     /// A part the cell's camera saw: on this robot's belt, its encoder count at the exposure
-    /// from the loop's own reads (none yet that far back: the part was seen before this
-    /// session could place it, and is let pass).
+    /// from the loop's own reads. One it cannot take is let pass at once: seen before this
+    /// session could place it (no read yet that far back), or not taken into a full queue;
+    /// and so are the parts numbered between the newest it had and this one, which it never
+    /// heard of (a message lost) — the robots downstream may take them.
     fn cell_part(&mut self, m: &CellMsg) {
         let now = self.loop_now_ns();
         let Some(side) = self.cell.as_mut() else { return };
         // What it has heard of parts the queue no longer holds is done with.
         let old = m.part.saturating_sub(super::QUEUE_CAPACITY as u32);
         side.ledger.forget(|id| id < old);
+        if side.newest > 0 {
+            let skipped = side.newest.saturating_add(1)..m.part;
+            for id in skipped.rev().take(MAX_SKIPPED).filter(|id| self.queue.part(*id).is_none()) {
+                side.passed(id, now);
+            }
+        }
+        side.newest = side.newest.max(m.part);
         let exposure = side.monotonic(m.t_ns);
-        let Some(latched_counts) = super::counts_at(&self.history, exposure) else {
+        let counts = super::counts_at(&self.history, exposure);
+        let Some(latched_counts) = counts else {
             if !side.ledger.passed_by(m.part, side.me()) {
                 side.passed(m.part, now);
             }
@@ -281,10 +302,34 @@ impl Dispatch {
             belt_mm: m.belt_mm - side.offset_mm,
             across_mm: m.across_mm,
         };
-        self.detections += 1;
+        if self.queue.part(m.part).is_some() {
+            return;
+        }
         if self.queue.insert(m.part, seen) {
+            self.detections += 1;
             let record = self.new_record(m.part, &seen);
             self.records.push(record);
+        } else {
+            side.passed(m.part, now);
+        }
+    }
+
+    /// The session ends: every part it had not claimed is let pass, and the one it had
+    /// claimed and not begun to grip is given up — the robots downstream may take them now
+    /// rather than once this robot is seen gone.
+    pub(super) fn end_cell(&mut self) {
+        let at = self.loop_now_ns();
+        let Some(side) = self.cell.as_mut() else { return };
+        for p in self.queue.parts() {
+            let gripping =
+                || self.records.iter().rev().any(|r| r.id == p.id && r.grip_cycle.is_some());
+            match p.state {
+                PartState::Pending if !side.ledger.passed_by(p.id, side.me()) => {
+                    side.passed(p.id, at);
+                }
+                PartState::Claimed if !gripping() => side.released(p.id, at),
+                _ => {}
+            }
         }
     }
 

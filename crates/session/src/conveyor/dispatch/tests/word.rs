@@ -316,3 +316,77 @@ fn what_was_heard_of_parts_long_gone_is_forgotten() {
     let heard: Vec<bool> = [1, 2, n].iter().map(|id| side.ledger.passed_by(*id, "west")).collect();
     assert_eq!(heard, [false, true, true]);
 }
+
+/// Parts numbered between the newest a robot had and the one it hears of now were lost on
+/// their way: it lets them pass at once and never claims them, even if they come later.
+#[test]
+fn parts_never_heard_of_are_let_pass_and_never_claimed() {
+    let mut run = Run::new(&[("west", 0.0)], u64::MAX);
+    let part = |run: &Run, id: u32, k: u64| {
+        let side = run.robots[0].d.cell.as_ref().unwrap();
+        CellMsg {
+            belt_mm: 100.0,
+            ..CellMsg::new(CellKind::Part, id, "", side.realtime(run.t0 + k * MS))
+        }
+    };
+    for k in 0..3_000 {
+        if k == 200 || k == 1_200 || k == 1_300 {
+            let id = [1, 5, 3][usize::from(k > 200) + usize::from(k > 1_200)];
+            let m = part(&run, id, k - 20);
+            run.robots[0].inbox.push((k, m));
+        }
+        run.step(k);
+    }
+    let passed: Vec<u32> = said(&run.log, "west", CellKind::Passed).iter().map(|p| p.0).collect();
+    assert_eq!(passed, [4, 3, 2], "the gap before part 5, at once, and once: {passed:?}");
+    let claimed: Vec<u32> = said(&run.log, "west", CellKind::Claim).iter().map(|p| p.0).collect();
+    assert_eq!(claimed, [1, 5], "part 3, let pass, came later: not claimed");
+}
+
+/// A claim older than its robot's word that it let the part pass (a ledger answer that came
+/// late) is stale: it takes nothing from the robot that may claim the part now.
+#[test]
+fn a_claim_after_its_robots_pass_is_stale() {
+    let mut run = Run::new(&[("east", 600.0)], u64::MAX);
+    run.step(0);
+    let r = &mut run.robots[0];
+    r.d.cell_message(&CellMsg::new(CellKind::Passed, 9, "west", 10));
+    r.d.cell_message(&CellMsg::new(CellKind::Claim, 9, "west", 5));
+    let side = r.d.cell.as_ref().unwrap();
+    assert!(side.ledger.claim_of(9).is_none() && side.ledger.passed_by(9, "west"));
+}
+
+/// As its session ends, a robot lets pass every part it had not claimed and gives up the
+/// one it was going for (its gripper not yet told to close): the robots downstream may take
+/// them at once.
+#[test]
+fn a_session_ending_lets_its_parts_go() {
+    let mut run = Run::new(&[("west", 0.0)], 250);
+    let mut going_for = None;
+    for k in 0..3_000 {
+        run.step(k);
+        if let Some((id, from)) = run.robots[0].busy
+            && k == from + 10
+            && k > 1_000
+        {
+            going_for = Some(id);
+            break;
+        }
+    }
+    let id = going_for.expect("a pick under way");
+    let r = &mut run.robots[0];
+    let pending: Vec<u32> =
+        r.d.queue.parts().iter().filter(|p| p.state == PartState::Pending).map(|p| p.id).collect();
+    assert!(!pending.is_empty());
+    r.d.end_cell();
+    let side = r.d.cell.as_mut().unwrap();
+    let said: Vec<(Option<CellKind>, u32)> =
+        side.outbox.drain(..).map(|m| (m.kind(), m.part)).collect();
+    let mut want: Vec<(Option<CellKind>, u32)> =
+        pending.iter().map(|p| (Some(CellKind::Passed), *p)).collect();
+    want.push((Some(CellKind::Released), id));
+    want.sort_by_key(|(_, p)| *p);
+    let mut got = said.clone();
+    got.sort_by_key(|(_, p)| *p);
+    assert_eq!(got, want);
+}
