@@ -123,7 +123,7 @@ fn the_camera_publishes_the_worlds_parts_until_stopped() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A folder of frames `<exposure_ns>.png` (drawn here, parts at known places, 50 ms apart)
+/// A folder of frames `<exposure_ns>.png` (drawn here, parts at known places, 200 ms apart)
 /// replayed by the `images` camera: each frame's parts found where they were drawn, the
 /// frames in order at their spacing, nothing latched (a folder has no encoder: the
 /// controller places them by their exposure); the folder done, it waits for its stop.
@@ -151,7 +151,7 @@ fn a_folder_of_frames_is_replayed_and_its_parts_found() {
                 height_mm: base.camera.part_height_mm,
             })
             .collect();
-        let exposure = 7_000_000_000u64 + 50_000_000 * k as u64;
+        let exposure = 7_000_000_000u64 + 200_000_000 * k as u64;
         render::belt_frame(&model, &shapes, &look)
             .save(frames.join(format!("{exposure}.png")))
             .unwrap();
@@ -168,10 +168,11 @@ fn a_folder_of_frames_is_replayed_and_its_parts_found() {
     let (received, _, stderr) = serve(&dir, &settings, 5);
     let seen: Vec<PartDetection> = received.iter().map(|(_, d)| *d).collect();
     assert_eq!(seen.len(), 5, "{seen:?}");
-    // Replayed at their pace: the last frame's parts arrive 100 ms of frames after the
-    // first's (not all at once).
+    // Replayed at their pace: the last frame's parts arrive 400 ms of frames after the
+    // first's, not all at once — less the first frame's reading and finding, which a loaded
+    // machine can hold up by tens of milliseconds (measured: 22 ms under stress-ng).
     let took = received[4].0 - received[0].0;
-    assert!(took >= Duration::from_millis(80), "the frames came {took:?} apart");
+    assert!(took >= Duration::from_millis(300), "the frames came {took:?} apart");
     assert!(stderr.contains("3 frames, 5 detections sent (images camera)"), "{stderr}");
     for d in &seen {
         let parts = &drawn[d.frame as usize];
@@ -185,7 +186,7 @@ fn a_folder_of_frames_is_replayed_and_its_parts_found() {
         assert!(near, "{d:?} is none of {parts:?}");
     }
     let spacing = seen.last().unwrap().exposure_ns - seen[0].exposure_ns;
-    assert_eq!(spacing, 100_000_000, "replayed at the frames' spacing");
+    assert_eq!(spacing, 400_000_000, "replayed at the frames' spacing");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
