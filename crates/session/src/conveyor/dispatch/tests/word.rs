@@ -109,20 +109,7 @@ fn a_part_past_the_window_is_passed_while_one_downstream_can_reach_it() {
 #[test]
 fn a_pick_given_up_is_said_to_the_cell() {
     let mut run = Run::new(&[("west", 0.0)], 250);
-    let mut given_up = None;
-    for k in 0..2_000 {
-        if given_up.is_none()
-            && let Some((id, from)) = run.robots[0].busy
-            && k == from + 20
-        {
-            let r = &mut run.robots[0];
-            let _ = r.events.push(PickEvent::GaveUp { id, why: GaveUp::OutOfReach });
-            r.busy = None;
-            given_up = Some(id);
-        }
-        run.step(k);
-    }
-    let id = given_up.expect("a pick under way");
+    let id = give_up_a_pick(&mut run, 0, 2_000);
     let said: Vec<_> =
         run.log.iter().filter(|(_, _, m)| m.part == id).map(|(_, _, m)| m.kind()).collect();
     assert_eq!(said, [Some(CellKind::Claim), Some(CellKind::Released)], "part {id}");
@@ -169,21 +156,7 @@ fn a_turn_let_pass_is_taken_downstream_only_on_its_word() {
 #[test]
 fn a_pick_given_up_upstream_is_picked_downstream() {
     let mut run = Run::new(&[("west", 0.0), ("east", 600.0)], 500);
-    let mut given_up = None;
-    for k in 0..6_000 {
-        if given_up.is_none()
-            && k > 1_000
-            && let Some((id, from)) = run.robots[0].busy
-            && k == from + 20
-        {
-            let r = &mut run.robots[0];
-            let _ = r.events.push(PickEvent::GaveUp { id, why: GaveUp::OutOfReach });
-            r.busy = None;
-            given_up = Some(id);
-        }
-        run.step(k);
-    }
-    let id = given_up.expect("a pick under way");
+    let id = give_up_a_pick(&mut run, 1_000, 6_000);
     let (west, east) = (run.robots.remove(0), run.robots.remove(0));
     assert!(!west.picked.contains(&id) && east.picked.contains(&id), "{id}: {:?}", east.picked);
 }
@@ -403,4 +376,24 @@ fn a_session_ending_lets_its_parts_go() {
         got.sort_by_key(|(_, p)| *p);
         assert_eq!(got, want, "{into_pick_ms} ms into the pick of {id}");
     }
+}
+
+/// Runs `run` for `ms` milliseconds, the first robot's picker giving up (out of reach) the
+/// first pick it begins after `after_ms`, 20 ms into it: that part.
+fn give_up_a_pick(run: &mut Run, after_ms: u64, ms: u64) -> u32 {
+    let mut given_up = None;
+    for k in 0..ms {
+        if given_up.is_none()
+            && k > after_ms
+            && let Some((id, from)) = run.robots[0].busy
+            && k == from + 20
+        {
+            let r = &mut run.robots[0];
+            let _ = r.events.push(PickEvent::GaveUp { id, why: GaveUp::OutOfReach });
+            r.busy = None;
+            given_up = Some(id);
+        }
+        run.step(k);
+    }
+    given_up.expect("a pick under way")
 }
